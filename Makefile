@@ -1,0 +1,28 @@
+# Two entry points (README quick start): `make evaluate` and `make test`.
+# Both create the virtual environment in .venv on first use and install the project into it.
+PYTHON ?= python3
+VENV ?= .venv
+BIN := $(VENV)/bin
+export MUJOCO_GL ?= egl
+
+.PHONY: evaluate test setup clean
+
+setup: $(VENV)/.installed
+
+$(VENV)/.installed: pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e '.[test]'
+	touch $@
+
+# The main job: compare recomputation policies on the stored 100-episode cart-pendulum test set.
+evaluate: setup
+	$(BIN)/etmpc evaluate cart_pendulum --policy always --policy never \
+		--policy every:2 --policy every:5 --policy every:10 \
+		--policy threshold:0.1 --policy threshold:0.3 --json results/cart_pendulum.json
+
+test: setup
+	$(BIN)/python -m pytest -q
+
+clean:
+	rm -rf $(VENV) results

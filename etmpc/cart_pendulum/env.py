@@ -1,0 +1,232 @@
+"""The cart-pendulum dm-control domain: MuJoCo physics, the `balance` task and its suite.
+
+The plant is ``models/cart_pendulum.xml`` simulated by MuJoCo (RK4, 0.025 s) under a 0.1 s control
+interval. Each interval draws an unmeasured angular disturbance ``w ~ N(0, 1)`` rad/s^2 that enters
+as the generalised force ``M(q) e_hinge w``, refreshed before every physics step, so it produces
+the angular acceleration ``w`` the paper adds to ``omega_dot`` (exactly at the start of each
+physics step; MuJoCo holds the force over the step's RK4 stages, so the cart coupling lags by up
+to one 0.025 s step: ~1e-3 over 2 s, see tests/test_cart_pendulum_model.py).
+
+Two plant settings (see the MJCF header for the numbers):
+  * ``"mismatched"`` (default): the MJCF as written: hinge damping, cart damping and drive armature,
+    a pole inertia that is not the ideal rod's; the analytic model does not know these.
+  * ``"matched"``: those differences removed by name, so MuJoCo integrates the same ODE as the
+    MPC's analytic model (``tests/test_cart_pendulum_model.py`` shows they agree).
+"""
+
+from __future__ import annotations
+
+import collections
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+from dm_control import mjcf
+from dm_control.mujoco import Physics as MjPhysics
+from dm_control.rl import control
+from dm_control.utils import containers
+from dm_env import specs
+
+from etmpc.cart_pendulum.model import NX, STATE_NAMES, Parameters
+from etmpc.errors import UnknownNameError
+from etmpc.resources import model_path
+
+CONTROL_DT_S = 0.1
+EPISODE_STEPS = 100
+DISTURBANCE_STD_RAD_S2 = 1.0
+INITIAL_STATE_LOW = np.array([0.0, -1.0, -0.78, -1.0])  # eta, v, beta, omega
+INITIAL_STATE_HIGH = np.array([0.0, 1.0, 0.78, 1.0])
+
+PLANTS = ("mismatched", "matched")
+SUITE = containers.TaggedTasks()
+
+
+def _matched(root: mjcf.RootElement) -> None:
+    """Remove the MJCF's deliberate differences from the analytic model (edits by MJCF name)."""
+    p = Parameters()
+    root.find("joint", "hinge").damping = 0.0
+    slider = root.find("joint", "slider")
+    slider.damping = 0.0
+    slider.armature = 0.0
+    rod = p.pole_mass_kg * (2 * p.pole_half_length_m) ** 2 / 12  # uniform rod about its centre
+    pole = root.find("body", "pole")
+    pole.inertial.diaginertia = [rod, rod, 1e-6]
+    pole.inertial.mass = p.pole_mass_kg
+    root.find("body", "cart").inertial.mass = p.cart_mass_kg
+
+
+def load_model(plant: str = "mismatched") -> mjcf.RootElement:
+    if plant not in PLANTS:
+        raise UnknownNameError(f"unknown plant setting {plant!r}; valid: {', '.join(PLANTS)}")
+    root = mjcf.from_path(str(model_path("cart_pendulum.xml")))
+    if plant == "matched":
+        _matched(root)
+    return root
+
+
+class Physics(MjPhysics):
+    """Cart-pendulum physics with named accessors and the held angular disturbance."""
+
+    def _reload_from_data(self, data):  # called by dm-control whenever the model is (re)bound
+        super()._reload_from_data(data)
+        m = self.model
+        self._slider = (m.jnt_qposadr[m.name2id("slider", "joint")], m.jnt_dofadr[m.name2id("slider", "joint")])
+        self._hinge = (m.jnt_qposadr[m.name2id("hinge", "joint")], m.jnt_dofadr[m.name2id("hinge", "joint")])
+        self._hinge_unit = np.zeros(m.nv)
+        self._hinge_unit[self._hinge[1]] = 1.0
+        self._force = np.zeros(m.nv)
+
+    # -- vocabulary -------------------------------------------------------------------------------
+    def cart_position(self) -> float:
+        return float(self.data.qpos[self._slider[0]])
+
+    def cart_velocity(self) -> float:
+        return float(self.data.qvel[self._slider[1]])
+
+    def pole_angle(self) -> float:
+        return float(self.data.qpos[self._hinge[0]])
+
+    def pole_angular_velocity(self) -> float:
+        return float(self.data.qvel[self._hinge[1]])
+
+    def state(self) -> np.ndarray:
+        """``[eta, v, beta, omega]`` in the analytic model's order."""
+        q, v = self.data.qpos, self.data.qvel
+        return np.array([q[self._slider[0]], v[self._slider[1]], q[self._hinge[0]], v[self._hinge[1]]])
+
+    def set_state_vector(self, x: np.ndarray) -> None:
+        self.data.qpos[self._slider[0]], self.data.qvel[self._slider[1]] = x[0], x[1]
+        self.data.qpos[self._hinge[0]], self.data.qvel[self._hinge[1]] = x[2], x[3]
+
+    def disturbance(self) -> float:
+        """Angular disturbance of the current control interval (rad/s^2)."""
+        return float(self.data.userdata[0])
+
+    def set_disturbance(self, w_rad_s2: float) -> None:
+        self.data.userdata[0] = w_rad_s2
+
+    # -- stepping ---------------------------------------------------------------------------------
+    def step(self, nstep: int = 1) -> None:
+        """Advance ``nstep`` physics steps, refreshing ``qfrc_applied = M(q) e_hinge w`` before each.
+
+        ``mj_step1`` after every step keeps the mass matrix (and the rest of mjData) in sync with
+        the new state, as dm-control's legacy stepping does for RK4.
+        """
+        m, d = self.model.ptr, self.data.ptr
+        w = d.userdata[0]
+        with self.check_invalid_state():
+            for _ in range(nstep):
+                if w:
+                    mujoco.mj_mulM(m, d, self._force, self._hinge_unit)
+                    d.qfrc_applied[:] = self._force * w
+                else:
+                    d.qfrc_applied[:] = 0.0
+                mujoco.mj_step(m, d)
+                mujoco.mj_step1(m, d)
+
+
+@dataclass(frozen=True)
+class Episode:
+    """Everything random about one episode, drawn in advance: a test-set row."""
+
+    initial_state: np.ndarray  # (4,) [eta, v, beta, omega]
+    disturbance: np.ndarray  # (EPISODE_STEPS,) rad/s^2, held over each control interval
+
+    @classmethod
+    def draw(cls, rng: np.random.Generator, steps: int = EPISODE_STEPS) -> Episode:
+        initial_state = rng.uniform(INITIAL_STATE_LOW, INITIAL_STATE_HIGH)
+        disturbance = rng.normal(0.0, DISTURBANCE_STD_RAD_S2, size=steps)
+        return cls(initial_state, disturbance)
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        return {"initial_state": self.initial_state, "disturbance": self.disturbance}
+
+    @classmethod
+    def from_arrays(cls, arrays: dict[str, np.ndarray]) -> Episode:
+        initial_state = np.asarray(arrays["initial_state"], dtype=float)
+        disturbance = np.asarray(arrays["disturbance"], dtype=float)
+        if initial_state.shape != (NX,) or disturbance.ndim != 1:
+            raise ValueError(f"bad episode arrays: {initial_state.shape}, {disturbance.shape}")
+        return cls(initial_state, disturbance)
+
+
+class Balance(control.Task):
+    """Keep the pole upright; reward ``-beta^2`` of the state each step leads to.
+
+    Randomness has one owner: the task's ``random`` generator draws each episode on reset, unless
+    :meth:`use_episode` has queued a stored one (a test-set episode), which is then replayed exactly.
+    """
+
+    def __init__(self, random: np.random.Generator | int | None = None, steps: int = EPISODE_STEPS):
+        self._random = random if isinstance(random, np.random.Generator) else np.random.default_rng(random)
+        self._steps = steps
+        self._queued: Episode | None = None
+        self._episode: Episode | None = None
+        self._step = 0
+
+    @property
+    def random(self) -> np.random.Generator:
+        return self._random
+
+    @property
+    def episode(self) -> Episode | None:
+        """The episode being played (drawn or stored)."""
+        return self._episode
+
+    def use_episode(self, episode: Episode | None) -> None:
+        """Play ``episode`` at the next reset (``None``: draw from ``random`` again)."""
+        if episode is not None and episode.disturbance.shape[0] < self._steps:
+            raise ValueError(f"episode has {episode.disturbance.shape[0]} disturbances, need {self._steps}")
+        self._queued = episode
+
+    def initialize_episode(self, physics: Physics) -> None:
+        episode, self._queued = self._queued, None
+        self._episode = episode if episode is not None else Episode.draw(self._random, self._steps)
+        self._step = 0
+        physics.set_state_vector(self._episode.initial_state)
+        physics.set_disturbance(0.0)
+
+    def before_step(self, action, physics: Physics) -> None:
+        physics.set_control(action)
+        physics.set_disturbance(self._episode.disturbance[self._step])
+        self._step += 1
+
+    def after_step(self, physics: Physics) -> None:
+        pass
+
+    def action_spec(self, physics: Physics) -> specs.BoundedArray:
+        low, high = physics.model.actuator_ctrlrange[0]
+        return specs.BoundedArray((1,), np.float64, [low], [high], name="force")
+
+    def observation_spec(self, physics: Physics) -> collections.OrderedDict:
+        return collections.OrderedDict((name, specs.Array((), np.float64, name=name)) for name in STATE_NAMES)
+
+    def get_observation(self, physics: Physics) -> collections.OrderedDict:
+        return collections.OrderedDict(zip(STATE_NAMES, physics.state()))
+
+    def get_reward(self, physics: Physics) -> float:
+        return -physics.pole_angle() ** 2
+
+    def get_termination(self, physics: Physics) -> float | None:
+        # A non-finite state ends the episode (discount 0); the control loop reports it.
+        return None if np.all(np.isfinite(physics.state())) else 0.0
+
+
+def make_environment(
+    random: np.random.Generator | int | None = None,
+    plant: str = "mismatched",
+    steps: int = EPISODE_STEPS,
+    environment_kwargs: dict | None = None,
+) -> control.Environment:
+    root = load_model(plant)
+    physics = Physics.from_xml_string(root.to_xml_string(), assets=root.get_assets())
+    task = Balance(random=random, steps=steps)
+    kwargs = dict(time_limit=steps * CONTROL_DT_S, control_timestep=CONTROL_DT_S)
+    kwargs.update(environment_kwargs or {})
+    return control.Environment(physics, task, **kwargs)
+
+
+@SUITE.add("benchmarking")
+def balance(random=None, plant: str = "mismatched", environment_kwargs: dict | None = None):
+    """Balance the pole for 100 control intervals of 0.1 s under the angular disturbance."""
+    return make_environment(random=random, plant=plant, environment_kwargs=environment_kwargs)

@@ -1,0 +1,109 @@
+"""The ``etmpc`` command: ``evaluate`` and ``bench``.
+
+Bad input (unknown task or policy, bad numbers, missing or corrupt files) prints one line on
+stderr and exits with code 2, without a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from etmpc.errors import EtmpcError
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str):  # one line, exit code 2
+        raise EtmpcError(message)
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
+    return value
+
+
+def _json_path(text: str) -> Path:
+    path = Path(text)
+    if path.exists() and path.is_dir():
+        raise argparse.ArgumentTypeError(f"{text} is a directory, not a file")
+    return path
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="etmpc", description="Event-triggered MPC benchmark.")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    ev = sub.add_parser("evaluate", help="compare recomputation policies on a stored test set")
+    ev.add_argument("task", help="system to evaluate: cart_pendulum")
+    ev.add_argument("--policy", action="append", required=True, metavar="SPEC",
+                    help="always | never | every:T | threshold:X (repeatable)")
+    ev.add_argument("--episodes", type=_positive_int, default=None, help="first N test-set episodes (default: all)")
+    ev.add_argument("--repeats", type=_positive_int, default=1, help="passes over the test set (for stochastic policies)")
+    ev.add_argument("--workers", type=_positive_int, default=None, help="worker processes (default: one per core)")
+    ev.add_argument("--seed", type=int, default=0, help="seed of the policies' own randomness")
+    ev.add_argument("--test-set", default=None, metavar="PATH", help="test set file (default: the stored one)")
+    ev.add_argument("--json", type=_json_path, default=None, metavar="PATH", help="write the results as JSON")
+
+    be = sub.add_parser("bench", help="time the MPC solve, the rest of a step and whole episodes")
+    be.add_argument("--episodes", type=_positive_int, default=10, help="test-set episodes per measurement")
+    be.add_argument("--json", type=_json_path, default=None, metavar="PATH", help="write the figures as JSON")
+    be.add_argument("--no-do-mpc", action="store_true", help="skip the do-mpc comparison even if installed")
+    be.add_argument("--jit", action="store_true", help="also time the MPC compiled with CasADi's JIT (needs a C compiler)")
+    return parser
+
+
+def _write_json(path: Path, data: dict) -> None:
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(data, indent=2) + "\n")
+    except OSError as exc:
+        raise EtmpcError(f"cannot write {path}: {exc.strerror}") from None
+
+
+def _evaluate(args) -> None:
+    from etmpc.evaluate import evaluate, format_table
+
+    if args.test_set is not None and not Path(args.test_set).is_file():
+        raise EtmpcError(f"test set {args.test_set} not found")
+    result = evaluate(args.task, args.policy, args.episodes, args.repeats, args.workers, args.seed, args.test_set)
+    print(format_table(result))
+    if args.json is not None:
+        _write_json(args.json, result.to_json())
+        print(f"wrote {args.json}")
+    nonfinite = sum(s.nonfinite_episodes for s in result.summaries)
+    if nonfinite:
+        print(f"warning: {nonfinite} run(s) ended on a non-finite state and are excluded from the means", file=sys.stderr)
+
+
+def _bench(args) -> None:
+    from etmpc.bench import format_bench, run_bench
+
+    figures = run_bench(episodes=args.episodes, do_mpc=not args.no_do_mpc, jit=args.jit)
+    print(format_bench(figures))
+    if args.json is not None:
+        _write_json(args.json, figures)
+        print(f"wrote {args.json}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    try:
+        args = build_parser().parse_args(argv)
+        {"evaluate": _evaluate, "bench": _bench}[args.command](args)
+    except EtmpcError as exc:
+        print(f"etmpc: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("etmpc: interrupted", file=sys.stderr)
+        return 130
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

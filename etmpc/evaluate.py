@@ -1,0 +1,202 @@
+"""Evaluate recomputation policies on a stored test set, in parallel, with identical results.
+
+Every (policy, repeat, episode) run is independent: the environment replays the stored episode and
+a stochastic policy draws from its own generator, seeded by ``SeedSequence(seed, spawn_key=(repeat,
+episode))`` (the same for every policy: common random numbers). Runs are spread over worker
+processes and gathered back in order, so the numbers do not depend on the number of workers.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import asdict, dataclass
+from multiprocessing import get_context
+
+import numpy as np
+from tqdm import tqdm
+
+from etmpc import testset as ts_mod
+from etmpc.loop import run_episode
+from etmpc.policies import parse_policy
+from etmpc.systems import make_system
+
+
+@dataclass(frozen=True)
+class RunResult:
+    """One episode under one policy."""
+
+    policy: str
+    repeat: int
+    episode: int
+    objective: float  # sense-aware: cost (min) or profit (max), computations included
+    control_cost: float  # -sum(rewards): the control part alone
+    recomputes: int
+    solver_failures: int
+    steps: int
+    finite: bool  # False: the episode ended early on a non-finite state
+
+
+@dataclass(frozen=True)
+class PolicySummary:
+    policy: str
+    objective_mean: float
+    objective_std: float  # over test-set episodes (each averaged over repeats)
+    objective_std_repeats: float  # over the repeats' means: the spread due to the policy's randomness
+    objective_sense: str
+    control_cost_mean: float
+    recomputes_mean: float
+    solver_failures: int  # total over all runs
+    nonfinite_episodes: int  # runs that ended on a non-finite state; excluded from the means
+    episodes: int
+    repeats: int
+
+
+# -- worker side ---------------------------------------------------------------------------------
+_WORKER: dict = {}
+
+
+def _init_worker(domain: str, testset_path: str) -> None:
+    system = make_system(domain)
+    _WORKER.update(system=system, env=system.make_env(), testset=ts_mod.load(testset_path, system.domain, system.task))
+
+
+def _run(job: tuple[str, int, int, int]) -> RunResult:
+    spec, repeat, episode, seed = job
+    system, env, testset = _WORKER["system"], _WORKER["env"], _WORKER["testset"]
+    policy = parse_policy(spec, system.error_weights)
+    rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(repeat, episode)))
+    traj = run_episode(system, env, policy, rng, system.episode_from_arrays(testset.episode_arrays(episode)))
+    ret = traj.policy_return(system.recompute_price)
+    return RunResult(
+        policy=spec,
+        repeat=repeat,
+        episode=episode,
+        objective=ret if system.objective_sense == "max" else -ret,
+        control_cost=-float(traj.rewards[: traj.steps].sum()),
+        recomputes=traj.recomputes,
+        solver_failures=traj.solver_failures,
+        steps=traj.steps,
+        finite=not traj.nonfinite,
+    )
+
+
+# -- driver side ---------------------------------------------------------------------------------
+def default_workers() -> int:
+    return max(1, len(os.sched_getaffinity(0)))
+
+
+def run_jobs(domain: str, testset_path: str, jobs: list, workers: int, progress: bool) -> list[RunResult]:
+    bar = tqdm(total=len(jobs), desc="episodes", unit="ep", disable=None if progress else True, leave=False)
+    try:
+        if workers <= 1:
+            _init_worker(domain, testset_path)
+            results = []
+            for job in jobs:
+                results.append(_run(job))
+                bar.update()
+            return results
+        chunk = max(1, min(8, len(jobs) // (4 * workers)))
+        with ProcessPoolExecutor(workers, get_context("spawn"), _init_worker, (domain, testset_path)) as pool:
+            results = []
+            for result in pool.map(_run, jobs, chunksize=chunk):
+                results.append(result)
+                bar.update()
+            return results
+    finally:
+        bar.close()
+
+
+def summarise(spec: str, runs: list[RunResult], sense: str, episodes: int, repeats: int) -> PolicySummary:
+    """Means over the runs that stayed finite; the others are counted, never averaged in."""
+    finite = [r for r in runs if r.finite]
+    by_episode: dict[int, list[float]] = {}
+    by_repeat: dict[int, list[float]] = {}
+    for r in finite:
+        by_episode.setdefault(r.episode, []).append(r.objective)
+        by_repeat.setdefault(r.repeat, []).append(r.objective)
+    mean = lambda values: float(np.mean(values)) if len(values) else math.nan  # noqa: E731
+    std = lambda values: float(np.std(values, ddof=1)) if len(values) > 1 else 0.0  # noqa: E731
+    return PolicySummary(
+        policy=spec,
+        objective_mean=mean([r.objective for r in finite]),
+        objective_std=std([mean(v) for v in by_episode.values()]),
+        objective_std_repeats=std([mean(v) for v in by_repeat.values()]),
+        objective_sense=sense,
+        control_cost_mean=mean([r.control_cost for r in finite]),
+        recomputes_mean=mean([r.recomputes for r in finite]),
+        solver_failures=sum(r.solver_failures for r in runs),
+        nonfinite_episodes=len(runs) - len(finite),
+        episodes=episodes,
+        repeats=repeats,
+    )
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    domain: str
+    task: str
+    testset_path: str
+    testset_sha256: str
+    seed: int
+    summaries: list[PolicySummary]
+    runs: list[RunResult]
+
+    def to_json(self) -> dict:
+        return {
+            "domain": self.domain,
+            "task": self.task,
+            "test_set": {"path": self.testset_path, "sha256": self.testset_sha256},
+            "seed": self.seed,
+            "policies": {s.policy: asdict(s) for s in self.summaries},
+            "runs": [asdict(r) for r in self.runs],
+        }
+
+
+def evaluate(
+    domain: str,
+    policies: list[str],
+    episodes: int | None = None,
+    repeats: int = 1,
+    workers: int | None = None,
+    seed: int = 0,
+    testset_path: str | None = None,
+    progress: bool = True,
+) -> Evaluation:
+    """Run every policy on the first ``episodes`` test-set episodes, ``repeats`` times each."""
+    system = make_system(domain)
+    for spec in policies:  # fail on a bad spec before any work starts
+        parse_policy(spec, system.error_weights)
+    path = testset_path or str(ts_mod.default_path(system.domain, system.task))
+    testset = ts_mod.load(path, system.domain, system.task)
+    episodes = testset.episodes if episodes is None else episodes
+    if not 1 <= episodes <= testset.episodes:
+        raise ts_mod.TestSetError(f"--episodes must be in 1..{testset.episodes} for this test set, got {episodes}")
+    if repeats < 1:
+        raise ValueError("repeats must be >= 1")
+    workers = default_workers() if workers is None else workers
+    jobs = [(spec, r, e, seed) for spec in policies for r in range(repeats) for e in range(episodes)]
+    runs = run_jobs(domain, path, jobs, workers, progress)
+    summaries = [
+        summarise(spec, [r for r in runs if r.policy == spec], system.objective_sense, episodes, repeats) for spec in policies
+    ]
+    return Evaluation(system.domain, system.task, str(testset.path.resolve()), testset.sha256, seed, summaries, runs)
+
+
+def format_table(evaluation: Evaluation) -> str:
+    sense = evaluation.summaries[0].objective_sense if evaluation.summaries else "min"
+    head = f"{'policy':<16}{'objective':>12}{'± std':>10}{'control':>11}{'recomputes':>12}{'failures':>10}{'non-finite':>12}"
+    lines = [
+        f"{evaluation.domain}/{evaluation.task}: objective ({'lower' if sense == 'min' else 'higher'} is better), "
+        f"test set {evaluation.testset_sha256[:12]}",
+        head,
+        "-" * len(head),
+    ]
+    for s in evaluation.summaries:
+        lines.append(
+            f"{s.policy:<16}{s.objective_mean:>12.5f}{s.objective_std:>10.5f}{s.control_cost_mean:>11.5f}"
+            f"{s.recomputes_mean:>12.2f}{s.solver_failures:>10d}{s.nonfinite_episodes:>12d}"
+        )
+    lines.append(f"{evaluation.summaries[0].episodes} episodes x {evaluation.summaries[0].repeats} repeats per policy" if evaluation.summaries else "")
+    return "\n".join(lines)

@@ -1,0 +1,144 @@
+"""The control loop of the paper's Algorithm 1, generic over the system.
+
+Each step: measure ``x_i``; if there is no plan, or the plan has run out (age = N), or the policy
+draws ``a_i = 1``, solve a new plan from ``x_i``. Apply the planned input plus the LQR correction
+``-K (x_i - x_hat_i)``, clipped to the input bounds. If a solve fails, the previous plan is kept
+(the LQR keeps correcting around it) and the failure is counted; with no earlier plan the failed
+solve's last iterate is used. Every recompute attempt counts as a computation (``a_i = 1``).
+
+A system plugs in by providing what :class:`System` lists; nothing here knows about MuJoCo or
+batteries.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import dm_env
+import numpy as np
+from dm_control.rl.control import PhysicsError
+
+from etmpc.lqr import ErrorFeedback
+from etmpc.plan import Plan
+from etmpc.policies import AugmentedState, Policy
+
+
+class System(Protocol):
+    """What the control loop needs from a system (see ``etmpc/cart_pendulum/system.py``)."""
+
+    domain: str
+    task: str
+    objective_sense: str  # "min": the objective is a cost; "max": a profit
+    recompute_price: float  # charged per computation in the policy's objective
+    episode_steps: int
+    u_min: np.ndarray
+    u_max: np.ndarray
+    error_weights: np.ndarray  # diagonal of W for the threshold policy
+    feedback: ErrorFeedback
+
+    def make_env(self, random: Any = None) -> dm_env.Environment: ...
+    def episode_from_arrays(self, arrays: dict[str, np.ndarray]) -> Any: ...
+    def state(self, timestep: dm_env.TimeStep) -> np.ndarray: ...
+    def plan(self, x: np.ndarray, u_prev: np.ndarray, warm: Plan | None, age: int, timestep: dm_env.TimeStep) -> Plan: ...
+    def action(self, u: np.ndarray, recompute: bool) -> np.ndarray: ...
+
+
+@dataclass
+class Trajectory:
+    """Everything one episode did, step by step (arrays preallocated for the full episode)."""
+
+    states: np.ndarray  # (T + 1, nx) measured; rows past `steps` stay NaN
+    applied: np.ndarray  # (T, nu) input sent to the plant
+    planned: np.ndarray  # (T, nu) the plan's input for that step
+    correction: np.ndarray  # (T, nu) LQR correction before clipping
+    predicted: np.ndarray  # (T, nx) the plan's prediction x_hat_i
+    plan_age: np.ndarray  # (T,) i - k at the decision
+    recompute: np.ndarray  # (T,) a_i: a computation was spent (includes forced ones)
+    forced: np.ndarray  # (T,) the plan had run out (or there was none)
+    rewards: np.ndarray  # (T,) the environment's reward for the step
+    solve_time_s: np.ndarray  # (T,) wall time of the MPC computation (NaN where none happened)
+    step_time_s: np.ndarray  # (T,) wall time of the whole step, solve included
+    plans: list[tuple[int, Plan]] = field(default_factory=list)  # (step made, plan), successful or used
+    steps: int = 0
+    solver_failures: int = 0
+    nonfinite: bool = False  # the episode ended early on a non-finite state
+
+    @classmethod
+    def empty(cls, steps: int, nx: int, nu: int) -> Trajectory:
+        nan = lambda *shape: np.full(shape, np.nan)  # noqa: E731
+        return cls(
+            states=nan(steps + 1, nx), applied=nan(steps, nu), planned=nan(steps, nu), correction=nan(steps, nu),
+            predicted=nan(steps, nx), plan_age=np.zeros(steps, int), recompute=np.zeros(steps, bool),
+            forced=np.zeros(steps, bool), rewards=np.zeros(steps), solve_time_s=nan(steps), step_time_s=nan(steps),
+        )
+
+    @property
+    def recomputes(self) -> int:
+        return int(self.recompute[: self.steps].sum())
+
+    def policy_return(self, recompute_price: float) -> float:
+        """The policy's return: rewards minus the price of every computation."""
+        return float(self.rewards[: self.steps].sum() - recompute_price * self.recomputes)
+
+
+def run_episode(
+    system: System,
+    env: dm_env.Environment,
+    policy: Policy,
+    rng: np.random.Generator | None = None,
+    episode: Any = None,
+) -> Trajectory:
+    """Play one episode (a stored one if given, else one drawn by the task) under ``policy``."""
+    env.task.use_episode(episode)
+    timestep = env.reset()
+    x = system.state(timestep)
+    nx, nu, n = x.shape[0], system.u_min.shape[0], system.episode_steps
+    traj = Trajectory.empty(n, nx, nu)
+    feedback, u_min, u_max = system.feedback, system.u_min, system.u_max
+    plan: Plan | None = None
+    age, u_prev = 0, np.zeros(nu)
+
+    for i in range(n):
+        start = time.perf_counter()
+        traj.states[i] = x
+        if not np.all(np.isfinite(x)):
+            traj.nonfinite = True
+            break
+        forced = plan is None or age >= plan.horizon
+        recompute = forced or policy.decide(AugmentedState(x, plan.states[0], age, plan.state_at(age)), rng)
+        if recompute:
+            solve_start = time.perf_counter()
+            new = system.plan(x, u_prev, plan, age, timestep)
+            traj.solve_time_s[i] = time.perf_counter() - solve_start  # the whole computation
+            if not new.success:
+                traj.solver_failures += 1
+            if new.success or plan is None:
+                plan, age = new, 0
+                traj.plans.append((i, plan))
+        u_planned = plan.input_at(age)
+        x_predicted = plan.state_at(age)
+        correction = np.zeros(nu) if age == 0 else feedback.correction(x, x_predicted)
+        u = np.clip(u_planned + correction, u_min, u_max)
+
+        try:
+            timestep = env.step(system.action(u, recompute))
+        except PhysicsError:
+            traj.nonfinite = True
+            break
+        traj.applied[i], traj.planned[i], traj.correction[i] = u, u_planned, correction
+        traj.predicted[i], traj.plan_age[i] = x_predicted, age
+        traj.recompute[i], traj.forced[i] = recompute, forced
+        traj.rewards[i] = timestep.reward
+        traj.steps = i + 1
+        x = system.state(timestep)
+        age, u_prev = age + 1, u
+        traj.step_time_s[i] = time.perf_counter() - start
+        if timestep.last():
+            break
+
+    if traj.steps and not traj.nonfinite:
+        traj.states[traj.steps] = x
+        traj.nonfinite = not bool(np.all(np.isfinite(x)))
+    return traj

@@ -1,0 +1,44 @@
+"""A plan is the MPC's output value: what it intends to apply and what it predicts will happen."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True, eq=False)
+class Plan:
+    """An MPC solution made at step ``k`` from the measured state ``states[0]``.
+
+    ``inputs[j]`` is the input planned for step ``k + j`` and ``states[j]`` the state predicted at
+    ``k + j`` (``j = 0..N``). ``success`` is False when the solver did not converge; such a plan holds
+    the solver's last iterate and is only used when there is no earlier plan to keep.
+    """
+
+    inputs: np.ndarray  # (N, nu)
+    states: np.ndarray  # (N + 1, nx)
+    cost: float
+    solve_time_s: float
+    success: bool
+    iterations: int = 0
+    status: str = ""
+    forecasts: dict[str, np.ndarray] | None = None  # time-varying parameters the plan assumed
+
+    @property
+    def horizon(self) -> int:
+        return self.inputs.shape[0]
+
+    def input_at(self, age: int) -> np.ndarray:
+        """Planned input ``age`` steps after the plan was made (the last one past the horizon)."""
+        return self.inputs[min(age, self.horizon - 1)]
+
+    def state_at(self, age: int) -> np.ndarray:
+        """Predicted state ``age`` steps after the plan was made (the terminal one past the horizon)."""
+        return self.states[min(age, self.horizon)]
+
+    def shifted(self, age: int) -> tuple[np.ndarray, np.ndarray]:
+        """Inputs and states advanced by ``age`` steps, padded with the last values (a warm start)."""
+        idx_u = np.minimum(np.arange(self.horizon) + age, self.horizon - 1)
+        idx_x = np.minimum(np.arange(self.horizon + 1) + age, self.horizon)
+        return self.inputs[idx_u], self.states[idx_x]

@@ -1,0 +1,21 @@
+"""The systems the benchmark knows, by domain name."""
+
+from __future__ import annotations
+
+import importlib
+
+from etmpc.errors import UnknownNameError
+
+# Domain name -> "module:class" of its control-loop adapter (see etmpc.loop.System).
+_SYSTEMS = {"cart_pendulum": "etmpc.cart_pendulum.system:CartPendulumSystem"}
+
+
+def names() -> tuple[str, ...]:
+    return tuple(_SYSTEMS)
+
+
+def make_system(domain: str):
+    if domain not in _SYSTEMS:
+        raise UnknownNameError(f"unknown task {domain!r}; valid: {', '.join(_SYSTEMS)}")
+    module, cls = _SYSTEMS[domain].split(":")
+    return getattr(importlib.import_module(module), cls)()

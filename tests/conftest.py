@@ -1,0 +1,18 @@
+import os
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import pytest  # noqa: E402
+
+from etmpc import testset  # noqa: E402
+from etmpc.cart_pendulum.system import CartPendulumSystem  # noqa: E402
+
+
+@pytest.fixture(scope="session")
+def cart_system():
+    return CartPendulumSystem()
+
+
+@pytest.fixture(scope="session")
+def cart_testset(cart_system):
+    return testset.load(testset.default_path("cart_pendulum", "balance"), "cart_pendulum", "balance")
