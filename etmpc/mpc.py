@@ -16,7 +16,7 @@ against a tightly converged Ipopt on random states.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import casadi as ca
 import numpy as np
@@ -140,12 +140,22 @@ class GaussNewtonMPC:
         return self.pack(inputs, states)
 
     def solve(self, x: np.ndarray, u_prev: np.ndarray, warm: Plan | None = None, age: int = 0) -> Plan:
-        """Plan from the measured state ``x``; the first input change is against ``u_prev``."""
-        w0 = self.initial_guess(x, warm, age)
+        """Plan from the measured state ``x``; the first input change is against ``u_prev``.
+
+        Warm started from ``warm`` shifted by ``age``; if that fails, retried once from a cold
+        start (zero inputs), since a poor warm start is the usual cause of a failed SQP.
+        """
         p = np.concatenate([x, np.atleast_1d(u_prev)])
         start = time.perf_counter()
+        plan = self._solve_from(self.initial_guess(x, warm, age), p, x)
+        if not plan.success and warm is not None:
+            retry = self._solve_from(self.initial_guess(x, None, 0), p, x)
+            if retry.success:
+                plan = retry
+        return replace(plan, solve_time_s=time.perf_counter() - start)
+
+    def _solve_from(self, w0: np.ndarray, p: np.ndarray, x: np.ndarray) -> Plan:
         sol = self._solver(x0=w0, p=p, lbx=self._lbw, ubx=self._ubw, lbg=0.0, ubg=0.0)
-        elapsed = time.perf_counter() - start
         w = np.asarray(sol["x"]).ravel()
         cost = float(sol["f"])
         try:  # stats() can raise when the QP solver failed inside the SQP
@@ -157,4 +167,4 @@ class GaussNewtonMPC:
             success, status = False, "non-finite iterate"
             w, cost = self.initial_guess(x, None, 0), float("nan")
         inputs, states = self.unpack(w)
-        return Plan(inputs, states, cost, elapsed, success, iterations, status)
+        return Plan(inputs, states, cost, 0.0, success, iterations, status)

@@ -1,0 +1,55 @@
+"""The command line: tables, JSON, and one-line errors with exit code 2."""
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from etmpc.cli import main
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["evaluate", "cartpole", "--policy", "always"], "unknown task 'cartpole'"),
+    (["evaluate", "cart_pendulum", "--policy", "sometimes"], "unknown policy 'sometimes'"),
+    (["evaluate", "cart_pendulum", "--policy", "every:0"], "period"),
+    (["evaluate", "cart_pendulum", "--policy", "threshold:-1"], "threshold"),
+    (["evaluate", "cart_pendulum", "--policy", "always", "--test-set", "/no/such.npz"], "not found"),
+    (["evaluate", "cart_pendulum", "--policy", "always", "--episodes", "0"], "--episodes"),
+    (["evaluate", "cart_pendulum", "--policy", "always", "--episodes", "101"], "1..100"),
+    (["evaluate", "cart_pendulum", "--policy", "always", "--json", "/"], "directory"),
+    (["evaluate", "cart_pendulum"], "--policy"),
+    (["frobnicate"], "invalid choice"),
+])
+def test_bad_input_is_one_line_and_exit_2(capsys, argv, message):
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("etmpc: error:") and message in err
+    assert "Traceback" not in err
+
+
+def test_evaluate_writes_table_and_json(tmp_path, capsys):
+    out = tmp_path / "sub" / "r.json"
+    assert main(["evaluate", "cart_pendulum", "--policy", "never", "--policy", "every:10", "--episodes", "2",
+                 "--workers", "1", "--json", str(out)]) == 0
+    table = capsys.readouterr().out
+    data = json.loads(out.read_text())
+    assert set(data["policies"]) == {"never", "every:10"}
+    for spec, summary in data["policies"].items():
+        assert f"{summary['objective_mean']:.5f}" in table and summary["recomputes_mean"] in (5.0, 10.0)
+
+
+def test_console_script_error_has_no_traceback():
+    result = subprocess.run([sys.executable, "-m", "etmpc.cli", "evaluate", "cart_pendulum", "--policy", "every:0"],
+                            capture_output=True, text=True)
+    assert result.returncode == 2 and "Traceback" not in result.stderr and result.stderr.count("\n") == 1
+
+
+def test_bench_reports_consistent_figures():
+    from etmpc.bench import run_bench
+
+    figures = run_bench(episodes=1, do_mpc=False)
+    assert figures["mpc_solve"]["samples"] == 100  # one solve per step under `always`
+    assert 0 < figures["mpc_solve"]["median_ms"] <= figures["mpc_solve"]["p90_ms"]
+    assert figures["rest_of_step"]["samples"] == 200 and figures["solver_failures"] == 0
+    assert figures["episodes_per_second"]["never"] > figures["episodes_per_second"]["always"]

@@ -1,0 +1,79 @@
+"""Algorithm 1 with the fixed policies: recompute counts, the LQR path and policy parsing."""
+
+import math
+
+import numpy as np
+import pytest
+
+from etmpc.errors import EtmpcError, UnknownNameError
+from etmpc.loop import run_episode
+from etmpc.policies import AugmentedState, parse_policy
+
+
+@pytest.fixture(scope="module")
+def episode(cart_system, cart_testset):
+    return cart_system.episode_from_arrays(cart_testset.episode_arrays(2))
+
+
+@pytest.fixture(scope="module")
+def env(cart_system):
+    return cart_system.make_env()
+
+
+@pytest.mark.parametrize("spec, expected", [("always", 100), ("never", 5), ("every:1", 100), ("every:3", 34), ("every:7", 15), ("every:20", 5), ("every:50", 5)])
+def test_recompute_counts(cart_system, env, episode, spec, expected):
+    traj = run_episode(cart_system, env, parse_policy(spec, cart_system.error_weights), None, episode)
+    assert traj.recomputes == expected
+    period = {"always": 1, "never": 20}.get(spec) or int(spec.split(":")[1])
+    assert traj.plan_age.max() == min(period, 20) - 1  # inputs applied at ages 0 .. T-1
+
+
+def test_every_one_equals_always(cart_system, env, episode):
+    a = run_episode(cart_system, env, parse_policy("always", cart_system.error_weights), None, episode)
+    b = run_episode(cart_system, env, parse_policy("every:1", cart_system.error_weights), None, episode)
+    np.testing.assert_array_equal(a.states, b.states)
+
+
+def test_applied_input_is_plan_plus_lqr_clipped(cart_system, env, episode):
+    traj = run_episode(cart_system, env, parse_policy("never", cart_system.error_weights), None, episode)
+    expected = np.clip(traj.planned + traj.correction, -25, 25)
+    np.testing.assert_array_equal(traj.applied, expected)
+    kept = traj.plan_age > 0
+    K = cart_system.feedback.gain
+    np.testing.assert_allclose(traj.correction[kept, 0], -(traj.states[:100][kept] - traj.predicted[kept]) @ K[0])
+    assert np.all(traj.correction[~kept] == 0)
+
+
+def test_objective_is_the_sum_of_costs(cart_system, env, episode):
+    traj = run_episode(cart_system, env, parse_policy("every:4", cart_system.error_weights), None, episode)
+    beta = traj.states[1:101, 2]
+    assert -traj.policy_return(5e-5) == pytest.approx(np.sum(beta**2) + 5e-5 * 25, rel=1e-12)
+
+
+def test_threshold_extremes(cart_system, env, episode):
+    never = run_episode(cart_system, env, parse_policy("never", cart_system.error_weights), None, episode)
+    high = run_episode(cart_system, env, parse_policy("threshold:1e9", cart_system.error_weights), None, episode)
+    zero = run_episode(cart_system, env, parse_policy("threshold:0", cart_system.error_weights), None, episode)
+    np.testing.assert_array_equal(high.states, never.states)
+    assert zero.recomputes == 100  # the disturbance always leaves some error
+    mid = run_episode(cart_system, env, parse_policy("threshold:0.3", cart_system.error_weights), None, episode)
+    assert never.recomputes < mid.recomputes < 100
+
+
+def test_threshold_uses_the_weighted_error_norm():
+    policy = parse_policy("threshold:1", np.array([0, 1, math.sqrt(10), math.sqrt(10)]))
+    s = lambda dx: AugmentedState(np.array(dx, float), np.zeros(4), 1, np.zeros(4))  # noqa: E731
+    rng = np.random.default_rng(0)
+    assert not policy.decide(s([100, 0, 0, 0]), rng)  # cart position has weight 0
+    assert not policy.decide(s([0, 0.99, 0, 0]), rng)
+    assert policy.decide(s([0, 0, 0.32, 0]), rng)  # sqrt(10) * 0.32 > 1
+
+
+@pytest.mark.parametrize("spec, error", [
+    ("every:0", EtmpcError), ("every:-2", EtmpcError), ("every:x", EtmpcError), ("every:1.5", EtmpcError),
+    ("threshold:-0.1", EtmpcError), ("threshold:nan", EtmpcError), ("threshold:inf", EtmpcError),
+    ("threshold:", EtmpcError), ("always:3", EtmpcError), ("sometimes", UnknownNameError), ("rl:/nope.npz", EtmpcError),
+])
+def test_bad_specs(spec, error):
+    with pytest.raises(error):
+        parse_policy(spec, np.ones(4))

@@ -1,0 +1,66 @@
+"""Stored test sets: bit-identical regeneration and clear errors."""
+
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from etmpc import testset
+from etmpc.errors import TestSetError
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_stored_test_set_regenerates_bit_identically():
+    result = subprocess.run([sys.executable, str(ROOT / "scripts" / "make_testset.py"), "cart_pendulum", "--check"],
+                            capture_output=True, text=True)
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "identical" in result.stdout
+
+
+def test_loaded_test_set_matches_its_seed(cart_testset, cart_system):
+    assert cart_testset.episodes == 100 and cart_testset.meta["seed"] == 20210601
+    assert cart_testset.sha256 == testset.checksum_path(cart_testset.path).read_text().split()[0]
+    rng = testset.episode_generators(cart_testset.meta["seed"], 100)[37]
+    episode = cart_system.draw_episode(rng)
+    np.testing.assert_array_equal(cart_testset.episode_arrays(37)["disturbance"], episode.disturbance)
+
+
+@pytest.fixture
+def copy(tmp_path, cart_testset):
+    target = tmp_path / cart_testset.path.name
+    shutil.copy(cart_testset.path, target)
+    shutil.copy(testset.checksum_path(cart_testset.path), testset.checksum_path(target))
+    return target
+
+
+def test_missing_test_set(tmp_path):
+    with pytest.raises(TestSetError, match="not found.*make_testset.py cart_pendulum"):
+        testset.load(tmp_path / "nope.npz", "cart_pendulum", "balance")
+
+
+def test_corrupted_test_set(copy):
+    data = bytearray(copy.read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    copy.write_bytes(bytes(data))
+    with pytest.raises(TestSetError, match="corrupted"):
+        testset.load(copy, "cart_pendulum", "balance")
+
+
+def test_missing_checksum(copy):
+    testset.checksum_path(copy).unlink()
+    with pytest.raises(TestSetError, match="checksum file"):
+        testset.load(copy, "cart_pendulum", "balance")
+
+
+def test_wrong_task(copy):
+    with pytest.raises(TestSetError, match="is for cart_pendulum/balance"):
+        testset.load(copy, "battery", "trading")
+
+
+def test_episode_out_of_range(cart_testset):
+    with pytest.raises(TestSetError, match="out of range"):
+        cart_testset.episode_arrays(100)
