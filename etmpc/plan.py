@@ -23,7 +23,6 @@ class Plan:
     success: bool
     iterations: int = 0
     status: str = ""
-    forecasts: dict[str, np.ndarray] | None = None  # time-varying parameters the plan assumed
 
     @property
     def horizon(self) -> int:

@@ -94,7 +94,7 @@ def load(path: Path, domain: str, task: str) -> TestSet:
     expected_file = checksum_path(path)
     if not expected_file.is_file():
         raise TestSetError(f"checksum file {expected_file} not found; {regen}")
-    expected = expected_file.read_text().split()[0] if expected_file.read_text().strip() else ""
+    expected = (expected_file.read_text().split() or [""])[0]
     actual = sha256_of(path)
     if actual != expected:
         raise TestSetError(f"test set {path} is corrupted: sha256 {actual[:12]}... != {expected[:12]}... in {expected_file.name}; {regen}")
