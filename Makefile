@@ -15,11 +15,16 @@ $(VENV)/.installed: pyproject.toml
 	$(BIN)/python -m pip install --quiet -e '.[test]'
 	touch $@
 
-# The main job: compare recomputation policies on the stored 100-episode cart-pendulum test set.
+# The main job: compare recomputation policies on the stored 100-episode test set of each system,
+# and draw the paper's Figure 1 (battery forecasts).
 evaluate: setup
 	$(BIN)/etmpc evaluate cart_pendulum --policy always --policy never \
 		--policy every:2 --policy every:5 --policy every:10 \
 		--policy threshold:0.1 --policy threshold:0.3 --json results/cart_pendulum.json
+	$(BIN)/etmpc evaluate battery --policy always --policy never \
+		--policy every:2 --policy every:5 --policy every:10 \
+		--policy threshold:0.01 --policy threshold:0.02 --json results/battery.json
+	$(BIN)/python scripts/figure_forecasts.py --policy every:20 --policy always --out results/figure1_battery_forecasts.png
 
 test: setup
 	$(BIN)/python -m pytest -q

@@ -1,19 +1,21 @@
 """``etmpc bench``: where the time of a step goes, measured on real episodes of the test set.
 
+For each system, through the :class:`etmpc.loop.System` protocol only:
+
 * MPC solve: wall time of each recompute (the whole ``system.plan`` call) under ``always``.
-* Rest of a step: step wall time minus the solve (physics, LQR, policy, bookkeeping), under
+* Rest of a step: step wall time minus the solve (plant, LQR, policy, bookkeeping), under
   ``always`` and ``never`` together.
 * Episodes per second, single process, for ``always`` and ``never``.
-* do-mpc (when installed): the very same OCP solved by do-mpc/Ipopt at the same sequence of
-  measured states, in the same run, each solver warm started from its own previous solution;
-  the ratio of medians and how far its objective is from ours.
-* With ``--jit``: the same MPC with its CasADi functions compiled by the C compiler (CasADi's
-  JIT; several seconds to build per process, so not the default), on the same states.
+* Reference solvers (``system.reference_solvers()``: do-mpc for the cart pendulum when installed,
+  scipy's ``linprog`` for the battery): the very same OCP, solved at the same sequence of measured
+  states in the same run, one solver after the other (so neither evicts the other's caches); the
+  ratio of medians and how far the reference's objective is from ours.
+* With ``--jit``: the system's MPC compiled by the C compiler (``system.compiled()``; several
+  seconds to build per process, so not the default), on the same states.
 """
 
 from __future__ import annotations
 
-import importlib.util
 import platform
 import time
 
@@ -25,7 +27,7 @@ from etmpc.policies import parse_policy
 from etmpc.systems import make_system
 
 
-def _stats(values_s: np.ndarray) -> dict:
+def _stats(values_s) -> dict:
     values_s = np.asarray(values_s)
     return {
         "median_ms": float(np.median(values_s) * 1e3),
@@ -34,89 +36,97 @@ def _stats(values_s: np.ndarray) -> dict:
     }
 
 
+def _episode(system, testset, index: int):
+    return system.episode_from_arrays(testset.episode_arrays(index))
+
+
 def _play(system, env, testset, spec: str, episodes: int):
     policy = parse_policy(spec, system.error_weights)
     start = time.perf_counter()
-    trajectories = [
-        run_episode(system, env, policy, np.random.default_rng(e), system.episode_from_arrays(testset.episode_arrays(e)))
-        for e in range(episodes)
-    ]
+    trajectories = [run_episode(system, env, policy, np.random.default_rng(e), _episode(system, testset, e)) for e in range(episodes)]
     return trajectories, time.perf_counter() - start
 
 
-def _same_states(trajectories, max_solves: int) -> list[tuple[np.ndarray, np.ndarray, bool]]:
-    """(measured state, last applied input, continuing the same episode) of an ``always`` run."""
-    return [
-        (traj.states[i], traj.applied[i - 1] if i else np.zeros(1), i > 0)
-        for traj in trajectories
-        for i in range(traj.steps)
-    ][:max_solves]
+class _Capture:
+    """The system, with every ``plan`` call's problem kept: (x, u_prev, continuing, timestep)."""
+
+    def __init__(self, system, limit: int):
+        self._system, self._limit, self.problems = system, limit, []
+
+    def __getattr__(self, name):
+        return getattr(self._system, name)
+
+    def plan(self, x, u_prev, warm, age, timestep):
+        if len(self.problems) < self._limit:
+            self.problems.append((np.array(x), np.array(u_prev), warm is not None, timestep))
+        return self._system.plan(x, u_prev, warm, age, timestep)
 
 
-def _time_ours(mpc, problems) -> tuple[list[float], list[np.ndarray]]:
+def _problems(system, env, testset, count: int) -> list:
+    """The first ``count`` OCPs an ``always`` run meets on the test set (an untimed run)."""
+    capture = _Capture(system, count)
+    policy = parse_policy("always", system.error_weights)
+    episode = 0
+    while len(capture.problems) < count and episode < testset.episodes:
+        run_episode(capture, env, policy, np.random.default_rng(episode), _episode(system, testset, episode))
+        episode += 1
+    return capture.problems
+
+
+def _time_ours(system, problems) -> tuple[list[float], list[np.ndarray]]:
+    """``system.plan`` on each problem, warm started from its own previous plan within an episode."""
     times, inputs, plan = [], [], None
-    for x, u_prev, continuing in problems:
+    for x, u_prev, continuing, timestep in problems:
         warm = plan if continuing else None
         start = time.perf_counter()
-        plan = mpc.solve(x, u_prev, warm, 1 if warm is not None else 0)
+        plan = system.plan(x, u_prev, warm, 1 if warm is not None else 0, timestep)
         times.append(time.perf_counter() - start)
         inputs.append(plan.inputs.ravel())
     return times, inputs
 
 
-def _compare_jit(system, trajectories, max_solves: int = 200) -> dict:
-    """The same MPC with its CasADi functions compiled by the system's C compiler."""
-    from dataclasses import replace
-
-    from etmpc.cart_pendulum.system import CartPendulumSystem
-
-    start = time.perf_counter()
-    jitted = CartPendulumSystem(replace(system.config, solver=replace(system.config.solver, jit=True))).mpc
-    build_s = time.perf_counter() - start
-    problems = _same_states(trajectories, max_solves)
-    plain, _ = _time_ours(system.mpc, problems)
-    compiled, _ = _time_ours(jitted, problems)
-    return {"build_s": build_s, "interpreted": _stats(plain), "compiled": _stats(compiled)}
-
-
-def _compare_do_mpc(system, trajectories, max_solves: int = 200) -> dict:
-    """Both solvers over the same sequence of measured states, one solver after the other (so
-    neither evicts the other's caches), each warm started from its own previous solution."""
-    from etmpc.bench_dompc import DoMpcReference
-
-    config = system.config
-    reference = DoMpcReference(
-        system.model.discrete, config.horizon, config.input_change_weight, float(system.u_min[0]), float(system.u_max[0])
-    )
-    problems = _same_states(trajectories, max_solves)
-    ours_s, our_inputs = _time_ours(system.mpc, problems)
+def _compare_reference(system, reference, problems) -> dict:
+    ours_s, our_inputs = _time_ours(system, problems)
     theirs_s, gaps, failures = [], [], 0
-    for (x, u_prev, _), ours in zip(problems, our_inputs):
-        inputs, elapsed, ok = reference.solve(x, float(u_prev[0]))
+    for (x, u_prev, continuing, timestep), ours in zip(problems, our_inputs):
+        inputs, elapsed, ok = reference.solve(x, u_prev, timestep, continuing)
         theirs_s.append(elapsed)
-        failures += not ok
-        ours_cost = _ocp_cost(system, x, u_prev, ours)
-        gaps.append((_ocp_cost(system, x, u_prev, inputs) - ours_cost) / max(abs(ours_cost), 1e-12))
+        if not ok:
+            failures += 1
+            continue
+        ours_cost = system.plan_cost(x, u_prev, timestep, ours)
+        gaps.append((system.plan_cost(x, u_prev, timestep, inputs) - ours_cost) / max(abs(ours_cost), 1e-12))
     ours, theirs = _stats(ours_s), _stats(theirs_s)
     return {
+        "name": reference.name,
         "ours": ours,
-        "do_mpc": theirs,
+        "reference": theirs,
         "speedup_median": theirs["median_ms"] / ours["median_ms"],
-        "do_mpc_failures": failures,
-        "objective_gap_relative": {"median": float(np.median(gaps)), "max_abs": float(np.max(np.abs(gaps)))},
+        "reference_failures": failures,
+        "objective_gap_relative": {
+            "median": float(np.median(gaps)) if gaps else float("nan"),
+            "max_abs": float(np.max(np.abs(gaps))) if gaps else float("nan"),
+        },
     }
 
 
-def _ocp_cost(system, x0: np.ndarray, u_prev: np.ndarray, inputs: np.ndarray) -> float:
-    """The cart-pendulum OCP objective of an input sequence, rolled out through the predictor."""
-    states = system.mpc.rollout(x0, inputs.reshape(-1, 1))
-    du = np.diff(np.concatenate([np.atleast_1d(u_prev), inputs]))
-    return float(np.sum(states[:, 2] ** 2) + system.config.input_change_weight * np.sum(du**2))
+def _compare_compiled(system, problems) -> dict:
+    start = time.perf_counter()
+    compiled = system.compiled()
+    if compiled is None:
+        return {"available": False}
+    _time_ours(compiled, problems[:1])  # build any lazily compiled code before timing
+    build_s = time.perf_counter() - start
+    plain, _ = _time_ours(system, problems)
+    fast, _ = _time_ours(compiled, problems)
+    return {"available": True, "build_s": build_s, "interpreted": _stats(plain), "compiled": _stats(fast)}
 
 
-def run_bench(domain: str = "cart_pendulum", episodes: int = 10, do_mpc: bool = True, jit: bool = False) -> dict:
+def run_bench(domain: str = "cart_pendulum", episodes: int = 10, references: bool = True, jit: bool = False,
+              reference_solves: int = 200) -> dict:
     system = make_system(domain)
     testset = ts_mod.load(ts_mod.default_path(system.domain, system.task), system.domain, system.task)
+    episodes = min(episodes, testset.episodes)
     env = system.make_env()
     _play(system, env, testset, "always", 1)  # warm up caches and lazy builds
 
@@ -133,14 +143,17 @@ def run_bench(domain: str = "cart_pendulum", episodes: int = 10, do_mpc: bool = 
         "rest_of_step": {**_stats(rest), "median_us": float(np.median(rest) * 1e6)},
         "episodes_per_second": {"always": episodes / always_s, "never": episodes / never_s},
         "solver_failures": int(sum(t.solver_failures for t in always + never)),
+        "references": [],
+        "jit": None,
     }
-    if do_mpc and importlib.util.find_spec("do_mpc") is not None:
-        figures["do_mpc"] = _compare_do_mpc(system, always)
-    else:
-        figures["do_mpc"] = None
-    figures["jit"] = _compare_jit(system, always) if jit else None
-    if jit and figures["do_mpc"] is not None:
-        figures["do_mpc"]["speedup_median_compiled"] = figures["do_mpc"]["do_mpc"]["median_ms"] / figures["jit"]["compiled"]["median_ms"]
+    problems = _problems(system, env, testset, reference_solves) if references or jit else []
+    if references:
+        figures["references"] = [_compare_reference(system, ref, problems) for ref in system.reference_solvers()]
+    if jit:
+        figures["jit"] = _compare_compiled(system, problems)
+        if figures["jit"]["available"]:
+            for ref in figures["references"]:
+                ref["speedup_median_compiled"] = ref["reference"]["median_ms"] / figures["jit"]["compiled"]["median_ms"]
     return figures
 
 
@@ -152,21 +165,22 @@ def format_bench(f: dict) -> str:
         f"episodes/s         always {f['episodes_per_second']['always']:.1f}   never {f['episodes_per_second']['never']:.1f}",
         f"solver failures    {f['solver_failures']}",
     ]
-    d = f.get("do_mpc")
-    if d is None:
-        lines.append("do-mpc             not installed (pip install 'etmpc[bench]') or skipped")
-    else:
+    for r in f["references"]:
         lines += [
-            f"do-mpc (same OCP)  median {d['do_mpc']['median_ms']:.3f} ms vs ours {d['ours']['median_ms']:.3f} ms "
-            f"on the same {d['ours']['samples']} states: {d['speedup_median']:.1f}x faster",
-            f"                   objective gap (do-mpc - ours)/ours: median {d['objective_gap_relative']['median']:.1e}, "
-            f"max |.| {d['objective_gap_relative']['max_abs']:.1e}; do-mpc failures {d['do_mpc_failures']}",
+            f"{r['name']}: median {r['reference']['median_ms']:.3f} ms vs ours {r['ours']['median_ms']:.3f} ms "
+            f"on the same {r['ours']['samples']} OCPs: ours {r['speedup_median']:.1f}x faster",
+            f"    objective gap (reference - ours)/|ours|: median {r['objective_gap_relative']['median']:.1e}, "
+            f"max |.| {r['objective_gap_relative']['max_abs']:.1e}; reference failures {r['reference_failures']}",
         ]
+    if not f["references"]:
+        lines.append("reference solvers  none run (skipped, or do-mpc not installed: pip install 'etmpc[bench]')")
     j = f.get("jit")
-    if j is not None:
+    if j is not None and not j["available"]:
+        lines.append("compiled (--jit)   not applicable to this system's MPC")
+    elif j is not None:
         lines.append(
             f"compiled (--jit)   median {j['compiled']['median_ms']:.3f} ms vs interpreted {j['interpreted']['median_ms']:.3f} ms "
-            f"on the same states (build {j['build_s']:.1f} s)"
-            + (f"; do-mpc / compiled: {d['speedup_median_compiled']:.1f}x" if d is not None else "")
+            f"on the same OCPs (build {j['build_s']:.1f} s)"
         )
+        lines += [f"    {r['name']} / compiled: {r['speedup_median_compiled']:.1f}x" for r in f["references"]]
     return "\n".join(lines)

@@ -66,12 +66,18 @@ class DoMpcReference:
         self._mpc = mpc
         self._first_call = True
 
-    def solve(self, x0: np.ndarray, u_prev: float) -> tuple[np.ndarray, float, bool]:
-        """Returns (inputs of shape (horizon,), wall-clock solve time in seconds of the make_step call, success)."""
+    name = "do-mpc 5.1 (Ipopt)"
+
+    def solve(self, x0: np.ndarray, u_prev, timestep=None, continuing: bool = True) -> tuple[np.ndarray, float, bool]:
+        """Returns (inputs of shape (horizon,), wall-clock solve time in seconds of the make_step call, success).
+
+        do-mpc always warm starts from its own previous solution, as in the paper's closed loop,
+        so ``continuing`` (and the ``timestep``, which the cart's OCP does not need) are ignored.
+        """
         mpc = self._mpc
         x0 = np.asarray(x0, dtype=float).reshape(4, 1)
         mpc.x0 = x0
-        mpc.u0 = np.array([[float(u_prev)]])
+        mpc.u0 = np.array([[float(np.ravel(u_prev)[0])]])
         if self._first_call:
             mpc.set_initial_guess()
             self._first_call = False

@@ -11,7 +11,8 @@ import json
 import sys
 from pathlib import Path
 
-from etmpc.errors import EtmpcError
+from etmpc.errors import EtmpcError, UnknownNameError
+from etmpc.systems import names
 
 
 class _Parser(argparse.ArgumentParser):
@@ -37,11 +38,12 @@ def _json_path(text: str) -> Path:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    tasks = " | ".join(names())
     parser = _Parser(prog="etmpc", description="Event-triggered MPC benchmark.")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     ev = sub.add_parser("evaluate", help="compare recomputation policies on a stored test set")
-    ev.add_argument("task", help="system to evaluate: cart_pendulum")
+    ev.add_argument("task", help=f"system to evaluate: {tasks}")
     ev.add_argument("--policy", action="append", required=True, metavar="SPEC",
                     help="always | never | every:T | threshold:X (repeatable)")
     ev.add_argument("--episodes", type=_positive_int, default=None, help="first N test-set episodes (default: all)")
@@ -52,9 +54,11 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--json", type=_json_path, default=None, metavar="PATH", help="write the results as JSON")
 
     be = sub.add_parser("bench", help="time the MPC solve, the rest of a step and whole episodes")
+    be.add_argument("tasks", nargs="*", metavar="TASK", help=f"systems to bench (default: all: {tasks})")
     be.add_argument("--episodes", type=_positive_int, default=10, help="test-set episodes per measurement")
     be.add_argument("--json", type=_json_path, default=None, metavar="PATH", help="write the figures as JSON")
-    be.add_argument("--no-do-mpc", action="store_true", help="skip the do-mpc comparison even if installed")
+    be.add_argument("--no-reference", action="store_true",
+                    help="skip the reference solvers (do-mpc for cart_pendulum, scipy linprog for battery)")
     be.add_argument("--jit", action="store_true", help="also time the MPC compiled with CasADi's JIT (needs a C compiler)")
     return parser
 
@@ -85,8 +89,14 @@ def _evaluate(args) -> None:
 def _bench(args) -> None:
     from etmpc.bench import format_bench, run_bench
 
-    figures = run_bench(episodes=args.episodes, do_mpc=not args.no_do_mpc, jit=args.jit)
-    print(format_bench(figures))
+    domains = args.tasks or list(names())
+    unknown = [d for d in domains if d not in names()]
+    if unknown:
+        raise UnknownNameError(f"unknown task {unknown[0]!r}; valid: {', '.join(names())}")
+    figures = {}
+    for domain in domains:
+        figures[domain] = run_bench(domain, episodes=args.episodes, references=not args.no_reference, jit=args.jit)
+        print(format_bench(figures[domain]), flush=True)
     if args.json is not None:
         _write_json(args.json, figures)
         print(f"wrote {args.json}")

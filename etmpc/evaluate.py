@@ -31,7 +31,7 @@ class RunResult:
     repeat: int
     episode: int
     objective: float  # sense-aware: cost (min) or profit (max), computations included
-    control_cost: float  # -sum(rewards): the control part alone
+    control_objective: float  # the objective without the price of computations (sense-aware)
     recomputes: int
     solver_failures: int
     steps: int
@@ -45,7 +45,7 @@ class PolicySummary:
     objective_std: float  # over test-set episodes (each averaged over repeats)
     objective_std_repeats: float  # over the repeats' means: the spread due to the policy's randomness
     objective_sense: str
-    control_cost_mean: float
+    control_objective_mean: float
     recomputes_mean: float
     solver_failures: int  # total over all runs
     nonfinite_episodes: int  # runs that ended on a non-finite state; excluded from the means
@@ -69,12 +69,13 @@ def _run(job: tuple[str, int, int, int]) -> RunResult:
     rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(repeat, episode)))
     traj = run_episode(system, env, policy, rng, system.episode_from_arrays(testset.episode_arrays(episode)))
     ret = traj.policy_return(system.recompute_price)
+    rewards = float(traj.rewards[: traj.steps].sum())
     return RunResult(
         policy=spec,
         repeat=repeat,
         episode=episode,
         objective=ret if system.objective_sense == "max" else -ret,
-        control_cost=-float(traj.rewards[: traj.steps].sum()),
+        control_objective=rewards if system.objective_sense == "max" else -rewards,
         recomputes=traj.recomputes,
         solver_failures=traj.solver_failures,
         steps=traj.steps,
@@ -124,7 +125,7 @@ def summarise(spec: str, runs: list[RunResult], sense: str, episodes: int, repea
         objective_std=std([mean(v) for v in by_episode.values()]),
         objective_std_repeats=std([mean(v) for v in by_repeat.values()]),
         objective_sense=sense,
-        control_cost_mean=mean([r.control_cost for r in finite]),
+        control_objective_mean=mean([r.control_objective for r in finite]),
         recomputes_mean=mean([r.recomputes for r in finite]),
         solver_failures=sum(r.solver_failures for r in runs),
         nonfinite_episodes=len(runs) - len(finite),
@@ -195,7 +196,7 @@ def format_table(evaluation: Evaluation) -> str:
     ]
     for s in evaluation.summaries:
         lines.append(
-            f"{s.policy:<16}{s.objective_mean:>12.5f}{s.objective_std:>10.5f}{s.control_cost_mean:>11.5f}"
+            f"{s.policy:<16}{s.objective_mean:>12.5f}{s.objective_std:>10.5f}{s.control_objective_mean:>11.5f}"
             f"{s.recomputes_mean:>12.2f}{s.solver_failures:>10d}{s.nonfinite_episodes:>12d}"
         )
     lines.append(f"{evaluation.summaries[0].episodes} episodes x {evaluation.summaries[0].repeats} repeats per policy" if evaluation.summaries else "")

@@ -26,7 +26,8 @@ from etmpc.policies import AugmentedState, Policy
 
 
 class System(Protocol):
-    """What the control loop needs from a system (see ``etmpc/cart_pendulum/system.py``)."""
+    """What the control loop needs from a system (see ``etmpc/cart_pendulum/system.py`` and
+    ``etmpc/battery/system.py``)."""
 
     domain: str
     task: str
@@ -43,6 +44,13 @@ class System(Protocol):
     def state(self, timestep: dm_env.TimeStep) -> np.ndarray: ...
     def plan(self, x: np.ndarray, u_prev: np.ndarray, warm: Plan | None, age: int, timestep: dm_env.TimeStep) -> Plan: ...
     def action(self, u: np.ndarray, recompute: bool) -> np.ndarray: ...
+
+    # Not used by the loop: test sets (etmpc.testset) and `etmpc bench`.
+    def draw_episode(self, rng: np.random.Generator) -> Any: ...
+    def episode_parameters(self) -> dict: ...
+    def plan_cost(self, x: np.ndarray, u_prev: np.ndarray, timestep: dm_env.TimeStep, inputs: np.ndarray) -> float: ...
+    def reference_solvers(self) -> list: ...  # objects with .name and .solve(x, u_prev, timestep, continuing)
+    def compiled(self) -> System | None: ...  # the same system with compiled MPC code, if that exists
 
 
 @dataclass

@@ -108,7 +108,7 @@ class GaussNewtonMPC:
 
     # -- packing ----------------------------------------------------------------------------------
     def pack(self, inputs: np.ndarray, states: np.ndarray) -> np.ndarray:
-        n, nx, nu = self.horizon, self.nx, self.nu
+        n, nu = self.horizon, self.nu
         stages = np.concatenate([states[:n], inputs.reshape(n, nu)], axis=1).ravel()
         return np.concatenate([stages, states[n]])
 

@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -13,7 +14,9 @@ class Plan:
 
     ``inputs[j]`` is the input planned for step ``k + j`` and ``states[j]`` the state predicted at
     ``k + j`` (``j = 0..N``). ``success`` is False when the solver did not converge; such a plan holds
-    the solver's last iterate and is only used when there is no earlier plan to keep.
+    the solver's last iterate and is only used when there is no earlier plan to keep. ``cost`` is the
+    value the solver minimised (for an economic MPC, the negative profit). ``forecasts`` holds the
+    forecasts of time-varying parameters the plan was made with (name -> values for ``k..k+N-1``).
     """
 
     inputs: np.ndarray  # (N, nu)
@@ -23,6 +26,7 @@ class Plan:
     success: bool
     iterations: int = 0
     status: str = ""
+    forecasts: Mapping[str, np.ndarray] = field(default_factory=dict)
 
     @property
     def horizon(self) -> int:

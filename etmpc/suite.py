@@ -11,7 +11,7 @@ from types import ModuleType
 from etmpc.errors import UnknownNameError
 
 # Domain name -> module holding a ``SUITE`` of task factories (as in dm_control.suite).
-_DOMAINS = {"cart_pendulum": "etmpc.cart_pendulum.env"}
+_DOMAINS = {"cart_pendulum": "etmpc.cart_pendulum.env", "battery": "etmpc.battery.env"}
 
 
 def domains() -> tuple[str, ...]:

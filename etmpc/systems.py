@@ -7,7 +7,10 @@ import importlib
 from etmpc.errors import UnknownNameError
 
 # Domain name -> "module:class" of its control-loop adapter (see etmpc.loop.System).
-_SYSTEMS = {"cart_pendulum": "etmpc.cart_pendulum.system:CartPendulumSystem"}
+_SYSTEMS = {
+    "cart_pendulum": "etmpc.cart_pendulum.system:CartPendulumSystem",
+    "battery": "etmpc.battery.system:BatterySystem",
+}
 
 
 def names() -> tuple[str, ...]:

@@ -120,5 +120,6 @@ def generate(system, seed: int, episodes: int) -> tuple[dict[str, np.ndarray], d
         "seed": seed,
         "episodes": episodes,
         "generator": "numpy PCG64, one SeedSequence(seed).spawn(episodes) child per episode",
+        "parameters": system.episode_parameters(),
     }
     return arrays, meta

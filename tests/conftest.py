@@ -5,6 +5,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 import pytest  # noqa: E402
 
 from etmpc import testset  # noqa: E402
+from etmpc.battery.system import BatterySystem  # noqa: E402
 from etmpc.cart_pendulum.system import CartPendulumSystem  # noqa: E402
 
 
@@ -16,3 +17,13 @@ def cart_system():
 @pytest.fixture(scope="session")
 def cart_testset(cart_system):
     return testset.load(testset.default_path("cart_pendulum", "balance"), "cart_pendulum", "balance")
+
+
+@pytest.fixture(scope="session")
+def battery_system():
+    return BatterySystem()
+
+
+@pytest.fixture(scope="session")
+def battery_testset(battery_system):
+    return testset.load(testset.default_path("battery", "trading"), "battery", "trading")

@@ -23,10 +23,10 @@ def plant_trajectory(plant, x0, inputs, disturbances):
     padded = np.zeros(cp_env.EPISODE_STEPS)
     padded[: len(disturbances)] = disturbances
     environment.task.use_episode(cp_env.Episode(np.asarray(x0, float), padded))
-    timestep = environment.reset()
+    environment.reset()
     states = [environment.physics.state()]
     for u in inputs:
-        timestep = environment.step([u])
+        environment.step([u])
         states.append(environment.physics.state())
     return np.array(states)
 

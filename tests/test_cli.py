@@ -20,6 +20,10 @@ from etmpc.cli import main
     (["evaluate", "cart_pendulum", "--policy", "always", "--json", "/"], "directory"),
     (["evaluate", "cart_pendulum"], "--policy"),
     (["frobnicate"], "invalid choice"),
+    (["evaluate", "battery", "--policy", "every:x"], "every"),
+    (["evaluate", "battery", "--policy", "always", "--episodes", "101"], "1..100"),
+    (["bench", "battery", "pendulum"], "unknown task 'pendulum'"),
+    (["bench", "--episodes", "0"], "--episodes"),
 ])
 def test_bad_input_is_one_line_and_exit_2(capsys, argv, message):
     assert main(argv) == 2
@@ -39,6 +43,12 @@ def test_evaluate_writes_table_and_json(tmp_path, capsys):
         assert f"{summary['objective_mean']:.5f}" in table and summary["recomputes_mean"] in (5.0, 10.0)
 
 
+def test_evaluate_battery_reports_profit(capsys):
+    assert main(["evaluate", "battery", "--policy", "always", "--policy", "never", "--episodes", "2", "--workers", "1"]) == 0
+    out = capsys.readouterr().out
+    assert "battery/trading: objective (higher is better)" in out and "never" in out
+
+
 def test_console_script_error_has_no_traceback():
     result = subprocess.run([sys.executable, "-m", "etmpc.cli", "evaluate", "cart_pendulum", "--policy", "every:0"],
                             capture_output=True, text=True)
@@ -48,7 +58,7 @@ def test_console_script_error_has_no_traceback():
 def test_bench_reports_consistent_figures():
     from etmpc.bench import run_bench
 
-    figures = run_bench(episodes=1, do_mpc=False)
+    figures = run_bench("cart_pendulum", episodes=1, references=False)
     assert figures["mpc_solve"]["samples"] == 100  # one solve per step under `always`
     assert 0 < figures["mpc_solve"]["median_ms"] <= figures["mpc_solve"]["p90_ms"]
     assert figures["rest_of_step"]["samples"] == 200 and figures["solver_failures"] == 0

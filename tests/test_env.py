@@ -18,7 +18,7 @@ def test_suite_returns_a_dm_control_environment():
 
 
 def test_unknown_names_list_the_valid_ones():
-    with pytest.raises(UnknownNameError, match="valid: cart_pendulum"):
+    with pytest.raises(UnknownNameError, match="valid: cart_pendulum, battery"):
         suite.load("cartpole", "balance")
     with pytest.raises(UnknownNameError, match="valid: balance"):
         suite.load("cart_pendulum", "swingup")

@@ -18,3 +18,5 @@ def test_wheel_contents(tmp_path):
     assert "etmpc/_data/models/cart_pendulum.xml" in names
     assert "etmpc/_data/tasks/cart_pendulum/balance_testset.npz" in names
     assert "etmpc/_data/tasks/cart_pendulum/balance_testset.npz.sha256" in names
+    assert "etmpc/_data/tasks/battery/trading_testset.npz" in names
+    assert "etmpc/battery/system.py" in names

@@ -14,8 +14,9 @@ from etmpc.errors import TestSetError
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def test_stored_test_set_regenerates_bit_identically():
-    result = subprocess.run([sys.executable, str(ROOT / "scripts" / "make_testset.py"), "cart_pendulum", "--check"],
+@pytest.mark.parametrize("domain", ["cart_pendulum", "battery"])
+def test_stored_test_set_regenerates_bit_identically(domain):
+    result = subprocess.run([sys.executable, str(ROOT / "scripts" / "make_testset.py"), domain, "--check"],
                             capture_output=True, text=True)
     assert result.returncode == 0, result.stdout + result.stderr
     assert "identical" in result.stdout

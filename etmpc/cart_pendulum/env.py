@@ -28,6 +28,7 @@ from dm_control.utils import containers
 from dm_env import specs
 
 from etmpc.cart_pendulum.model import NX, STATE_NAMES, Parameters
+from etmpc.episodes import EpisodeTask
 from etmpc.errors import UnknownNameError
 from etmpc.resources import model_path
 
@@ -150,40 +151,29 @@ class Episode:
         return cls(initial_state, disturbance)
 
 
-class Balance(control.Task):
+class Balance(EpisodeTask):
     """Keep the pole upright; reward ``-beta^2`` of the state each step leads to.
 
-    Randomness has one owner: the task's ``random`` generator draws each episode on reset, unless
-    :meth:`use_episode` has queued a stored one (a test-set episode), which is then replayed exactly.
+    Each episode (initial state and disturbance sequence) is drawn from ``random`` on reset, or is
+    a stored one queued with :meth:`use_episode` (see :class:`etmpc.episodes.EpisodeTask`).
     """
 
     def __init__(self, random: np.random.Generator | int | None = None, steps: int = EPISODE_STEPS):
-        self._random = random if isinstance(random, np.random.Generator) else np.random.default_rng(random)
+        super().__init__(random)
         self._steps = steps
-        self._queued: Episode | None = None
-        self._episode: Episode | None = None
         self._step = 0
 
-    @property
-    def random(self) -> np.random.Generator:
-        return self._random
-
-    @property
-    def episode(self) -> Episode | None:
-        """The episode being played (drawn or stored)."""
-        return self._episode
-
-    def use_episode(self, episode: Episode | None) -> None:
-        """Play ``episode`` at the next reset (``None``: draw from ``random`` again)."""
-        if episode is not None and episode.disturbance.shape[0] < self._steps:
+    def check_episode(self, episode: Episode) -> None:
+        if episode.disturbance.shape[0] < self._steps:
             raise ValueError(f"episode has {episode.disturbance.shape[0]} disturbances, need {self._steps}")
-        self._queued = episode
+
+    def draw_episode(self, random: np.random.Generator) -> Episode:
+        return Episode.draw(random, self._steps)
 
     def initialize_episode(self, physics: Physics) -> None:
-        episode, self._queued = self._queued, None
-        self._episode = episode if episode is not None else Episode.draw(self._random, self._steps)
+        episode = self.next_episode()
         self._step = 0
-        physics.set_state_vector(self._episode.initial_state)
+        physics.set_state_vector(episode.initial_state)
         physics.set_disturbance(0.0)
 
     def before_step(self, action, physics: Physics) -> None:

@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import importlib.util
+from dataclasses import dataclass, replace
 from functools import cached_property
 
 import casadi as ca
@@ -70,6 +71,15 @@ class CartPendulumSystem:
     def draw_episode(self, rng: np.random.Generator) -> cp_env.Episode:
         return cp_env.Episode.draw(rng)
 
+    def episode_parameters(self) -> dict:
+        """What the episodes are drawn from (recorded in the test set)."""
+        return {
+            "initial_state_low": cp_env.INITIAL_STATE_LOW.tolist(),
+            "initial_state_high": cp_env.INITIAL_STATE_HIGH.tolist(),
+            "disturbance_std_rad_s2": cp_env.DISTURBANCE_STD_RAD_S2,
+            "steps": cp_env.EPISODE_STEPS,
+        }
+
     def episode_from_arrays(self, arrays: dict[str, np.ndarray]) -> cp_env.Episode:
         return cp_env.Episode.from_arrays(arrays)
 
@@ -82,3 +92,24 @@ class CartPendulumSystem:
 
     def action(self, u: np.ndarray, recompute: bool) -> np.ndarray:
         return u  # computing costs the cart no energy; the price is in the objective
+
+    # -- for etmpc bench --------------------------------------------------------------------------
+    def plan_cost(self, x: np.ndarray, u_prev: np.ndarray, timestep: dm_env.TimeStep, inputs: np.ndarray) -> float:
+        """The OCP objective of an input sequence, rolled out through the predictor."""
+        inputs = np.ravel(inputs)
+        states = self.mpc.rollout(x, inputs.reshape(-1, NU))
+        du = np.diff(np.concatenate([np.ravel(u_prev), inputs]))
+        return float(np.sum(states[:, 2] ** 2) + self.config.input_change_weight * np.sum(du**2))
+
+    def reference_solvers(self) -> list:
+        """do-mpc 5.1 (the paper's stack) on the same OCP, if the ``bench`` extra is installed."""
+        if importlib.util.find_spec("do_mpc") is None:
+            return []
+        from etmpc.bench_dompc import DoMpcReference
+
+        c = self.config
+        return [DoMpcReference(self.model.discrete, c.horizon, c.input_change_weight, float(self.u_min[0]), float(self.u_max[0]))]
+
+    def compiled(self) -> CartPendulumSystem:
+        """The same system with its CasADi functions compiled by the C compiler (CasADi's JIT)."""
+        return CartPendulumSystem(replace(self.config, solver=replace(self.config.solver, jit=True)))

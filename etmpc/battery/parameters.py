@@ -1,0 +1,121 @@
+"""Every number of the battery-trading task, in one declarative place, with units.
+
+The plant constants are the paper's (SPEC.md). The paper gives no numbers for the generators of
+production and price; the ones below are chosen so that the trading problem is neither trivial
+nor hopeless, and the reasons are written next to them. Change them by building a new
+:class:`Market` (``dataclasses.replace``); a test set records the values it was drawn with.
+
+Scales, for orientation: a full-power trade (360 kW for 10 s) moves 1 kWh, 10 % of the capacity;
+a net production of 100 kW held for 10 s moves 2.8 %; the computer's 0.1 kW draw moves 0.003 %.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+SECONDS_PER_HOUR = 3600.0
+
+
+@dataclass(frozen=True)
+class Battery:
+    """The storage and its market access (SPEC.md, paper eq. battery)."""
+
+    capacity_kwh: float = 10.0  # C
+    interval_s: float = 10.0  # delta: one control interval
+    trade_fraction_per_interval: float = 0.1  # |u| <= 0.1 C / delta: 10 % of the capacity per interval
+    compute_power_kw: float = 0.1  # eta_c: drawn from the battery while the MPC computes
+    episode_steps: int = 100
+
+    @property
+    def interval_h(self) -> float:
+        """delta in hours, as it enters the dynamics and the revenue ``lambda u delta``."""
+        return self.interval_s / SECONDS_PER_HOUR
+
+    @property
+    def trade_limit_kw(self) -> float:
+        return self.trade_fraction_per_interval * self.capacity_kwh / self.interval_h
+
+    @property
+    def soc_per_kw(self) -> float:
+        """delta / C: change of state of charge per kW held over one interval."""
+        return self.interval_h / self.capacity_kwh
+
+
+@dataclass(frozen=True)
+class Signal:
+    """A time-varying parameter: ``base + OU``, and how it is forecast.
+
+    * **base**: an hourly level (fixed per clock hour, drawn ``U(hourly_low, hourly_high)``; the spot
+      price) plus an event level (drawn ``U(event_low, event_high)`` and held for an exponentially
+      distributed duration of mean ``event_mean_duration_s``, then redrawn);
+    * **true value** = base + an Ornstein-Uhlenbeck deviation of time constant ``ou_time_constant_s``
+      and stationary standard deviation ``ou_std`` (exact discretisation, started stationary);
+    * **forecast** made at step ``k`` for lead ``j``: the true value at ``j = 0``; for ``j >= 1`` the
+      base at ``k`` held constant plus ``forecast_std_per_step * j * z_j``, where ``z`` is a second,
+      unit OU process along lead time with time constant ``forecast_time_constant_s``. The forecast
+      knows neither the coming events nor the current OU deviation.
+    """
+
+    unit: str
+    hourly_low: float
+    hourly_high: float
+    event_low: float
+    event_high: float
+    event_mean_duration_s: float
+    ou_time_constant_s: float
+    ou_std: float
+    forecast_std_per_step: float
+    forecast_time_constant_s: float
+
+    @property
+    def mean(self) -> float:
+        """E[value]: the OU deviation and the forecast noise have mean zero."""
+        return 0.5 * (self.hourly_low + self.hourly_high) + 0.5 * (self.event_low + self.event_high)
+
+
+# Net production minus consumption on the battery's grid, kW (> 0: surplus flows into the battery).
+# Events are loads and generators switching (+-100 kW, 28 % of a full-power trade) every 4 minutes on
+# average, so about one change falls inside each 200 s MPC horizon: plans go stale for a reason.
+PRODUCTION = Signal(
+    unit="kW",
+    hourly_low=0.0,
+    hourly_high=0.0,
+    event_low=-100.0,
+    event_high=100.0,
+    event_mean_duration_s=240.0,
+    ou_time_constant_s=60.0,
+    ou_std=15.0,
+    forecast_std_per_step=2.0,  # 38 kW at the last lead of a 20-step forecast
+    forecast_time_constant_s=60.0,
+)
+
+# Balance-market price, EUR/kWh. The spot price (40-60 EUR/MWh) is fixed per clock hour; imbalance
+# events move the balance price by up to +-30 EUR/MWh for two minutes on average, and a fast OU
+# (30 s, 10 EUR/MWh) adds the noise of the balance market. Its mean, 0.05 EUR/kWh, is the terminal
+# value of stored energy.
+PRICE = Signal(
+    unit="EUR/kWh",
+    hourly_low=0.04,
+    hourly_high=0.06,
+    event_low=-0.03,
+    event_high=0.03,
+    event_mean_duration_s=120.0,
+    ou_time_constant_s=30.0,
+    ou_std=0.01,
+    forecast_std_per_step=0.001,  # 0.019 EUR/kWh at the last lead
+    forecast_time_constant_s=60.0,
+)
+
+
+@dataclass(frozen=True)
+class Market:
+    """Everything random about a trading episode."""
+
+    production: Signal = PRODUCTION
+    price: Signal = PRICE
+    forecast_steps: int = 20  # values per forecast (k .. k+19): the paper's horizon N
+    initial_soc_low: float = 0.1  # x_0 ~ U(low, high)
+    initial_soc_high: float = 0.9
+    # Each episode starts at a uniform time within the clock hour, so the 1000 s of about 28 % of
+    # the episodes see the spot price change.
+
