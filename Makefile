@@ -24,7 +24,7 @@ evaluate: setup
 	$(BIN)/etmpc evaluate battery --policy always --policy never \
 		--policy every:2 --policy every:5 --policy every:10 \
 		--policy threshold:0.01 --policy threshold:0.02 --json results/battery.json
-	$(BIN)/python scripts/figure_forecasts.py --policy every:20 --policy always --out results/figure1_battery_forecasts.png
+	$(BIN)/python scripts/figure_forecasts.py --policy every:20 --policy every:5 --out results/figure1_battery_forecasts.png
 
 test: setup
 	$(BIN)/python -m pytest -q
