@@ -53,6 +53,21 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--test-set", default=None, metavar="PATH", help="test set file (default: the stored one)")
     ev.add_argument("--json", type=_json_path, default=None, metavar="PATH", help="write the results as JSON")
 
+    tr = sub.add_parser("train", help="train the learned recomputation policy with GPOMDP over several seeds")
+    tr.add_argument("task", help=f"system to train on: {tasks}")
+    tr.add_argument("--seeds", default="0-4", help="seeds: a range 0-4 or a list 0,2,5 (default 0-4)")
+    tr.add_argument("--episodes", type=_positive_int, default=1500, help="training episodes per seed (default 1500)")
+    tr.add_argument("--eval-every", type=_positive_int, default=150, help="evaluate on the test set every N episodes (default 150)")
+    tr.add_argument("--eval-episodes", type=_positive_int, default=None, help="first N test-set episodes per evaluation (default: all)")
+    tr.add_argument("--out", type=Path, required=True, metavar="DIR", help="run directory: checkpoint, policies, curve")
+    tr.add_argument("--workers", type=_positive_int, default=None, help="worker processes (default: one per core)")
+    tr.add_argument("--backend", choices=("local", "ray"), default="local", help="where the work runs (default local)")
+    tr.add_argument("--address", default=None, help="Ray cluster to join (with --backend ray)")
+    tr.add_argument("--resume", action="store_true", help="continue the run in DIR from its last checkpoint")
+    tr.add_argument("--baseline", choices=("none", "mean"), default="none", help="GPOMDP baseline (default none, as the paper)")
+    tr.add_argument("--learning-rate", type=float, default=0.05, help="alpha (default 0.05)")
+    tr.add_argument("--discount", type=float, default=0.975, help="gamma (default 0.975)")
+
     be = sub.add_parser("bench", help="time the MPC solve, the rest of a step and whole episodes")
     be.add_argument("tasks", nargs="*", metavar="TASK", help=f"systems to bench (default: all: {tasks})")
     be.add_argument("--episodes", type=_positive_int, default=10, help="test-set episodes per measurement")
@@ -86,6 +101,27 @@ def _evaluate(args) -> None:
         print(f"warning: {nonfinite} run(s) ended on a non-finite state and are excluded from the means", file=sys.stderr)
 
 
+def _train(args) -> None:
+    from etmpc.evaluate import default_workers
+    from etmpc.gpomdp import Settings
+    from etmpc.train import TrainConfig, format_summary, parse_seeds, train
+
+    if args.task not in names():
+        raise UnknownNameError(f"unknown task {args.task!r}; valid: {', '.join(names())}")
+    if args.address is not None and args.backend != "ray":
+        raise EtmpcError("--address needs --backend ray")
+    if args.out.exists() and not args.out.is_dir():
+        raise EtmpcError(f"--out {args.out} exists and is not a directory")
+    try:
+        settings = Settings(args.discount, args.learning_rate, args.baseline)
+    except ValueError as exc:
+        raise EtmpcError(str(exc)) from None
+    config = TrainConfig(args.task, parse_seeds(args.seeds), args.episodes, args.eval_every, args.eval_episodes, gpomdp=settings)
+    state = train(config, args.out, args.workers or default_workers(), args.resume, args.backend)
+    print(format_summary(state))
+    print(f"wrote {args.out}/curve.json, curve.png, checkpoint.json and seed*/best.json, last.json")
+
+
 def _bench(args) -> None:
     from etmpc.bench import format_bench, run_bench
 
@@ -105,7 +141,7 @@ def _bench(args) -> None:
 def main(argv: list[str] | None = None) -> int:
     try:
         args = build_parser().parse_args(argv)
-        {"evaluate": _evaluate, "bench": _bench}[args.command](args)
+        {"evaluate": _evaluate, "train": _train, "bench": _bench}[args.command](args)
     except EtmpcError as exc:
         print(f"etmpc: error: {exc}", file=sys.stderr)
         return 2

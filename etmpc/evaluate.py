@@ -59,13 +59,16 @@ _WORKER: dict = {}
 
 def _init_worker(domain: str, testset_path: str) -> None:
     system = make_system(domain)
-    _WORKER.update(system=system, env=system.make_env(), testset=ts_mod.load(testset_path, system.domain, system.task))
+    _WORKER.update(system=system, env=system.make_env(), testset=ts_mod.load(testset_path, system.domain, system.task), policies={})
 
 
 def _run(job: tuple[str, int, int, int]) -> RunResult:
     spec, repeat, episode, seed = job
     system, env, testset = _WORKER["system"], _WORKER["env"], _WORKER["testset"]
-    policy = parse_policy(spec, system.error_weights)
+    policies = _WORKER.setdefault("policies", {})
+    if spec not in policies:  # a learned policy is read from its file once per worker
+        policies[spec] = parse_policy(spec, system.error_weights, system.domain)
+    policy = policies[spec]
     rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(repeat, episode)))
     traj = run_episode(system, env, policy, rng, system.episode_from_arrays(testset.episode_arrays(episode)))
     ret = traj.policy_return(system.recompute_price)
@@ -168,7 +171,7 @@ def evaluate(
     """Run every policy on the first ``episodes`` test-set episodes, ``repeats`` times each."""
     system = make_system(domain)
     for spec in policies:  # fail on a bad spec before any work starts
-        parse_policy(spec, system.error_weights)
+        parse_policy(spec, system.error_weights, system.domain)
     path = testset_path or str(ts_mod.default_path(system.domain, system.task))
     testset = ts_mod.load(path, system.domain, system.task)
     episodes = testset.episodes if episodes is None else episodes

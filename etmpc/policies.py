@@ -5,7 +5,8 @@ the plan was made from, and the plan's age. The plan's prediction ``x_hat_i`` is
 ``s`` and is handed along for the event trigger. When the plan runs out (age = N) the control loop
 forces a recompute whatever the policy says.
 
-Specs (``parse_policy``): ``always``, ``never``, ``every:T`` (T >= 1), ``threshold:X`` (X >= 0).
+Specs (``parse_policy``): ``always``, ``never``, ``every:T`` (T >= 1), ``threshold:X`` (X >= 0),
+``rl:PATH`` (a learned policy saved by ``etmpc train``, see :mod:`etmpc.learned`).
 """
 
 from __future__ import annotations
@@ -100,8 +101,11 @@ def _number(text: str, kind: type, spec: str):
     return value
 
 
-def parse_policy(spec: str, error_weights: np.ndarray) -> Policy:
-    """Build a policy from its command-line spec; bad specs raise :class:`EtmpcError`."""
+def parse_policy(spec: str, error_weights: np.ndarray, domain: str | None = None) -> Policy:
+    """Build a policy from its command-line spec; bad specs raise :class:`EtmpcError`.
+
+    ``rl:PATH`` is checked against ``domain`` and the state size ``len(error_weights)``.
+    """
     name, _, arg = spec.partition(":")
     if name in ("always", "never"):
         if arg:
@@ -118,5 +122,9 @@ def parse_policy(spec: str, error_weights: np.ndarray) -> Policy:
             raise EtmpcError(f"bad policy {spec!r}: the threshold must be a finite number >= 0")
         return Threshold(level, np.asarray(error_weights, dtype=float))
     if name == "rl":
-        raise EtmpcError(f"bad policy {spec!r}: learned policies are not available yet (no trainer in this version)")
-    raise UnknownNameError(f"unknown policy {spec!r}; valid: always, never, every:T, threshold:X")
+        if not arg:
+            raise EtmpcError(f"bad policy {spec!r}: give the policy file, rl:PATH")
+        from etmpc.learned import load_policy
+
+        return load_policy(arg, domain, nx=len(error_weights))
+    raise UnknownNameError(f"unknown policy {spec!r}; valid: always, never, every:T, threshold:X, rl:PATH")

@@ -72,7 +72,7 @@ def test_threshold_uses_the_weighted_error_norm():
 @pytest.mark.parametrize("spec, error", [
     ("every:0", EtmpcError), ("every:-2", EtmpcError), ("every:x", EtmpcError), ("every:1.5", EtmpcError),
     ("threshold:-0.1", EtmpcError), ("threshold:nan", EtmpcError), ("threshold:inf", EtmpcError),
-    ("threshold:", EtmpcError), ("always:3", EtmpcError), ("sometimes", UnknownNameError), ("rl:/nope.npz", EtmpcError),
+    ("threshold:", EtmpcError), ("always:3", EtmpcError), ("sometimes", UnknownNameError), ("rl:/nope.json", EtmpcError),
 ])
 def test_bad_specs(spec, error):
     with pytest.raises(error):

@@ -1,0 +1,436 @@
+"""``etmpc train``: GPOMDP training of the logistic recomputation policy over several seeds.
+
+The run advances in *phases* of ``eval_every`` training episodes. In each phase every seed trains
+its block of episodes (seeds run in parallel), then every seed's policy is evaluated on the test
+set (its episodes run in parallel), then a checkpoint is written atomically. A killed run resumed
+with ``--resume`` restarts from the last checkpoint and ends bit for bit where an uninterrupted run
+would, because every random draw is keyed by ``(seed, episode)`` and never by history:
+
+* training episode ``e`` of seed ``s``: the environment's episode from ``SeedSequence(TRAIN_ENTROPY,
+  spawn_key=(s, e, 0))``, the policy's draws from ``spawn_key=(s, e, 1)``;
+* evaluation: the stored test set, and the policy's draws from ``SeedSequence(0, spawn_key=(repeat,
+  episode))``, exactly as ``etmpc evaluate --seed 0`` draws them, so ``etmpc evaluate --policy
+  rl:DIR/seed0/best.json`` reproduces a point of the curve;
+* the feature normalisation: measured once per run on ``normalisation_episodes`` episodes under a
+  policy that recomputes with probability 1/2 (so plan ages vary), from ``NORMALISATION_ENTROPY``.
+
+Outputs in ``DIR``: ``checkpoint.json``, ``curve.json`` and ``curve.png`` (mean and standard
+deviation over seeds, the paper's Figure 2), ``seed<S>/last.json`` and ``seed<S>/best.json``.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from etmpc import testset as ts_mod
+from etmpc.errors import EtmpcError
+from etmpc.gpomdp import Learner, Settings
+from etmpc.learned import LogisticPolicy, Normalisation, PolicyFileError, raw_state, write_json_atomically
+from etmpc.loop import run_episode
+from etmpc.systems import make_system
+
+TRAIN_ENTROPY = 0x6574_6D70_6321  # "etmpc!"
+NORMALISATION_ENTROPY = 0x6E6F_726D  # "norm"
+CHECKPOINT_FORMAT = "etmpc-train-checkpoint"
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """One training run. Everything here must match when a run is resumed."""
+
+    domain: str
+    seeds: tuple[int, ...] = (0, 1, 2, 3, 4)
+    episodes: int = 1500  # training episodes per seed
+    eval_every: int = 150  # evaluate on the test set after every this many episodes (and at 0)
+    eval_episodes: int | None = None  # first N test-set episodes (None: all)
+    eval_repeats: int = 1  # passes over the test set per evaluation
+    normalisation_episodes: int = 20
+    gpomdp: Settings = field(default_factory=Settings)
+
+    def __post_init__(self):
+        if not self.seeds or len(set(self.seeds)) != len(self.seeds):
+            raise EtmpcError(f"seeds must be distinct and at least one, got {self.seeds}")
+        for name in ("episodes", "eval_every", "eval_repeats", "normalisation_episodes"):
+            if getattr(self, name) < 1:
+                raise EtmpcError(f"{name.replace('_', '-')} must be >= 1, got {getattr(self, name)}")
+
+    def to_json(self) -> dict:
+        data = asdict(self)
+        data["seeds"] = list(self.seeds)
+        return data
+
+    @classmethod
+    def from_json(cls, data: dict) -> TrainConfig:
+        data = dict(data)
+        data["seeds"] = tuple(data["seeds"])
+        data["gpomdp"] = Settings(**data["gpomdp"])
+        return cls(**data)
+
+    @property
+    def milestones(self) -> list[int]:
+        """Episode counts at which the policy is evaluated: 0, eval_every, ..., episodes."""
+        points = list(range(0, self.episodes, self.eval_every)) + [self.episodes]
+        return sorted(set(points))
+
+
+# -- worker side: every function here is a pure function of its arguments -------------------------
+_CACHE: dict = {}
+
+
+def _worker(domain: str):
+    if domain not in _CACHE:
+        system = make_system(domain)
+        testset = ts_mod.load(ts_mod.default_path(system.domain, system.task), system.domain, system.task)
+        _CACHE[domain] = (system, system.make_env(), testset)
+    return _CACHE[domain]
+
+
+class _Coin:
+    """Recompute with probability 1/2, keeping every augmented state it sees (for normalisation)."""
+
+    spec, stochastic = "coin", True
+
+    def __init__(self):
+        self.states = []
+
+    def decide(self, s, rng):
+        self.states.append(raw_state(s))
+        return bool(rng.random() < 0.5)
+
+
+def normalisation_states(domain: str, index: int) -> np.ndarray:
+    system, env, _ = _worker(domain)
+    rng = np.random.default_rng(np.random.SeedSequence(NORMALISATION_ENTROPY, spawn_key=(index, 0)))
+    coin = _Coin()
+    run_episode(system, env, coin, np.random.default_rng(np.random.SeedSequence(NORMALISATION_ENTROPY, spawn_key=(index, 1))),
+                system.draw_episode(rng))
+    return np.array(coin.states)
+
+
+def policy_rewards(system, traj) -> np.ndarray:
+    """Per-step rewards the policy maximises: the environment's, minus the price of a computation."""
+    n = traj.steps
+    return traj.rewards[:n] - system.recompute_price * traj.recompute[:n]
+
+
+def train_block(domain: str, policy_json: dict, learner_json: dict, seed: int, start: int, stop: int) -> tuple[dict, list]:
+    """Train ``seed`` on its episodes ``start..stop-1``; returns the learner and per-episode stats."""
+    system, env, _ = _worker(domain)
+    policy = LogisticPolicy.from_json(policy_json)
+    learner = _learner_from_json(learner_json)
+    stats = []
+    for e in range(start, stop):
+        episode = system.draw_episode(np.random.default_rng(np.random.SeedSequence(TRAIN_ENTROPY, spawn_key=(seed, e, 0))))
+        acting = policy.with_theta(learner.theta, record=True)
+        rng = np.random.default_rng(np.random.SeedSequence(TRAIN_ENTROPY, spawn_key=(seed, e, 1)))
+        traj = run_episode(system, env, acting, rng, episode)
+        rewards = policy_rewards(system, traj)
+        steps = np.flatnonzero(~traj.forced[: traj.steps])
+        if len(steps) != len(acting.decisions):
+            raise RuntimeError("decisions and unforced steps disagree")  # a control-loop invariant
+        feats = np.array([d[0] for d in acting.decisions]).reshape(len(steps), -1)
+        learner.update(feats, np.array([d[1] for d in acting.decisions]), np.array([d[2] for d in acting.decisions]), steps, rewards)
+        stats.append({"episode": e, "return": float(rewards.sum()), "recomputes": traj.recomputes})
+    return _learner_to_json(learner), stats
+
+
+def evaluate_theta(domain: str, policy_json: dict, repeat: int, episode: int) -> tuple[float, float, int]:
+    """(objective, control objective, recomputes) of one test-set episode, sense-aware as in evaluate."""
+    system, env, testset = _worker(domain)
+    policy = LogisticPolicy.from_json(policy_json)
+    rng = np.random.default_rng(np.random.SeedSequence(0, spawn_key=(repeat, episode)))
+    traj = run_episode(system, env, policy, rng, system.episode_from_arrays(testset.episode_arrays(episode)))
+    sign = 1.0 if system.objective_sense == "max" else -1.0
+    rewards = float(traj.rewards[: traj.steps].sum())
+    return sign * traj.policy_return(system.recompute_price), sign * rewards, traj.recomputes
+
+
+def _call(job):
+    name, args = job
+    return {"normalisation": normalisation_states, "train": train_block, "evaluate": evaluate_theta}[name](*args)
+
+
+def _learner_to_json(learner: Learner) -> dict:
+    return {"theta": learner.theta.tolist(), "baseline_mean": learner.baseline_mean.tolist(), "episodes": learner.episodes,
+            "settings": asdict(learner.settings)}
+
+
+def _learner_from_json(data: dict) -> Learner:
+    return Learner(np.asarray(data["theta"], float), Settings(**data["settings"]), np.asarray(data["baseline_mean"], float),
+                   int(data["episodes"]))
+
+
+# -- driver side -----------------------------------------------------------------------------------
+@dataclass
+class RunState:
+    """What ``checkpoint.json`` holds."""
+
+    config: TrainConfig
+    policy: dict  # the initial policy's JSON: normalisation, domain, hyperparameters
+    learners: dict  # seed (str) -> learner JSON
+    curve: list = field(default_factory=list)  # rows: {"episodes", "seed", "objective", "control", "recomputes"}
+    best: dict = field(default_factory=dict)  # seed (str) -> {"episodes", "objective", "theta"}
+    training: list = field(default_factory=list)  # per-episode stats, all seeds
+
+    @property
+    def done(self) -> int:
+        return min(int(data["episodes"]) for data in self.learners.values())
+
+    def to_json(self) -> dict:
+        return {"format": CHECKPOINT_FORMAT, "version": 1, "config": self.config.to_json(), "policy": self.policy,
+                "learners": self.learners, "curve": self.curve, "best": self.best, "training": self.training}
+
+
+def load_checkpoint(path: Path) -> RunState:
+    try:
+        data = json.loads(path.read_text())
+        if data.get("format") != CHECKPOINT_FORMAT or data.get("version") != 1:
+            raise ValueError(f"format {data.get('format')!r} version {data.get('version')!r}")
+        config = TrainConfig.from_json(data["config"])
+        LogisticPolicy.from_json(data["policy"], where=f"checkpoint {path}")
+        state = RunState(config, data["policy"], data["learners"], data["curve"], data["best"], data["training"])
+        if sorted(state.learners) != sorted(str(s) for s in config.seeds):
+            raise ValueError("learners do not match the seeds")
+        for learner in state.learners.values():
+            if len(learner["theta"]) != len(data["policy"]["theta"]):
+                raise ValueError("feature size differs between learners and policy")
+    except PolicyFileError:
+        raise
+    except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError) as exc:
+        raise PolicyFileError(f"checkpoint {path} is corrupt or unreadable ({exc}); move it away to start afresh") from None
+    return state
+
+
+class LocalBackend:
+    """Jobs in this process (``workers=1``) or a pool of spawned processes, results in job order."""
+
+    def __init__(self, workers: int):
+        self.workers = workers
+        self._pool = None
+
+    def __enter__(self):
+        if self.workers > 1:
+            from concurrent.futures import ProcessPoolExecutor
+            from multiprocessing import get_context
+
+            self._pool = ProcessPoolExecutor(self.workers, get_context("spawn"))
+        return self
+
+    def __exit__(self, *exc):
+        if self._pool is not None:
+            self._pool.shutdown(cancel_futures=True)
+
+    def map(self, jobs: list, on_result=None) -> list:
+        results = []
+        iterator = map(_call, jobs) if self._pool is None else self._pool.map(_call, jobs, chunksize=1)
+        for job, result in zip(jobs, iterator):
+            results.append(result)
+            if on_result is not None:
+                on_result(job)
+        return results
+
+
+def _policy_at(state: RunState, theta) -> dict:
+    return dict(state.policy, theta=list(theta))
+
+
+def _evaluate_phase(state: RunState, backend, progress) -> None:
+    config, done = state.config, state.done
+    testset_n = _worker_testset_size(config)
+    jobs = [("evaluate", (config.domain, _policy_at(state, state.learners[str(s)]["theta"]), r, e))
+            for s in config.seeds for r in range(config.eval_repeats) for e in range(testset_n)]
+    results = backend.map(jobs, progress)
+    per_seed = config.eval_repeats * testset_n
+    sense = make_system(config.domain).objective_sense
+    for i, seed in enumerate(config.seeds):
+        chunk = results[i * per_seed:(i + 1) * per_seed]
+        row = {"episodes": done, "seed": seed, "objective": float(np.mean([c[0] for c in chunk])),
+               "control": float(np.mean([c[1] for c in chunk])), "recomputes": float(np.mean([c[2] for c in chunk]))}
+        state.curve.append(row)
+        best = state.best.get(str(seed))
+        better = best is None or (row["objective"] > best["objective"] if sense == "max" else row["objective"] < best["objective"])
+        if better:
+            state.best[str(seed)] = {"episodes": done, "objective": row["objective"], "theta": state.learners[str(seed)]["theta"]}
+
+
+def _worker_testset_size(config: TrainConfig) -> int:
+    system = make_system(config.domain)
+    testset = ts_mod.load(ts_mod.default_path(system.domain, system.task), system.domain, system.task)
+    n = testset.episodes if config.eval_episodes is None else config.eval_episodes
+    if not 1 <= n <= testset.episodes:
+        raise EtmpcError(f"eval episodes must be in 1..{testset.episodes}, got {n}")
+    return n
+
+
+def _save(out: Path, state: RunState) -> None:
+    """Policies and curve first, the checkpoint last: the checkpoint never points past the files."""
+    for seed in state.config.seeds:
+        key = str(seed)
+        hyper = dict(state.policy["hyperparameters"], seed=seed)
+        write_json_atomically(out / f"seed{seed}" / "last.json",
+                              dict(_policy_at(state, state.learners[key]["theta"]), hyperparameters=dict(hyper, episodes=state.done)))
+        best = state.best[key]
+        write_json_atomically(out / f"seed{seed}" / "best.json",
+                              dict(_policy_at(state, best["theta"]), hyperparameters=dict(hyper, episodes=best["episodes"])))
+    write_json_atomically(out / "curve.json", curve_summary(state))
+    write_curve_png(out / "curve.png", state)
+    write_json_atomically(out / "checkpoint.json", state.to_json())
+
+
+def curve_summary(state: RunState) -> dict:
+    rows = {}
+    for row in state.curve:
+        rows.setdefault(row["episodes"], []).append(row)
+    points = []
+    for episodes, group in sorted(rows.items()):
+        values = np.array([r["objective"] for r in group])
+        points.append({"episodes": episodes, "objective_mean": float(values.mean()),
+                       "objective_std": float(values.std(ddof=1)) if len(values) > 1 else 0.0,
+                       "recomputes_mean": float(np.mean([r["recomputes"] for r in group])), "seeds": len(group)})
+    return {"domain": state.config.domain, "objective_sense": make_system(state.config.domain).objective_sense,
+            "points": points, "per_seed": state.curve}
+
+
+def write_curve_png(path: Path, state: RunState) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    summary = curve_summary(state)
+    x = np.array([p["episodes"] for p in summary["points"]])
+    mean = np.array([p["objective_mean"] for p in summary["points"]])
+    std = np.array([p["objective_std"] for p in summary["points"]])
+    fig, ax = plt.subplots(figsize=(6, 4))
+    ax.plot(x, mean, marker="o", label=f"mean over {len(state.config.seeds)} seeds")
+    ax.fill_between(x, mean - std, mean + std, alpha=0.25, label="± 1 std")
+    ax.set_xlabel("training episodes")
+    ax.set_ylabel(f"test-set objective ({'higher' if summary['objective_sense'] == 'max' else 'lower'} is better)")
+    ax.set_title(f"{state.config.domain}: GPOMDP learning curve")
+    ax.grid(alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp")
+    fig.savefig(tmp, dpi=110, format="png")
+    plt.close(fig)
+    tmp.replace(path)
+
+
+def train(config: TrainConfig, out: Path, workers: int = 1, resume: bool = False, backend: str = "local",
+          progress: bool = True) -> RunState:
+    out = Path(out)
+    checkpoint = out / "checkpoint.json"
+    if checkpoint.exists():
+        if not resume:
+            raise EtmpcError(f"{out} already holds a training run; pass --resume to continue it, or choose another --out")
+        state = load_checkpoint(checkpoint)
+        if state.config != config:
+            raise EtmpcError(f"{checkpoint} was made with different settings ({_difference(state.config, config)}); "
+                             "resume with the same ones, or choose another --out")
+    else:
+        state = None
+    if backend != "local":
+        raise EtmpcError(f"backend {backend!r} is not available yet; use --backend local")
+    _worker_testset_size(config)  # fail on a bad test set or size before any work
+
+    testset_n = _worker_testset_size(config)
+    total = len(config.seeds) * (config.episodes + len(config.milestones) * config.eval_repeats * testset_n)
+    started = time.perf_counter()
+    with LocalBackend(workers) as pool, _Progress(total, f"train {config.domain}", progress) as bar:
+        tick = lambda job: bar.update(1 if job[0] == "evaluate" else job[1][5] - job[1][4])  # noqa: E731
+        if state is None:
+            states = pool.map([("normalisation", (config.domain, i)) for i in range(config.normalisation_episodes)])
+            normalisation = Normalisation.fit(np.concatenate(states))
+            hyper = {"discount": config.gpomdp.discount, "learning_rate": config.gpomdp.learning_rate,
+                     "baseline": config.gpomdp.baseline, "normalisation_episodes": config.normalisation_episodes}
+            initial = LogisticPolicy.initial(normalisation, config.domain, hyper)
+            learner = _learner_to_json(Learner.start(initial.theta, config.gpomdp, make_system(config.domain).episode_steps))
+            state = RunState(config, initial.to_json(), {str(s): dict(learner) for s in config.seeds})
+            _evaluate_phase(state, pool, tick)
+            _save(out, state)
+            resumed_from = 0
+        else:
+            bar.update(len(config.seeds) * (state.done + sum(1 for m in config.milestones if m <= state.done) * config.eval_repeats * testset_n))
+            resumed_from = bar.n
+        for start, stop in zip(config.milestones, config.milestones[1:]):
+            if stop <= state.done:
+                continue
+            jobs = [("train", (config.domain, state.policy, state.learners[str(s)], s, start, stop)) for s in config.seeds]
+            for seed, (learner, stats) in zip(config.seeds, pool.map(jobs, tick)):
+                state.learners[str(seed)] = learner
+                state.training += [dict(s, seed=seed) for s in stats]
+            _evaluate_phase(state, pool, tick)
+            _save(out, state)
+            _report(state, started, bar, resumed_from)
+    return state
+
+
+class _Progress:
+    """A tqdm bar (on a terminal) with its own count, so the ETA line works when the bar is off."""
+
+    def __init__(self, total: int, desc: str, enabled: bool):
+        from tqdm import tqdm
+
+        self.n, self.total = 0, total
+        self._bar = tqdm(total=total, unit="ep", desc=desc, disable=None if enabled else True)
+        self._quiet = not enabled
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self._bar.close()
+
+    def update(self, n: int) -> None:
+        self.n += n
+        self._bar.update(n)
+
+    def write(self, line: str) -> None:
+        if not self._quiet:
+            self._bar.write(line, file=sys.stderr)
+
+
+def _report(state: RunState, started: float, bar, resumed_from: int) -> None:
+    """One line per phase on stderr, for logs where the progress bar is off."""
+    point = curve_summary(state)["points"][-1]
+    elapsed = time.perf_counter() - started
+    done_here, left = bar.n - resumed_from, bar.total - bar.n
+    eta = elapsed * left / done_here if done_here > 0 else float("nan")
+    bar.write(f"{state.config.domain}: {state.done}/{state.config.episodes} episodes per seed, test objective "
+              f"{point['objective_mean']:.5f} ± {point['objective_std']:.5f}, {point['recomputes_mean']:.1f} recomputes; "
+              f"elapsed {elapsed:.0f} s, ETA {eta:.0f} s")
+
+
+def _difference(a: TrainConfig, b: TrainConfig) -> str:
+    da, db = a.to_json(), b.to_json()
+    return ", ".join(f"{k}: {da[k]} vs {db[k]}" for k in da if da[k] != db[k])
+
+
+def parse_seeds(text: str) -> tuple[int, ...]:
+    """``"0-4"`` -> (0, 1, 2, 3, 4); ``"1,3,7"``; ``"2"``."""
+    seeds = []
+    try:
+        for part in text.split(","):
+            lo, sep, hi = part.partition("-")
+            seeds += list(range(int(lo), int(hi) + 1)) if sep else [int(lo)]
+    except ValueError:
+        raise EtmpcError(f"bad --seeds {text!r}: use a range like 0-4 or a list like 0,2,5") from None
+    if not seeds or min(seeds) < 0 or len(set(seeds)) != len(seeds):
+        raise EtmpcError(f"bad --seeds {text!r}: non-negative and distinct")
+    return tuple(seeds)
+
+
+def format_summary(state: RunState) -> str:
+    summary = curve_summary(state)
+    lines = [f"{state.config.domain}: objective ({'higher' if summary['objective_sense'] == 'max' else 'lower'} is better) on the test set",
+             f"{'episodes':>9}{'mean':>12}{'std':>10}{'recomputes':>12}"]
+    lines += [f"{p['episodes']:>9}{p['objective_mean']:>12.5f}{p['objective_std']:>10.5f}{p['recomputes_mean']:>12.2f}" for p in summary["points"]]
+    return "\n".join(lines)
+
