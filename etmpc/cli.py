@@ -11,8 +11,8 @@ import json
 import sys
 from pathlib import Path
 
-from etmpc.errors import EtmpcError, UnknownNameError
-from etmpc.systems import names
+from etmpc.errors import EtmpcError
+from etmpc.systems import check_name, names
 
 
 class _Parser(argparse.ArgumentParser):
@@ -102,12 +102,11 @@ def _evaluate(args) -> None:
 
 
 def _train(args) -> None:
-    from etmpc.evaluate import default_workers
     from etmpc.gpomdp import Settings
     from etmpc.train import TrainConfig, format_summary, parse_seeds, train
+    from etmpc.workers import default_workers
 
-    if args.task not in names():
-        raise UnknownNameError(f"unknown task {args.task!r}; valid: {', '.join(names())}")
+    check_name(args.task)
     if args.address is not None and args.backend != "ray":
         raise EtmpcError("--address needs --backend ray")
     if args.out.exists() and not args.out.is_dir():
@@ -126,9 +125,8 @@ def _bench(args) -> None:
     from etmpc.bench import format_bench, run_bench
 
     domains = args.tasks or list(names())
-    unknown = [d for d in domains if d not in names()]
-    if unknown:
-        raise UnknownNameError(f"unknown task {unknown[0]!r}; valid: {', '.join(names())}")
+    for domain in domains:  # all names checked before any bench runs
+        check_name(domain)
     figures = {}
     for domain in domains:
         figures[domain] = run_bench(domain, episodes=args.episodes, references=not args.no_reference, jit=args.jit)

@@ -9,10 +9,7 @@ processes and gathered back in order, so the numbers do not depend on the number
 from __future__ import annotations
 
 import math
-import os
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass
-from multiprocessing import get_context
 
 import numpy as np
 from tqdm import tqdm
@@ -21,6 +18,7 @@ from etmpc import testset as ts_mod
 from etmpc.loop import run_episode
 from etmpc.policies import parse_policy
 from etmpc.systems import make_system
+from etmpc.workers import LocalBackend, context, default_workers, policy_rng
 
 
 @dataclass(frozen=True)
@@ -54,31 +52,25 @@ class PolicySummary:
 
 
 # -- worker side ---------------------------------------------------------------------------------
-_WORKER: dict = {}
-
-
-def _init_worker(domain: str, testset_path: str) -> None:
-    system = make_system(domain)
-    _WORKER.update(system=system, env=system.make_env(), testset=ts_mod.load(testset_path, system.domain, system.task), policies={})
-
-
-def _run(job: tuple[str, int, int, int]) -> RunResult:
-    spec, repeat, episode, seed = job
-    system, env, testset = _WORKER["system"], _WORKER["env"], _WORKER["testset"]
-    policies = _WORKER.setdefault("policies", {})
-    if spec not in policies:  # a learned policy is read from its file once per worker
-        policies[spec] = parse_policy(spec, system.error_weights, system.domain)
-    policy = policies[spec]
-    rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(repeat, episode)))
-    traj = run_episode(system, env, policy, rng, system.episode_from_arrays(testset.episode_arrays(episode)))
+def scores(system, traj) -> tuple[float, float]:
+    """``(objective, control objective)`` of an episode, sense-aware: a cost (min) or a profit (max)."""
     ret = traj.policy_return(system.recompute_price)
     rewards = float(traj.rewards[: traj.steps].sum())
+    return (ret, rewards) if system.objective_sense == "max" else (-ret, -rewards)
+
+
+def _run(job: tuple) -> RunResult:
+    domain, testset_path, sha256, spec, policy, repeat, episode, seed = job
+    system, env, testset = context(domain, testset_path, sha256)
+    traj = run_episode(system, env, policy, policy_rng(seed, repeat, episode),
+                       system.episode_from_arrays(testset.episode_arrays(episode)))
+    objective, control_objective = scores(system, traj)
     return RunResult(
         policy=spec,
         repeat=repeat,
         episode=episode,
-        objective=ret if system.objective_sense == "max" else -ret,
-        control_objective=rewards if system.objective_sense == "max" else -rewards,
+        objective=objective,
+        control_objective=control_objective,
         recomputes=traj.recomputes,
         solver_failures=traj.solver_failures,
         steps=traj.steps,
@@ -87,29 +79,11 @@ def _run(job: tuple[str, int, int, int]) -> RunResult:
 
 
 # -- driver side ---------------------------------------------------------------------------------
-def default_workers() -> int:
-    return max(1, len(os.sched_getaffinity(0)))
-
-
-def run_jobs(domain: str, testset_path: str, jobs: list, workers: int, progress: bool) -> list[RunResult]:
-    bar = tqdm(total=len(jobs), desc="episodes", unit="ep", disable=None if progress else True, leave=False)
-    try:
-        if workers <= 1:
-            _init_worker(domain, testset_path)
-            results = []
-            for job in jobs:
-                results.append(_run(job))
-                bar.update()
-            return results
-        chunk = max(1, min(8, len(jobs) // (4 * workers)))
-        with ProcessPoolExecutor(workers, get_context("spawn"), _init_worker, (domain, testset_path)) as pool:
-            results = []
-            for result in pool.map(_run, jobs, chunksize=chunk):
-                results.append(result)
-                bar.update()
-            return results
-    finally:
-        bar.close()
+def run_jobs(jobs: list, workers: int, progress: bool) -> list[RunResult]:
+    chunk = max(1, min(8, len(jobs) // (4 * workers)))
+    with tqdm(total=len(jobs), desc="episodes", unit="ep", disable=None if progress else True, leave=False) as bar, \
+            LocalBackend(workers) as backend:
+        return backend.map(_run, jobs, on_result=lambda job: bar.update(), chunksize=chunk)
 
 
 def summarise(spec: str, runs: list[RunResult], sense: str, episodes: int, repeats: int) -> PolicySummary:
@@ -170,8 +144,8 @@ def evaluate(
 ) -> Evaluation:
     """Run every policy on the first ``episodes`` test-set episodes, ``repeats`` times each."""
     system = make_system(domain)
-    for spec in policies:  # fail on a bad spec before any work starts
-        parse_policy(spec, system.error_weights, system.domain)
+    # Parsed once here (a bad spec fails before any work starts), then sent with each job.
+    parsed = {spec: parse_policy(spec, system.error_weights, system.domain) for spec in policies}
     path = testset_path or str(ts_mod.default_path(system.domain, system.task))
     testset = ts_mod.load(path, system.domain, system.task)
     episodes = testset.episodes if episodes is None else episodes
@@ -180,8 +154,8 @@ def evaluate(
     if repeats < 1:
         raise ValueError("repeats must be >= 1")
     workers = default_workers() if workers is None else workers
-    jobs = [(spec, r, e, seed) for spec in policies for r in range(repeats) for e in range(episodes)]
-    runs = run_jobs(domain, path, jobs, workers, progress)
+    jobs = [(domain, path, testset.sha256, spec, parsed[spec], r, e, seed) for spec in policies for r in range(repeats) for e in range(episodes)]
+    runs = run_jobs(jobs, workers, progress)
     summaries = [
         summarise(spec, [r for r in runs if r.policy == spec], system.objective_sense, episodes, repeats) for spec in policies
     ]

@@ -105,11 +105,14 @@ class LogisticPolicy:
         return LogisticPolicy(np.array(theta, dtype=float), self.normalisation, self.domain, self.hyperparameters, record)
 
     def keep_probability(self, s: AugmentedState) -> float:
-        return sigmoid(float(self.theta @ self.normalisation.features(raw_state(s))))
+        return self._keep_probability(self.normalisation.features(raw_state(s)))
+
+    def _keep_probability(self, phi: np.ndarray) -> float:
+        return sigmoid(float(self.theta @ phi))
 
     def decide(self, s: AugmentedState, rng: np.random.Generator) -> bool:
         phi = self.normalisation.features(raw_state(s))
-        p_keep = sigmoid(float(self.theta @ phi))
+        p_keep = self._keep_probability(phi)
         recompute = bool(rng.random() >= p_keep)
         if self.record:
             self.decisions.append((phi, recompute, p_keep))

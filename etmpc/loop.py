@@ -86,6 +86,10 @@ class Trajectory:
     def recomputes(self) -> int:
         return int(self.recompute[: self.steps].sum())
 
+    def policy_rewards(self, recompute_price: float) -> np.ndarray:
+        """Per-step rewards the policy maximises: the environment's, minus the price of a computation."""
+        return self.rewards[: self.steps] - recompute_price * self.recompute[: self.steps]
+
     def policy_return(self, recompute_price: float) -> float:
         """The policy's return: rewards minus the price of every computation."""
         return float(self.rewards[: self.steps].sum() - recompute_price * self.recomputes)

@@ -17,8 +17,13 @@ def names() -> tuple[str, ...]:
     return tuple(_SYSTEMS)
 
 
-def make_system(domain: str):
+def check_name(domain: str) -> None:
+    """Raise :class:`UnknownNameError`, listing the valid names, unless ``domain`` is known."""
     if domain not in _SYSTEMS:
         raise UnknownNameError(f"unknown task {domain!r}; valid: {', '.join(_SYSTEMS)}")
+
+
+def make_system(domain: str):
+    check_name(domain)
     module, cls = _SYSTEMS[domain].split(":")
     return getattr(importlib.import_module(module), cls)()

@@ -24,16 +24,18 @@ import json
 import sys
 import time
 from dataclasses import asdict, dataclass, field
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
 
-from etmpc import testset as ts_mod
 from etmpc.errors import EtmpcError
+from etmpc.evaluate import scores
 from etmpc.gpomdp import Learner, Settings
 from etmpc.learned import LogisticPolicy, Normalisation, PolicyFileError, raw_state, write_json_atomically
 from etmpc.loop import run_episode
 from etmpc.systems import make_system
+from etmpc.workers import LocalBackend, context, policy_rng
 
 TRAIN_ENTROPY = 0x6574_6D70_6321  # "etmpc!"
 NORMALISATION_ENTROPY = 0x6E6F_726D  # "norm"
@@ -80,17 +82,6 @@ class TrainConfig:
 
 
 # -- worker side: every function here is a pure function of its arguments -------------------------
-_CACHE: dict = {}
-
-
-def _worker(domain: str):
-    if domain not in _CACHE:
-        system = make_system(domain)
-        testset = ts_mod.load(ts_mod.default_path(system.domain, system.task), system.domain, system.task)
-        _CACHE[domain] = (system, system.make_env(), testset)
-    return _CACHE[domain]
-
-
 class _Coin:
     """Recompute with probability 1/2, keeping every augmented state it sees (for normalisation)."""
 
@@ -105,7 +96,7 @@ class _Coin:
 
 
 def normalisation_states(domain: str, index: int) -> np.ndarray:
-    system, env, _ = _worker(domain)
+    system, env, _ = context(domain)
     rng = np.random.default_rng(np.random.SeedSequence(NORMALISATION_ENTROPY, spawn_key=(index, 0)))
     coin = _Coin()
     run_episode(system, env, coin, np.random.default_rng(np.random.SeedSequence(NORMALISATION_ENTROPY, spawn_key=(index, 1))),
@@ -113,15 +104,9 @@ def normalisation_states(domain: str, index: int) -> np.ndarray:
     return np.array(coin.states)
 
 
-def policy_rewards(system, traj) -> np.ndarray:
-    """Per-step rewards the policy maximises: the environment's, minus the price of a computation."""
-    n = traj.steps
-    return traj.rewards[:n] - system.recompute_price * traj.recompute[:n]
-
-
 def train_block(domain: str, policy_json: dict, learner_json: dict, seed: int, start: int, stop: int) -> tuple[dict, list]:
     """Train ``seed`` on its episodes ``start..stop-1``; returns the learner and per-episode stats."""
-    system, env, _ = _worker(domain)
+    system, env, _ = context(domain)
     policy = LogisticPolicy.from_json(policy_json)
     learner = _learner_from_json(learner_json)
     stats = []
@@ -130,7 +115,7 @@ def train_block(domain: str, policy_json: dict, learner_json: dict, seed: int, s
         acting = policy.with_theta(learner.theta, record=True)
         rng = np.random.default_rng(np.random.SeedSequence(TRAIN_ENTROPY, spawn_key=(seed, e, 1)))
         traj = run_episode(system, env, acting, rng, episode)
-        rewards = policy_rewards(system, traj)
+        rewards = traj.policy_rewards(system.recompute_price)
         steps = np.flatnonzero(~traj.forced[: traj.steps])
         if len(steps) != len(acting.decisions):
             raise RuntimeError("decisions and unforced steps disagree")  # a control-loop invariant
@@ -142,13 +127,10 @@ def train_block(domain: str, policy_json: dict, learner_json: dict, seed: int, s
 
 def evaluate_theta(domain: str, policy_json: dict, repeat: int, episode: int) -> tuple[float, float, int]:
     """(objective, control objective, recomputes) of one test-set episode, sense-aware as in evaluate."""
-    system, env, testset = _worker(domain)
+    system, env, testset = context(domain)
     policy = LogisticPolicy.from_json(policy_json)
-    rng = np.random.default_rng(np.random.SeedSequence(0, spawn_key=(repeat, episode)))
-    traj = run_episode(system, env, policy, rng, system.episode_from_arrays(testset.episode_arrays(episode)))
-    sign = 1.0 if system.objective_sense == "max" else -1.0
-    rewards = float(traj.rewards[: traj.steps].sum())
-    return sign * traj.policy_return(system.recompute_price), sign * rewards, traj.recomputes
+    traj = run_episode(system, env, policy, policy_rng(0, repeat, episode), system.episode_from_arrays(testset.episode_arrays(episode)))
+    return (*scores(system, traj), traj.recomputes)
 
 
 def _call(job):
@@ -178,6 +160,10 @@ class RunState:
     best: dict = field(default_factory=dict)  # seed (str) -> {"episodes", "objective", "theta"}
     training: list = field(default_factory=list)  # per-episode stats, all seeds
 
+    @cached_property
+    def objective_sense(self) -> str:
+        return make_system(self.config.domain).objective_sense
+
     @property
     def done(self) -> int:
         return min(int(data["episodes"]) for data in self.learners.values())
@@ -200,54 +186,22 @@ def load_checkpoint(path: Path) -> RunState:
         for learner in state.learners.values():
             if len(learner["theta"]) != len(data["policy"]["theta"]):
                 raise ValueError("feature size differs between learners and policy")
-    except PolicyFileError:
-        raise
     except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError) as exc:
         raise PolicyFileError(f"checkpoint {path} is corrupt or unreadable ({exc}); move it away to start afresh") from None
     return state
-
-
-class LocalBackend:
-    """Jobs in this process (``workers=1``) or a pool of spawned processes, results in job order."""
-
-    def __init__(self, workers: int):
-        self.workers = workers
-        self._pool = None
-
-    def __enter__(self):
-        if self.workers > 1:
-            from concurrent.futures import ProcessPoolExecutor
-            from multiprocessing import get_context
-
-            self._pool = ProcessPoolExecutor(self.workers, get_context("spawn"))
-        return self
-
-    def __exit__(self, *exc):
-        if self._pool is not None:
-            self._pool.shutdown(cancel_futures=True)
-
-    def map(self, jobs: list, on_result=None) -> list:
-        results = []
-        iterator = map(_call, jobs) if self._pool is None else self._pool.map(_call, jobs, chunksize=1)
-        for job, result in zip(jobs, iterator):
-            results.append(result)
-            if on_result is not None:
-                on_result(job)
-        return results
 
 
 def _policy_at(state: RunState, theta) -> dict:
     return dict(state.policy, theta=list(theta))
 
 
-def _evaluate_phase(state: RunState, backend, progress) -> None:
+def _evaluate_phase(state: RunState, backend, progress, testset_n: int) -> None:
     config, done = state.config, state.done
-    testset_n = _worker_testset_size(config)
     jobs = [("evaluate", (config.domain, _policy_at(state, state.learners[str(s)]["theta"]), r, e))
             for s in config.seeds for r in range(config.eval_repeats) for e in range(testset_n)]
-    results = backend.map(jobs, progress)
+    results = backend.map(_call, jobs, progress)
     per_seed = config.eval_repeats * testset_n
-    sense = make_system(config.domain).objective_sense
+    sense = state.objective_sense
     for i, seed in enumerate(config.seeds):
         chunk = results[i * per_seed:(i + 1) * per_seed]
         row = {"episodes": done, "seed": seed, "objective": float(np.mean([c[0] for c in chunk])),
@@ -259,17 +213,18 @@ def _evaluate_phase(state: RunState, backend, progress) -> None:
             state.best[str(seed)] = {"episodes": done, "objective": row["objective"], "theta": state.learners[str(seed)]["theta"]}
 
 
-def _worker_testset_size(config: TrainConfig) -> int:
-    system = make_system(config.domain)
-    testset = ts_mod.load(ts_mod.default_path(system.domain, system.task), system.domain, system.task)
+def _eval_episodes(config: TrainConfig) -> int:
+    """How many test-set episodes each evaluation plays (loads and checks the test set)."""
+    _, _, testset = context(config.domain)
     n = testset.episodes if config.eval_episodes is None else config.eval_episodes
     if not 1 <= n <= testset.episodes:
         raise EtmpcError(f"eval episodes must be in 1..{testset.episodes}, got {n}")
     return n
 
 
-def _save(out: Path, state: RunState) -> None:
-    """Policies and curve first, the checkpoint last: the checkpoint never points past the files."""
+def _save(out: Path, state: RunState) -> dict:
+    """Policies and curve first, the checkpoint last: the checkpoint never points past the files.
+    Returns the curve's summary."""
     for seed in state.config.seeds:
         key = str(seed)
         hyper = dict(state.policy["hyperparameters"], seed=seed)
@@ -278,9 +233,11 @@ def _save(out: Path, state: RunState) -> None:
         best = state.best[key]
         write_json_atomically(out / f"seed{seed}" / "best.json",
                               dict(_policy_at(state, best["theta"]), hyperparameters=dict(hyper, episodes=best["episodes"])))
-    write_json_atomically(out / "curve.json", curve_summary(state))
-    write_curve_png(out / "curve.png", state)
+    summary = curve_summary(state)
+    write_json_atomically(out / "curve.json", summary)
+    write_curve_png(out / "curve.png", summary, len(state.config.seeds))
     write_json_atomically(out / "checkpoint.json", state.to_json())
+    return summary
 
 
 def curve_summary(state: RunState) -> dict:
@@ -293,26 +250,25 @@ def curve_summary(state: RunState) -> dict:
         points.append({"episodes": episodes, "objective_mean": float(values.mean()),
                        "objective_std": float(values.std(ddof=1)) if len(values) > 1 else 0.0,
                        "recomputes_mean": float(np.mean([r["recomputes"] for r in group])), "seeds": len(group)})
-    return {"domain": state.config.domain, "objective_sense": make_system(state.config.domain).objective_sense,
+    return {"domain": state.config.domain, "objective_sense": state.objective_sense,
             "points": points, "per_seed": state.curve}
 
 
-def write_curve_png(path: Path, state: RunState) -> None:
+def write_curve_png(path: Path, summary: dict, seeds: int) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    summary = curve_summary(state)
     x = np.array([p["episodes"] for p in summary["points"]])
     mean = np.array([p["objective_mean"] for p in summary["points"]])
     std = np.array([p["objective_std"] for p in summary["points"]])
     fig, ax = plt.subplots(figsize=(6, 4))
-    ax.plot(x, mean, marker="o", label=f"mean over {len(state.config.seeds)} seeds")
+    ax.plot(x, mean, marker="o", label=f"mean over {seeds} seeds")
     ax.fill_between(x, mean - std, mean + std, alpha=0.25, label="± 1 std")
     ax.set_xlabel("training episodes")
     ax.set_ylabel(f"test-set objective ({'higher' if summary['objective_sense'] == 'max' else 'lower'} is better)")
-    ax.set_title(f"{state.config.domain}: GPOMDP learning curve")
+    ax.set_title(f"{summary['domain']}: GPOMDP learning curve")
     ax.grid(alpha=0.3)
     ax.legend()
     fig.tight_layout()
@@ -338,22 +294,20 @@ def train(config: TrainConfig, out: Path, workers: int = 1, resume: bool = False
         state = None
     if backend != "local":
         raise EtmpcError(f"backend {backend!r} is not available yet; use --backend local")
-    _worker_testset_size(config)  # fail on a bad test set or size before any work
-
-    testset_n = _worker_testset_size(config)
+    testset_n = _eval_episodes(config)  # fails on a bad test set or size before any work
     total = len(config.seeds) * (config.episodes + len(config.milestones) * config.eval_repeats * testset_n)
     started = time.perf_counter()
     with LocalBackend(workers) as pool, _Progress(total, f"train {config.domain}", progress) as bar:
         tick = lambda job: bar.update(1 if job[0] == "evaluate" else job[1][5] - job[1][4])  # noqa: E731
         if state is None:
-            states = pool.map([("normalisation", (config.domain, i)) for i in range(config.normalisation_episodes)])
+            states = pool.map(_call, [("normalisation", (config.domain, i)) for i in range(config.normalisation_episodes)])
             normalisation = Normalisation.fit(np.concatenate(states))
             hyper = {"discount": config.gpomdp.discount, "learning_rate": config.gpomdp.learning_rate,
                      "baseline": config.gpomdp.baseline, "normalisation_episodes": config.normalisation_episodes}
             initial = LogisticPolicy.initial(normalisation, config.domain, hyper)
-            learner = _learner_to_json(Learner.start(initial.theta, config.gpomdp, make_system(config.domain).episode_steps))
+            learner = _learner_to_json(Learner.start(initial.theta, config.gpomdp, context(config.domain)[0].episode_steps))
             state = RunState(config, initial.to_json(), {str(s): dict(learner) for s in config.seeds})
-            _evaluate_phase(state, pool, tick)
+            _evaluate_phase(state, pool, tick, testset_n)
             _save(out, state)
             resumed_from = 0
         else:
@@ -363,12 +317,12 @@ def train(config: TrainConfig, out: Path, workers: int = 1, resume: bool = False
             if stop <= state.done:
                 continue
             jobs = [("train", (config.domain, state.policy, state.learners[str(s)], s, start, stop)) for s in config.seeds]
-            for seed, (learner, stats) in zip(config.seeds, pool.map(jobs, tick)):
+            for seed, (learner, stats) in zip(config.seeds, pool.map(_call, jobs, tick)):
                 state.learners[str(seed)] = learner
                 state.training += [dict(s, seed=seed) for s in stats]
-            _evaluate_phase(state, pool, tick)
-            _save(out, state)
-            _report(state, started, bar, resumed_from)
+            _evaluate_phase(state, pool, tick, testset_n)
+            summary = _save(out, state)
+            _report(state, summary["points"][-1], started, bar, resumed_from)
     return state
 
 
@@ -397,9 +351,8 @@ class _Progress:
             self._bar.write(line, file=sys.stderr)
 
 
-def _report(state: RunState, started: float, bar, resumed_from: int) -> None:
+def _report(state: RunState, point: dict, started: float, bar, resumed_from: int) -> None:
     """One line per phase on stderr, for logs where the progress bar is off."""
-    point = curve_summary(state)["points"][-1]
     elapsed = time.perf_counter() - started
     done_here, left = bar.n - resumed_from, bar.total - bar.n
     eta = elapsed * left / done_here if done_here > 0 else float("nan")

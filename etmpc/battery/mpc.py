@@ -43,8 +43,10 @@ class EconomicMPC:
 
     def profit(self, soc: float, production_kw: np.ndarray, price: np.ndarray, inputs_kw: np.ndarray) -> float:
         """The LP's objective (EUR) of an input sequence; its SoC bounds are not checked here."""
-        dt_h, soc_n = self.battery.interval_h, self.rollout(soc, production_kw, inputs_kw)[-1]
-        return float(np.dot(price, inputs_kw) * dt_h + self.terminal_price * self.battery.capacity_kwh * soc_n)
+        return self._profit(price, inputs_kw, self.rollout(soc, production_kw, inputs_kw)[-1])
+
+    def _profit(self, price: np.ndarray, inputs_kw: np.ndarray, final_soc: float) -> float:
+        return float(np.dot(price, inputs_kw) * self.battery.interval_h + self.terminal_price * self.battery.capacity_kwh * final_soc)
 
     def rollout(self, soc: float, production_kw: np.ndarray, inputs_kw: np.ndarray) -> np.ndarray:
         """Predicted states of charge ``x_0..x_N`` (the model knows no bounds)."""
@@ -72,11 +74,11 @@ class EconomicMPC:
         except RuntimeError:
             success, status = False, str(self._solver.stats().get("return_status", "failed"))
             inputs = np.clip(production_kw, -self._limit, self._limit)
-        states = np.clip(self.rollout(soc, production_kw, inputs), 0.0, 1.0)  # clip: solver round-off only
+        states = self.rollout(soc, production_kw, inputs)
         return Plan(
             inputs=inputs[:, None],
-            states=states[:, None],
-            cost=-self.profit(soc, production_kw, price, inputs),
+            states=np.clip(states, 0.0, 1.0)[:, None],  # clip: solver round-off only
+            cost=-self._profit(price, inputs, states[-1]),
             solve_time_s=time.perf_counter() - start,
             success=success,
             status=status,
