@@ -1,4 +1,4 @@
-"""The ``etmpc`` command: ``evaluate`` and ``bench``.
+"""The ``etmpc`` command: ``evaluate``, ``train`` and ``bench``.
 
 Bad input (unknown task or policy, bad numbers, missing or corrupt files) prints one line on
 stderr and exits with code 2, without a traceback.
@@ -13,6 +13,7 @@ from pathlib import Path
 
 from etmpc.errors import EtmpcError
 from etmpc.systems import check_name, names
+from etmpc.workers import BACKENDS
 
 
 class _Parser(argparse.ArgumentParser):
@@ -52,6 +53,7 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--seed", type=int, default=0, help="seed of the policies' own randomness")
     ev.add_argument("--test-set", default=None, metavar="PATH", help="test set file (default: the stored one)")
     ev.add_argument("--json", type=_json_path, default=None, metavar="PATH", help="write the results as JSON")
+    _backend_arguments(ev)
 
     tr = sub.add_parser("train", help="train the learned recomputation policy with GPOMDP over several seeds")
     tr.add_argument("task", help=f"system to train on: {tasks}")
@@ -61,8 +63,7 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--eval-episodes", type=_positive_int, default=None, help="first N test-set episodes per evaluation (default: all)")
     tr.add_argument("--out", type=Path, required=True, metavar="DIR", help="run directory: checkpoint, policies, curve")
     tr.add_argument("--workers", type=_positive_int, default=None, help="worker processes (default: one per core)")
-    tr.add_argument("--backend", choices=("local", "ray"), default="local", help="where the work runs (default local)")
-    tr.add_argument("--address", default=None, help="Ray cluster to join (with --backend ray)")
+    _backend_arguments(tr)
     tr.add_argument("--resume", action="store_true", help="continue the run in DIR from its last checkpoint")
     tr.add_argument("--baseline", choices=("none", "mean"), default="none", help="GPOMDP baseline (default none, as the paper)")
     tr.add_argument("--learning-rate", type=float, default=0.05, help="alpha (default 0.05)")
@@ -78,6 +79,19 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _backend_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--backend", choices=BACKENDS, default="local",
+                        help="where the work runs: local processes, or Ray (the 'ray' extra); results are the same")
+    parser.add_argument("--address", default=None, metavar="ADDR",
+                        help="Ray cluster to join, e.g. auto or ray://HOST:10001 (with --backend ray; "
+                             "default: start a local Ray instance of --workers CPUs)")
+
+
+def _check_backend(args) -> None:
+    if args.address is not None and args.backend != "ray":
+        raise EtmpcError("--address needs --backend ray")
+
+
 def _write_json(path: Path, data: dict) -> None:
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -89,9 +103,11 @@ def _write_json(path: Path, data: dict) -> None:
 def _evaluate(args) -> None:
     from etmpc.evaluate import evaluate, format_table
 
+    _check_backend(args)
     if args.test_set is not None and not Path(args.test_set).is_file():
         raise EtmpcError(f"test set {args.test_set} not found")
-    result = evaluate(args.task, args.policy, args.episodes, args.repeats, args.workers, args.seed, args.test_set)
+    result = evaluate(args.task, args.policy, args.episodes, args.repeats, args.workers, args.seed, args.test_set,
+                      backend=args.backend, address=args.address)
     print(format_table(result))
     if args.json is not None:
         _write_json(args.json, result.to_json())
@@ -107,8 +123,7 @@ def _train(args) -> None:
     from etmpc.workers import default_workers
 
     check_name(args.task)
-    if args.address is not None and args.backend != "ray":
-        raise EtmpcError("--address needs --backend ray")
+    _check_backend(args)
     if args.out.exists() and not args.out.is_dir():
         raise EtmpcError(f"--out {args.out} exists and is not a directory")
     try:
@@ -116,7 +131,7 @@ def _train(args) -> None:
     except ValueError as exc:
         raise EtmpcError(str(exc)) from None
     config = TrainConfig(args.task, parse_seeds(args.seeds), args.episodes, args.eval_every, args.eval_episodes, gpomdp=settings)
-    state = train(config, args.out, args.workers or default_workers(), args.resume, args.backend)
+    state = train(config, args.out, args.workers or default_workers(), args.resume, args.backend, args.address)
     print(format_summary(state))
     print(f"wrote {args.out}/curve.json, curve.png, checkpoint.json and seed*/best.json, last.json")
 

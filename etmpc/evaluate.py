@@ -18,7 +18,7 @@ from etmpc import testset as ts_mod
 from etmpc.loop import run_episode
 from etmpc.policies import parse_policy
 from etmpc.systems import make_system
-from etmpc.workers import LocalBackend, context, default_workers, policy_rng
+from etmpc.workers import context, default_workers, make_backend, policy_rng
 
 
 @dataclass(frozen=True)
@@ -79,10 +79,10 @@ def _run(job: tuple) -> RunResult:
 
 
 # -- driver side ---------------------------------------------------------------------------------
-def run_jobs(jobs: list, workers: int, progress: bool) -> list[RunResult]:
+def run_jobs(jobs: list, workers: int, progress: bool, backend: str = "local", address: str | None = None) -> list[RunResult]:
     chunk = max(1, min(8, len(jobs) // (4 * workers)))
     with tqdm(total=len(jobs), desc="episodes", unit="ep", disable=None if progress else True, leave=False) as bar, \
-            LocalBackend(workers) as backend:
+            make_backend(backend, workers, address) as backend:
         return backend.map(_run, jobs, on_result=lambda job: bar.update(), chunksize=chunk)
 
 
@@ -141,8 +141,11 @@ def evaluate(
     seed: int = 0,
     testset_path: str | None = None,
     progress: bool = True,
+    backend: str = "local",
+    address: str | None = None,
 ) -> Evaluation:
-    """Run every policy on the first ``episodes`` test-set episodes, ``repeats`` times each."""
+    """Run every policy on the first ``episodes`` test-set episodes, ``repeats`` times each, on
+    ``workers`` processes of ``backend`` (see ``etmpc.workers.make_backend``)."""
     system = make_system(domain)
     # Parsed once here (a bad spec fails before any work starts), then sent with each job.
     parsed = {spec: parse_policy(spec, system.error_weights, system.domain) for spec in policies}
@@ -154,8 +157,11 @@ def evaluate(
     if repeats < 1:
         raise ValueError("repeats must be >= 1")
     workers = default_workers() if workers is None else workers
-    jobs = [(domain, path, testset.sha256, spec, parsed[spec], r, e, seed) for spec in policies for r in range(repeats) for e in range(episodes)]
-    runs = run_jobs(jobs, workers, progress)
+    # Workers find the stored test set themselves (a cluster node's install may live elsewhere) and
+    # check that its digest is the one verified here.
+    jobs = [(domain, testset_path, testset.sha256, spec, parsed[spec], r, e, seed)
+            for spec in policies for r in range(repeats) for e in range(episodes)]
+    runs = run_jobs(jobs, workers, progress, backend, address)
     summaries = [
         summarise(spec, [r for r in runs if r.policy == spec], system.objective_sense, episodes, repeats) for spec in policies
     ]

@@ -35,7 +35,7 @@ from etmpc.gpomdp import Learner, Settings
 from etmpc.learned import LogisticPolicy, Normalisation, PolicyFileError, raw_state, write_json_atomically
 from etmpc.loop import run_episode
 from etmpc.systems import make_system
-from etmpc.workers import LocalBackend, context, policy_rng
+from etmpc.workers import context, make_backend, policy_rng
 
 TRAIN_ENTROPY = 0x6574_6D70_6321  # "etmpc!"
 NORMALISATION_ENTROPY = 0x6E6F_726D  # "norm"
@@ -125,9 +125,10 @@ def train_block(domain: str, policy_json: dict, learner_json: dict, seed: int, s
     return _learner_to_json(learner), stats
 
 
-def evaluate_theta(domain: str, policy_json: dict, repeat: int, episode: int) -> tuple[float, float, int]:
-    """(objective, control objective, recomputes) of one test-set episode, sense-aware as in evaluate."""
-    system, env, testset = context(domain)
+def evaluate_theta(domain: str, sha256: str, policy_json: dict, repeat: int, episode: int) -> tuple[float, float, int]:
+    """(objective, control objective, recomputes) of one episode of the stored test set (whose digest
+    must be ``sha256``), sense-aware as in evaluate."""
+    system, env, testset = context(domain, None, sha256)
     policy = LogisticPolicy.from_json(policy_json)
     traj = run_episode(system, env, policy, policy_rng(0, repeat, episode), system.episode_from_arrays(testset.episode_arrays(episode)))
     return (*scores(system, traj), traj.recomputes)
@@ -195,9 +196,10 @@ def _policy_at(state: RunState, theta) -> dict:
     return dict(state.policy, theta=list(theta))
 
 
-def _evaluate_phase(state: RunState, backend, progress, testset_n: int) -> None:
+def _evaluate_phase(state: RunState, backend, progress, testset: tuple[int, str]) -> None:
     config, done = state.config, state.done
-    jobs = [("evaluate", (config.domain, _policy_at(state, state.learners[str(s)]["theta"]), r, e))
+    testset_n, sha256 = testset
+    jobs = [("evaluate", (config.domain, sha256, _policy_at(state, state.learners[str(s)]["theta"]), r, e))
             for s in config.seeds for r in range(config.eval_repeats) for e in range(testset_n)]
     results = backend.map(_call, jobs, progress)
     per_seed = config.eval_repeats * testset_n
@@ -213,13 +215,14 @@ def _evaluate_phase(state: RunState, backend, progress, testset_n: int) -> None:
             state.best[str(seed)] = {"episodes": done, "objective": row["objective"], "theta": state.learners[str(seed)]["theta"]}
 
 
-def _eval_episodes(config: TrainConfig) -> int:
-    """How many test-set episodes each evaluation plays (loads and checks the test set)."""
+def _eval_episodes(config: TrainConfig) -> tuple[int, str]:
+    """How many test-set episodes each evaluation plays, and the test set's digest (loads and checks
+    the test set)."""
     _, _, testset = context(config.domain)
     n = testset.episodes if config.eval_episodes is None else config.eval_episodes
     if not 1 <= n <= testset.episodes:
         raise EtmpcError(f"eval episodes must be in 1..{testset.episodes}, got {n}")
-    return n
+    return n, testset.sha256
 
 
 def _save(out: Path, state: RunState) -> dict:
@@ -280,7 +283,7 @@ def write_curve_png(path: Path, summary: dict, seeds: int) -> None:
 
 
 def train(config: TrainConfig, out: Path, workers: int = 1, resume: bool = False, backend: str = "local",
-          progress: bool = True) -> RunState:
+          address: str | None = None, progress: bool = True) -> RunState:
     out = Path(out)
     checkpoint = out / "checkpoint.json"
     if checkpoint.exists():
@@ -292,12 +295,11 @@ def train(config: TrainConfig, out: Path, workers: int = 1, resume: bool = False
                              "resume with the same ones, or choose another --out")
     else:
         state = None
-    if backend != "local":
-        raise EtmpcError(f"backend {backend!r} is not available yet; use --backend local")
-    testset_n = _eval_episodes(config)  # fails on a bad test set or size before any work
+    testset = _eval_episodes(config)  # fails on a bad test set or size before any work
+    testset_n = testset[0]
     total = len(config.seeds) * (config.episodes + len(config.milestones) * config.eval_repeats * testset_n)
     started = time.perf_counter()
-    with LocalBackend(workers) as pool, _Progress(total, f"train {config.domain}", progress) as bar:
+    with make_backend(backend, workers, address) as pool, _Progress(total, f"train {config.domain}", progress) as bar:
         tick = lambda job: bar.update(1 if job[0] == "evaluate" else job[1][5] - job[1][4])  # noqa: E731
         if state is None:
             states = pool.map(_call, [("normalisation", (config.domain, i)) for i in range(config.normalisation_episodes)])
@@ -307,7 +309,7 @@ def train(config: TrainConfig, out: Path, workers: int = 1, resume: bool = False
             initial = LogisticPolicy.initial(normalisation, config.domain, hyper)
             learner = _learner_to_json(Learner.start(initial.theta, config.gpomdp, context(config.domain)[0].episode_steps))
             state = RunState(config, initial.to_json(), {str(s): dict(learner) for s in config.seeds})
-            _evaluate_phase(state, pool, tick, testset_n)
+            _evaluate_phase(state, pool, tick, testset)
             _save(out, state)
             resumed_from = 0
         else:
@@ -320,7 +322,7 @@ def train(config: TrainConfig, out: Path, workers: int = 1, resume: bool = False
             for seed, (learner, stats) in zip(config.seeds, pool.map(_call, jobs, tick)):
                 state.learners[str(seed)] = learner
                 state.training += [dict(s, seed=seed) for s in stats]
-            _evaluate_phase(state, pool, tick, testset_n)
+            _evaluate_phase(state, pool, tick, testset)
             summary = _save(out, state)
             _report(state, summary["points"][-1], started, bar, resumed_from)
     return state

@@ -1,18 +1,28 @@
-"""Where episodes run: the per-process context, the policies' seeding, and a pool that keeps order.
+"""Where episodes run: the per-process context, the policies' seeding, and backends that keep order.
 
 Work is a list of jobs for a module-level function; results come back in job order whatever the
-number of worker processes, so results never depend on where they ran.
+number of worker processes or the backend, and every random draw is seeded by the job itself, so
+results never depend on where they ran.
+
+Backends (``make_backend``):
+
+- ``local``: this process (one worker) or a pool of spawned processes;
+- ``ray``: Ray tasks (the optional ``ray`` extra), on a Ray instance started for the run, or on an
+  existing cluster given by its address. Every node of a cluster needs the same etmpc installed.
 """
 
 from __future__ import annotations
 
+import logging
 import os
+import socket
 from concurrent.futures import ProcessPoolExecutor
 from multiprocessing import get_context
 
 import numpy as np
 
 from etmpc import testset as ts_mod
+from etmpc.errors import EtmpcError
 from etmpc.systems import make_system
 
 _CONTEXTS: dict = {}
@@ -26,7 +36,11 @@ def context(domain: str, testset_path: str | None = None, sha256: str | None = N
     if key not in _CONTEXTS:
         system = make_system(domain)
         path = testset_path or ts_mod.default_path(system.domain, system.task)
-        _CONTEXTS[key] = (system, system.make_env(), ts_mod.load(path, system.domain, system.task))
+        testset = ts_mod.load(path, system.domain, system.task)
+        if sha256 is not None and testset.sha256 != sha256:
+            raise EtmpcError(f"test set {path} on this worker has sha256 {testset.sha256[:12]}…, the run uses "
+                             f"{sha256[:12]}…: install the same etmpc on every worker")
+        _CONTEXTS[key] = (system, system.make_env(), testset)
     return _CONTEXTS[key]
 
 
@@ -64,3 +78,90 @@ class LocalBackend:
             if on_result is not None:
                 on_result(job)
         return results
+
+
+BACKENDS = ("local", "ray")
+
+
+class RayBackend:
+    """Jobs as Ray tasks, in chunks, with at most ``2 * workers`` chunks in flight; results in job
+    order. Without ``address`` it starts a Ray instance of ``workers`` CPUs for the run and stops it
+    afterwards; with one (``auto``, ``HOST:PORT`` or ``ray://HOST:PORT``) it joins that cluster, and
+    ``workers`` only bounds how much work is queued at once."""
+
+    def __init__(self, workers: int, address: str | None = None):
+        self.workers, self.address = workers, address
+        self._started = False
+        self._remote = None
+
+    def __enter__(self):
+        try:
+            import ray
+        except ImportError:
+            raise EtmpcError("--backend ray needs Ray: pip install 'etmpc[ray]'") from None
+        if not ray.is_initialized():
+            options = dict(include_dashboard=False, logging_level=logging.WARNING, log_to_driver=True)
+            if self.address is None:
+                # The object store only carries jobs and results (kilobytes): keep it small.
+                options.update(num_cpus=self.workers, object_store_memory=100 * 2**20)
+            else:
+                _check_reachable(self.address)
+            try:
+                ray.init(address=self.address, **options)
+            except ConnectionError as exc:
+                raise EtmpcError(f"cannot join the Ray cluster at {self.address}: {exc} (a cluster with token "
+                                 "authentication also needs RAY_AUTH_MODE=token and its token in etmpc's environment)") from None
+            self._started = True
+        self._remote = ray.remote(num_cpus=1, max_retries=0)(_run_chunk)
+        return self
+
+    def __exit__(self, *exc):
+        if self._started:
+            import ray
+
+            ray.shutdown()
+
+    def map(self, fn, jobs: list, on_result=None, chunksize: int = 1) -> list:
+        import ray
+
+        chunks = [jobs[i:i + chunksize] for i in range(0, len(jobs), chunksize)]
+        window = 2 * self.workers
+        pending = [self._remote.remote(fn, chunk) for chunk in chunks[:window]]
+        results = []
+        for i, chunk in enumerate(chunks):
+            results += ray.get(pending[i])
+            pending[i] = None  # let Ray free the result
+            if i + window < len(chunks):
+                pending.append(self._remote.remote(fn, chunks[i + window]))
+            if on_result is not None:
+                for job in chunk:
+                    on_result(job)
+        return results
+
+
+def _check_reachable(address: str, timeout: float = 10.0) -> None:
+    """Fail fast on a cluster address nobody answers at (Ray itself retries for minutes)."""
+    if address == "auto":
+        return
+    host, sep, port = address.removeprefix("ray://").rpartition(":")
+    if not sep or not port.isdigit():
+        raise EtmpcError(f"bad --address {address!r}: use auto, HOST:PORT or ray://HOST:PORT")
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout).close()
+    except OSError as exc:
+        raise EtmpcError(f"cannot reach the Ray cluster at {address}: {exc.strerror or exc}") from None
+
+
+def _run_chunk(fn, chunk: list) -> list:
+    return [fn(job) for job in chunk]
+
+
+def make_backend(name: str, workers: int, address: str | None = None):
+    """A context manager with ``.map(fn, jobs, on_result=None, chunksize=1)``."""
+    if name == "local":
+        if address is not None:
+            raise EtmpcError("--address needs --backend ray")
+        return LocalBackend(workers)
+    if name == "ray":
+        return RayBackend(workers, address)
+    raise EtmpcError(f"unknown backend {name!r}: {' | '.join(BACKENDS)}")

@@ -100,7 +100,8 @@ def test_an_existing_run_is_never_overwritten(tmp_path, capsys):
     (["train", "battery", "--baseline", "median", "--out", "x"], "invalid choice"),
     (["train", "battery", "--learning-rate", "-1", "--out", "x"], "learning rate"),
     (["train", "battery", "--address", "ray://h:10001", "--out", "x"], "--backend ray"),
-    (["train", "battery", "--backend", "ray", "--out", "x"], "not available yet"),
+    (["train", "battery", "--backend", "ray", "--address", "nonsense", "--out", "x"], "bad --address"),
+    (["train", "battery", "--backend", "ray", "--address", "127.0.0.1:1", "--out", "x"], "cannot reach"),
 ])
 def test_bad_train_input_is_one_line_and_exit_2(capsys, tmp_path, argv, message):
     argv = [a if a != "x" else str(tmp_path / "run") for a in argv]

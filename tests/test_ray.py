@@ -1,0 +1,71 @@
+"""The Ray backend runs the same work as the local one and gives exactly the same numbers: on a Ray
+instance it starts itself, and on an existing cluster it joins by address."""
+
+import json
+import os
+import secrets
+import shutil
+import socket
+import subprocess
+import sys
+from dataclasses import asdict
+from pathlib import Path
+
+import pytest
+import ray  # the 'ray' extra is part of the test install, so these tests run rather than skip
+
+from etmpc.evaluate import evaluate
+from etmpc.train import TrainConfig, train
+
+TINY = dict(seeds=(0, 1), episodes=4, eval_every=2, eval_episodes=3, normalisation_episodes=2)
+POLICIES = ["always", "every:3", "threshold:0.2"]
+
+
+def files(out):
+    return {p.relative_to(out).as_posix(): p.read_bytes() for p in sorted(out.rglob("*")) if p.is_file()}
+
+
+@pytest.mark.slow
+def test_training_and_evaluation_agree_exactly_on_local_and_ray(tmp_path):
+    config = TrainConfig("cart_pendulum", **TINY)
+    train(config, tmp_path / "local", workers=1, progress=False)
+    train(config, tmp_path / "ray", workers=2, backend="ray", progress=False)
+    assert not ray.is_initialized()  # the instance it started is stopped again
+    assert files(tmp_path / "local") == files(tmp_path / "ray")
+
+    # Evaluation, including the learned (stochastic) policy, over two passes.
+    policies = POLICIES + [f"rl:{tmp_path / 'local' / 'seed1' / 'last.json'}"]
+    local = evaluate("cart_pendulum", policies, episodes=4, repeats=2, workers=1, progress=False)
+    remote = evaluate("cart_pendulum", policies, episodes=4, repeats=2, workers=2, progress=False, backend="ray")
+    assert local.runs == remote.runs and local.summaries == remote.summaries
+    assert len(local.runs) == 4 * 4 * 2 and {r.recomputes for r in local.runs} != {40}  # not all alike
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.mark.slow
+def test_joins_an_existing_cluster_by_address(tmp_path):
+    """`ray start --head` (with token authentication, as a real cluster would have), then
+    `etmpc evaluate --backend ray --address HOST:PORT` runs the work there. A fresh process, as a user
+    would run it: Ray reads its token once per process."""
+    ray_cli = shutil.which("ray", path=str(Path(sys.executable).parent))
+    assert ray_cli is not None, "the ray extra installs the ray command next to python"
+    port = _free_port()
+    env = dict(os.environ, RAY_AUTH_MODE="token", RAY_AUTH_TOKEN=secrets.token_hex(16), RAY_USAGE_STATS_ENABLED="0")
+    subprocess.run([ray_cli, "start", "--head", f"--port={port}", "--num-cpus=2", "--include-dashboard=false"],
+                   env=env, check=True, capture_output=True, timeout=120)
+    try:
+        argv = ["evaluate", "battery", *(a for p in POLICIES for a in ("--policy", p)), "--episodes", "3"]
+        done = subprocess.run([sys.executable, "-m", "etmpc.cli", *argv, "--backend", "ray", "--address", f"127.0.0.1:{port}",
+                               "--json", str(tmp_path / "joined.json")], env=env, capture_output=True, text=True, timeout=300)
+        assert done.returncode == 0, done.stderr
+        status = subprocess.run([ray_cli, "status", f"--address=127.0.0.1:{port}"], env=env, capture_output=True, text=True, timeout=120)
+        assert status.returncode == 0, "the cluster it joined is still up"
+    finally:
+        subprocess.run([ray_cli, "stop", "--force"], env=env, capture_output=True, timeout=120)
+    local = evaluate("battery", POLICIES, episodes=3, workers=1, progress=False)
+    assert json.loads((tmp_path / "joined.json").read_text())["runs"] == [asdict(r) for r in local.runs]
