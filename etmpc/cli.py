@@ -12,6 +12,7 @@ import sys
 from pathlib import Path
 
 from etmpc.errors import EtmpcError
+from etmpc.gpomdp import BASELINES
 from etmpc.systems import check_name, names
 from etmpc.workers import BACKENDS
 
@@ -65,7 +66,8 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--workers", type=_positive_int, default=None, help="worker processes (default: one per core)")
     _backend_arguments(tr)
     tr.add_argument("--resume", action="store_true", help="continue the run in DIR from its last checkpoint")
-    tr.add_argument("--baseline", choices=("none", "mean"), default="none", help="GPOMDP baseline (default none, as the paper)")
+    tr.add_argument("--baseline", choices=BASELINES, default="none",
+                    help="GPOMDP baseline: none (the paper, default), mean (per step index), state (linear value function)")
     tr.add_argument("--learning-rate", type=float, default=0.05, help="alpha (default 0.05)")
     tr.add_argument("--discount", type=float, default=0.975, help="gamma (default 0.975)")
 

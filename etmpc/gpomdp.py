@@ -12,9 +12,15 @@ which is Baxter & Bartlett's eligibility-trace estimate ``sum_t r_t z_t``, ``z_t
 grad log pi_t``, reordered (see the tests). For ``pi(keep | s) = sigma(theta . phi)`` and
 ``a = 1`` meaning recompute, ``grad log pi(a | s) = (1 - a - p_keep) phi``.
 
-``b_t`` is an optional baseline (variance reduction, off by default as in the paper): the running
-mean of ``G_t`` at each step index over the episodes seen so far, ``b <- b + (G - b) / n``. It uses
-only earlier episodes, so the estimate stays unbiased.
+``b_t`` is an optional baseline (variance reduction, off by default as in the paper). It is built
+from earlier episodes only and depends on nothing the action at ``t`` changes, so the estimate stays
+unbiased (``E[grad log pi(a_t | s_t) | s_t] = 0``):
+
+- ``mean``: the running mean of ``G_t`` at each step index, ``b <- b + (G - b) / n``;
+- ``state``: a linear value function ``b_t = w . phi(s_t)`` on the policy's own features, fitted by
+  ridge least squares to every earlier decision's ``G_t``. The features hold the squares of the
+  state, so it can follow a quadratic cost to go; on the cart pendulum most of ``G_t``'s variance is
+  the episode's initial state, which this removes and a per-step mean cannot.
 """
 
 from __future__ import annotations
@@ -23,7 +29,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-BASELINES = ("none", "mean")
+BASELINES = ("none", "mean", "state")
+VALUE_RIDGE = 1.0  # ridge of the state baseline's least squares (features are normalised to O(1))
 
 
 @dataclass(frozen=True)
@@ -32,7 +39,7 @@ class Settings:
 
     discount: float = 0.975  # gamma
     learning_rate: float = 0.05  # alpha
-    baseline: str = "none"  # "none" (the paper) or "mean": running mean of G_t per step index
+    baseline: str = "none"  # "none" (the paper), "mean" (per step index) or "state" (linear in phi)
 
     def __post_init__(self):
         if not 0.0 < self.discount <= 1.0:
@@ -58,35 +65,55 @@ def gradient(features: np.ndarray, recompute: np.ndarray, keep_probability: np.n
     """GPOMDP's estimate from one episode.
 
     ``features (d, p)``, ``recompute (d,)``, ``keep_probability (d,)``: the policy's ``d`` decisions,
-    made at step indices ``steps (d,)``; ``returns (T,)`` the rewards to go; ``baseline (T,)`` or None.
+    made at step indices ``steps (d,)``; ``returns (T,)`` the rewards to go; ``baseline (d,)``, its
+    value at each decision, or None.
     """
     if len(steps) == 0:
         return np.zeros(features.shape[1] if features.ndim == 2 else 0)
-    advantage = returns[steps] - (baseline[steps] if baseline is not None else 0.0)
+    advantage = returns[steps] - (baseline if baseline is not None else 0.0)
     score = (1.0 - np.asarray(recompute, dtype=float)) - keep_probability  # d log pi / d (theta . phi)
     return (score * advantage) @ features
 
 
 @dataclass
 class Learner:
-    """The parameters and the baseline's state: everything a checkpoint has to keep."""
+    """The parameters and the baselines' state: everything a checkpoint has to keep."""
 
     theta: np.ndarray
     settings: Settings
     baseline_mean: np.ndarray  # (T,) running mean of G_t
     episodes: int = 0
+    value_gram: np.ndarray | None = None  # (p, p) sum of phi phi^T over earlier decisions ("state")
+    value_target: np.ndarray | None = None  # (p,) sum of phi G over earlier decisions ("state")
+
+    def __post_init__(self):
+        p = len(self.theta)
+        self.value_gram = np.zeros((p, p)) if self.value_gram is None else np.asarray(self.value_gram, float)
+        self.value_target = np.zeros(p) if self.value_target is None else np.asarray(self.value_target, float)
 
     @classmethod
     def start(cls, theta: np.ndarray, settings: Settings, steps: int) -> Learner:
         return cls(np.array(theta, dtype=float), settings, np.zeros(steps), 0)
 
+    def value_weights(self) -> np.ndarray:
+        """The state baseline's ``w`` from the decisions seen so far (0 before any)."""
+        return np.linalg.solve(self.value_gram + VALUE_RIDGE * np.eye(len(self.value_target)), self.value_target)
+
     def update(self, features, recompute, keep_probability, steps, rewards) -> np.ndarray:
         """One GPOMDP step from one episode; returns the gradient used."""
+        features, steps = np.asarray(features, float), np.asarray(steps, int)
         returns = rewards_to_go(np.asarray(rewards, dtype=float), self.settings.discount)
-        baseline = self.baseline_mean[: len(returns)] if self.settings.baseline == "mean" and self.episodes else None
-        g = gradient(np.asarray(features), recompute, np.asarray(keep_probability), np.asarray(steps, int), returns, baseline)
+        baseline = None
+        if self.episodes and self.settings.baseline == "mean":
+            baseline = self.baseline_mean[steps]
+        elif self.episodes and self.settings.baseline == "state" and len(steps):
+            baseline = features @ self.value_weights()
+        g = gradient(features, recompute, np.asarray(keep_probability), steps, returns, baseline)
         self.theta = self.theta + self.settings.learning_rate * g
         self.episodes += 1
         n = len(returns)
         self.baseline_mean[:n] += (returns - self.baseline_mean[:n]) / self.episodes
+        if len(steps):
+            self.value_gram += features.T @ features
+            self.value_target += features.T @ returns[steps]
         return g

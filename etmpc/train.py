@@ -141,12 +141,13 @@ def _call(job):
 
 def _learner_to_json(learner: Learner) -> dict:
     return {"theta": learner.theta.tolist(), "baseline_mean": learner.baseline_mean.tolist(), "episodes": learner.episodes,
-            "settings": asdict(learner.settings)}
+            "settings": asdict(learner.settings), "value_gram": learner.value_gram.tolist(),
+            "value_target": learner.value_target.tolist()}
 
 
 def _learner_from_json(data: dict) -> Learner:
     return Learner(np.asarray(data["theta"], float), Settings(**data["settings"]), np.asarray(data["baseline_mean"], float),
-                   int(data["episodes"]))
+                   int(data["episodes"]), np.asarray(data["value_gram"], float), np.asarray(data["value_target"], float))
 
 
 # -- driver side -----------------------------------------------------------------------------------
