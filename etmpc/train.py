@@ -112,17 +112,34 @@ def train_block(domain: str, policy_json: dict, learner_json: dict, seed: int, s
     stats = []
     for e in range(start, stop):
         episode = system.draw_episode(np.random.default_rng(np.random.SeedSequence(TRAIN_ENTROPY, spawn_key=(seed, e, 0))))
-        acting = policy.with_theta(learner.theta, record=True)
         rng = np.random.default_rng(np.random.SeedSequence(TRAIN_ENTROPY, spawn_key=(seed, e, 1)))
-        traj = run_episode(system, env, acting, rng, episode)
-        rewards = traj.policy_rewards(system.recompute_price)
-        steps = np.flatnonzero(~traj.forced[: traj.steps])
-        if len(steps) != len(acting.decisions):
-            raise RuntimeError("decisions and unforced steps disagree")  # a control-loop invariant
-        feats = np.array([d[0] for d in acting.decisions]).reshape(len(steps), -1)
-        learner.update(feats, np.array([d[1] for d in acting.decisions]), np.array([d[2] for d in acting.decisions]), steps, rewards)
-        stats.append({"episode": e, "return": float(rewards.sum()), "recomputes": traj.recomputes})
+        sample = play(system, env, policy.with_theta(learner.theta, record=True), rng, episode)
+        learner.update(sample.features, sample.recompute, sample.keep_probability, sample.steps, sample.rewards)
+        stats.append({"episode": e, "return": float(sample.rewards.sum()), "recomputes": sample.recomputes})
     return _learner_to_json(learner), stats
+
+
+@dataclass(frozen=True)
+class Sample:
+    """What GPOMDP needs from one episode: the policy's decisions and the per-step rewards."""
+
+    features: np.ndarray  # (d, p) phi(s) at each decision
+    recompute: np.ndarray  # (d,) the action taken
+    keep_probability: np.ndarray  # (d,)
+    steps: np.ndarray  # (d,) step index of each decision
+    rewards: np.ndarray  # (T,) the policy's rewards
+    recomputes: int
+
+
+def play(system, env, acting: LogisticPolicy, rng: np.random.Generator, episode) -> Sample:
+    """One episode under ``acting`` (a recording policy), as GPOMDP sees it."""
+    traj = run_episode(system, env, acting, rng, episode)
+    steps = np.flatnonzero(~traj.forced[: traj.steps])
+    if len(steps) != len(acting.decisions):
+        raise RuntimeError("decisions and unforced steps disagree")  # a control-loop invariant
+    return Sample(np.array([d[0] for d in acting.decisions]).reshape(len(steps), -1),
+                  np.array([d[1] for d in acting.decisions], dtype=bool), np.array([d[2] for d in acting.decisions]),
+                  steps, traj.policy_rewards(system.recompute_price), traj.recomputes)
 
 
 def evaluate_theta(domain: str, sha256: str, policy_json: dict, repeat: int, episode: int) -> tuple[float, float, int]:

@@ -129,7 +129,12 @@ class RayBackend:
         pending = [self._remote.remote(fn, chunk) for chunk in chunks[:window]]
         results = []
         for i, chunk in enumerate(chunks):
-            results += ray.get(pending[i])
+            try:
+                results += ray.get(pending[i])
+            except ray.exceptions.RayTaskError as exc:
+                if isinstance(exc.cause, EtmpcError):  # bad input found on a worker: the same one-line error as locally
+                    raise exc.cause from None
+                raise
             pending[i] = None  # let Ray free the result
             if i + window < len(chunks):
                 pending.append(self._remote.remote(fn, chunks[i + window]))

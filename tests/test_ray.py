@@ -69,3 +69,18 @@ def test_joins_an_existing_cluster_by_address(tmp_path):
         subprocess.run([ray_cli, "stop", "--force"], env=env, capture_output=True, timeout=120)
     local = evaluate("battery", POLICIES, episodes=3, workers=1, progress=False)
     assert json.loads((tmp_path / "joined.json").read_text())["runs"] == [asdict(r) for r in local.runs]
+
+
+@pytest.mark.parametrize("backend", ["local", "ray"])
+def test_a_worker_with_another_test_set_refuses_with_the_same_one_line_error(backend):
+    """Workers check the test set's digest against the driver's; the error reaches the user as the
+    same one-line EtmpcError on either backend (not wrapped in Ray's remote traceback)."""
+    from etmpc.errors import EtmpcError
+    from etmpc.train import _call
+    from etmpc.workers import make_backend
+
+    job = ("evaluate", ("battery", "0" * 64, {}, 0, 0))
+    with make_backend(backend, 2) as pool, pytest.raises(EtmpcError) as caught:
+        pool.map(_call, [job, job])
+    assert type(caught.value) is EtmpcError
+    assert str(caught.value).startswith("test set ") and "0000000000" in str(caught.value) and "\n" not in str(caught.value)
