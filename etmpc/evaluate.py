@@ -170,7 +170,8 @@ def evaluate(
 
 def format_table(evaluation: Evaluation) -> str:
     sense = evaluation.summaries[0].objective_sense if evaluation.summaries else "min"
-    head = f"{'policy':<16}{'objective':>12}{'± std':>10}{'control':>11}{'recomputes':>12}{'failures':>10}{'non-finite':>12}"
+    width = max([16] + [len(s.policy) + 2 for s in evaluation.summaries])  # long rl:PATH specs stay aligned
+    head = f"{'policy':<{width}}{'objective':>12}{'± std':>10}{'control':>11}{'recomputes':>12}{'failures':>10}{'non-finite':>12}"
     lines = [
         f"{evaluation.domain}/{evaluation.task}: objective ({'lower' if sense == 'min' else 'higher'} is better), "
         f"test set {evaluation.testset_sha256[:12]}",
@@ -179,7 +180,7 @@ def format_table(evaluation: Evaluation) -> str:
     ]
     for s in evaluation.summaries:
         lines.append(
-            f"{s.policy:<16}{s.objective_mean:>12.5f}{s.objective_std:>10.5f}{s.control_objective_mean:>11.5f}"
+            f"{s.policy:<{width}}{s.objective_mean:>12.5f}{s.objective_std:>10.5f}{s.control_objective_mean:>11.5f}"
             f"{s.recomputes_mean:>12.2f}{s.solver_failures:>10d}{s.nonfinite_episodes:>12d}"
         )
     lines.append(f"{evaluation.summaries[0].episodes} episodes x {evaluation.summaries[0].repeats} repeats per policy" if evaluation.summaries else "")

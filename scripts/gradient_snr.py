@@ -4,7 +4,7 @@ which way to move the policy?
     python scripts/gradient_snr.py cart_pendulum [--policy PATH] [--episodes 800] [--workers 2]
 
 Plays ``--episodes`` training episodes under one fixed policy (the initial policy of ``etmpc train``
-by default) and computes every episode's GPOMDP estimate (the paper's gamma), once without a
+by default) and computes every episode's GPOMDP estimate (the paper's gamma by default), once without a
 baseline and once with the ``state`` baseline, cross-fitted (fitted on the other half of the
 episodes). For each coordinate of theta it prints the mean estimate, its z-score (mean over its
 standard error) and the number of episodes at which that coordinate's z would reach 2. A z-score
@@ -51,6 +51,7 @@ def main(argv=None) -> int:
     parser.add_argument("--policy", default=None, metavar="PATH", help="policy file (default: train's initial policy)")
     parser.add_argument("--episodes", type=int, default=800)
     parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--discount", type=float, default=Settings().discount, help="gamma (default: the paper's)")
     args = parser.parse_args(argv)
 
     system = context(args.task)[0]
@@ -59,7 +60,7 @@ def main(argv=None) -> int:
         policy = LogisticPolicy.initial(Normalisation.fit(states), args.task, {})
     else:
         policy = load_policy(args.policy, args.task, len(system.error_weights))
-    gamma = Settings().discount
+    gamma = args.discount
     chunk = 25
     jobs = [(args.task, policy.to_json(), lo, min(lo + chunk, args.episodes)) for lo in range(0, args.episodes, chunk)]
     with make_backend("local", args.workers) as backend:

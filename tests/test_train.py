@@ -6,6 +6,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,6 +17,7 @@ from etmpc.learned import INITIAL_KEEP_LOGIT, LogisticPolicy, Normalisation, loa
 from etmpc.policies import AugmentedState, parse_policy
 from etmpc.train import TrainConfig, train
 
+ROOT = Path(__file__).resolve().parents[1]
 TINY = dict(seeds=(0, 1), episodes=4, eval_every=2, eval_episodes=3, normalisation_episodes=2)
 
 
@@ -155,3 +157,21 @@ def test_rl_spec_needs_a_path():
     with pytest.raises(EtmpcError, match="rl:PATH"):
         parse_policy("rl:", np.ones(4))
     assert Settings().discount == 0.975 and Settings().learning_rate == 0.05
+
+
+
+def test_training_benchmark_script_measures_both_ends(tmp_path):
+    """`scripts/bench_training.py`: the policy that mostly keeps its plan recomputes less and runs
+    faster than the initial one, every worker's memory is measured, and the projection is the
+    protocol's episode counts over the measured rates."""
+    out = tmp_path / "bench.json"
+    done = subprocess.run([sys.executable, str(ROOT / "scripts" / "bench_training.py"), "battery", "--episodes", "3",
+                           "--workers", "1", "--json", str(out)], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    data = json.loads(out.read_text())
+    start, keeper = data["rates"]["start (initial policy)"], data["rates"]["mostly keeps (bias +3)"]
+    assert start["recomputes"] > 80 > 30 > keeper["recomputes"]
+    assert keeper["train"] > start["train"]
+    assert len(data["peak_rss_mib"]) == 1 and 50 < data["peak_rss_mib"][0] < 1024
+    expected = 5 * 1500 / start["train"] + 5 * 11 * 100 / start["evaluate"]
+    assert data["protocol_projection_seconds"]["start (initial policy)"] == pytest.approx(expected)
