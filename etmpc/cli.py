@@ -1,4 +1,4 @@
-"""The ``etmpc`` command: ``evaluate``, ``train`` and ``bench``.
+"""The ``etmpc`` command: ``evaluate``, ``train``, ``render``, ``replay`` and ``bench``.
 
 Bad input (unknown task or policy, bad numbers, missing or corrupt files) prints one line on
 stderr and exits with code 2, without a traceback.
@@ -54,6 +54,8 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--seed", type=int, default=0, help="seed of the policies' own randomness")
     ev.add_argument("--test-set", default=None, metavar="PATH", help="test set file (default: the stored one)")
     ev.add_argument("--json", type=_json_path, default=None, metavar="PATH", help="write the results as JSON")
+    ev.add_argument("--record", type=_rrd_path, default=None, metavar="PATH.rrd",
+                    help="write every episode into a Rerun recording (open it with `rerun PATH.rrd`)")
     _backend_arguments(ev)
 
     tr = sub.add_parser("train", help="train the learned recomputation policy with GPOMDP over several seeds")
@@ -71,6 +73,23 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--learning-rate", type=float, default=0.05, help="alpha (default 0.05)")
     tr.add_argument("--discount", type=float, default=0.975, help="gamma (default 0.975)")
 
+    rn = sub.add_parser("render", help="render one test-set episode headless to an MP4 video (cart_pendulum)")
+    rn.add_argument("task", help="system to render: cart_pendulum (the battery has no 3-D scene)")
+    rn.add_argument("--policy", required=True, metavar="SPEC", help="always | never | every:T | threshold:X | rl:PATH")
+    rn.add_argument("--episode", type=int, default=0, help="test-set episode (default 0)")
+    rn.add_argument("--out", type=Path, required=True, metavar="FILE.mp4")
+    rn.add_argument("--seed", type=int, default=0, help="seed of the policy's own randomness, as in evaluate")
+    rn.add_argument("--width", type=_positive_int, default=640)
+    rn.add_argument("--height", type=_positive_int, default=480)
+    rn.add_argument("--fps", type=float, default=None, help="frames per second (default: one frame per control interval)")
+    rn.add_argument("--record", type=_rrd_path, default=None, metavar="PATH.rrd",
+                    help="also write the episode, frames included, into a Rerun recording")
+
+    rp = sub.add_parser("replay", help="summarise a Rerun recording: objective, recomputes, prediction errors")
+    rp.add_argument("recording", type=Path, metavar="PATH.rrd")
+    rp.add_argument("--per-episode", action="store_true", help="one line per episode, not only per policy")
+    rp.add_argument("--json", type=_json_path, default=None, metavar="PATH", help="write every episode's figures as JSON")
+
     be = sub.add_parser("bench", help="time the MPC solve, the rest of a step and whole episodes")
     be.add_argument("tasks", nargs="*", metavar="TASK", help=f"systems to bench (default: all: {tasks})")
     be.add_argument("--episodes", type=_positive_int, default=10, help="test-set episodes per measurement")
@@ -79,6 +98,13 @@ def build_parser() -> argparse.ArgumentParser:
                     help="skip the reference solvers (do-mpc for cart_pendulum, scipy linprog for battery)")
     be.add_argument("--jit", action="store_true", help="also time the MPC compiled with CasADi's JIT (needs a C compiler)")
     return parser
+
+
+def _rrd_path(text: str) -> Path:
+    path = _json_path(text)
+    if path.suffix != ".rrd":
+        raise argparse.ArgumentTypeError(f"{text} does not end in .rrd")
+    return path
 
 
 def _backend_arguments(parser: argparse.ArgumentParser) -> None:
@@ -109,8 +135,10 @@ def _evaluate(args) -> None:
     if args.test_set is not None and not Path(args.test_set).is_file():
         raise EtmpcError(f"test set {args.test_set} not found")
     result = evaluate(args.task, args.policy, args.episodes, args.repeats, args.workers, args.seed, args.test_set,
-                      backend=args.backend, address=args.address)
+                      backend=args.backend, address=args.address, record=args.record)
     print(format_table(result))
+    if args.record is not None:
+        print(f"wrote {args.record} (open it with: rerun {args.record}; summarise it with: etmpc replay {args.record})")
     if args.json is not None:
         _write_json(args.json, result.to_json())
         print(f"wrote {args.json}")
@@ -138,6 +166,34 @@ def _train(args) -> None:
     print(f"wrote {args.out}/curve.json, curve.png, checkpoint.json and seed*/best.json, last.json")
 
 
+def _render(args) -> None:
+    from etmpc.render import render_rollout
+
+    check_name(args.task)
+    if args.out.suffix != ".mp4":
+        raise EtmpcError(f"--out {args.out} does not end in .mp4")
+    try:
+        result = render_rollout(args.task, args.policy, args.episode, args.out, args.seed, args.width, args.height,
+                                args.fps, record=args.record)
+    except ValueError as exc:
+        raise EtmpcError(str(exc)) from None
+    print(f"wrote {result.path}: {result.frames} frames at {result.fps:g} fps, {result.trajectory.recomputes} recomputes")
+    if args.record is not None:
+        print(f"wrote {args.record}")
+
+
+def _replay(args) -> None:
+    from dataclasses import asdict
+
+    from etmpc.recording import format_replay, replay_summary
+
+    episodes = replay_summary(args.recording)
+    print(format_replay(episodes, args.per_episode))
+    if args.json is not None:
+        _write_json(args.json, {"recording": str(args.recording), "episodes": [asdict(e) for e in episodes]})
+        print(f"wrote {args.json}")
+
+
 def _bench(args) -> None:
     from etmpc.bench import format_bench, run_bench
 
@@ -156,7 +212,7 @@ def _bench(args) -> None:
 def main(argv: list[str] | None = None) -> int:
     try:
         args = build_parser().parse_args(argv)
-        {"evaluate": _evaluate, "train": _train, "bench": _bench}[args.command](args)
+        {"evaluate": _evaluate, "train": _train, "render": _render, "replay": _replay, "bench": _bench}[args.command](args)
     except EtmpcError as exc:
         print(f"etmpc: error: {exc}", file=sys.stderr)
         return 2

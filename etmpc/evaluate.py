@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass
+from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
@@ -17,6 +18,7 @@ from tqdm import tqdm
 from etmpc import testset as ts_mod
 from etmpc.loop import run_episode
 from etmpc.policies import parse_policy
+from etmpc.recording import EpisodeRecord, Recorder
 from etmpc.systems import make_system
 from etmpc.workers import context, default_workers, make_backend, policy_rng
 
@@ -59,12 +61,18 @@ def scores(system, traj) -> tuple[float, float]:
     return (ret, rewards) if system.objective_sense == "max" else (-ret, -rewards)
 
 
-def _run(job: tuple) -> RunResult:
-    domain, testset_path, sha256, spec, policy, repeat, episode, seed = job
+def _run(job: tuple) -> tuple[RunResult, EpisodeRecord | None]:
+    """One test-set episode; with ``record``, also what a recording keeps of it (else nothing extra
+    is built or sent back)."""
+    domain, testset_path, sha256, spec, policy, repeat, episode, seed, record = job
     system, env, testset = context(domain, testset_path, sha256)
-    traj = run_episode(system, env, policy, policy_rng(seed, repeat, episode),
-                       system.episode_from_arrays(testset.episode_arrays(episode)))
+    stored = system.episode_from_arrays(testset.episode_arrays(episode))
+    traj = run_episode(system, env, policy, policy_rng(seed, repeat, episode), stored)
     objective, control_objective = scores(system, traj)
+    kept = None
+    if record:
+        identity = {"policy": spec, "episode": episode, "repeat": repeat, "seed": seed, "test_set_sha256": sha256}
+        kept = EpisodeRecord.from_trajectory(system, traj, identity, stored)
     return RunResult(
         policy=spec,
         repeat=repeat,
@@ -75,11 +83,11 @@ def _run(job: tuple) -> RunResult:
         solver_failures=traj.solver_failures,
         steps=traj.steps,
         finite=not traj.nonfinite,
-    )
+    ), kept
 
 
 # -- driver side ---------------------------------------------------------------------------------
-def run_jobs(jobs: list, workers: int, progress: bool, backend: str = "local", address: str | None = None) -> list[RunResult]:
+def run_jobs(jobs: list, workers: int, progress: bool, backend: str = "local", address: str | None = None) -> list[tuple]:
     chunk = max(1, min(8, len(jobs) // (4 * workers)))
     with tqdm(total=len(jobs), desc="episodes", unit="ep", disable=None if progress else True, leave=False) as bar, \
             make_backend(backend, workers, address) as backend:
@@ -143,9 +151,11 @@ def evaluate(
     progress: bool = True,
     backend: str = "local",
     address: str | None = None,
+    record: str | Path | None = None,
 ) -> Evaluation:
     """Run every policy on the first ``episodes`` test-set episodes, ``repeats`` times each, on
-    ``workers`` processes of ``backend`` (see ``etmpc.workers.make_backend``)."""
+    ``workers`` processes of ``backend`` (see ``etmpc.workers.make_backend``). With ``record``, also
+    write every episode into that Rerun recording (``.rrd``)."""
     system = make_system(domain)
     # Parsed once here (a bad spec fails before any work starts), then sent with each job.
     parsed = {spec: parse_policy(spec, system.error_weights, system.domain) for spec in policies}
@@ -159,9 +169,21 @@ def evaluate(
     workers = default_workers() if workers is None else workers
     # Workers find the stored test set themselves (a cluster node's install may live elsewhere) and
     # check that its digest is the one verified here.
-    jobs = [(domain, testset_path, testset.sha256, spec, parsed[spec], r, e, seed)
+    recorder = Recorder(record) if record is not None else None  # a bad path fails before any work
+    jobs = [(domain, testset_path, testset.sha256, spec, parsed[spec], r, e, seed, recorder is not None)
             for spec in policies for r in range(repeats) for e in range(episodes)]
-    runs = run_jobs(jobs, workers, progress, backend, address)
+    try:
+        outcomes = run_jobs(jobs, workers, progress, backend, address)
+        if recorder is not None:
+            for _, kept in outcomes:
+                recorder.log_episode(kept)
+    except BaseException:
+        if recorder is not None:
+            recorder.close(keep=False)
+        raise
+    if recorder is not None:
+        recorder.close()
+    runs = [result for result, _ in outcomes]
     summaries = [
         summarise(spec, [r for r in runs if r.policy == spec], system.objective_sense, episodes, repeats) for spec in policies
     ]

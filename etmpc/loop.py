@@ -34,6 +34,9 @@ class System(Protocol):
     objective_sense: str  # "min": the objective is a cost; "max": a profit
     recompute_price: float  # charged per computation in the policy's objective
     episode_steps: int
+    control_interval_s: float
+    state_names: tuple[str, ...]
+    input_names: tuple[str, ...]
     u_min: np.ndarray
     u_max: np.ndarray
     error_weights: np.ndarray  # diagonal of W for the threshold policy
@@ -45,8 +48,9 @@ class System(Protocol):
     def plan(self, x: np.ndarray, u_prev: np.ndarray, warm: Plan | None, age: int, timestep: dm_env.TimeStep) -> Plan: ...
     def action(self, u: np.ndarray, recompute: bool) -> np.ndarray: ...
 
-    # Not used by the loop: test sets (etmpc.testset) and `etmpc bench`.
+    # Not used by the loop: test sets (etmpc.testset), `etmpc bench` and recordings.
     def draw_episode(self, rng: np.random.Generator) -> Any: ...
+    def signals(self, episode: Any) -> dict[str, np.ndarray]: ...  # exogenous inputs per step (recordings)
     def episode_parameters(self) -> dict: ...
     def plan_cost(self, x: np.ndarray, u_prev: np.ndarray, timestep: dm_env.TimeStep, inputs: np.ndarray) -> float: ...
     def reference_solvers(self) -> list: ...  # objects with .name and .solve(x, u_prev, timestep, continuing)

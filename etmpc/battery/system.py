@@ -34,6 +34,8 @@ class BatterySystem:
     domain = "battery"
     task = "trading"
     objective_sense = "max"  # the objective is the profit, EUR
+    state_names = ("state_of_charge",)
+    input_names = ("trade_kw",)
 
     def __init__(self, config: Config = Config()):
         if config.lqr_state_weight < 0 or config.lqr_input_weight <= 0:
@@ -43,6 +45,7 @@ class BatterySystem:
         self.config = config
         battery = config.battery
         self.episode_steps = battery.episode_steps
+        self.control_interval_s = battery.interval_s
         self.recompute_price = config.recompute_price
         self.terminal_price = config.market.price.mean
         self.u_min = np.array([-battery.trade_limit_kw])
@@ -69,6 +72,10 @@ class BatterySystem:
 
     def episode_from_arrays(self, arrays: dict[str, np.ndarray]) -> battery_env.Episode:
         return battery_env.Episode.from_arrays(arrays)
+
+    def signals(self, episode: battery_env.Episode) -> dict[str, np.ndarray]:
+        """The episode's true prices and net production, per step, for recordings."""
+        return {"price_eur_kwh": episode.price_eur_kwh, "net_production_kw": episode.production_kw}
 
     def state(self, timestep: dm_env.TimeStep) -> np.ndarray:
         return np.array([timestep.observation["state_of_charge"]])

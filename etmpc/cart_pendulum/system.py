@@ -38,6 +38,9 @@ class CartPendulumSystem:
     task = "balance"
     objective_sense = "min"  # the objective is sum(beta^2) + price * computations
     episode_steps = cp_env.EPISODE_STEPS
+    control_interval_s = cp_env.CONTROL_DT_S
+    state_names = STATE_NAMES
+    input_names = ("force_n",)
 
     def __init__(self, config: Config = Config()):
         self.config = config
@@ -82,6 +85,10 @@ class CartPendulumSystem:
 
     def episode_from_arrays(self, arrays: dict[str, np.ndarray]) -> cp_env.Episode:
         return cp_env.Episode.from_arrays(arrays)
+
+    def signals(self, episode: cp_env.Episode) -> dict[str, np.ndarray]:
+        """The episode's exogenous inputs, per step, for recordings."""
+        return {"disturbance_rad_s2": episode.disturbance}
 
     def state(self, timestep: dm_env.TimeStep) -> np.ndarray:
         obs = timestep.observation
