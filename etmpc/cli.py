@@ -68,6 +68,9 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--workers", type=_positive_int, default=None, help="worker processes (default: one per core)")
     _backend_arguments(tr)
     tr.add_argument("--resume", action="store_true", help="continue the run in DIR from its last checkpoint")
+    tr.add_argument("--record", type=int, default=0, metavar="N",
+                    help="record the first N test-set episodes of each seed at every evaluation, "
+                         "into DIR/recordings/eval_<episodes>.rrd (default 0: none)")
     tr.add_argument("--baseline", choices=BASELINES, default="none",
                     help="GPOMDP baseline: none (the paper, default), mean (per step index), state (linear value function)")
     tr.add_argument("--learning-rate", type=float, default=0.05, help="alpha (default 0.05)")
@@ -161,7 +164,8 @@ def _train(args) -> None:
     except ValueError as exc:
         raise EtmpcError(str(exc)) from None
     config = TrainConfig(args.task, parse_seeds(args.seeds), args.episodes, args.eval_every, args.eval_episodes, gpomdp=settings)
-    state = train(config, args.out, args.workers or default_workers(), args.resume, args.backend, args.address)
+    state = train(config, args.out, args.workers or default_workers(), args.resume, args.backend, args.address,
+                  record_episodes=args.record)
     print(format_summary(state))
     print(f"wrote {args.out}/curve.json, curve.png, checkpoint.json and seed*/best.json, last.json")
 

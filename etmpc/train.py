@@ -15,7 +15,9 @@ would, because every random draw is keyed by ``(seed, episode)`` and never by hi
   policy that recomputes with probability 1/2 (so plan ages vary), from ``NORMALISATION_ENTROPY``.
 
 Outputs in ``DIR``: ``checkpoint.json``, ``curve.json`` and ``curve.png`` (mean and standard
-deviation over seeds, the paper's Figure 2), ``seed<S>/last.json`` and ``seed<S>/best.json``.
+deviation over seeds, the paper's Figure 2), ``seed<S>/last.json`` and ``seed<S>/best.json``; with
+``--record N``, ``recordings/eval_<episodes>.rrd``: the first N test-set episodes of every seed's
+evaluation, as Rerun recordings (see ``etmpc.recording``).
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ from etmpc.evaluate import scores
 from etmpc.gpomdp import Learner, Settings
 from etmpc.learned import LogisticPolicy, Normalisation, PolicyFileError, raw_state, write_json_atomically
 from etmpc.loop import run_episode
+from etmpc.recording import EpisodeRecord, Recorder
 from etmpc.systems import make_system
 from etmpc.workers import context, make_backend, policy_rng
 
@@ -142,13 +145,20 @@ def play(system, env, acting: LogisticPolicy, rng: np.random.Generator, episode)
                   steps, traj.policy_rewards(system.recompute_price), traj.recomputes)
 
 
-def evaluate_theta(domain: str, sha256: str, policy_json: dict, repeat: int, episode: int) -> tuple[float, float, int]:
-    """(objective, control objective, recomputes) of one episode of the stored test set (whose digest
-    must be ``sha256``), sense-aware as in evaluate."""
+def evaluate_theta(domain: str, sha256: str, policy_json: dict, repeat: int, episode: int,
+                   identity: dict | None = None) -> tuple[float, float, int, EpisodeRecord | None]:
+    """(objective, control objective, recomputes, record) of one episode of the stored test set (whose
+    digest must be ``sha256``), sense-aware as in evaluate. With ``identity``, ``record`` is what a
+    recording keeps of the episode (else None)."""
     system, env, testset = context(domain, None, sha256)
     policy = LogisticPolicy.from_json(policy_json)
-    traj = run_episode(system, env, policy, policy_rng(0, repeat, episode), system.episode_from_arrays(testset.episode_arrays(episode)))
-    return (*scores(system, traj), traj.recomputes)
+    stored = system.episode_from_arrays(testset.episode_arrays(episode))
+    traj = run_episode(system, env, policy, policy_rng(0, repeat, episode), stored)
+    record = None
+    if identity is not None:
+        record = EpisodeRecord.from_trajectory(system, traj, dict(identity, episode=episode, repeat=repeat, seed=0,
+                                                                  test_set_sha256=sha256), stored)
+    return (*scores(system, traj), traj.recomputes, record)
 
 
 def _call(job):
@@ -214,12 +224,25 @@ def _policy_at(state: RunState, theta) -> dict:
     return dict(state.policy, theta=list(theta))
 
 
-def _evaluate_phase(state: RunState, backend, progress, testset: tuple[int, str]) -> None:
+def _evaluate_phase(state: RunState, backend, progress, testset: tuple[int, str], out: Path, record_episodes: int) -> None:
+    """Evaluate every seed's policy; with ``record_episodes``, also write the first that many test-set
+    episodes of each seed into ``out/recordings/eval_<episodes>.rrd``."""
     config, done = state.config, state.done
     testset_n, sha256 = testset
-    jobs = [("evaluate", (config.domain, sha256, _policy_at(state, state.learners[str(s)]["theta"]), r, e))
+
+    def identity(seed: int, e: int) -> dict | None:
+        if e >= record_episodes:
+            return None
+        return {"policy": f"seed{seed}/episodes{done:05d}", "training_seed": seed, "training_episodes": done}
+
+    jobs = [("evaluate", (config.domain, sha256, _policy_at(state, state.learners[str(s)]["theta"]), r, e, identity(s, e)))
             for s in config.seeds for r in range(config.eval_repeats) for e in range(testset_n)]
     results = backend.map(_call, jobs, progress)
+    records = [c[3] for c in results if c[3] is not None]
+    if records:
+        with Recorder(out / "recordings" / f"eval_{done:05d}.rrd") as recorder:
+            for record in records:
+                recorder.log_episode(record)
     per_seed = config.eval_repeats * testset_n
     sense = state.objective_sense
     for i, seed in enumerate(config.seeds):
@@ -301,8 +324,13 @@ def write_curve_png(path: Path, summary: dict, seeds: int) -> None:
 
 
 def train(config: TrainConfig, out: Path, workers: int = 1, resume: bool = False, backend: str = "local",
-          address: str | None = None, progress: bool = True) -> RunState:
+          address: str | None = None, progress: bool = True, record_episodes: int = 0) -> RunState:
+    """Train ``config`` into ``out`` (see the module docstring). With ``record_episodes``, each
+    evaluation also writes that many test-set episodes per seed into a Rerun recording,
+    ``out/recordings/eval_<episodes>.rrd`` (not part of the config: it changes no result)."""
     out = Path(out)
+    if record_episodes < 0:
+        raise EtmpcError(f"record episodes must be >= 0, got {record_episodes}")
     checkpoint = out / "checkpoint.json"
     if checkpoint.exists():
         if not resume:
@@ -327,7 +355,7 @@ def train(config: TrainConfig, out: Path, workers: int = 1, resume: bool = False
             initial = LogisticPolicy.initial(normalisation, config.domain, hyper)
             learner = _learner_to_json(Learner.start(initial.theta, config.gpomdp, context(config.domain)[0].episode_steps))
             state = RunState(config, initial.to_json(), {str(s): dict(learner) for s in config.seeds})
-            _evaluate_phase(state, pool, tick, testset)
+            _evaluate_phase(state, pool, tick, testset, out, record_episodes)
             _save(out, state)
             resumed_from = 0
         else:
@@ -340,7 +368,7 @@ def train(config: TrainConfig, out: Path, workers: int = 1, resume: bool = False
             for seed, (learner, stats) in zip(config.seeds, pool.map(_call, jobs, tick)):
                 state.learners[str(seed)] = learner
                 state.training += [dict(s, seed=seed) for s in stats]
-            _evaluate_phase(state, pool, tick, testset)
+            _evaluate_phase(state, pool, tick, testset, out, record_episodes)
             summary = _save(out, state)
             _report(state, summary["points"][-1], started, bar, resumed_from)
     return state

@@ -165,3 +165,21 @@ def test_render_puts_the_video_frames_into_the_recording(tmp_path, capsys):
     live = evaluate("cart_pendulum", ["every:5"], episodes=4, workers=1, progress=False).runs[3]
     assert (replayed.episode, replayed.objective, replayed.recomputes) == (3, live.objective, live.recomputes)
     assert main(["render", "cart_pendulum", "--policy", "every:5", "--out", str(tmp_path / "v.avi")]) == 2
+
+
+def test_train_records_its_evaluations_without_changing_any_result(tmp_path):
+    from etmpc.train import TrainConfig, train
+
+    config = TrainConfig("battery", seeds=(0, 1), episodes=4, eval_every=2, eval_episodes=3, normalisation_episodes=2)
+    train(config, tmp_path / "plain", workers=1, progress=False)
+    train(config, tmp_path / "rec", workers=1, progress=False, record_episodes=2)
+    plain = {p.relative_to(tmp_path / "plain"): p.read_bytes() for p in (tmp_path / "plain").rglob("*") if p.is_file()}
+    recorded = {p.relative_to(tmp_path / "rec"): p.read_bytes() for p in (tmp_path / "rec").rglob("*") if p.is_file()}
+    assert {k: v for k, v in recorded.items() if k.parts[0] != "recordings"} == plain
+    assert sorted(p.name for p in (tmp_path / "rec" / "recordings").iterdir()) == ["eval_00000.rrd", "eval_00002.rrd", "eval_00004.rrd"]
+
+    replayed = replay_summary(tmp_path / "rec" / "recordings" / "eval_00004.rrd")
+    assert sorted((r.policy, r.episode) for r in replayed) == [(f"seed{s}/episodes00004", e) for s in (0, 1) for e in (0, 1)]
+    live = evaluate("battery", [f"rl:{tmp_path / 'rec' / 'seed1' / 'last.json'}"], episodes=2, workers=1, progress=False)
+    again = [r for r in replayed if r.policy == "seed1/episodes00004"]
+    assert [(r.objective, r.recomputes) for r in again] == [(r.objective, r.recomputes) for r in live.runs]
