@@ -1,4 +1,4 @@
-"""The ``etmpc`` command: ``evaluate``, ``train``, ``render``, ``replay`` and ``bench``.
+"""The ``etmpc`` command: ``reproduce``, ``evaluate``, ``train``, ``render``, ``replay`` and ``bench``.
 
 Bad input (unknown task or policy, bad numbers, missing or corrupt files) prints one line on
 stderr and exits with code 2, without a traceback.
@@ -75,6 +75,13 @@ def build_parser() -> argparse.ArgumentParser:
                     help="GPOMDP baseline: none (the paper, default), mean (per step index), state (linear value function)")
     tr.add_argument("--learning-rate", type=float, default=0.05, help="alpha (default 0.05)")
     tr.add_argument("--discount", type=float, default=0.975, help="gamma (default 0.975)")
+
+    re_ = sub.add_parser("reproduce", help="the paper's experiments on both systems, with REPORT.md and results.json")
+    re_.add_argument("--quick", action="store_true", help="the same steps at small sizes (a few minutes)")
+    re_.add_argument("--out", type=Path, default=None, metavar="DIR",
+                     help="run directory (default results/reproduce, or results/reproduce-quick with --quick)")
+    re_.add_argument("--workers", type=_positive_int, default=None, help="worker processes (default: one per core)")
+    _backend_arguments(re_)
 
     rn = sub.add_parser("render", help="render one test-set episode headless to an MP4 video (cart_pendulum)")
     rn.add_argument("task", help="system to render: cart_pendulum (the battery has no 3-D scene)")
@@ -170,6 +177,18 @@ def _train(args) -> None:
     print(f"wrote {args.out}/curve.json, curve.png, checkpoint.json and seed*/best.json, last.json")
 
 
+def _reproduce(args) -> None:
+    from etmpc.reproduce import FULL, QUICK, reproduce
+    from etmpc.workers import default_workers
+
+    _check_backend(args)
+    out = args.out or Path("results") / ("reproduce-quick" if args.quick else "reproduce")
+    if out.exists() and not out.is_dir():
+        raise EtmpcError(f"--out {out} exists and is not a directory")
+    reproduce(out, QUICK if args.quick else FULL, args.workers or default_workers(), args.backend, args.address)
+    print(f"wrote {out}/REPORT.md and {out}/results.json")
+
+
 def _render(args) -> None:
     from etmpc.render import render_rollout
 
@@ -216,7 +235,8 @@ def _bench(args) -> None:
 def main(argv: list[str] | None = None) -> int:
     try:
         args = build_parser().parse_args(argv)
-        {"evaluate": _evaluate, "train": _train, "render": _render, "replay": _replay, "bench": _bench}[args.command](args)
+        {"evaluate": _evaluate, "train": _train, "reproduce": _reproduce, "render": _render, "replay": _replay,
+         "bench": _bench}[args.command](args)
     except EtmpcError as exc:
         print(f"etmpc: error: {exc}", file=sys.stderr)
         return 2

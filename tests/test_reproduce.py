@@ -1,0 +1,78 @@
+"""`etmpc reproduce` end to end at a tiny size: the report's numbers are the JSON's, the JSON's are a
+direct evaluation's, and a second run continues rather than redoes."""
+
+import json
+
+import numpy as np
+import pytest
+
+from etmpc.errors import EtmpcError
+from etmpc.evaluate import evaluate
+from etmpc.recording import replay_summary
+from etmpc.reproduce import BASELINES, Settings, reproduce
+
+TINY = Settings(seeds=(0, 1), episodes=2, eval_every=1, eval_episodes=2, test_episodes=3, repeats=2, record_episodes=1,
+                video_size=(64, 48))
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("reproduce")
+    return out, reproduce(out, TINY, workers=1, progress=False)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("domain", ["cart_pendulum", "battery"])
+def test_json_equals_a_direct_evaluation(run, domain):
+    out, results = run
+    r = results["systems"][domain]
+    fixed = evaluate(domain, BASELINES[domain], episodes=3, workers=1, progress=False)
+    for s in fixed.summaries:
+        assert r["fixed"][s.policy]["objective_mean"] == s.objective_mean
+        assert r["fixed"][s.policy]["recomputes_mean"] == s.recomputes_mean
+    sign = 1 if r["objective_sense"] == "max" else -1
+    best = max(fixed.summaries, key=lambda s: sign * s.objective_mean)
+    assert r["best_fixed"]["policy"] == best.policy
+
+    specs = [f"rl:{out / domain / 'train' / f'seed{s}' / 'last.json'}" for s in TINY.seeds]
+    learned = evaluate(domain, specs, episodes=3, repeats=2, workers=1, progress=False)
+    assert r["learned"]["objective_mean"] == pytest.approx(np.mean([x.objective for x in learned.runs]), rel=1e-12)
+    assert r["learned"]["per_seed"] == [s.objective_mean for s in learned.summaries]
+    # The paired comparison, recomputed here from the two direct evaluations.
+    diff = [np.mean([x.objective for x in learned.runs if x.episode == e])
+            - next(x.objective for x in fixed.runs if x.policy == best.policy and x.episode == e) for e in range(3)]
+    assert r["paired"]["mean_difference"] == pytest.approx(np.mean(diff), rel=1e-12)
+    assert r["paired"]["ci95"] == pytest.approx(1.96 * np.std(diff, ddof=1) / np.sqrt(3), rel=1e-12)
+
+
+@pytest.mark.slow
+def test_report_states_the_json_numbers_and_the_files_exist(run):
+    out, results = run
+    report = (out / "REPORT.md").read_text()
+    assert json.loads((out / "results.json").read_text())["systems"] == results["systems"]
+    for domain, r in results["systems"].items():
+        best = r["best_fixed"]
+        assert f"| `{best['policy']}` **(best fixed)** | {best['objective_mean']:.5f} |" in report
+        assert f"{r['paired']['mean_difference']:+.5f} ± {r['paired']['ci95']:.5f}" in report
+        assert f"| learned (2 seeds x 2 passes) | {r['learned']['objective_mean']:.5f} |" in report
+        for name in r["files"].values():
+            assert (out / name).is_file() and (out / name).stat().st_size > 0, name
+        replayed = replay_summary(out / domain / "episodes.rrd")
+        assert {e.policy for e in replayed} == {best["policy"], f"rl:{out / domain / 'train' / 'seed0' / 'last.json'}"}
+    against = report.split("## Against the paper")[1]
+    for domain, r in results["systems"].items():
+        (claim,) = [line for line in against.splitlines() if f"best on {domain}," in line]
+        verdict = "Holds" if r["margin_percent"] > 0 and r["paired"]["ci95"] < abs(r["paired"]["mean_difference"]) else "Does not hold"
+        assert verdict in claim and f"{r['margin_percent']:+.2f} %" in claim
+    assert results["software"]["mujoco"] == "3.17.0" and results["machine"]["cores"] >= 1
+
+
+@pytest.mark.slow
+def test_a_second_run_continues_and_other_settings_are_refused(run):
+    out, results = run
+    mtimes = {p: p.stat().st_mtime_ns for p in out.rglob("*") if p.is_file() and p.name not in ("results.json", "REPORT.md")}
+    again = reproduce(out, TINY, workers=1, progress=False)
+    assert again["systems"] == results["systems"]
+    assert {p: p.stat().st_mtime_ns for p in mtimes} == mtimes  # nothing was redone
+    with pytest.raises(EtmpcError, match="other settings"):
+        reproduce(out, Settings(seeds=(0,), episodes=2, eval_every=1, test_episodes=3), workers=1, progress=False)
