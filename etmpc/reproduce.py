@@ -171,14 +171,15 @@ def summarise_system(system, baselines: dict, learned: dict, curve: dict) -> dic
         if best is None or better(s["objective_mean"], fixed[best]["objective_mean"]):
             best = spec
     per_seed = [s["objective_mean"] for s in learned["policies"].values()]
-    learned_runs = learned["runs"]
+    # As evaluate does: a run that ended on a non-finite state is counted, never averaged in.
+    learned_runs = [r for r in learned["runs"] if r["finite"]]
     # Paired over test-set episodes: the learned policy's mean over seeds and passes against the
     # best fixed policy on the same episode.
     by_episode: dict[int, list[float]] = {}
     for r in learned_runs:
         by_episode.setdefault(r["episode"], []).append(r["objective"])
-    fixed_by_episode = {r["episode"]: r["objective"] for r in baselines["runs"] if r["policy"] == best}
-    episodes = sorted(by_episode)
+    fixed_by_episode = {r["episode"]: r["objective"] for r in baselines["runs"] if r["policy"] == best and r["finite"]}
+    episodes = sorted(set(by_episode) & set(fixed_by_episode))
     diff = np.array([np.mean(by_episode[e]) - fixed_by_episode[e] for e in episodes])
     gain = diff if sense == "max" else -diff  # > 0: the learned policy is better
     learned_mean = float(np.mean([r["objective"] for r in learned_runs]))
@@ -198,7 +199,8 @@ def summarise_system(system, baselines: dict, learned: dict, curve: dict) -> dic
             "objective_std_seeds": float(np.std(per_seed, ddof=1)) if len(per_seed) > 1 else 0.0,
             "control_objective_mean": float(np.mean([r["control_objective"] for r in learned_runs])),
             "recomputes_mean": float(np.mean([r["recomputes"] for r in learned_runs])),
-            "solver_failures": int(sum(r["solver_failures"] for r in learned_runs)),
+            "solver_failures": int(sum(r["solver_failures"] for r in learned["runs"])),
+            "nonfinite_episodes": len(learned["runs"]) - len(learned_runs),
             "per_seed": per_seed,
             "repeats": next(iter(learned["policies"].values()))["repeats"],
         },
