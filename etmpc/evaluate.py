@@ -16,11 +16,10 @@ import numpy as np
 from tqdm import tqdm
 
 from etmpc import testset as ts_mod
-from etmpc.loop import run_episode
 from etmpc.policies import parse_policy
 from etmpc.recording import EpisodeRecord, Recorder
 from etmpc.systems import make_system
-from etmpc.workers import context, default_workers, make_backend, policy_rng
+from etmpc.workers import default_workers, make_backend, play_test_episode
 
 
 @dataclass(frozen=True)
@@ -65,14 +64,9 @@ def _run(job: tuple) -> tuple[RunResult, EpisodeRecord | None]:
     """One test-set episode; with ``record``, also what a recording keeps of it (else nothing extra
     is built or sent back)."""
     domain, testset_path, sha256, spec, policy, repeat, episode, seed, record = job
-    system, env, testset = context(domain, testset_path, sha256)
-    stored = system.episode_from_arrays(testset.episode_arrays(episode))
-    traj = run_episode(system, env, policy, policy_rng(seed, repeat, episode), stored)
-    objective, control_objective = scores(system, traj)
-    kept = None
-    if record:
-        identity = {"policy": spec, "episode": episode, "repeat": repeat, "seed": seed, "test_set_sha256": sha256}
-        kept = EpisodeRecord.from_trajectory(system, traj, identity, stored)
+    played = play_test_episode(domain, policy, seed, repeat, episode, testset_path, sha256)
+    traj = played.trajectory
+    objective, control_objective = scores(played.system, traj)
     return RunResult(
         policy=spec,
         repeat=repeat,
@@ -83,7 +77,7 @@ def _run(job: tuple) -> tuple[RunResult, EpisodeRecord | None]:
         solver_failures=traj.solver_failures,
         steps=traj.steps,
         finite=not traj.nonfinite,
-    ), kept
+    ), played.record(spec) if record else None
 
 
 # -- driver side ---------------------------------------------------------------------------------

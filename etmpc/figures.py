@@ -172,7 +172,7 @@ def draw_trajectory(system, traj: Trajectory, title: str | None = None, signals:
 def write_trajectory_png(path, system, traj: Trajectory, title: str | None = None,
                          signals: Mapping[str, np.ndarray] | None = None) -> Path:
     """:func:`draw_trajectory` written atomically to ``path`` (PNG)."""
-    return _save_atomically(draw_trajectory(system, traj, title, signals), path)
+    return save_png_atomically(draw_trajectory(system, traj, title, signals), path)
 
 
 # -- the paper's Figure 3: the objective per policy ----------------------------------------------
@@ -340,10 +340,10 @@ def draw_policy_bars(evaluations: Sequence[dict], group_learned: bool = True, so
 def write_policy_bars_png(path, evaluations: Sequence[dict], group_learned: bool = True,
                           sources: Sequence[str] | None = None) -> Path:
     """:func:`draw_policy_bars` written atomically to ``path`` (PNG)."""
-    return _save_atomically(draw_policy_bars(evaluations, group_learned, sources), path)
+    return save_png_atomically(draw_policy_bars(evaluations, group_learned, sources), path)
 
 
-def _save_atomically(fig, path, dpi: int = 120) -> Path:
+def save_png_atomically(fig, path, dpi: int = 120) -> Path:
     """Write ``fig`` as a PNG next to ``path`` and rename it into place: a reader sees the old file
     or the whole new one. The figure is closed either way."""
     path = Path(path)

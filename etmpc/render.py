@@ -22,13 +22,12 @@ from pathlib import Path
 import av
 import numpy as np
 
-from etmpc import testset as ts_mod
 from etmpc.errors import EtmpcError
-from etmpc.loop import Trajectory, run_episode
+from etmpc.loop import Trajectory
 from etmpc.policies import parse_policy
-from etmpc.recording import EpisodeRecord, Recorder
-from etmpc.systems import make_system
-from etmpc.workers import policy_rng
+from etmpc.recording import Recorder
+from etmpc.systems import check_name
+from etmpc.workers import context, play_test_episode
 
 SCENES = ("cart_pendulum",)  # domains with a MuJoCo scene
 CAMERA = "track"  # models/cart_pendulum.xml: rides with the cart (the "fixed" camera only turns towards it)
@@ -117,15 +116,14 @@ def render_rollout(domain: str, policy_spec: str, episode: int, out: str | Path,
     """Play test-set ``episode`` under ``policy_spec`` exactly as ``etmpc evaluate`` does (repeat 0
     of ``seed``) and write its video to ``out``, at one frame per control interval by default.
     With ``record``, also write the episode, its frames included, into that Rerun recording."""
-    system = make_system(domain)
-    check_scene(system.domain)
+    check_name(domain)
+    check_scene(domain)
     check_size(width, height)
-    policy = parse_policy(policy_spec, system.error_weights, system.domain)
-    testset = ts_mod.load(testset_path or ts_mod.default_path(system.domain, system.task), system.domain, system.task)
-    arrays = testset.episode_arrays(episode)  # an out-of-range index raises TestSetError (an EtmpcError)
-    env = system.make_env()
+    policy = parse_policy(policy_spec, context(domain, testset_path)[0].error_weights, domain)
+    # An out-of-range index raises TestSetError (an EtmpcError) before anything is drawn.
+    played = play_test_episode(domain, policy, seed, 0, episode, testset_path)
+    system, env, traj = played.system, played.env, played.trajectory
     fps = 1.0 / env.control_timestep() if fps is None else fps
-    traj = run_episode(system, env, policy, policy_rng(seed, 0, episode), system.episode_from_arrays(arrays))
     states = traj.states[: traj.steps + 1]
     states = states[np.all(np.isfinite(states), axis=1)]  # an episode that diverged ends on a NaN row
     if record is None:  # frames go straight into the encoder
@@ -133,7 +131,6 @@ def render_rollout(domain: str, policy_spec: str, episode: int, out: str | Path,
     else:
         frames = render_frames(system, env, states, width, height, CAMERA)
         count = write_video(frames, out, fps)
-        identity = {"policy": policy_spec, "episode": episode, "repeat": 0, "seed": seed, "test_set_sha256": testset.sha256}
         with Recorder(record) as recorder:
-            recorder.log_episode(EpisodeRecord.from_trajectory(system, traj, identity, system.episode_from_arrays(arrays)), frames)
+            recorder.log_episode(played.record(policy_spec), frames)
     return RenderResult(path=Path(out), frames=count, fps=fps, trajectory=traj)

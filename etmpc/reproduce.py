@@ -224,33 +224,25 @@ def _trajectory_png(path: Path, system, spec: str) -> None:
     if path.exists():
         return
     from etmpc import figures
-    from etmpc.loop import run_episode
     from etmpc.policies import parse_policy
-    from etmpc.workers import context, policy_rng
+    from etmpc.workers import play_test_episode
 
-    _, env, testset = context(system.domain)
-    episode = system.episode_from_arrays(testset.episode_arrays(0))
-    traj = run_episode(system, env, parse_policy(spec, system.error_weights, system.domain), policy_rng(0, 0, 0), episode)
-    figures.write_trajectory_png(path, system, traj, title=f"{system.domain}: test-set episode 0 under {spec}",
-                                 signals=system.signals(episode))
+    played = play_test_episode(system.domain, parse_policy(spec, system.error_weights, system.domain), 0, 0, 0)
+    figures.write_trajectory_png(path, system, played.trajectory, title=f"{system.domain}: test-set episode 0 under {spec}",
+                                 signals=system.signals(played.episode))
 
 
 def _forecasts_png(path: Path, system) -> None:
     if path.exists():
         return
     from etmpc import figures
-    from etmpc.loop import run_episode
     from etmpc.policies import parse_policy
-    from etmpc.workers import context, policy_rng
+    from etmpc.workers import play_test_episode
 
-    _, env, testset = context(system.domain)
-    episode = system.episode_from_arrays(testset.episode_arrays(0))
-    runs = [(spec, run_episode(system, env, parse_policy(spec, system.error_weights), policy_rng(0, 0, 0), episode))
-            for spec in ("every:20", "every:5")]
-    fig = figures.forecast_figure(episode, runs, system.control_interval_s, system.terminal_price)
-    tmp = path.with_name(f".{path.name}.tmp")
-    fig.savefig(tmp, dpi=110, format="png")
-    tmp.replace(path)
+    runs = [(spec, play_test_episode(system.domain, parse_policy(spec, system.error_weights), 0, 0, 0)) for spec in ("every:20", "every:5")]
+    fig = figures.forecast_figure(runs[0][1].episode, [(spec, played.trajectory) for spec, played in runs],
+                                  system.control_interval_s, system.terminal_price)
+    figures.save_png_atomically(fig, path, dpi=110)
 
 
 def software_versions() -> dict:

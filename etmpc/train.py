@@ -38,7 +38,7 @@ from etmpc.learned import LogisticPolicy, Normalisation, PolicyFileError, raw_st
 from etmpc.loop import run_episode
 from etmpc.recording import EpisodeRecord, Recorder
 from etmpc.systems import make_system
-from etmpc.workers import context, make_backend, policy_rng
+from etmpc.workers import context, make_backend, play_test_episode
 
 TRAIN_ENTROPY = 0x6574_6D70_6321  # "etmpc!"
 NORMALISATION_ENTROPY = 0x6E6F_726D  # "norm"
@@ -150,15 +150,10 @@ def evaluate_theta(domain: str, sha256: str, policy_json: dict, repeat: int, epi
     """(objective, control objective, recomputes, record) of one episode of the stored test set (whose
     digest must be ``sha256``), sense-aware as in evaluate. With ``identity``, ``record`` is what a
     recording keeps of the episode (else None)."""
-    system, env, testset = context(domain, None, sha256)
-    policy = LogisticPolicy.from_json(policy_json)
-    stored = system.episode_from_arrays(testset.episode_arrays(episode))
-    traj = run_episode(system, env, policy, policy_rng(0, repeat, episode), stored)
-    record = None
-    if identity is not None:
-        record = EpisodeRecord.from_trajectory(system, traj, dict(identity, episode=episode, repeat=repeat, seed=0,
-                                                                  test_set_sha256=sha256), stored)
-    return (*scores(system, traj), traj.recomputes, record)
+    context(domain, None, sha256)  # the worker's test set is checked before the policy is read
+    played = play_test_episode(domain, LogisticPolicy.from_json(policy_json), 0, repeat, episode, None, sha256)
+    record = played.record(**identity) if identity is not None else None
+    return (*scores(played.system, played.trajectory), played.trajectory.recomputes, record)
 
 
 def _call(job):
@@ -299,9 +294,8 @@ def curve_summary(state: RunState) -> dict:
 
 
 def write_curve_png(path: Path, summary: dict, seeds: int) -> None:
-    import matplotlib
+    from etmpc.figures import save_png_atomically  # first: it selects the Agg backend
 
-    matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     x = np.array([p["episodes"] for p in summary["points"]])
@@ -316,11 +310,7 @@ def write_curve_png(path: Path, summary: dict, seeds: int) -> None:
     ax.grid(alpha=0.3)
     ax.legend()
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
-    fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
-    tmp.replace(path)
+    save_png_atomically(fig, path, dpi=110)
 
 
 def train(config: TrainConfig, out: Path, workers: int = 1, resume: bool = False, backend: str = "local",

@@ -17,12 +17,16 @@ import logging
 import os
 import socket
 from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
 from multiprocessing import get_context
+from typing import Any
 
 import numpy as np
 
 from etmpc import testset as ts_mod
 from etmpc.errors import EtmpcError
+from etmpc.loop import Trajectory, run_episode
+from etmpc.recording import EpisodeRecord
 from etmpc.systems import make_system
 
 _CONTEXTS: dict = {}
@@ -42,6 +46,36 @@ def context(domain: str, testset_path: str | None = None, sha256: str | None = N
                              f"{sha256[:12]}…: install the same etmpc on every worker")
         _CONTEXTS[key] = (system, system.make_env(), testset)
     return _CONTEXTS[key]
+
+
+@dataclass(frozen=True, eq=False)
+class Played:
+    """One test-set episode played (see :func:`play_test_episode`)."""
+
+    system: Any
+    env: Any
+    trajectory: Trajectory
+    episode: Any  # the stored episode, as the system's task replays it
+    index: int
+    repeat: int
+    seed: int
+    test_set_sha256: str
+
+    def record(self, policy: str, **extra) -> EpisodeRecord:
+        """What a recording keeps of this episode, under the policy's name (``extra``: more identity)."""
+        identity = {"policy": policy, "episode": self.index, "repeat": self.repeat, "seed": self.seed,
+                    "test_set_sha256": self.test_set_sha256, **extra}
+        return EpisodeRecord.from_trajectory(self.system, self.trajectory, identity, self.episode)
+
+
+def play_test_episode(domain: str, policy, seed: int, repeat: int, episode: int, testset_path: str | None = None,
+                      sha256: str | None = None) -> Played:
+    """Test-set ``episode`` under ``policy`` with the policy's draws of pass ``repeat`` of ``seed``: how
+    ``evaluate``, the evaluations during ``train``, ``render`` and the figures all play an episode."""
+    system, env, testset = context(domain, testset_path, sha256)
+    stored = system.episode_from_arrays(testset.episode_arrays(episode))  # a bad index raises TestSetError
+    traj = run_episode(system, env, policy, policy_rng(seed, repeat, episode), stored)
+    return Played(system, env, traj, stored, episode, repeat, seed, testset.sha256)
 
 
 def policy_rng(seed: int, repeat: int, episode: int) -> np.random.Generator:

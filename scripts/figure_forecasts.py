@@ -15,7 +15,7 @@ import numpy as np
 
 from etmpc import testset
 from etmpc.errors import EtmpcError
-from etmpc.figures import forecast_figure
+from etmpc.figures import forecast_figure, save_png_atomically
 from etmpc.loop import run_episode
 from etmpc.policies import parse_policy
 from etmpc.systems import make_system
@@ -39,8 +39,7 @@ def main(argv: list[str] | None = None) -> int:
     env = system.make_env()
     runs = [(spec, run_episode(system, env, policy, np.random.default_rng(args.seed), episode)) for spec, policy in policies]
     fig = forecast_figure(episode, runs, system.config.battery.interval_s, system.terminal_price)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(args.out, dpi=120)
+    save_png_atomically(fig, args.out, dpi=120)
     print(f"wrote {args.out}")
     return 0
 

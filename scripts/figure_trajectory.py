@@ -16,10 +16,9 @@ from pathlib import Path
 from etmpc.errors import EtmpcError
 from etmpc.evaluate import scores
 from etmpc.figures import write_trajectory_png
-from etmpc.loop import run_episode
 from etmpc.policies import parse_policy
 from etmpc.systems import check_name, names
-from etmpc.workers import context, policy_rng
+from etmpc.workers import context, play_test_episode
 
 
 class _Parser(argparse.ArgumentParser):
@@ -44,16 +43,16 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         check_name(args.task)
-        system, env, testset = context(args.task)  # what evaluate's workers use
+        system = context(args.task)[0]
         policy = parse_policy(args.policy, system.error_weights, system.domain)
-        episode = system.episode_from_arrays(testset.episode_arrays(args.episode))
+        played = play_test_episode(args.task, policy, args.seed, 0, args.episode)  # as evaluate plays it
     except EtmpcError as exc:
         parser.error(str(exc))
     out = args.out or Path("results") / f"trajectory_{args.task}_{slug(args.policy)}_ep{args.episode}.png"
     if out.exists() and out.is_dir():
         parser.error(f"--out {out} is a directory")
 
-    traj = run_episode(system, env, policy, policy_rng(args.seed, 0, args.episode), episode)
+    traj, episode = played.trajectory, played.episode
     objective, control = scores(system, traj)
     what = "cost" if system.objective_sense == "min" else "profit"
     title = (f"{system.domain} test-set episode {args.episode}, policy {args.policy}: {what} {objective:.5g} "
