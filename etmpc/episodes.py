@@ -42,6 +42,12 @@ class EpisodeTask(control.Task):
         self._episode = episode if episode is not None else self.draw_episode(self._random)
         return self._episode
 
+    def resume(self, episode: Any, step: int) -> None:
+        """Continue ``episode`` from ``step`` (the next ``before_step`` applies step ``step``'s
+        exogenous values): how a rollout puts the task back where a snapshot was taken, possibly
+        with another future. The episode is not checked: it comes from this task or its sampler."""
+        self._episode, self._step = episode, step
+
     def check_episode(self, episode: Any) -> None:
         """Raise ``ValueError`` if ``episode`` cannot be played by this task."""
 

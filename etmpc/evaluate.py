@@ -152,7 +152,7 @@ def evaluate(
     write every episode into that Rerun recording (``.rrd``)."""
     system = make_system(domain)
     # Parsed once here (a bad spec fails before any work starts), then sent with each job.
-    parsed = {spec: parse_policy(spec, system.error_weights, system.domain) for spec in policies}
+    parsed = {spec: parse_policy(spec, system.error_weights, system.domain, system.episode_steps) for spec in policies}
     path = testset_path or str(ts_mod.default_path(system.domain, system.task))
     testset = ts_mod.load(path, system.domain, system.task)
     episodes = testset.episodes if episodes is None else episodes

@@ -8,11 +8,20 @@ solve's last iterate is used. Every recompute attempt counts as a computation (`
 
 A system plugs in by providing what :class:`System` lists; nothing here knows about MuJoCo or
 batteries.
+
+Two ways to play the same loop, bit for bit the same numbers:
+
+* :func:`run_episode` steps the ``dm_env`` interface and keeps everything (a :class:`Trajectory`);
+* :func:`play_on` continues from a :class:`Snapshot` of a running episode, stepping the task and
+  the physics directly (no ``TimeStep`` per step) and keeping only the return: the fast path the
+  rollout policies simulate their futures with.
 """
 
 from __future__ import annotations
 
+import math
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
@@ -55,6 +64,10 @@ class System(Protocol):
     def plan_cost(self, x: np.ndarray, u_prev: np.ndarray, timestep: dm_env.TimeStep, inputs: np.ndarray) -> float: ...
     def reference_solvers(self) -> list: ...  # objects with .name and .solve(x, u_prev, timestep, continuing)
     def compiled(self) -> System | None: ...  # the same system with compiled MPC code, if that exists
+
+    # Used by the rollout policies (etmpc.rollout).
+    def sample_future(self, episode: Any, step: int, rng: np.random.Generator) -> Any: ...  # see its docstrings
+    def truncation_value(self, x: np.ndarray) -> float: ...  # reward for the state a truncated rollout ends in
 
 
 @dataclass
@@ -99,6 +112,57 @@ class Trajectory:
         return float(self.rewards[: self.steps].sum() - recompute_price * self.recomputes)
 
 
+@dataclass(frozen=True, eq=False)
+class DecisionContext:
+    """The loop's whole state at a decision, for policies that simulate futures (``rollout:``)."""
+
+    system: Any
+    env: dm_env.Environment
+    step: int  # i: the decision is about the input of interval i
+    plan: Plan
+    age: int
+    u_prev: np.ndarray
+    timestep: dm_env.TimeStep
+
+
+@dataclass(frozen=True, eq=False)
+class Snapshot:
+    """A running episode, frozen at a decision: the plant, the task's position in its episode and the
+    controller's memory. :func:`play_on` continues from it exactly."""
+
+    physics: Any  # the physics' own snapshot (see each Physics.snapshot)
+    step: int
+    episode: Any  # the episode the task was playing
+    plan: Plan
+    age: int
+    u_prev: np.ndarray
+    x: np.ndarray
+    observation: Mapping
+
+    @classmethod
+    def take(cls, context: DecisionContext) -> Snapshot:
+        env = context.env
+        x = context.system.state(context.timestep)
+        return cls(env.physics.snapshot(), context.step, env.task.episode, context.plan, context.age,
+                   np.array(context.u_prev), x, context.timestep.observation)
+
+
+def _decide(policy: Policy, rng, x, plan: Plan | None, age: int, observation, context=None) -> tuple[bool, bool]:
+    """``(recompute, forced)`` for the step: forced when there is no plan or it has run out."""
+    forced = plan is None or age >= plan.horizon
+    if forced:
+        return True, True
+    return bool(policy.decide(AugmentedState(x, plan.states[0], age, plan.state_at(age), plan, observation, context), rng)), False
+
+
+def _input(system: System, plan: Plan, age: int, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``(u, u_planned, correction, x_predicted)``: the plan's input plus the LQR correction, clipped."""
+    u_planned = plan.input_at(age)
+    x_predicted = plan.state_at(age)
+    correction = np.zeros(u_planned.shape) if age == 0 else system.feedback.correction(x, x_predicted)
+    return np.clip(u_planned + correction, system.u_min, system.u_max), u_planned, correction, x_predicted
+
+
 def run_episode(
     system: System,
     env: dm_env.Environment,
@@ -112,9 +176,9 @@ def run_episode(
     x = system.state(timestep)
     nx, nu, n = x.shape[0], system.u_min.shape[0], system.episode_steps
     traj = Trajectory.empty(n, nx, nu)
-    feedback, u_min, u_max = system.feedback, system.u_min, system.u_max
     plan: Plan | None = None
     age, u_prev = 0, np.zeros(nu)
+    simulates = getattr(policy, "simulates", False)
 
     for i in range(n):
         start = time.perf_counter()
@@ -122,8 +186,8 @@ def run_episode(
         if not np.all(np.isfinite(x)):
             traj.nonfinite = True
             break
-        forced = plan is None or age >= plan.horizon
-        recompute = forced or policy.decide(AugmentedState(x, plan.states[0], age, plan.state_at(age)), rng)
+        context = DecisionContext(system, env, i, plan, age, u_prev, timestep) if simulates and plan is not None else None
+        recompute, forced = _decide(policy, rng, x, plan, age, timestep.observation, context)
         if recompute:
             solve_start = time.perf_counter()
             new = system.plan(x, u_prev, plan, age, timestep)
@@ -133,10 +197,7 @@ def run_episode(
             if new.success or plan is None:
                 plan, age = new, 0
                 traj.plans.append((i, plan))
-        u_planned = plan.input_at(age)
-        x_predicted = plan.state_at(age)
-        correction = np.zeros(nu) if age == 0 else feedback.correction(x, x_predicted)
-        u = np.clip(u_planned + correction, u_min, u_max)
+        u, u_planned, correction, x_predicted = _input(system, plan, age, x)
 
         try:
             timestep = env.step(system.action(u, recompute))
@@ -158,3 +219,62 @@ def run_episode(
         traj.states[traj.steps] = x
         traj.nonfinite = not bool(np.all(np.isfinite(x)))
     return traj
+
+
+def play_on(
+    system: System,
+    env: dm_env.Environment,
+    snapshot: Snapshot,
+    policy: Policy,
+    rng: np.random.Generator | None,
+    first: bool,
+    episode: Any = None,
+    first_plan: Plan | None = None,
+    stop: int | None = None,
+) -> float:
+    """Continue ``snapshot`` in ``env`` (a twin of the one it was taken in) and return the policy's
+    return from the snapshot's step on: rewards minus the price of each computation, plus
+    ``system.truncation_value`` of the last state when the play stops before the episode's end.
+
+    The first decision is ``first`` (recompute or keep), the later ones ``policy``'s. ``episode``
+    replaces the episode being played from the snapshot's step on (a sampled future); ``first_plan``
+    is the plan a recompute at the first step gives, when the caller has solved it already (it is
+    the same for every future). ``stop`` is the step to stop before (default: the episode's end). A
+    plant that fails (non-finite state) returns ``-inf``.
+
+    Steps the task and the physics directly, as ``control.Environment.step`` does, without making
+    a ``TimeStep``: the same numbers as :func:`run_episode`, bit for bit (tests/test_rollout.py).
+    """
+    task, physics = env.task, env.physics
+    physics.restore(snapshot.physics)
+    task.resume(snapshot.episode if episode is None else episode, snapshot.step)
+    n_sub_steps, price = env._n_sub_steps, system.recompute_price
+    end = system.episode_steps if stop is None else min(stop, system.episode_steps)
+    plan, age, u_prev, x, observation = snapshot.plan, snapshot.age, snapshot.u_prev, snapshot.x, snapshot.observation
+    total = 0.0
+    for i in range(snapshot.step, end):
+        if i == snapshot.step:
+            recompute, forced = (True, True) if plan is None or age >= plan.horizon else (first, False)
+        else:
+            recompute, forced = _decide(policy, rng, x, plan, age, observation)
+        if recompute:
+            new = first_plan if (i == snapshot.step and first_plan is not None) else \
+                system.plan(x, u_prev, plan, age, dm_env.TimeStep(dm_env.StepType.MID, None, None, observation))
+            if new.success or plan is None:
+                plan, age = new, 0
+        u = _input(system, plan, age, x)[0]
+        try:
+            task.before_step(system.action(u, recompute), physics)
+            physics.step(n_sub_steps)
+        except PhysicsError:
+            return -math.inf
+        task.after_step(physics)
+        total += task.get_reward(physics) - price * recompute
+        observation = task.get_observation(physics)
+        x = system.state(dm_env.TimeStep(dm_env.StepType.MID, None, None, observation))
+        if not np.all(np.isfinite(x)):
+            return -math.inf
+        age, u_prev = age + 1, u
+    if end < system.episode_steps:
+        total += system.truncation_value(x)
+    return total

@@ -6,14 +6,17 @@ the plan was made from, and the plan's age. The plan's prediction ``x_hat_i`` is
 forces a recompute whatever the policy says.
 
 Specs (``parse_policy``): ``always``, ``never``, ``every:T`` (T >= 1), ``threshold:X`` (X >= 0),
-``rl:PATH`` (a learned policy saved by ``etmpc train``, see :mod:`etmpc.learned`).
+``rl:PATH`` (a learned policy saved by ``etmpc train``, see :mod:`etmpc.learned`), and the policies
+that simulate futures (see :mod:`etmpc.rollout`): ``rollout:BASE[:K[:H]]`` and the upper bound
+``oracle:BASE``.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Protocol
+from collections.abc import Mapping
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -26,6 +29,9 @@ class AugmentedState:
     x_plan: np.ndarray  # x_k, measured when the plan was made
     age: int  # i - k
     x_predicted: np.ndarray  # x_hat_i, the plan's prediction for now
+    plan: Any = None  # the kept Plan (its inputs and the forecasts it was made with)
+    observation: Mapping | None = None  # what the task shows now (for the exogenous features)
+    context: Any = None  # etmpc.loop.DecisionContext: the loop's whole state, for policies that simulate
 
 
 class Policy(Protocol):
@@ -101,12 +107,17 @@ def _number(text: str, kind: type, spec: str):
     return value
 
 
-def parse_policy(spec: str, error_weights: np.ndarray, domain: str | None = None) -> Policy:
+def parse_policy(spec: str, error_weights: np.ndarray, domain: str | None = None, steps: int = 100) -> Policy:
     """Build a policy from its command-line spec; bad specs raise :class:`EtmpcError`.
 
-    ``rl:PATH`` is checked against ``domain`` and the state size ``len(error_weights)``.
+    ``rl:PATH`` is checked against ``domain`` and the state size ``len(error_weights)``; ``steps``
+    (the episode length) bounds a rollout's look-ahead.
     """
     name, _, arg = spec.partition(":")
+    if name in ("rollout", "oracle"):
+        from etmpc.rollout import parse_rollout
+
+        return parse_rollout(spec, lambda base: parse_policy(base, error_weights, domain, steps), steps)
     if name in ("always", "never"):
         if arg:
             raise EtmpcError(f"bad policy {spec!r}: {name!r} takes no argument")
@@ -127,4 +138,5 @@ def parse_policy(spec: str, error_weights: np.ndarray, domain: str | None = None
         from etmpc.learned import load_policy
 
         return load_policy(arg, domain, nx=len(error_weights))
-    raise UnknownNameError(f"unknown policy {spec!r}; valid: always, never, every:T, threshold:X, rl:PATH")
+    raise UnknownNameError(f"unknown policy {spec!r}; valid: always, never, every:T, threshold:X, rl:PATH, "
+                           "rollout:BASE[:K[:H]], oracle:BASE")

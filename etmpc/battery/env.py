@@ -87,6 +87,16 @@ class Physics(control.Physics):
         """Energy of the last interval the battery could not take (> 0, spilled) or give (< 0)."""
         return self._unbalanced_kwh
 
+    # -- snapshots (rollouts) ---------------------------------------------------------------------
+    _STATE = ("_soc", "_time_s", "_commanded_kw", "_computing", "_production_kw", "_executed_kw", "_unbalanced_kwh")
+
+    def snapshot(self) -> tuple[float, ...]:
+        return tuple(getattr(self, name) for name in self._STATE)
+
+    def restore(self, snapshot: tuple[float, ...]) -> None:
+        for name, value in zip(self._STATE, snapshot, strict=True):
+            setattr(self, name, value)
+
     # -- control.Physics --------------------------------------------------------------------------
     def set_control(self, control_: np.ndarray) -> None:
         trade_kw, computing = control_

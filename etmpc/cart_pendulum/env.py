@@ -17,6 +17,7 @@ Two plant settings (see the MJCF header for the numbers):
 from __future__ import annotations
 
 import collections
+import copy
 from dataclasses import dataclass
 
 import mujoco
@@ -105,6 +106,15 @@ class Physics(MjPhysics):
 
     def set_disturbance(self, w_rad_s2: float) -> None:
         self.data.userdata[0] = w_rad_s2
+
+    # -- snapshots (rollouts) ---------------------------------------------------------------------
+    def snapshot(self) -> mujoco.MjData:
+        """A copy of the whole ``mjData`` (state, disturbance, and every derived quantity)."""
+        return copy.copy(self.data.ptr)
+
+    def restore(self, snapshot: mujoco.MjData) -> None:
+        """Put back a snapshot, taken here or in a twin physics of the same model, exactly."""
+        mujoco.mj_copyData(self.data.ptr, self.model.ptr, snapshot)
 
     # -- stepping ---------------------------------------------------------------------------------
     def step(self, nstep: int = 1) -> None:

@@ -90,6 +90,17 @@ class CartPendulumSystem:
         """The episode's exogenous inputs, per step, for recordings."""
         return {"disturbance_rad_s2": episode.disturbance}
 
+    def sample_future(self, episode: cp_env.Episode, step: int, rng: np.random.Generator) -> cp_env.Episode:
+        """``episode`` with the disturbances of intervals ``step..`` redrawn: at the decision of step
+        ``step`` the controller has felt those of the earlier intervals only (they are i.i.d.)."""
+        disturbance = np.array(episode.disturbance)
+        disturbance[step:] = rng.normal(0.0, cp_env.DISTURBANCE_STD_RAD_S2, size=disturbance.size - step)
+        return cp_env.Episode(episode.initial_state, disturbance)
+
+    def truncation_value(self, x: np.ndarray) -> float:
+        """A rollout stopped before the episode's end counts no cost beyond it."""
+        return 0.0
+
     def state(self, timestep: dm_env.TimeStep) -> np.ndarray:
         obs = timestep.observation
         return np.array([obs[name] for name in STATE_NAMES], dtype=float)

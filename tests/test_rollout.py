@@ -1,0 +1,112 @@
+"""Snapshots, the fast path and the rollout policies, against the dm_env loop and rollout's theorem."""
+
+import numpy as np
+import pytest
+
+from etmpc.errors import EtmpcError, UnknownNameError
+from etmpc.loop import Snapshot, play_on, run_episode
+from etmpc.policies import Every, parse_policy
+from etmpc.workers import play_test_episode
+
+
+class SnapshotAt:
+    """``every:T`` that also freezes the running episode at one step (the loop hands it its context)."""
+
+    simulates, stochastic = True, False
+
+    def __init__(self, period: int, step: int):
+        self.inner, self.step, self.snapshot, self.decision = Every(period), step, None, None
+        self.spec = self.inner.spec
+
+    def decide(self, s, rng):
+        decision = self.inner.decide(s, rng)
+        if s.context.step == self.step:
+            self.snapshot, self.decision = Snapshot.take(s.context), decision
+        return decision
+
+
+def _returns_from(traj, step: int, price: float) -> float:
+    total = 0.0  # the same sum, in the same order, as play_on makes it
+    for reward, recompute in zip(traj.rewards[step:traj.steps], traj.recompute[step:traj.steps]):
+        total += reward - price * recompute
+    return total
+
+
+@pytest.mark.parametrize("domain, period, step", [("cart_pendulum", 3, 37), ("battery", 4, 58)])
+def test_restoring_a_snapshot_replays_the_episode_bit_for_bit(domain, period, step, cart_system, battery_system,
+                                                              cart_testset, battery_testset):
+    system, testset = {"cart_pendulum": (cart_system, cart_testset), "battery": (battery_system, battery_testset)}[domain]
+    episode = system.episode_from_arrays(testset.episode_arrays(3))
+    spy = SnapshotAt(period, step)
+    original = run_episode(system, system.make_env(), spy, None, episode)
+    assert spy.snapshot is not None and original.steps == system.episode_steps
+    twin = system.make_env()
+    for _ in range(2):  # and again: a restore leaves nothing behind
+        total = play_on(system, twin, spy.snapshot, spy.inner, None, spy.decision)
+        assert total == _returns_from(original, step, system.recompute_price)
+        np.testing.assert_array_equal(twin.physics.state(), original.states[original.steps])
+    # Stopping early: the same steps, plus the truncation value of the state reached.
+    stop = step + 10
+    truncated = play_on(system, twin, spy.snapshot, spy.inner, None, spy.decision, stop=stop)
+    partial = original.rewards[step:stop] - system.recompute_price * original.recompute[step:stop]
+    assert truncated == pytest.approx(partial.sum() + system.truncation_value(original.states[stop]), rel=1e-12, abs=1e-15)
+
+
+def test_a_sampled_future_changes_only_what_the_controller_has_not_seen(cart_system, cart_testset):
+    episode = cart_system.episode_from_arrays(cart_testset.episode_arrays(0))
+    future = cart_system.sample_future(episode, 40, np.random.default_rng(1))
+    np.testing.assert_array_equal(future.initial_state, episode.initial_state)
+    np.testing.assert_array_equal(future.disturbance[:40], episode.disturbance[:40])
+    assert not np.any(future.disturbance[40:] == episode.disturbance[40:])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("episode", [0, 5])
+def test_the_oracle_never_does_worse_than_its_base(cart_system, episode):
+    """Rollout's cost-improvement property: with the stored (deterministic) future, the one-step
+    lookahead over a base policy costs at most what the base costs, on every episode, because the
+    simulation is the plant, bit for bit (Bertsekas, Rollout algorithms, sequential consistency)."""
+    base = play_test_episode("cart_pendulum", parse_policy("every:5", cart_system.error_weights), 0, 0, episode)
+    oracle = play_test_episode("cart_pendulum", parse_policy("oracle:every:5", cart_system.error_weights), 0, 0, episode)
+    price = cart_system.recompute_price
+    assert -oracle.trajectory.policy_return(price) <= -base.trajectory.policy_return(price)
+    assert oracle.trajectory.recomputes != base.trajectory.recomputes or \
+        not np.array_equal(oracle.trajectory.recompute, base.trajectory.recompute)  # it did decide something
+
+
+def test_rollout_is_deterministic_given_its_generator(battery_system):
+    policy = parse_policy("rollout:every:5:2:10", battery_system.error_weights)
+    a = play_test_episode("battery", policy, 3, 0, 1).trajectory
+    b = play_test_episode("battery", policy, 3, 0, 1).trajectory
+    c = play_test_episode("battery", policy, 4, 0, 1).trajectory
+    np.testing.assert_array_equal(a.recompute, b.recompute)
+    assert a.policy_return(0.0) == b.policy_return(0.0)
+    assert not np.array_equal(a.recompute, c.recompute) or a.policy_return(0.0) != c.policy_return(0.0)
+
+
+@pytest.mark.parametrize("spec, canonical", [
+    ("rollout:always", "rollout:always:8"), ("rollout:every:3", "rollout:every:3:8"), ("rollout:every:3:4", "rollout:every:3:4"),
+    ("rollout:always:2:30", "rollout:always:2:30"), ("rollout:threshold:0.3:5", "rollout:threshold:0.3:5"),
+    ("oracle:every:3", "oracle:every:3"), ("oracle:never", "oracle:never"),
+])
+def test_rollout_specs(cart_system, spec, canonical):
+    policy = parse_policy(spec, cart_system.error_weights)
+    assert policy.spec == canonical
+    assert policy.oracle == spec.startswith("oracle")
+
+
+@pytest.mark.parametrize("spec", [
+    "rollout", "rollout:", "oracle:", "rollout:bogus", "rollout:every:0", "rollout:every:3:0", "rollout:every:3:-2",
+    "rollout:always:x", "rollout:always:8:0", "rollout:always:8:101", "rollout:always:8:20:3", "rollout:always:1e3",
+    "rollout:rollout:always", "oracle:oracle:always", "oracle:rollout:always", "oracle:every:3:8", "rollout:rl:/no/such.json",
+    "rollout:always:100000",
+])
+def test_bad_rollout_specs_are_one_line_errors(cart_system, spec):
+    with pytest.raises(EtmpcError) as info:
+        parse_policy(spec, cart_system.error_weights)
+    assert "\n" not in str(info.value) and spec in str(info.value)
+
+
+def test_unknown_policy_lists_the_rollouts(cart_system):
+    with pytest.raises(UnknownNameError, match="rollout:BASE"):
+        parse_policy("rollouts:always", cart_system.error_weights)
