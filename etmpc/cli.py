@@ -13,6 +13,8 @@ from pathlib import Path
 
 from etmpc.errors import EtmpcError
 from etmpc.gpomdp import BASELINES
+from etmpc.learned import DEFAULT_FEATURES, FEATURE_SETS
+from etmpc.train import ALGORITHMS
 from etmpc.systems import check_name, names
 from etmpc.workers import BACKENDS
 
@@ -47,7 +49,8 @@ def build_parser() -> argparse.ArgumentParser:
     ev = sub.add_parser("evaluate", help="compare recomputation policies on a stored test set")
     ev.add_argument("task", help=f"system to evaluate: {tasks}")
     ev.add_argument("--policy", action="append", required=True, metavar="SPEC",
-                    help="always | never | every:T | threshold:X (repeatable)")
+                    help="always | never | every:T | threshold:X | rl:PATH | rollout:BASE[:K[:H]] | "
+                         "oracle:BASE (an upper bound, not a policy) (repeatable)")
     ev.add_argument("--episodes", type=_positive_int, default=None, help="first N test-set episodes (default: all)")
     ev.add_argument("--repeats", type=_positive_int, default=1, help="passes over the test set (for stochastic policies)")
     ev.add_argument("--workers", type=_positive_int, default=None, help="worker processes (default: one per core)")
@@ -73,8 +76,19 @@ def build_parser() -> argparse.ArgumentParser:
                          "into DIR/recordings/eval_<episodes>.rrd (default 0: none)")
     tr.add_argument("--baseline", choices=BASELINES, default="none",
                     help="GPOMDP baseline: none (the paper, default), mean (per step index), state (linear value function)")
-    tr.add_argument("--learning-rate", type=float, default=0.05, help="alpha (default 0.05)")
-    tr.add_argument("--discount", type=float, default=0.975, help="gamma (default 0.975)")
+    tr.add_argument("--learning-rate", type=float, default=0.05, help="GPOMDP's alpha (default 0.05)")
+    tr.add_argument("--discount", type=float, default=0.975, help="GPOMDP's gamma (default 0.975)")
+    tr.add_argument("--algorithm", choices=ALGORITHMS, default="gpomdp",
+                    help="gpomdp (the paper's policy gradient, default) or dpi (direct policy iteration: "
+                         "rollout-labelled classification; --eval-every episodes per iteration)")
+    tr.add_argument("--features", choices=FEATURE_SETS, default=DEFAULT_FEATURES,
+                    help="the policy's features: error (prediction error, its square, the plan's age and, for the "
+                         "battery, prices and production now and as planned; default) or paper ([x_i, x_k, i-k] and squares)")
+    tr.add_argument("--futures", type=_positive_int, default=None, metavar="K", help="DPI: sampled futures per labelled decision (default 4)")
+    tr.add_argument("--horizon", type=_positive_int, default=None, metavar="H", help="DPI: steps simulated ahead (default 20)")
+    tr.add_argument("--labels", type=_positive_int, default=None, metavar="D", help="DPI: decisions labelled per episode (default 25)")
+    tr.add_argument("--validation-episodes", type=_positive_int, default=50,
+                    help="training-distribution episodes that choose selected.json among the seeds (default 50)")
 
     re_ = sub.add_parser("reproduce", help="the paper's experiments on both systems, with REPORT.md and results.json")
     re_.add_argument("--quick", action="store_true", help="the same steps at small sizes (a few minutes)")
@@ -158,6 +172,7 @@ def _evaluate(args) -> None:
 
 
 def _train(args) -> None:
+    from etmpc.dpi import Settings as DpiSettings
     from etmpc.gpomdp import Settings
     from etmpc.train import TrainConfig, format_summary, parse_seeds, train
     from etmpc.workers import default_workers
@@ -166,15 +181,21 @@ def _train(args) -> None:
     _check_backend(args)
     if args.out.exists() and not args.out.is_dir():
         raise EtmpcError(f"--out {args.out} exists and is not a directory")
+    dpi_options = {"futures": args.futures, "horizon": args.horizon, "states_per_episode": args.labels}
+    if args.algorithm != "dpi" and any(v is not None for v in dpi_options.values()):
+        raise EtmpcError("--futures, --horizon and --labels are DPI's settings: add --algorithm dpi")
     try:
         settings = Settings(args.discount, args.learning_rate, args.baseline)
+        dpi_settings = DpiSettings(**{k: v for k, v in dpi_options.items() if v is not None})
     except ValueError as exc:
         raise EtmpcError(str(exc)) from None
-    config = TrainConfig(args.task, parse_seeds(args.seeds), args.episodes, args.eval_every, args.eval_episodes, gpomdp=settings)
+    config = TrainConfig(args.task, parse_seeds(args.seeds), args.episodes, args.eval_every, args.eval_episodes, gpomdp=settings,
+                         features=args.features, algorithm=args.algorithm, dpi=dpi_settings,
+                         validation_episodes=args.validation_episodes)
     state = train(config, args.out, args.workers or default_workers(), args.resume, args.backend, args.address,
                   record_episodes=args.record)
     print(format_summary(state))
-    print(f"wrote {args.out}/curve.json, curve.png, checkpoint.json and seed*/best.json, last.json")
+    print(f"wrote {args.out}/selected.json, curve.json, curve.png, checkpoint.json and seed*/best.json, last.json")
 
 
 def _reproduce(args) -> None:

@@ -3,12 +3,23 @@
 ``pi(0 | s) = sigma(theta^T phi(s))`` is the probability of *keeping* the plan (paper eq. logreg),
 ``pi(1 | s) = 1 - pi(0 | s)`` that of recomputing. The features are
 
-    phi(s) = [ (s - mean) / std,  (s^2 - mean_sq) / std_sq,  1 ],   s = [x_i, x_k, i - k]
+    phi(s) = [ (r - mean) / std,  (r^2 - mean_sq) / std_sq,  1 ]
 
-so ``len(phi) = 2 (2 nx + 1) + 1``. The normalisation is measured once per training run (see
-:func:`etmpc.train`) and saved with the parameters, the task and the hyperparameters in one JSON
-file, so ``--policy rl:PATH`` evaluates it anywhere. JSON keeps every float exactly (Python writes
-the shortest repr that reads back to the same double).
+of a raw vector ``r`` chosen by the policy's *feature set*:
+
+* ``error`` (the default for training): ``r = [x_i - x_hat_i, i - k, exogenous]``, the prediction
+  error per state (its square comes with ``r^2``) and the plan's age, as the authors' own
+  environment feeds its policy; for the battery also the exogenous information a good trigger needs
+  (see ``etmpc.battery.system.exogenous_features``: the price and net production now, what the plan
+  assumed for them, their differences, and the value at today's price of the trade the plan makes now);
+* ``paper``: ``r = s = [x_i, x_k, i - k]``, the augmented state as the paper's text defines it.
+
+The normalisation is measured once per training run (see :func:`etmpc.train`) and saved with the
+parameters, the feature set, the task and the hyperparameters in one JSON file, so ``--policy
+rl:PATH`` evaluates it anywhere. The decision rule is saved too: ``sample`` draws the decision from
+``pi`` (the paper's policy, and what GPOMDP's gradient needs), ``greedy`` takes the likelier answer
+(what a classifier trained by DPI is). JSON keeps every float exactly (Python writes the shortest repr
+that reads back to the same double). Files of format version 1 (before feature sets) are ``paper``.
 """
 
 from __future__ import annotations
@@ -25,7 +36,9 @@ from etmpc.errors import EtmpcError
 from etmpc.policies import AugmentedState
 
 FORMAT = "etmpc-logistic-policy"
-VERSION = 1
+VERSION = 2
+FEATURE_SETS = ("error", "paper")
+DEFAULT_FEATURES = "error"
 INITIAL_KEEP_LOGIT = -3.0  # sigma(-3) = 0.047: at first the policy recomputes 95 % of the time
 
 
@@ -38,8 +51,39 @@ def raw_state(s: AugmentedState) -> np.ndarray:
     return np.concatenate([s.x, s.x_plan, [float(s.age)]])
 
 
-def feature_size(nx: int) -> int:
-    return 2 * (2 * nx + 1) + 1
+def _exogenous(domain: str):
+    """The domain's exogenous features ``f(s) -> array`` and their names, or None."""
+    if domain == "battery":
+        from etmpc.battery.system import EXOGENOUS_FEATURES, exogenous_features
+
+        return exogenous_features, EXOGENOUS_FEATURES
+    return None
+
+
+def raw_features(features: str, domain: str, s: AugmentedState) -> np.ndarray:
+    """The raw vector ``r`` of feature set ``features`` (see the module docstring)."""
+    if features == "paper":
+        return raw_state(s)
+    exogenous = _exogenous(domain)
+    error = np.concatenate([s.x - s.x_predicted, [float(s.age)]])
+    return error if exogenous is None else np.concatenate([error, exogenous[0](s)])
+
+
+def raw_size(features: str, domain: str, nx: int) -> int:
+    if features == "paper":
+        return 2 * nx + 1
+    exogenous = _exogenous(domain)
+    return nx + 1 + (0 if exogenous is None else len(exogenous[1]))
+
+
+def feature_size(nx: int, features: str = "paper", domain: str = "") -> int:
+    return 2 * raw_size(features, domain, nx) + 1
+
+
+def check_features(name: str) -> str:
+    if name not in FEATURE_SETS:
+        raise EtmpcError(f"unknown feature set {name!r}; valid: {', '.join(FEATURE_SETS)}")
+    return name
 
 
 @dataclass(frozen=True, eq=False)
@@ -89,31 +133,41 @@ class LogisticPolicy:
     hyperparameters: dict = field(default_factory=dict)
     record: bool = False
     decisions: list = field(default_factory=list)
-    stochastic: bool = True
+    features: str = "paper"  # the feature set (FEATURE_SETS)
+    greedy: bool = False  # True: recompute exactly when pi(keep | s) < 1/2, drawing nothing
+
+    @property
+    def stochastic(self) -> bool:
+        return not self.greedy
 
     @property
     def spec(self) -> str:
         return f"rl:{self.hyperparameters.get('name', self.domain)}"
 
     @classmethod
-    def initial(cls, normalisation: Normalisation, domain: str, hyperparameters: dict | None = None) -> LogisticPolicy:
+    def initial(cls, normalisation: Normalisation, domain: str, hyperparameters: dict | None = None,
+                features: str = "paper", greedy: bool = False) -> LogisticPolicy:
         theta = np.zeros(normalisation.mean.size * 2 + 1)
         theta[-1] = INITIAL_KEEP_LOGIT
-        return cls(theta, normalisation, domain, dict(hyperparameters or {}))
+        return cls(theta, normalisation, domain, dict(hyperparameters or {}), features=features, greedy=greedy)
 
     def with_theta(self, theta: np.ndarray, record: bool = False) -> LogisticPolicy:
-        return LogisticPolicy(np.array(theta, dtype=float), self.normalisation, self.domain, self.hyperparameters, record)
+        return LogisticPolicy(np.array(theta, dtype=float), self.normalisation, self.domain, self.hyperparameters, record,
+                              features=self.features, greedy=self.greedy)
+
+    def phi(self, s: AugmentedState) -> np.ndarray:
+        return self.normalisation.features(raw_features(self.features, self.domain, s))
 
     def keep_probability(self, s: AugmentedState) -> float:
-        return self._keep_probability(self.normalisation.features(raw_state(s)))
+        return self._keep_probability(self.phi(s))
 
     def _keep_probability(self, phi: np.ndarray) -> float:
         return sigmoid(float(self.theta @ phi))
 
     def decide(self, s: AugmentedState, rng: np.random.Generator) -> bool:
-        phi = self.normalisation.features(raw_state(s))
+        phi = self.phi(s)
         p_keep = self._keep_probability(phi)
-        recompute = bool(rng.random() >= p_keep)
+        recompute = p_keep < 0.5 if self.greedy else bool(rng.random() >= p_keep)
         if self.record:
             self.decisions.append((phi, recompute, p_keep))
         return recompute
@@ -124,6 +178,8 @@ class LogisticPolicy:
             "format": FORMAT,
             "version": VERSION,
             "domain": self.domain,
+            "features": self.features,
+            "decision": "greedy" if self.greedy else "sample",
             "theta": self.theta.tolist(),
             "normalisation": self.normalisation.to_json(),
             "hyperparameters": self.hyperparameters,
@@ -137,12 +193,19 @@ class LogisticPolicy:
     def from_json(cls, data: dict, where: str = "policy") -> LogisticPolicy:
         if not isinstance(data, dict) or data.get("format") != FORMAT:
             raise PolicyFileError(f"{where} is not an etmpc logistic policy (format {data.get('format') if isinstance(data, dict) else None!r})")
-        if data.get("version") != VERSION:
-            raise PolicyFileError(f"{where} has format version {data.get('version')!r}; this etmpc reads {VERSION}")
+        if data.get("version") not in (1, VERSION):
+            raise PolicyFileError(f"{where} has format version {data.get('version')!r}; this etmpc reads 1 and {VERSION}")
+        features = data.get("features", "paper") if data.get("version") == VERSION else "paper"
+        if features not in FEATURE_SETS:
+            raise PolicyFileError(f"{where} has unknown feature set {features!r}; this etmpc knows {', '.join(FEATURE_SETS)}")
+        decision = data.get("decision", "sample") if data.get("version") == VERSION else "sample"
+        if decision not in ("sample", "greedy"):
+            raise PolicyFileError(f"{where} has unknown decision rule {decision!r}; this etmpc knows sample, greedy")
         try:
             normalisation = Normalisation.from_json(data["normalisation"])
             theta = np.asarray(data["theta"], dtype=float)
-            policy = cls(theta, normalisation, str(data["domain"]), dict(data.get("hyperparameters", {})))
+            policy = cls(theta, normalisation, str(data["domain"]), dict(data.get("hyperparameters", {})), features=features,
+                         greedy=decision == "greedy")
         except (KeyError, TypeError, ValueError) as exc:
             raise PolicyFileError(f"{where} is corrupt ({exc!r})") from None
         n = normalisation.mean.size
@@ -165,8 +228,9 @@ def load_policy(path: str | Path, domain: str | None = None, nx: int | None = No
     policy = LogisticPolicy.from_json(data, where=f"policy file {path}")
     if domain is not None and policy.domain != domain:
         raise PolicyFileError(f"policy file {path} was trained on {policy.domain!r}, not {domain!r}")
-    if nx is not None and policy.theta.size != feature_size(nx):
-        raise PolicyFileError(f"policy file {path} has {policy.theta.size} features; {domain or 'this task'} needs {feature_size(nx)}")
+    if nx is not None and policy.theta.size != feature_size(nx, policy.features, policy.domain):
+        raise PolicyFileError(f"policy file {path} has {policy.theta.size} features; {domain or 'this task'} needs "
+                              f"{feature_size(nx, policy.features, policy.domain)} ({policy.features} features)")
     return policy
 
 

@@ -1,4 +1,8 @@
-"""``etmpc train``: GPOMDP training of the logistic recomputation policy over several seeds.
+"""``etmpc train``: training of the logistic recomputation policy over several seeds.
+
+Two learners (``--algorithm``): ``gpomdp``, the paper's policy gradient (:mod:`etmpc.gpomdp`), and
+``dpi``, direct policy iteration with rollout-labelled classification (:mod:`etmpc.dpi`); and two
+feature sets (``--features``, :mod:`etmpc.learned`): ``error`` (the default) and ``paper``.
 
 The run advances in *phases* of ``eval_every`` training episodes. In each phase every seed trains
 its block of episodes (seeds run in parallel), then every seed's policy is evaluated on the test
@@ -12,10 +16,17 @@ would, because every random draw is keyed by ``(seed, episode)`` and never by hi
   episode))``, exactly as ``etmpc evaluate --seed 0`` draws them, so ``etmpc evaluate --policy
   rl:DIR/seed0/best.json`` reproduces a point of the curve;
 * the feature normalisation: measured once per run on ``normalisation_episodes`` episodes under a
-  policy that recomputes with probability 1/2 (so plan ages vary), from ``NORMALISATION_ENTROPY``.
+  policy that recomputes with probability 1/2 (so plan ages vary), from ``NORMALISATION_ENTROPY``;
+* DPI: training episode ``e`` of seed ``s`` and its rollouts from ``SeedSequence(DPI_ENTROPY,
+  spawn_key=(s, e, k))``; its iteration-0 schedule is chosen on episodes from ``SELECTION_ENTROPY``;
+* the choice of the run's policy (``selected.json``): every seed's final policy on
+  ``validation_episodes`` training-distribution episodes from ``VALIDATION_ENTROPY`` (never the
+  test set), the best one.
 
 Outputs in ``DIR``: ``checkpoint.json``, ``curve.json`` and ``curve.png`` (mean and standard
-deviation over seeds, the paper's Figure 2), ``seed<S>/last.json`` and ``seed<S>/best.json``; with
+deviation over seeds, the paper's Figure 2), ``seed<S>/last.json`` and ``seed<S>/best.json`` (the
+best point of the test-set curve: a look back, not a model choice), ``selected.json`` (the final
+policy of the seed that did best on the validation episodes: the run's answer); with
 ``--record N``, ``recordings/eval_<episodes>.rrd``: the first N test-set episodes of every seed's
 evaluation, as Rerun recordings (see ``etmpc.recording``).
 """
@@ -31,17 +42,23 @@ from pathlib import Path
 
 import numpy as np
 
+from etmpc import dpi
 from etmpc.errors import EtmpcError
 from etmpc.evaluate import scores
 from etmpc.gpomdp import Learner, Settings
-from etmpc.learned import LogisticPolicy, Normalisation, PolicyFileError, raw_state, write_json_atomically
+from etmpc.learned import (DEFAULT_FEATURES, LogisticPolicy, Normalisation, PolicyFileError, check_features, raw_features,
+                           write_json_atomically)
 from etmpc.loop import run_episode
+from etmpc.policies import parse_policy
 from etmpc.recording import EpisodeRecord, Recorder
 from etmpc.systems import make_system
 from etmpc.workers import context, make_backend, play_test_episode
 
 TRAIN_ENTROPY = 0x6574_6D70_6321  # "etmpc!"
 NORMALISATION_ENTROPY = 0x6E6F_726D  # "norm"
+SELECTION_ENTROPY = 0x7365_6C65_6374  # "select"
+VALIDATION_ENTROPY = 0x7661_6C69_64  # "valid"
+ALGORITHMS = ("gpomdp", "dpi")
 CHECKPOINT_FORMAT = "etmpc-train-checkpoint"
 
 
@@ -57,17 +74,25 @@ class TrainConfig:
     eval_repeats: int = 1  # passes over the test set per evaluation
     normalisation_episodes: int = 20
     gpomdp: Settings = field(default_factory=Settings)
+    features: str = DEFAULT_FEATURES  # the policy's feature set (etmpc.learned.FEATURE_SETS)
+    algorithm: str = "gpomdp"  # "gpomdp" or "dpi"
+    dpi: dpi.Settings = field(default_factory=dpi.Settings)  # used when algorithm == "dpi"
+    validation_episodes: int = 50  # training-distribution episodes that choose selected.json
 
     def __post_init__(self):
         if not self.seeds or len(set(self.seeds)) != len(self.seeds):
             raise EtmpcError(f"seeds must be distinct and at least one, got {self.seeds}")
-        for name in ("episodes", "eval_every", "eval_repeats", "normalisation_episodes"):
+        for name in ("episodes", "eval_every", "eval_repeats", "normalisation_episodes", "validation_episodes"):
             if getattr(self, name) < 1:
                 raise EtmpcError(f"{name.replace('_', '-')} must be >= 1, got {getattr(self, name)}")
+        check_features(self.features)
+        if self.algorithm not in ALGORITHMS:
+            raise EtmpcError(f"unknown algorithm {self.algorithm!r}; valid: {', '.join(ALGORITHMS)}")
 
     def to_json(self) -> dict:
         data = asdict(self)
         data["seeds"] = list(self.seeds)
+        data["dpi"]["bases"] = list(self.dpi.bases)
         return data
 
     @classmethod
@@ -75,6 +100,11 @@ class TrainConfig:
         data = dict(data)
         data["seeds"] = tuple(data["seeds"])
         data["gpomdp"] = Settings(**data["gpomdp"])
+        data.setdefault("features", "paper")  # checkpoints from before feature sets
+        dpi_settings = dict(data.get("dpi", {}))
+        if "bases" in dpi_settings:
+            dpi_settings["bases"] = tuple(dpi_settings["bases"])
+        data["dpi"] = dpi.Settings(**dpi_settings)
         return cls(**data)
 
     @property
@@ -86,22 +116,23 @@ class TrainConfig:
 
 # -- worker side: every function here is a pure function of its arguments -------------------------
 class _Coin:
-    """Recompute with probability 1/2, keeping every augmented state it sees (for normalisation)."""
+    """Recompute with probability 1/2, keeping every raw feature vector it sees (for normalisation)."""
 
     spec, stochastic = "coin", True
 
-    def __init__(self):
+    def __init__(self, features: str, domain: str):
+        self.features, self.domain = features, domain
         self.states = []
 
     def decide(self, s, rng):
-        self.states.append(raw_state(s))
+        self.states.append(raw_features(self.features, self.domain, s))
         return bool(rng.random() < 0.5)
 
 
-def normalisation_states(domain: str, index: int) -> np.ndarray:
+def normalisation_states(domain: str, index: int, features: str = "paper") -> np.ndarray:
     system, env, _ = context(domain)
     rng = np.random.default_rng(np.random.SeedSequence(NORMALISATION_ENTROPY, spawn_key=(index, 0)))
-    coin = _Coin()
+    coin = _Coin(features, domain)
     run_episode(system, env, coin, np.random.default_rng(np.random.SeedSequence(NORMALISATION_ENTROPY, spawn_key=(index, 1))),
                 system.draw_episode(rng))
     return np.array(coin.states)
@@ -156,9 +187,34 @@ def evaluate_theta(domain: str, sha256: str, policy_json: dict, repeat: int, epi
     return (*scores(played.system, played.trajectory), played.trajectory.recomputes, record)
 
 
+def label_episode(domain: str, base, settings: dpi.Settings, policy_json: dict, seed: int, e: int) -> list:
+    """DPI's training episode ``e`` of ``seed`` under ``base`` (a fixed spec or a policy's JSON):
+    ``[(phi, q_keep, q_recompute, step), ...]`` at its picked decisions."""
+    system, env, _ = context(domain)
+    base = parse_policy(base, system.error_weights, domain) if isinstance(base, str) else LogisticPolicy.from_json(base)
+    featurise = LogisticPolicy.from_json(policy_json).phi
+    episode_rng, pick_rng, future_rng, policy_rng = dpi.episode_rngs(seed, e)
+    picked = set(pick_rng.choice(system.episode_steps, size=min(settings.states_per_episode, system.episode_steps),
+                                 replace=False).tolist())
+    labeller = dpi.Labeller(base, featurise, picked, settings, future_rng)
+    run_episode(system, env, labeller, policy_rng, system.draw_episode(episode_rng))
+    return [(phi.tolist(), keep, recompute, step) for phi, keep, recompute, step in labeller.rows]
+
+
+def training_return(domain: str, policy, entropy: int, index: int) -> float:
+    """The policy's objective (sense-aware) on training-distribution episode ``index`` of ``entropy``'s
+    stream (``policy``: a spec or a policy's JSON): how models are chosen without the test set."""
+    system, env, _ = context(domain)
+    policy = parse_policy(policy, system.error_weights, domain) if isinstance(policy, str) else LogisticPolicy.from_json(policy)
+    episode = system.draw_episode(np.random.default_rng(np.random.SeedSequence(entropy, spawn_key=(index, 0))))
+    traj = run_episode(system, env, policy, np.random.default_rng(np.random.SeedSequence(entropy, spawn_key=(index, 1))), episode)
+    return scores(system, traj)[0]
+
+
 def _call(job):
     name, args = job
-    return {"normalisation": normalisation_states, "train": train_block, "evaluate": evaluate_theta}[name](*args)
+    return {"normalisation": normalisation_states, "train": train_block, "evaluate": evaluate_theta, "label": label_episode,
+            "score": training_return}[name](*args)
 
 
 def _learner_to_json(learner: Learner) -> dict:
@@ -183,6 +239,8 @@ class RunState:
     curve: list = field(default_factory=list)  # rows: {"episodes", "seed", "objective", "control", "recomputes"}
     best: dict = field(default_factory=dict)  # seed (str) -> {"episodes", "objective", "theta"}
     training: list = field(default_factory=list)  # per-episode stats, all seeds
+    base: str | None = None  # DPI: the fixed schedule iteration 0 rolls out over (chosen on training episodes)
+    validation: dict = field(default_factory=dict)  # seed (str) -> final policy's objective on the validation episodes
 
     @cached_property
     def objective_sense(self) -> str:
@@ -194,7 +252,8 @@ class RunState:
 
     def to_json(self) -> dict:
         return {"format": CHECKPOINT_FORMAT, "version": 1, "config": self.config.to_json(), "policy": self.policy,
-                "learners": self.learners, "curve": self.curve, "best": self.best, "training": self.training}
+                "learners": self.learners, "curve": self.curve, "best": self.best, "training": self.training,
+                "base": self.base, "validation": self.validation}
 
 
 def load_checkpoint(path: Path) -> RunState:
@@ -204,7 +263,8 @@ def load_checkpoint(path: Path) -> RunState:
             raise ValueError(f"format {data.get('format')!r} version {data.get('version')!r}")
         config = TrainConfig.from_json(data["config"])
         LogisticPolicy.from_json(data["policy"], where=f"checkpoint {path}")
-        state = RunState(config, data["policy"], data["learners"], data["curve"], data["best"], data["training"])
+        state = RunState(config, data["policy"], data["learners"], data["curve"], data["best"], data["training"],
+                         data.get("base"), data.get("validation", {}))
         if sorted(state.learners) != sorted(str(s) for s in config.seeds):
             raise ValueError("learners do not match the seeds")
         for learner in state.learners.values():
@@ -272,6 +332,12 @@ def _save(out: Path, state: RunState) -> dict:
         best = state.best[key]
         write_json_atomically(out / f"seed{seed}" / "best.json",
                               dict(_policy_at(state, best["theta"]), hyperparameters=dict(hyper, episodes=best["episodes"])))
+    if state.validation:
+        sense = state.objective_sense
+        pick = (max if sense == "max" else min)(state.config.seeds, key=lambda seed: state.validation[str(seed)])
+        hyper = dict(state.policy["hyperparameters"], seed=pick, episodes=state.done,
+                     validation_objective=state.validation[str(pick)], validation_episodes=state.config.validation_episodes)
+        write_json_atomically(out / "selected.json", dict(_policy_at(state, state.learners[str(pick)]["theta"]), hyperparameters=hyper))
     summary = curve_summary(state)
     write_json_atomically(out / "curve.json", summary)
     write_curve_png(out / "curve.png", summary, len(state.config.seeds))
@@ -289,8 +355,8 @@ def curve_summary(state: RunState) -> dict:
         points.append({"episodes": episodes, "objective_mean": float(values.mean()),
                        "objective_std": float(values.std(ddof=1)) if len(values) > 1 else 0.0,
                        "recomputes_mean": float(np.mean([r["recomputes"] for r in group])), "seeds": len(group)})
-    return {"domain": state.config.domain, "objective_sense": state.objective_sense,
-            "points": points, "per_seed": state.curve}
+    return {"domain": state.config.domain, "objective_sense": state.objective_sense, "algorithm": state.config.algorithm,
+            "features": state.config.features, "points": points, "per_seed": state.curve}
 
 
 def write_curve_png(path: Path, summary: dict, seeds: int) -> None:
@@ -306,7 +372,8 @@ def write_curve_png(path: Path, summary: dict, seeds: int) -> None:
     ax.fill_between(x, mean - std, mean + std, alpha=0.25, label="± 1 std")
     ax.set_xlabel("training episodes")
     ax.set_ylabel(f"test-set objective ({'higher' if summary['objective_sense'] == 'max' else 'lower'} is better)")
-    ax.set_title(f"{summary['domain']}: GPOMDP learning curve")
+    learner = {"gpomdp": "GPOMDP", "dpi": "DPI"}.get(summary.get("algorithm", "gpomdp"), summary.get("algorithm"))
+    ax.set_title(f"{summary['domain']}: {learner} learning curve ({summary.get('features', 'paper')} features)")
     ax.grid(alpha=0.3)
     ax.legend()
     fig.tight_layout()
@@ -333,18 +400,28 @@ def train(config: TrainConfig, out: Path, workers: int = 1, resume: bool = False
         state = None
     testset = _eval_episodes(config)  # fails on a bad test set or size before any work
     testset_n = testset[0]
-    total = len(config.seeds) * (config.episodes + len(config.milestones) * config.eval_repeats * testset_n)
+    total = len(config.seeds) * (config.episodes + len(config.milestones) * config.eval_repeats * testset_n
+                                 + config.validation_episodes)
     started = time.perf_counter()
     with make_backend(backend, workers, address) as pool, _Progress(total, f"train {config.domain}", progress) as bar:
-        tick = lambda job: bar.update(1 if job[0] == "evaluate" else job[1][5] - job[1][4])  # noqa: E731
+        tick = lambda job: bar.update(job[1][5] - job[1][4] if job[0] == "train" else 1 if job[0] != "score" else 0)  # noqa: E731
         if state is None:
-            states = pool.map(_call, [("normalisation", (config.domain, i)) for i in range(config.normalisation_episodes)])
+            states = pool.map(_call, [("normalisation", (config.domain, i, config.features)) for i in range(config.normalisation_episodes)])
             normalisation = Normalisation.fit(np.concatenate(states))
-            hyper = {"discount": config.gpomdp.discount, "learning_rate": config.gpomdp.learning_rate,
-                     "baseline": config.gpomdp.baseline, "normalisation_episodes": config.normalisation_episodes}
-            initial = LogisticPolicy.initial(normalisation, config.domain, hyper)
-            learner = _learner_to_json(Learner.start(initial.theta, config.gpomdp, context(config.domain)[0].episode_steps))
-            state = RunState(config, initial.to_json(), {str(s): dict(learner) for s in config.seeds})
+            hyper = {"algorithm": config.algorithm, "features": config.features,
+                     "normalisation_episodes": config.normalisation_episodes}
+            if config.algorithm == "gpomdp":
+                hyper.update(discount=config.gpomdp.discount, learning_rate=config.gpomdp.learning_rate, baseline=config.gpomdp.baseline)
+            else:
+                hyper.update(asdict(config.dpi), bases=list(config.dpi.bases))
+            initial = LogisticPolicy.initial(normalisation, config.domain, hyper, config.features, greedy=config.algorithm == "dpi")
+            if config.algorithm == "gpomdp":
+                learner = _learner_to_json(Learner.start(initial.theta, config.gpomdp, context(config.domain)[0].episode_steps))
+                base = None
+            else:
+                learner = {"theta": initial.theta.tolist(), "episodes": 0, "iterations": 0, "data": []}
+                base = _choose_base(config, pool)
+            state = RunState(config, initial.to_json(), {str(s): dict(learner) for s in config.seeds}, base=base)
             _evaluate_phase(state, pool, tick, testset, out, record_episodes)
             _save(out, state)
             resumed_from = 0
@@ -354,14 +431,56 @@ def train(config: TrainConfig, out: Path, workers: int = 1, resume: bool = False
         for start, stop in zip(config.milestones, config.milestones[1:]):
             if stop <= state.done:
                 continue
-            jobs = [("train", (config.domain, state.policy, state.learners[str(s)], s, start, stop)) for s in config.seeds]
-            for seed, (learner, stats) in zip(config.seeds, pool.map(_call, jobs, tick)):
-                state.learners[str(seed)] = learner
-                state.training += [dict(s, seed=seed) for s in stats]
+            if config.algorithm == "gpomdp":
+                jobs = [("train", (config.domain, state.policy, state.learners[str(s)], s, start, stop)) for s in config.seeds]
+                for seed, (learner, stats) in zip(config.seeds, pool.map(_call, jobs, tick)):
+                    state.learners[str(seed)] = learner
+                    state.training += [dict(s, seed=seed) for s in stats]
+            else:
+                _dpi_iteration(state, pool, tick, start, stop)
             _evaluate_phase(state, pool, tick, testset, out, record_episodes)
             summary = _save(out, state)
             _report(state, summary["points"][-1], started, bar, resumed_from)
+        if not state.validation:
+            jobs = [("score", (config.domain, _policy_at(state, state.learners[str(s)]["theta"]), VALIDATION_ENTROPY, i))
+                    for s in config.seeds for i in range(config.validation_episodes)]
+            values = pool.map(_call, jobs, lambda job: bar.update(1))
+            n = config.validation_episodes
+            state.validation = {str(s): float(np.mean(values[k * n:(k + 1) * n])) for k, s in enumerate(config.seeds)}
+            _save(out, state)
     return state
+
+
+def _choose_base(config: TrainConfig, pool) -> str:
+    """DPI's iteration-0 schedule: the best of ``config.dpi.bases`` on training-distribution episodes."""
+    n = config.dpi.selection_episodes
+    values = pool.map(_call, [("score", (config.domain, spec, SELECTION_ENTROPY, i)) for spec in config.dpi.bases for i in range(n)])
+    means = [float(np.mean(values[k * n:(k + 1) * n])) for k in range(len(config.dpi.bases))]
+    pick = int(np.argmax(means) if make_system(config.domain).objective_sense == "max" else np.argmin(means))
+    return config.dpi.bases[pick]
+
+
+def _dpi_iteration(state: RunState, pool, tick, start: int, stop: int) -> None:
+    """One DPI iteration per seed: label episodes ``start..stop-1`` by rollouts over the current
+    policy (over the chosen schedule at iteration 0), then refit ``theta`` on every label so far."""
+    config = state.config
+    def base(seed):
+        learner = state.learners[str(seed)]
+        return state.base if learner["iterations"] == 0 else _policy_at(state, learner["theta"])
+    jobs = [("label", (config.domain, base(s), config.dpi, state.policy, s, e)) for s in config.seeds for e in range(start, stop)]
+    results = pool.map(_call, jobs, tick)
+    per_seed = stop - start
+    for k, seed in enumerate(config.seeds):
+        learner = state.learners[str(seed)]
+        for rows in results[k * per_seed:(k + 1) * per_seed]:
+            learner["data"] += [list(row) for row in rows]
+        phi = np.array([row[0] for row in learner["data"]])
+        advantage = np.array([row[1] - row[2] for row in learner["data"]])
+        learner["theta"] = dpi.fit(phi, advantage, config.dpi.ridge).tolist()
+        learner["iterations"] += 1
+        learner["episodes"] = stop
+        state.training += [{"episode": e, "seed": seed, "labels": len(rows)}
+                           for e, rows in zip(range(start, stop), results[k * per_seed:(k + 1) * per_seed])]
 
 
 class _Progress:

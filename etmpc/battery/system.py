@@ -10,12 +10,39 @@ import dm_env
 import numpy as np
 
 from etmpc.battery import env as battery_env
+from etmpc.battery import market
 from etmpc.battery.mpc import EconomicMPC
 from etmpc.battery.parameters import Battery, Market
 from etmpc.battery.reference import LinprogReference
 from etmpc.errors import EtmpcError
 from etmpc.lqr import ErrorFeedback, discrete_lqr_gain
 from etmpc.plan import Plan
+
+
+# What the learned policy's default ("error") feature set adds for the battery (etmpc.learned).
+EXOGENOUS_FEATURES = (
+    "price_eur_kwh",  # lambda_i, now
+    "net_production_kw",  # P_i, now
+    "planned_price_eur_kwh",  # what the kept plan assumed for lambda_i
+    "planned_production_kw",  # what it assumed for P_i
+    "price_error_eur_kwh",  # lambda_i minus the plan's assumption
+    "production_error_kw",
+    "trade_value_eur",  # (lambda_i - lambda_bar) u_plan,i delta: today's worth of the trade the plan makes now
+)
+_MEAN_PRICE, _INTERVAL_H = Market().price.mean, Battery().interval_h
+
+
+def exogenous_features(s) -> np.ndarray:
+    """The values of :data:`EXOGENOUS_FEATURES` at augmented state ``s`` (it carries the kept plan
+    and the current observation). The trade's value is against the mean price ``lambda_bar``, the
+    value the MPC gives stored energy: > 0 when the plan's trade now beats keeping the energy."""
+    obs, plan, age = s.observation, s.plan, s.age
+    price, production = float(obs["price_eur_kwh"]), float(obs["net_production_kw"])
+    planned_price = float(plan.forecasts["price_eur_kwh"][age])
+    planned_production = float(plan.forecasts["production_kw"][age])
+    trade_value = (price - _MEAN_PRICE) * float(plan.input_at(age)[0]) * _INTERVAL_H
+    return np.array([price, production, planned_price, planned_production, price - planned_price,
+                     production - planned_production, trade_value])
 
 
 @dataclass(frozen=True)
@@ -76,6 +103,15 @@ class BatterySystem:
     def signals(self, episode: battery_env.Episode) -> dict[str, np.ndarray]:
         """The episode's true prices and net production, per step, for recordings."""
         return {"price_eur_kwh": episode.price_eur_kwh, "net_production_kw": episode.production_kw}
+
+    def sample_future(self, episode: battery_env.Episode, step: int, rng: np.random.Generator) -> battery_env.Episode:
+        """``episode`` with everything the controller has not seen at the decision of step ``step``
+        redrawn from the task's generators (rows ``step + 1..``; see ``market.sample_future``)."""
+        return market.sample_future(rng, episode, step + 1, self.config.battery, self.config.market)
+
+    def truncation_value(self, x: np.ndarray) -> float:
+        """The stored energy at the mean price, as the task values it at the episode's end (EUR)."""
+        return self.terminal_price * self.config.battery.capacity_kwh * float(x[0])
 
     def state(self, timestep: dm_env.TimeStep) -> np.ndarray:
         return np.array([timestep.observation["state_of_charge"]])
