@@ -50,6 +50,7 @@ class PolicySummary:
     nonfinite_episodes: int  # runs that ended on a non-finite state; excluded from the means
     episodes: int
     repeats: int
+    upper_bound: bool = False  # an oracle: it knows the episode's future; a bound, not a policy
 
 
 # -- worker side ---------------------------------------------------------------------------------
@@ -77,7 +78,7 @@ def _run(job: tuple) -> tuple[RunResult, EpisodeRecord | None]:
         solver_failures=traj.solver_failures,
         steps=traj.steps,
         finite=not traj.nonfinite,
-    ), played.record(spec) if record else None
+    ), played.record(spec, upper_bound=spec.startswith("oracle:")) if record else None
 
 
 # -- driver side ---------------------------------------------------------------------------------
@@ -110,6 +111,7 @@ def summarise(spec: str, runs: list[RunResult], sense: str, episodes: int, repea
         nonfinite_episodes=len(runs) - len(finite),
         episodes=episodes,
         repeats=repeats,
+        upper_bound=spec.startswith("oracle:"),
     )
 
 
@@ -186,7 +188,8 @@ def evaluate(
 
 def format_table(evaluation: Evaluation) -> str:
     sense = evaluation.summaries[0].objective_sense if evaluation.summaries else "min"
-    width = max([16] + [len(s.policy) + 2 for s in evaluation.summaries])  # long rl:PATH specs stay aligned
+    names = {s.policy: s.policy + (" (upper bound)" if s.upper_bound else "") for s in evaluation.summaries}
+    width = max([16] + [len(name) + 2 for name in names.values()])  # long rl:PATH specs stay aligned
     head = f"{'policy':<{width}}{'objective':>12}{'± std':>10}{'control':>11}{'recomputes':>12}{'failures':>10}{'non-finite':>12}"
     lines = [
         f"{evaluation.domain}/{evaluation.task}: objective ({'lower' if sense == 'min' else 'higher'} is better), "
@@ -196,8 +199,10 @@ def format_table(evaluation: Evaluation) -> str:
     ]
     for s in evaluation.summaries:
         lines.append(
-            f"{s.policy:<{width}}{s.objective_mean:>12.5f}{s.objective_std:>10.5f}{s.control_objective_mean:>11.5f}"
+            f"{names[s.policy]:<{width}}{s.objective_mean:>12.5f}{s.objective_std:>10.5f}{s.control_objective_mean:>11.5f}"
             f"{s.recomputes_mean:>12.2f}{s.solver_failures:>10d}{s.nonfinite_episodes:>12d}"
         )
     lines.append(f"{evaluation.summaries[0].episodes} episodes x {evaluation.summaries[0].repeats} repeats per policy" if evaluation.summaries else "")
+    if any(s.upper_bound for s in evaluation.summaries):
+        lines.append("(upper bound): an oracle knows each episode's future; it bounds what a trigger can gain and is not a policy")
     return "\n".join(lines)

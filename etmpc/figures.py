@@ -190,6 +190,7 @@ class Bar:
     recomputes: float  # mean per episode (over seeds for a group)
     policies: tuple[str, ...]  # the specs drawn by this bar
     stochastic: bool
+    bound: bool = False  # an oracle: an upper bound that knows the future, not a policy
 
 
 def _check_evaluations(evaluations: Sequence[dict], sources: Sequence[str] | None) -> list[str]:
@@ -254,10 +255,17 @@ def policy_bars(evaluations: Sequence[dict], group_learned: bool = True, sources
             drawn.update(members)
         else:
             label = f"rl:{_short_path(spec[3:])}" if spec.startswith("rl:") else spec
-            bars.append(Bar(label, float(summary["objective_mean"]), float(summary["objective_std_repeats"]),
-                            float(summary["recomputes_mean"]), (spec,), spec.startswith("rl:")))
+            bound = is_upper_bound(spec)
+            bars.append(Bar(label + ("\n(upper bound)" if bound else ""), float(summary["objective_mean"]),
+                            float(summary["objective_std_repeats"]), float(summary["recomputes_mean"]), (spec,),
+                            spec.startswith("rl:"), bound))
             drawn.add(spec)
     return bars
+
+
+def is_upper_bound(spec: str) -> bool:
+    """``oracle:`` specs know the episode's future: an upper bound, never a contender."""
+    return spec.startswith("oracle:")
 
 
 def _short_path(path: str, parts: int = 3) -> str:
@@ -286,7 +294,7 @@ def draw_policy_bars(evaluations: Sequence[dict], group_learned: bool = True, so
     errors = np.array([b.error for b in bars])
     x = np.arange(len(bars))
     fig, ax = plt.subplots(figsize=(max(7.0, 1.45 * len(bars) + 3.0), 4.8))
-    colors = ["tab:orange" if b.stochastic else "tab:blue" for b in bars]
+    colors = ["tab:gray" if b.bound else "tab:orange" if b.stochastic else "tab:blue" for b in bars]
     container = ax.bar(x, np.nan_to_num(means), width=0.65, color=colors, alpha=0.85, gid="policy_bars")
     for rect, bar in zip(container.patches, bars):
         rect.set_gid(bar.label)
@@ -324,9 +332,11 @@ def draw_policy_bars(evaluations: Sequence[dict], group_learned: bool = True, so
     ax.grid(axis="y", alpha=0.3)
     ax.set_axisbelow(True)
     handles = []
-    if not all(b.stochastic for b in bars):
+    if any(not b.stochastic and not b.bound for b in bars):
         handles.append(Patch(color="tab:blue", alpha=0.85, label="fixed policy"))
-    if any(b.stochastic for b in bars):
+    if any(b.bound for b in bars):
+        handles.append(Patch(color="tab:gray", alpha=0.85, label="oracle: upper bound\n(knows the future; not a policy)"))
+    if any(b.stochastic and not b.bound for b in bars):
         handles.append(Patch(color="tab:orange", alpha=0.85, label="learned (stochastic) policy"))
     if spread.any():
         grouped = any(len(b.policies) > 1 for b in bars)

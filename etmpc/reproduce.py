@@ -4,8 +4,15 @@ Per system, in ``DIR/<domain>/``:
 
 1. ``baselines.json``: the fixed policies (``always``, ``never``, ``every:T`` for every T that
    matters, thresholds) on the test set;
-2. ``train/``: the learned policy over the seeds with the paper's protocol (``etmpc train``);
+2. ``train/``: the learned policy over the seeds with the paper's protocol (``etmpc train``: GPOMDP
+   on the paper's features);
 3. ``learned.json``: each seed's final policy (``last.json``) evaluated ``repeats`` times;
+3b. ``train_dpi/``: the default learner (DPI on the ``error`` features) over its seeds; the seed
+   chosen on validation episodes (``selected.json``) is copied to ``DIR/policies/<domain>/learned.json``
+   (the project ships the full run's copy in ``policies/``) and evaluated on the test set
+   (``learned_default.json``);
+3c. ``headroom.json``: the rollout policy over the best fixed one and the ``oracle:`` upper bound on
+   the first ``rollout_episodes`` test-set episodes (rollouts are expensive);
 4. figures: ``figure1_forecasts.png`` (battery), ``train/curve.png`` (Figure 2),
    ``figure3.png``, ``trajectory.png`` (the best fixed policy's first episode);
 5. ``episodes.rrd``: a Rerun recording of representative episodes (the best fixed policy and
@@ -30,6 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
+from etmpc.dpi import Settings as DpiSettings
 from etmpc.errors import EtmpcError
 from etmpc.evaluate import evaluate
 from etmpc.learned import write_json_atomically
@@ -59,16 +67,29 @@ class Settings:
     repeats: int = 5  # passes over the test set for the learned policy
     record_episodes: int = 3  # representative episodes per policy in the recording
     video_size: tuple[int, int] = (640, 480)
+    # The default learner (DPI on the error features) and the headroom meters.
+    dpi_seeds: tuple[int, ...] = (0, 1, 2)
+    dpi_episodes: int = 60  # training episodes per seed: 3 iterations of 20
+    dpi_eval_every: int = 20
+    dpi_labels: int = 25  # decisions labelled per training episode
+    dpi_futures: int = 4
+    dpi_horizon: int = 20
+    validation_episodes: int = 50  # training-distribution episodes that choose the shipped seed
+    rollout_episodes: int = 30  # first test-set episodes for rollout:BEST and oracle:BEST
+    rollout_futures: int = 8
+    rollout_horizon: int | None = 20  # None: to the episode's end
+    smoke: bool = False  # a smoke run: its report gives no verdicts
 
     def to_json(self) -> dict:
         data = asdict(self)
-        data["seeds"], data["video_size"] = list(self.seeds), list(self.video_size)
+        data["seeds"], data["video_size"], data["dpi_seeds"] = list(self.seeds), list(self.video_size), list(self.dpi_seeds)
         return data
 
 
 FULL = Settings()
 QUICK = Settings(episodes=30, eval_every=15, eval_episodes=10, test_episodes=20, repeats=2, record_episodes=2,
-                 video_size=(320, 240))
+                 video_size=(320, 240), dpi_seeds=(0, 1), dpi_episodes=4, dpi_eval_every=2, dpi_labels=5, dpi_futures=2,
+                 dpi_horizon=10, validation_episodes=5, rollout_episodes=3, rollout_futures=2, rollout_horizon=10, smoke=True)
 
 
 def reproduce(out: Path, settings: Settings = FULL, workers: int = 1, backend: str = "local",
@@ -106,11 +127,15 @@ def _check_settings(out: Path, settings: Settings, domains) -> None:
         write_json_atomically(path, wanted)
 
 
-def _evaluated(path: Path, **kwargs) -> dict:
-    """An evaluation's JSON, made once: a complete file from an earlier invocation is reused."""
+def _evaluated(path: Path, timed: int | None = None, **kwargs) -> dict:
+    """An evaluation's JSON, made once: a complete file from an earlier invocation is reused. With
+    ``timed`` (the number of workers), its wall time and that number are kept in the file."""
     if path.exists():
         return json.loads(path.read_text())
+    started = time.perf_counter()
     data = evaluate(**kwargs).to_json()
+    if timed is not None:
+        data["cost"] = {"wall_seconds": time.perf_counter() - started, "workers": timed}
     write_json_atomically(path, data)
     return data
 
@@ -136,17 +161,40 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
     learned_specs = [f"rl:{train_dir / f'seed{s}' / 'last.json'}" for s in settings.seeds]
     learned = _evaluated(folder / "learned.json", policies=learned_specs, repeats=settings.repeats, **common)
 
+    _say(f"{domain}: the default learner (DPI), {len(settings.dpi_seeds)} seeds x {settings.dpi_episodes} episodes")
+    dpi_config = TrainConfig(domain, settings.dpi_seeds, settings.dpi_episodes, settings.dpi_eval_every, settings.eval_episodes,
+                             features="error", algorithm="dpi", validation_episodes=settings.validation_episodes,
+                             dpi=DpiSettings(futures=settings.dpi_futures, horizon=settings.dpi_horizon,
+                                             states_per_episode=settings.dpi_labels))
+    dpi_dir = folder / "train_dpi"
+    train(dpi_config, dpi_dir, run["workers"], resume=(dpi_dir / "checkpoint.json").exists(), backend=run["backend"],
+          address=run["address"], progress=progress)
+    shipped = folder.parent / "policies" / domain / "learned.json"
+    if not shipped.exists():
+        write_json_atomically(shipped, json.loads((dpi_dir / "selected.json").read_text()))
+    default = _evaluated(folder / "learned_default.json", policies=[f"rl:{shipped}"], **common)
+
     summary = summarise_system(system, baselines, learned, curve_summary(state))
     best = summary["best_fixed"]["policy"]
+
+    _say(f"{domain}: headroom, rollout and oracle over {best} on {settings.rollout_episodes} episodes")
+    rollout_spec = f"rollout:{best}:{settings.rollout_futures}" + (f":{settings.rollout_horizon}" if settings.rollout_horizon else "")
+    subset = dict(common, episodes=settings.rollout_episodes)
+    rollout = _evaluated(folder / "headroom_rollout.json", timed=run["workers"], policies=[rollout_spec], **subset)
+    oracle = _evaluated(folder / "headroom_oracle.json", timed=run["workers"], policies=[f"oracle:{best}"], **subset)
+    summary["default_learner"] = summarise_default(system, baselines, default, load_checkpoint(dpi_dir / "checkpoint.json"))
+    summary["headroom"] = summarise_headroom(system, best, baselines, learned, default, rollout, oracle)
 
     _say(f"{domain}: figures, recording, video")
     if not (folder / "figure3.png").exists():
         figures.write_policy_bars_png(folder / "figure3.png", [baselines, learned])
     if not (folder / "episodes.rrd").exists():
-        evaluate(domain, [best, learned_specs[0]], episodes=settings.record_episodes, workers=run["workers"],
+        evaluate(domain, [best, learned_specs[0], f"rl:{shipped}"], episodes=settings.record_episodes, workers=run["workers"],
                  progress=False, record=folder / "episodes.rrd")
     files = {"baselines": "baselines.json", "learned": "learned.json", "curve": "train/curve.png",
-             "figure3": "figure3.png", "recording": "episodes.rrd", "trajectory": "trajectory.png"}
+             "figure3": "figure3.png", "recording": "episodes.rrd", "trajectory": "trajectory.png",
+             "default_learner": "learned_default.json", "curve_dpi": "train_dpi/curve.png",
+             "headroom_rollout": "headroom_rollout.json", "headroom_oracle": "headroom_oracle.json"}
     _trajectory_png(folder / "trajectory.png", system, best)
     if domain == "battery":
         _forecasts_png(folder / "figure1_forecasts.png", system)
@@ -213,6 +261,65 @@ def summarise_system(system, baselines: dict, learned: dict, curve: dict) -> dic
         "margin_percent": margin_percent,
         "curve": {"start": points[0], "best": best_point, "final": points[-1], "points": points},
     }
+
+
+def per_episode(evaluation: dict, policies=None) -> dict[int, float]:
+    """Episode -> the mean objective of ``policies`` (default: every policy in the file) over their
+    finite runs (seeds and passes together)."""
+    values: dict[int, list[float]] = {}
+    for r in evaluation["runs"]:
+        if r["finite"] and (policies is None or r["policy"] in policies):
+            values.setdefault(r["episode"], []).append(r["objective"])
+    return {e: float(np.mean(v)) for e, v in values.items()}
+
+
+def paired(a: dict[int, float], b: dict[int, float], sense: str, episodes=None) -> dict:
+    """``a`` against ``b`` on their common episodes (or ``episodes``): the mean difference ``a - b``
+    with its 95 % CI, and the same as a percentage of ``|mean b|``, signed so that > 0 is better."""
+    common = sorted(set(a) & set(b) if episodes is None else set(episodes) & set(a) & set(b))
+    diff = np.array([a[e] - b[e] for e in common])
+    sign = 1.0 if sense == "max" else -1.0
+    scale = abs(float(np.mean([b[e] for e in common]))) if common else float("nan")
+    ci = float(1.96 * diff.std(ddof=1) / np.sqrt(len(diff))) if len(diff) > 1 else float("nan")
+    mean = float(diff.mean()) if len(diff) else float("nan")
+    return {"episodes": len(common), "objective_mean": float(np.mean([a[e] for e in common])) if common else float("nan"),
+            "reference_mean": float(np.mean([b[e] for e in common])) if common else float("nan"),
+            "mean_difference": mean, "ci95": ci, "gain_percent": 100.0 * sign * mean / scale,
+            "gain_percent_ci95": 100.0 * ci / scale, "better_episodes": int((sign * diff > 0).sum())}
+
+
+def summarise_default(system, baselines: dict, default: dict, state) -> dict:
+    """The default learner's shipped policy on the test set, against the best fixed policy."""
+    sense = system.objective_sense
+    fixed = baselines["policies"]
+    best = (max if sense == "max" else min)(fixed, key=lambda spec: fixed[spec]["objective_mean"])
+    (spec, row), = default["policies"].items()
+    hyper = json.loads(Path(spec[3:]).read_text())["hyperparameters"]
+    return {"policy": spec, "seed": hyper["seed"], "validation_objective": hyper["validation_objective"],
+            "validation": state.validation, "base": state.base, **_row(row),
+            "paired": paired(per_episode(default), per_episode(baselines, {best}), sense),
+            "curve": curve_summary(state)["points"]}
+
+
+def summarise_headroom(system, best: str, baselines: dict, learned: dict, default: dict, rollout: dict, oracle: dict) -> dict:
+    """Every contender and the oracle bound against the best fixed policy, paired on the episodes the
+    rollout policy played. Rows, in order: the oracle (an upper bound, not a policy), the rollout
+    policy, the default learner, the paper's learner, the best fixed policy."""
+    sense = system.objective_sense
+    reference = per_episode(baselines, {best})
+    episodes = sorted(per_episode(rollout))
+    rows = {}
+    for name, evaluation in (("oracle", oracle), ("rollout", rollout), ("learned_default", default), ("learned_paper", learned),
+                             ("best_fixed", None)):
+        evaluation = evaluation or {"policies": {best: None}, "runs": [r for r in baselines["runs"] if r["policy"] == best]}
+        runs = [r for r in evaluation["runs"] if r["episode"] in episodes and r["finite"]]
+        rows[name] = dict(paired(per_episode(evaluation), reference, sense, episodes), policies=list(evaluation["policies"]),
+                          recomputes_mean=float(np.mean([r["recomputes"] for r in runs])) if runs else float("nan"))
+    cost = rollout.get("cost", {})
+    steps = sum(r["steps"] for r in rollout["runs"])
+    return {"reference": best, "episodes": len(episodes), "rows": rows, "rollout_cost": cost,
+            # CPU seconds per step of the rollout policy (its decision and the step itself; the solve is a small part).
+            "rollout_seconds_per_step": cost["wall_seconds"] * cost["workers"] / steps if cost and steps else None}
 
 
 def _row(s: dict) -> dict:
@@ -284,6 +391,11 @@ def report(results: dict) -> str:
     lines = [
         "# etmpc: the paper's experiments, reproduced",
         "",
+    ]
+    if s.get("smoke"):
+        lines += ["**This is a smoke run (`--quick`): every size is far too small for a conclusion. It checks that "
+                  "every stage runs; it gives no verdicts.**", ""]
+    lines += [
         f"Settings: {len(s['seeds'])} seeds x {s['episodes']} training episodes, evaluated every {s['eval_every']}"
         f" on {s['eval_episodes'] or 'all'} test-set episodes; fixed policies and the final learned policies on "
         f"{s['test_episodes'] or 'all'} test-set episodes, the learned ones {s['repeats']} times.",
@@ -319,15 +431,52 @@ def report(results: dict) -> str:
             "",
             f"![learning curve]({r['files']['curve']}) ![Figure 3]({r['files']['figure3']})",
             "",
+        ] + headroom_section(r, s.get("smoke", False)) + [
             f"Files: {', '.join(f'`{v}`' for v in r['files'].values())}.",
             "",
         ]
-    lines += ["## Against the paper", ""] + against_the_paper(results) + [""]
+    lines += ["## Against the paper", ""]
+    lines += (["No verdicts in a smoke run."] if s.get("smoke") else against_the_paper(results)) + [""]
     lines += ["## Software and machine", "", "| package | version |", "|---|---|"]
     lines += [f"| {k} | {v} |" for k, v in results["software"].items()]
     m = results["machine"]
     lines += ["", f"Machine: {m['cpu']}, {m['cores']} cores, {m['memory_gib']} GiB, {m['platform']}.", ""]
     return "\n".join(lines)
+
+
+def _pct(row: dict) -> str:
+    return f"{row['gain_percent']:+.2f} % ± {row['gain_percent_ci95']:.2f} %"
+
+
+def headroom_section(r: dict, smoke: bool) -> list[str]:
+    """What any trigger could gain over the best fixed policy, and what the learners reach."""
+    h, d = r["headroom"], r["default_learner"]
+    best = h["reference"]
+    names = {"oracle": "upper bound, **not a policy**: knows the episode's future", "rollout": "rollout policy",
+             "learned_default": "learned, default learner (DPI, error features)",
+             "learned_paper": "learned, the paper's (GPOMDP, paper features)", "best_fixed": "best fixed"}
+    lines = [f"### Headroom over `{best}`", "",
+             f"Paired over test-set episodes 0–{h['episodes'] - 1} (the rollout policies are expensive); "
+             "gain > 0 is better than the best fixed policy; 95 % CIs.", "",
+             "| | policies | recomputes | objective | gain over best fixed | gain % |", "|---|---|---|---|---|---|"]
+    for key, row in h["rows"].items():
+        specs = ", ".join(f"`{p}`" for p in row["policies"]) if len(row["policies"]) <= 2 else f"{len(row['policies'])} seeds"
+        sign = 1 if r["objective_sense"] == "max" else -1
+        lines.append(f"| {names[key]} | {specs} | {row['recomputes_mean']:.1f} | {_f(row['objective_mean'])} | "
+                     f"{sign * row['mean_difference']:+.5f} ± {row['ci95']:.5f} | {_pct(row)} |")
+    if h["rollout_seconds_per_step"] is not None:
+        cost = h["rollout_cost"]
+        lines += ["", f"The rollout policy cost {h['rollout_seconds_per_step'] * 1e3:.0f} ms of CPU per step (its decision "
+                  f"included): {cost['wall_seconds']:.0f} s for {h['episodes']} episodes on {cost['workers']} workers."]
+    p = d["paired"]
+    lines += ["", f"**The default learner on all {p['episodes']} test-set episodes** (`{d['policy']}`, seed {d['seed']}, "
+              f"chosen on {len(d['validation'])} seeds' validation episodes, never the test set; iteration 0 rolled out "
+              f"over `{d['base']}`): {_f(d['objective_mean'])} with {d['recomputes_mean']:.1f} recomputes; against "
+              f"`{best}`: gain {_pct(p)}, better in {p['better_episodes']}/{p['episodes']} episodes."]
+    if not smoke:
+        ci_low = p["gain_percent"] - p["gain_percent_ci95"]
+        lines.append(f"Its CI {'excludes' if ci_low > 0 else 'does not exclude'} 0.")
+    return lines + [""]
 
 
 def against_the_paper(results: dict) -> list[str]:

@@ -12,7 +12,8 @@ from etmpc.recording import replay_summary
 from etmpc.reproduce import BASELINES, Settings, reproduce
 
 TINY = Settings(seeds=(0, 1), episodes=2, eval_every=1, eval_episodes=2, test_episodes=3, repeats=2, record_episodes=1,
-                video_size=(64, 48))
+                video_size=(64, 48), dpi_seeds=(0, 1), dpi_episodes=2, dpi_eval_every=1, dpi_labels=3, dpi_futures=2,
+                dpi_horizon=5, validation_episodes=2, rollout_episodes=2, rollout_futures=2, rollout_horizon=5)
 
 
 @pytest.fixture(scope="module")
@@ -58,7 +59,8 @@ def test_report_states_the_json_numbers_and_the_files_exist(run):
         for name in r["files"].values():
             assert (out / name).is_file() and (out / name).stat().st_size > 0, name
         replayed = replay_summary(out / domain / "episodes.rrd")
-        assert {e.policy for e in replayed} == {best["policy"], f"rl:{out / domain / 'train' / 'seed0' / 'last.json'}"}
+        assert {e.policy for e in replayed} == {best["policy"], f"rl:{out / domain / 'train' / 'seed0' / 'last.json'}",
+                                                f"rl:{out / 'policies' / domain / 'learned.json'}"}
     against = report.split("## Against the paper")[1]
     for domain, r in results["systems"].items():
         (claim,) = [line for line in against.splitlines() if f"best on {domain}," in line]
@@ -76,3 +78,27 @@ def test_a_second_run_continues_and_other_settings_are_refused(run):
     assert {p: p.stat().st_mtime_ns for p in mtimes} == mtimes  # nothing was redone
     with pytest.raises(EtmpcError, match="other settings"):
         reproduce(out, Settings(seeds=(0,), episodes=2, eval_every=1, test_episodes=3), workers=1, progress=False)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("domain", ["cart_pendulum", "battery"])
+def test_headroom_and_the_default_learner_are_direct_evaluations(run, domain):
+    out, results = run
+    r = results["systems"][domain]
+    best, sense = r["best_fixed"]["policy"], r["objective_sense"]
+    sign = 1 if sense == "max" else -1
+    # The shipped policy is the validation-chosen seed's final DPI policy, byte for byte in content.
+    selected = json.loads((out / domain / "train_dpi" / "selected.json").read_text())
+    assert json.loads((out / "policies" / domain / "learned.json").read_text()) == selected
+    validation = r["default_learner"]["validation"]
+    assert selected["hyperparameters"]["seed"] == int((max if sense == "max" else min)(validation, key=validation.get))
+    # Each headroom row is that policy's evaluation, paired with the best fixed one on the same episodes.
+    direct = evaluate(domain, [f"rollout:{best}:2:5", f"oracle:{best}", best], episodes=2, workers=1, progress=False)
+    by = {(x.policy, x.episode): x.objective for x in direct.runs}
+    for key, spec in (("rollout", f"rollout:{best}:2:5"), ("oracle", f"oracle:{best}")):
+        row = r["headroom"]["rows"][key]
+        diff = [by[spec, e] - by[best, e] for e in range(2)]
+        assert row["policies"] == [spec] and row["mean_difference"] == pytest.approx(np.mean(diff), rel=1e-12, abs=1e-15)
+        assert row["gain_percent"] == pytest.approx(100 * sign * np.mean(diff) / abs(np.mean([by[best, e] for e in range(2)])))
+    report = (out / "REPORT.md").read_text()
+    assert f"`oracle:{best}`" in report and "**not a policy**" in report
