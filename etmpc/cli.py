@@ -78,9 +78,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help="GPOMDP baseline: none (the paper, default), mean (per step index), state (linear value function)")
     tr.add_argument("--learning-rate", type=float, default=0.05, help="GPOMDP's alpha (default 0.05)")
     tr.add_argument("--discount", type=float, default=0.975, help="GPOMDP's gamma (default 0.975)")
-    tr.add_argument("--algorithm", choices=ALGORITHMS, default="gpomdp",
-                    help="gpomdp (the paper's policy gradient, default) or dpi (direct policy iteration: "
-                         "rollout-labelled classification; --eval-every episodes per iteration)")
+    tr.add_argument("--algorithm", choices=ALGORITHMS, default="dpi",
+                    help="dpi (direct policy iteration: rollout-labelled classification, --eval-every episodes per "
+                         "iteration; default) or gpomdp (the paper's policy gradient)")
     tr.add_argument("--features", choices=FEATURE_SETS, default=DEFAULT_FEATURES,
                     help="the policy's features: error (prediction error, its square, the plan's age and, for the "
                          "battery, prices and production now and as planned; default) or paper ([x_i, x_k, i-k] and squares)")

@@ -421,7 +421,8 @@ def train(config: TrainConfig, out: Path, workers: int = 1, resume: bool = False
             else:
                 learner = {"theta": initial.theta.tolist(), "episodes": 0, "iterations": 0, "data": []}
                 base = _choose_base(config, pool)
-            state = RunState(config, initial.to_json(), {str(s): dict(learner) for s in config.seeds}, base=base)
+            # One learner per seed, sharing nothing (a DPI learner's labels grow in place).
+            state = RunState(config, initial.to_json(), {str(s): json.loads(json.dumps(learner)) for s in config.seeds}, base=base)
             _evaluate_phase(state, pool, tick, testset, out, record_episodes)
             _save(out, state)
             resumed_from = 0

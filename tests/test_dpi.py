@@ -81,7 +81,7 @@ def test_policy_files_keep_their_feature_set_and_old_files_read_as_paper(tmp_pat
 
 
 @pytest.mark.parametrize("argv, message", [
-    (["--futures", "4"], "--algorithm dpi"),
+    (["--algorithm", "gpomdp", "--futures", "4"], "--algorithm dpi"),
     (["--algorithm", "dpi", "--horizon", "0"], "must be >= 1"),
     (["--algorithm", "reinforce"], "invalid choice"),
     (["--features", "telepathy"], "invalid choice"),
@@ -92,3 +92,22 @@ def test_bad_learner_options_are_one_line_errors(capsys, tmp_path, argv, message
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and message in err
     assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.slow
+def test_a_dpi_run_does_not_depend_on_the_number_of_workers_and_chooses_on_validation(tmp_path):
+    from etmpc.train import TrainConfig, train
+
+    config = TrainConfig("battery", seeds=(0, 1), episodes=2, eval_every=1, eval_episodes=2, normalisation_episodes=2,
+                         algorithm="dpi", validation_episodes=3,
+                         dpi=dpi.Settings(futures=2, horizon=4, states_per_episode=3, bases=("always", "every:3"), selection_episodes=2))
+    one = train(config, tmp_path / "one", workers=1, progress=False)
+    train(config, tmp_path / "two", workers=2, progress=False)
+    read = lambda out: {p.relative_to(out).as_posix(): p.read_bytes() for p in sorted(out.rglob("*.json"))}  # noqa: E731
+    assert read(tmp_path / "one") == read(tmp_path / "two")
+    assert one.base in ("always", "every:3") and all(learner["iterations"] == 2 for learner in one.learners.values())
+    assert all(len(learner["data"]) > 0 for learner in one.learners.values())
+    selected = json.loads((tmp_path / "one" / "selected.json").read_text())
+    best = max(one.validation, key=one.validation.get)  # profit: higher is better
+    assert selected["hyperparameters"]["seed"] == int(best) and selected["decision"] == "greedy"
+    assert selected["theta"] == one.learners[best]["theta"]

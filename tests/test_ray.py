@@ -17,7 +17,7 @@ import ray  # the 'ray' extra is part of the test install, so these tests run ra
 from etmpc.evaluate import evaluate
 from etmpc.train import TrainConfig, train
 
-TINY = dict(seeds=(0, 1), episodes=4, eval_every=2, eval_episodes=3, normalisation_episodes=2)
+TINY = dict(seeds=(0, 1), episodes=4, eval_every=2, eval_episodes=3, normalisation_episodes=2, validation_episodes=2)
 POLICIES = ["always", "every:3", "threshold:0.2"]
 
 

@@ -170,7 +170,8 @@ def test_render_puts_the_video_frames_into_the_recording(tmp_path, capsys):
 def test_train_records_its_evaluations_without_changing_any_result(tmp_path):
     from etmpc.train import TrainConfig, train
 
-    config = TrainConfig("battery", seeds=(0, 1), episodes=4, eval_every=2, eval_episodes=3, normalisation_episodes=2)
+    config = TrainConfig("battery", seeds=(0, 1), episodes=4, eval_every=2, eval_episodes=3, normalisation_episodes=2,
+                         validation_episodes=2)
     train(config, tmp_path / "plain", workers=1, progress=False)
     train(config, tmp_path / "rec", workers=1, progress=False, record_episodes=2)
     plain = {p.relative_to(tmp_path / "plain"): p.read_bytes() for p in (tmp_path / "plain").rglob("*") if p.is_file()}

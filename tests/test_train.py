@@ -18,7 +18,7 @@ from etmpc.policies import AugmentedState, parse_policy
 from etmpc.train import TrainConfig, train
 
 ROOT = Path(__file__).resolve().parents[1]
-TINY = dict(seeds=(0, 1), episodes=4, eval_every=2, eval_episodes=3, normalisation_episodes=2)
+TINY = dict(seeds=(0, 1), episodes=4, eval_every=2, eval_episodes=3, normalisation_episodes=2, validation_episodes=2)
 
 
 def files(out):
@@ -55,7 +55,7 @@ def test_training_moves_theta_and_keeps_the_gradient_step(tmp_path):
 
 
 CMD = [sys.executable, "-m", "etmpc.cli", "train", "cart_pendulum", "--seeds", "0-1", "--episodes", "12",
-       "--eval-every", "3", "--eval-episodes", "2", "--workers", "1"]
+       "--eval-every", "3", "--eval-episodes", "2", "--workers", "1", "--algorithm", "gpomdp", "--validation-episodes", "3"]
 
 
 @pytest.mark.slow
@@ -83,9 +83,9 @@ def test_kill_9_then_resume_ends_bit_for_bit_like_an_uninterrupted_run(tmp_path)
 def test_an_existing_run_is_never_overwritten(tmp_path, capsys):
     train(TrainConfig("battery", **TINY), tmp_path, workers=1, progress=False)
     before = files(tmp_path)
-    assert main(["train", "battery", "--seeds", "0-1", "--episodes", "4", "--out", str(tmp_path)]) == 2
+    assert main(["train", "battery", "--seeds", "0-1", "--episodes", "4", "--out", str(tmp_path), "--algorithm", "gpomdp"]) == 2
     assert "--resume" in capsys.readouterr().err
-    assert main(["train", "battery", "--seeds", "0-2", "--episodes", "4", "--out", str(tmp_path), "--resume"]) == 2
+    assert main(["train", "battery", "--seeds", "0-2", "--episodes", "4", "--out", str(tmp_path), "--resume", "--algorithm", "gpomdp"]) == 2
     assert "different settings" in capsys.readouterr().err
     (tmp_path / "checkpoint.json").write_text('{"format": "etmpc-train-checkpoint", "version": 1, "config": {')
     corrupt = files(tmp_path)

@@ -6,9 +6,16 @@ holds the whole realisation and a replay needs no randomness (see :class:`etmpc.
 
 from __future__ import annotations
 
+import dataclasses
+from itertools import accumulate
+from typing import TYPE_CHECKING
+
 import numpy as np
 
-from etmpc.battery.parameters import SECONDS_PER_HOUR, Signal
+from etmpc.battery.parameters import SECONDS_PER_HOUR, Battery, Market, Signal
+
+if TYPE_CHECKING:  # env.py imports this module
+    from etmpc.battery.env import Episode
 
 
 def ou_path(rng: np.random.Generator, steps: int, dt_s: float, time_constant_s: float, std: float,
@@ -18,7 +25,7 @@ def ou_path(rng: np.random.Generator, steps: int, dt_s: float, time_constant_s: 
     ``o_0 ~ N(0, std^2)``, ``o_{k+1} = rho o_k + std sqrt(1 - rho^2) xi_k`` with ``rho = exp(-dt/tau)``.
     With ``rows``, draws that many independent paths (shape ``(rows, steps)``).
     """
-    rho = np.exp(-dt_s / time_constant_s)
+    rho = float(np.exp(-dt_s / time_constant_s))  # a Python float: numpy-scalar products are slow
     shape = (steps,) if rows is None else (rows, steps)
     xi = rng.standard_normal(shape)
     xi[..., 1:] *= np.sqrt(1.0 - rho * rho)
@@ -64,74 +71,69 @@ def draw_signal(rng: np.random.Generator, signal: Signal, start_s: float, steps:
     return true, base, forecasts
 
 
-def sample_future(rng: np.random.Generator, episode, known_rows: int, battery, market):
-    """A copy of ``episode`` (an :class:`etmpc.battery.env.Episode`) whose rows ``known_rows..`` are
-    redrawn from the task's generators, conditioned only on what a controller has seen by row
-    ``k = known_rows - 1``: the true values and the forecast rows up to ``k``, and the clock.
+# Each Market signal's arrays in an Episode: (true, base, forecast).
+SIGNAL_ARRAYS = {
+    "production": ("production_kw", "production_base_kw", "production_forecast_kw"),
+    "price": ("price_eur_kwh", "price_base_eur_kwh", "price_forecast_eur_kwh"),
+}
 
-    Per signal, conditioned on row ``k``:
 
-    * the base now is estimated as the lead-1 forecast ``forecast[k, 1]`` (an approximation: its noise,
-      ``forecast_std_per_step``, is small beside the event levels; the true value if there is no lead 1);
-    * the OU deviation ``o = true[k] - base`` continues exactly, ``o+ = rho o + std sqrt(1 - rho^2) xi``;
-    * the current hour's hourly level is drawn from its posterior given ``base = hourly + event`` with
-      both uniform: uniform on ``[max(h_lo, base - e_hi), min(h_hi, base - e_lo)]``; the event level is
-      the rest. The current event lasts a further ``Exp(mean)`` (memoryless), then new events follow;
-      each new clock hour draws a new hourly level;
-    * forecast rows are made as :func:`draw_signal` makes them.
+def sample_future(rng: np.random.Generator, episode: Episode, known_rows: int, battery: Battery,
+                  market: Market) -> Episode:
+    """A copy of ``episode`` whose rows ``known_rows..`` are redrawn from the task's generators,
+    conditioned only on what a controller has seen by row ``k = known_rows - 1`` (``1 <= known_rows
+    <= steps + 1``): the true values and forecast rows up to ``k``, and the clock.
 
     Rows ``< known_rows`` are the input's, bit for bit; nothing at or after ``known_rows`` is read.
-    """
-    from etmpc.battery.env import Episode
+    Per signal, from row ``k`` on:
 
-    steps = episode.steps
+    * **base now** ``b = forecast[k, 1]``, the lead-1 forecast (the true value if there is no lead 1).
+      An approximation: the lead-1 forecast is the base plus noise of std ``forecast_std_per_step``,
+      small beside the event levels; the earlier rows' information about the base is not used either.
+    * **OU deviation** ``o = true[k] - b``, continued exactly: ``o+ = rho o + ou_std sqrt(1 - rho^2) xi``,
+      ``rho = exp(-dt / ou_time_constant_s)``; ``true = base + o``.
+    * **hourly level** of the current clock hour from its posterior given ``b = hourly + event``, both
+      uniform: ``U[max(h_lo, b - e_hi), min(h_hi, b - e_lo)]``; if noise in ``b`` empties that interval,
+      the feasible hourly level nearest to it. The event level is ``b - hourly``. Each later clock hour
+      draws a new hourly level ``U(h_lo, h_hi)``.
+    * **events**: the current one lasts a further ``Exp(event_mean_duration_s)`` from the clock time
+      of row ``k`` (memoryless), then each new event draws ``U(e_lo, e_hi)`` and lasts ``Exp(mean)``;
+      ``base = hourly + event``.
+    * **forecast rows** as :func:`draw_signal` makes them: the row's base held plus
+      ``forecast_std_per_step * j * z_j``, ``z`` a fresh unit OU path along the lead; ``[r, 0]`` is the
+      true value.
+    """
+    steps, dt_s = episode.steps, battery.interval_s
     if not 1 <= known_rows <= steps + 1:
         raise ValueError(f"known_rows must be in 1..{steps + 1}, got {known_rows}")
-    arrays = {name: np.array(value) for name, value in episode.arrays().items()}
-    if known_rows == steps + 1:
-        return Episode.from_arrays(arrays)
-    k, dt = known_rows - 1, battery.interval_s
-    new = steps + 1 - known_rows  # rows to draw
-    times_s = episode.start_s + dt * np.arange(known_rows, steps + 1)
-    for prefix, signal in (("production", market.production), ("price", market.price)):
-        true_name = f"{prefix}_{'kw' if prefix == 'production' else 'eur_kwh'}"
-        base_name = true_name.replace(prefix, f"{prefix}_base", 1)
-        forecast_name = true_name.replace(prefix, f"{prefix}_forecast", 1)
-        forecast = arrays[forecast_name]
-        base_now = forecast[k, 1] if forecast.shape[1] > 1 else arrays[true_name][k]
-        # The hourly level of the current hour, from its posterior; the event level is the rest.
-        low = max(signal.hourly_low, base_now - signal.event_high)
-        high = min(signal.hourly_high, base_now - signal.event_low)
-        hourly = rng.uniform(low, high) if high > low else float(np.clip(base_now - 0.5 * (signal.event_low + signal.event_high),
-                                                                        signal.hourly_low, signal.hourly_high))
-        event = base_now - hourly
-        # Events after row k: the current one lasts a further Exp(mean); each new hour redraws the hourly level.
-        hour_now = np.floor((episode.start_s + dt * k) / SECONDS_PER_HOUR)
-        base = np.empty(new)
-        end = episode.start_s + dt * k + rng.exponential(signal.event_mean_duration_s)
-        hours = {hour_now: hourly}
-        for r, t in enumerate(times_s):
-            while t >= end:
-                end += rng.exponential(signal.event_mean_duration_s)
-                event = rng.uniform(signal.event_low, signal.event_high)
-            hour = np.floor(t / SECONDS_PER_HOUR)
-            if hour not in hours:
-                hours[hour] = rng.uniform(signal.hourly_low, signal.hourly_high)
-            base[r] = hours[hour] + event
-        # The OU deviation, continued exactly from its value now.
-        rho = np.exp(-dt / signal.ou_time_constant_s)
-        xi = rng.standard_normal(new) * signal.ou_std * np.sqrt(1.0 - rho * rho)
-        deviation = np.empty(new)
-        o = arrays[true_name][k] - base_now
-        for r in range(new):
-            o = rho * o + xi[r]
-            deviation[r] = o
-        true = base + deviation
-        lead = np.arange(forecast.shape[1])
-        noise = ou_path(rng, forecast.shape[1], dt, signal.forecast_time_constant_s, 1.0, rows=new)
-        rows = base[:, None] + signal.forecast_std_per_step * lead * noise
-        rows[:, 0] = true
-        arrays[true_name][known_rows:] = true
-        arrays[base_name][known_rows:] = base
-        forecast[known_rows:] = rows
-    return Episode.from_arrays(arrays)
+    k, new = known_rows - 1, steps + 1 - known_rows
+    now_s = episode.start_s + dt_s * k
+    times_s = episode.start_s + dt_s * np.arange(known_rows, steps + 1)
+    hours = (np.floor(times_s / SECONDS_PER_HOUR) - np.floor(now_s / SECONDS_PER_HOUR)).astype(int)  # 0: this hour
+    arrays = {}
+    for name, names in SIGNAL_ARRAYS.items():
+        signal: Signal = getattr(market, name)
+        true, base, forecast = (np.array(getattr(episode, a)) for a in names)
+        if new:
+            b = float(forecast[k, 1] if forecast.shape[1] > 1 else true[k])
+            low, high = max(signal.hourly_low, b - signal.event_high), min(signal.hourly_high, b - signal.event_low)
+            if low < high:
+                hourly = rng.uniform(low, high)
+            else:  # a point, or empty (b beyond h + e): the feasible hourly level nearest to b's
+                hourly = low if b < signal.hourly_low + signal.event_low else high
+            hourly_levels = np.concatenate(([hourly], rng.uniform(signal.hourly_low, signal.hourly_high, hours[-1])))
+            ends_s = [now_s + rng.exponential(signal.event_mean_duration_s)]
+            while ends_s[-1] <= times_s[-1]:
+                ends_s.append(ends_s[-1] + rng.exponential(signal.event_mean_duration_s))
+            events = np.concatenate(([b - hourly], rng.uniform(signal.event_low, signal.event_high, len(ends_s) - 1)))
+            base[known_rows:] = hourly_levels[hours] + events[np.searchsorted(ends_s, times_s, side="right")]
+            rho = float(np.exp(-dt_s / signal.ou_time_constant_s))
+            xi = signal.ou_std * np.sqrt(1.0 - rho * rho) * rng.standard_normal(new)
+            deviation = list(accumulate(xi.tolist(), lambda o, x: rho * o + x, initial=true[k] - b))[1:]
+            true[known_rows:] = base[known_rows:] + deviation
+            lead = np.arange(forecast.shape[1])
+            noise = ou_path(rng, forecast.shape[1], dt_s, signal.forecast_time_constant_s, 1.0, rows=new)
+            forecast[known_rows:] = base[known_rows:, None] + signal.forecast_std_per_step * lead * noise
+            forecast[known_rows:, 0] = true[known_rows:]
+        arrays.update(zip(names, (true, base, forecast)))
+    return dataclasses.replace(episode, **arrays)
