@@ -102,3 +102,15 @@ def test_headroom_and_the_default_learner_are_direct_evaluations(run, domain):
         assert row["gain_percent"] == pytest.approx(100 * sign * np.mean(diff) / abs(np.mean([by[best, e] for e in range(2)])))
     report = (out / "REPORT.md").read_text()
     assert f"`oracle:{best}`" in report and "**not a policy**" in report
+
+
+@pytest.mark.slow
+def test_a_smoke_report_says_so_at_its_top_and_gives_no_verdicts(run):
+    from etmpc.reproduce import report
+
+    _, results = run
+    smoke = dict(results, settings=dict(results["settings"], smoke=True))
+    text = report(smoke)
+    assert "smoke run" in text.split("## ")[0]
+    assert "Holds" not in text and "Does not hold" not in text and "exclude 0" not in text
+    assert "No verdicts in a smoke run." in text

@@ -110,3 +110,23 @@ def test_bad_rollout_specs_are_one_line_errors(cart_system, spec):
 def test_unknown_policy_lists_the_rollouts(cart_system):
     with pytest.raises(UnknownNameError, match="rollout:BASE"):
         parse_policy("rollouts:always", cart_system.error_weights)
+
+
+def test_the_oracle_is_labelled_an_upper_bound_in_the_table_json_and_figure(tmp_path, capsys):
+    import json
+
+    from etmpc.cli import main
+    from etmpc.figures import policy_bars
+
+    out = tmp_path / "ev.json"
+    assert main(["evaluate", "battery", "--policy", "every:10", "--policy", "oracle:every:10", "--episodes", "1",
+                 "--workers", "1", "--json", str(out)]) == 0
+    table = capsys.readouterr().out
+    assert "oracle:every:10 (upper bound)" in table and "not a policy" in table
+    data = json.loads(out.read_text())
+    assert data["policies"]["oracle:every:10"]["upper_bound"] is True and data["policies"]["every:10"]["upper_bound"] is False
+    bars = {b.policies[0]: b for b in policy_bars([data])}
+    assert bars["oracle:every:10"].bound and "(upper bound)" in bars["oracle:every:10"].label
+    assert not bars["every:10"].bound
+    # With the stored future, the bound is never below its base (profit: higher is better).
+    assert data["policies"]["oracle:every:10"]["objective_mean"] >= data["policies"]["every:10"]["objective_mean"]
