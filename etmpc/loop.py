@@ -254,9 +254,9 @@ def play_on(
     total = 0.0
     for i in range(snapshot.step, end):
         if i == snapshot.step:
-            recompute, forced = (True, True) if plan is None or age >= plan.horizon else (first, False)
+            recompute = plan is None or age >= plan.horizon or first  # a plan that has run out forces a solve
         else:
-            recompute, forced = _decide(policy, rng, x, plan, age, observation)
+            recompute = _decide(policy, rng, x, plan, age, observation)[0]
         if recompute:
             new = first_plan if (i == snapshot.step and first_plan is not None) else \
                 system.plan(x, u_prev, plan, age, dm_env.TimeStep(dm_env.StepType.MID, None, None, observation))

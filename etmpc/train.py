@@ -191,7 +191,7 @@ def label_episode(domain: str, base, settings: dpi.Settings, policy_json: dict, 
     """DPI's training episode ``e`` of ``seed`` under ``base`` (a fixed spec or a policy's JSON):
     ``[(phi, q_keep, q_recompute, step), ...]`` at its picked decisions."""
     system, env, _ = context(domain)
-    base = parse_policy(base, system.error_weights, domain) if isinstance(base, str) else LogisticPolicy.from_json(base)
+    base = _policy(system, base)
     featurise = LogisticPolicy.from_json(policy_json).phi
     episode_rng, pick_rng, future_rng, policy_rng = dpi.episode_rngs(seed, e)
     picked = set(pick_rng.choice(system.episode_steps, size=min(settings.states_per_episode, system.episode_steps),
@@ -205,10 +205,15 @@ def training_return(domain: str, policy, entropy: int, index: int) -> float:
     """The policy's objective (sense-aware) on training-distribution episode ``index`` of ``entropy``'s
     stream (``policy``: a spec or a policy's JSON): how models are chosen without the test set."""
     system, env, _ = context(domain)
-    policy = parse_policy(policy, system.error_weights, domain) if isinstance(policy, str) else LogisticPolicy.from_json(policy)
+    policy = _policy(system, policy)
     episode = system.draw_episode(np.random.default_rng(np.random.SeedSequence(entropy, spawn_key=(index, 0))))
     traj = run_episode(system, env, policy, np.random.default_rng(np.random.SeedSequence(entropy, spawn_key=(index, 1))), episode)
     return scores(system, traj)[0]
+
+
+def _policy(system, policy):
+    """A policy from its spec (a fixed policy) or its JSON (a logistic policy being trained)."""
+    return parse_policy(policy, system.error_weights, system.domain) if isinstance(policy, str) else LogisticPolicy.from_json(policy)
 
 
 def _call(job):
@@ -443,20 +448,24 @@ def train(config: TrainConfig, out: Path, workers: int = 1, resume: bool = False
             summary = _save(out, state)
             _report(state, summary["points"][-1], started, bar, resumed_from)
         if not state.validation:
-            jobs = [("score", (config.domain, _policy_at(state, state.learners[str(s)]["theta"]), VALIDATION_ENTROPY, i))
-                    for s in config.seeds for i in range(config.validation_episodes)]
-            values = pool.map(_call, jobs, lambda job: bar.update(1))
-            n = config.validation_episodes
-            state.validation = {str(s): float(np.mean(values[k * n:(k + 1) * n])) for k, s in enumerate(config.seeds)}
+            policies = [_policy_at(state, state.learners[str(s)]["theta"]) for s in config.seeds]
+            means = _mean_scores(pool, config.domain, policies, VALIDATION_ENTROPY, config.validation_episodes,
+                                 lambda job: bar.update(1))
+            state.validation = {str(s): mean for s, mean in zip(config.seeds, means)}
             _save(out, state)
     return state
 
 
+def _mean_scores(pool, domain: str, policies: list, entropy: int, episodes: int, on_result=None) -> list[float]:
+    """Each policy's mean objective on the first ``episodes`` episodes of ``entropy``'s stream."""
+    jobs = [("score", (domain, policy, entropy, i)) for policy in policies for i in range(episodes)]
+    values = pool.map(_call, jobs, on_result)
+    return [float(np.mean(values[k * episodes:(k + 1) * episodes])) for k in range(len(policies))]
+
+
 def _choose_base(config: TrainConfig, pool) -> str:
     """DPI's iteration-0 schedule: the best of ``config.dpi.bases`` on training-distribution episodes."""
-    n = config.dpi.selection_episodes
-    values = pool.map(_call, [("score", (config.domain, spec, SELECTION_ENTROPY, i)) for spec in config.dpi.bases for i in range(n)])
-    means = [float(np.mean(values[k * n:(k + 1) * n])) for k in range(len(config.dpi.bases))]
+    means = _mean_scores(pool, config.domain, list(config.dpi.bases), SELECTION_ENTROPY, config.dpi.selection_episodes)
     pick = int(np.argmax(means) if make_system(config.domain).objective_sense == "max" else np.argmin(means))
     return config.dpi.bases[pick]
 
