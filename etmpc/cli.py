@@ -120,7 +120,6 @@ def build_parser() -> argparse.ArgumentParser:
     be.add_argument("--json", type=_json_path, default=None, metavar="PATH", help="write the figures as JSON")
     be.add_argument("--no-reference", action="store_true",
                     help="skip the reference solvers (do-mpc for cart_pendulum, scipy linprog for battery)")
-    be.add_argument("--jit", action="store_true", help="also time the MPC compiled with CasADi's JIT (needs a C compiler)")
     return parser
 
 
@@ -246,7 +245,7 @@ def _bench(args) -> None:
         check_name(domain)
     figures = {}
     for domain in domains:
-        figures[domain] = run_bench(domain, episodes=args.episodes, references=not args.no_reference, jit=args.jit)
+        figures[domain] = run_bench(domain, episodes=args.episodes, references=not args.no_reference)
         print(format_bench(figures[domain]), flush=True)
     if args.json is not None:
         _write_json(args.json, figures)

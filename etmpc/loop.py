@@ -63,7 +63,7 @@ class System(Protocol):
     def episode_parameters(self) -> dict: ...
     def plan_cost(self, x: np.ndarray, u_prev: np.ndarray, timestep: dm_env.TimeStep, inputs: np.ndarray) -> float: ...
     def reference_solvers(self) -> list: ...  # objects with .name and .solve(x, u_prev, timestep, continuing)
-    def compiled(self) -> System | None: ...  # the same system with compiled MPC code, if that exists
+    def interpreted(self) -> System | None: ...  # the same system with its MPC in CasADi's VM, if it is compiled
 
     # Used by the rollout policies (etmpc.rollout).
     def sample_future(self, episode: Any, step: int, rng: np.random.Generator) -> Any: ...  # see its docstrings

@@ -24,7 +24,7 @@ class Plan:
     cost: float
     solve_time_s: float
     success: bool
-    iterations: int = 0
+    iterations: int = 0  # -1: the solver does not report it
     status: str = ""
     forecasts: Mapping[str, np.ndarray] = field(default_factory=dict)
 

@@ -61,5 +61,11 @@ def test_bench_reports_consistent_figures():
     figures = run_bench("cart_pendulum", episodes=1, references=False)
     assert figures["mpc_solve"]["samples"] == 100  # one solve per step under `always`
     assert 0 < figures["mpc_solve"]["median_ms"] <= figures["mpc_solve"]["p90_ms"]
-    assert figures["rest_of_step"]["samples"] == 200 and figures["solver_failures"] == 0
-    assert figures["episodes_per_second"]["never"] > figures["episodes_per_second"]["always"]
+    assert figures["rest_of_step"]["samples"] == 300 and figures["solver_failures"] == 0  # always, every:3, never
+    assert set(figures["episodes_per_second"]) == {"always", "every:3", "never"}
+    rollout = figures["rollout_step"]
+    assert rollout["samples"] == 5 and rollout["median_us"] > 0
+    assert rollout["steps_per_second"] == pytest.approx(1e6 / rollout["median_us"])
+    before = figures["interpreted"]  # the same OCPs solved as before compiling: the same optimum
+    assert before["ours"]["samples"] == before["interpreted"]["samples"] == 200
+    assert before["objective_gap_relative"]["max_abs"] < 1e-6

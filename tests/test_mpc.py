@@ -9,17 +9,28 @@ from etmpc.plan import Plan
 from etmpc.policies import parse_policy
 
 
-def ipopt_reference(mpc, x, u_prev, w0):
-    """Same NLP (the MPC's own transcription is not reused: only its variables and functions),
-    solved by Ipopt to 1e-12 from the same initial guess."""
-    solver = ca.nlpsol("reference", "ipopt", mpc.nlp, {
+def ipopt_reference(system, x, u_prev):
+    """The OCP transcribed independently of the MPC (full multiple shooting: every state and input a
+    variable, ``x_0 = x`` an equality), solved by Ipopt to 1e-12 from zero inputs rolled out."""
+    model, c = system.model.discrete, system.config
+    n, nx = c.horizon, 4
+    X, U = ca.SX.sym("X", nx, n + 1), ca.SX.sym("U", 1, n)
+    du = U - ca.horzcat(ca.DM(u_prev), U[:, :-1])
+    nlp = {
+        "x": ca.vertcat(ca.vec(X), ca.vec(U)),
+        "f": ca.sumsqr(X[2, :]) + c.input_change_weight * ca.sumsqr(du),
+        "g": ca.vertcat(X[:, 0] - x, *[model(X[:, k], U[:, k]) - X[:, k + 1] for k in range(n)]),
+    }
+    solver = ca.nlpsol("reference", "ipopt", nlp, {
         "print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes",
         "ipopt.tol": 1e-12, "ipopt.acceptable_iter": 0, "ipopt.max_iter": 1000,
     })
-    lbw, ubw = mpc.bounds()
-    sol = solver(x0=w0, p=np.concatenate([x, u_prev]), lbx=lbw, ubx=ubw, lbg=0, ubg=0)
+    states = system.mpc.rollout(x, np.zeros((n, 1)))
+    lbu, ubu = np.full(n, -c.force_limit_n), np.full(n, c.force_limit_n)
+    sol = solver(x0=np.concatenate([states.ravel(), np.zeros(n)]), lbx=np.r_[np.full(nx * (n + 1), -np.inf), lbu],
+                 ubx=np.r_[np.full(nx * (n + 1), np.inf), ubu], lbg=0, ubg=0)
     assert solver.stats()["success"]
-    return float(sol["f"]), np.asarray(sol["x"]).ravel()
+    return float(sol["f"])
 
 
 def random_state(rng):
@@ -33,7 +44,7 @@ def test_optimum_matches_ipopt_on_random_states(cart_system):
         x, u_prev = random_state(rng), rng.uniform(-25, 25, 1)
         plan = mpc.solve(x, u_prev)
         assert plan.success, plan.status
-        reference, _ = ipopt_reference(mpc, x, u_prev, mpc.initial_guess(x, None, 0))
+        reference = ipopt_reference(cart_system, x, u_prev)
         assert abs(plan.cost - reference) <= 1e-6 * abs(reference)
 
 
@@ -44,7 +55,7 @@ def test_warm_started_solve_matches_cold_and_reference(cart_system):
     x_next = first.states[1] + np.array([0, 0.01, 0.002, -0.05])  # the plant drifted a little
     warm = mpc.solve(x_next, first.inputs[0], first, 1)
     cold = mpc.solve(x_next, first.inputs[0])
-    reference, _ = ipopt_reference(mpc, x_next, first.inputs[0], mpc.initial_guess(x_next, None, 0))
+    reference = ipopt_reference(cart_system, x_next, first.inputs[0])
     assert warm.success and cold.success
     assert abs(warm.cost - reference) <= 1e-6 * reference and abs(cold.cost - reference) <= 1e-6 * reference
 
@@ -97,3 +108,43 @@ def test_failed_first_solve_still_controls(cart_system, cart_testset):
     flaky = FlakySolver(cart_system, fail_at={1})
     traj = run_episode(flaky, cart_system.make_env(), parse_policy("every:5", cart_system.error_weights), None, episode)
     assert traj.solver_failures == 1 and traj.steps == 100
+
+
+def test_every_transcription_and_engine_reaches_the_same_optimum(cart_system):
+    """Shooting nodes every 1, 4 (default) or 20 steps are the same NLP; compiled C and CasADi's
+    virtual machine run the same function. All land on Ipopt's optimum."""
+    from dataclasses import replace
+
+    from etmpc.cart_pendulum.system import CartPendulumSystem
+
+    default = cart_system.mpc
+    assert default.is_compiled and default.settings.block == 4
+    variants = {
+        (block, compiled): CartPendulumSystem(replace(cart_system.config, solver=replace(
+            cart_system.config.solver, block=block, compiled=compiled))).mpc
+        for block, compiled in [(1, False), (4, False), (20, False)]
+    }
+    rng = np.random.default_rng(7)
+    for _ in range(4):
+        x, u_prev = random_state(rng), rng.uniform(-25, 25, 1)
+        reference = ipopt_reference(cart_system, x, u_prev)
+        plan = default.solve(x, u_prev)
+        assert plan.success and plan.status == "converged"
+        for mpc in variants.values():
+            other = mpc.solve(x, u_prev)
+            assert other.success and abs(other.cost - reference) <= 1e-6 * reference
+        same_function = variants[(4, False)].solve(x, u_prev)  # the compiled function, interpreted
+        np.testing.assert_allclose(plan.inputs, same_function.inputs, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(plan.states, same_function.states, rtol=0, atol=1e-9)
+
+
+def test_unconverged_solve_is_a_failure_with_its_residuals(cart_system):
+    """Two SQP iterations from a cold start cannot converge: the plan says so, with the residuals."""
+    from dataclasses import replace
+
+    from etmpc.cart_pendulum.system import CartPendulumSystem
+
+    capped = CartPendulumSystem(replace(cart_system.config, solver=replace(cart_system.config.solver, max_iterations=2))).mpc
+    plan = capped.solve(np.array([0.0, 0.5, 0.6, -0.5]), np.zeros(1))
+    assert not plan.success and plan.status.startswith("not converged: constraint violation")
+    assert np.all(np.isfinite(plan.inputs))

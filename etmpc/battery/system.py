@@ -132,5 +132,5 @@ class BatterySystem:
     def reference_solvers(self) -> list:
         return [LinprogReference(self.config.battery, self.config.horizon, self.terminal_price)]
 
-    def compiled(self):
-        return None  # the LP is solved inside HiGHS; there is nothing to compile
+    def interpreted(self):
+        return None  # the LP is solved inside HiGHS: there is no other way it runs

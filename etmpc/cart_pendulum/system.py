@@ -65,7 +65,8 @@ class CartPendulumSystem:
         stage = ca.Function("stage_residual", [x, u, du], [ca.vertcat(x[2], sqrt_d * du)])
         terminal = ca.Function("terminal_residual", [x], [x[2]])
         return GaussNewtonMPC(
-            self.model.discrete, stage, terminal, self.config.horizon, self.u_min, self.u_max, self.config.solver
+            self.model.discrete, stage, terminal, self.config.horizon, self.u_min, self.u_max, self.config.solver,
+            name="cart_pendulum_mpc",
         )
 
     def make_env(self, random=None):
@@ -128,6 +129,7 @@ class CartPendulumSystem:
         c = self.config
         return [DoMpcReference(self.model.discrete, c.horizon, c.input_change_weight, float(self.u_min[0]), float(self.u_max[0]))]
 
-    def compiled(self) -> CartPendulumSystem:
-        """The same system with its CasADi functions compiled by the C compiler (CasADi's JIT)."""
-        return CartPendulumSystem(replace(self.config, solver=replace(self.config.solver, jit=True)))
+    def interpreted(self) -> CartPendulumSystem:
+        """The same system with the MPC as it was solved before it was compiled: full multiple
+        shooting, run by CasADi's virtual machine (for ``etmpc bench``)."""
+        return CartPendulumSystem(replace(self.config, solver=replace(self.config.solver, block=1, compiled=False)))
