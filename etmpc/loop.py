@@ -54,6 +54,7 @@ class System(Protocol):
     def make_env(self, random: Any = None) -> dm_env.Environment: ...
     def episode_from_arrays(self, arrays: dict[str, np.ndarray]) -> Any: ...
     def state(self, timestep: dm_env.TimeStep) -> np.ndarray: ...
+    def measure(self, physics: Any) -> np.ndarray: ...  # the same x, read off the physics (no observation made)
     def plan(self, x: np.ndarray, u_prev: np.ndarray, warm: Plan | None, age: int, timestep: dm_env.TimeStep) -> Plan: ...
     def action(self, u: np.ndarray, recompute: bool) -> np.ndarray: ...
 
@@ -160,7 +161,8 @@ def _input(system: System, plan: Plan, age: int, x: np.ndarray) -> tuple[np.ndar
     u_planned = plan.input_at(age)
     x_predicted = plan.state_at(age)
     correction = np.zeros(u_planned.shape) if age == 0 else system.feedback.correction(x, x_predicted)
-    return np.clip(u_planned + correction, system.u_min, system.u_max), u_planned, correction, x_predicted
+    # np.minimum(np.maximum(.)) is np.clip's arithmetic without its Python-level overhead.
+    return np.minimum(np.maximum(u_planned + correction, system.u_min), system.u_max), u_planned, correction, x_predicted
 
 
 def run_episode(
@@ -243,7 +245,9 @@ def play_on(
     plant that fails (non-finite state) returns ``-inf``.
 
     Steps the task and the physics directly, as ``control.Environment.step`` does, without making
-    a ``TimeStep``: the same numbers as :func:`run_episode`, bit for bit (tests/test_rollout.py).
+    a ``TimeStep``; reads the state off the physics (``system.measure``) and makes the task's
+    observation only when a solve or a policy reads it (a policy that does not sets ``observes =
+    False``): the same numbers as :func:`run_episode`, bit for bit (tests/test_rollout.py).
     """
     task, physics = env.task, env.physics
     physics.restore(snapshot.physics)
@@ -251,15 +255,24 @@ def play_on(
     n_sub_steps, price = env._n_sub_steps, system.recompute_price
     end = system.episode_steps if stop is None else min(stop, system.episode_steps)
     plan, age, u_prev, x, observation = snapshot.plan, snapshot.age, snapshot.u_prev, snapshot.x, snapshot.observation
+    observes = getattr(policy, "observes", True)  # the observation is made only when someone reads it
     total = 0.0
     for i in range(snapshot.step, end):
         if i == snapshot.step:
             recompute = plan is None or age >= plan.horizon or first  # a plan that has run out forces a solve
+        elif plan is None or age >= plan.horizon:
+            recompute = True
         else:
-            recompute = _decide(policy, rng, x, plan, age, observation)[0]
+            if observes and observation is None:
+                observation = task.get_observation(physics)
+            recompute = bool(policy.decide(AugmentedState(x, plan.states[0], age, plan.state_at(age), plan, observation), rng))
         if recompute:
-            new = first_plan if (i == snapshot.step and first_plan is not None) else \
-                system.plan(x, u_prev, plan, age, dm_env.TimeStep(dm_env.StepType.MID, None, None, observation))
+            if i == snapshot.step and first_plan is not None:
+                new = first_plan
+            else:
+                if observation is None:
+                    observation = task.get_observation(physics)
+                new = system.plan(x, u_prev, plan, age, dm_env.TimeStep(dm_env.StepType.MID, None, None, observation))
             if new.success or plan is None:
                 plan, age = new, 0
         u = _input(system, plan, age, x)[0]
@@ -270,9 +283,8 @@ def play_on(
             return -math.inf
         task.after_step(physics)
         total += task.get_reward(physics) - price * recompute
-        observation = task.get_observation(physics)
-        x = system.state(dm_env.TimeStep(dm_env.StepType.MID, None, None, observation))
-        if not np.all(np.isfinite(x)):
+        observation, x = None, system.measure(physics)
+        if not np.isfinite(x).all():
             return -math.inf
         age, u_prev = age + 1, u
     if end < system.episode_steps:

@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from collections.abc import Mapping
-from typing import Any, Protocol
+from typing import Any, ClassVar, Protocol
 
 import numpy as np
 
@@ -37,6 +37,8 @@ class AugmentedState:
 class Policy(Protocol):
     spec: str
     stochastic: bool
+    # Optional ``observes = False``: decide never reads ``s.observation`` (the fast path of
+    # etmpc.loop.play_on then skips making it). Without the attribute, a policy is assumed to read it.
 
     def decide(self, s: AugmentedState, rng: np.random.Generator) -> bool: ...
 
@@ -47,6 +49,7 @@ class Always:
 
     spec: str = "always"
     stochastic: bool = False
+    observes: ClassVar[bool] = False
 
     def decide(self, s: AugmentedState, rng: np.random.Generator) -> bool:
         return True
@@ -58,6 +61,7 @@ class Never:
 
     spec: str = "never"
     stochastic: bool = False
+    observes: ClassVar[bool] = False
 
     def decide(self, s: AugmentedState, rng: np.random.Generator) -> bool:
         return False
@@ -69,6 +73,7 @@ class Every:
 
     period: int
     stochastic: bool = False
+    observes: ClassVar[bool] = False
 
     @property
     def spec(self) -> str:
@@ -89,6 +94,7 @@ class Threshold:
     level: float
     weights: np.ndarray
     stochastic: bool = False
+    observes: ClassVar[bool] = False
 
     @property
     def spec(self) -> str:

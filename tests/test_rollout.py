@@ -1,27 +1,34 @@
 """Snapshots, the fast path and the rollout policies, against the dm_env loop and rollout's theorem."""
 
+import copy
+import dataclasses
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 from etmpc.errors import EtmpcError, UnknownNameError
 from etmpc.loop import Snapshot, play_on, run_episode
-from etmpc.policies import Every, parse_policy
+from etmpc.policies import parse_policy
 from etmpc.workers import play_test_episode
+
+REPO = Path(__file__).resolve().parents[1]
 
 
 class SnapshotAt:
-    """``every:T`` that also freezes the running episode at one step (the loop hands it its context)."""
+    """A policy that also freezes the running episode at one step (the loop hands it its context),
+    with its generator as it is after that step's decision."""
 
-    simulates, stochastic = True, False
+    simulates = True
 
-    def __init__(self, period: int, step: int):
-        self.inner, self.step, self.snapshot, self.decision = Every(period), step, None, None
-        self.spec = self.inner.spec
+    def __init__(self, inner, step: int):
+        self.inner, self.step, self.snapshot, self.decision, self.rng = inner, step, None, None, None
+        self.spec, self.stochastic = inner.spec, inner.stochastic
 
     def decide(self, s, rng):
         decision = self.inner.decide(s, rng)
         if s.context.step == self.step:
-            self.snapshot, self.decision = Snapshot.take(s.context), decision
+            self.snapshot, self.decision, self.rng = Snapshot.take(s.context), decision, copy.deepcopy(rng)
         return decision
 
 
@@ -32,24 +39,48 @@ def _returns_from(traj, step: int, price: float) -> float:
     return total
 
 
-@pytest.mark.parametrize("domain, period, step", [("cart_pendulum", 3, 37), ("battery", 4, 58)])
-def test_restoring_a_snapshot_replays_the_episode_bit_for_bit(domain, period, step, cart_system, battery_system,
-                                                              cart_testset, battery_testset):
+# Every kind of base a rollout plays: fixed schedules, the event trigger (reads the state only,
+# ``observes = False``) and the shipped learned policies (read the observation, draw from the generator).
+@pytest.mark.parametrize("domain, spec, step", [
+    ("cart_pendulum", "every:3", 37), ("battery", "every:4", 58), ("cart_pendulum", "never", 5),
+    ("cart_pendulum", "threshold:0.3", 21), ("battery", "threshold:0.02", 40),
+    ("cart_pendulum", "rl:policies/cart_pendulum/learned.json", 12), ("battery", "rl:policies/battery/learned.json", 30),
+    ("battery", "rl:policies/battery/learned.json+sample", 30),
+])
+def test_the_fast_path_replays_the_dm_env_loop_bit_for_bit(domain, spec, step, cart_system, battery_system,
+                                                            cart_testset, battery_testset):
     system, testset = {"cart_pendulum": (cart_system, cart_testset), "battery": (battery_system, battery_testset)}[domain]
     episode = system.episode_from_arrays(testset.episode_arrays(3))
-    spy = SnapshotAt(period, step)
-    original = run_episode(system, system.make_env(), spy, None, episode)
+    inner = parse_policy(spec.replace("rl:", "rl:" + str(REPO) + "/").removesuffix("+sample"), system.error_weights, domain)
+    if spec.endswith("+sample"):  # drawing each decision from pi, as in training
+        inner = dataclasses.replace(inner, greedy=False)
+        assert inner.stochastic
+    spy = SnapshotAt(inner, step)
+    original = run_episode(system, system.make_env(), spy, np.random.default_rng(7), episode)
     assert spy.snapshot is not None and original.steps == system.episode_steps
     twin = system.make_env()
     for _ in range(2):  # and again: a restore leaves nothing behind
-        total = play_on(system, twin, spy.snapshot, spy.inner, None, spy.decision)
+        total = play_on(system, twin, spy.snapshot, inner, copy.deepcopy(spy.rng), spy.decision)
         assert total == _returns_from(original, step, system.recompute_price)
         np.testing.assert_array_equal(twin.physics.state(), original.states[original.steps])
     # Stopping early: the same steps, plus the truncation value of the state reached.
     stop = step + 10
-    truncated = play_on(system, twin, spy.snapshot, spy.inner, None, spy.decision, stop=stop)
+    truncated = play_on(system, twin, spy.snapshot, inner, copy.deepcopy(spy.rng), spy.decision, stop=stop)
     partial = original.rewards[step:stop] - system.recompute_price * original.recompute[step:stop]
     assert truncated == pytest.approx(partial.sum() + system.truncation_value(original.states[stop]), rel=1e-12, abs=1e-15)
+
+
+@pytest.mark.parametrize("domain", ["cart_pendulum", "battery"])
+def test_measuring_the_physics_gives_the_state_the_observation_shows(domain, cart_system, battery_system):
+    system = {"cart_pendulum": cart_system, "battery": battery_system}[domain]
+    env = system.make_env(random=4)
+    timestep = env.reset()
+    rng = np.random.default_rng(0)
+    while not timestep.last():
+        x = system.measure(env.physics)
+        assert x.dtype == np.float64
+        np.testing.assert_array_equal(x, system.state(timestep))
+        timestep = env.step(rng.uniform(env.action_spec().minimum, env.action_spec().maximum))
 
 
 def test_a_sampled_future_changes_only_what_the_controller_has_not_seen(cart_system, cart_testset):

@@ -116,6 +116,10 @@ class BatterySystem:
     def state(self, timestep: dm_env.TimeStep) -> np.ndarray:
         return np.array([timestep.observation["state_of_charge"]])
 
+    def measure(self, physics: battery_env.Physics) -> np.ndarray:
+        """``state`` read off the physics: the number the observation shows."""
+        return physics.state()
+
     def plan(self, x: np.ndarray, u_prev: np.ndarray, warm: Plan | None, age: int, timestep: dm_env.TimeStep) -> Plan:
         obs = timestep.observation
         return self.mpc.solve(float(x[0]), obs["production_forecast_kw"], obs["price_forecast_eur_kwh"])

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import collections
 import copy
+import logging
 from dataclasses import dataclass
 
 import mujoco
@@ -121,19 +122,32 @@ class Physics(MjPhysics):
         """Advance ``nstep`` physics steps, refreshing ``qfrc_applied = M(q) e_hinge w`` before each.
 
         ``mj_step1`` after every step keeps the mass matrix (and the rest of mjData) in sync with
-        the new state, as dm-control's legacy stepping does for RK4.
+        the new state, as dm-control's legacy stepping does for RK4. A new MuJoCo warning (a
+        diverging state) raises ``PhysicsError`` as ``check_invalid_state`` does; this is the
+        hot loop of every rollout, so the check is inlined.
         """
         m, d = self.model.ptr, self.data.ptr
         w = d.userdata[0]
-        with self.check_invalid_state():
-            for _ in range(nstep):
-                if w:
-                    mujoco.mj_mulM(m, d, self._force, self._hinge_unit)
-                    d.qfrc_applied[:] = self._force * w
-                else:
-                    d.qfrc_applied[:] = 0.0
-                mujoco.mj_step(m, d)
-                mujoco.mj_step1(m, d)
+        force, push = d.qfrc_applied, self._hinge_unit * w
+        warnings_before = self._warnings.tolist()
+        for _ in range(nstep):
+            if w:
+                mujoco.mj_mulM(m, d, force, push)  # M(q) (e_hinge w): the same numbers as (M(q) e_hinge) w
+            else:
+                force[:] = 0.0
+            mujoco.mj_step(m, d)
+            mujoco.mj_step1(m, d)
+        warnings_after = self._warnings.tolist()
+        if warnings_after != warnings_before:
+            self._invalid_state(warnings_before, warnings_after)
+
+    def _invalid_state(self, before: list[int], after: list[int]) -> None:
+        """What ``check_invalid_state`` does when MuJoCo warned during a step."""
+        names = [name for name, b, a in zip(mujoco.mjtWarning.__members__, before, after) if a > b]
+        message = f"Physics state is invalid. Warning(s) raised: {', '.join(names)}"
+        if self._warnings_cause_exception:
+            raise control.PhysicsError(message)
+        logging.warning(message)
 
 
 @dataclass(frozen=True)

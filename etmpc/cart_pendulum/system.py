@@ -106,6 +106,10 @@ class CartPendulumSystem:
         obs = timestep.observation
         return np.array([obs[name] for name in STATE_NAMES], dtype=float)
 
+    def measure(self, physics: cp_env.Physics) -> np.ndarray:
+        """``state`` read off the physics: the numbers the observation is made of."""
+        return physics.state()
+
     def plan(self, x: np.ndarray, u_prev: np.ndarray, warm: Plan | None, age: int, timestep: dm_env.TimeStep) -> Plan:
         return self.mpc.solve(x, u_prev, warm, age)
 
