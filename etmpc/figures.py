@@ -14,7 +14,6 @@ PNGs are written atomically (a temporary file renamed into place).
 
 from __future__ import annotations
 
-import os
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -30,6 +29,7 @@ from matplotlib.patches import Patch  # noqa: E402
 
 from etmpc.errors import EtmpcError  # noqa: E402
 from etmpc.loop import Trajectory  # noqa: E402
+from etmpc.outputs import atomic_path  # noqa: E402
 
 # (forecast name in Plan.forecasts, episode attribute of the true values, axis label)
 _SIGNALS = (
@@ -357,14 +357,9 @@ def save_png_atomically(fig, path, dpi: int = 120) -> Path:
     """Write ``fig`` as a PNG next to ``path`` and rename it into place: a reader sees the old file
     or the whole new one. The figure is closed either way."""
     path = Path(path)
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(tmp, dpi=dpi, format="png")
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, dpi=dpi, format="png")
     finally:
         plt.close(fig)
     return path

@@ -25,6 +25,7 @@ unbiased (``E[grad log pi(a_t | s_t) | s_t] = 0``):
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -44,8 +45,8 @@ class Settings:
     def __post_init__(self):
         if not 0.0 < self.discount <= 1.0:
             raise ValueError(f"discount must be in (0, 1], got {self.discount}")
-        if not self.learning_rate > 0.0:
-            raise ValueError(f"learning rate must be > 0, got {self.learning_rate}")
+        if not 0.0 < self.learning_rate < math.inf:
+            raise ValueError(f"learning rate must be a finite number > 0, got {self.learning_rate}")
         if self.baseline not in BASELINES:
             raise ValueError(f"baseline must be one of {', '.join(BASELINES)}, got {self.baseline!r}")
 

@@ -26,13 +26,13 @@ from __future__ import annotations
 
 import json
 import math
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from etmpc.errors import EtmpcError
+from etmpc.outputs import write_text
 from etmpc.policies import AugmentedState
 
 FORMAT = "etmpc-logistic-policy"
@@ -162,7 +162,12 @@ class LogisticPolicy:
         return self._keep_probability(self.phi(s))
 
     def _keep_probability(self, phi: np.ndarray) -> float:
-        return sigmoid(float(self.theta @ phi))
+        with np.errstate(over="ignore", invalid="ignore"):  # an infinite logit is a sure answer; NaN is not
+            logit = float(self.theta @ phi)
+        if math.isnan(logit):
+            raise PolicyFileError(f"the {self.domain} policy's decision value is not a number at this state "
+                                  "(its parameters overflow against the features): retrain it or check its file")
+        return sigmoid(logit)
 
     def decide(self, s: AugmentedState, rng: np.random.Generator) -> bool:
         phi = self.phi(s)
@@ -235,10 +240,5 @@ def load_policy(path: str | Path, domain: str | None = None, nx: int | None = No
 
 
 def write_json_atomically(path: Path, data: dict) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    with open(tmp, "w") as f:
-        json.dump(data, f)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
+    """``data`` as compact JSON (the shipped policy files' format), written atomically."""
+    write_text(path, json.dumps(data))

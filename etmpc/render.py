@@ -20,10 +20,12 @@ from fractions import Fraction
 from pathlib import Path
 
 import av
+import mujoco
 import numpy as np
 
 from etmpc.errors import EtmpcError
 from etmpc.loop import Trajectory
+from etmpc.outputs import atomic_path
 from etmpc.policies import parse_policy
 from etmpc.recording import Recorder
 from etmpc.systems import check_name
@@ -52,6 +54,26 @@ def check_size(width: int, height: int) -> None:
         raise ValueError(f"video size must be even and positive for H.264/yuv420p, got {width}x{height}")
 
 
+def check_display() -> None:
+    """An on-screen backend without a screen cannot render: said before any work (GLFW would
+    print warnings, then fail deep in MuJoCo)."""
+    backend = os.environ.get("MUJOCO_GL", "").lower().strip()
+    if backend in ("glfw", "glx") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        raise EtmpcError(f"MUJOCO_GL={backend} needs a display and DISPLAY is not set: render headless with MUJOCO_GL=egl")
+
+
+def _render(physics, height: int, width: int, camera: str) -> np.ndarray:
+    """``physics.render``, with a failure to make an OpenGL context said in one line."""
+    try:
+        return physics.render(height, width, camera_id=camera)
+    except (mujoco.FatalError, RuntimeError, ImportError, OSError, AttributeError) as exc:
+        # AttributeError: PyOpenGL without the platform library MUJOCO_GL asks for (osmesa, egl).
+        backend = os.environ.get("MUJOCO_GL", "")
+        reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise EtmpcError(f"cannot render with MUJOCO_GL={backend}: {reason} (headless machines need MUJOCO_GL=egl, "
+                         "or osmesa with libOSMesa installed)") from None
+
+
 def _frames(system, env, states: np.ndarray, width: int, height: int, camera: str) -> Iterator[np.ndarray]:
     check_scene(system.domain)
     physics = env.physics
@@ -60,7 +82,7 @@ def _frames(system, env, states: np.ndarray, width: int, height: int, camera: st
             raise ValueError(f"cannot render a non-finite state {x}")
         physics.set_state_vector(x)  # the inverse of Physics.state(), which the observation reports
         physics.forward()  # mj_forward: body poses (and cameras) for the new qpos
-        yield physics.render(height, width, camera_id=camera)
+        yield _render(physics, height, width, camera)
 
 
 def render_frames(system, env, states: np.ndarray, width: int = 640, height: int = 480,
@@ -84,11 +106,9 @@ def write_video(frames: Iterable[np.ndarray], path: str | Path, fps: float) -> i
         raise ValueError("no frames to write")
     height, width = np.shape(first)[:2]
     check_size(width, height)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.part")
     count = 0
-    try:
-        with av.open(tmp, "w", format="mp4") as container:
+    with atomic_path(path) as tmp:
+        with av.open(str(tmp), "w", format="mp4") as container:
             stream = container.add_stream("libx264", rate=Fraction(fps).limit_denominator(1001))
             stream.width, stream.height, stream.pix_fmt = width, height, "yuv420p"
             for frame in _chain(first, frames):
@@ -98,10 +118,6 @@ def write_video(frames: Iterable[np.ndarray], path: str | Path, fps: float) -> i
                 container.mux(stream.encode(av.VideoFrame.from_ndarray(frame, format="rgb24")))
                 count += 1
             container.mux(stream.encode())  # flush the encoder
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
     return count
 
 
@@ -118,6 +134,7 @@ def render_rollout(domain: str, policy_spec: str, episode: int, out: str | Path,
     With ``record``, also write the episode, its frames included, into that Rerun recording."""
     check_name(domain)
     check_scene(domain)
+    check_display()
     check_size(width, height)
     policy = parse_policy(policy_spec, context(domain, testset_path)[0].error_weights, domain)
     # An out-of-range index raises TestSetError (an EtmpcError) before anything is drawn.

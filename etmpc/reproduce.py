@@ -41,6 +41,7 @@ from etmpc.dpi import Settings as DpiSettings
 from etmpc.errors import EtmpcError
 from etmpc.evaluate import evaluate
 from etmpc.learned import write_json_atomically
+from etmpc.outputs import refuse_foreign, write_text
 from etmpc.systems import make_system
 from etmpc.train import TrainConfig, curve_summary, load_checkpoint, train
 
@@ -108,7 +109,7 @@ def reproduce(out: Path, settings: Settings = FULL, workers: int = 1, backend: s
         "wall_seconds_this_invocation": time.perf_counter() - started,
     }
     write_json_atomically(out / "results.json", results)
-    _write_text(out / "REPORT.md", report(results))
+    write_text(out / "REPORT.md", report(results))
     return results
 
 
@@ -123,6 +124,7 @@ def _check_settings(out: Path, settings: Settings, domains) -> None:
         if stored != wanted:
             raise EtmpcError(f"{out} holds a run with other settings ({stored['settings']}); use another --out")
     else:
+        refuse_foreign(out, lambda name: False, "reproduce run")  # a new run starts in a new or empty directory
         out.mkdir(parents=True, exist_ok=True)
         write_json_atomically(path, wanted)
 
@@ -528,8 +530,4 @@ def _say(line: str) -> None:
     print(line, file=sys.stderr, flush=True)
 
 
-def _write_text(path: Path, text: str) -> None:
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(text)
-    tmp.replace(path)
 

@@ -34,6 +34,7 @@ evaluation, as Rerun recordings (see ``etmpc.recording``).
 from __future__ import annotations
 
 import json
+import re
 import sys
 import time
 from dataclasses import asdict, dataclass, field
@@ -49,6 +50,7 @@ from etmpc.gpomdp import Learner, Settings
 from etmpc.learned import (DEFAULT_FEATURES, LogisticPolicy, Normalisation, PolicyFileError, check_features, raw_features,
                            write_json_atomically)
 from etmpc.loop import run_episode
+from etmpc.outputs import refuse_foreign
 from etmpc.policies import parse_policy
 from etmpc.recording import EpisodeRecord, Recorder
 from etmpc.systems import make_system
@@ -385,6 +387,14 @@ def write_curve_png(path: Path, summary: dict, seeds: int) -> None:
     save_png_atomically(fig, path, dpi=110)
 
 
+_OUTPUTS = {"checkpoint.json", "curve.json", "curve.png", "selected.json", "recordings"}
+
+
+def _ours(name: str) -> bool:
+    """What a training run writes in its directory."""
+    return name in _OUTPUTS or re.fullmatch(r"seed\d+", name) is not None
+
+
 def train(config: TrainConfig, out: Path, workers: int = 1, resume: bool = False, backend: str = "local",
           address: str | None = None, progress: bool = True, record_episodes: int = 0) -> RunState:
     """Train ``config`` into ``out`` (see the module docstring). With ``record_episodes``, each
@@ -394,6 +404,7 @@ def train(config: TrainConfig, out: Path, workers: int = 1, resume: bool = False
     if record_episodes < 0:
         raise EtmpcError(f"record episodes must be >= 0, got {record_episodes}")
     checkpoint = out / "checkpoint.json"
+    refuse_foreign(out, _ours, "training run")
     if checkpoint.exists():
         if not resume:
             raise EtmpcError(f"{out} already holds a training run; pass --resume to continue it, or choose another --out")
@@ -533,13 +544,19 @@ def _difference(a: TrainConfig, b: TrainConfig) -> str:
     return ", ".join(f"{k}: {da[k]} vs {db[k]}" for k in da if da[k] != db[k])
 
 
+MAX_SEEDS = 1000
+
+
 def parse_seeds(text: str) -> tuple[int, ...]:
     """``"0-4"`` -> (0, 1, 2, 3, 4); ``"1,3,7"``; ``"2"``."""
     seeds = []
     try:
         for part in text.split(","):
             lo, sep, hi = part.partition("-")
-            seeds += list(range(int(lo), int(hi) + 1)) if sep else [int(lo)]
+            lo, hi = int(lo), int(hi) if sep else int(lo)
+            if hi - lo + 1 + len(seeds) > MAX_SEEDS:
+                raise EtmpcError(f"bad --seeds {text!r}: at most {MAX_SEEDS} seeds")
+            seeds += range(lo, hi + 1)
     except ValueError:
         raise EtmpcError(f"bad --seeds {text!r}: use a range like 0-4 or a list like 0,2,5") from None
     if not seeds or min(seeds) < 0 or len(set(seeds)) != len(seeds):

@@ -14,7 +14,8 @@ import matplotlib.pyplot
 import numpy as np
 import pytest
 
-from etmpc import figures
+from etmpc import figures, outputs
+from etmpc.errors import EtmpcError
 from etmpc.evaluate import evaluate
 from etmpc.figures import forecast_figure
 from etmpc.learned import LogisticPolicy, Normalisation
@@ -281,8 +282,8 @@ def test_png_writers_are_atomic(tmp_path, cart_evaluations, battery_system, batt
         raise OSError(28, "No space left on device")
 
     before = (tmp_path / "traj.png").read_bytes()
-    monkeypatch.setattr(figures.os, "replace", fail)
-    with pytest.raises(OSError):
+    monkeypatch.setattr(outputs.os, "replace", fail)
+    with pytest.raises(EtmpcError, match="cannot write .*traj.png: No space left on device"):
         figures.write_trajectory_png(tmp_path / "traj.png", battery_system, traj, title="another")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["new", "traj.png"]  # the old file, whole; no temporary
     assert (tmp_path / "traj.png").read_bytes() == before
