@@ -157,6 +157,7 @@ def evaluate(
     parsed = {spec: parse_policy(spec, system.error_weights, system.domain, system.episode_steps) for spec in policies}
     path = testset_path or str(ts_mod.default_path(system.domain, system.task))
     testset = ts_mod.load(path, system.domain, system.task)
+    testset.check_playable(system, system.make_env().task)  # a bad episode fails here, before any work
     episodes = testset.episodes if episodes is None else episodes
     if not 1 <= episodes <= testset.episodes:
         raise ts_mod.TestSetError(f"--episodes must be in 1..{testset.episodes} for this test set, got {episodes}")

@@ -84,28 +84,61 @@ class TestSet:
             raise TestSetError(f"episode {index} is out of range: the test set has {self.episodes} (0..{self.episodes - 1})")
         return {name: values[index] for name, values in self.arrays.items()}
 
+    def check_playable(self, system, task) -> None:
+        """Raise :class:`TestSetError` unless every episode is one ``task`` (of ``system``) can
+        play: the arrays it needs, of the shapes it needs."""
+        for index in range(self.episodes):
+            try:
+                task.check_episode(system.episode_from_arrays(self.episode_arrays(index)))
+            except KeyError as exc:
+                raise TestSetError(f"test set {self.path} has no array {exc}") from None
+            except (ValueError, TypeError) as exc:
+                raise TestSetError(f"test set {self.path}, episode {index}: {exc}") from None
+
 
 def load(path: Path, domain: str, task: str) -> TestSet:
-    """Load and verify a test set; any problem raises :class:`TestSetError` with what to do."""
+    """Load and verify a test set; any problem raises :class:`TestSetError` with what to do.
+
+    Beyond its checksum (which only says the file is the one its ``.sha256`` describes), the
+    contents are checked: ``meta`` names the task and the number of episodes, and every array has
+    one row per episode. Whether each row is an episode the task can play is
+    :meth:`TestSet.check_playable`'s question."""
     path = Path(path)
-    regen = f"regenerate it with: python scripts/make_testset.py {domain}"
+    stored = path.resolve() == default_path(domain, task).resolve()
+    # Only the stored test set is regenerated from its seed; someone else's file is theirs to fix.
+    advice = (f"regenerate it with: python scripts/make_testset.py {domain}" if stored else
+              "use the stored test set (drop --test-set) or a complete one")
     if not path.is_file():
-        raise TestSetError(f"test set {path} not found; {regen}")
+        raise TestSetError(f"test set {path} not found; {advice}")
     expected_file = checksum_path(path)
     if not expected_file.is_file():
-        raise TestSetError(f"checksum file {expected_file} not found; {regen}")
-    expected = (expected_file.read_text().split() or [""])[0]
+        raise TestSetError(f"checksum file {expected_file} not found: a test set comes with the sha256 of its .npz "
+                           f"beside it; {advice}")
+    expected = (expected_file.read_text(errors="replace").split() or [""])[0]
     actual = sha256_of(path)
     if actual != expected:
-        raise TestSetError(f"test set {path} is corrupted: sha256 {actual[:12]}... != {expected[:12]}... in {expected_file.name}; {regen}")
+        raise TestSetError(f"test set {path} is corrupted: sha256 {actual[:12]}... != {expected[:12]}... in {expected_file.name}; {advice}")
     try:
         with np.load(path, allow_pickle=False) as data:
             arrays = {name: data[name] for name in data.files if name != "meta"}
             meta = json.loads(data["meta"].item())
-    except (OSError, ValueError, KeyError, zipfile.BadZipFile) as exc:
-        raise TestSetError(f"test set {path} cannot be read ({exc}); {regen}") from None
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
+        raise TestSetError(f"test set {path} cannot be read ({exc}); {advice}") from None
+    if not isinstance(meta, dict):
+        raise TestSetError(f"test set {path} has no description (meta); {advice}")
     if (meta.get("domain"), meta.get("task")) != (domain, task):
         raise TestSetError(f"test set {path} is for {meta.get('domain')}/{meta.get('task')}, not {domain}/{task}")
+    episodes = meta.get("episodes")
+    if not isinstance(episodes, int) or isinstance(episodes, bool) or episodes < 1:
+        raise TestSetError(f"test set {path} says it has {episodes!r} episodes; {advice}")
+    if not arrays:
+        raise TestSetError(f"test set {path} holds no episode arrays; {advice}")
+    for name, values in arrays.items():
+        if values.ndim < 1 or values.shape[0] != episodes:
+            raise TestSetError(f"test set {path}: array {name!r} has shape {values.shape}, not one row per each of its "
+                               f"{episodes} episodes; {advice}")
+        if values.dtype.kind not in "fiu" or not np.all(np.isfinite(values)):
+            raise TestSetError(f"test set {path}: array {name!r} is not all finite numbers; {advice}")
     return TestSet(path=path, sha256=actual, meta=meta, arrays=arrays)
 
 

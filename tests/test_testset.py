@@ -38,9 +38,15 @@ def copy(tmp_path, cart_testset):
     return target
 
 
-def test_missing_test_set(tmp_path):
-    with pytest.raises(TestSetError, match="not found.*make_testset.py cart_pendulum"):
+def test_missing_test_set(tmp_path, monkeypatch):
+    # Someone's own file: the advice is not to regenerate the stored set, which would not bring it back.
+    with pytest.raises(TestSetError, match="not found") as info:
         testset.load(tmp_path / "nope.npz", "cart_pendulum", "balance")
+    assert "make_testset" not in str(info.value)
+    # The stored one (here: where the stored one is looked for) is regenerated from its seed.
+    monkeypatch.setattr(testset, "default_path", lambda domain, task: tmp_path / "stored.npz")
+    with pytest.raises(TestSetError, match="not found.*make_testset.py cart_pendulum"):
+        testset.load(tmp_path / "stored.npz", "cart_pendulum", "balance")
 
 
 def test_corrupted_test_set(copy):
@@ -53,8 +59,35 @@ def test_corrupted_test_set(copy):
 
 def test_missing_checksum(copy):
     testset.checksum_path(copy).unlink()
-    with pytest.raises(TestSetError, match="checksum file"):
+    with pytest.raises(TestSetError, match="checksum file") as info:
         testset.load(copy, "cart_pendulum", "balance")
+    assert "make_testset" not in str(info.value)
+
+
+@pytest.mark.parametrize("change, message", [
+    (lambda a, m: ({**a, "disturbance": a["disturbance"][:2]}, m), "not one row per each"),
+    (lambda a, m: ({}, m), "no episode arrays"),
+    (lambda a, m: (a, dict(m, episodes=0)), "0 episodes"),
+    (lambda a, m: ({**a, "initial_state": np.full_like(a["initial_state"], np.inf)}, m), "not all finite"),
+])
+def test_contents_are_checked_not_only_the_checksum(tmp_path, cart_testset, change, message):
+    arrays = {k: np.array(v[:4]) for k, v in cart_testset.arrays.items()}
+    arrays, meta = change(arrays, dict(cart_testset.meta, episodes=4))
+    path = tmp_path / "ts.npz"
+    testset.write(path, arrays, meta)  # a matching checksum: only the contents are wrong
+    with pytest.raises(TestSetError, match=message):
+        testset.load(path, "cart_pendulum", "balance")
+
+
+def test_every_episode_must_be_playable(tmp_path, cart_testset, cart_system):
+    arrays = {k: np.array(v[:4]) for k, v in cart_testset.arrays.items()}
+    arrays["disturbance"] = arrays["disturbance"][:, :60]  # an episode is 100 steps
+    path = tmp_path / "ts.npz"
+    testset.write(path, arrays, dict(cart_testset.meta, episodes=4))
+    loaded = testset.load(path, "cart_pendulum", "balance")
+    with pytest.raises(TestSetError, match="episode 0: episode has 60 disturbances, need 100"):
+        loaded.check_playable(cart_system, cart_system.make_env().task)
+    cart_testset.check_playable(cart_system, cart_system.make_env().task)  # the stored one is
 
 
 def test_wrong_task(copy):
