@@ -30,6 +30,7 @@ each episode's figures from it with the same formulas as the live run.
 from __future__ import annotations
 
 import re
+import warnings
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -142,12 +143,20 @@ class Recorder:
         self.close(keep=exc_type is None)
 
     def close(self, keep: bool = True) -> None:
-        self._stream.flush()
-        self._stream.disconnect()
-        if keep:
-            self._tmp.replace(self.path)
-        else:
-            self._tmp.unlink(missing_ok=True)
+        try:
+            if keep:  # the end marker: a reader that does not find it knows the file was cut short
+                self._stream.log(END_MARKER, self._rr.AnyValues(episodes=self.episodes), static=True)
+            self._stream.flush()
+            self._stream.disconnect()
+            if keep:
+                self._tmp.replace(self.path)
+        except (OSError, RuntimeError) as exc:  # RuntimeError: Rerun's file writer gave up (a full disk)
+            keep = False
+            reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+            raise EtmpcError(f"cannot write {self.path}: {reason} (is the disk full?)") from None
+        finally:
+            if not keep:
+                self._tmp.unlink(missing_ok=True)
 
     def _policy_part(self, domain: str, policy: str) -> str:
         key = (domain, policy)
@@ -277,6 +286,7 @@ def blueprint(root: str, record: EpisodeRecord):
 
 
 # -- reading back ------------------------------------------------------------------------------------
+END_MARKER = "/etmpc_recording_end"  # static, logged last: {"episodes": how many the file holds}
 READ = {"objective": OBJECTIVE_SERIES, "decision": DECISION_SERIES, "prediction_error": ("prediction_error",)}
 
 
@@ -289,13 +299,22 @@ def read_recording(path: str | Path) -> dict[str, dict]:
     path = Path(path)
     if not path.is_file():
         raise EtmpcError(f"recording {path} not found")
-    try:
-        chunks = list(RrdReader(str(path)).stream())
-    except Exception as exc:  # the reader raises its own types for a file that is not a recording
-        raise EtmpcError(f"{path} is not a readable Rerun recording ({exc})") from None
+    with warnings.catch_warnings(record=True) as caught:  # said in the error below, not as a second line
+        warnings.simplefilter("always")
+        try:
+            chunks = list(RrdReader(str(path)).stream())
+        except Exception as exc:  # the reader raises its own types for a file that is not a recording
+            short = any("no footer" in str(w.message) for w in caught)
+            raise EtmpcError(f"recording {path} is cut short (no footer; {exc})" if short else
+                             f"{path} is not a readable Rerun recording ({exc})") from None
     episodes: dict[str, dict] = {}
     pieces: dict[tuple[str, str], list] = {}
+    end = None
     for chunk in chunks:
+        if str(chunk.entity_path) == END_MARKER and chunk.is_static:
+            batch = chunk.to_record_batch()
+            end = int(batch.column("episodes").to_pylist()[0][0])
+            continue
         root, _, leaf = str(chunk.entity_path).rpartition("/")
         if leaf != "identity" and leaf not in READ:
             continue
@@ -313,8 +332,11 @@ def read_recording(path: str | Path) -> dict[str, dict]:
         for j, name in enumerate(READ[leaf]):
             episodes.setdefault(root, {})[name] = (steps[order], values[order, j])
     complete = {root: data for root, data in episodes.items() if "identity" in data and "reward" in data}
-    if not complete:
-        raise EtmpcError(f"{path} holds no etmpc episodes")
+    if end is None:
+        raise EtmpcError(f"recording {path} is incomplete: it has no end marker (the file was cut short, or its "
+                         "run did not finish)" if complete else f"{path} holds no etmpc episodes")
+    if len(complete) != end:
+        raise EtmpcError(f"recording {path} is incomplete: {len(complete)} of its {end} episodes can be read")
     return complete
 
 
@@ -379,7 +401,8 @@ def format_replay(episodes: list[ReplayedEpisode], per_episode: bool = False) ->
     groups: dict[tuple[str, str], list[ReplayedEpisode]] = {}
     for e in episodes:
         groups.setdefault((e.domain, e.policy), []).append(e)
-    width = max([16] + [len(p) + 2 for _, p in groups])
+    labels = [f"  episode {e.episode} repeat {e.repeat}" for e in episodes] if per_episode else []
+    width = max([16] + [len(p) + 2 for _, p in groups] + [len(label) + 2 for label in labels])
     head = (f"{'policy':<{width}}{'episodes':>9}{'objective':>12}{'control':>11}{'recomputes':>12}"
             f"{'pred.err mean':>15}{'max':>10}{'at recompute':>14}")
     current = None
