@@ -13,12 +13,17 @@ Backends (``make_backend``):
 
 from __future__ import annotations
 
+import ctypes
 import logging
 import os
+import signal
 import socket
+import sys
+import threading
+import time
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
-from multiprocessing import get_context
+from multiprocessing.context import SpawnContext, SpawnProcess
 from typing import Any
 
 import numpy as np
@@ -44,7 +49,9 @@ def context(domain: str, testset_path: str | None = None, sha256: str | None = N
         if sha256 is not None and testset.sha256 != sha256:
             raise EtmpcError(f"test set {path} on this worker has sha256 {testset.sha256[:12]}…, the run uses "
                              f"{sha256[:12]}…: install the same etmpc on every worker")
-        _CONTEXTS[key] = (system, system.make_env(), testset)
+        env = system.make_env()
+        testset.check_playable(system, env.task)
+        _CONTEXTS[key] = (system, env, testset)
     return _CONTEXTS[key]
 
 
@@ -88,6 +95,46 @@ def default_workers() -> int:
     return max(1, len(os.sched_getaffinity(0)))
 
 
+class _QuietSpawnProcess(SpawnProcess):
+    """A spawned worker that ignores Ctrl-C from its first instruction: the disposition is set to
+    SIG_IGN around the fork and exec, and a Python that starts with SIGINT ignored keeps it so
+    (a worker still importing would otherwise print a KeyboardInterrupt traceback)."""
+
+    def start(self):
+        if threading.current_thread() is not threading.main_thread():
+            return super().start()
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        try:
+            return super().start()
+        finally:
+            signal.signal(signal.SIGINT, signal.default_int_handler if previous is None else previous)
+
+
+class _QuietSpawnContext(SpawnContext):
+    Process = _QuietSpawnProcess
+
+
+def die_with_parent(parent: int) -> None:
+    """Worker initialiser: end this process as soon as ``parent`` (the process that started it)
+    ends, however it ends (SIGTERM, SIGKILL, a crash), so no worker outlives its command. On Linux
+    the kernel sends SIGKILL (``PR_SET_PDEATHSIG``); everywhere, a watchdog thread also checks.
+    Ctrl-C is left to the parent."""
+    # Ctrl-C reaches the whole process group: the command stops its workers itself, which must
+    # not print a KeyboardInterrupt traceback each.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if sys.platform.startswith("linux"):
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # 1 = PR_SET_PDEATHSIG
+    if os.getppid() != parent:  # it died before that took effect
+        os._exit(1)
+
+    def watch():
+        while os.getppid() == parent:
+            time.sleep(0.5)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="die-with-parent", daemon=True).start()
+
+
 class LocalBackend:
     """Jobs in this process (``workers=1``) or a pool of spawned processes, results in job order."""
 
@@ -97,7 +144,8 @@ class LocalBackend:
 
     def __enter__(self):
         if self.workers > 1:
-            self._pool = ProcessPoolExecutor(self.workers, get_context("spawn"))
+            self._pool = ProcessPoolExecutor(self.workers, _QuietSpawnContext(), initializer=die_with_parent,
+                                             initargs=(os.getpid(),))
         return self
 
     def __exit__(self, *exc):
