@@ -1,27 +1,38 @@
 """Rerun recordings of episodes, and reading them back.
 
-One episode lives under ``/<domain>/<policy>/episode_<EEE>/repeat_<R>``, so several episodes and
-policies in one file stay apart. Under it:
+One episode lives under ``/<domain>/<policy>/episode_<EEE>/repeat_<R>`` (``<policy>``: the
+policy's label, its spec with a learned policy's file shortened to its stem: ``every:3``,
+``rl:learned``), so several episodes and policies in one file stay apart. Under it, every series
+is a Rerun time series on two timelines, ``step`` (sequence) and ``time`` (seconds since the
+episode started), and every series name carries its unit:
 
 - ``identity``: static values: domain, task, policy (its exact spec), test-set episode, repeat,
-  seed, test-set sha256, objective sense, price of a computation, control interval;
-- ``state`` (a series per state), ``input`` (planned, LQR correction and applied, per input) and
-  ``signal`` (the episode's exogenous inputs: disturbance, or price and net production): time
-  series, one entity each with a named series per column;
-- ``decision``: ``recompute`` (1 where a computation was spent) and ``forced``; ``events``: a text
-  log line per recompute;
+  seed, test-set sha256, objective sense, price of a computation, control interval; ``about``: a
+  static title line (policy, episode, objective, computations, how to read the plots);
+- ``realised/state/<name>``: the state, steps ``0..S``; ``realised/input/<name>``: the applied
+  input, with its lower and upper bounds as two more series; ``realised/signal/<name>``: the
+  episode's exogenous inputs (disturbance, or price and net production); ``correction/<name>``:
+  the LQR correction added to the plan;
+- ``plan/state/<name>``, ``plan/input/<name>``: every plan's prediction from the step it was made
+  (up to the episode's end), as time series on the same timelines; ``forecast/<signal>``: every
+  forecast a battery plan was made with, under the signal it forecasts. Each is one entity whose
+  series are "slots": a plan takes the first slot whose last plan ended two steps before it
+  starts, so the plans of a slot never overlap and a NaN row parts them. Each point is coloured
+  by when its plan was made (``etmpc.blueprint.plan_colours``);
+- ``decision``: ``recompute`` (1 where a computation was spent) and ``forced``, every step;
+  ``recompute``: the recomputes only, as points at the age of the plan each one replaced, a
+  series per kind (chosen by the policy, forced because the plan ran out, the first plan);
+  ``events``: a log line per recompute (why, the plan's age, the prediction error);
 - ``prediction_error``: ``‖W (x_i − x̂_i)‖`` against the plan in force before the step's decision
   (what the threshold policy compares; none at step 0, where there is no plan yet);
-- ``objective``: ``reward`` (the environment's, per step), ``computation`` (the price of the
-  step's computation) and ``running`` (the running objective, in its own sense);
-- ``plan/state/<name>`` and ``plan/input/<name>``: each new plan, at the step it was made, as a
-  line from that step into the future (x: time in seconds); ``forecast/<name>``: the forecasts a
-  battery plan was made with; ``realised/state/<name>``, ``realised/signal/<name>``: the whole
-  realised trajectory as a static line, to set the plans against.
+  ``threshold``: the threshold of a ``threshold:X`` policy;
+- ``objective/reward`` (the environment's, per step) and ``objective/running`` (the running
+  objective, computations included, in its own sense; a computation's price is the identity's
+  ``recompute_price`` times ``decision``'s ``recompute``).
 
-Two timelines: ``step`` (sequence) and ``time`` (seconds since the episode started). A blueprint
-for the first recorded episode ships in the file. The whole series of an episode goes in with
-``send_columns``, one call per entity.
+In one view, Rerun draws entities in the order of their paths: ``realised/…`` comes over
+``plan/…`` and ``forecast/…``. The file carries a blueprint (``etmpc.blueprint``): a tab per
+policy and episode. Each entity's whole series goes in with one ``send_columns`` call.
 
 ``read_recording`` reads a file back with Rerun's own reader, and ``replay_summary`` recomputes
 each episode's figures from it with the same formulas as the live run.
@@ -30,6 +41,7 @@ each episode's figures from it with the same formulas as the live run.
 from __future__ import annotations
 
 import re
+import threading
 import warnings
 from collections.abc import Iterable
 from dataclasses import dataclass, field
@@ -37,11 +49,10 @@ from pathlib import Path
 
 import numpy as np
 
+from etmpc import blueprint as look
 from etmpc.errors import EtmpcError
 
 APPLICATION_ID = "etmpc"
-# Column order of the multi-series entities.
-INPUT_SERIES = ("planned", "LQR correction", "applied")
 DECISION_SERIES = ("recompute", "forced")
 OBJECTIVE_SERIES = ("reward", "computation", "running")
 
@@ -64,6 +75,7 @@ class EpisodeRecord:
     prediction_error: np.ndarray  # (S,), NaN at step 0
     plans: list = field(default_factory=list)  # (step, states (N+1, nx), inputs (N, nu), forecasts {name: (N,)})
     signals: dict = field(default_factory=dict)  # name -> (>= S,)
+    input_bounds: tuple = ()  # (u_min (nu,), u_max (nu,)), or () if the system has none
 
     @property
     def steps(self) -> int:
@@ -72,6 +84,7 @@ class EpisodeRecord:
     @classmethod
     def from_trajectory(cls, system, traj, identity: dict, episode) -> EpisodeRecord:
         n = traj.steps
+        bounds = (getattr(system, "u_min", None), getattr(system, "u_max", None))
         return cls(
             identity=dict(identity, domain=system.domain, task=system.task, objective_sense=system.objective_sense,
                           recompute_price=float(system.recompute_price), control_interval_s=float(system.control_interval_s)),
@@ -88,6 +101,7 @@ class EpisodeRecord:
             prediction_error=prediction_errors(traj, system.error_weights),
             plans=[(k, p.states, p.inputs, {name: np.asarray(v) for name, v in p.forecasts.items()}) for k, p in traj.plans],
             signals={name: np.asarray(v, float) for name, v in system.signals(episode).items()},
+            input_bounds=() if None in bounds else tuple(np.asarray(b, float) for b in bounds),
         )
 
 
@@ -106,22 +120,23 @@ def prediction_errors(traj, error_weights) -> np.ndarray:
     return errors
 
 
-def slug(text: str) -> str:
-    """An entity-path part for a policy spec: ``every:3`` -> ``every_3``."""
-    return re.sub(r"[^A-Za-z0-9_]+", "_", text).strip("_") or "policy"
-
-
 def episode_root(identity: dict, policy_part: str) -> str:
     return f"/{identity['domain']}/{policy_part}/episode_{int(identity['episode']):03d}/repeat_{int(identity['repeat'])}"
 
 
+_ROOT = re.compile(r"^(.*/episode_\d+/repeat_\d+)/(.+)$")
+
+
 class Recorder:
     """Writes episodes into one ``.rrd`` file. The file appears under its name only once it is
-    complete: it is written beside it and renamed on ``close``."""
+    complete: it is written beside it and renamed on ``close``, after the blueprint (which needs
+    every episode) and an end marker.
+
+    Rerun (and the pandas that pyarrow loads on its first numpy array) takes a second or two to
+    import: a thread started here imports it while the caller plays its episodes, and the file is
+    opened when the first episode comes."""
 
     def __init__(self, path: str | Path):
-        import rerun as rr
-
         self.path = Path(path)
         if self.path.suffix != ".rrd":
             raise EtmpcError(f"a recording is a .rrd file, got {self.path}")
@@ -129,11 +144,19 @@ class Recorder:
             raise EtmpcError(f"{self.path} is a directory, not a file")
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._tmp = self.path.with_name(f".{self.path.name}.partial")
-        self._rr = rr
-        self._stream = rr.RecordingStream(APPLICATION_ID)
-        self._stream.save(self._tmp)
+        try:
+            self._tmp.touch()  # a path that cannot be written fails here, before any work
+        except OSError as exc:
+            raise EtmpcError(f"cannot write {self.path}: {exc.strerror or exc}") from None
+        self._imported: list = []
+        self._importer = threading.Thread(target=_import_rerun, args=(self._imported,), daemon=True)
+        self._importer.start()
+        self._rr = None
+        self._stream = None
         self._policy_parts: dict[tuple[str, str], str] = {}
-        self._blueprint_sent = False
+        self._styles: dict = {}
+        self._indexes: dict = {}
+        self.layouts: list[look.EpisodeLayout] = []
         self.episodes = 0
 
     def __enter__(self):
@@ -142,117 +165,248 @@ class Recorder:
     def __exit__(self, exc_type, *exc):
         self.close(keep=exc_type is None)
 
+    def _open(self):
+        if self._stream is None:
+            self._importer.join()
+            if isinstance(self._imported[0], BaseException):
+                raise self._imported[0]
+            self._rr = self._imported[0]
+            self._stream = self._rr.RecordingStream(APPLICATION_ID)
+            self._stream.save(self._tmp)
+        return self._rr, self._stream
+
     def close(self, keep: bool = True) -> None:
         try:
-            if keep:  # the end marker: a reader that does not find it knows the file was cut short
-                self._stream.log(END_MARKER, self._rr.AnyValues(episodes=self.episodes), static=True)
-            self._stream.flush()
-            self._stream.disconnect()
+            if keep:
+                rr, stream = self._open()
+                if self.layouts:
+                    stream.send_blueprint(look.blueprint(self.layouts))
+                # The end marker: a reader that does not find it knows the file was cut short.
+                stream.log(END_MARKER, rr.AnyValues(episodes=self.episodes), static=True)
+            if self._stream is not None:
+                self._stream.flush()
+                self._stream.disconnect()
             if keep:
                 self._tmp.replace(self.path)
         except (OSError, RuntimeError) as exc:  # RuntimeError: Rerun's file writer gave up (a full disk)
             keep = False
             reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
             raise EtmpcError(f"cannot write {self.path}: {reason} (is the disk full?)") from None
+        except BaseException:
+            keep = False
+            raise
         finally:
             if not keep:
                 self._tmp.unlink(missing_ok=True)
 
-    def _policy_part(self, domain: str, policy: str) -> str:
+    def _policy_part(self, domain: str, policy: str) -> tuple[str, str]:
+        """``(label, entity path part)`` of a policy spec: two specs with the same label stay apart."""
         key = (domain, policy)
         if key not in self._policy_parts:
-            part, taken = slug(policy), set(self._policy_parts.values())
-            i = 2
-            while part in taken:  # two specs with the same slug stay apart
-                part, i = f"{slug(policy)}_{i}", i + 1
-            self._policy_parts[key] = part
-        return self._policy_parts[key]
+            base = look.policy_label(policy)
+            taken = {name for (d, _), name in self._policy_parts.items() if d == domain}
+            name, i = base, 2
+            while name in taken:
+                name, i = f"{base} ({i})", i + 1
+            self._policy_parts[key] = name
+        name = self._policy_parts[key]
+        return name, self._rr.escape_entity_path_part(name.replace("/", "_"))  # one path part
+
+    def _style(self, kind: str, **fields):
+        """A static ``SeriesLines`` or ``SeriesPoints``, built once per look (they repeat from one
+        episode to the next, and building one costs more than logging it)."""
+        key = (kind, repr(sorted(fields.items())))
+        if key not in self._styles:
+            self._styles[key] = getattr(self._rr, kind)(**fields)
+        return self._styles[key]
+
+    def _steps(self, count: int, dt: float) -> list:
+        """The index of steps ``0..count-1`` (kept: most series share one)."""
+        key = (count, dt)
+        if key not in self._indexes:
+            self._indexes[key] = _timeline(np.arange(count), dt)
+        return self._indexes[key]
 
     def log_episode(self, record: EpisodeRecord, frames: Iterable[np.ndarray] | None = None) -> str:
         """Log one episode (and, optionally, rendered frames, one per state); returns its root path."""
-        rr, stream = self._rr, self._stream
+        rr, stream = self._open()
         identity = record.identity
-        root = episode_root(identity, self._policy_part(identity["domain"], identity["policy"]))
+        name, part = self._policy_part(identity["domain"], identity["policy"])
+        root = episode_root(identity, part)
         dt = identity["control_interval_s"]
         n = record.steps
-        state_index = _timeline(np.arange(n + 1), dt)
-        step_index = _timeline(np.arange(n), dt)
+        written: list[str] = []
+
+        def series(path, index, values, names, kind="SeriesLines", **style):
+            stream.send_columns(f"{root}/{path}", index, rr.Scalars.columns(scalars=np.asarray(values, float)))
+            stream.log(f"{root}/{path}", self._style(kind, names=list(names), **style), static=True)
+            written.append(path)
 
         stream.log(f"{root}/identity", rr.AnyValues(**identity), static=True)
-        # Series that share an index go in one entity, a column each: the index (row id, step,
-        # time) costs more than a value, so this keeps files small.
-        _series(stream, f"{root}/state", state_index, record.states, record.state_names)
-        for j, name in enumerate(record.state_names):
-            stream.log(f"{root}/realised/state/{name}", rr.LineStrips2D([np.c_[np.arange(n + 1) * dt, record.states[:, j]]]),
-                       static=True)
-        inputs = np.concatenate([record.planned, record.correction, record.applied], axis=1)
-        names = [f"{kind}: {name}" for kind in INPUT_SERIES for name in record.input_names]
-        _series(stream, f"{root}/input", step_index, inputs, names)
-        if record.signals:
-            signals = np.stack([values[:n] for values in record.signals.values()], axis=1)
-            _series(stream, f"{root}/signal", step_index, signals, list(record.signals))
-            for j, name in enumerate(record.signals):
-                stream.log(f"{root}/realised/signal/{name}", rr.LineStrips2D([np.c_[np.arange(n) * dt, signals[:, j]]]),
-                           static=True)
 
-        decisions = np.stack([record.recompute, record.forced], axis=1).astype(float)
-        _series(stream, f"{root}/decision", step_index, decisions, DECISION_SERIES, points=True)
-        events = np.flatnonzero(record.recompute)
-        if len(events):
-            text = ["first plan" if i == 0 else "forced recompute: the plan ran out" if record.forced[i] else "recompute"
-                    for i in events]
-            stream.send_columns(f"{root}/events", _timeline(events, dt), rr.TextLog.columns(text=text, level=["INFO"] * len(text)))
-        known = np.flatnonzero(np.isfinite(record.prediction_error))
-        _series(stream, f"{root}/prediction_error", _timeline(known, dt), record.prediction_error[known, None], ["‖W (x − x̂)‖"])
+        # What happened. Entities drawn in one view are drawn in the order of their paths, so
+        # ``realised/…`` comes over ``plan/…`` and ``forecast/…``.
+        realised = dict(colors=[look.REALISED], widths=[look.REALISED_WIDTH])
+        for j, s in enumerate(record.state_names):
+            series(f"realised/state/{s}", self._steps(n + 1, dt), record.states[:, j], [f"what happened [{look.unit(s)}]"],
+                   **realised)
+        for j, u in enumerate(record.input_names):
+            what = f"[{look.unit(u)}]"
+            if record.input_bounds:  # the bounds as two more series of the input, grey
+                lo, hi = (float(b[j]) for b in record.input_bounds)
+                values = np.column_stack([record.applied[:, j], np.full(n, lo), np.full(n, hi)])
+                series(f"realised/input/{u}", self._steps(n, dt), values, [f"applied {what}", f"lower bound {what}",
+                       f"upper bound {what}"], colors=[look.REALISED, look.BOUND, look.BOUND],
+                       widths=[look.REALISED_WIDTH, 1.0, 1.0])
+            else:
+                series(f"realised/input/{u}", self._steps(n, dt), record.applied[:, j], [f"applied {what}"], **realised)
+            series(f"correction/{u}", self._steps(n, dt), record.correction[:, j], [f"LQR correction {what}"], **realised)
+        forecasts = {look.signal_of_forecast(f, record.signals): f for f in (record.plans[0][3] if record.plans else {})}
+        forecasts.pop(None, None)
+        for s, values in record.signals.items():
+            series(f"realised/signal/{s}", self._steps(n, dt), values[:n],
+                   [f"true [{look.unit(s)}]" if s in forecasts else look.label(s)], **realised)
 
-        price = identity["recompute_price"] * record.recompute
-        sign = 1.0 if identity["objective_sense"] == "max" else -1.0
-        objective = np.stack([record.rewards, price, sign * np.cumsum(record.rewards - price)], axis=1)
-        _series(stream, f"{root}/objective", step_index, objective, OBJECTIVE_SERIES)
-
+        # The plans, as time series from the step each was made.
         if record.plans:
             made = np.array([k for k, *_ in record.plans])
-            plan_index = _timeline(made, dt)
-            states = np.stack([states for _, states, _, _ in record.plans])  # (P, N + 1, nx)
-            inputs = np.stack([inputs for _, _, inputs, _ in record.plans])  # (P, N, nu)
-            for j, name in enumerate(record.state_names):
-                stream.send_columns(f"{root}/plan/state/{name}", plan_index, _strips(made, states[:, :, j], dt))
-            for j, name in enumerate(record.input_names):
-                stream.send_columns(f"{root}/plan/input/{name}", plan_index, _strips(made, inputs[:, :, j], dt))
-            for name in record.plans[0][3]:
-                forecast = np.stack([f[name] for _, _, _, f in record.plans])  # (P, N)
-                stream.send_columns(f"{root}/forecast/{name}", plan_index, _strips(made, forecast, dt))
+            slots, n_slots = _slots(made, max(p[1].shape[0] for p in record.plans))
+            colours = look.plan_colours(made, n)
+            # Every slot drawn: the viewer shows only the first 20 series of an entity unless told.
+            plan_style = lambda what: self._style("SeriesLines", names=[what] * n_slots,  # noqa: E731
+                                                  widths=[look.PLAN_WIDTH] * n_slots, visible_series=[True] * n_slots)
+            fans = [(f"plan/state/{s}", np.stack([p[1][:, j] for p in record.plans]), n, f"each plan [{look.unit(s)}]")
+                    for j, s in enumerate(record.state_names)]
+            fans += [(f"plan/input/{u}", np.stack([p[2][:, j] for p in record.plans]), n - 1, f"each plan [{look.unit(u)}]")
+                     for j, u in enumerate(record.input_names)]
+            fans += [(f"forecast/{s}", np.stack([p[3][f] for p in record.plans]), n - 1, f"each forecast [{look.unit(s)}]")
+                     for s, f in forecasts.items()]
+            for path, values, last, what in fans:
+                stream.send_columns(f"{root}/{path}", self._steps(last + 1, dt), _fan(made, slots, n_slots, values, last, colours))
+                stream.log(f"{root}/{path}", plan_style(what), static=True)
+                written.append(path)
+
+        # The decisions.
+        decisions = np.stack([record.recompute, record.forced], axis=1).astype(float)
+        stream.send_columns(f"{root}/decision", self._steps(n, dt), rr.Scalars.columns(scalars=decisions))  # for replay
+        written.append("decision")
+        events = np.flatnonzero(record.recompute)
+        if len(events):
+            made_at = np.array([k for k, *_ in record.plans], dtype=np.int64)
+            previous = made_at[np.maximum(np.searchsorted(made_at, events) - 1, 0)] if len(made_at) else events
+            age = np.where(events > 0, events - previous, 0)
+            forced = record.forced[events] & (events > 0)  # step 0 is forced too (there is no plan yet): the first plan
+            # A series per kind of recompute, at the recomputes only (NaN: another kind), at the age
+            # of the plan each one replaced.
+            kinds = np.stack([(events > 0) & ~forced, forced, events == 0], axis=1)
+            series("recompute", _timeline(events, dt), np.where(kinds, age[:, None], np.nan),
+                   ["chosen by the policy", "forced: the plan ran out", "first plan"], kind="SeriesPoints",
+                   colors=[look.CHOSEN, look.FORCED, look.FIRST], markers=["circle", "cross", "diamond"],
+                   marker_sizes=[3.0, 4.5, 4.0])
+            error = record.prediction_error[events]
+            text = ["first plan" if i == 0 else
+                    f"{'FORCED, the plan ran out' if f else 'chosen by the policy'}: plan age {a}, ‖W (x − x̂)‖ {e:.4g}"
+                    for i, f, a, e in zip(events, forced, age, error)]
+            stream.send_columns(f"{root}/events", _timeline(events, dt),
+                                rr.TextLog.columns(text=text, level=["WARN" if f else "INFO" for f in forced]))
+            written.append("events")
+        known = np.flatnonzero(np.isfinite(record.prediction_error))
+        series("prediction_error", _timeline(known, dt), record.prediction_error[known], ["‖W (x − x̂)‖"], **realised)
+        threshold = re.fullmatch(r"threshold:(.+)", identity["policy"])
+        if threshold:
+            x = float(threshold.group(1))
+            series("threshold", _timeline(np.array([0, n - 1]), dt), np.array([x, x]), [f"threshold {x:g}"],
+                   colors=[look.BOUND], widths=[1.0])
+
+        # The objective.
+        price = identity["recompute_price"] * record.recompute
+        sign = 1.0 if identity["objective_sense"] == "max" else -1.0
+        running = sign * np.cumsum(record.rewards - price)
+        series("objective/reward", self._steps(n, dt), record.rewards, ["reward"], **realised)
+        series("objective/running", self._steps(n, dt), running,
+               [f"running {'profit (higher' if sign > 0 else 'cost (lower'} is better)"], **realised)
 
         if frames is not None:
             for i, frame in enumerate(frames):
                 stream.set_time("step", sequence=i)
                 stream.set_time("time", duration=i * dt)
                 stream.log(f"{root}/camera", rr.Image(frame).compress(jpeg_quality=85))
+            written.append("camera")
 
-        if not self._blueprint_sent:
-            stream.send_blueprint(blueprint(root, record))
-            self._blueprint_sent = True
+        stream.log(f"{root}/about", rr.TextDocument(_about(name, record, running[-1] if n else 0.0), media_type="text/markdown"),
+                   static=True)
+        y_ranges = {}
+        for s in forecasts:
+            lo, hi = float(np.min(record.signals[s][:n])), float(np.max(record.signals[s][:n]))
+            pad = 0.1 * (hi - lo) or 0.1 * abs(hi) or 1.0
+            y_ranges[s] = (lo - pad, hi + pad)
+        self.layouts.append(look.EpisodeLayout(
+            root=root, domain=identity["domain"], policy=name, episode=int(identity["episode"]),
+            repeat=int(identity["repeat"]), steps=n, control_interval_s=dt, states=record.state_names,
+            inputs=record.input_names, signals=tuple(s for s in record.signals if s not in forecasts),
+            forecast_signals=tuple(s for s in record.signals if s in forecasts), entities=frozenset(written), y_ranges=y_ranges))
         self.episodes += 1
         return root
 
 
-def _series(stream, entity: str, index: list, values: np.ndarray, names, points: bool = False) -> None:
+def _import_rerun(out: list) -> None:
+    """Import Rerun and warm pyarrow up (it imports pandas on its first numpy array); ``out``
+    receives the module, or the exception."""
+    try:
+        import pyarrow as pa
+        import rerun as rr
+        import rerun.blueprint  # noqa: F401
+
+        pa.array(np.zeros(1, dtype=np.int64))
+        out.append(rr)
+    except BaseException as exc:  # handed to the thread that needs Rerun
+        out.append(exc)
+
+
+def _about(name: str, record: EpisodeRecord, objective: float) -> str:
+    """The episode's title line (Markdown)."""
+    identity = record.identity
+    spec = identity["policy"]
+    bound = " (an upper bound, not a policy)" if identity.get("upper_bound") else ""
+    sense = "profit: higher" if identity["objective_sense"] == "max" else "cost: lower"
+    forced = int(record.forced[1:].sum())
+    return (f"**{name}**{bound} · {identity['domain']} · **test-set episode {identity['episode']}**"
+            + (f", repeat {identity['repeat']}" if identity["repeat"] else "")
+            + f" · objective **{objective:.5g}** {look.OBJECTIVE_UNITS.get(identity['domain'], '')} ({sense} is better)"
+            f" · {int(record.recompute.sum())} computations, {forced} forced · seed {identity['seed']}"
+            + (f" · policy `{spec}`" if spec != name else "") + "  \n"
+            "Orange: what happened. Thin lines: each plan's prediction from the step it was made, coloured by when: "
+            f"blue (early) → violet → teal → green (late). A step is {identity['control_interval_s']:g} s.")
+
+
+def _slots(made: np.ndarray, length: int) -> tuple[np.ndarray, int]:
+    """A series ("slot") per plan: the first slot whose last plan ended at least two steps before
+    this one starts, so that a NaN row parts two plans of one slot. ``length``: a plan's points."""
+    ends: list[int] = []
+    slots = np.empty(len(made), dtype=np.int64)
+    for p, k in enumerate(made):
+        s = next((s for s, end in enumerate(ends) if end + 1 < k), len(ends))
+        if s == len(ends):
+            ends.append(0)
+        ends[s] = int(k) + length - 1
+        slots[p] = s
+    return slots, len(ends)
+
+
+def _fan(made, slots, n_slots: int, values: np.ndarray, last: int, colours) -> list:
+    """The columns of plans ``values (P, L)``, each from the step it was made, as ``n_slots``
+    series over steps ``0..last`` (NaN where a slot has no plan), each point coloured by its plan."""
     import rerun as rr
 
-    stream.send_columns(entity, index, rr.Scalars.columns(scalars=np.asarray(values, float)))
-    style = rr.SeriesPoints(names=list(names), marker_sizes=[3.0] * len(names)) if points else rr.SeriesLines(names=list(names))
-    stream.log(entity, style, static=True)
-
-
-def _strips(made: np.ndarray, values: np.ndarray, dt: float):
-    """A line per row of ``values (P, L)``, from the step it was made at into the future: points
-    ``((k + j) dt, values[p, j])``."""
-    import rerun as rr
-
-    points = np.empty(values.shape + (2,), dtype=np.float32)
-    points[..., 0] = (made[:, None] + np.arange(values.shape[1])) * dt
-    points[..., 1] = values
-    return rr.LineStrips2D.columns(strips=points)  # a 3-D array takes Rerun's numpy fast path
+    rows = made[:, None] + np.arange(values.shape[1])
+    keep = rows <= last
+    cols = np.broadcast_to(slots[:, None], rows.shape)[keep]
+    grid = np.full((last + 1, n_slots), np.nan)
+    grid[rows[keep], cols] = values[keep]
+    paint = np.zeros((last + 1, n_slots), dtype=np.uint32)
+    paint[rows[keep], cols] = np.broadcast_to(colours[:, None], rows.shape)[keep]
+    return [*rr.Scalars.columns(scalars=grid),
+            *rr.SeriesLines.columns(colors=paint.ravel()).partition(np.full(last + 1, n_slots))]
 
 
 def _timeline(steps: np.ndarray, dt: float) -> list:
@@ -264,30 +418,12 @@ def _timeline(steps: np.ndarray, dt: float) -> list:
             rr.TimeColumn("time", duration=(steps * round(dt * 1e9)).astype("timedelta64[ns]"))]
 
 
-def blueprint(root: str, record: EpisodeRecord):
-    """The layout the file opens in: one episode's series on the left, its plans against what
-    happened on the right."""
-    import rerun.blueprint as rrb
-
-    series = [
-        rrb.TimeSeriesView(name="state", origin=f"{root}/state"),
-        rrb.TimeSeriesView(name="input: planned, LQR correction, applied", origin=f"{root}/input"),
-        rrb.TimeSeriesView(name="prediction error and recomputes", contents=[f"{root}/prediction_error", f"{root}/decision"]),
-        rrb.TimeSeriesView(name="reward, computation, running objective", origin=f"{root}/objective"),
-    ]
-    if record.signals:
-        series.append(rrb.TimeSeriesView(name="exogenous signals", origin=f"{root}/signal"))
-    plans = [rrb.Spatial2DView(name=f"plans: {name}", contents=[f"{root}/plan/state/{name}", f"{root}/realised/state/{name}"])
-             for name in record.state_names]
-    plans += [rrb.Spatial2DView(name=f"forecasts: {name}", contents=[f"{root}/forecast/{name}", f"{root}/realised/signal/{name}"])
-              for name in (record.plans[0][3] if record.plans else {})]
-    right = plans + [rrb.TextLogView(name="recompute events", origin=f"{root}/events")]
-    return rrb.Blueprint(rrb.Horizontal(rrb.Vertical(*series), rrb.Vertical(*right)), collapse_panels=True)
-
-
 # -- reading back ------------------------------------------------------------------------------------
 END_MARKER = "/etmpc_recording_end"  # static, logged last: {"episodes": how many the file holds}
-READ = {"objective": OBJECTIVE_SERIES, "decision": DECISION_SERIES, "prediction_error": ("prediction_error",)}
+# Entity (relative to its episode's root) -> the series it holds, in column order. ``objective``
+# with three columns is how files written before the objective's series were split hold them.
+READ = {"objective/reward": ("reward",), "objective/running": ("running",),
+        "objective": OBJECTIVE_SERIES, "decision": DECISION_SERIES, "prediction_error": ("prediction_error",)}
 
 
 def read_recording(path: str | Path) -> dict[str, dict]:
@@ -315,7 +451,10 @@ def read_recording(path: str | Path) -> dict[str, dict]:
             batch = chunk.to_record_batch()
             end = int(batch.column("episodes").to_pylist()[0][0])
             continue
-        root, _, leaf = str(chunk.entity_path).rpartition("/")
+        found = _ROOT.match(str(chunk.entity_path))
+        if found is None:
+            continue
+        root, leaf = found.groups()
         if leaf != "identity" and leaf not in READ:
             continue
         batch = chunk.to_record_batch()
