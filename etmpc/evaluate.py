@@ -18,7 +18,7 @@ from tqdm import tqdm
 from etmpc import testset as ts_mod
 from etmpc.policies import parse_policy
 from etmpc.recording import EpisodeRecord, Recorder
-from etmpc.systems import make_system
+from etmpc.systems import make_system, system_key
 from etmpc.workers import default_workers, make_backend, play_test_episode
 
 
@@ -124,6 +124,7 @@ class Evaluation:
     seed: int
     summaries: list[PolicySummary]
     runs: list[RunResult]
+    recompute_price: float = math.nan  # the price of a computation in every objective here
 
     def to_json(self) -> dict:
         return {
@@ -131,6 +132,7 @@ class Evaluation:
             "task": self.task,
             "test_set": {"path": self.testset_path, "sha256": self.testset_sha256},
             "seed": self.seed,
+            "recompute_price": self.recompute_price,
             "policies": {s.policy: asdict(s) for s in self.summaries},
             "runs": [asdict(r) for r in self.runs],
         }
@@ -148,11 +150,14 @@ def evaluate(
     backend: str = "local",
     address: str | None = None,
     record: str | Path | None = None,
+    recompute_price: float | None = None,
 ) -> Evaluation:
     """Run every policy on the first ``episodes`` test-set episodes, ``repeats`` times each, on
     ``workers`` processes of ``backend`` (see ``etmpc.workers.make_backend``). With ``record``, also
-    write every episode into that Rerun recording (``.rrd``)."""
-    system = make_system(domain)
+    write every episode into that Rerun recording (``.rrd``). ``recompute_price``: the price of a
+    computation, if not the system's own (it enters every objective, and what rollouts optimise)."""
+    key = system_key(domain, recompute_price)
+    system = make_system(key)
     # Parsed once here (a bad spec fails before any work starts), then sent with each job.
     parsed = {spec: parse_policy(spec, system.error_weights, system.domain, system.episode_steps) for spec in policies}
     path = testset_path or str(ts_mod.default_path(system.domain, system.task))
@@ -167,7 +172,7 @@ def evaluate(
     # Workers find the stored test set themselves (a cluster node's install may live elsewhere) and
     # check that its digest is the one verified here.
     recorder = Recorder(record) if record is not None else None  # a bad path fails before any work
-    jobs = [(domain, testset_path, testset.sha256, spec, parsed[spec], r, e, seed, recorder is not None)
+    jobs = [(key, testset_path, testset.sha256, spec, parsed[spec], r, e, seed, recorder is not None)
             for spec in policies for r in range(repeats) for e in range(episodes)]
     try:
         outcomes = run_jobs(jobs, workers, progress, backend, address)
@@ -184,7 +189,8 @@ def evaluate(
     summaries = [
         summarise(spec, [r for r in runs if r.policy == spec], system.objective_sense, episodes, repeats) for spec in policies
     ]
-    return Evaluation(system.domain, system.task, str(testset.path.resolve()), testset.sha256, seed, summaries, runs)
+    return Evaluation(system.domain, system.task, str(testset.path.resolve()), testset.sha256, seed, summaries, runs,
+                      system.recompute_price)
 
 
 def format_table(evaluation: Evaluation) -> str:
@@ -194,7 +200,7 @@ def format_table(evaluation: Evaluation) -> str:
     head = f"{'policy':<{width}}{'objective':>12}{'± std':>10}{'control':>11}{'recomputes':>12}{'failures':>10}{'non-finite':>12}"
     lines = [
         f"{evaluation.domain}/{evaluation.task}: objective ({'lower' if sense == 'min' else 'higher'} is better), "
-        f"test set {evaluation.testset_sha256[:12]}",
+        f"test set {evaluation.testset_sha256[:12]}, {evaluation.recompute_price:g} per computation",
         head,
         "-" * len(head),
     ]

@@ -6,7 +6,8 @@ the plan was made from, and the plan's age. The plan's prediction ``x_hat_i`` is
 forces a recompute whatever the policy says.
 
 Specs (``parse_policy``): ``always``, ``never``, ``every:T`` (T >= 1), ``threshold:X`` (X >= 0),
-``rl:PATH`` (a learned policy saved by ``etmpc train``, see :mod:`etmpc.learned`), and the policies
+``rl:PATH`` (a learned policy saved by ``etmpc train``, see :mod:`etmpc.learned`), ``self:PATH`` (a
+self-triggering policy, see :mod:`etmpc.selftrigger`), and the policies
 that simulate futures (see :mod:`etmpc.rollout`): ``rollout:BASE[:K[:H]]`` and the upper bound
 ``oracle:BASE``.
 """
@@ -138,11 +139,17 @@ def parse_policy(spec: str, error_weights: np.ndarray, domain: str | None = None
         if not (math.isfinite(level) and level >= 0):
             raise EtmpcError(f"bad policy {spec!r}: the threshold must be a finite number >= 0")
         return Threshold(level, np.asarray(error_weights, dtype=float))
+    if name == "self":
+        if not arg:
+            raise EtmpcError(f"bad policy {spec!r}: give the policy file, self:PATH")
+        from etmpc.selftrigger import load_self
+
+        return load_self(arg, domain)
     if name == "rl":
         if not arg:
             raise EtmpcError(f"bad policy {spec!r}: give the policy file, rl:PATH")
         from etmpc.learned import load_policy
 
         return load_policy(arg, domain, nx=len(error_weights))
-    raise UnknownNameError(f"unknown policy {spec!r}; valid: always, never, every:T, threshold:X, rl:PATH, "
+    raise UnknownNameError(f"unknown policy {spec!r}; valid: always, never, every:T, threshold:X, rl:PATH, self:PATH, "
                            "rollout:BASE[:K[:H]], oracle:BASE")

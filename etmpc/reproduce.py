@@ -94,20 +94,32 @@ QUICK = Settings(episodes=30, eval_every=15, eval_episodes=10, test_episodes=20,
 
 
 def reproduce(out: Path, settings: Settings = FULL, workers: int = 1, backend: str = "local",
-              address: str | None = None, domains=DOMAINS, progress: bool = True) -> dict:
-    """Run (or continue) every stage into ``out``; returns ``results.json``'s content."""
+              address: str | None = None, domains=DOMAINS, progress: bool = True, sweep: bool = False) -> dict:
+    """Run (or continue) every stage into ``out``; returns ``results.json``'s content. With
+    ``sweep``, also the price sweep of each system (``out/sweep/<task>``, see
+    :mod:`etmpc.experiments.sweep`) and its equal-rate answer in the report."""
+    from etmpc.experiments import sweep as sweeps
+
     out = Path(out)
     started = time.perf_counter()
+    sweep_settings = {d: sweeps.SweepSettings.default(d, quick=settings.smoke) for d in domains} if sweep else {}
+    for domain, chosen in sweep_settings.items():  # checked before any work
+        sweeps.check_directory(out / "sweep" / domain, domain, chosen)
     _check_settings(out, settings, domains)
     run = dict(workers=workers, backend=backend, address=address)
     systems = {}
     for domain in domains:
         systems[domain] = _system(out / domain, domain, settings, run, progress)
+    paretos = {}
+    for domain, chosen in sweep_settings.items():
+        paretos[domain] = sweeps.sweep(domain, out / "sweep" / domain, chosen, workers, backend, address, progress, say=_say)
     results = {
         "format": "etmpc-reproduce", "version": 1, "settings": settings.to_json(), "systems": systems,
         "software": software_versions(), "machine": machine(),
         "wall_seconds_this_invocation": time.perf_counter() - started,
     }
+    if paretos:
+        results["sweep"] = paretos
     write_json_atomically(out / "results.json", results)
     write_text(out / "REPORT.md", report(results))
     return results
@@ -129,7 +141,7 @@ def _check_settings(out: Path, settings: Settings, domains) -> None:
         write_json_atomically(path, wanted)
 
 
-def _evaluated(path: Path, timed: int | None = None, **kwargs) -> dict:
+def evaluated_once(path: Path, timed: int | None = None, **kwargs) -> dict:
     """An evaluation's JSON, made once: a complete file from an earlier invocation is reused. With
     ``timed`` (the number of workers), its wall time and that number are kept in the file."""
     if path.exists():
@@ -150,7 +162,7 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
     common = dict(domain=domain, episodes=settings.test_episodes, workers=run["workers"], backend=run["backend"],
                   address=run["address"], progress=progress)
     _say(f"{domain}: fixed policies")
-    baselines = _evaluated(folder / "baselines.json", policies=BASELINES[domain], **common)
+    baselines = evaluated_once(folder / "baselines.json", policies=BASELINES[domain], **common)
 
     _say(f"{domain}: training {len(settings.seeds)} seeds x {settings.episodes} episodes")
     config = TrainConfig(domain, settings.seeds, settings.episodes, settings.eval_every, settings.eval_episodes)
@@ -161,7 +173,7 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
 
     _say(f"{domain}: the learned policies, {settings.repeats} passes")
     learned_specs = [f"rl:{train_dir / f'seed{s}' / 'last.json'}" for s in settings.seeds]
-    learned = _evaluated(folder / "learned.json", policies=learned_specs, repeats=settings.repeats, **common)
+    learned = evaluated_once(folder / "learned.json", policies=learned_specs, repeats=settings.repeats, **common)
 
     _say(f"{domain}: the default learner (DPI), {len(settings.dpi_seeds)} seeds x {settings.dpi_episodes} episodes")
     dpi_config = TrainConfig(domain, settings.dpi_seeds, settings.dpi_episodes, settings.dpi_eval_every, settings.eval_episodes,
@@ -174,7 +186,7 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
     shipped = folder.parent / "policies" / domain / "learned.json"
     if not shipped.exists():
         write_json_atomically(shipped, json.loads((dpi_dir / "selected.json").read_text()))
-    default = _evaluated(folder / "learned_default.json", policies=[f"rl:{shipped}"], **common)
+    default = evaluated_once(folder / "learned_default.json", policies=[f"rl:{shipped}"], **common)
 
     summary = summarise_system(system, baselines, learned, curve_summary(state))
     best = summary["best_fixed"]["policy"]
@@ -182,8 +194,8 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
     _say(f"{domain}: headroom, rollout and oracle over {best} on {settings.rollout_episodes} episodes")
     rollout_spec = f"rollout:{best}:{settings.rollout_futures}" + (f":{settings.rollout_horizon}" if settings.rollout_horizon else "")
     subset = dict(common, episodes=settings.rollout_episodes)
-    rollout = _evaluated(folder / "headroom_rollout.json", timed=run["workers"], policies=[rollout_spec], **subset)
-    oracle = _evaluated(folder / "headroom_oracle.json", timed=run["workers"], policies=[f"oracle:{best}"], **subset)
+    rollout = evaluated_once(folder / "headroom_rollout.json", timed=run["workers"], policies=[rollout_spec], **subset)
+    oracle = evaluated_once(folder / "headroom_oracle.json", timed=run["workers"], policies=[f"oracle:{best}"], **subset)
     summary["default_learner"] = summarise_default(system, baselines, default, load_checkpoint(dpi_dir / "checkpoint.json"))
     summary["headroom"] = summarise_headroom(system, best, baselines, learned, default, rollout, oracle)
 
@@ -437,6 +449,12 @@ def report(results: dict) -> str:
             f"Files: {', '.join(f'`{v}`' for v in r['files'].values())}.",
             "",
         ]
+    if results.get("sweep"):
+        from etmpc.experiments.sweep import report_section
+
+        lines += ["# Beyond the paper: the trade-off curve", ""]
+        for domain, pareto in results["sweep"].items():
+            lines += report_section(pareto) + ["", f"![trade-off](sweep/{domain}/pareto.png)", ""]
     lines += ["## Against the paper", ""]
     lines += (["No verdicts in a smoke run."] if s.get("smoke") else against_the_paper(results)) + [""]
     lines += ["## Software and machine", "", "| package | version |", "|---|---|"]

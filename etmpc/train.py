@@ -53,7 +53,7 @@ from etmpc.loop import run_episode
 from etmpc.outputs import refuse_foreign
 from etmpc.policies import parse_policy
 from etmpc.recording import EpisodeRecord, Recorder
-from etmpc.systems import make_system
+from etmpc.systems import make_system, system_key
 from etmpc.workers import context, make_backend, play_test_episode
 
 TRAIN_ENTROPY = 0x6574_6D70_6321  # "etmpc!"
@@ -80,6 +80,7 @@ class TrainConfig:
     algorithm: str = "gpomdp"  # "gpomdp" or "dpi"
     dpi: dpi.Settings = field(default_factory=dpi.Settings)  # used when algorithm == "dpi"
     validation_episodes: int = 50  # training-distribution episodes that choose selected.json
+    recompute_price: float | None = None  # the price of a computation to train for (None: the system's)
 
     def __post_init__(self):
         if not self.seeds or len(set(self.seeds)) != len(self.seeds):
@@ -90,6 +91,12 @@ class TrainConfig:
         check_features(self.features)
         if self.algorithm not in ALGORITHMS:
             raise EtmpcError(f"unknown algorithm {self.algorithm!r}; valid: {', '.join(ALGORITHMS)}")
+        system_key(self.domain, self.recompute_price)  # a bad price fails here
+
+    @property
+    def system(self) -> str:
+        """The key workers build the system by: the domain, at ``recompute_price`` if one is set."""
+        return system_key(self.domain, self.recompute_price)
 
     def to_json(self) -> dict:
         data = asdict(self)
@@ -103,6 +110,7 @@ class TrainConfig:
         data["seeds"] = tuple(data["seeds"])
         data["gpomdp"] = Settings(**data["gpomdp"])
         data.setdefault("features", "paper")  # checkpoints from before feature sets
+        data.setdefault("recompute_price", None)  # checkpoints from before prices
         dpi_settings = dict(data.get("dpi", {}))
         if "bases" in dpi_settings:
             dpi_settings["bases"] = tuple(dpi_settings["bases"])
@@ -134,7 +142,7 @@ class _Coin:
 def normalisation_states(domain: str, index: int, features: str = "paper") -> np.ndarray:
     system, env, _ = context(domain)
     rng = np.random.default_rng(np.random.SeedSequence(NORMALISATION_ENTROPY, spawn_key=(index, 0)))
-    coin = _Coin(features, domain)
+    coin = _Coin(features, system.domain)
     run_episode(system, env, coin, np.random.default_rng(np.random.SeedSequence(NORMALISATION_ENTROPY, spawn_key=(index, 1))),
                 system.draw_episode(rng))
     return np.array(coin.states)
@@ -214,8 +222,15 @@ def training_return(domain: str, policy, entropy: int, index: int) -> float:
 
 
 def _policy(system, policy):
-    """A policy from its spec (a fixed policy) or its JSON (a logistic policy being trained)."""
-    return parse_policy(policy, system.error_weights, system.domain) if isinstance(policy, str) else LogisticPolicy.from_json(policy)
+    """A policy from its spec (a fixed policy) or its JSON (a logistic policy being trained, or a
+    self-trigger being chosen)."""
+    if isinstance(policy, str):
+        return parse_policy(policy, system.error_weights, system.domain)
+    from etmpc import selftrigger
+
+    if policy.get("format") == selftrigger.FORMAT:
+        return selftrigger.from_json(policy, "candidate", system.domain)
+    return LogisticPolicy.from_json(policy)
 
 
 def _call(job):
@@ -251,7 +266,7 @@ class RunState:
 
     @cached_property
     def objective_sense(self) -> str:
-        return make_system(self.config.domain).objective_sense
+        return make_system(self.config.system).objective_sense
 
     @property
     def done(self) -> int:
@@ -297,7 +312,7 @@ def _evaluate_phase(state: RunState, backend, progress, testset: tuple[int, str]
             return None
         return {"policy": f"seed{seed}/episodes{done:05d}", "training_seed": seed, "training_episodes": done}
 
-    jobs = [("evaluate", (config.domain, sha256, _policy_at(state, state.learners[str(s)]["theta"]), r, e, identity(s, e)))
+    jobs = [("evaluate", (config.system, sha256, _policy_at(state, state.learners[str(s)]["theta"]), r, e, identity(s, e)))
             for s in config.seeds for r in range(config.eval_repeats) for e in range(testset_n)]
     results = backend.map(_call, jobs, progress)
     records = [c[3] for c in results if c[3] is not None]
@@ -422,17 +437,19 @@ def train(config: TrainConfig, out: Path, workers: int = 1, resume: bool = False
     with make_backend(backend, workers, address) as pool, _Progress(total, f"train {config.domain}", progress) as bar:
         tick = lambda job: bar.update(job[1][5] - job[1][4] if job[0] == "train" else 1 if job[0] != "score" else 0)  # noqa: E731
         if state is None:
-            states = pool.map(_call, [("normalisation", (config.domain, i, config.features)) for i in range(config.normalisation_episodes)])
+            states = pool.map(_call, [("normalisation", (config.system, i, config.features)) for i in range(config.normalisation_episodes)])
             normalisation = Normalisation.fit(np.concatenate(states))
             hyper = {"algorithm": config.algorithm, "features": config.features,
                      "normalisation_episodes": config.normalisation_episodes}
+            if config.recompute_price is not None:  # trained for another price than the system's own
+                hyper["recompute_price"] = config.recompute_price
             if config.algorithm == "gpomdp":
                 hyper.update(discount=config.gpomdp.discount, learning_rate=config.gpomdp.learning_rate, baseline=config.gpomdp.baseline)
             else:
                 hyper.update(asdict(config.dpi), bases=list(config.dpi.bases))
             initial = LogisticPolicy.initial(normalisation, config.domain, hyper, config.features, greedy=config.algorithm == "dpi")
             if config.algorithm == "gpomdp":
-                learner = _learner_to_json(Learner.start(initial.theta, config.gpomdp, context(config.domain)[0].episode_steps))
+                learner = _learner_to_json(Learner.start(initial.theta, config.gpomdp, context(config.system)[0].episode_steps))
                 base = None
             else:
                 learner = {"theta": initial.theta.tolist(), "episodes": 0, "iterations": 0, "data": []}
@@ -449,7 +466,7 @@ def train(config: TrainConfig, out: Path, workers: int = 1, resume: bool = False
             if stop <= state.done:
                 continue
             if config.algorithm == "gpomdp":
-                jobs = [("train", (config.domain, state.policy, state.learners[str(s)], s, start, stop)) for s in config.seeds]
+                jobs = [("train", (config.system, state.policy, state.learners[str(s)], s, start, stop)) for s in config.seeds]
                 for seed, (learner, stats) in zip(config.seeds, pool.map(_call, jobs, tick)):
                     state.learners[str(seed)] = learner
                     state.training += [dict(s, seed=seed) for s in stats]
@@ -460,7 +477,7 @@ def train(config: TrainConfig, out: Path, workers: int = 1, resume: bool = False
             _report(state, summary["points"][-1], started, bar, resumed_from)
         if not state.validation:
             policies = [_policy_at(state, state.learners[str(s)]["theta"]) for s in config.seeds]
-            means = _mean_scores(pool, config.domain, policies, VALIDATION_ENTROPY, config.validation_episodes,
+            means = _mean_scores(pool, config.system, policies, VALIDATION_ENTROPY, config.validation_episodes,
                                  lambda job: bar.update(1))
             state.validation = {str(s): mean for s, mean in zip(config.seeds, means)}
             _save(out, state)
@@ -476,8 +493,8 @@ def _mean_scores(pool, domain: str, policies: list, entropy: int, episodes: int,
 
 def _choose_base(config: TrainConfig, pool) -> str:
     """DPI's iteration-0 schedule: the best of ``config.dpi.bases`` on training-distribution episodes."""
-    means = _mean_scores(pool, config.domain, list(config.dpi.bases), SELECTION_ENTROPY, config.dpi.selection_episodes)
-    pick = int(np.argmax(means) if make_system(config.domain).objective_sense == "max" else np.argmin(means))
+    means = _mean_scores(pool, config.system, list(config.dpi.bases), SELECTION_ENTROPY, config.dpi.selection_episodes)
+    pick = int(np.argmax(means) if make_system(config.system).objective_sense == "max" else np.argmin(means))
     return config.dpi.bases[pick]
 
 
@@ -488,7 +505,7 @@ def _dpi_iteration(state: RunState, pool, tick, start: int, stop: int) -> None:
     def base(seed):
         learner = state.learners[str(seed)]
         return state.base if learner["iterations"] == 0 else _policy_at(state, learner["theta"])
-    jobs = [("label", (config.domain, base(s), config.dpi, state.policy, s, e)) for s in config.seeds for e in range(start, stop)]
+    jobs = [("label", (config.system, base(s), config.dpi, state.policy, s, e)) for s in config.seeds for e in range(start, stop)]
     results = pool.map(_call, jobs, tick)
     per_seed = stop - start
     for k, seed in enumerate(config.seeds):
