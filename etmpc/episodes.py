@@ -2,10 +2,79 @@
 
 from __future__ import annotations
 
+import collections
+import math
+import numbers
 from typing import Any
 
 import numpy as np
 from dm_control.rl import control
+from dm_env import specs
+
+Random = np.random.Generator | np.random.RandomState | int | None
+
+
+def generator(random: Random) -> np.random.Generator:
+    """The task's generator from what ``dm_control.suite`` tasks accept as ``random``.
+
+    A ``Generator`` is used as given; an int seeds a new one; ``None`` draws fresh entropy; a
+    ``RandomState`` (the suite's own type) seeds a new ``Generator`` from four of its draws, so
+    the same ``RandomState`` state gives the same episodes.
+    """
+    if isinstance(random, np.random.Generator):
+        return random
+    if isinstance(random, np.random.RandomState):
+        return np.random.default_rng(random.randint(0, 2**32, size=4, dtype=np.uint64))
+    if random is None or (isinstance(random, numbers.Integral) and not isinstance(random, bool)):
+        if random is not None and random < 0:
+            raise ValueError(f"random seed must be non-negative, got {random}")
+        return np.random.default_rng(random)
+    raise TypeError("random must be an int seed, a numpy Generator or RandomState, or None; "
+                    f"got {type(random).__name__}")
+
+
+def steps_for(time_limit: float, interval_s: float) -> int:
+    """The number of control intervals in ``time_limit`` seconds; a whole, positive number is required
+    (an episode's exogenous signals are drawn in advance, so it cannot be open-ended)."""
+    try:
+        seconds = float(time_limit)
+    except (TypeError, ValueError):
+        raise TypeError(f"time_limit must be a number of seconds, got {time_limit!r}") from None
+    steps = round(seconds / interval_s) if math.isfinite(seconds) else 0
+    if steps < 1 or not math.isclose(steps * interval_s, seconds, rel_tol=1e-9, abs_tol=1e-12):
+        raise ValueError(f"time_limit must be a positive whole number of {interval_s:g} s control intervals, "
+                         f"got {time_limit!r}")
+    return steps
+
+
+def environment_kwargs_for(time_limit_s: float, interval_s: float, environment_kwargs: dict | None) -> dict:
+    """``control.Environment``'s arguments: the task's time limit and interval, then the user's others.
+
+    The interval and the episode's length belong to the task (its signals are drawn for them):
+    ``time_limit`` goes in ``task_kwargs``, and ``control_timestep`` cannot be changed.
+    """
+    user = dict(environment_kwargs or {})
+    if "time_limit" in user:
+        raise ValueError("pass time_limit in task_kwargs, not environment_kwargs: the episode is drawn for it")
+    if "control_timestep" in user and user["control_timestep"] != interval_s:
+        raise ValueError(f"control_timestep is the task's {interval_s:g} s and cannot be changed")
+    return dict(time_limit=time_limit_s, control_timestep=interval_s) | user
+
+
+class Environment(control.Environment):
+    """``control.Environment`` whose ``flat_observation`` spec is right for tasks that state their spec.
+
+    dm-control infers a flat spec only for tasks without ``observation_spec``; ours state theirs,
+    so the flat spec (one float64 vector under ``"observations"``) is made from it here.
+    """
+
+    def observation_spec(self):
+        spec = super().observation_spec()
+        if not self._flat_observation:
+            return spec
+        size = sum(int(np.prod(array.shape)) for array in spec.values())
+        key = control.FLAT_OBSERVATION_KEY
+        return collections.OrderedDict([(key, specs.Array((size,), np.float64, name=key))])
 
 
 class EpisodeTask(control.Task):
@@ -13,17 +82,30 @@ class EpisodeTask(control.Task):
 
     Randomness has one owner: the task's ``random`` generator draws each episode on reset
     (:meth:`draw_episode`), unless :meth:`use_episode` has queued a stored one (a test-set episode),
-    which is then replayed exactly.
+    which is then replayed exactly. ``random`` is what the suite's tasks accept (see
+    :func:`generator`).
     """
 
-    def __init__(self, random: np.random.Generator | int | None = None):
-        self._random = random if isinstance(random, np.random.Generator) else np.random.default_rng(random)
+    def __init__(self, random: Random = None):
+        self._random = generator(random)
         self._queued: Any = None
         self._episode: Any = None
+        self._visualize_reward = False
 
     @property
     def random(self) -> np.random.Generator:
         return self._random
+
+    @property
+    def visualize_reward(self) -> bool:
+        """Colour the rendered scene by the reward, as ``dm_control.suite`` tasks do."""
+        return self._visualize_reward
+
+    @visualize_reward.setter
+    def visualize_reward(self, value: bool) -> None:
+        if not isinstance(value, bool):
+            raise ValueError(f"visualize_reward must be a bool, got {type(value).__name__}")
+        self._visualize_reward = value
 
     @property
     def episode(self) -> Any:

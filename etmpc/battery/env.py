@@ -9,6 +9,10 @@ dm-control suite task does for a MuJoCo model. Load it like the cart pendulum::
 **Action** ``[trade_kw, computing]``: the trade (``> 0`` sells, ``< 0`` buys), limited to
 ``+-0.1 C / delta`` = 360 kW, and the fraction of the interval the controller's computer runs
 (1 when the MPC computes this step, else 0), which draws ``eta_c = 0.1`` kW from the battery.
+Both are **clamped to the action spec's bounds**, as MuJoCo clamps a limited actuator (a trade
+beyond 360 kW is 360 kW; ``computing`` outside ``[0, 1]`` is 0 or 1, so no action charges the
+battery for free or draws more than the computer's power). A non-finite value or an action of
+another shape raises ``ValueError``.
 
 **Dynamics** ``x+ = x - delta/C (u - P + eta_c a)`` (delta in hours). The SPEC corrects the paper's
 sign of the computation's draw: computing consumes energy. The state of charge never leaves
@@ -22,11 +26,15 @@ or absorb, and only the executed trade is paid. If even the largest trade cannot
 
 **Observation**: the state of charge, the current net production and price, and the forecasts of
 both for the next 20 intervals (the first value of each is the current true value).
+
+There is no scene to render: ``physics.render`` raises ``NotImplementedError``; record a run to
+Rerun instead (``etmpc evaluate battery --record FILE.rrd``).
 """
 
 from __future__ import annotations
 
 import collections
+import math
 from dataclasses import dataclass, fields
 
 import numpy as np
@@ -36,7 +44,7 @@ from dm_env import specs
 
 from etmpc.battery.market import draw_signal
 from etmpc.battery.parameters import SECONDS_PER_HOUR, Battery, Market
-from etmpc.episodes import EpisodeTask
+from etmpc.episodes import Environment, EpisodeTask, Random, environment_kwargs_for, steps_for
 
 SUITE = containers.TaggedTasks()
 
@@ -46,6 +54,7 @@ class Physics(control.Physics):
 
     def __init__(self, battery: Battery = Battery()):
         self.battery = battery
+        self._trade_limit_kw = battery.trade_limit_kw
         self._soc = 0.0
         self._time_s = 0.0
         self._commanded_kw = 0.0
@@ -99,9 +108,22 @@ class Physics(control.Physics):
 
     # -- control.Physics --------------------------------------------------------------------------
     def set_control(self, control_: np.ndarray) -> None:
-        trade_kw, computing = control_
-        self._commanded_kw = float(trade_kw)
-        self._computing = float(computing)
+        """``[trade_kw, computing]``, each clamped to its bounds (see the module's docstring)."""
+        try:
+            trade_kw, computing = control_
+            trade_kw, computing = float(trade_kw), float(computing)
+        except (TypeError, ValueError):
+            shape = np.shape(control_)
+            raise ValueError(f"the battery's action is [trade_kw, computing], got an action of shape {shape}") from None
+        if not math.isfinite(trade_kw + computing):
+            raise ValueError(f"the battery's action must be finite, got [{trade_kw}, {computing}]")
+        limit = self._trade_limit_kw
+        self._commanded_kw = min(max(trade_kw, -limit), limit)
+        self._computing = min(max(computing, 0.0), 1.0)
+
+    def render(self, *args, **kwargs):
+        raise NotImplementedError("the battery has no scene to render; record the run to Rerun instead "
+                                  "(etmpc evaluate battery --record FILE.rrd)")
 
     def step(self, n_sub_steps: int = 1) -> None:
         b = self.battery
@@ -110,8 +132,7 @@ class Physics(control.Physics):
             x, net_in_kw = self._soc, self._production_kw - b.compute_power_kw * self._computing
             # x+ = x - per_kw (u - net_in): the trades that keep x+ in [0, 1] are [lowest, highest].
             highest, lowest = net_in_kw + x / per_kw, net_in_kw - (1.0 - x) / per_kw
-            u = min(max(self._commanded_kw, -limit), limit)
-            u = min(max(min(max(u, lowest), highest), -limit), limit)
+            u = min(max(min(max(self._commanded_kw, lowest), highest), -limit), limit)  # commanded: within +-limit
             x_next = x - per_kw * (u - net_in_kw)
             self._soc = min(max(x_next, 0.0), 1.0)
             self._unbalanced_kwh = (x_next - self._soc) * b.capacity_kwh
@@ -199,7 +220,7 @@ class Trading(EpisodeTask):
     :class:`etmpc.episodes.EpisodeTask`).
     """
 
-    def __init__(self, random: np.random.Generator | int | None = None, battery: Battery = Battery(),
+    def __init__(self, random: Random = None, battery: Battery = Battery(),
                  market: Market = Market(), steps: int | None = None):
         super().__init__(random)
         self.battery, self.market = battery, market
@@ -250,16 +271,16 @@ class Trading(EpisodeTask):
     def get_observation(self, physics: Physics) -> collections.OrderedDict:
         e, k, n = self._episode, self._step, self.market.forecast_steps
         return collections.OrderedDict((
-            ("state_of_charge", physics.state_of_charge()),
-            ("net_production_kw", e.production_kw[k]),
-            ("price_eur_kwh", e.price_eur_kwh[k]),
+            ("state_of_charge", np.float64(physics.state_of_charge())),
+            ("net_production_kw", np.float64(e.production_kw[k])),
+            ("price_eur_kwh", np.float64(e.price_eur_kwh[k])),
             ("production_forecast_kw", e.production_forecast_kw[k, :n]),
             ("price_forecast_eur_kwh", e.price_forecast_eur_kwh[k, :n]),
         ))
 
 
 def make_environment(
-    random: np.random.Generator | int | None = None,
+    random: Random = None,
     battery: Battery = Battery(),
     market: Market = Market(),
     steps: int | None = None,
@@ -267,12 +288,13 @@ def make_environment(
 ) -> control.Environment:
     steps = battery.episode_steps if steps is None else steps
     task = Trading(random=random, battery=battery, market=market, steps=steps)
-    kwargs = dict(time_limit=steps * battery.interval_s, control_timestep=battery.interval_s)
-    kwargs.update(environment_kwargs or {})
-    return control.Environment(Physics(battery), task, **kwargs)
+    kwargs = environment_kwargs_for(steps * battery.interval_s, battery.interval_s, environment_kwargs)
+    return Environment(Physics(battery), task, **kwargs)
 
 
 @SUITE.add("benchmarking")
-def trading(random=None, environment_kwargs: dict | None = None):
-    """Trade a 10 kWh battery on the balance market for 100 intervals of 10 s."""
-    return make_environment(random=random, environment_kwargs=environment_kwargs)
+def trading(time_limit: float = Battery().episode_steps * Battery().interval_s, random: Random = None,
+            environment_kwargs: dict | None = None):
+    """Trade a 10 kWh battery on the balance market: 100 intervals of 10 s by default."""
+    steps = steps_for(time_limit, Battery().interval_s)
+    return make_environment(random=random, steps=steps, environment_kwargs=environment_kwargs)

@@ -12,6 +12,15 @@ Two plant settings (see the MJCF header for the numbers):
     a pole inertia that is not the ideal rod's; the analytic model does not know these.
   * ``"matched"``: those differences removed by name, so MuJoCo integrates the same ODE as the
     MPC's analytic model (``tests/test_cart_pendulum_model.py`` shows they agree).
+
+**Action** ``[force]`` (N) on the cart. MuJoCo clamps it to the actuator's ``ctrlrange``
+(+-25 N), as it does for every limited actuator of the suite; a non-finite force or an action of
+another shape raises ``ValueError``.
+
+**Observation** ``cart_position``, ``cart_velocity``, ``pole_angle``, ``pole_angular_velocity``
+(m, m/s, rad, rad/s). The pole angle is the hinge's angle, **unwrapped**: it counts whole turns
+(``2 pi`` is a full turn, not upright), so it stays continuous and the reward ``-beta^2`` keeps
+growing worse after the pole falls rather than rewarding a pole that swings over the top.
 """
 
 from __future__ import annotations
@@ -19,6 +28,7 @@ from __future__ import annotations
 import collections
 import copy
 import logging
+import math
 from dataclasses import dataclass
 
 import mujoco
@@ -30,7 +40,7 @@ from dm_control.utils import containers
 from dm_env import specs
 
 from etmpc.cart_pendulum.model import NX, STATE_NAMES, Parameters
-from etmpc.episodes import EpisodeTask
+from etmpc.episodes import Environment, EpisodeTask, Random, environment_kwargs_for, steps_for
 from etmpc.errors import UnknownNameError
 from etmpc.resources import model_path
 
@@ -41,6 +51,8 @@ INITIAL_STATE_LOW = np.array([0.0, -1.0, -0.78, -1.0])  # eta, v, beta, omega
 INITIAL_STATE_HIGH = np.array([0.0, 1.0, 0.78, 1.0])
 
 PLANTS = ("mismatched", "matched")
+_POLE_RGB = np.array([0.2, 0.45, 0.85])  # the MJCF's "pole" material
+_FALLEN_RGB = np.array([0.85, 0.1, 0.1])
 SUITE = containers.TaggedTasks()
 
 
@@ -107,6 +119,16 @@ class Physics(MjPhysics):
 
     def set_disturbance(self, w_rad_s2: float) -> None:
         self.data.userdata[0] = w_rad_s2
+
+    def set_control(self, control_) -> None:
+        """The force on the cart (N): one finite number (MuJoCo clamps it to ``ctrlrange``)."""
+        force = np.asarray(control_, dtype=float)
+        if force.size != 1:
+            raise ValueError(f"the cart pendulum's action is one force, got an action of shape {force.shape}")
+        value = float(force.reshape(()))
+        if not math.isfinite(value):
+            raise ValueError(f"the cart pendulum's force must be finite, got {value}")
+        self.data.ctrl[0] = value
 
     # -- snapshots (rollouts) ---------------------------------------------------------------------
     def snapshot(self) -> mujoco.MjData:
@@ -182,7 +204,7 @@ class Balance(EpisodeTask):
     a stored one queued with :meth:`use_episode` (see :class:`etmpc.episodes.EpisodeTask`).
     """
 
-    def __init__(self, random: np.random.Generator | int | None = None, steps: int = EPISODE_STEPS):
+    def __init__(self, random: Random = None, steps: int = EPISODE_STEPS):
         super().__init__(random)
         self._steps = steps
         self._step = 0
@@ -199,6 +221,7 @@ class Balance(EpisodeTask):
         self._step = 0
         physics.set_state_vector(episode.initial_state)
         physics.set_disturbance(0.0)
+        self._colour_pole(physics)
 
     def before_step(self, action, physics: Physics) -> None:
         physics.set_control(action)
@@ -206,7 +229,17 @@ class Balance(EpisodeTask):
         self._step += 1
 
     def after_step(self, physics: Physics) -> None:
-        pass
+        if self.visualize_reward:
+            self._colour_pole(physics)
+
+    def _colour_pole(self, physics: Physics) -> None:
+        """With ``visualize_reward``, the pole's colour goes from its own blue (upright) to red
+        (fallen) by ``exp(reward)`` in (0, 1], as the suite colours its bodies; without, its own."""
+        upright = 1.0
+        if self.visualize_reward:
+            reward = self.get_reward(physics)
+            upright = math.exp(reward) if math.isfinite(reward) else 0.0
+        physics.named.model.mat_rgba["pole", :3] = upright * _POLE_RGB + (1.0 - upright) * _FALLEN_RGB
 
     def action_spec(self, physics: Physics) -> specs.BoundedArray:
         low, high = physics.model.actuator_ctrlrange[0]
@@ -227,7 +260,7 @@ class Balance(EpisodeTask):
 
 
 def make_environment(
-    random: np.random.Generator | int | None = None,
+    random: Random = None,
     plant: str = "mismatched",
     steps: int = EPISODE_STEPS,
     environment_kwargs: dict | None = None,
@@ -235,12 +268,12 @@ def make_environment(
     root = load_model(plant)
     physics = Physics.from_xml_string(root.to_xml_string(), assets=root.get_assets())
     task = Balance(random=random, steps=steps)
-    kwargs = dict(time_limit=steps * CONTROL_DT_S, control_timestep=CONTROL_DT_S)
-    kwargs.update(environment_kwargs or {})
-    return control.Environment(physics, task, **kwargs)
+    return Environment(physics, task, **environment_kwargs_for(steps * CONTROL_DT_S, CONTROL_DT_S, environment_kwargs))
 
 
 @SUITE.add("benchmarking")
-def balance(random=None, plant: str = "mismatched", environment_kwargs: dict | None = None):
-    """Balance the pole for 100 control intervals of 0.1 s under the angular disturbance."""
-    return make_environment(random=random, plant=plant, environment_kwargs=environment_kwargs)
+def balance(time_limit: float = EPISODE_STEPS * CONTROL_DT_S, random: Random = None, plant: str = "mismatched",
+            environment_kwargs: dict | None = None):
+    """Balance the pole under the angular disturbance: 100 control intervals of 0.1 s by default."""
+    return make_environment(random=random, plant=plant, steps=steps_for(time_limit, CONTROL_DT_S),
+                            environment_kwargs=environment_kwargs)

@@ -1,0 +1,397 @@
+"""The command line against a hostile user and a hostile machine.
+
+Every case below is a bad input or a fault. Each asserts what the tool promises: exit code 2 (130
+for Ctrl-C, 143 for SIGTERM), exactly one line on stderr that names the problem, no traceback,
+every file that was there before byte-identical, no partial file left, and no process left.
+
+Most cases run the command in this process (``etmpc.cli.main``), so the module stays fast; the
+ones that need a real process (signals, a full disk, the OpenGL backend) run ``etmpc`` as one.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import resource
+import signal
+import subprocess
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from etmpc import testset as ts_mod
+from etmpc.cli import main
+
+REPO = Path(__file__).resolve().parents[1]
+CART_POLICY = REPO / "policies" / "cart_pendulum" / "learned.json"
+BATTERY_POLICY = REPO / "policies" / "battery" / "learned.json"
+
+
+# -- what every case checks -----------------------------------------------------------------------
+def _files(root: Path) -> dict[str, bytes | None]:
+    """Every file (its bytes) and directory (None) under ``root``."""
+    out = {}
+    for dirpath, dirnames, filenames in os.walk(root):
+        for d in dirnames:
+            out[os.path.relpath(os.path.join(dirpath, d), root)] = None
+        for f in filenames:
+            path = os.path.join(dirpath, f)
+            out[os.path.relpath(path, root)] = Path(path).read_bytes()
+    return out
+
+
+def _children(pid: int) -> list[int]:
+    kids = []
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                stat = Path(f"/proc/{entry}/stat").read_text()
+            except OSError:
+                continue
+            if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
+                kids.append(int(entry))
+    return kids
+
+
+def _assert_one_line(stderr: str, must_name: str) -> None:
+    assert "Traceback" not in stderr, stderr
+    lines = stderr.strip("\n").splitlines()
+    assert len(lines) == 1, stderr
+    assert lines[0].startswith("etmpc: "), stderr
+    assert must_name.lower() in lines[0].lower(), (must_name, lines[0])
+
+
+# -- the setups: each makes files in the case's directory and returns nothing ----------------------
+def _write_testset(directory: Path, name: str, change=None) -> Path:
+    """The stored cart test set, first 5 episodes, with ``change(arrays, meta)`` applied, written
+    with a matching checksum (so only the contents are wrong)."""
+    stored = ts_mod.load(ts_mod.default_path("cart_pendulum", "balance"), "cart_pendulum", "balance")
+    arrays = {k: np.array(v[:5]) for k, v in stored.arrays.items()}
+    meta = dict(stored.meta, episodes=5)
+    if change is not None:
+        arrays, meta = change(arrays, meta)
+    path = directory / name
+    ts_mod.write(path, arrays, meta)
+    return path
+
+
+def _policy_file(directory: Path, name: str, edit) -> None:
+    data = json.loads(CART_POLICY.read_text())
+    edit(data)
+    (directory / name).write_text(json.dumps(data))
+
+
+def _overflowing(data: dict) -> None:
+    """Two terms of the decision value that are +inf and -inf on every state, whatever the order of the sum
+    (a sum of finite overflowing terms would depend on the BLAS kernel's order, so on the machine)."""
+    theta = [0.0] * len(data["theta"])
+    theta[0] = theta[1] = 1e308
+    data["theta"] = theta
+    norm = data["normalisation"]
+    norm["mean"][0], norm["mean"][1] = 1e10, -1e10  # phi_0 <= -1e9 and phi_1 >= 1e9 on any state of the task
+    norm["std"][0] = norm["std"][1] = 1.0
+
+
+def _setup(kind: str, d: Path) -> None:
+    if kind == "existing-json":
+        (d / "ev.json").write_text('{"mine": true}\n')
+    elif kind == "file-parent":
+        (d / "afile").write_text("not a directory\n")
+    elif kind == "a-dir":
+        (d / "out.json").mkdir()
+        (d / "out.rrd").mkdir()
+    elif kind == "user-dir":
+        (d / "run").mkdir()
+        (d / "run" / "notes.txt").write_text("my notes\n")
+    elif kind == "reproduce-dir":
+        (d / "run").mkdir()
+        (d / "run" / "settings.json").write_text('{"settings": {}, "domains": []}\n')
+        (d / "run" / "REPORT.md").write_text("# a report\n")
+    elif kind == "train-dir":
+        (d / "run").mkdir()
+        (d / "run" / "checkpoint.json").write_text("{}\n")
+        (d / "run" / "curve.json").write_text("{}\n")
+    elif kind == "bad-settings":
+        (d / "run").mkdir()
+        (d / "run" / "settings.json").write_text("{not json")
+    elif kind == "user-task-dir":
+        (d / "run" / "battery").mkdir(parents=True)
+        (d / "run" / "battery" / "notes.txt").write_text("my notes\n")
+    elif kind == "other-sweep":
+        (d / "run" / "battery").mkdir(parents=True)
+        (d / "run" / "battery" / "settings.json").write_text('{"format": "etmpc-sweep", "domain": "battery", "settings": {}}\n')
+    elif kind == "corrupt-policy":
+        (d / "p.json").write_text('{"format": "etmpc-logistic-policy", "theta": [1, 2')
+    elif kind == "huge-theta":
+        _policy_file(d, "p.json", _overflowing)
+    elif kind == "nan-theta":
+        _policy_file(d, "p.json", lambda data: data.update(theta=[float("nan")] * len(data["theta"])))
+    elif kind == "ts-no-sha":
+        _write_testset(d, "ts.npz").with_name("ts.npz.sha256").unlink()
+    elif kind == "ts-empty":
+        (d / "ts.npz").write_bytes(b"")
+        (d / "ts.npz.sha256").write_text(f"{ts_mod.hashlib.sha256(b'').hexdigest()}  ts.npz\n")
+    elif kind == "ts-short-disturbance":
+        _write_testset(d, "ts.npz", lambda a, m: ({**a, "disturbance": a["disturbance"][:, :50]}, m))
+    elif kind == "ts-count-mismatch":
+        _write_testset(d, "ts.npz", lambda a, m: ({**a, "disturbance": a["disturbance"][:3]}, m))
+    elif kind == "ts-missing-array":
+        _write_testset(d, "ts.npz", lambda a, m: ({"initial_state": a["initial_state"]}, m))
+    elif kind == "ts-other-task":
+        _write_testset(d, "ts.npz", lambda a, m: (a, dict(m, domain="battery", task="trading")))
+    elif kind == "ts-nan":
+        _write_testset(d, "ts.npz", lambda a, m: ({**a, "initial_state": a["initial_state"] * np.nan}, m))
+    elif kind == "ts-bad-meta":
+        _write_testset(d, "ts.npz", lambda a, m: (a, dict(m, episodes="five")))
+    elif kind == "ts-corrupt":
+        path = _write_testset(d, "ts.npz")
+        data = bytearray(path.read_bytes())
+        data[len(data) // 2] ^= 0xFF
+        path.write_bytes(bytes(data))
+    elif kind == "rrd-garbage":
+        (d / "r.rrd").write_bytes(b"RRF2" + bytes(range(256)) * 8)
+    elif kind == "text-file":
+        (d / "r.rrd").write_text("hello\n")
+    elif kind != "none":
+        raise AssertionError(kind)
+
+
+# -- the in-process cases: (id, setup, argv, what the line must name) -------------------------------
+EV = ["evaluate", "cart_pendulum"]
+CASES = [
+    # names and policies
+    ("unknown-task", "none", ["evaluate", "cartpole", "--policy", "always"], "cartpole"),
+    ("unknown-policy", "none", [*EV, "--policy", "sometimes"], "sometimes"),
+    ("every-zero", "none", [*EV, "--policy", "every:0"], "every:0"),
+    ("every-text", "none", [*EV, "--policy", "every:x"], "every:x"),
+    ("threshold-negative", "none", [*EV, "--policy", "threshold:-1"], "threshold:-1"),
+    ("threshold-nan", "none", [*EV, "--policy", "threshold:nan"], "threshold:nan"),
+    ("threshold-inf", "none", [*EV, "--policy", "threshold:inf"], "threshold:inf"),
+    ("rl-missing", "none", [*EV, "--policy", "rl:no/such.json"], "no/such.json"),
+    ("rl-corrupt", "corrupt-policy", [*EV, "--policy", "rl:p.json"], "p.json"),
+    ("rl-other-domain", "none", [*EV, "--policy", f"rl:{BATTERY_POLICY}"], "battery"),
+    ("rl-nan-theta", "nan-theta", [*EV, "--policy", "rl:p.json"], "p.json"),
+    ("rl-overflowing-theta", "huge-theta", [*EV, "--policy", "rl:p.json", "--episodes", "1", "--workers", "1"], "not a number"),
+    ("rollout-bad-k", "none", [*EV, "--policy", "rollout:every:3:0"], "rollout:every:3:0"),
+    ("oracle-of-oracle", "none", [*EV, "--policy", "oracle:oracle:always"], "oracle:oracle:always"),
+    ("policy-twice", "none", [*EV, "--policy", "always", "--policy", "always"], "twice"),
+    # numbers
+    ("episodes-zero", "none", [*EV, "--policy", "always", "--episodes", "0"], "--episodes"),
+    ("episodes-negative", "none", [*EV, "--policy", "always", "--episodes", "-3"], "--episodes"),
+    ("episodes-too-many", "none", [*EV, "--policy", "always", "--episodes", "1000"], "1000"),
+    ("repeats-zero", "none", [*EV, "--policy", "always", "--repeats", "0"], "--repeats"),
+    ("workers-zero", "none", [*EV, "--policy", "always", "--workers", "0"], "--workers"),
+    ("workers-absurd", "none", [*EV, "--policy", "always", "--workers", "1000000000000"], "--workers"),
+    ("seed-negative", "none", [*EV, "--policy", "always", "--seed", "-1"], "--seed"),
+    ("seed-text", "none", [*EV, "--policy", "always", "--seed", "one"], "--seed"),
+    ("seed-huge", "none", [*EV, "--policy", "always", "--seed", str(2**64)], "--seed"),
+    # test sets
+    ("testset-missing", "none", [*EV, "--policy", "always", "--test-set", "nope.npz"], "nope.npz"),
+    ("testset-no-checksum", "ts-no-sha", [*EV, "--policy", "always", "--test-set", "ts.npz"], "sha256"),
+    ("testset-empty", "ts-empty", [*EV, "--policy", "always", "--test-set", "ts.npz"], "ts.npz"),
+    ("testset-short-disturbance", "ts-short-disturbance", [*EV, "--policy", "always", "--test-set", "ts.npz"], "disturbances"),
+    ("testset-count-mismatch", "ts-count-mismatch", [*EV, "--policy", "always", "--test-set", "ts.npz"], "disturbance"),
+    ("testset-missing-array", "ts-missing-array", [*EV, "--policy", "always", "--test-set", "ts.npz"], "disturbance"),
+    ("testset-other-task", "ts-other-task", [*EV, "--policy", "always", "--test-set", "ts.npz"], "battery"),
+    ("testset-nan", "ts-nan", [*EV, "--policy", "always", "--test-set", "ts.npz"], "finite"),
+    ("testset-bad-meta", "ts-bad-meta", [*EV, "--policy", "always", "--test-set", "ts.npz"], "episodes"),
+    ("testset-corrupt", "ts-corrupt", [*EV, "--policy", "always", "--test-set", "ts.npz"], "corrupted"),
+    # outputs
+    ("json-is-directory", "a-dir", [*EV, "--policy", "always", "--json", "out.json"], "directory"),
+    ("json-parent-is-file", "file-parent", [*EV, "--policy", "always", "--json", "afile/ev.json"], "afile"),
+    ("record-parent-is-file", "file-parent", [*EV, "--policy", "always", "--record", "afile/r.rrd"], "afile"),
+    ("record-is-directory", "a-dir", [*EV, "--policy", "always", "--record", "out.rrd"], "directory"),
+    ("record-not-rrd", "none", [*EV, "--policy", "always", "--record", "r.txt"], ".rrd"),
+    ("json-and-record-same", "existing-json", [*EV, "--policy", "always", "--record", "ev.rrd", "--json", "ev.rrd"], "same file"),
+    ("json-overwrites-testset", "ts-no-sha", [*EV, "--policy", "always", "--test-set", "ts.npz", "--json", "ts.npz"], "ts.npz"),
+    ("replay-json-overwrites-recording", "rrd-garbage", ["replay", "r.rrd", "--json", "r.rrd"], "r.rrd"),
+    ("bench-json-parent-is-file", "file-parent", ["bench", "battery", "--json", "afile/b.json"], "afile"),
+    # backends
+    ("backend-unknown", "none", [*EV, "--policy", "always", "--backend", "slurm"], "--backend"),
+    ("address-without-ray", "none", [*EV, "--policy", "always", "--address", "auto"], "--address"),
+    # the command itself
+    ("no-command", "none", [], "command"),
+    ("unknown-command", "none", ["evalute"], "evalute"),
+    ("unknown-option", "none", [*EV, "--policy", "always", "--fast"], "--fast"),
+    # train
+    ("train-unknown-task", "none", ["train", "pendulum", "--out", "run"], "pendulum"),
+    ("train-out-is-file", "file-parent", ["train", "battery", "--out", "afile"], "afile"),
+    ("train-into-user-directory", "user-dir", ["train", "battery", "--out", "run", "--episodes", "2"], "notes.txt"),
+    ("train-resume-into-reproduce", "reproduce-dir", ["train", "battery", "--out", "run", "--resume"], "settings.json"),
+    ("train-seeds-reversed", "none", ["train", "battery", "--out", "run", "--seeds", "4-1"], "--seeds"),
+    ("train-seeds-absurd", "none", ["train", "battery", "--out", "run", "--seeds", "0-100000000000"], "--seeds"),
+    ("train-learning-rate-nan", "none", ["train", "battery", "--out", "run", "--algorithm", "gpomdp",
+                                         "--learning-rate", "nan"], "learning rate"),
+    ("train-dpi-option-with-gpomdp", "none", ["train", "battery", "--out", "run", "--algorithm", "gpomdp",
+                                              "--futures", "3"], "--futures"),
+    ("train-record-negative", "none", ["train", "battery", "--out", "run", "--record", "-1"], "--record"),
+    ("train-eval-episodes-too-many", "none", ["train", "battery", "--out", "run", "--eval-episodes", "1000",
+                                              "--episodes", "2", "--seeds", "0"], "1000"),
+    # reproduce
+    ("reproduce-out-is-file", "file-parent", ["reproduce", "--out", "afile"], "afile"),
+    ("reproduce-into-training-run", "train-dir", ["reproduce", "--quick", "--out", "run"], "checkpoint.json"),
+    ("reproduce-into-user-directory", "user-dir", ["reproduce", "--quick", "--out", "run"], "notes.txt"),
+    ("reproduce-unreadable-settings", "bad-settings", ["reproduce", "--quick", "--out", "run"], "settings.json"),
+    # render
+    ("render-battery", "none", ["render", "battery", "--policy", "always", "--out", "v.mp4"], "battery"),
+    ("render-not-mp4", "none", ["render", "cart_pendulum", "--policy", "always", "--out", "v.avi"], ".mp4"),
+    ("render-episode-negative", "none", ["render", "cart_pendulum", "--policy", "always", "--out", "v.mp4",
+                                         "--episode", "-1"], "--episode"),
+    ("render-episode-out-of-range", "none", ["render", "cart_pendulum", "--policy", "always", "--out", "v.mp4",
+                                             "--episode", "100"], "100"),
+    ("render-odd-width", "none", ["render", "cart_pendulum", "--policy", "always", "--out", "v.mp4",
+                                  "--width", "641"], "641"),
+    ("render-fps-absurd", "none", ["render", "cart_pendulum", "--policy", "always", "--out", "v.mp4",
+                                   "--fps", "1e9"], "--fps"),
+    ("render-fps-zero", "none", ["render", "cart_pendulum", "--policy", "always", "--out", "v.mp4", "--fps", "0"], "--fps"),
+    ("render-seed-negative", "none", ["render", "cart_pendulum", "--policy", "always", "--out", "v.mp4",
+                                      "--seed", "-1"], "--seed"),
+    ("render-out-parent-is-file", "file-parent", ["render", "cart_pendulum", "--policy", "always",
+                                                  "--out", "afile/v.mp4"], "afile"),
+    # sweep, and prices
+    ("price-negative", "none", [*EV, "--policy", "always", "--price", "-1"], "--price"),
+    ("price-infinite", "none", [*EV, "--policy", "always", "--price", "inf"], "--price"),
+    ("train-price-nan", "none", ["train", "battery", "--out", "run", "--price", "nan"], "--price"),
+    ("sweep-price-nan", "none", ["sweep", "battery", "--prices", "0,nan"], "--prices"),
+    ("sweep-price-text", "none", ["sweep", "battery", "--prices", "1e-4,cheap"], "cheap"),
+    ("sweep-price-twice", "none", ["sweep", "battery", "--prices", "1e-4,0.0001"], "twice"),
+    ("sweep-task-twice", "none", ["sweep", "battery", "battery"], "twice"),
+    ("sweep-unknown-task", "none", ["sweep", "cartpole"], "cartpole"),
+    ("sweep-episodes-too-many", "none", ["sweep", "battery", "--episodes", "1000"], "1000"),
+    ("sweep-into-user-directory", "user-task-dir", ["sweep", "cart_pendulum", "battery", "--out", "run"], "notes.txt"),
+    # self-triggering policies
+    ("self-missing", "none", [*EV, "--policy", "self:no/such.json"], "no/such.json"),
+    ("self-given-a-logistic-policy", "none", [*EV, "--policy", f"self:{CART_POLICY}"], "not a self-trigger policy"),
+    ("self-corrupt", "corrupt-policy", [*EV, "--policy", "self:p.json"], "p.json"),
+    ("self-no-path", "none", [*EV, "--policy", "self:"], "self:PATH"),
+    ("train-self-out-is-a-directory", "a-dir", ["train-self", "cart_pendulum", "--out", "out.json"], "out.json"),
+    ("train-self-unknown-task", "none", ["train-self", "cartpole", "--out", "p.json"], "cartpole"),
+    ("train-self-negative-price", "none", ["train-self", "battery", "--out", "p.json", "--price", "-1"], "--price"),
+    ("sweep-other-settings", "other-sweep", ["sweep", "battery", "--out", "run", "--quick"], "other settings"),
+    # replay and bench
+    ("replay-missing", "none", ["replay", "none.rrd"], "none.rrd"),
+    ("replay-garbage", "rrd-garbage", ["replay", "r.rrd"], "r.rrd"),
+    ("replay-text", "text-file", ["replay", "r.rrd"], "r.rrd"),
+    ("replay-json-is-directory", "a-dir", ["replay", "r.rrd", "--json", "out.json"], "directory"),
+    ("bench-unknown-task", "none", ["bench", "cartpole"], "cartpole"),
+    ("bench-episodes-too-many", "none", ["bench", "battery", "--episodes", "1000", "--no-reference"], "1000"),
+]
+
+
+@pytest.mark.parametrize("setup, argv, names", [c[1:] for c in CASES], ids=[c[0] for c in CASES])
+def test_a_hostile_input_is_one_line_and_touches_nothing(setup, argv, names, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    _setup(setup, tmp_path)
+    before, processes = _files(tmp_path), set(_children(os.getpid()))  # earlier tests' helpers may live on
+    with warnings.catch_warnings(record=True) as caught:  # a warning would be a second line on stderr
+        warnings.simplefilter("always")
+        code = main(list(argv))
+    _, err = capsys.readouterr()
+    assert code == 2, err
+    _assert_one_line(err + "".join(f"{w.message}\n" for w in caught), names)
+    assert _files(tmp_path) == before  # nothing changed, nothing new (no partial file either)
+    assert set(_children(os.getpid())) <= processes
+
+
+# -- faults that need a real process -------------------------------------------------------------
+def _etmpc(args: list[str], cwd: Path, env: dict | None = None, file_size_limit: int | None = None,
+           **popen) -> subprocess.Popen:
+    """``etmpc ARGS`` in its own session; ``file_size_limit`` bytes per file (RLIMIT_FSIZE): the
+    kernel refuses writes past it as it does on a full disk."""
+    def limit():
+        if file_size_limit is not None:
+            signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a refused write, not a killed process
+            resource.setrlimit(resource.RLIMIT_FSIZE, (file_size_limit, file_size_limit))
+
+    full_env = {**os.environ, "MUJOCO_GL": "egl", **(env or {})}
+    return subprocess.Popen([sys.executable, "-m", "etmpc.cli", *args], cwd=cwd, env=full_env, preexec_fn=limit,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True, **popen)
+
+
+@pytest.mark.parametrize("args, names", [
+    (["evaluate", "battery", "--policy", "always", "--episodes", "2", "--workers", "1", "--json", "ev.json"], "ev.json"),
+    (["evaluate", "battery", "--policy", "always", "--episodes", "2", "--workers", "1", "--record", "new.rrd"], "new.rrd"),
+    (["train", "battery", "--out", "run", "--episodes", "2", "--eval-every", "2", "--eval-episodes", "1", "--seeds", "0",
+      "--validation-episodes", "1", "--labels", "1", "--futures", "1", "--horizon", "2", "--workers", "1"], "run"),
+], ids=["json", "record", "train"])
+def test_a_full_disk_is_one_line_and_leaves_the_old_files(args, names, tmp_path, request):
+    kind = request.node.callspec.id
+    _setup("existing-json", tmp_path)
+    before = _files(tmp_path)
+    # The check before the run writes 4 kB: a limit of 5 bytes fails it (no work is done), 5 kB
+    # passes it and fails the checkpoint, 50 kB fails the recording.
+    limit = {"json": 5, "record": 50_000, "train": 5_000}[kind]
+    proc = _etmpc(args, tmp_path, file_size_limit=limit)
+    _, err = proc.communicate(timeout=300)
+    assert proc.returncode == 2, err
+    _assert_one_line(err, names)
+    after = _files(tmp_path)
+    assert {k: v for k, v in after.items() if k in before} == before
+    leftovers = [k for k in after if k not in before and (".tmp" in k or ".partial" in k or k.endswith(".rrd"))]
+    assert leftovers == []
+
+
+@pytest.mark.parametrize("backend, names", [("bogus", "MUJOCO_GL=bogus"), ("glfw", "DISPLAY")])
+def test_a_rendering_backend_that_cannot_work_is_one_line(backend, names, tmp_path):
+    env = {"MUJOCO_GL": backend}
+    proc = _etmpc(["render", "cart_pendulum", "--policy", "never", "--out", "v.mp4"], tmp_path, env=env)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 2, err
+    _assert_one_line(err, names)
+    assert _files(tmp_path) == {}
+
+
+def test_a_truncated_recording_is_an_error(tmp_path):
+    recording = tmp_path / "r.rrd"
+    assert main(["evaluate", "battery", "--policy", "always", "--policy", "every:5", "--episodes", "2",
+                 "--workers", "1", "--record", str(recording)]) == 0
+    data = recording.read_bytes()
+    for cut in (len(data) // 3, len(data) - 100):
+        (tmp_path / "cut.rrd").write_bytes(data[:cut])
+        proc = _etmpc(["replay", "cut.rrd"], tmp_path)
+        _, err = proc.communicate(timeout=120)
+        assert proc.returncode == 2, err
+        _assert_one_line(err, "cut.rrd")
+
+
+@pytest.mark.parametrize("how, code, line", [
+    ("SIGINT", 130, "interrupted"), ("SIGTERM", 143, "terminated"), ("SIGKILL", -9, None),
+])
+def test_stopping_a_parallel_run_leaves_no_worker_and_no_file(how, code, line, tmp_path):
+    _setup("existing-json", tmp_path)
+    before = _files(tmp_path)
+    proc = _etmpc(["evaluate", "cart_pendulum", "--policy", "always", "--workers", "2", "--json", "ev.json",
+                   "--record", "r.rrd"], tmp_path)
+    deadline = time.monotonic() + 120
+    workers = []
+    while time.monotonic() < deadline and len(workers) < 2:  # the pool is up and working
+        time.sleep(0.5)
+        workers = [p for p in _children(proc.pid) if "spawn_main" in Path(f"/proc/{p}/cmdline").read_text(errors="replace")]
+    assert len(workers) >= 2
+    time.sleep(2)
+    sig = getattr(signal, how)
+    # Ctrl-C reaches the whole process group, as a terminal sends it; the others only the command.
+    os.killpg(proc.pid, sig) if how == "SIGINT" else os.kill(proc.pid, sig)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == code, err
+    if line is not None:
+        _assert_one_line(err, line)
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline and any(Path(f"/proc/{w}").exists() for w in workers):
+        time.sleep(0.2)
+    assert not [w for w in workers if Path(f"/proc/{w}").exists() and
+                Path(f"/proc/{w}/stat").read_text().split(") ")[1][0] != "Z"]
+    after = _files(tmp_path)
+    assert {k: v for k, v in after.items() if k in before} == before
+    if how != "SIGKILL":  # SIGKILL leaves the recording's partial file: nothing runs to remove it
+        assert set(after) == set(before)
+
+
+def test_version():
+    proc = subprocess.run([sys.executable, "-m", "etmpc.cli", "--version"], capture_output=True, text=True)
+    assert proc.returncode == 0 and proc.stdout.startswith("etmpc ")
+
