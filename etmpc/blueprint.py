@@ -65,9 +65,10 @@ def unit(name: str) -> str:
 
 
 def policy_label(spec: str) -> str:
-    """A policy's name on screen and in entity paths: its spec, with each learned policy's file
-    path shortened to the file's stem (``rl:results/x/seed0/last.json`` -> ``rl:last``)."""
-    return re.sub(r"rl:([^:]+?\.json)", lambda m: f"rl:{Path(m.group(1)).stem}", spec)
+    """A policy's name on screen and in entity paths: its spec, with each learned or self-triggering
+    policy's file path shortened to the file's stem (``rl:results/x/seed0/last.json`` -> ``rl:last``,
+    ``self:runs/self.json`` -> ``self:self``)."""
+    return re.sub(r"(rl|self):([^:]+?\.json)", lambda m: f"{m.group(1)}:{Path(m.group(2)).stem}", spec)
 
 
 def signal_of_forecast(forecast: str, signals) -> str | None:
@@ -85,6 +86,7 @@ BOUND = (140, 140, 140)  # input bounds, thresholds: grey
 CHOSEN = (66, 133, 244)  # a recompute the policy chose: blue
 FORCED = (219, 68, 55)  # a recompute forced because the plan ran out: red
 FIRST = (140, 140, 140)
+ANNOUNCED = (15, 157, 88)  # what a self-trigger announced at a solve: green
 # A plan's colour says when it was made: blue (episode start) -> violet -> teal -> green (end).
 _PLAN_ANCHORS = np.array([(70, 110, 235), (150, 90, 220), (0, 165, 190), (70, 185, 60)], float)
 PLAN_ALPHA = 210
@@ -172,7 +174,8 @@ def episode_container(layout: EpisodeLayout):
     panels += [
         view("prediction error ‖W (x − x̂)‖" + (" · grey: threshold" if "threshold" in layout.entities else ""),
              ["prediction_error", "threshold"]),
-        view("recomputes (● chosen ✕ forced ◆ first): age of the plan replaced [steps]", ["recompute"]),
+        view("recomputes (● chosen ✕ forced ◆ first): age of the plan replaced [steps]"
+             + (" · ▲ announced at the solve" if "announced" in layout.entities else ""), ["recompute", "announced"]),
         view(f"reward per step [{units}]", ["objective/reward"]),
         view(f"running objective [{units}], computations included", ["objective/running"]),
     ]

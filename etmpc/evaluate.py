@@ -78,7 +78,7 @@ def _run(job: tuple) -> tuple[RunResult, EpisodeRecord | None]:
         solver_failures=traj.solver_failures,
         steps=traj.steps,
         finite=not traj.nonfinite,
-    ), played.record(spec, upper_bound=spec.startswith("oracle:")) if record else None
+    ), played.record(spec, getattr(policy, "announce", None), upper_bound=spec.startswith("oracle:")) if record else None
 
 
 # -- driver side ---------------------------------------------------------------------------------

@@ -76,13 +76,16 @@ class EpisodeRecord:
     plans: list = field(default_factory=list)  # (step, states (N+1, nx), inputs (N, nu), forecasts {name: (N,)})
     signals: dict = field(default_factory=dict)  # name -> (>= S,)
     input_bounds: tuple = ()  # (u_min (nu,), u_max (nu,)), or () if the system has none
+    announced: tuple = ()  # a self-trigger's (step a plan was made, steps it announced it would be kept)
 
     @property
     def steps(self) -> int:
         return len(self.rewards)
 
     @classmethod
-    def from_trajectory(cls, system, traj, identity: dict, episode) -> EpisodeRecord:
+    def from_trajectory(cls, system, traj, identity: dict, episode, announce=None) -> EpisodeRecord:
+        """``announce``: a self-triggering policy's ``announce(plan)``, to record what it announced
+        at each solve (it is a function of the plan alone, so asking again gives the same answer)."""
         n = traj.steps
         bounds = (getattr(system, "u_min", None), getattr(system, "u_max", None))
         return cls(
@@ -102,6 +105,7 @@ class EpisodeRecord:
             plans=[(k, p.states, p.inputs, {name: np.asarray(v) for name, v in p.forecasts.items()}) for k, p in traj.plans],
             signals={name: np.asarray(v, float) for name, v in system.signals(episode).items()},
             input_bounds=() if None in bounds else tuple(np.asarray(b, float) for b in bounds),
+            announced=tuple((int(k), int(announce(p))) for k, p in traj.plans) if announce is not None else (),
         )
 
 
@@ -307,9 +311,17 @@ class Recorder:
             text = ["first plan" if i == 0 else
                     f"{'FORCED, the plan ran out' if f else 'chosen by the policy'}: plan age {a}, ‖W (x − x̂)‖ {e:.4g}"
                     for i, f, a, e in zip(events, forced, age, error)]
+            if record.announced:  # a self-trigger: what it announced as it made each plan
+                announced = dict(record.announced)
+                text = [t + (f"; announced: keep {announced[i]} steps, next solve at step {i + announced[i]}"
+                             if i in announced else "") for t, i in zip(text, events)]
             stream.send_columns(f"{root}/events", _timeline(events, dt),
                                 rr.TextLog.columns(text=text, level=["WARN" if f else "INFO" for f in forced]))
             written.append("events")
+        if record.announced:
+            made, keep = (np.array(v, dtype=np.int64) for v in zip(*record.announced))
+            series("announced", _timeline(made, dt), keep.astype(float), ["announced at the solve: steps the plan will be kept"],
+                   kind="SeriesPoints", colors=[look.ANNOUNCED], markers=["up"], marker_sizes=[4.0])
         known = np.flatnonzero(np.isfinite(record.prediction_error))
         series("prediction_error", _timeline(known, dt), record.prediction_error[known], ["‖W (x − x̂)‖"], **realised)
         threshold = re.fullmatch(r"threshold:(.+)", identity["policy"])

@@ -149,5 +149,5 @@ def render_rollout(domain: str, policy_spec: str, episode: int, out: str | Path,
         frames = render_frames(system, env, states, width, height, CAMERA)
         count = write_video(frames, out, fps)
         with Recorder(record) as recorder:
-            recorder.log_episode(played.record(policy_spec), frames)
+            recorder.log_episode(played.record(policy_spec, getattr(policy, "announce", None)), frames)
     return RenderResult(path=Path(out), frames=count, fps=fps, trajectory=traj)

@@ -68,11 +68,12 @@ class Played:
     seed: int
     test_set_sha256: str
 
-    def record(self, policy: str, **extra) -> EpisodeRecord:
-        """What a recording keeps of this episode, under the policy's name (``extra``: more identity)."""
+    def record(self, policy: str, announce=None, **extra) -> EpisodeRecord:
+        """What a recording keeps of this episode, under the policy's name (``extra``: more identity;
+        ``announce``: a self-trigger's, to record what it announced at each solve)."""
         identity = {"policy": policy, "episode": self.index, "repeat": self.repeat, "seed": self.seed,
                     "test_set_sha256": self.test_set_sha256, **extra}
-        return EpisodeRecord.from_trajectory(self.system, self.trajectory, identity, self.episode)
+        return EpisodeRecord.from_trajectory(self.system, self.trajectory, identity, self.episode, announce)
 
 
 def play_test_episode(domain: str, policy, seed: int, repeat: int, episode: int, testset_path: str | None = None,

@@ -1,5 +1,6 @@
 """Rerun recordings: what is in the file, read back with Rerun's own reader, against the live run."""
 
+import json
 import shutil
 import uuid
 
@@ -420,3 +421,37 @@ def test_train_records_its_evaluations_without_changing_any_result(tmp_path):
     live = evaluate("battery", [f"rl:{tmp_path / 'rec' / 'seed1' / 'last.json'}"], episodes=2, workers=1, progress=False)
     again = [r for r in replayed if r.policy == "seed1/episodes00004"]
     assert [(r.objective, r.recomputes) for r in again] == [(r.objective, r.recomputes) for r in live.runs]
+
+
+def test_a_self_trigger_records_what_it_announced_at_each_solve(tmp_path, cart_system):
+    """Independent truth: the loop keeps a self-trigger's plan exactly as long as announced, so each
+    announcement recorded at a solve is the gap to the next recompute in the file's own decisions."""
+    from etmpc import selftrigger as st
+
+    played = evaluate_mod.play_test_episode("cart_pendulum", parse_policy("always", cart_system.error_weights), 0, 0, 0)
+    env = cart_system.make_env()
+    env.task.use_episode(played.episode)
+    timestep = env.reset()
+    p = st.plan_features(cart_system.plan(cart_system.state(timestep), np.zeros(1), None, 0, timestep)).size
+    theta = np.zeros((len(st.CANDIDATES), 1 + p))
+    theta[st.CANDIDATES.index(2), 3], theta[st.CANDIDATES.index(6), 3] = 1.0, -1.0  # by the sign of the pole angle
+    policy_file = tmp_path / "announcing.json"
+    policy_file.write_text(json.dumps(st.SelfTrigger("x", "cart_pendulum", st.CANDIDATES, theta, np.zeros(p),
+                                                     np.ones(p)).to_json()))
+    path = tmp_path / "s.rrd"
+    evaluate("cart_pendulum", [f"self:{policy_file}"], episodes=1, workers=1, progress=False, record=path)
+    entities = chunks_by_entity(path)
+    root = "/cart_pendulum/self\\:announcing/episode_000/repeat_0"
+    _, decision = series(entities, f"{root}/decision")
+    solves = np.flatnonzero(decision[:, 0] > 0)
+    steps, announced = series(entities, f"{root}/announced")
+    np.testing.assert_array_equal(steps, solves)
+    assert set(announced[:, 0]) == {2, 6}
+    np.testing.assert_array_equal(announced[:-1, 0], np.diff(solves))
+    assert len(decision) - solves[-1] <= announced[-1, 0]  # the last plan is cut short by the episode's end
+    text = column_chunk(entities, f"{root}/events", "TextLog:text").column("TextLog:text").to_pylist()
+    for k, n, (line,) in zip(solves, announced[:, 0].astype(int), text):
+        assert line.endswith(f"announced: keep {n} steps, next solve at step {k + n}")
+    root_view, _ = read_blueprint(path)
+    (recompute_view,) = [v for v in views_of(root_view) if v["class"] == "TimeSeries" and v["name"].startswith("recomputes")]
+    assert f"{root}/announced" in recompute_view["contents"]
