@@ -18,7 +18,7 @@ $(VENV)/.installed: pyproject.toml
 # The main job: the paper's experiments on both systems, with REPORT.md and results.json. Running it
 # again after an interruption continues.
 reproduce: setup
-	$(BIN)/etmpc reproduce --out results/reproduce
+	$(BIN)/etmpc reproduce --sweep --out results/reproduce
 
 # A shorter look: compare recomputation policies on the stored 100-episode test set of each system,
 # and draw the paper's Figure 1 (battery forecasts).
