@@ -5,7 +5,6 @@ hand-built episode tables whose answers are known exactly, and brute force over 
 """
 
 import json
-import math
 
 import numpy as np
 import pytest
