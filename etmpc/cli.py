@@ -263,6 +263,11 @@ def _write_json(path: Path, data: dict) -> None:
     write_json(path, data)
 
 
+def _say(line: str) -> None:
+    """Progress of a long stage, on stderr (stdout keeps the results)."""
+    print(line, file=sys.stderr, flush=True)
+
+
 def _check_outputs(files: dict, directories: dict | None = None, inputs: dict | None = None) -> None:
     """Every output checked before any work: writable, distinct, and none of them an input."""
     from etmpc.outputs import check_outputs
@@ -342,9 +347,8 @@ def _train_self(args) -> None:
     _check_outputs({"--out": args.out})
     settings = SelfSettings(episodes=args.episodes, solves_per_episode=args.solves, futures=args.futures,
                             validation_episodes=args.validation_episodes)
-    key = args.task if args.price is None else system_key(args.task, args.price)
-    train_self(key, args.out, settings, args.workers or default_workers(), args.backend, args.address,
-               say=lambda line: print(line, file=sys.stderr, flush=True))
+    train_self(system_key(args.task, args.price), args.out, settings, args.workers or default_workers(), args.backend,
+               args.address, say=_say)
     print(f"wrote {args.out} (evaluate it with: etmpc evaluate {args.task} --policy self:{args.out}"
           f"{'' if args.price is None else f' --price {args.price:g}'})")
 
@@ -385,7 +389,7 @@ def _sweep(args) -> None:
         check_directory(out / task, task, settings[task])
     for task in args.task:
         pareto = sweep(task, out / task, settings[task], args.workers or default_workers(), args.backend, args.address,
-                       say=lambda line: print(line, file=sys.stderr, flush=True))
+                       say=_say)
         print("\n".join(report_section(pareto)))
         print(f"wrote {out / task}/pareto.json, pareto.png and SWEEP.md")
 
