@@ -41,7 +41,7 @@ from scipy.optimize import minimize
 from etmpc.errors import EtmpcError
 from etmpc.loop import Snapshot, play_on, run_episode
 from etmpc.outputs import write_json
-from etmpc.policies import AugmentedState, parse_policy
+from etmpc.policies import Always, AugmentedState, Every, parse_policy
 
 FORMAT = "etmpc-self-trigger"
 CANDIDATES = (1, 2, 3, 4, 5, 6, 8, 10, 12, 15, 20)
@@ -269,7 +269,7 @@ def train_self(key: str, out: Path, settings: SelfSettings = SelfSettings(), wor
         mean, scale = features.mean(axis=0), features.std(axis=0)
         scale = np.where(scale > 1e-12, scale, 1.0)
         fits = {}
-        period = _period(base)
+        period = _period(base, system)
         if period in candidates:  # the base itself, as a self-trigger: what training must beat (first: it wins ties)
             fits[f"constant {period} (the base)"] = SelfTrigger.constant(str(out), system.domain, candidates, period, mean.size)
         for r in settings.ridges:
@@ -290,12 +290,12 @@ def train_self(key: str, out: Path, settings: SelfSettings = SelfSettings(), wor
     return policy
 
 
-def _period(spec: str) -> int:
-    """``T`` of ``every:T`` (``always``: 1); 0 for anything else."""
-    if spec == "always":
+def _period(spec: str, system) -> int:
+    """``T`` of a periodic base (``always``: 1, ``every:T``: T); 0 for anything else."""
+    policy = parse_policy(spec, system.error_weights, system.domain)
+    if isinstance(policy, Always):
         return 1
-    name, _, arg = spec.partition(":")
-    return int(arg) if name == "every" and arg.isdigit() else 0
+    return policy.period if isinstance(policy, Every) else 0
 
 
 def _label_job(job) -> list:
