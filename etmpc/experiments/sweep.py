@@ -380,24 +380,24 @@ def build_pareto(domain: str, sense: str, settings: SweepSettings, fixed: dict, 
 
 
 def _answer(price: float, rows: dict, best: str) -> dict:
-    """At ``price``: the rollout policy's and the best event trigger's gain over the periodic front
-    at equal rates, and the oracle's (the bound)."""
-    def front(kind):
+    """At ``price``: the gain over the periodic front at equal rates of the rollout, learned and
+    self-triggering policies, of the best event trigger, and of the oracle (the bound)."""
+    def best_of(kind):
         candidates = [r for r in rows.values() if r["kind"] == kind and r["versus_periodic_front"] is not None]
         if not candidates:
             return None
         row = max(candidates, key=lambda r: r["versus_periodic_front"]["gain"])
         return {"policy": row["policy"], **row["versus_periodic_front"]}
-    return {"price": price, "best_periodic": best, "rollout": front("rollout"), "learned": front("learned"),
-            "self": front("self"), "best_event": front("event"), "oracle": front("oracle")}
+    return {"price": price, "best_periodic": best, "rollout": best_of("rollout"), "learned": best_of("learned"),
+            "self": best_of("self"), "best_event": best_of("event"), "oracle": best_of("oracle")}
 
 
 # -- the figure and the report ------------------------------------------------------------------------
 def draw_pareto(pareto: dict):
     """Control objective against computations per episode: every periodic schedule as a grey dot and
     the periodic front (the schedules no other beats) as a line, the event triggers as a dashed line
-    of points, the rollout policy at each price as a filled point and the
-    oracle bound at each price as a hollow one, coloured by price."""
+    of points; at each price, coloured by price, the rollout (diamond), learned (square) and
+    self-triggering (triangle) policies as filled points and the oracle bound as a hollow circle."""
     import matplotlib.pyplot as plt
 
     points, sense = pareto["points"], pareto["objective_sense"]
