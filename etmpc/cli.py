@@ -15,6 +15,7 @@ import threading
 from pathlib import Path
 
 from etmpc.errors import EtmpcError
+from etmpc.outputs import check_outputs, write_json
 
 # MuJoCo's OpenGL backends on Linux (mujoco/rendering/classic/gl_context.py): anything else makes
 # importing dm-control fail, so the command checks it before importing anything that renders.
@@ -257,28 +258,9 @@ def _check_backend(args) -> None:
         raise EtmpcError("--address needs --backend ray")
 
 
-def _write_json(path: Path, data: dict) -> None:
-    from etmpc.outputs import write_json
-
-    write_json(path, data)
-
-
 def _say(line: str) -> None:
     """Progress of a long stage, on stderr (stdout keeps the results)."""
     print(line, file=sys.stderr, flush=True)
-
-
-def _check_outputs(files: dict, directories: dict | None = None, inputs: dict | None = None) -> None:
-    """Every output checked before any work: writable, distinct, and none of them an input."""
-    from etmpc.outputs import check_outputs
-
-    for option, path in (inputs or {}).items():
-        if path is None:
-            continue
-        for out_option, out in {**files, **(directories or {})}.items():
-            if out is not None and Path(out).resolve() == Path(path).resolve():
-                raise EtmpcError(f"{out_option} {out} would overwrite the {option} it reads: write it elsewhere")
-    check_outputs(files, directories)
 
 
 def _distinct_policies(specs: list[str]) -> None:
@@ -296,14 +278,14 @@ def _evaluate(args) -> None:
     _distinct_policies(args.policy)
     if args.test_set is not None and not Path(args.test_set).is_file():
         raise EtmpcError(f"test set {args.test_set} not found")
-    _check_outputs({"--json": args.json, "--record": args.record}, inputs={"--test-set": args.test_set})
+    check_outputs({"--json": args.json, "--record": args.record}, inputs={"--test-set": args.test_set})
     result = evaluate(args.task, args.policy, args.episodes, args.repeats, args.workers, args.seed, args.test_set,
                       backend=args.backend, address=args.address, record=args.record, recompute_price=args.price)
     print(format_table(result))
     if args.record is not None:
         print(f"wrote {args.record} (open it with: rerun {args.record}; summarise it with: etmpc replay {args.record})")
     if args.json is not None:
-        _write_json(args.json, result.to_json())
+        write_json(args.json, result.to_json())
         print(f"wrote {args.json}")
     nonfinite = sum(s.nonfinite_episodes for s in result.summaries)
     if nonfinite:
@@ -319,7 +301,7 @@ def _train(args) -> None:
 
     check_name(args.task)
     _check_backend(args)
-    _check_outputs({}, {"--out": args.out})
+    check_outputs({}, {"--out": args.out})
     dpi_options = {"futures": args.futures, "horizon": args.horizon, "states_per_episode": args.labels}
     if args.algorithm != "dpi" and any(v is not None for v in dpi_options.values()):
         raise EtmpcError("--futures, --horizon and --labels are DPI's settings: add --algorithm dpi")
@@ -344,7 +326,7 @@ def _train_self(args) -> None:
 
     check_name(args.task)
     _check_backend(args)
-    _check_outputs({"--out": args.out})
+    check_outputs({"--out": args.out})
     settings = SelfSettings(episodes=args.episodes, solves_per_episode=args.solves, futures=args.futures,
                             validation_episodes=args.validation_episodes)
     train_self(system_key(args.task, args.price), args.out, settings, args.workers or default_workers(), args.backend,
@@ -359,7 +341,7 @@ def _reproduce(args) -> None:
 
     _check_backend(args)
     out = args.out or Path("results") / ("reproduce-quick" if args.quick else "reproduce")
-    _check_outputs({}, {"--out": out})
+    check_outputs({}, {"--out": out})
     reproduce(out, QUICK if args.quick else FULL, args.workers or default_workers(), args.backend, args.address,
               sweep=args.sweep)
     print(f"wrote {out}/REPORT.md and {out}/results.json")
@@ -384,7 +366,7 @@ def _sweep(args) -> None:
         stored = load(default_path(system.domain, system.task), system.domain, system.task)
         if chosen.episodes > stored.episodes:
             raise EtmpcError(f"--episodes must be in 1..{stored.episodes} for the {task} test set, got {chosen.episodes}")
-    _check_outputs({}, {"--out": out})
+    check_outputs({}, {"--out": out})
     for task in args.task:  # every directory checked before any work
         check_directory(out / task, task, settings[task])
     for task in args.task:
@@ -401,7 +383,7 @@ def _render(args) -> None:
     check_name(args.task)
     if args.out.suffix != ".mp4":
         raise EtmpcError(f"--out {args.out} does not end in .mp4")
-    _check_outputs({"--out": args.out, "--record": args.record})
+    check_outputs({"--out": args.out, "--record": args.record})
     try:
         result = render_rollout(args.task, args.policy, args.episode, args.out, args.seed, args.width, args.height,
                                 args.fps, record=args.record)
@@ -417,11 +399,11 @@ def _replay(args) -> None:
 
     from etmpc.recording import format_replay, replay_summary
 
-    _check_outputs({"--json": args.json}, inputs={"recording": args.recording})
+    check_outputs({"--json": args.json}, inputs={"recording": args.recording})
     episodes = replay_summary(args.recording)
     print(format_replay(episodes, args.per_episode))
     if args.json is not None:
-        _write_json(args.json, {"recording": str(args.recording), "episodes": [asdict(e) for e in episodes]})
+        write_json(args.json, {"recording": str(args.recording), "episodes": [asdict(e) for e in episodes]})
         print(f"wrote {args.json}")
 
 
@@ -432,13 +414,13 @@ def _bench(args) -> None:
     domains = args.tasks or list(names())
     for domain in domains:  # all names checked before any bench runs
         check_name(domain)
-    _check_outputs({"--json": args.json})
+    check_outputs({"--json": args.json})
     figures = {}
     for domain in domains:
         figures[domain] = run_bench(domain, episodes=args.episodes, references=not args.no_reference)
         print(format_bench(figures[domain]), flush=True)
     if args.json is not None:
-        _write_json(args.json, figures)
+        write_json(args.json, figures)
         print(f"wrote {args.json}")
 
 

@@ -69,14 +69,21 @@ def check_writable(path: Path, option: str, directory: bool = False) -> None:
             os.unlink(probe)
 
 
-def check_outputs(outputs: Mapping[str, Path | None], directories: Mapping[str, Path | None] | None = None) -> None:
+def check_outputs(outputs: Mapping[str, Path | None], directories: Mapping[str, Path | None] | None = None,
+                  inputs: Mapping[str, Path | str | None] | None = None) -> None:
     """Check every output of one command before it runs: ``outputs`` maps an option (``--json``)
     to the file it names (``None``: not asked for), ``directories`` an option to a directory the
-    command writes into. Two options naming the same file, or a file inside a named directory,
-    are refused."""
+    command writes into, ``inputs`` a name to a file the command reads. Two options naming the same
+    file, a file inside a named directory, or an output that is an input, are refused."""
     seen: dict[Path, str] = {}
     named = [(o, Path(p), False) for o, p in outputs.items() if p is not None]
     named += [(o, Path(p), True) for o, p in (directories or {}).items() if p is not None]
+    for source, path in (inputs or {}).items():
+        if path is None:
+            continue
+        for option, out, _ in named:
+            if out.resolve() == Path(path).resolve():
+                raise EtmpcError(f"{option} {out} would overwrite the {source} it reads: write it elsewhere")
     for option, path, directory in named:
         resolved = path.resolve()
         if resolved in seen:
