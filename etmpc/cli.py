@@ -438,6 +438,10 @@ def main(argv: list[str] | None = None) -> int:
     # Rerun's own log lines (its file writer's errors) stay off stderr: a failure to write a
     # recording is reported as one line by etmpc itself. Set RUST_LOG to see them.
     os.environ.setdefault("RUST_LOG", "off")
+    # The numerical libraries run single-threaded (the work is spread over processes instead), so
+    # their sums do not depend on how many cores the machine has; set these yourself to override.
+    for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(name, "1")
     in_main_thread = threading.current_thread() is threading.main_thread()
     previous = signal.signal(signal.SIGTERM, _terminate) if in_main_thread else None
     try:

@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from etmpc.errors import EtmpcError
+from etmpc.numerics import dot
 from etmpc.outputs import write_text
 from etmpc.policies import AugmentedState
 
@@ -159,20 +160,30 @@ class LogisticPolicy:
         return self.normalisation.features(raw_features(self.features, self.domain, s))
 
     def keep_probability(self, s: AugmentedState) -> float:
-        return self._keep_probability(self.phi(s))
+        return sigmoid(self.decision_value(self.phi(s)))
 
-    def _keep_probability(self, phi: np.ndarray) -> float:
-        with np.errstate(over="ignore", invalid="ignore"):  # an infinite logit is a sure answer; NaN is not
-            logit = float(self.theta @ phi)
+    def decision_value(self, phi: np.ndarray) -> float:
+        """The logit ``theta . phi`` of keeping, the same on every machine: the terms ``theta_j phi_j``
+        are formed first (each rounded as IEEE multiplication rounds it) and judged before they are
+        summed. Terms of ``+inf`` only give ``+inf`` (a sure keep), of ``-inf`` only ``-inf`` (a sure
+        recompute), and finite terms are summed exactly and rounded once (``etmpc.numerics.dot``); an
+        exact sum beyond the double range is ``+-inf`` by its sign. Terms of both infinities, or NaN,
+        have no value: that is an error, on every machine (a BLAS ``theta @ phi`` gives NaN or
+        ``-inf`` for them depending on the CPU's kernel)."""
+        with np.errstate(over="ignore", invalid="ignore"):
+            logit = dot(self.theta, phi)
         if math.isnan(logit):
             raise PolicyFileError(f"the {self.domain} policy's decision value is not a number at this state "
                                   "(its parameters overflow against the features): retrain it or check its file")
-        return sigmoid(logit)
+        return logit
 
     def decide(self, s: AugmentedState, rng: np.random.Generator) -> bool:
         phi = self.phi(s)
-        p_keep = self._keep_probability(phi)
-        recompute = p_keep < 0.5 if self.greedy else bool(rng.random() >= p_keep)
+        logit = self.decision_value(phi)
+        p_keep = sigmoid(logit)
+        # Greedy: recompute when pi(keep | s) < 1/2, i.e. when the logit is negative (decided on the
+        # logit itself, so no exp rounding can move the boundary).
+        recompute = logit < 0.0 if self.greedy else bool(rng.random() >= p_keep)
         if self.record:
             self.decisions.append((phi, recompute, p_keep))
         return recompute

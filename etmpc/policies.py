@@ -22,6 +22,7 @@ from typing import Any, ClassVar, Protocol
 import numpy as np
 
 from etmpc.errors import EtmpcError, UnknownNameError
+from etmpc.numerics import norm
 
 
 @dataclass(frozen=True)
@@ -102,8 +103,7 @@ class Threshold:
         return f"threshold:{self.level:g}"
 
     def decide(self, s: AugmentedState, rng: np.random.Generator) -> bool:
-        error = self.weights * (s.x - s.x_predicted)
-        return bool(math.sqrt(float(error @ error)) > self.level)
+        return norm(self.weights * (s.x - s.x_predicted)) > self.level
 
 
 def _number(text: str, kind: type, spec: str):

@@ -51,6 +51,7 @@ import numpy as np
 
 from etmpc import blueprint as look
 from etmpc.errors import EtmpcError
+from etmpc.numerics import norm
 
 APPLICATION_ID = "etmpc"
 DECISION_SERIES = ("recompute", "forced")
@@ -118,7 +119,7 @@ def prediction_errors(traj, error_weights) -> np.ndarray:
     for i in range(traj.steps):
         if current is not None:
             k, plan = current
-            errors[i] = float(np.linalg.norm(w * (traj.states[i] - plan.state_at(i - k))))
+            errors[i] = norm(w * (traj.states[i] - plan.state_at(i - k)))  # the threshold policy's measure
         while upcoming is not None and upcoming[0] <= i:  # a plan made at step i is in force from i on
             current, upcoming = upcoming, next(plans, None)
     return errors

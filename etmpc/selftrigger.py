@@ -40,6 +40,7 @@ from scipy.optimize import minimize
 
 from etmpc.errors import EtmpcError
 from etmpc.loop import Snapshot, play_on, run_episode
+from etmpc.numerics import matvec
 from etmpc.outputs import write_json
 from etmpc.policies import Always, AugmentedState, Every, parse_policy
 
@@ -81,7 +82,7 @@ class SelfTrigger:
     def announce(self, plan) -> int:
         """The number of steps ``plan`` will be kept, decided as it is made."""
         z = (plan_features(plan) - self.mean) / self.scale
-        logits = self.theta @ np.concatenate([[1.0], z])
+        logits = matvec(self.theta, np.concatenate([[1.0], z]))  # not @: the choice must not depend on the BLAS kernel
         if not np.all(np.isfinite(logits)):
             raise EtmpcError(f"self-trigger policy {self.path} gives a non-finite score for a plan")
         return int(self.candidates[int(np.argmax(logits))])

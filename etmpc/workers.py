@@ -115,11 +115,28 @@ class _QuietSpawnContext(SpawnContext):
     Process = _QuietSpawnProcess
 
 
+THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+def single_threaded():
+    """Run the numerical libraries (both OpenBLAS builds of numpy and scipy) on one thread each: the
+    parallelism is across episodes, and a BLAS reduction split over threads adds in an order that
+    depends on how many the machine has. Returns a context manager (``threadpoolctl``'s)."""
+    import scipy.linalg  # noqa: F401  (scipy's own OpenBLAS is loaded here, so that it is limited too)
+    from threadpoolctl import threadpool_limits
+
+    return threadpool_limits(limits=1)
+
+
 def die_with_parent(parent: int) -> None:
     """Worker initialiser: end this process as soon as ``parent`` (the process that started it)
     ends, however it ends (SIGTERM, SIGKILL, a crash), so no worker outlives its command. On Linux
     the kernel sends SIGKILL (``PR_SET_PDEATHSIG``); everywhere, a watchdog thread also checks.
-    Ctrl-C is left to the parent."""
+    Ctrl-C is left to the parent. The worker's numerical libraries run on one thread
+    (:func:`single_threaded`; libraries it loads later read the environment variables)."""
+    for name in THREAD_VARIABLES:
+        os.environ.setdefault(name, "1")
+    single_threaded()
     # Ctrl-C reaches the whole process group: the command stops its workers itself, which must
     # not print a KeyboardInterrupt traceback each.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -142,14 +159,18 @@ class LocalBackend:
     def __init__(self, workers: int):
         self.workers = workers
         self._pool = None
+        self._limits = None
 
     def __enter__(self):
         if self.workers > 1:
             self._pool = ProcessPoolExecutor(self.workers, _QuietSpawnContext(), initializer=die_with_parent,
                                              initargs=(os.getpid(),))
+        self._limits = single_threaded()  # this process runs jobs (one worker) or the driver's own sums
         return self
 
     def __exit__(self, *exc):
+        if self._limits is not None:
+            self._limits.restore_original_limits()
         if self._pool is not None:
             self._pool.shutdown(cancel_futures=True)
 
@@ -241,7 +262,8 @@ def _check_reachable(address: str, timeout: float = 10.0) -> None:
 
 
 def _run_chunk(fn, chunk: list) -> list:
-    return [fn(job) for job in chunk]
+    with single_threaded():
+        return [fn(job) for job in chunk]
 
 
 def make_backend(name: str, workers: int, address: str | None = None):

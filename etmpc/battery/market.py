@@ -7,6 +7,7 @@ holds the whole realisation and a replay needs no randomness (see :class:`etmpc.
 from __future__ import annotations
 
 import dataclasses
+import math
 from itertools import accumulate
 from typing import TYPE_CHECKING
 
@@ -25,7 +26,7 @@ def ou_path(rng: np.random.Generator, steps: int, dt_s: float, time_constant_s: 
     ``o_0 ~ N(0, std^2)``, ``o_{k+1} = rho o_k + std sqrt(1 - rho^2) xi_k`` with ``rho = exp(-dt/tau)``.
     With ``rows``, draws that many independent paths (shape ``(rows, steps)``).
     """
-    rho = float(np.exp(-dt_s / time_constant_s))  # a Python float: numpy-scalar products are slow
+    rho = math.exp(-dt_s / time_constant_s)  # libm's, not numpy's vectorised exp (which differs by CPU)
     shape = (steps,) if rows is None else (rows, steps)
     xi = rng.standard_normal(shape)
     xi[..., 1:] *= np.sqrt(1.0 - rho * rho)
@@ -127,7 +128,7 @@ def sample_future(rng: np.random.Generator, episode: Episode, known_rows: int, b
                 ends_s.append(ends_s[-1] + rng.exponential(signal.event_mean_duration_s))
             events = np.concatenate(([b - hourly], rng.uniform(signal.event_low, signal.event_high, len(ends_s) - 1)))
             base[known_rows:] = hourly_levels[hours] + events[np.searchsorted(ends_s, times_s, side="right")]
-            rho = float(np.exp(-dt_s / signal.ou_time_constant_s))
+            rho = math.exp(-dt_s / signal.ou_time_constant_s)
             xi = signal.ou_std * np.sqrt(1.0 - rho * rho) * rng.standard_normal(new)
             deviation = list(accumulate(xi.tolist(), lambda o, x: rho * o + x, initial=true[k] - b))[1:]
             true[known_rows:] = base[known_rows:] + deviation

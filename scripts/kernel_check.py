@@ -1,0 +1,135 @@
+"""Are evaluations the same, byte for byte, whatever numerical kernels the CPU selects?
+
+Plays the same policies on the first test-set episodes of both systems once per *kernel setting* and
+compares the evaluation JSONs byte for byte. A setting is what another x86-64 machine would run with
+the same packages, forced on this one through the libraries' own switches:
+
+* ``OPENBLAS_CORETYPE``: OpenBLAS's kernels (``Prescott``: SSE3, no FMA; ``Haswell``: AVX2 + FMA;
+  ``SkylakeX``: AVX-512);
+* ``NPY_DISABLE_CPU_FEATURES``: numpy's own vectorised loops (its dispatch targets above the baseline);
+* ``GLIBC_TUNABLES=glibc.cpu.hwcaps=...``: which variant of libm's exp, sin, cos, log glibc picks.
+
+Only settings this CPU can run are tried. Usage::
+
+    python scripts/kernel_check.py [--episodes 4]
+
+prints one line per setting and exits 1 if any evaluation differs from the default one. A setting's
+run is this script with ``--digest``: it prints the sha256 of each system's evaluation JSON.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def cpu_flags() -> set[str]:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("flags"):
+                return set(line.split(":", 1)[1].split())
+    except OSError:
+        pass
+    return set()
+
+
+def numpy_dispatch() -> list[str]:
+    """numpy's dispatch targets (above its baseline), as ``NPY_DISABLE_CPU_FEATURES`` names them."""
+    try:
+        from numpy._core._multiarray_umath import __cpu_dispatch__
+    except ImportError:  # numpy < 2
+        from numpy.core._multiarray_umath import __cpu_dispatch__
+    return list(__cpu_dispatch__)
+
+
+def settings() -> dict[str, dict[str, str]]:
+    """Kernel settings this CPU can run: name -> environment."""
+    if platform.machine().lower() not in ("x86_64", "amd64"):
+        return {"default": {}}
+    flags = cpu_flags()
+    dispatch = numpy_dispatch()
+    wide = [t for t in dispatch if t.startswith(("X86_V4", "AVX512"))]
+    chosen = {"default": {}}
+    chosen["SSE: OpenBLAS Prescott, numpy baseline loops"] = {
+        "OPENBLAS_CORETYPE": "Prescott", "NPY_DISABLE_CPU_FEATURES": " ".join(dispatch)}
+    if {"avx2", "fma"} <= flags:
+        chosen["AVX2 machine: OpenBLAS Haswell, numpy and libm without AVX-512"] = {
+            "OPENBLAS_CORETYPE": "Haswell", "NPY_DISABLE_CPU_FEATURES": " ".join(wide),
+            "GLIBC_TUNABLES": "glibc.cpu.hwcaps=-AVX512F,-AVX512DQ,-AVX512BW,-AVX512VL,-AVX512CD"}
+        chosen["no FMA: OpenBLAS Prescott, numpy baseline, libm without AVX2/FMA"] = {
+            "OPENBLAS_CORETYPE": "Prescott", "NPY_DISABLE_CPU_FEATURES": " ".join(dispatch),
+            "GLIBC_TUNABLES": "glibc.cpu.hwcaps=-AVX2,-FMA,-AVX512F,-AVX"}
+    if {"avx512f", "avx512dq", "avx512bw", "avx512vl", "avx512cd"} <= flags:
+        chosen["AVX-512 machine: OpenBLAS SkylakeX"] = {"OPENBLAS_CORETYPE": "SkylakeX"}
+    return chosen
+
+
+def _self_trigger(path: Path, domain: str) -> str:
+    """A self-trigger whose announcements depend on the plan (random but fixed parameters)."""
+    import numpy as np
+
+    from etmpc.outputs import write_json
+    from etmpc.selftrigger import CANDIDATES, SelfTrigger
+
+    p = {"cart_pendulum": 4 + 4 + 4 + 1 + 1, "battery": 1 + 1 + 1 + 1 + 1 + 4}[domain]
+    theta = np.random.default_rng(5).normal(size=(len(CANDIDATES), 1 + p))
+    write_json(path, SelfTrigger(str(path), domain, CANDIDATES, theta, np.zeros(p), np.ones(p)).to_json())
+    return f"self:{path}"
+
+
+def digests(episodes: int) -> dict[str, str]:
+    from etmpc.evaluate import evaluate
+
+    policies = {
+        "cart_pendulum": ["always", "every:3", "threshold:0.3", f"rl:{ROOT / 'policies/cart_pendulum/learned.json'}",
+                          "rollout:every:3:2:5"],
+        "battery": ["every:3", "threshold:0.01", f"rl:{ROOT / 'policies/battery/learned.json'}", "rollout:always:2:5"],
+    }
+    out = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for domain, specs in policies.items():
+            specs = specs + [_self_trigger(Path(tmp) / f"self_{domain}.json", domain)]
+            text = json.dumps(evaluate(domain, specs, episodes=episodes, workers=1, progress=False).to_json())
+            out[domain] = hashlib.sha256(text.replace(tmp, "TMP").encode()).hexdigest()  # the file's name is no result
+    return out
+
+
+def compare(episodes: int = 4) -> dict[str, dict[str, str]]:
+    """Each setting's digests, computed in a fresh interpreter under that setting's environment."""
+    found = {}
+    for name, env in settings().items():
+        result = subprocess.run([sys.executable, __file__, "--digest", "--episodes", str(episodes)],
+                                env={**os.environ, **env}, capture_output=True, text=True, check=True)
+        found[name] = json.loads(result.stdout.strip().splitlines()[-1])
+    return found
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--episodes", type=int, default=4, help="first N test-set episodes per system (default 4)")
+    parser.add_argument("--digest", action="store_true", help="print this process's digests as JSON (one setting)")
+    args = parser.parse_args()
+    if args.digest:
+        print(json.dumps(digests(args.episodes)))
+        return 0
+    found = compare(args.episodes)
+    reference = found["default"]
+    same = True
+    for name, values in found.items():
+        equal = values == reference
+        same &= equal
+        print(f"{'same' if equal else 'DIFFERS':8s} {name}: " + ", ".join(f"{d} {v[:12]}" for d, v in values.items()))
+    return 0 if same else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
