@@ -29,8 +29,8 @@ import dm_env
 import numpy as np
 from dm_control.rl.control import PhysicsError
 
-from etmpc.lqr import ErrorFeedback
-from etmpc.plan import Plan
+from etmpc.control.lqr import ErrorFeedback
+from etmpc.control.plan import Plan
 from etmpc.policies import AugmentedState, Policy
 
 
@@ -58,7 +58,7 @@ class System(Protocol):
     def plan(self, x: np.ndarray, u_prev: np.ndarray, warm: Plan | None, age: int, timestep: dm_env.TimeStep) -> Plan: ...
     def action(self, u: np.ndarray, recompute: bool) -> np.ndarray: ...
 
-    # Not used by the loop: test sets (etmpc.testset), `etmpc bench` and recordings.
+    # Not used by the loop: test sets (etmpc.evaluation.testsets), `etmpc bench` and recordings.
     def draw_episode(self, rng: np.random.Generator) -> Any: ...
     def signals(self, episode: Any) -> dict[str, np.ndarray]: ...  # exogenous inputs per step (recordings)
     def episode_parameters(self) -> dict: ...
@@ -66,7 +66,7 @@ class System(Protocol):
     def reference_solvers(self) -> list: ...  # objects with .name and .solve(x, u_prev, timestep, continuing)
     def interpreted(self) -> System | None: ...  # the same system with its MPC in CasADi's VM, if it is compiled
 
-    # Used by the rollout policies (etmpc.rollout).
+    # Used by the rollout policies (etmpc.policies.rollout).
     def sample_future(self, episode: Any, step: int, rng: np.random.Generator) -> Any: ...  # see its docstrings
     def truncation_value(self, x: np.ndarray) -> float: ...  # reward for the state a truncated rollout ends in
 

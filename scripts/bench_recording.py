@@ -15,7 +15,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from etmpc.evaluate import evaluate
+from etmpc.evaluation.evaluate import evaluate
 
 
 def main(argv=None) -> int:

@@ -27,10 +27,10 @@ from pathlib import Path
 
 import numpy as np
 
-from etmpc.gpomdp import Learner, Settings
-from etmpc.learned import INITIAL_KEEP_LOGIT, LogisticPolicy, Normalisation, load_policy
-from etmpc.train import evaluate_theta, normalisation_states, train_block, _learner_to_json
-from etmpc.workers import context, make_backend
+from etmpc.learning.gpomdp import Learner, Settings
+from etmpc.policies.learned import INITIAL_KEEP_LOGIT, LogisticPolicy, Normalisation, load_policy
+from etmpc.learning.train import evaluate_theta, normalisation_states, train_block, _learner_to_json
+from etmpc.evaluation.workers import context, make_backend
 
 
 def peak_rss_mib() -> float:

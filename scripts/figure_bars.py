@@ -12,8 +12,8 @@ import json
 import sys
 from pathlib import Path
 
-from etmpc.errors import EtmpcError
-from etmpc.figures import write_policy_bars_png
+from etmpc.common.errors import EtmpcError
+from etmpc.views.figures import write_policy_bars_png
 
 
 class _Parser(argparse.ArgumentParser):

@@ -13,9 +13,9 @@ from pathlib import Path
 
 import numpy as np
 
-from etmpc import testset
-from etmpc.errors import EtmpcError
-from etmpc.figures import forecast_figure, save_png_atomically
+from etmpc.evaluation import testsets as testset
+from etmpc.common.errors import EtmpcError
+from etmpc.views.figures import forecast_figure, save_png_atomically
 from etmpc.loop import run_episode
 from etmpc.policies import parse_policy
 from etmpc.systems import make_system

@@ -13,12 +13,12 @@ import re
 import sys
 from pathlib import Path
 
-from etmpc.errors import EtmpcError
-from etmpc.evaluate import scores
-from etmpc.figures import write_trajectory_png
+from etmpc.common.errors import EtmpcError
+from etmpc.evaluation.evaluate import scores
+from etmpc.views.figures import write_trajectory_png
 from etmpc.policies import parse_policy
 from etmpc.systems import check_name, names
-from etmpc.workers import context, play_test_episode
+from etmpc.evaluation.workers import context, play_test_episode
 
 
 class _Parser(argparse.ArgumentParser):

@@ -19,10 +19,10 @@ import sys
 
 import numpy as np
 
-from etmpc.gpomdp import VALUE_RIDGE, Settings, gradient, rewards_to_go
-from etmpc.learned import LogisticPolicy, Normalisation, load_policy
-from etmpc.train import normalisation_states, play
-from etmpc.workers import context, make_backend
+from etmpc.learning.gpomdp import VALUE_RIDGE, Settings, gradient, rewards_to_go
+from etmpc.policies.learned import LogisticPolicy, Normalisation, load_policy
+from etmpc.learning.train import normalisation_states, play
+from etmpc.evaluation.workers import context, make_backend
 
 ENTROPY = 0x5A12  # this script's own episodes, apart from training's and the test set's
 

@@ -77,8 +77,8 @@ def _self_trigger(path: Path, domain: str) -> str:
     """A self-trigger whose announcements depend on the plan (random but fixed parameters)."""
     import numpy as np
 
-    from etmpc.outputs import write_json
-    from etmpc.selftrigger import CANDIDATES, SelfTrigger
+    from etmpc.common.outputs import write_json
+    from etmpc.policies.selftrigger import CANDIDATES, SelfTrigger
 
     p = {"cart_pendulum": 4 + 4 + 4 + 1 + 1, "battery": 1 + 1 + 1 + 1 + 1 + 4}[domain]
     theta = np.random.default_rng(5).normal(size=(len(CANDIDATES), 1 + p))
@@ -87,7 +87,7 @@ def _self_trigger(path: Path, domain: str) -> str:
 
 
 def digests(episodes: int) -> dict[str, str]:
-    from etmpc.evaluate import evaluate
+    from etmpc.evaluation.evaluate import evaluate
 
     policies = {
         "cart_pendulum": ["always", "every:3", "threshold:0.3", f"rl:{ROOT / 'policies/cart_pendulum/learned.json'}",

@@ -10,7 +10,7 @@ import argparse
 import hashlib
 import sys
 
-from etmpc import testset
+from etmpc.evaluation import testsets as testset
 from etmpc.systems import make_system, names
 
 SEEDS = {"cart_pendulum": 20210601, "battery": 20210602}  # one fixed seed per system's test set

@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import argparse
 
-from etmpc.cart_pendulum.mismatch import table
-from etmpc.cart_pendulum.model import STATE_NAMES
+from etmpc.systems.cart_pendulum.mismatch import table
+from etmpc.systems.cart_pendulum.model import STATE_NAMES
 
 UNITS = ("m", "m/s", "rad", "rad/s")
 

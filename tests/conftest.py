@@ -4,9 +4,9 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 import pytest  # noqa: E402
 
-from etmpc import testset  # noqa: E402
-from etmpc.battery.system import BatterySystem  # noqa: E402
-from etmpc.cart_pendulum.system import CartPendulumSystem  # noqa: E402
+from etmpc.evaluation import testsets as testset  # noqa: E402
+from etmpc.systems.battery.system import BatterySystem  # noqa: E402
+from etmpc.systems.cart_pendulum.system import CartPendulumSystem  # noqa: E402
 
 
 @pytest.fixture(scope="session")

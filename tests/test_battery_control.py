@@ -5,12 +5,12 @@ import dataclasses
 import numpy as np
 import pytest
 
-from etmpc.battery import env as battery_env
-from etmpc.battery.mpc import EconomicMPC
-from etmpc.battery.parameters import Battery
-from etmpc.battery.reference import solve_with_linprog
-from etmpc.battery.system import BatterySystem, Config
-from etmpc.evaluate import evaluate
+from etmpc.systems.battery import task as battery_env
+from etmpc.systems.battery.mpc import EconomicMPC
+from etmpc.systems.battery.parameters import Battery
+from etmpc.systems.battery.reference import solve_with_linprog
+from etmpc.systems.battery.system import BatterySystem, Config
+from etmpc.evaluation.evaluate import evaluate
 from etmpc.loop import run_episode
 from etmpc.policies import parse_policy
 
@@ -75,7 +75,7 @@ def test_lqr_gain_is_the_scalar_riccati_solution():
 
 
 def test_bad_configurations_are_refused():
-    from etmpc.errors import EtmpcError
+    from etmpc.common.errors import EtmpcError
 
     with pytest.raises(EtmpcError, match="exceeds the 20 forecast values"):
         BatterySystem(Config(horizon=21))
@@ -140,7 +140,7 @@ def test_evaluate_reports_profit_with_sense_max(battery_system, battery_testset)
 
 
 def test_bench_compares_against_linprog():
-    from etmpc.bench import run_bench
+    from etmpc.evaluation.bench import run_bench
 
     figures = run_bench("battery", episodes=1, reference_solves=30)
     assert figures["mpc_solve"]["samples"] == 100 and figures["solver_failures"] == 0

@@ -5,9 +5,9 @@ import pytest
 from dm_control.rl import control
 
 from etmpc import suite
-from etmpc.battery import env as battery_env
-from etmpc.battery.market import event_levels, ou_path
-from etmpc.battery.parameters import PRICE, Battery, Market
+from etmpc.systems.battery import task as battery_env
+from etmpc.systems.battery.market import event_levels, ou_path
+from etmpc.systems.battery.parameters import PRICE, Battery, Market
 
 B = Battery()
 DT_H = 10 / 3600  # delta in hours

@@ -7,9 +7,9 @@ the values the generators' parameters imply, allowing ``Z`` standard errors of t
 import numpy as np
 import pytest
 
-from etmpc.battery.env import Episode
-from etmpc.battery.market import SIGNAL_ARRAYS, sample_future
-from etmpc.battery.parameters import SECONDS_PER_HOUR, Battery, Market
+from etmpc.systems.battery.task import Episode
+from etmpc.systems.battery.market import SIGNAL_ARRAYS, sample_future
+from etmpc.systems.battery.parameters import SECONDS_PER_HOUR, Battery, Market
 
 B, M = Battery(), Market()
 DT = B.interval_s

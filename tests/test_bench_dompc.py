@@ -9,8 +9,8 @@ pytest.importorskip("do_mpc")
 import casadi as ca  # noqa: E402
 import numpy as np  # noqa: E402
 
-from etmpc.bench_dompc import DoMpcReference  # noqa: E402
-from etmpc.cart_pendulum.model import AnalyticModel  # noqa: E402
+from etmpc.systems.cart_pendulum.dompc import DoMpcReference  # noqa: E402
+from etmpc.systems.cart_pendulum.model import AnalyticModel  # noqa: E402
 
 N, D, U_MAX, ANGLE = 20, 1e-4, 25.0, 2
 

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from etmpc.cart_pendulum import env as cp_env
-from etmpc.cart_pendulum.model import AnalyticModel, Parameters, ode, paper_lqr_matrices
+from etmpc.systems.cart_pendulum import task as cp_env
+from etmpc.systems.cart_pendulum.model import AnalyticModel, Parameters, ode, paper_lqr_matrices
 
 
 def analytic_trajectory(x0, inputs, disturbances, dt=cp_env.CONTROL_DT_S):
@@ -118,7 +118,7 @@ def test_predictor_is_rk4_of_the_ode():
 
 
 def test_mismatch_table_orders_the_settings():
-    from etmpc.cart_pendulum.mismatch import table
+    from etmpc.systems.cart_pendulum.mismatch import table
 
     matched, mismatched = table(samples=40, seed=1)
     assert matched["plant"] == "matched" and mismatched["plant"] == "mismatched"

@@ -56,7 +56,7 @@ def test_console_script_error_has_no_traceback():
 
 
 def test_bench_reports_consistent_figures():
-    from etmpc.bench import run_bench
+    from etmpc.evaluation.bench import run_bench
 
     figures = run_bench("cart_pendulum", episodes=1, references=False)
     assert figures["mpc_solve"]["samples"] == 100  # one solve per step under `always`

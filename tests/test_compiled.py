@@ -7,7 +7,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from etmpc import compiled
+from etmpc.control import compiled
 
 
 @pytest.fixture
@@ -18,7 +18,7 @@ def function():
 
 @pytest.fixture
 def builds(monkeypatch):
-    """Counts the builds (compiler runs) of etmpc.compiled."""
+    """Counts the builds (compiler runs) of etmpc.control.compiled."""
     count = [0]
     build = compiled._build
 
@@ -51,7 +51,7 @@ def test_valid_cache_is_reused_without_building(function, tmp_path, builds):
 
 BUILD = """
 import sys, casadi as ca, numpy as np
-from etmpc import compiled
+from etmpc.control import compiled
 x, y = ca.SX.sym("x", 3), ca.SX.sym("y", 2)
 function = ca.Function("etmpc_test_fn", [x, y], [ca.sin(x) * y[0], ca.sumsqr(x) + y[1]], ["x", "y"], ["a", "b"])
 builds = []
@@ -96,7 +96,7 @@ def test_failed_build_leaves_nothing_and_says_why(function, tmp_path, monkeypatc
 def test_without_a_compiler_the_mpc_runs_interpreted(cart_system, monkeypatch):
     from dataclasses import replace
 
-    from etmpc.cart_pendulum.system import CartPendulumSystem
+    from etmpc.systems.cart_pendulum.system import CartPendulumSystem
 
     default = cart_system.mpc  # built (or loaded) before the compiler goes away
     monkeypatch.setenv("CC", "/nonexistent/cc")

@@ -5,10 +5,10 @@ import json
 import numpy as np
 import pytest
 
-from etmpc import dpi
+from etmpc.learning import dpi
 from etmpc.cli import main
-from etmpc.learned import LogisticPolicy, Normalisation, feature_size, load_policy, raw_features
-from etmpc.plan import Plan
+from etmpc.policies.learned import LogisticPolicy, Normalisation, feature_size, load_policy, raw_features
+from etmpc.control.plan import Plan
 from etmpc.policies import AugmentedState
 
 
@@ -96,7 +96,7 @@ def test_bad_learner_options_are_one_line_errors(capsys, tmp_path, argv, message
 
 @pytest.mark.slow
 def test_a_dpi_run_does_not_depend_on_the_number_of_workers_and_chooses_on_validation(tmp_path):
-    from etmpc.train import TrainConfig, train
+    from etmpc.learning.train import TrainConfig, train
 
     config = TrainConfig("battery", seeds=(0, 1), episodes=2, eval_every=1, eval_episodes=2, normalisation_episodes=2,
                          algorithm="dpi", validation_episodes=3,

@@ -5,8 +5,8 @@ import pytest
 from dm_control.rl import control
 
 from etmpc import suite
-from etmpc.cart_pendulum import env as cp_env
-from etmpc.errors import UnknownNameError
+from etmpc.systems.cart_pendulum import task as cp_env
+from etmpc.common.errors import UnknownNameError
 
 
 def test_suite_returns_a_dm_control_environment():

@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from etmpc.evaluate import evaluate
+from etmpc.evaluation.evaluate import evaluate
 from etmpc.loop import run_episode
 from etmpc.policies import parse_policy
 

@@ -14,14 +14,15 @@ import matplotlib.pyplot
 import numpy as np
 import pytest
 
-from etmpc import figures, outputs
-from etmpc.errors import EtmpcError
-from etmpc.evaluate import evaluate
-from etmpc.figures import forecast_figure
-from etmpc.learned import LogisticPolicy, Normalisation
+from etmpc.views import figures
+from etmpc.common import outputs
+from etmpc.common.errors import EtmpcError
+from etmpc.evaluation.evaluate import evaluate
+from etmpc.views.figures import forecast_figure
+from etmpc.policies.learned import LogisticPolicy, Normalisation
 from etmpc.loop import run_episode
 from etmpc.policies import parse_policy
-from etmpc.workers import policy_rng
+from etmpc.evaluation.workers import policy_rng
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -5,8 +5,8 @@ import itertools
 import numpy as np
 import pytest
 
-from etmpc.gpomdp import VALUE_RIDGE, Learner, Settings, gradient, rewards_to_go
-from etmpc.learned import sigmoid
+from etmpc.learning.gpomdp import VALUE_RIDGE, Learner, Settings, gradient, rewards_to_go
+from etmpc.policies.learned import sigmoid
 
 # A 4-step MDP with a scalar state; the policy decides at steps 0, 2 and 3 (step 1 is "forced":
 # it recomputes whatever the policy says, like a plan that ran out).

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from etmpc import testset as ts_mod
+from etmpc.evaluation import testsets as ts_mod
 from etmpc.cli import main
 
 REPO = Path(__file__).resolve().parents[1]

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from etmpc.errors import EtmpcError, UnknownNameError
+from etmpc.common.errors import EtmpcError, UnknownNameError
 from etmpc.loop import run_episode
 from etmpc.policies import AugmentedState, parse_policy
 

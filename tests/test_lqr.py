@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 from scipy.linalg import expm, solve_discrete_are
 
-from etmpc.cart_pendulum.model import AnalyticModel
-from etmpc.lqr import discrete_lqr_gain
+from etmpc.systems.cart_pendulum.model import AnalyticModel
+from etmpc.control.lqr import discrete_lqr_gain
 
 
 def test_gain_matches_scipy_riccati_on_the_zoh_model(cart_system):

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from etmpc.loop import run_episode
-from etmpc.plan import Plan
+from etmpc.control.plan import Plan
 from etmpc.policies import parse_policy
 
 
@@ -115,7 +115,7 @@ def test_every_transcription_and_engine_reaches_the_same_optimum(cart_system):
     virtual machine run the same function. All land on Ipopt's optimum."""
     from dataclasses import replace
 
-    from etmpc.cart_pendulum.system import CartPendulumSystem
+    from etmpc.systems.cart_pendulum.system import CartPendulumSystem
 
     default = cart_system.mpc
     assert default.is_compiled and default.settings.block == 4
@@ -142,7 +142,7 @@ def test_unconverged_solve_is_a_failure_with_its_residuals(cart_system):
     """Two SQP iterations from a cold start cannot converge: the plan says so, with the residuals."""
     from dataclasses import replace
 
-    from etmpc.cart_pendulum.system import CartPendulumSystem
+    from etmpc.systems.cart_pendulum.system import CartPendulumSystem
 
     capped = CartPendulumSystem(replace(cart_system.config, solver=replace(cart_system.config.solver, max_iterations=2))).mpc
     plan = capped.solve(np.array([0.0, 0.5, 0.6, -0.5]), np.zeros(1))

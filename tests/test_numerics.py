@@ -1,4 +1,4 @@
-"""Sums that decide: exactly rounded, independent of order, with a rule for overflow (etmpc.numerics),
+"""Sums that decide: exactly rounded, independent of order, with a rule for overflow (etmpc.common.numerics),
 and the learned policy's decision value built on them."""
 
 import math
@@ -8,8 +8,8 @@ from fractions import Fraction
 import numpy as np
 import pytest
 
-from etmpc.learned import LogisticPolicy, Normalisation, PolicyFileError
-from etmpc.numerics import dot, fsum, matvec, norm
+from etmpc.policies.learned import LogisticPolicy, Normalisation, PolicyFileError
+from etmpc.common.numerics import dot, fsum, matvec, norm
 from etmpc.policies import AugmentedState
 
 INF = math.inf
@@ -112,7 +112,7 @@ def test_greedy_keeps_at_a_logit_of_exactly_zero():
 def test_the_battery_gain_is_the_closed_form_riccati_solution_correctly_rounded(battery_system):
     """The scalar discrete Riccati equation x+ = x + b u, Q, R has P = (Q b^2 + sqrt(Q^2 b^4 + 4 b^2 Q R)) / (2 b^2)
     and K = b P / (R + b^2 P): here in 50-digit decimal arithmetic, independent of the mpmath code."""
-    from etmpc.battery.parameters import Battery
+    from etmpc.systems.battery.parameters import Battery
 
     with localcontext() as ctx:
         ctx.prec = 50

@@ -64,7 +64,7 @@ def test_the_installed_commands_work_outside_the_checkout(wheel, tmp_path):
     result = run("evaluate", "cart_pendulum", "--policy", f"rl:{shipped}", "--policy", "every:3", "--episodes", "3",
                  "--workers", "2", "--json", "installed.json")
     assert result.returncode == 0, result.stderr
-    from etmpc.evaluate import evaluate  # the same evaluation from the checkout: the same numbers
+    from etmpc.evaluation.evaluate import evaluate  # the same evaluation from the checkout: the same numbers
 
     here = evaluate("cart_pendulum", [f"rl:{shipped}", "every:3"], episodes=3, workers=1, progress=False).to_json()
     installed = json.loads((outside / "installed.json").read_text())

@@ -14,8 +14,8 @@ from pathlib import Path
 import pytest
 import ray  # the 'ray' extra is part of the test install, so these tests run rather than skip
 
-from etmpc.evaluate import evaluate
-from etmpc.train import TrainConfig, train
+from etmpc.evaluation.evaluate import evaluate
+from etmpc.learning.train import TrainConfig, train
 
 TINY = dict(seeds=(0, 1), episodes=4, eval_every=2, eval_episodes=3, normalisation_episodes=2, validation_episodes=2)
 POLICIES = ["always", "every:3", "threshold:0.2"]
@@ -75,9 +75,9 @@ def test_joins_an_existing_cluster_by_address(tmp_path):
 def test_a_worker_with_another_test_set_refuses_with_the_same_one_line_error(backend):
     """Workers check the test set's digest against the driver's; the error reaches the user as the
     same one-line EtmpcError on either backend (not wrapped in Ray's remote traceback)."""
-    from etmpc.errors import EtmpcError
-    from etmpc.train import _call
-    from etmpc.workers import make_backend
+    from etmpc.common.errors import EtmpcError
+    from etmpc.learning.train import _call
+    from etmpc.evaluation.workers import make_backend
 
     job = ("evaluate", ("battery", "0" * 64, {}, 0, 0))
     with make_backend(backend, 2) as pool, pytest.raises(EtmpcError) as caught:

@@ -8,14 +8,14 @@ import numpy as np
 import pytest
 from rerun.chunk import RrdReader
 
-import etmpc.evaluate as evaluate_mod
-from etmpc import blueprint as look
+import etmpc.evaluation.evaluate as evaluate_mod
+from etmpc.views import blueprint as look
 from etmpc.cli import main
-from etmpc.evaluate import evaluate
+from etmpc.evaluation.evaluate import evaluate
 from etmpc.loop import run_episode
 from etmpc.policies import parse_policy
-from etmpc.recording import prediction_errors, read_recording, replay_summary
-from etmpc.workers import context, policy_rng
+from etmpc.views.recording import prediction_errors, read_recording, replay_summary
+from etmpc.evaluation.workers import context, policy_rng
 
 
 def live_and_replayed(tmp_path, domain, policies, episodes=3, repeats=1):
@@ -405,7 +405,7 @@ def test_render_puts_the_video_frames_into_the_recording(tmp_path, capsys):
 
 
 def test_train_records_its_evaluations_without_changing_any_result(tmp_path):
-    from etmpc.train import TrainConfig, train
+    from etmpc.learning.train import TrainConfig, train
 
     config = TrainConfig("battery", seeds=(0, 1), episodes=4, eval_every=2, eval_episodes=3, normalisation_episodes=2,
                          validation_episodes=2)
@@ -426,7 +426,7 @@ def test_train_records_its_evaluations_without_changing_any_result(tmp_path):
 def test_a_self_trigger_records_what_it_announced_at_each_solve(tmp_path, cart_system):
     """Independent truth: the loop keeps a self-trigger's plan exactly as long as announced, so each
     announcement recorded at a solve is the gap to the next recompute in the file's own decisions."""
-    from etmpc import selftrigger as st
+    from etmpc.policies import selftrigger as st
 
     played = evaluate_mod.play_test_episode("cart_pendulum", parse_policy("always", cart_system.error_weights), 0, 0, 0)
     env = cart_system.make_env()

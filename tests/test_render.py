@@ -5,12 +5,12 @@ import av
 import numpy as np
 import pytest
 
-from etmpc.cart_pendulum.model import Parameters
-from etmpc.errors import EtmpcError
+from etmpc.systems.cart_pendulum.model import Parameters
+from etmpc.common.errors import EtmpcError
 from etmpc.loop import run_episode
 from etmpc.policies import parse_policy
-from etmpc.render import CAMERA, render_frames, render_rollout, write_video
-from etmpc.workers import policy_rng
+from etmpc.views.video import CAMERA, render_frames, render_rollout, write_video
+from etmpc.evaluation.workers import policy_rng
 
 W, H = 160, 120
 

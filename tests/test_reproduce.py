@@ -6,10 +6,10 @@ import json
 import numpy as np
 import pytest
 
-from etmpc.errors import EtmpcError
-from etmpc.evaluate import evaluate
-from etmpc.recording import replay_summary
-from etmpc.reproduce import BASELINES, Settings, reproduce
+from etmpc.common.errors import EtmpcError
+from etmpc.evaluation.evaluate import evaluate
+from etmpc.views.recording import replay_summary
+from etmpc.experiments.reproduce import BASELINES, Settings, reproduce
 
 TINY = Settings(seeds=(0, 1), episodes=2, eval_every=1, eval_episodes=2, test_episodes=3, repeats=2, record_episodes=1,
                 video_size=(64, 48), dpi_seeds=(0, 1), dpi_episodes=2, dpi_eval_every=1, dpi_labels=3, dpi_futures=2,
@@ -106,7 +106,7 @@ def test_headroom_and_the_default_learner_are_direct_evaluations(run, domain):
 
 @pytest.mark.slow
 def test_a_smoke_report_says_so_at_its_top_and_gives_no_verdicts(run):
-    from etmpc.reproduce import report
+    from etmpc.experiments.reproduce import report
 
     _, results = run
     smoke = dict(results, settings=dict(results["settings"], smoke=True))

@@ -7,10 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from etmpc.errors import EtmpcError, UnknownNameError
+from etmpc.common.errors import EtmpcError, UnknownNameError
 from etmpc.loop import Snapshot, play_on, run_episode
 from etmpc.policies import parse_policy
-from etmpc.workers import play_test_episode
+from etmpc.evaluation.workers import play_test_episode
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -147,7 +147,7 @@ def test_the_oracle_is_labelled_an_upper_bound_in_the_table_json_and_figure(tmp_
     import json
 
     from etmpc.cli import main
-    from etmpc.figures import policy_bars
+    from etmpc.views.figures import policy_bars
 
     out = tmp_path / "ev.json"
     assert main(["evaluate", "battery", "--policy", "every:10", "--policy", "oracle:every:10", "--episodes", "1",

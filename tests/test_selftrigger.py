@@ -9,10 +9,10 @@ import pickle
 import numpy as np
 import pytest
 
-from etmpc import selftrigger as st
-from etmpc.errors import EtmpcError
+from etmpc.policies import selftrigger as st
+from etmpc.common.errors import EtmpcError
 from etmpc.policies import parse_policy
-from etmpc.workers import play_test_episode
+from etmpc.evaluation.workers import play_test_episode
 
 
 def _constant(domain: str, n: int, p: int) -> st.SelfTrigger:

@@ -15,8 +15,8 @@ from dm_control import suite as dm_suite
 from dm_env import test_utils
 
 from etmpc import suite
-from etmpc.battery import env as battery_env
-from etmpc.cart_pendulum import env as cp_env
+from etmpc.systems.battery import task as battery_env
+from etmpc.systems.cart_pendulum import task as cp_env
 
 SHORT = {"cart_pendulum": 1.0, "battery": 50.0}  # time limits of a few steps, so episodes end in the tests
 STEPS = {"cart_pendulum": 10, "battery": 5}

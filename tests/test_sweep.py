@@ -9,10 +9,10 @@ import json
 import numpy as np
 import pytest
 
-from etmpc.errors import EtmpcError
-from etmpc.evaluate import evaluate
+from etmpc.common.errors import EtmpcError
+from etmpc.evaluation.evaluate import evaluate
 from etmpc.experiments import sweep as sw
-from etmpc.selftrigger import SelfSettings
+from etmpc.policies.selftrigger import SelfSettings
 
 
 def test_re_pricing_an_evaluation_gives_what_evaluating_at_that_price_gives():

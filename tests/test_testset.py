@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from etmpc import testset
-from etmpc.errors import TestSetError
+from etmpc.evaluation import testsets as testset
+from etmpc.common.errors import TestSetError
 
 ROOT = Path(__file__).resolve().parents[1]
 

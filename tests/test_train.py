@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 
 from etmpc.cli import main
-from etmpc.gpomdp import Settings
-from etmpc.learned import INITIAL_KEEP_LOGIT, LogisticPolicy, Normalisation, load_policy, sigmoid
+from etmpc.learning.gpomdp import Settings
+from etmpc.policies.learned import INITIAL_KEEP_LOGIT, LogisticPolicy, Normalisation, load_policy, sigmoid
 from etmpc.policies import AugmentedState, parse_policy
-from etmpc.train import TrainConfig, train
+from etmpc.learning.train import TrainConfig, train
 
 ROOT = Path(__file__).resolve().parents[1]
 TINY = dict(seeds=(0, 1), episodes=4, eval_every=2, eval_episodes=3, normalisation_episodes=2, validation_episodes=2)
@@ -36,7 +36,7 @@ def test_results_do_not_depend_on_the_number_of_workers(tmp_path):
 
 def test_curve_points_are_what_evaluate_reports(tmp_path):
     """The learning curve's last point for a seed equals `etmpc evaluate --policy rl:last.json --seed 0`."""
-    from etmpc.evaluate import evaluate
+    from etmpc.evaluation.evaluate import evaluate
 
     state = train(TrainConfig("battery", **TINY), tmp_path, workers=1, progress=False)
     result = evaluate("battery", [f"rl:{tmp_path / 'seed1' / 'last.json'}"], episodes=3, workers=1, progress=False)
@@ -152,7 +152,7 @@ def test_bad_policy_files_are_one_line_errors(tmp_path, capsys, content, message
 
 
 def test_rl_spec_needs_a_path():
-    from etmpc.errors import EtmpcError
+    from etmpc.common.errors import EtmpcError
 
     with pytest.raises(EtmpcError, match="rl:PATH"):
         parse_policy("rl:", np.ones(4))

@@ -13,11 +13,11 @@ for every price from the control objective and the computations of each episode)
 price ``p``,
 
 * the rollout policy ``rollout:BEST:K:H`` over the best periodic schedule at ``p``, which optimises
-  the objective at ``p`` (see :mod:`etmpc.rollout`);
+  the objective at ``p`` (see :mod:`etmpc.policies.rollout`);
 * the oracle ``oracle:BEST``: an upper bound on what any trigger could gain at ``p``, not a policy;
 * a learned policy trained at ``p`` with the default learner (DPI on the ``error`` features, see
-  :mod:`etmpc.dpi`), chosen among its seeds on training-distribution episodes, never the test set;
-* a self-triggering policy ``self:PATH`` trained at ``p`` (see :mod:`etmpc.selftrigger`): at each
+  :mod:`etmpc.learning.dpi`), chosen among its seeds on training-distribution episodes, never the test set;
+* a self-triggering policy ``self:PATH`` trained at ``p`` (see :mod:`etmpc.policies.selftrigger`): at each
   solve it announces how long the plan will be kept.
 
 Comparisons are paired per episode. *At an equal rate*: the periodic front (the schedules no other
@@ -43,9 +43,9 @@ from pathlib import Path
 
 import numpy as np
 
-from etmpc.errors import EtmpcError
-from etmpc.outputs import refuse_foreign, write_json, write_text
-from etmpc.selftrigger import SelfSettings
+from etmpc.common.errors import EtmpcError
+from etmpc.common.outputs import refuse_foreign, write_json, write_text
+from etmpc.policies.selftrigger import SelfSettings
 from etmpc.systems import check_price, make_system
 
 # Prices of a computation, in the objective's unit. The cart pendulum: a log grid around the paper's
@@ -83,8 +83,8 @@ class LearnerSettings:
     selection_episodes: int = 20
 
     def config(self, domain: str, price: float):
-        from etmpc import dpi
-        from etmpc.train import TrainConfig
+        from etmpc.learning import dpi
+        from etmpc.learning.train import TrainConfig
 
         return TrainConfig(domain, self.seeds, self.episodes, self.eval_every, self.eval_episodes, algorithm="dpi",
                            dpi=dpi.Settings(self.futures, self.horizon, self.labels, bases=self.bases,
@@ -171,7 +171,7 @@ def _start(out: Path, domain: str, settings: SweepSettings) -> None:
 def _stage(path: Path, **kwargs) -> dict:
     """An evaluation made once (a complete file from an earlier invocation is reused), with its
     wall time and number of workers."""
-    from etmpc.evaluate import evaluate
+    from etmpc.evaluation.evaluate import evaluate
 
     if path.exists():
         return json.loads(path.read_text())
@@ -211,7 +211,7 @@ def sweep(domain: str, out: Path, settings: SweepSettings, workers: int = 1, bac
     pareto["cpu_seconds_of_evaluations"] = sum(
         e["cost"]["wall_seconds"] * (e["cost"]["workers"] or 1) for e in [fixed, *priced])
     write_json(out / "pareto.json", pareto)
-    from etmpc.figures import save_png_atomically
+    from etmpc.views.figures import save_png_atomically
 
     save_png_atomically(draw_pareto(pareto), out / "pareto.png")
     write_text(out / "SWEEP.md", "\n".join(report_section(pareto)) + "\n")
@@ -221,7 +221,7 @@ def sweep(domain: str, out: Path, settings: SweepSettings, workers: int = 1, bac
 def _learned(out: Path, i: int, domain: str, price: float, learner: LearnerSettings, run: dict) -> dict:
     """The default learner trained at ``price`` (``train_<i>/``, resumable), its chosen policy
     evaluated on the sweep's episodes at that price (``learned_<i>.json``)."""
-    from etmpc.train import train
+    from etmpc.learning.train import train
 
     path, train_dir = out / f"learned_{i}.json", out / f"train_{i}"
     if path.exists():
@@ -234,7 +234,7 @@ def _learned(out: Path, i: int, domain: str, price: float, learner: LearnerSetti
 def _self(out: Path, i: int, domain: str, price: float, settings: SelfSettings, run: dict, say) -> dict:
     """The self-trigger trained at ``price`` (``self_policy_<i>.json``, kept once written), evaluated
     on the sweep's episodes at that price (``self_<i>.json``)."""
-    from etmpc.selftrigger import train_self
+    from etmpc.policies.selftrigger import train_self
     from etmpc.systems import system_key
 
     path, policy = out / f"self_{i}.json", out / f"self_policy_{i}.json"

@@ -1,0 +1,252 @@
+"""``etmpc bench``: where the time of a step goes, measured on real episodes of the test set.
+
+For each system, through the :class:`etmpc.loop.System` protocol only, in one process:
+
+* MPC solve: wall time of each recompute (the whole ``system.plan`` call) under ``always``:
+  median and 90th percentile.
+* Rest of a step on the ``dm_env`` path (:func:`etmpc.loop.run_episode`, what ``evaluate`` plays):
+  step wall time minus the solve (plant, LQR, policy, bookkeeping), under ``always``, ``every:3``
+  and ``never`` together.
+* Rollout step: a step of :func:`etmpc.loop.play_on` (the fast path rollouts and the oracle bound
+  simulate futures with) under ``never``, forced solves taken out; and the steps per second that
+  makes.
+* Episodes per second, single process, for ``always``, ``every:3`` and ``never``.
+* Reference solvers (``system.reference_solvers()``: do-mpc for the cart pendulum when installed,
+  scipy's ``linprog`` for the battery): the very same OCP, solved at the same sequence of measured
+  states in the same run, one solver after the other (so neither evicts the other's caches); the
+  ratio of medians and how far the reference's objective is from ours.
+* Before compiling (``system.interpreted()``, the cart pendulum only): the MPC as it was solved
+  before it ran as compiled C (full multiple shooting in CasADi's virtual machine), on the same
+  states: the speed-up and the objective gap.
+"""
+
+from __future__ import annotations
+
+import platform
+import time
+
+import numpy as np
+
+from etmpc.evaluation import testsets as ts_mod
+from etmpc.common.errors import EtmpcError
+from etmpc.loop import Snapshot, play_on, run_episode
+from etmpc.policies import parse_policy
+from etmpc.systems import make_system
+
+
+def _stats(values_s) -> dict:
+    values_s = np.asarray(values_s)
+    return {
+        "median_ms": float(np.median(values_s) * 1e3),
+        "p90_ms": float(np.percentile(values_s, 90) * 1e3),
+        "samples": int(values_s.size),
+    }
+
+
+def _episode(system, testset, index: int):
+    return system.episode_from_arrays(testset.episode_arrays(index))
+
+
+def _play(system, env, testset, spec: str, episodes: int):
+    policy = parse_policy(spec, system.error_weights)
+    start = time.perf_counter()
+    trajectories = [run_episode(system, env, policy, np.random.default_rng(e), _episode(system, testset, e)) for e in range(episodes)]
+    return trajectories, time.perf_counter() - start
+
+
+class _Capture:
+    """The system, with every ``plan`` call's problem kept: (x, u_prev, continuing, timestep)."""
+
+    def __init__(self, system, limit: int):
+        self._system, self._limit, self.problems = system, limit, []
+
+    def __getattr__(self, name):
+        return getattr(self._system, name)
+
+    def plan(self, x, u_prev, warm, age, timestep):
+        if len(self.problems) < self._limit:
+            self.problems.append((np.array(x), np.array(u_prev), warm is not None, timestep))
+        return self._system.plan(x, u_prev, warm, age, timestep)
+
+
+def _problems(system, env, testset, count: int) -> list:
+    """The first ``count`` OCPs an ``always`` run meets on the test set (an untimed run)."""
+    capture = _Capture(system, count)
+    policy = parse_policy("always", system.error_weights)
+    episode = 0
+    while len(capture.problems) < count and episode < testset.episodes:
+        run_episode(capture, env, policy, np.random.default_rng(episode), _episode(system, testset, episode))
+        episode += 1
+    return capture.problems
+
+
+def _time_ours(system, problems) -> tuple[list[float], list[np.ndarray]]:
+    """``system.plan`` on each problem, warm started from its own previous plan within an episode."""
+    times, inputs, plan = [], [], None
+    for x, u_prev, continuing, timestep in problems:
+        warm = plan if continuing else None
+        start = time.perf_counter()
+        plan = system.plan(x, u_prev, warm, 1 if warm is not None else 0, timestep)
+        times.append(time.perf_counter() - start)
+        inputs.append(plan.inputs.ravel())
+    return times, inputs
+
+
+def _compare_reference(system, reference, problems) -> dict:
+    ours_s, our_inputs = _time_ours(system, problems)
+    theirs_s, gaps, failures = [], [], 0
+    for (x, u_prev, continuing, timestep), ours in zip(problems, our_inputs):
+        inputs, elapsed, ok = reference.solve(x, u_prev, timestep, continuing)
+        theirs_s.append(elapsed)
+        if not ok:
+            failures += 1
+            continue
+        ours_cost = system.plan_cost(x, u_prev, timestep, ours)
+        gaps.append((system.plan_cost(x, u_prev, timestep, inputs) - ours_cost) / max(abs(ours_cost), 1e-12))
+    ours, theirs = _stats(ours_s), _stats(theirs_s)
+    return {
+        "name": reference.name,
+        "ours": ours,
+        "reference": theirs,
+        "speedup_median": theirs["median_ms"] / ours["median_ms"],
+        "reference_failures": failures,
+        "objective_gap_relative": {
+            "median": float(np.median(gaps)) if gaps else float("nan"),
+            "max_abs": float(np.max(np.abs(gaps))) if gaps else float("nan"),
+        },
+    }
+
+
+def _compare_interpreted(system, problems) -> dict | None:
+    """Our solver against the same OCPs solved as before it was compiled (``system.interpreted()``)."""
+    before = system.interpreted()
+    if before is None:
+        return None
+    _time_ours(before, problems[:1])  # build lazily constructed solvers before timing
+    ours_s, ours_inputs = _time_ours(system, problems)
+    theirs_s, theirs_inputs = _time_ours(before, problems)
+    gaps = []
+    for (x, u_prev, _, timestep), ours, theirs in zip(problems, ours_inputs, theirs_inputs):
+        ours_cost = system.plan_cost(x, u_prev, timestep, ours)
+        gaps.append((system.plan_cost(x, u_prev, timestep, theirs) - ours_cost) / max(abs(ours_cost), 1e-12))
+    ours, theirs = _stats(ours_s), _stats(theirs_s)
+    return {
+        "ours": ours,
+        "interpreted": theirs,
+        "speedup_median": theirs["median_ms"] / ours["median_ms"],
+        "objective_gap_relative": {"median": float(np.median(gaps)), "max_abs": float(np.max(np.abs(gaps)))},
+    }
+
+
+class _Snapshotter:
+    """A policy that never recomputes and keeps a snapshot of the loop at its first decision."""
+
+    spec, stochastic, simulates = "never", False, True
+
+    def __init__(self):
+        self.snapshot = None
+
+    def decide(self, s, rng) -> bool:
+        if self.snapshot is None:
+            self.snapshot = Snapshot.take(s.context)
+        return False
+
+
+def _rollout_steps(system, env, testset, episodes: int, repeats: int = 5) -> dict:
+    """Wall time per step of :func:`etmpc.loop.play_on` under ``never`` from step 1 of each
+    episode (the plan made at step 0 kept, forced solves every N steps excluded): a rollout step
+    without a solve, the fast path rollouts and the oracle bound simulate with."""
+    never, twin = parse_policy("never", system.error_weights), system.make_env()
+    per_step, solve_s, steps = [], [0.0], 0
+
+    class _Timed:  # system.plan timed, so that forced solves can be taken out
+        def __getattr__(self, name):
+            return getattr(system, name)
+
+        def plan(self, *args):
+            start = time.perf_counter()
+            plan = system.plan(*args)
+            solve_s[0] += time.perf_counter() - start
+            return plan
+
+    timed = _Timed()
+    for e in range(episodes):
+        snapshotter = _Snapshotter()
+        run_episode(system, env, snapshotter, None, _episode(system, testset, e))
+        snapshot = snapshotter.snapshot
+        for _ in range(repeats):
+            solve_s[0] = 0.0
+            start = time.perf_counter()
+            play_on(timed, twin, snapshot, never, None, False)
+            steps = system.episode_steps - snapshot.step
+            per_step.append((time.perf_counter() - start - solve_s[0]) / steps)
+    median_s = float(np.median(per_step))
+    return {"median_us": median_s * 1e6, "p90_us": float(np.percentile(per_step, 90) * 1e6),
+            "steps_per_second": 1.0 / median_s, "samples": len(per_step)}
+
+
+def run_bench(domain: str = "cart_pendulum", episodes: int = 10, references: bool = True,
+              reference_solves: int = 200) -> dict:
+    system = make_system(domain)
+    testset = ts_mod.load(ts_mod.default_path(system.domain, system.task), system.domain, system.task)
+    if episodes > testset.episodes:
+        raise EtmpcError(f"--episodes {episodes}: the {domain} test set has {testset.episodes} episodes")
+    env = system.make_env()
+    _play(system, env, testset, "always", 1)  # warm up caches and lazy builds
+
+    played = {spec: _play(system, env, testset, spec, episodes) for spec in ("always", "every:3", "never")}
+    always = played["always"][0]
+    solves = np.concatenate([t.solve_time_s[: t.steps] for t in always])
+    solves = solves[~np.isnan(solves)]
+    trajectories = [t for runs, _ in played.values() for t in runs]
+    rest = np.concatenate([t.step_time_s[: t.steps] - np.nan_to_num(t.solve_time_s[: t.steps]) for t in trajectories])
+    figures = {
+        "domain": system.domain,
+        "machine": {"processor": platform.processor() or platform.machine(), "python": platform.python_version()},
+        "episodes": episodes,
+        "mpc_solve": _stats(solves),
+        "rest_of_step": {**_stats(rest), "median_us": float(np.median(rest) * 1e6)},
+        "rollout_step": _rollout_steps(system, env, testset, episodes),
+        "episodes_per_second": {spec: episodes / seconds for spec, (_, seconds) in played.items()},
+        "solver_failures": int(sum(t.solver_failures for t in trajectories)),
+        "references": [],
+        "references_skipped": not references,
+        "interpreted": None,
+    }
+    problems = _problems(system, env, testset, reference_solves)
+    if references:
+        figures["references"] = [_compare_reference(system, ref, problems) for ref in system.reference_solvers()]
+    figures["interpreted"] = _compare_interpreted(system, problems)
+    return figures
+
+
+def format_bench(f: dict) -> str:
+    lines = [
+        f"{f['domain']}: {f['episodes']} test-set episodes per policy, single process",
+        f"MPC solve          median {f['mpc_solve']['median_ms']:.3f} ms   p90 {f['mpc_solve']['p90_ms']:.3f} ms   ({f['mpc_solve']['samples']} solves)",
+        f"rest of a step     median {f['rest_of_step']['median_us']:.1f} us   p90 {f['rest_of_step']['p90_ms'] * 1e3:.1f} us"
+        "   (dm_env path: run_episode, evaluate)",
+        f"rollout step       median {f['rollout_step']['median_us']:.1f} us   p90 {f['rollout_step']['p90_us']:.1f} us"
+        f"   = {f['rollout_step']['steps_per_second']:,.0f} steps/s   (fast path: play_on, no solve)",
+        "episodes/s         " + "   ".join(f"{spec} {rate:.1f}" for spec, rate in f["episodes_per_second"].items()),
+        f"solver failures    {f['solver_failures']}",
+    ]
+    for r in f["references"]:
+        lines += [
+            f"{r['name']}: median {r['reference']['median_ms']:.3f} ms vs ours {r['ours']['median_ms']:.3f} ms "
+            f"on the same {r['ours']['samples']} OCPs: ours {r['speedup_median']:.1f}x faster",
+            f"    objective gap (reference - ours)/|ours|: median {r['objective_gap_relative']['median']:.1e}, "
+            f"max |.| {r['objective_gap_relative']['max_abs']:.1e}; reference failures {r['reference_failures']}",
+        ]
+    if not f["references"]:
+        lines.append("reference solvers  none run" + (" (--no-reference)" if f.get("references_skipped") else
+                     " (do-mpc is not installed: pip install 'etmpc[bench]')"))
+    i = f.get("interpreted")
+    if i is not None:
+        lines += [
+            f"before compiling   median {i['interpreted']['median_ms']:.3f} ms (full multiple shooting, CasADi VM) vs ours "
+            f"{i['ours']['median_ms']:.3f} ms on the same {i['ours']['samples']} OCPs: ours {i['speedup_median']:.1f}x faster",
+            f"    objective gap (before - ours)/|ours|: median {i['objective_gap_relative']['median']:.1e}, "
+            f"max |.| {i['objective_gap_relative']['max_abs']:.1e}",
+        ]
+    return "\n".join(lines)

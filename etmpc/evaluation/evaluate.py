@@ -1,0 +1,215 @@
+"""Evaluate recomputation policies on a stored test set, in parallel, with identical results.
+
+Every (policy, repeat, episode) run is independent: the environment replays the stored episode and
+a stochastic policy draws from its own generator, seeded by ``SeedSequence(seed, spawn_key=(repeat,
+episode))`` (the same for every policy: common random numbers). Runs are spread over worker
+processes and gathered back in order, so the numbers do not depend on the number of workers.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from etmpc.evaluation import testsets as ts_mod
+from etmpc.policies import parse_policy
+from etmpc.views.recording import EpisodeRecord, Recorder
+from etmpc.systems import make_system, system_key
+from etmpc.evaluation.workers import default_workers, make_backend, play_test_episode
+
+
+@dataclass(frozen=True)
+class RunResult:
+    """One episode under one policy."""
+
+    policy: str
+    repeat: int
+    episode: int
+    objective: float  # sense-aware: cost (min) or profit (max), computations included
+    control_objective: float  # the objective without the price of computations (sense-aware)
+    recomputes: int
+    solver_failures: int
+    steps: int
+    finite: bool  # False: the episode ended early on a non-finite state
+
+
+@dataclass(frozen=True)
+class PolicySummary:
+    policy: str
+    objective_mean: float
+    objective_std: float  # over test-set episodes (each averaged over repeats)
+    objective_std_repeats: float  # over the repeats' means: the spread due to the policy's randomness
+    objective_sense: str
+    control_objective_mean: float
+    recomputes_mean: float
+    solver_failures: int  # total over all runs
+    nonfinite_episodes: int  # runs that ended on a non-finite state; excluded from the means
+    episodes: int
+    repeats: int
+    upper_bound: bool = False  # an oracle: it knows the episode's future; a bound, not a policy
+
+
+# -- worker side ---------------------------------------------------------------------------------
+def scores(system, traj) -> tuple[float, float]:
+    """``(objective, control objective)`` of an episode, sense-aware: a cost (min) or a profit (max)."""
+    ret = traj.policy_return(system.recompute_price)
+    rewards = float(traj.rewards[: traj.steps].sum())
+    return (ret, rewards) if system.objective_sense == "max" else (-ret, -rewards)
+
+
+def _run(job: tuple) -> tuple[RunResult, EpisodeRecord | None]:
+    """One test-set episode; with ``record``, also what a recording keeps of it (else nothing extra
+    is built or sent back)."""
+    domain, testset_path, sha256, spec, policy, repeat, episode, seed, record = job
+    played = play_test_episode(domain, policy, seed, repeat, episode, testset_path, sha256)
+    traj = played.trajectory
+    objective, control_objective = scores(played.system, traj)
+    return RunResult(
+        policy=spec,
+        repeat=repeat,
+        episode=episode,
+        objective=objective,
+        control_objective=control_objective,
+        recomputes=traj.recomputes,
+        solver_failures=traj.solver_failures,
+        steps=traj.steps,
+        finite=not traj.nonfinite,
+    ), played.record(spec, getattr(policy, "announce", None), upper_bound=spec.startswith("oracle:")) if record else None
+
+
+# -- driver side ---------------------------------------------------------------------------------
+def run_jobs(jobs: list, workers: int, progress: bool, backend: str = "local", address: str | None = None) -> list[tuple]:
+    chunk = max(1, min(8, len(jobs) // (4 * workers)))
+    with tqdm(total=len(jobs), desc="episodes", unit="ep", disable=None if progress else True, leave=False) as bar, \
+            make_backend(backend, workers, address) as backend:
+        return backend.map(_run, jobs, on_result=lambda job: bar.update(), chunksize=chunk)
+
+
+def summarise(spec: str, runs: list[RunResult], sense: str, episodes: int, repeats: int) -> PolicySummary:
+    """Means over the runs that stayed finite; the others are counted, never averaged in."""
+    finite = [r for r in runs if r.finite]
+    by_episode: dict[int, list[float]] = {}
+    by_repeat: dict[int, list[float]] = {}
+    for r in finite:
+        by_episode.setdefault(r.episode, []).append(r.objective)
+        by_repeat.setdefault(r.repeat, []).append(r.objective)
+    mean = lambda values: float(np.mean(values)) if len(values) else math.nan  # noqa: E731
+    std = lambda values: float(np.std(values, ddof=1)) if len(values) > 1 else 0.0  # noqa: E731
+    return PolicySummary(
+        policy=spec,
+        objective_mean=mean([r.objective for r in finite]),
+        objective_std=std([mean(v) for v in by_episode.values()]),
+        objective_std_repeats=std([mean(v) for v in by_repeat.values()]),
+        objective_sense=sense,
+        control_objective_mean=mean([r.control_objective for r in finite]),
+        recomputes_mean=mean([r.recomputes for r in finite]),
+        solver_failures=sum(r.solver_failures for r in runs),
+        nonfinite_episodes=len(runs) - len(finite),
+        episodes=episodes,
+        repeats=repeats,
+        upper_bound=spec.startswith("oracle:"),
+    )
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    domain: str
+    task: str
+    testset_path: str
+    testset_sha256: str
+    seed: int
+    summaries: list[PolicySummary]
+    runs: list[RunResult]
+    recompute_price: float = math.nan  # the price of a computation in every objective here
+
+    def to_json(self) -> dict:
+        return {
+            "domain": self.domain,
+            "task": self.task,
+            "test_set": {"path": self.testset_path, "sha256": self.testset_sha256},
+            "seed": self.seed,
+            "recompute_price": self.recompute_price,
+            "policies": {s.policy: asdict(s) for s in self.summaries},
+            "runs": [asdict(r) for r in self.runs],
+        }
+
+
+def evaluate(
+    domain: str,
+    policies: list[str],
+    episodes: int | None = None,
+    repeats: int = 1,
+    workers: int | None = None,
+    seed: int = 0,
+    testset_path: str | None = None,
+    progress: bool = True,
+    backend: str = "local",
+    address: str | None = None,
+    record: str | Path | None = None,
+    recompute_price: float | None = None,
+) -> Evaluation:
+    """Run every policy on the first ``episodes`` test-set episodes, ``repeats`` times each, on
+    ``workers`` processes of ``backend`` (see ``etmpc.evaluation.workers.make_backend``). With ``record``, also
+    write every episode into that Rerun recording (``.rrd``). ``recompute_price``: the price of a
+    computation, if not the system's own (it enters every objective, and what rollouts optimise)."""
+    key = system_key(domain, recompute_price)
+    system = make_system(key)
+    # Parsed once here (a bad spec fails before any work starts), then sent with each job.
+    parsed = {spec: parse_policy(spec, system.error_weights, system.domain, system.episode_steps) for spec in policies}
+    path = testset_path or str(ts_mod.default_path(system.domain, system.task))
+    testset = ts_mod.load(path, system.domain, system.task)
+    testset.check_playable(system, system.make_env().task)  # a bad episode fails here, before any work
+    episodes = testset.episodes if episodes is None else episodes
+    if not 1 <= episodes <= testset.episodes:
+        raise ts_mod.TestSetError(f"--episodes must be in 1..{testset.episodes} for this test set, got {episodes}")
+    if repeats < 1:
+        raise ValueError("repeats must be >= 1")
+    workers = default_workers() if workers is None else workers
+    # Workers find the stored test set themselves (a cluster node's install may live elsewhere) and
+    # check that its digest is the one verified here.
+    recorder = Recorder(record) if record is not None else None  # a bad path fails before any work
+    jobs = [(key, testset_path, testset.sha256, spec, parsed[spec], r, e, seed, recorder is not None)
+            for spec in policies for r in range(repeats) for e in range(episodes)]
+    try:
+        outcomes = run_jobs(jobs, workers, progress, backend, address)
+        if recorder is not None:
+            for _, kept in outcomes:
+                recorder.log_episode(kept)
+    except BaseException:
+        if recorder is not None:
+            recorder.close(keep=False)
+        raise
+    if recorder is not None:
+        recorder.close()
+    runs = [result for result, _ in outcomes]
+    summaries = [
+        summarise(spec, [r for r in runs if r.policy == spec], system.objective_sense, episodes, repeats) for spec in policies
+    ]
+    return Evaluation(system.domain, system.task, str(testset.path.resolve()), testset.sha256, seed, summaries, runs,
+                      system.recompute_price)
+
+
+def format_table(evaluation: Evaluation) -> str:
+    sense = evaluation.summaries[0].objective_sense if evaluation.summaries else "min"
+    names = {s.policy: s.policy + (" (upper bound)" if s.upper_bound else "") for s in evaluation.summaries}
+    width = max([16] + [len(name) + 2 for name in names.values()])  # long rl:PATH specs stay aligned
+    head = f"{'policy':<{width}}{'objective':>12}{'± std':>10}{'control':>11}{'recomputes':>12}{'failures':>10}{'non-finite':>12}"
+    lines = [
+        f"{evaluation.domain}/{evaluation.task}: objective ({'lower' if sense == 'min' else 'higher'} is better), "
+        f"test set {evaluation.testset_sha256[:12]}, {evaluation.recompute_price:g} per computation",
+        head,
+        "-" * len(head),
+    ]
+    for s in evaluation.summaries:
+        lines.append(
+            f"{names[s.policy]:<{width}}{s.objective_mean:>12.5f}{s.objective_std:>10.5f}{s.control_objective_mean:>11.5f}"
+            f"{s.recomputes_mean:>12.2f}{s.solver_failures:>10d}{s.nonfinite_episodes:>12d}"
+        )
+    lines.append(f"{evaluation.summaries[0].episodes} episodes x {evaluation.summaries[0].repeats} repeats per policy" if evaluation.summaries else "")
+    if any(s.upper_bound for s in evaluation.summaries):
+        lines.append("(upper bound): an oracle knows each episode's future; it bounds what a trigger can gain and is not a policy")
+    return "\n".join(lines)

@@ -1,0 +1,158 @@
+"""Test sets: episodes whose random variables are all drawn in advance and stored.
+
+A test set is one ``.npz`` file in ``tasks/<domain>/`` with a ``.sha256`` file beside it. Each
+named array has the episode index as its first axis; ``meta`` holds a JSON description (task,
+seed, generator). The file is written with fixed zip timestamps so that regenerating it from its
+seed (``scripts/make_testset.py``) gives the same bytes, hence the same checksum.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from etmpc.common.errors import TestSetError
+from etmpc.common.resources import tasks_dir
+
+FORMAT_VERSION = 1
+_ZIP_EPOCH = (1980, 1, 1, 0, 0, 0)
+
+
+def default_path(domain: str, task: str) -> Path:
+    return tasks_dir() / domain / f"{task}_testset.npz"
+
+
+def episode_generators(seed: int, episodes: int) -> list[np.random.Generator]:
+    """One independent generator per episode, spawned from the test set's seed."""
+    return [np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(episodes)]
+
+
+def sha256_of(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def encode(arrays: dict[str, np.ndarray], meta: dict) -> bytes:
+    """Deterministic ``.npz`` bytes (sorted names, fixed timestamps) readable by ``np.load``."""
+    buffer = io.BytesIO()
+    members = dict(arrays, meta=np.array(json.dumps(meta, sort_keys=True)))
+    with zipfile.ZipFile(buffer, "w", compression=zipfile.ZIP_DEFLATED) as archive:
+        for name in sorted(members):
+            payload = io.BytesIO()
+            np.lib.format.write_array(payload, np.ascontiguousarray(members[name]), allow_pickle=False)
+            info = zipfile.ZipInfo(f"{name}.npy", date_time=_ZIP_EPOCH)
+            info.compress_type = zipfile.ZIP_DEFLATED
+            info.external_attr = 0o644 << 16
+            archive.writestr(info, payload.getvalue())
+    return buffer.getvalue()
+
+
+def write(path: Path, arrays: dict[str, np.ndarray], meta: dict) -> str:
+    """Write the test set and its checksum file; returns the sha256."""
+    data = encode(arrays, meta)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_bytes(data)
+    digest = hashlib.sha256(data).hexdigest()
+    checksum_path(path).write_text(f"{digest}  {path.name}\n")
+    return digest
+
+
+def checksum_path(path: Path) -> Path:
+    return path.with_name(path.name + ".sha256")
+
+
+@dataclass(frozen=True)
+class TestSet:
+    __test__ = False  # not a pytest test class
+
+    path: Path
+    sha256: str
+    meta: dict
+    arrays: dict[str, np.ndarray]
+
+    @property
+    def episodes(self) -> int:
+        return int(self.meta["episodes"])
+
+    def episode_arrays(self, index: int) -> dict[str, np.ndarray]:
+        if not 0 <= index < self.episodes:
+            raise TestSetError(f"episode {index} is out of range: the test set has {self.episodes} (0..{self.episodes - 1})")
+        return {name: values[index] for name, values in self.arrays.items()}
+
+    def check_playable(self, system, task) -> None:
+        """Raise :class:`TestSetError` unless every episode is one ``task`` (of ``system``) can
+        play: the arrays it needs, of the shapes it needs."""
+        for index in range(self.episodes):
+            try:
+                task.check_episode(system.episode_from_arrays(self.episode_arrays(index)))
+            except KeyError as exc:
+                raise TestSetError(f"test set {self.path} has no array {exc}") from None
+            except (ValueError, TypeError) as exc:
+                raise TestSetError(f"test set {self.path}, episode {index}: {exc}") from None
+
+
+def load(path: Path, domain: str, task: str) -> TestSet:
+    """Load and verify a test set; any problem raises :class:`TestSetError` with what to do.
+
+    Beyond its checksum (which only says the file is the one its ``.sha256`` describes), the
+    contents are checked: ``meta`` names the task and the number of episodes, and every array has
+    one row per episode. Whether each row is an episode the task can play is
+    :meth:`TestSet.check_playable`'s question."""
+    path = Path(path)
+    stored = path.resolve() == default_path(domain, task).resolve()
+    # Only the stored test set is regenerated from its seed; someone else's file is theirs to fix.
+    advice = (f"regenerate it with: python scripts/make_testset.py {domain}" if stored else
+              "use the stored test set (drop --test-set) or a complete one")
+    if not path.is_file():
+        raise TestSetError(f"test set {path} not found; {advice}")
+    expected_file = checksum_path(path)
+    if not expected_file.is_file():
+        raise TestSetError(f"checksum file {expected_file} not found: a test set comes with the sha256 of its .npz "
+                           f"beside it; {advice}")
+    expected = (expected_file.read_text(errors="replace").split() or [""])[0]
+    actual = sha256_of(path)
+    if actual != expected:
+        raise TestSetError(f"test set {path} is corrupted: sha256 {actual[:12]}... != {expected[:12]}... in {expected_file.name}; {advice}")
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            arrays = {name: data[name] for name in data.files if name != "meta"}
+            meta = json.loads(data["meta"].item())
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
+        raise TestSetError(f"test set {path} cannot be read ({exc}); {advice}") from None
+    if not isinstance(meta, dict):
+        raise TestSetError(f"test set {path} has no description (meta); {advice}")
+    if (meta.get("domain"), meta.get("task")) != (domain, task):
+        raise TestSetError(f"test set {path} is for {meta.get('domain')}/{meta.get('task')}, not {domain}/{task}")
+    episodes = meta.get("episodes")
+    if not isinstance(episodes, int) or isinstance(episodes, bool) or episodes < 1:
+        raise TestSetError(f"test set {path} says it has {episodes!r} episodes; {advice}")
+    if not arrays:
+        raise TestSetError(f"test set {path} holds no episode arrays; {advice}")
+    for name, values in arrays.items():
+        if values.ndim < 1 or values.shape[0] != episodes:
+            raise TestSetError(f"test set {path}: array {name!r} has shape {values.shape}, not one row per each of its "
+                               f"{episodes} episodes; {advice}")
+        if values.dtype.kind not in "fiu" or not np.all(np.isfinite(values)):
+            raise TestSetError(f"test set {path}: array {name!r} is not all finite numbers; {advice}")
+    return TestSet(path=path, sha256=actual, meta=meta, arrays=arrays)
+
+
+def generate(system, seed: int, episodes: int) -> tuple[dict[str, np.ndarray], dict]:
+    """Draw ``episodes`` episodes of ``system`` from ``seed``: the arrays and metadata of a test set."""
+    drawn = [system.draw_episode(rng).arrays() for rng in episode_generators(seed, episodes)]
+    arrays = {name: np.stack([episode[name] for episode in drawn]) for name in drawn[0]}
+    meta = {
+        "format": FORMAT_VERSION,
+        "domain": system.domain,
+        "task": system.task,
+        "seed": seed,
+        "episodes": episodes,
+        "generator": "numpy PCG64, one SeedSequence(seed).spawn(episodes) child per episode",
+        "parameters": system.episode_parameters(),
+    }
+    return arrays, meta

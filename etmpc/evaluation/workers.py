@@ -1,0 +1,277 @@
+"""Where episodes run: the per-process context, the policies' seeding, and backends that keep order.
+
+Work is a list of jobs for a module-level function; results come back in job order whatever the
+number of worker processes or the backend, and every random draw is seeded by the job itself, so
+results never depend on where they ran.
+
+Backends (``make_backend``):
+
+- ``local``: this process (one worker) or a pool of spawned processes;
+- ``ray``: Ray tasks (the optional ``ray`` extra), on a Ray instance started for the run, or on an
+  existing cluster given by its address. Every node of a cluster needs the same etmpc installed.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import logging
+import os
+import signal
+import socket
+import sys
+import threading
+import time
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from multiprocessing.context import SpawnContext, SpawnProcess
+from typing import Any
+
+import numpy as np
+
+from etmpc.evaluation import testsets as ts_mod
+from etmpc.common.errors import EtmpcError
+from etmpc.loop import Trajectory, run_episode
+from etmpc.views.recording import EpisodeRecord
+from etmpc.systems import make_system
+
+_CONTEXTS: dict = {}
+
+
+def context(domain: str, testset_path: str | None = None, sha256: str | None = None):
+    """``(system, env, testset)`` for ``domain``, built once per process (the stored test set by
+    default). ``sha256``, the digest the driver verified, keys the cache, so a test-set file that
+    changed in between is loaded afresh."""
+    key = (domain, testset_path, sha256)
+    if key not in _CONTEXTS:
+        system = make_system(domain)
+        path = testset_path or ts_mod.default_path(system.domain, system.task)
+        testset = ts_mod.load(path, system.domain, system.task)
+        if sha256 is not None and testset.sha256 != sha256:
+            raise EtmpcError(f"test set {path} on this worker has sha256 {testset.sha256[:12]}…, the run uses "
+                             f"{sha256[:12]}…: install the same etmpc on every worker")
+        env = system.make_env()
+        testset.check_playable(system, env.task)
+        _CONTEXTS[key] = (system, env, testset)
+    return _CONTEXTS[key]
+
+
+@dataclass(frozen=True, eq=False)
+class Played:
+    """One test-set episode played (see :func:`play_test_episode`)."""
+
+    system: Any
+    env: Any
+    trajectory: Trajectory
+    episode: Any  # the stored episode, as the system's task replays it
+    index: int
+    repeat: int
+    seed: int
+    test_set_sha256: str
+
+    def record(self, policy: str, announce=None, **extra) -> EpisodeRecord:
+        """What a recording keeps of this episode, under the policy's name (``extra``: more identity;
+        ``announce``: a self-trigger's, to record what it announced at each solve)."""
+        identity = {"policy": policy, "episode": self.index, "repeat": self.repeat, "seed": self.seed,
+                    "test_set_sha256": self.test_set_sha256, **extra}
+        return EpisodeRecord.from_trajectory(self.system, self.trajectory, identity, self.episode, announce)
+
+
+def play_test_episode(domain: str, policy, seed: int, repeat: int, episode: int, testset_path: str | None = None,
+                      sha256: str | None = None) -> Played:
+    """Test-set ``episode`` under ``policy`` with the policy's draws of pass ``repeat`` of ``seed``: how
+    ``evaluate``, the evaluations during ``train``, ``render`` and the figures all play an episode."""
+    system, env, testset = context(domain, testset_path, sha256)
+    stored = system.episode_from_arrays(testset.episode_arrays(episode))  # a bad index raises TestSetError
+    traj = run_episode(system, env, policy, policy_rng(seed, repeat, episode), stored)
+    return Played(system, env, traj, stored, episode, repeat, seed, testset.sha256)
+
+
+def policy_rng(seed: int, repeat: int, episode: int) -> np.random.Generator:
+    """A stochastic policy's draws on test-set ``episode`` in pass ``repeat``: the same for every
+    policy (common random numbers), and for ``evaluate`` and the evaluations during ``train``."""
+    return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(repeat, episode)))
+
+
+def default_workers() -> int:
+    return max(1, len(os.sched_getaffinity(0)))
+
+
+class _QuietSpawnProcess(SpawnProcess):
+    """A spawned worker that ignores Ctrl-C from its first instruction: the disposition is set to
+    SIG_IGN around the fork and exec, and a Python that starts with SIGINT ignored keeps it so
+    (a worker still importing would otherwise print a KeyboardInterrupt traceback)."""
+
+    def start(self):
+        if threading.current_thread() is not threading.main_thread():
+            return super().start()
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        try:
+            return super().start()
+        finally:
+            signal.signal(signal.SIGINT, signal.default_int_handler if previous is None else previous)
+
+
+class _QuietSpawnContext(SpawnContext):
+    Process = _QuietSpawnProcess
+
+
+THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+def single_threaded():
+    """Run the numerical libraries (both OpenBLAS builds of numpy and scipy) on one thread each: the
+    parallelism is across episodes, and a BLAS reduction split over threads adds in an order that
+    depends on how many the machine has. Returns a context manager (``threadpoolctl``'s)."""
+    import scipy.linalg  # noqa: F401  (scipy's own OpenBLAS is loaded here, so that it is limited too)
+    from threadpoolctl import threadpool_limits
+
+    return threadpool_limits(limits=1)
+
+
+def die_with_parent(parent: int) -> None:
+    """Worker initialiser: end this process as soon as ``parent`` (the process that started it)
+    ends, however it ends (SIGTERM, SIGKILL, a crash), so no worker outlives its command. On Linux
+    the kernel sends SIGKILL (``PR_SET_PDEATHSIG``); everywhere, a watchdog thread also checks.
+    Ctrl-C is left to the parent. The worker's numerical libraries run on one thread
+    (:func:`single_threaded`; libraries it loads later read the environment variables)."""
+    for name in THREAD_VARIABLES:
+        os.environ.setdefault(name, "1")
+    single_threaded()
+    # Ctrl-C reaches the whole process group: the command stops its workers itself, which must
+    # not print a KeyboardInterrupt traceback each.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if sys.platform.startswith("linux"):
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # 1 = PR_SET_PDEATHSIG
+    if os.getppid() != parent:  # it died before that took effect
+        os._exit(1)
+
+    def watch():
+        while os.getppid() == parent:
+            time.sleep(0.5)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="die-with-parent", daemon=True).start()
+
+
+class LocalBackend:
+    """Jobs in this process (``workers=1``) or a pool of spawned processes, results in job order."""
+
+    def __init__(self, workers: int):
+        self.workers = workers
+        self._pool = None
+        self._limits = None
+
+    def __enter__(self):
+        if self.workers > 1:
+            self._pool = ProcessPoolExecutor(self.workers, _QuietSpawnContext(), initializer=die_with_parent,
+                                             initargs=(os.getpid(),))
+        self._limits = single_threaded()  # this process runs jobs (one worker) or the driver's own sums
+        return self
+
+    def __exit__(self, *exc):
+        if self._limits is not None:
+            self._limits.restore_original_limits()
+        if self._pool is not None:
+            self._pool.shutdown(cancel_futures=True)
+
+    def map(self, fn, jobs: list, on_result=None, chunksize: int = 1) -> list:
+        results = []
+        iterator = map(fn, jobs) if self._pool is None else self._pool.map(fn, jobs, chunksize=chunksize)
+        for job, result in zip(jobs, iterator):
+            results.append(result)
+            if on_result is not None:
+                on_result(job)
+        return results
+
+
+BACKENDS = ("local", "ray")
+
+
+class RayBackend:
+    """Jobs as Ray tasks, in chunks, with at most ``2 * workers`` chunks in flight; results in job
+    order. Without ``address`` it starts a Ray instance of ``workers`` CPUs for the run and stops it
+    afterwards; with one (``auto``, ``HOST:PORT`` or ``ray://HOST:PORT``) it joins that cluster, and
+    ``workers`` only bounds how much work is queued at once."""
+
+    def __init__(self, workers: int, address: str | None = None):
+        self.workers, self.address = workers, address
+        self._started = False
+        self._remote = None
+
+    def __enter__(self):
+        try:
+            import ray
+        except ImportError:
+            raise EtmpcError("--backend ray needs Ray: pip install 'etmpc[ray]'") from None
+        if not ray.is_initialized():
+            options = dict(include_dashboard=False, logging_level=logging.WARNING, log_to_driver=True)
+            if self.address is None:
+                # The object store only carries jobs and results (kilobytes): keep it small.
+                options.update(num_cpus=self.workers, object_store_memory=100 * 2**20)
+            else:
+                _check_reachable(self.address)
+            try:
+                ray.init(address=self.address, **options)
+            except ConnectionError as exc:
+                raise EtmpcError(f"cannot join the Ray cluster at {self.address}: {exc} (a cluster with token "
+                                 "authentication also needs RAY_AUTH_MODE=token and its token in etmpc's environment)") from None
+            self._started = True
+        self._remote = ray.remote(num_cpus=1, max_retries=0)(_run_chunk)
+        return self
+
+    def __exit__(self, *exc):
+        if self._started:
+            import ray
+
+            ray.shutdown()
+
+    def map(self, fn, jobs: list, on_result=None, chunksize: int = 1) -> list:
+        import ray
+
+        chunks = [jobs[i:i + chunksize] for i in range(0, len(jobs), chunksize)]
+        window = 2 * self.workers
+        pending = [self._remote.remote(fn, chunk) for chunk in chunks[:window]]
+        results = []
+        for i, chunk in enumerate(chunks):
+            try:
+                results += ray.get(pending[i])
+            except ray.exceptions.RayTaskError as exc:
+                if isinstance(exc.cause, EtmpcError):  # bad input found on a worker: the same one-line error as locally
+                    raise exc.cause from None
+                raise
+            pending[i] = None  # let Ray free the result
+            if i + window < len(chunks):
+                pending.append(self._remote.remote(fn, chunks[i + window]))
+            if on_result is not None:
+                for job in chunk:
+                    on_result(job)
+        return results
+
+
+def _check_reachable(address: str, timeout: float = 10.0) -> None:
+    """Fail fast on a cluster address nobody answers at (Ray itself retries for minutes)."""
+    if address == "auto":
+        return
+    host, sep, port = address.removeprefix("ray://").rpartition(":")
+    if not sep or not port.isdigit():
+        raise EtmpcError(f"bad --address {address!r}: use auto, HOST:PORT or ray://HOST:PORT")
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout).close()
+    except OSError as exc:
+        raise EtmpcError(f"cannot reach the Ray cluster at {address}: {exc.strerror or exc}") from None
+
+
+def _run_chunk(fn, chunk: list) -> list:
+    with single_threaded():
+        return [fn(job) for job in chunk]
+
+
+def make_backend(name: str, workers: int, address: str | None = None):
+    """A context manager with ``.map(fn, jobs, on_result=None, chunksize=1)``."""
+    if name == "local":
+        if address is not None:
+            raise EtmpcError("--address needs --backend ray")
+        return LocalBackend(workers)
+    if name == "ray":
+        return RayBackend(workers, address)
+    raise EtmpcError(f"unknown backend {name!r}: {' | '.join(BACKENDS)}")

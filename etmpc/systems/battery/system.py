@@ -1,0 +1,140 @@
+"""The battery-trading system as the control loop sees it: plant, economic MPC, LQR and profit."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from functools import cached_property
+
+import control as ct
+import dm_env
+import numpy as np
+
+from etmpc.systems.battery import task as battery_env
+from etmpc.systems.battery import market
+from etmpc.systems.battery.mpc import EconomicMPC
+from etmpc.systems.battery.parameters import Battery, Market
+from etmpc.systems.battery.reference import LinprogReference
+from etmpc.common.errors import EtmpcError
+from etmpc.control.lqr import ErrorFeedback, discrete_lqr_gain
+from etmpc.control.plan import Plan
+
+
+# What the learned policy's default ("error") feature set adds for the battery (etmpc.policies.learned).
+EXOGENOUS_FEATURES = (
+    "price_eur_kwh",  # lambda_i, now
+    "net_production_kw",  # P_i, now
+    "planned_price_eur_kwh",  # what the kept plan assumed for lambda_i
+    "planned_production_kw",  # what it assumed for P_i
+    "price_error_eur_kwh",  # lambda_i minus the plan's assumption
+    "production_error_kw",
+    "trade_value_eur",  # (lambda_i - lambda_bar) u_plan,i delta: today's worth of the trade the plan makes now
+)
+_MEAN_PRICE, _INTERVAL_H = Market().price.mean, Battery().interval_h
+
+
+def exogenous_features(s) -> np.ndarray:
+    """The values of :data:`EXOGENOUS_FEATURES` at augmented state ``s`` (it carries the kept plan
+    and the current observation). The trade's value is against the mean price ``lambda_bar``, the
+    value the MPC gives stored energy: > 0 when the plan's trade now beats keeping the energy."""
+    obs, plan, age = s.observation, s.plan, s.age
+    price, production = float(obs["price_eur_kwh"]), float(obs["net_production_kw"])
+    planned_price = float(plan.forecasts["price_eur_kwh"][age])
+    planned_production = float(plan.forecasts["production_kw"][age])
+    trade_value = (price - _MEAN_PRICE) * float(plan.input_at(age)[0]) * _INTERVAL_H
+    return np.array([price, production, planned_price, planned_production, price - planned_price,
+                     production - planned_production, trade_value])
+
+
+@dataclass(frozen=True)
+class Config:
+    """The paper's settings for the battery (SPEC.md)."""
+
+    horizon: int = 20  # N
+    lqr_state_weight: float = 1.0  # Q on the state-of-charge error (dimensionless)
+    lqr_input_weight: float = 0.1  # R on the correction, per kW^2
+    recompute_price: float = 0.0  # the computation's cost is physical: eta_c is drawn from the battery
+    battery: Battery = Battery()
+    market: Market = Market()
+
+
+class BatterySystem:
+    domain = "battery"
+    task = "trading"
+    objective_sense = "max"  # the objective is the profit, EUR
+    state_names = ("state_of_charge",)
+    input_names = ("trade_kw",)
+
+    def __init__(self, config: Config = Config()):
+        if config.lqr_state_weight < 0 or config.lqr_input_weight <= 0:
+            raise ValueError(f"LQR weights need Q >= 0 and R > 0, got Q={config.lqr_state_weight}, R={config.lqr_input_weight}")
+        if config.horizon > config.market.forecast_steps:
+            raise EtmpcError(f"horizon {config.horizon} exceeds the {config.market.forecast_steps} forecast values the task provides")
+        self.config = config
+        battery = config.battery
+        self.episode_steps = battery.episode_steps
+        self.control_interval_s = battery.interval_s
+        self.recompute_price = config.recompute_price
+        self.terminal_price = config.market.price.mean
+        self.u_min = np.array([-battery.trade_limit_kw])
+        self.u_max = np.array([battery.trade_limit_kw])
+        self.error_weights = np.sqrt([config.lqr_state_weight])
+        # The SoC error: eps+ = eps - delta/C u_lqr (SPEC.md), a discrete system with its timebase.
+        soc_error = ct.ss([[1.0]], [[-battery.soc_per_kw]], [[1.0]], [[0.0]], dt=battery.interval_s)
+        gain = discrete_lqr_gain(soc_error, np.array([[config.lqr_state_weight]]), np.array([[config.lqr_input_weight]]))
+        self.feedback = ErrorFeedback(gain)
+
+    @cached_property
+    def mpc(self) -> EconomicMPC:
+        return EconomicMPC(self.config.battery, self.config.horizon, self.terminal_price)
+
+    def make_env(self, random=None):
+        return battery_env.make_environment(random=random, battery=self.config.battery, market=self.config.market)
+
+    def draw_episode(self, rng: np.random.Generator) -> battery_env.Episode:
+        return battery_env.Episode.draw(rng, self.config.battery, self.config.market)
+
+    def episode_parameters(self) -> dict:
+        """What the episodes are drawn from (recorded in the test set)."""
+        return {"battery": asdict(self.config.battery), "market": asdict(self.config.market)}
+
+    def episode_from_arrays(self, arrays: dict[str, np.ndarray]) -> battery_env.Episode:
+        return battery_env.Episode.from_arrays(arrays)
+
+    def signals(self, episode: battery_env.Episode) -> dict[str, np.ndarray]:
+        """The episode's true prices and net production, per step, for recordings."""
+        return {"price_eur_kwh": episode.price_eur_kwh, "net_production_kw": episode.production_kw}
+
+    def sample_future(self, episode: battery_env.Episode, step: int, rng: np.random.Generator) -> battery_env.Episode:
+        """``episode`` with everything the controller has not seen at the decision of step ``step``
+        redrawn from the task's generators (rows ``step + 1..``; see ``market.sample_future``)."""
+        return market.sample_future(rng, episode, step + 1, self.config.battery, self.config.market)
+
+    def truncation_value(self, x: np.ndarray) -> float:
+        """The stored energy at the mean price, as the task values it at the episode's end (EUR)."""
+        return self.terminal_price * self.config.battery.capacity_kwh * float(x[0])
+
+    def state(self, timestep: dm_env.TimeStep) -> np.ndarray:
+        return np.array([timestep.observation["state_of_charge"]])
+
+    def measure(self, physics: battery_env.Physics) -> np.ndarray:
+        """``state`` read off the physics: the number the observation shows."""
+        return physics.state()
+
+    def plan(self, x: np.ndarray, u_prev: np.ndarray, warm: Plan | None, age: int, timestep: dm_env.TimeStep) -> Plan:
+        obs = timestep.observation
+        return self.mpc.solve(float(x[0]), obs["production_forecast_kw"], obs["price_forecast_eur_kwh"])
+
+    def action(self, u: np.ndarray, recompute: bool) -> np.ndarray:
+        return np.array([u[0], 1.0 if recompute else 0.0])  # computing draws eta_c from the battery
+
+    # -- for etmpc bench --------------------------------------------------------------------------
+    def plan_cost(self, x: np.ndarray, u_prev: np.ndarray, timestep: dm_env.TimeStep, inputs: np.ndarray) -> float:
+        """The OCP's minimised objective (negative profit, EUR) of an input sequence."""
+        obs, n = timestep.observation, self.config.horizon
+        return -self.mpc.profit(float(x[0]), obs["production_forecast_kw"][:n], obs["price_forecast_eur_kwh"][:n], np.ravel(inputs))
+
+    def reference_solvers(self) -> list:
+        return [LinprogReference(self.config.battery, self.config.horizon, self.terminal_price)]
+
+    def interpreted(self):
+        return None  # the LP is solved inside HiGHS: there is no other way it runs

@@ -1,0 +1,139 @@
+"""The cart-pendulum system as the control loop sees it: plant, MPC, LQR and costs together."""
+
+from __future__ import annotations
+
+import importlib.util
+from dataclasses import dataclass, replace
+from functools import cached_property
+
+import casadi as ca
+import control as ct
+import dm_env
+import numpy as np
+
+from etmpc.systems.cart_pendulum import task as cp_env
+from etmpc.systems.cart_pendulum.model import NU, NX, STATE_NAMES, AnalyticModel
+from etmpc.control.lqr import ErrorFeedback, discrete_lqr_gain
+from etmpc.control.mpc import GaussNewtonMPC, SolverSettings
+from etmpc.control.plan import Plan
+
+
+@dataclass(frozen=True)
+class Config:
+    """The paper's settings for the cart pendulum (SPEC.md)."""
+
+    horizon: int = 20  # N
+    input_change_weight: float = 1e-4  # D on (u_k - u_{k-1})^2
+    force_limit_n: float = 25.0
+    lqr_state_weights: tuple[float, ...] = (0.0, 1.0, 10.0, 10.0)  # diag Q
+    lqr_input_weight: float = 0.1  # R
+    recompute_price: float = 5e-5  # per computation, in the policy cost R_k
+    rk4_substeps: int = 1  # RK4 steps of the MPC's predictor per 0.1 s interval (the paper: step 0.1 s)
+    plant: str = "mismatched"  # or "matched"
+    solver: SolverSettings = SolverSettings()
+
+
+class CartPendulumSystem:
+    domain = "cart_pendulum"
+    task = "balance"
+    objective_sense = "min"  # the objective is sum(beta^2) + price * computations
+    episode_steps = cp_env.EPISODE_STEPS
+    control_interval_s = cp_env.CONTROL_DT_S
+    state_names = STATE_NAMES
+    input_names = ("force_n",)
+
+    def __init__(self, config: Config = Config()):
+        self.config = config
+        self.model = AnalyticModel(dt_s=cp_env.CONTROL_DT_S, rk4_substeps=config.rk4_substeps)
+        self.recompute_price = config.recompute_price
+        self.u_min = np.array([-config.force_limit_n])
+        self.u_max = np.array([config.force_limit_n])
+        self.error_weights = np.sqrt(np.asarray(config.lqr_state_weights))
+        A, B = self.model.linearised_upright()
+        gain = discrete_lqr_gain(
+            ct.ss(A, B, np.eye(NX), np.zeros((NX, NU))),
+            np.diag(config.lqr_state_weights),
+            np.array([[config.lqr_input_weight]]),
+            dt_s=cp_env.CONTROL_DT_S,
+        )
+        self.feedback = ErrorFeedback(gain)
+
+    @cached_property
+    def mpc(self) -> GaussNewtonMPC:
+        x, u, du = ca.SX.sym("x", NX), ca.SX.sym("u", NU), ca.SX.sym("du", NU)
+        sqrt_d = np.sqrt(self.config.input_change_weight)
+        stage = ca.Function("stage_residual", [x, u, du], [ca.vertcat(x[2], sqrt_d * du)])
+        terminal = ca.Function("terminal_residual", [x], [x[2]])
+        return GaussNewtonMPC(
+            self.model.discrete, stage, terminal, self.config.horizon, self.u_min, self.u_max, self.config.solver,
+            name="cart_pendulum_mpc",
+        )
+
+    def make_env(self, random=None):
+        return cp_env.make_environment(random=random, plant=self.config.plant)
+
+    def draw_episode(self, rng: np.random.Generator) -> cp_env.Episode:
+        return cp_env.Episode.draw(rng)
+
+    def episode_parameters(self) -> dict:
+        """What the episodes are drawn from (recorded in the test set)."""
+        return {
+            "initial_state_low": cp_env.INITIAL_STATE_LOW.tolist(),
+            "initial_state_high": cp_env.INITIAL_STATE_HIGH.tolist(),
+            "disturbance_std_rad_s2": cp_env.DISTURBANCE_STD_RAD_S2,
+            "steps": cp_env.EPISODE_STEPS,
+        }
+
+    def episode_from_arrays(self, arrays: dict[str, np.ndarray]) -> cp_env.Episode:
+        return cp_env.Episode.from_arrays(arrays)
+
+    def signals(self, episode: cp_env.Episode) -> dict[str, np.ndarray]:
+        """The episode's exogenous inputs, per step, for recordings."""
+        return {"disturbance_rad_s2": episode.disturbance}
+
+    def sample_future(self, episode: cp_env.Episode, step: int, rng: np.random.Generator) -> cp_env.Episode:
+        """``episode`` with the disturbances of intervals ``step..`` redrawn: at the decision of step
+        ``step`` the controller has felt those of the earlier intervals only (they are i.i.d.)."""
+        disturbance = np.array(episode.disturbance)
+        disturbance[step:] = rng.normal(0.0, cp_env.DISTURBANCE_STD_RAD_S2, size=disturbance.size - step)
+        return cp_env.Episode(episode.initial_state, disturbance)
+
+    def truncation_value(self, x: np.ndarray) -> float:
+        """A rollout stopped before the episode's end counts no cost beyond it."""
+        return 0.0
+
+    def state(self, timestep: dm_env.TimeStep) -> np.ndarray:
+        obs = timestep.observation
+        return np.array([obs[name] for name in STATE_NAMES], dtype=float)
+
+    def measure(self, physics: cp_env.Physics) -> np.ndarray:
+        """``state`` read off the physics: the numbers the observation is made of."""
+        return physics.state()
+
+    def plan(self, x: np.ndarray, u_prev: np.ndarray, warm: Plan | None, age: int, timestep: dm_env.TimeStep) -> Plan:
+        return self.mpc.solve(x, u_prev, warm, age)
+
+    def action(self, u: np.ndarray, recompute: bool) -> np.ndarray:
+        return u  # computing costs the cart no energy; the price is in the objective
+
+    # -- for etmpc bench --------------------------------------------------------------------------
+    def plan_cost(self, x: np.ndarray, u_prev: np.ndarray, timestep: dm_env.TimeStep, inputs: np.ndarray) -> float:
+        """The OCP objective of an input sequence, rolled out through the predictor."""
+        inputs = np.ravel(inputs)
+        states = self.mpc.rollout(x, inputs.reshape(-1, NU))
+        du = np.diff(np.concatenate([np.ravel(u_prev), inputs]))
+        return float(np.sum(states[:, 2] ** 2) + self.config.input_change_weight * np.sum(du**2))
+
+    def reference_solvers(self) -> list:
+        """do-mpc 5.1 (the paper's stack) on the same OCP, if the ``bench`` extra is installed."""
+        if importlib.util.find_spec("do_mpc") is None:
+            return []
+        from etmpc.systems.cart_pendulum.dompc import DoMpcReference
+
+        c = self.config
+        return [DoMpcReference(self.model.discrete, c.horizon, c.input_change_weight, float(self.u_min[0]), float(self.u_max[0]))]
+
+    def interpreted(self) -> CartPendulumSystem:
+        """The same system with the MPC as it was solved before it was compiled: full multiple
+        shooting, run by CasADi's virtual machine (for ``etmpc bench``)."""
+        return CartPendulumSystem(replace(self.config, solver=replace(self.config.solver, block=1, compiled=False)))

@@ -1,0 +1,574 @@
+"""Rerun recordings of episodes, and reading them back.
+
+One episode lives under ``/<domain>/<policy>/episode_<EEE>/repeat_<R>`` (``<policy>``: the
+policy's label, its spec with a learned policy's file shortened to its stem: ``every:3``,
+``rl:learned``), so several episodes and policies in one file stay apart. Under it, every series
+is a Rerun time series on two timelines, ``step`` (sequence) and ``time`` (seconds since the
+episode started), and every series name carries its unit:
+
+- ``identity``: static values: domain, task, policy (its exact spec), test-set episode, repeat,
+  seed, test-set sha256, objective sense, price of a computation, control interval; ``about``: a
+  static title line (policy, episode, objective, computations, how to read the plots);
+- ``realised/state/<name>``: the state, steps ``0..S``; ``realised/input/<name>``: the applied
+  input, with its lower and upper bounds as two more series; ``realised/signal/<name>``: the
+  episode's exogenous inputs (disturbance, or price and net production); ``correction/<name>``:
+  the LQR correction added to the plan;
+- ``plan/state/<name>``, ``plan/input/<name>``: every plan's prediction from the step it was made
+  (up to the episode's end), as time series on the same timelines; ``forecast/<signal>``: every
+  forecast a battery plan was made with, under the signal it forecasts. Each is one entity whose
+  series are "slots": a plan takes the first slot whose last plan ended two steps before it
+  starts, so the plans of a slot never overlap and a NaN row parts them. Each point is coloured
+  by when its plan was made (``etmpc.views.blueprint.plan_colours``);
+- ``decision``: ``recompute`` (1 where a computation was spent) and ``forced``, every step;
+  ``recompute``: the recomputes only, as points at the age of the plan each one replaced, a
+  series per kind (chosen by the policy, forced because the plan ran out, the first plan);
+  ``events``: a log line per recompute (why, the plan's age, the prediction error);
+- ``prediction_error``: ``‖W (x_i − x̂_i)‖`` against the plan in force before the step's decision
+  (what the threshold policy compares; none at step 0, where there is no plan yet);
+  ``threshold``: the threshold of a ``threshold:X`` policy;
+- ``objective/reward`` (the environment's, per step) and ``objective/running`` (the running
+  objective, computations included, in its own sense; a computation's price is the identity's
+  ``recompute_price`` times ``decision``'s ``recompute``).
+
+In one view, Rerun draws entities in the order of their paths: ``realised/…`` comes over
+``plan/…`` and ``forecast/…``. The file carries a blueprint (``etmpc.views.blueprint``): a tab per
+policy and episode. Each entity's whole series goes in with one ``send_columns`` call.
+
+``read_recording`` reads a file back with Rerun's own reader, and ``replay_summary`` recomputes
+each episode's figures from it with the same formulas as the live run.
+"""
+
+from __future__ import annotations
+
+import re
+import threading
+import warnings
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from etmpc.views import blueprint as look
+from etmpc.common.errors import EtmpcError
+from etmpc.common.numerics import norm
+
+APPLICATION_ID = "etmpc"
+DECISION_SERIES = ("recompute", "forced")
+OBJECTIVE_SERIES = ("reward", "computation", "running")
+
+
+@dataclass(frozen=True, eq=False)
+class EpisodeRecord:
+    """What a recording keeps of one episode: small, picklable, built on the worker that ran it."""
+
+    identity: dict
+    state_names: tuple[str, ...]
+    input_names: tuple[str, ...]
+    error_weights: np.ndarray
+    states: np.ndarray  # (S + 1, nx)
+    planned: np.ndarray  # (S, nu)
+    correction: np.ndarray  # (S, nu)
+    applied: np.ndarray  # (S, nu)
+    recompute: np.ndarray  # (S,) bool
+    forced: np.ndarray  # (S,) bool
+    rewards: np.ndarray  # (S,)
+    prediction_error: np.ndarray  # (S,), NaN at step 0
+    plans: list = field(default_factory=list)  # (step, states (N+1, nx), inputs (N, nu), forecasts {name: (N,)})
+    signals: dict = field(default_factory=dict)  # name -> (>= S,)
+    input_bounds: tuple = ()  # (u_min (nu,), u_max (nu,)), or () if the system has none
+    announced: tuple = ()  # a self-trigger's (step a plan was made, steps it announced it would be kept)
+
+    @property
+    def steps(self) -> int:
+        return len(self.rewards)
+
+    @classmethod
+    def from_trajectory(cls, system, traj, identity: dict, episode, announce=None) -> EpisodeRecord:
+        """``announce``: a self-triggering policy's ``announce(plan)``, to record what it announced
+        at each solve (it is a function of the plan alone, so asking again gives the same answer)."""
+        n = traj.steps
+        bounds = (getattr(system, "u_min", None), getattr(system, "u_max", None))
+        return cls(
+            identity=dict(identity, domain=system.domain, task=system.task, objective_sense=system.objective_sense,
+                          recompute_price=float(system.recompute_price), control_interval_s=float(system.control_interval_s)),
+            state_names=tuple(system.state_names),
+            input_names=tuple(system.input_names),
+            error_weights=np.asarray(system.error_weights, float),
+            states=traj.states[: n + 1].copy(),
+            planned=traj.planned[:n].copy(),
+            correction=traj.correction[:n].copy(),
+            applied=traj.applied[:n].copy(),
+            recompute=traj.recompute[:n].copy(),
+            forced=traj.forced[:n].copy(),
+            rewards=traj.rewards[:n].copy(),
+            prediction_error=prediction_errors(traj, system.error_weights),
+            plans=[(k, p.states, p.inputs, {name: np.asarray(v) for name, v in p.forecasts.items()}) for k, p in traj.plans],
+            signals={name: np.asarray(v, float) for name, v in system.signals(episode).items()},
+            input_bounds=() if None in bounds else tuple(np.asarray(b, float) for b in bounds),
+            announced=tuple((int(k), int(announce(p))) for k, p in traj.plans) if announce is not None else (),
+        )
+
+
+def prediction_errors(traj, error_weights) -> np.ndarray:
+    """``‖W (x_i − x̂_i)‖`` per step, ``x̂_i`` from the plan in force before step i's decision."""
+    errors = np.full(traj.steps, np.nan)
+    plans = iter(traj.plans)
+    current, upcoming = None, next(plans, None)
+    w = np.asarray(error_weights, float)
+    for i in range(traj.steps):
+        if current is not None:
+            k, plan = current
+            errors[i] = norm(w * (traj.states[i] - plan.state_at(i - k)))  # the threshold policy's measure
+        while upcoming is not None and upcoming[0] <= i:  # a plan made at step i is in force from i on
+            current, upcoming = upcoming, next(plans, None)
+    return errors
+
+
+def episode_root(identity: dict, policy_part: str) -> str:
+    return f"/{identity['domain']}/{policy_part}/episode_{int(identity['episode']):03d}/repeat_{int(identity['repeat'])}"
+
+
+_ROOT = re.compile(r"^(.*/episode_\d+/repeat_\d+)/(.+)$")
+
+
+class Recorder:
+    """Writes episodes into one ``.rrd`` file. The file appears under its name only once it is
+    complete: it is written beside it and renamed on ``close``, after the blueprint (which needs
+    every episode) and an end marker.
+
+    Rerun (and the pandas that pyarrow loads on its first numpy array) takes a second or two to
+    import: a thread started here imports it while the caller plays its episodes, and the file is
+    opened when the first episode comes."""
+
+    def __init__(self, path: str | Path):
+        self.path = Path(path)
+        if self.path.suffix != ".rrd":
+            raise EtmpcError(f"a recording is a .rrd file, got {self.path}")
+        if self.path.is_dir():
+            raise EtmpcError(f"{self.path} is a directory, not a file")
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._tmp = self.path.with_name(f".{self.path.name}.partial")
+        try:
+            self._tmp.touch()  # a path that cannot be written fails here, before any work
+        except OSError as exc:
+            raise EtmpcError(f"cannot write {self.path}: {exc.strerror or exc}") from None
+        self._imported: list = []
+        self._importer = threading.Thread(target=_import_rerun, args=(self._imported,), daemon=True)
+        self._importer.start()
+        self._rr = None
+        self._stream = None
+        self._policy_parts: dict[tuple[str, str], str] = {}
+        self._styles: dict = {}
+        self._indexes: dict = {}
+        self.layouts: list[look.EpisodeLayout] = []
+        self.episodes = 0
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, *exc):
+        self.close(keep=exc_type is None)
+
+    def _open(self):
+        if self._stream is None:
+            self._importer.join()
+            if isinstance(self._imported[0], BaseException):
+                raise self._imported[0]
+            self._rr = self._imported[0]
+            self._stream = self._rr.RecordingStream(APPLICATION_ID)
+            self._stream.save(self._tmp)
+        return self._rr, self._stream
+
+    def close(self, keep: bool = True) -> None:
+        try:
+            if keep:
+                rr, stream = self._open()
+                if self.layouts:
+                    stream.send_blueprint(look.blueprint(self.layouts))
+                # The end marker: a reader that does not find it knows the file was cut short.
+                stream.log(END_MARKER, rr.AnyValues(episodes=self.episodes), static=True)
+            if self._stream is not None:
+                self._stream.flush()
+                self._stream.disconnect()
+            if keep:
+                self._tmp.replace(self.path)
+        except (OSError, RuntimeError) as exc:  # RuntimeError: Rerun's file writer gave up (a full disk)
+            keep = False
+            reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+            raise EtmpcError(f"cannot write {self.path}: {reason} (is the disk full?)") from None
+        except BaseException:
+            keep = False
+            raise
+        finally:
+            if not keep:
+                self._tmp.unlink(missing_ok=True)
+
+    def _policy_part(self, domain: str, policy: str) -> tuple[str, str]:
+        """``(label, entity path part)`` of a policy spec: two specs with the same label stay apart."""
+        key = (domain, policy)
+        if key not in self._policy_parts:
+            base = look.policy_label(policy)
+            taken = {name for (d, _), name in self._policy_parts.items() if d == domain}
+            name, i = base, 2
+            while name in taken:
+                name, i = f"{base} ({i})", i + 1
+            self._policy_parts[key] = name
+        name = self._policy_parts[key]
+        return name, self._rr.escape_entity_path_part(name.replace("/", "_"))  # one path part
+
+    def _style(self, kind: str, **fields):
+        """A static ``SeriesLines`` or ``SeriesPoints``, built once per look (they repeat from one
+        episode to the next, and building one costs more than logging it)."""
+        key = (kind, repr(sorted(fields.items())))
+        if key not in self._styles:
+            self._styles[key] = getattr(self._rr, kind)(**fields)
+        return self._styles[key]
+
+    def _steps(self, count: int, dt: float) -> list:
+        """The index of steps ``0..count-1`` (kept: most series share one)."""
+        key = (count, dt)
+        if key not in self._indexes:
+            self._indexes[key] = _timeline(np.arange(count), dt)
+        return self._indexes[key]
+
+    def log_episode(self, record: EpisodeRecord, frames: Iterable[np.ndarray] | None = None) -> str:
+        """Log one episode (and, optionally, rendered frames, one per state); returns its root path."""
+        rr, stream = self._open()
+        identity = record.identity
+        name, part = self._policy_part(identity["domain"], identity["policy"])
+        root = episode_root(identity, part)
+        dt = identity["control_interval_s"]
+        n = record.steps
+        written: list[str] = []
+
+        def series(path, index, values, names, kind="SeriesLines", **style):
+            stream.send_columns(f"{root}/{path}", index, rr.Scalars.columns(scalars=np.asarray(values, float)))
+            stream.log(f"{root}/{path}", self._style(kind, names=list(names), **style), static=True)
+            written.append(path)
+
+        stream.log(f"{root}/identity", rr.AnyValues(**identity), static=True)
+
+        # What happened. Entities drawn in one view are drawn in the order of their paths, so
+        # ``realised/…`` comes over ``plan/…`` and ``forecast/…``.
+        realised = dict(colors=[look.REALISED], widths=[look.REALISED_WIDTH])
+        for j, s in enumerate(record.state_names):
+            series(f"realised/state/{s}", self._steps(n + 1, dt), record.states[:, j], [f"what happened [{look.unit(s)}]"],
+                   **realised)
+        for j, u in enumerate(record.input_names):
+            what = f"[{look.unit(u)}]"
+            if record.input_bounds:  # the bounds as two more series of the input, grey
+                lo, hi = (float(b[j]) for b in record.input_bounds)
+                values = np.column_stack([record.applied[:, j], np.full(n, lo), np.full(n, hi)])
+                series(f"realised/input/{u}", self._steps(n, dt), values, [f"applied {what}", f"lower bound {what}",
+                       f"upper bound {what}"], colors=[look.REALISED, look.BOUND, look.BOUND],
+                       widths=[look.REALISED_WIDTH, 1.0, 1.0])
+            else:
+                series(f"realised/input/{u}", self._steps(n, dt), record.applied[:, j], [f"applied {what}"], **realised)
+            series(f"correction/{u}", self._steps(n, dt), record.correction[:, j], [f"LQR correction {what}"], **realised)
+        forecasts = {look.signal_of_forecast(f, record.signals): f for f in (record.plans[0][3] if record.plans else {})}
+        forecasts.pop(None, None)
+        for s, values in record.signals.items():
+            series(f"realised/signal/{s}", self._steps(n, dt), values[:n],
+                   [f"true [{look.unit(s)}]" if s in forecasts else look.label(s)], **realised)
+
+        # The plans, as time series from the step each was made.
+        if record.plans:
+            made = np.array([k for k, *_ in record.plans])
+            slots, n_slots = _slots(made, max(p[1].shape[0] for p in record.plans))
+            colours = look.plan_colours(made, n)
+            # Every slot drawn: the viewer shows only the first 20 series of an entity unless told.
+            plan_style = lambda what: self._style("SeriesLines", names=[what] * n_slots,  # noqa: E731
+                                                  widths=[look.PLAN_WIDTH] * n_slots, visible_series=[True] * n_slots)
+            fans = [(f"plan/state/{s}", np.stack([p[1][:, j] for p in record.plans]), n, f"each plan [{look.unit(s)}]")
+                    for j, s in enumerate(record.state_names)]
+            fans += [(f"plan/input/{u}", np.stack([p[2][:, j] for p in record.plans]), n - 1, f"each plan [{look.unit(u)}]")
+                     for j, u in enumerate(record.input_names)]
+            fans += [(f"forecast/{s}", np.stack([p[3][f] for p in record.plans]), n - 1, f"each forecast [{look.unit(s)}]")
+                     for s, f in forecasts.items()]
+            for path, values, last, what in fans:
+                stream.send_columns(f"{root}/{path}", self._steps(last + 1, dt), _fan(made, slots, n_slots, values, last, colours))
+                stream.log(f"{root}/{path}", plan_style(what), static=True)
+                written.append(path)
+
+        # The decisions.
+        decisions = np.stack([record.recompute, record.forced], axis=1).astype(float)
+        stream.send_columns(f"{root}/decision", self._steps(n, dt), rr.Scalars.columns(scalars=decisions))  # for replay
+        written.append("decision")
+        events = np.flatnonzero(record.recompute)
+        if len(events):
+            made_at = np.array([k for k, *_ in record.plans], dtype=np.int64)
+            previous = made_at[np.maximum(np.searchsorted(made_at, events) - 1, 0)] if len(made_at) else events
+            age = np.where(events > 0, events - previous, 0)
+            forced = record.forced[events] & (events > 0)  # step 0 is forced too (there is no plan yet): the first plan
+            # A series per kind of recompute, at the recomputes only (NaN: another kind), at the age
+            # of the plan each one replaced.
+            kinds = np.stack([(events > 0) & ~forced, forced, events == 0], axis=1)
+            series("recompute", _timeline(events, dt), np.where(kinds, age[:, None], np.nan),
+                   ["chosen by the policy", "forced: the plan ran out", "first plan"], kind="SeriesPoints",
+                   colors=[look.CHOSEN, look.FORCED, look.FIRST], markers=["circle", "cross", "diamond"],
+                   marker_sizes=[3.0, 4.5, 4.0])
+            error = record.prediction_error[events]
+            text = ["first plan" if i == 0 else
+                    f"{'FORCED, the plan ran out' if f else 'chosen by the policy'}: plan age {a}, ‖W (x − x̂)‖ {e:.4g}"
+                    for i, f, a, e in zip(events, forced, age, error)]
+            if record.announced:  # a self-trigger: what it announced as it made each plan
+                announced = dict(record.announced)
+                text = [t + (f"; announced: keep {announced[i]} steps, next solve at step {i + announced[i]}"
+                             if i in announced else "") for t, i in zip(text, events)]
+            stream.send_columns(f"{root}/events", _timeline(events, dt),
+                                rr.TextLog.columns(text=text, level=["WARN" if f else "INFO" for f in forced]))
+            written.append("events")
+        if record.announced:
+            made, keep = (np.array(v, dtype=np.int64) for v in zip(*record.announced))
+            series("announced", _timeline(made, dt), keep.astype(float), ["announced at the solve: steps the plan will be kept"],
+                   kind="SeriesPoints", colors=[look.ANNOUNCED], markers=["up"], marker_sizes=[4.0])
+        known = np.flatnonzero(np.isfinite(record.prediction_error))
+        series("prediction_error", _timeline(known, dt), record.prediction_error[known], ["‖W (x − x̂)‖"], **realised)
+        threshold = re.fullmatch(r"threshold:(.+)", identity["policy"])
+        if threshold:
+            x = float(threshold.group(1))
+            series("threshold", _timeline(np.array([0, n - 1]), dt), np.array([x, x]), [f"threshold {x:g}"],
+                   colors=[look.BOUND], widths=[1.0])
+
+        # The objective.
+        price = identity["recompute_price"] * record.recompute
+        sign = 1.0 if identity["objective_sense"] == "max" else -1.0
+        running = sign * np.cumsum(record.rewards - price)
+        series("objective/reward", self._steps(n, dt), record.rewards, ["reward"], **realised)
+        series("objective/running", self._steps(n, dt), running,
+               [f"running {'profit (higher' if sign > 0 else 'cost (lower'} is better)"], **realised)
+
+        if frames is not None:
+            for i, frame in enumerate(frames):
+                stream.set_time("step", sequence=i)
+                stream.set_time("time", duration=i * dt)
+                stream.log(f"{root}/camera", rr.Image(frame).compress(jpeg_quality=85))
+            written.append("camera")
+
+        stream.log(f"{root}/about", rr.TextDocument(_about(name, record, running[-1] if n else 0.0), media_type="text/markdown"),
+                   static=True)
+        y_ranges = {}
+        for s in forecasts:
+            lo, hi = float(np.min(record.signals[s][:n])), float(np.max(record.signals[s][:n]))
+            pad = 0.1 * (hi - lo) or 0.1 * abs(hi) or 1.0
+            y_ranges[s] = (lo - pad, hi + pad)
+        self.layouts.append(look.EpisodeLayout(
+            root=root, domain=identity["domain"], policy=name, episode=int(identity["episode"]),
+            repeat=int(identity["repeat"]), steps=n, control_interval_s=dt, states=record.state_names,
+            inputs=record.input_names, signals=tuple(s for s in record.signals if s not in forecasts),
+            forecast_signals=tuple(s for s in record.signals if s in forecasts), entities=frozenset(written), y_ranges=y_ranges))
+        self.episodes += 1
+        return root
+
+
+def _import_rerun(out: list) -> None:
+    """Import Rerun and warm pyarrow up (it imports pandas on its first numpy array); ``out``
+    receives the module, or the exception."""
+    try:
+        import pyarrow as pa
+        import rerun as rr
+        import rerun.blueprint  # noqa: F401
+
+        pa.array(np.zeros(1, dtype=np.int64))
+        out.append(rr)
+    except BaseException as exc:  # handed to the thread that needs Rerun
+        out.append(exc)
+
+
+def _about(name: str, record: EpisodeRecord, objective: float) -> str:
+    """The episode's title line (Markdown)."""
+    identity = record.identity
+    spec = identity["policy"]
+    bound = " (an upper bound, not a policy)" if identity.get("upper_bound") else ""
+    sense = "profit: higher" if identity["objective_sense"] == "max" else "cost: lower"
+    forced = int(record.forced[1:].sum())
+    return (f"**{name}**{bound} · {identity['domain']} · **test-set episode {identity['episode']}**"
+            + (f", repeat {identity['repeat']}" if identity["repeat"] else "")
+            + f" · objective **{objective:.5g}** {look.OBJECTIVE_UNITS.get(identity['domain'], '')} ({sense} is better)"
+            f" · {int(record.recompute.sum())} computations, {forced} forced · seed {identity['seed']}"
+            + (f" · policy `{spec}`" if spec != name else "") + "  \n"
+            "Orange: what happened. Thin lines: each plan's prediction from the step it was made, coloured by when: "
+            f"blue (early) → violet → teal → green (late). A step is {identity['control_interval_s']:g} s.")
+
+
+def _slots(made: np.ndarray, length: int) -> tuple[np.ndarray, int]:
+    """A series ("slot") per plan: the first slot whose last plan ended at least two steps before
+    this one starts, so that a NaN row parts two plans of one slot. ``length``: a plan's points."""
+    ends: list[int] = []
+    slots = np.empty(len(made), dtype=np.int64)
+    for p, k in enumerate(made):
+        s = next((s for s, end in enumerate(ends) if end + 1 < k), len(ends))
+        if s == len(ends):
+            ends.append(0)
+        ends[s] = int(k) + length - 1
+        slots[p] = s
+    return slots, len(ends)
+
+
+def _fan(made, slots, n_slots: int, values: np.ndarray, last: int, colours) -> list:
+    """The columns of plans ``values (P, L)``, each from the step it was made, as ``n_slots``
+    series over steps ``0..last`` (NaN where a slot has no plan), each point coloured by its plan."""
+    import rerun as rr
+
+    rows = made[:, None] + np.arange(values.shape[1])
+    keep = rows <= last
+    cols = np.broadcast_to(slots[:, None], rows.shape)[keep]
+    grid = np.full((last + 1, n_slots), np.nan)
+    grid[rows[keep], cols] = values[keep]
+    paint = np.zeros((last + 1, n_slots), dtype=np.uint32)
+    paint[rows[keep], cols] = np.broadcast_to(colours[:, None], rows.shape)[keep]
+    return [*rr.Scalars.columns(scalars=grid),
+            *rr.SeriesLines.columns(colors=paint.ravel()).partition(np.full(last + 1, n_slots))]
+
+
+def _timeline(steps: np.ndarray, dt: float) -> list:
+    import rerun as rr
+
+    steps = np.asarray(steps, dtype=np.int64)
+    # Whole nanoseconds as timedelta64: exact, and Rerun's fast path (floats go element by element).
+    return [rr.TimeColumn("step", sequence=steps),
+            rr.TimeColumn("time", duration=(steps * round(dt * 1e9)).astype("timedelta64[ns]"))]
+
+
+# -- reading back ------------------------------------------------------------------------------------
+END_MARKER = "/etmpc_recording_end"  # static, logged last: {"episodes": how many the file holds}
+# Entity (relative to its episode's root) -> the series it holds, in column order. ``objective``
+# with three columns is how files written before the objective's series were split hold them.
+READ = {"objective/reward": ("reward",), "objective/running": ("running",),
+        "objective": OBJECTIVE_SERIES, "decision": DECISION_SERIES, "prediction_error": ("prediction_error",)}
+
+
+def read_recording(path: str | Path) -> dict[str, dict]:
+    """``{episode root: {"identity": {...}, "reward": (steps, values), "recompute": …, "forced": …,
+    "computation": …, "running": …, "prediction_error": …}}`` from a ``.rrd`` file, read with
+    Rerun's own reader."""
+    from rerun.chunk import RrdReader
+
+    path = Path(path)
+    if not path.is_file():
+        raise EtmpcError(f"recording {path} not found")
+    with warnings.catch_warnings(record=True) as caught:  # said in the error below, not as a second line
+        warnings.simplefilter("always")
+        try:
+            chunks = list(RrdReader(str(path)).stream())
+        except Exception as exc:  # the reader raises its own types for a file that is not a recording
+            short = any("no footer" in str(w.message) for w in caught)
+            raise EtmpcError(f"recording {path} is cut short (no footer; {exc})" if short else
+                             f"{path} is not a readable Rerun recording ({exc})") from None
+    episodes: dict[str, dict] = {}
+    pieces: dict[tuple[str, str], list] = {}
+    end = None
+    for chunk in chunks:
+        if str(chunk.entity_path) == END_MARKER and chunk.is_static:
+            batch = chunk.to_record_batch()
+            end = int(batch.column("episodes").to_pylist()[0][0])
+            continue
+        found = _ROOT.match(str(chunk.entity_path))
+        if found is None:
+            continue
+        root, leaf = found.groups()
+        if leaf != "identity" and leaf not in READ:
+            continue
+        batch = chunk.to_record_batch()
+        if leaf == "identity" and chunk.is_static:
+            identity = {name: batch.column(name).to_pylist()[0][0] for name in batch.schema.names if not name.startswith("rerun.")}
+            episodes.setdefault(root, {})["identity"] = identity
+        elif leaf in READ and "Scalars:scalars" in batch.schema.names:
+            values = batch.column("Scalars:scalars").flatten().to_numpy().reshape(batch.num_rows, len(READ[leaf]))
+            pieces.setdefault((root, leaf), []).append((batch.column("step").to_numpy(), values))
+    for (root, leaf), parts in pieces.items():
+        steps = np.concatenate([s for s, _ in parts])
+        values = np.concatenate([v for _, v in parts])
+        order = np.argsort(steps, kind="stable")
+        for j, name in enumerate(READ[leaf]):
+            episodes.setdefault(root, {})[name] = (steps[order], values[order, j])
+    complete = {root: data for root, data in episodes.items() if "identity" in data and "reward" in data}
+    if end is None:
+        raise EtmpcError(f"recording {path} is incomplete: it has no end marker (the file was cut short, or its "
+                         "run did not finish)" if complete else f"{path} holds no etmpc episodes")
+    if len(complete) != end:
+        raise EtmpcError(f"recording {path} is incomplete: {len(complete)} of its {end} episodes can be read")
+    return complete
+
+
+@dataclass(frozen=True)
+class ReplayedEpisode:
+    domain: str
+    policy: str
+    episode: int
+    repeat: int
+    seed: int
+    objective_sense: str
+    objective: float
+    control_objective: float
+    recomputes: int
+    steps: int
+    prediction_error_mean: float
+    prediction_error_max: float
+    prediction_error_at_recompute: float  # mean error at the steps where the policy chose to recompute
+
+
+def replay_summary(path: str | Path) -> list[ReplayedEpisode]:
+    """Each recorded episode's figures, with the live run's formulas (``etmpc.evaluation.evaluate.scores``)."""
+    out = []
+    for root, data in read_recording(path).items():
+        identity = data["identity"]
+        _, rewards = data["reward"]
+        _, recompute = data["recompute"]
+        _, forced = data.get("forced", (None, np.zeros_like(recompute)))
+        steps_err, errors = data.get("prediction_error", (np.zeros(0, int), np.zeros(0)))
+        recomputes = int(recompute.sum())
+        # The same expressions as Trajectory.policy_return and evaluate.scores, on the same floats.
+        ret = float(rewards.sum() - identity["recompute_price"] * recomputes)
+        control = float(rewards.sum())
+        objective, control = (ret, control) if identity["objective_sense"] == "max" else (-ret, -control)
+        chosen = np.flatnonzero((recompute > 0) & (forced == 0))
+        at_recompute = errors[np.isin(steps_err, chosen)]
+        out.append(ReplayedEpisode(
+            domain=identity["domain"], policy=identity["policy"], episode=int(identity["episode"]),
+            repeat=int(identity["repeat"]), seed=int(identity["seed"]), objective_sense=identity["objective_sense"],
+            objective=objective, control_objective=control,
+            recomputes=recomputes, steps=len(rewards),
+            prediction_error_mean=_mean(errors),
+            prediction_error_max=float(errors.max()) if len(errors) else float("nan"),
+            prediction_error_at_recompute=_mean(at_recompute),
+        ))
+    out.sort(key=lambda r: (r.domain, r.policy, r.episode, r.repeat))
+    return out
+
+
+def _mean(values) -> float:
+    values = np.asarray(values, float)
+    values = values[np.isfinite(values)]
+    return float(values.mean()) if len(values) else float("nan")
+
+
+def _sense(group) -> str:
+    return group[0].objective_sense
+
+
+def format_replay(episodes: list[ReplayedEpisode], per_episode: bool = False) -> str:
+    lines = []
+    groups: dict[tuple[str, str], list[ReplayedEpisode]] = {}
+    for e in episodes:
+        groups.setdefault((e.domain, e.policy), []).append(e)
+    labels = [f"  episode {e.episode} repeat {e.repeat}" for e in episodes] if per_episode else []
+    width = max([16] + [len(p) + 2 for _, p in groups] + [len(label) + 2 for label in labels])
+    head = (f"{'policy':<{width}}{'episodes':>9}{'objective':>12}{'control':>11}{'recomputes':>12}"
+            f"{'pred.err mean':>15}{'max':>10}{'at recompute':>14}")
+    current = None
+    for (domain, policy), group in groups.items():
+        if domain != current:
+            lines += [f"{domain}: objective ({'higher' if _sense(group) == 'max' else 'lower'}"
+                      " is better); prediction error ‖W (x − x̂)‖ against the plan in force", head, "-" * len(head)]
+            current = domain
+        for e in [None] + (group if per_episode else []):  # the policy's line, then its episodes
+            chosen = group if e is None else [e]
+            label = policy if e is None else f"  episode {e.episode} repeat {e.repeat}"
+            mean = lambda attr: _mean([getattr(x, attr) for x in chosen])  # noqa: E731
+            top = max((x.prediction_error_max for x in chosen if np.isfinite(x.prediction_error_max)), default=float("nan"))
+            lines.append(f"{label:<{width}}{len(chosen):>9}{mean('objective'):>12.5f}{mean('control_objective'):>11.5f}"
+                         f"{mean('recomputes'):>12.2f}{mean('prediction_error_mean'):>15.4f}{top:>10.4f}"
+                         f"{mean('prediction_error_at_recompute'):>14.4f}")
+    return "\n".join(lines)

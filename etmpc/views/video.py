@@ -1,0 +1,153 @@
+"""Render a played episode as an MP4 video of the MuJoCo scene.
+
+Only the cart pendulum has a 3-D scene. Each measured state of the trajectory is put back into the
+physics (the exact inverse of how the task reports it: ``Physics.set_state_vector`` against
+``Physics.state``), positions are recomputed with ``mj_forward`` and the scene is drawn from the
+``track`` camera, which follows the cart. One frame per state, so a full episode of 100 control
+intervals gives 101 frames, shown at one frame per control interval (10 fps) unless told otherwise.
+
+Videos are H.264 in yuv420p (plays everywhere; needs an even width and height), encoded with PyAV
+into a temporary file beside the destination and renamed into place, so an interrupted render never
+leaves a half-written file under the final name.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
+from fractions import Fraction
+from pathlib import Path
+
+import av
+import mujoco
+import numpy as np
+
+from etmpc.common.errors import EtmpcError
+from etmpc.loop import Trajectory
+from etmpc.common.outputs import atomic_path
+from etmpc.policies import parse_policy
+from etmpc.views.recording import Recorder
+from etmpc.systems import check_name
+from etmpc.evaluation.workers import context, play_test_episode
+
+SCENES = ("cart_pendulum",)  # domains with a MuJoCo scene
+CAMERA = "track"  # models/cart_pendulum.xml: rides with the cart (the "fixed" camera only turns towards it)
+
+
+@dataclass(frozen=True)
+class RenderResult:
+    path: Path
+    frames: int  # frames written: the trajectory's steps + 1 (its finite states)
+    fps: float
+    trajectory: Trajectory
+
+
+def check_scene(domain: str) -> None:
+    if domain not in SCENES:
+        raise EtmpcError(f"domain {domain!r} has no 3-D scene to render (only {', '.join(SCENES)} has one)")
+
+
+def check_size(width: int, height: int) -> None:
+    """yuv420p halves the chroma resolution: both sides must be even (and positive)."""
+    if width < 2 or height < 2 or width % 2 or height % 2:
+        raise ValueError(f"video size must be even and positive for H.264/yuv420p, got {width}x{height}")
+
+
+def check_display() -> None:
+    """An on-screen backend without a screen cannot render: said before any work (GLFW would
+    print warnings, then fail deep in MuJoCo)."""
+    backend = os.environ.get("MUJOCO_GL", "").lower().strip()
+    if backend in ("glfw", "glx") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        raise EtmpcError(f"MUJOCO_GL={backend} needs a display and DISPLAY is not set: render headless with MUJOCO_GL=egl")
+
+
+def _render(physics, height: int, width: int, camera: str) -> np.ndarray:
+    """``physics.render``, with a failure to make an OpenGL context said in one line."""
+    try:
+        return physics.render(height, width, camera_id=camera)
+    except (mujoco.FatalError, RuntimeError, ImportError, OSError, AttributeError) as exc:
+        # AttributeError: PyOpenGL without the platform library MUJOCO_GL asks for (osmesa, egl).
+        backend = os.environ.get("MUJOCO_GL", "")
+        reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise EtmpcError(f"cannot render with MUJOCO_GL={backend}: {reason} (headless machines need MUJOCO_GL=egl, "
+                         "or osmesa with libOSMesa installed)") from None
+
+
+def _frames(system, env, states: np.ndarray, width: int, height: int, camera: str) -> Iterator[np.ndarray]:
+    check_scene(system.domain)
+    physics = env.physics
+    for x in np.asarray(states, dtype=float):
+        if not np.all(np.isfinite(x)):
+            raise ValueError(f"cannot render a non-finite state {x}")
+        physics.set_state_vector(x)  # the inverse of Physics.state(), which the observation reports
+        physics.forward()  # mj_forward: body poses (and cameras) for the new qpos
+        yield _render(physics, height, width, camera)
+
+
+def render_frames(system, env, states: np.ndarray, width: int = 640, height: int = 480,
+                  camera: str = CAMERA) -> list[np.ndarray]:
+    """One RGB frame, uint8 ``(height, width, 3)``, per row of ``states`` (``[eta, v, beta, omega]``).
+
+    Leaves ``env.physics`` at the last state: reset the environment before playing it again.
+    """
+    return list(_frames(system, env, states, width, height, camera))
+
+
+def write_video(frames: Iterable[np.ndarray], path: str | Path, fps: float) -> int:
+    """Encode uint8 RGB frames (all the same even size) as an H.264/yuv420p MP4 at ``path``;
+    returns the number of frames. ``path`` only ever holds a complete video (or what it held before)."""
+    path = Path(path)
+    if not (np.isfinite(fps) and fps > 0):
+        raise ValueError(f"fps must be a positive number, got {fps}")
+    frames = iter(frames)
+    first = next(frames, None)
+    if first is None:
+        raise ValueError("no frames to write")
+    height, width = np.shape(first)[:2]
+    check_size(width, height)
+    count = 0
+    with atomic_path(path) as tmp:
+        with av.open(str(tmp), "w", format="mp4") as container:
+            stream = container.add_stream("libx264", rate=Fraction(fps).limit_denominator(1001))
+            stream.width, stream.height, stream.pix_fmt = width, height, "yuv420p"
+            for frame in _chain(first, frames):
+                frame = np.asarray(frame)
+                if frame.shape != (height, width, 3) or frame.dtype != np.uint8:
+                    raise ValueError(f"frame {count} is {frame.dtype} {frame.shape}, expected uint8 {(height, width, 3)}")
+                container.mux(stream.encode(av.VideoFrame.from_ndarray(frame, format="rgb24")))
+                count += 1
+            container.mux(stream.encode())  # flush the encoder
+    return count
+
+
+def _chain(first: np.ndarray, rest: Iterator[np.ndarray]) -> Iterator[np.ndarray]:
+    yield first
+    yield from rest
+
+
+def render_rollout(domain: str, policy_spec: str, episode: int, out: str | Path, seed: int = 0,
+                   width: int = 640, height: int = 480, fps: float | None = None,
+                   testset_path: str | None = None, record: str | Path | None = None) -> RenderResult:
+    """Play test-set ``episode`` under ``policy_spec`` exactly as ``etmpc evaluate`` does (repeat 0
+    of ``seed``) and write its video to ``out``, at one frame per control interval by default.
+    With ``record``, also write the episode, its frames included, into that Rerun recording."""
+    check_name(domain)
+    check_scene(domain)
+    check_display()
+    check_size(width, height)
+    policy = parse_policy(policy_spec, context(domain, testset_path)[0].error_weights, domain)
+    # An out-of-range index raises TestSetError (an EtmpcError) before anything is drawn.
+    played = play_test_episode(domain, policy, seed, 0, episode, testset_path)
+    system, env, traj = played.system, played.env, played.trajectory
+    fps = 1.0 / env.control_timestep() if fps is None else fps
+    states = traj.states[: traj.steps + 1]
+    states = states[np.all(np.isfinite(states), axis=1)]  # an episode that diverged ends on a NaN row
+    if record is None:  # frames go straight into the encoder
+        count = write_video(_frames(system, env, states, width, height, CAMERA), out, fps)
+    else:
+        frames = render_frames(system, env, states, width, height, CAMERA)
+        count = write_video(frames, out, fps)
+        with Recorder(record) as recorder:
+            recorder.log_episode(played.record(policy_spec, getattr(policy, "announce", None)), frames)
+    return RenderResult(path=Path(out), frames=count, fps=fps, trajectory=traj)
