@@ -6,8 +6,11 @@ draws ``a_i = 1``, solve a new plan from ``x_i``. Apply the planned input plus t
 (the LQR keeps correcting around it) and the failure is counted; with no earlier plan the failed
 solve's last iterate is used. Every recompute attempt counts as a computation (``a_i = 1``).
 
-A system plugs in by providing what :class:`System` lists; nothing here knows about MuJoCo or
-batteries.
+A system plugs in by providing what :class:`etmpc.systems.base.System` lists; a policy by providing
+what :class:`Policy` lists, deciding from an :class:`AugmentedState`. Nothing here knows about MuJoCo,
+batteries or any particular policy.
+
+This module may import ``etmpc.common``, ``etmpc.control`` and ``etmpc.systems``.
 
 Two ways to play the same loop, bit for bit the same numbers:
 
@@ -29,48 +32,38 @@ import dm_env
 import numpy as np
 from dm_control.rl.control import PhysicsError
 
-from etmpc.control.lqr import ErrorFeedback
 from etmpc.control.plan import Plan
-from etmpc.policies import AugmentedState, Policy
+from etmpc.systems.base import System
 
 
-class System(Protocol):
-    """What the control loop needs from a system (see ``etmpc/cart_pendulum/system.py`` and
-    ``etmpc/battery/system.py``)."""
+# -- what the loop asks of a policy ------------------------------------------------------------------
+@dataclass(frozen=True)
+class AugmentedState:
+    """What a policy sees at a decision (paper, section 2.2): ``s = [x_i, x_k, i - k]`` (the current
+    state, the state the plan was made from, the plan's age), the plan's prediction ``x_hat_i`` (a
+    function of ``s``, handed along for the event trigger), the kept plan, the task's observation and,
+    for policies that simulate, the loop's whole state."""
 
-    domain: str
-    task: str
-    objective_sense: str  # "min": the objective is a cost; "max": a profit
-    recompute_price: float  # charged per computation in the policy's objective
-    episode_steps: int
-    control_interval_s: float
-    state_names: tuple[str, ...]
-    input_names: tuple[str, ...]
-    u_min: np.ndarray
-    u_max: np.ndarray
-    error_weights: np.ndarray  # diagonal of W for the threshold policy
-    feedback: ErrorFeedback
-
-    def make_env(self, random: Any = None) -> dm_env.Environment: ...
-    def episode_from_arrays(self, arrays: dict[str, np.ndarray]) -> Any: ...
-    def state(self, timestep: dm_env.TimeStep) -> np.ndarray: ...
-    def measure(self, physics: Any) -> np.ndarray: ...  # the same x, read off the physics (no observation made)
-    def plan(self, x: np.ndarray, u_prev: np.ndarray, warm: Plan | None, age: int, timestep: dm_env.TimeStep) -> Plan: ...
-    def action(self, u: np.ndarray, recompute: bool) -> np.ndarray: ...
-
-    # Not used by the loop: test sets (etmpc.evaluation.testsets), `etmpc bench` and recordings.
-    def draw_episode(self, rng: np.random.Generator) -> Any: ...
-    def signals(self, episode: Any) -> dict[str, np.ndarray]: ...  # exogenous inputs per step (recordings)
-    def episode_parameters(self) -> dict: ...
-    def plan_cost(self, x: np.ndarray, u_prev: np.ndarray, timestep: dm_env.TimeStep, inputs: np.ndarray) -> float: ...
-    def reference_solvers(self) -> list: ...  # objects with .name and .solve(x, u_prev, timestep, continuing)
-    def interpreted(self) -> System | None: ...  # the same system with its MPC in CasADi's VM, if it is compiled
-
-    # Used by the rollout policies (etmpc.policies.rollout).
-    def sample_future(self, episode: Any, step: int, rng: np.random.Generator) -> Any: ...  # see its docstrings
-    def truncation_value(self, x: np.ndarray) -> float: ...  # reward for the state a truncated rollout ends in
+    x: np.ndarray  # x_i, measured now
+    x_plan: np.ndarray  # x_k, measured when the plan was made
+    age: int  # i - k
+    x_predicted: np.ndarray  # x_hat_i, the plan's prediction for now
+    plan: Any = None  # the kept Plan (its inputs and the forecasts it was made with)
+    observation: Mapping | None = None  # what the task shows now (for the exogenous features)
+    context: Any = None  # a DecisionContext: the loop's whole state, for policies that simulate (simulates = True)
 
 
+class Policy(Protocol):
+    spec: str
+    stochastic: bool
+    # Optional ``observes = False``: decide never reads ``s.observation`` (the fast path of
+    # etmpc.loop.play_on then skips making it). Without the attribute, a policy is assumed to read it.
+
+    def decide(self, s: AugmentedState, rng: np.random.Generator) -> bool: ...
+
+
+
+# -- what one episode did --------------------------------------------------------------------------
 @dataclass
 class Trajectory:
     """Everything one episode did, step by step (arrays preallocated for the full episode)."""

@@ -9,6 +9,7 @@ import pickle
 import numpy as np
 import pytest
 
+from etmpc.learning import selftrigger as self_training
 from etmpc.policies import selftrigger as st
 from etmpc.common.errors import EtmpcError
 from etmpc.policies import parse_policy
@@ -83,7 +84,7 @@ def test_the_fit_recovers_a_rule_the_labels_follow():
         return q
 
     z = rng.normal(size=(600, 3))
-    theta = st.fit(z, returns(z), ridge=1e-3)
+    theta = self_training.fit(z, returns(z), ridge=1e-3)
     fresh = rng.normal(size=(400, 3))
     fresh = fresh[np.abs(np.abs(fresh[:, 0]) - 0.5) > 0.1]  # away from the boundaries
     chosen = np.argmax(np.c_[np.ones(len(fresh)), fresh] @ theta.T, axis=1)
@@ -140,13 +141,13 @@ def test_a_non_finite_score_is_an_error_not_a_choice(cart_system):
         st.SelfTrigger("p", "cart_pendulum", st.CANDIDATES, theta, np.zeros(p), np.ones(p)).announce(Plan())
 
 
-TINY = st.SelfSettings(bases=("every:3", "every:8"), selection_episodes=2, episodes=2, solves_per_episode=3, futures=1,
+TINY = self_training.SelfSettings(bases=("every:3", "every:8"), selection_episodes=2, episodes=2, solves_per_episode=3, futures=1,
                        horizon=2, ridges=(0.1,), validation_episodes=2)
 
 
 def test_training_is_the_same_on_one_or_two_workers_and_never_worse_than_its_base_on_validation(tmp_path):
-    one = st.train_self("cart_pendulum@0.0005", tmp_path / "one.json", TINY, workers=1)
-    two = st.train_self("cart_pendulum@0.0005", tmp_path / "two.json", TINY, workers=2)
+    one = self_training.train_self("cart_pendulum@0.0005", tmp_path / "one.json", TINY, workers=1)
+    two = self_training.train_self("cart_pendulum@0.0005", tmp_path / "two.json", TINY, workers=2)
     np.testing.assert_array_equal(one.theta, two.theta)
     a, b = (json.loads((tmp_path / n).read_text()) for n in ("one.json", "two.json"))
     assert a["hyperparameters"] == b["hyperparameters"] and a["theta"] == b["theta"]
@@ -162,6 +163,6 @@ def test_training_is_the_same_on_one_or_two_workers_and_never_worse_than_its_bas
 
 def test_settings_refuse_nonsense():
     with pytest.raises(EtmpcError, match="episodes"):
-        st.SelfSettings(episodes=0)
+        self_training.SelfSettings(episodes=0)
     with pytest.raises(EtmpcError, match="ridges"):
-        st.SelfSettings(ridges=(0.0,))
+        self_training.SelfSettings(ridges=(0.0,))

@@ -12,7 +12,7 @@ import pytest
 from etmpc.common.errors import EtmpcError
 from etmpc.evaluation.evaluate import evaluate
 from etmpc.experiments import sweep as sw
-from etmpc.policies.selftrigger import SelfSettings
+from etmpc.learning.selftrigger import SelfSettings
 
 
 def test_re_pricing_an_evaluation_gives_what_evaluating_at_that_price_gives():

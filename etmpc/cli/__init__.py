@@ -320,7 +320,7 @@ def _train(args) -> None:
 
 
 def _train_self(args) -> None:
-    from etmpc.policies.selftrigger import SelfSettings, train_self
+    from etmpc.learning.selftrigger import SelfSettings, train_self
     from etmpc.systems import check_name, system_key
     from etmpc.evaluation.workers import default_workers
 

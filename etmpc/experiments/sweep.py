@@ -45,7 +45,7 @@ import numpy as np
 
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import refuse_foreign, write_json, write_text
-from etmpc.policies.selftrigger import SelfSettings
+from etmpc.learning.selftrigger import SelfSettings
 from etmpc.systems import check_price, make_system
 
 # Prices of a computation, in the objective's unit. The cart pendulum: a log grid around the paper's
@@ -234,7 +234,7 @@ def _learned(out: Path, i: int, domain: str, price: float, learner: LearnerSetti
 def _self(out: Path, i: int, domain: str, price: float, settings: SelfSettings, run: dict, say) -> dict:
     """The self-trigger trained at ``price`` (``self_policy_<i>.json``, kept once written), evaluated
     on the sweep's episodes at that price (``self_<i>.json``)."""
-    from etmpc.policies.selftrigger import train_self
+    from etmpc.learning.selftrigger import train_self
     from etmpc.systems import system_key
 
     path, policy = out / f"self_{i}.json", out / f"self_policy_{i}.json"

@@ -34,7 +34,7 @@ import numpy as np
 from etmpc.common.errors import EtmpcError
 from etmpc.common.numerics import dot
 from etmpc.common.outputs import write_text
-from etmpc.policies import AugmentedState
+from etmpc.loop import AugmentedState
 
 FORMAT = "etmpc-logistic-policy"
 VERSION = 2

@@ -29,7 +29,7 @@ import numpy as np
 from etmpc.common.errors import EtmpcError
 from etmpc.loop import DecisionContext, Snapshot, play_on
 from etmpc.common.numerics import fsum
-from etmpc.policies import AugmentedState, Policy
+from etmpc.loop import AugmentedState, Policy
 
 DEFAULT_FUTURES = 8
 MAX_FUTURES = 1000

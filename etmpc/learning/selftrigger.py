@@ -1,0 +1,200 @@
+"""Training of the self-triggering policy (``etmpc train-self``, see :mod:`etmpc.policies.selftrigger`).
+
+**Training** (:func:`train_self`) is one step of rollout policy improvement over a base schedule,
+as :mod:`etmpc.learning.dpi` does for event triggering:
+
+1. the base ``every:T`` is the best of ``bases`` on training-distribution episodes (as DPI chooses
+   its first schedule);
+2. on training-distribution episodes played by the base, at a few picked steps, a plan is solved and
+   every candidate ``n`` scored: the mean return, over ``K`` futures sampled from what the
+   controller knows (common random numbers), of keeping that plan ``n`` steps and then following
+   the base, ``H`` steps past the longest candidate plus the truncation value;
+3. the model is fitted to each labelled solve's best candidate by ridge-regularised cross-entropy,
+   each solve weighted by how much the choice matters (best minus mean return), for each ridge of
+   ``ridges``;
+4. the policy kept is the best, on validation episodes of the training distribution, of these fits
+   and of the base itself written as a self-trigger (a constant announcement ``T``), so what
+   training returns is never worse than its base on those episodes. The test set is never seen.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+
+import numpy as np
+from scipy.optimize import minimize
+
+from etmpc.common.errors import EtmpcError
+from etmpc.common.outputs import write_json
+from etmpc.loop import Snapshot, play_on, run_episode
+from etmpc.policies import Always, Every, parse_policy
+from etmpc.policies.selftrigger import CANDIDATES, SelfTrigger, plan_features
+
+SELF_ENTROPY = 0x73656C66  # "self"
+
+
+@dataclass(frozen=True)
+class SelfSettings:
+    bases: tuple[str, ...] = ("always", "every:2", "every:3", "every:5", "every:8", "every:12", "every:20")
+    selection_episodes: int = 20  # training-distribution episodes that choose the base
+    episodes: int = 40  # labelled training episodes
+    solves_per_episode: int = 8  # labelled solves per episode
+    futures: int = 2  # K
+    horizon: int = 10  # H: steps simulated past the longest candidate
+    ridges: tuple[float, ...] = (1e-2, 1e-1, 1.0)
+    validation_episodes: int = 20  # training-distribution episodes that choose among the fits and the base
+    candidates: tuple[int, ...] = CANDIDATES
+
+    def __post_init__(self):
+        for name in ("selection_episodes", "episodes", "solves_per_episode", "futures", "validation_episodes"):
+            if getattr(self, name) < 1:
+                raise EtmpcError(f"self-trigger training needs {name} >= 1, got {getattr(self, name)}")
+        if self.horizon < 0 or not self.ridges or min(self.ridges) <= 0 or not self.bases:
+            raise EtmpcError("self-trigger training needs horizon >= 0, ridges > 0 and at least one base")
+
+    def to_json(self) -> dict:
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
+
+
+class _KeepFor:
+    """Keep the plan made at the snapshot ``n`` steps, then follow ``base`` (for :func:`play_on`)."""
+
+    def __init__(self, first_plan, n: int, base):
+        self.first_plan, self.n, self.base = first_plan, n, base
+        self.spec, self.stochastic = f"keep:{n}+{base.spec}", base.stochastic
+        self.observes = getattr(base, "observes", True)
+
+    def decide(self, s, rng) -> bool:
+        if s.plan is self.first_plan:
+            return s.age >= self.n
+        return self.base.decide(s, rng)
+
+
+class _Labeller:
+    """Plays ``base``; at the picked steps, scores every candidate ``n`` for a plan solved there."""
+
+    simulates = True
+
+    def __init__(self, base, steps: set[int], settings: SelfSettings, rng: np.random.Generator):
+        self.base, self.steps, self.settings, self.rng = base, steps, settings, rng
+        self.spec, self.stochastic = f"label-self:{base.spec}", base.stochastic
+        self.rows: list[tuple[list[float], list[float]]] = []
+        self._twin = None
+
+    def decide(self, s, rng) -> bool:
+        ctx = s.context
+        if ctx.step in self.steps:
+            system = ctx.system
+            if self._twin is None:
+                self._twin = system.make_env()
+            snapshot = Snapshot.take(ctx)
+            futures = [system.sample_future(snapshot.episode, ctx.step, self.rng) for _ in range(self.settings.futures)]
+            solved = system.plan(snapshot.x, snapshot.u_prev, snapshot.plan, snapshot.age, ctx.timestep)
+            stop = ctx.step + self.settings.horizon
+            returns = [np.mean([play_on(system, self._twin, snapshot, _KeepFor(solved, n, self.base), None, True, future,
+                                        solved, stop) for future in futures]) for n in self.settings.candidates]
+            self.rows.append((plan_features(solved).tolist(), [float(q) for q in returns]))
+        return self.base.decide(s, rng)
+
+
+def label_episode(key: str, base: str, candidates: tuple[int, ...], settings: SelfSettings, index: int) -> list:
+    """Training episode ``index`` played by ``base``: ``[(features, returns per candidate), ...]``
+    at its picked steps (those where the loop asks the policy: a plan is in force)."""
+    from etmpc.evaluation.workers import context
+
+    system, env, _ = context(key)
+    rngs = [np.random.default_rng(np.random.SeedSequence(SELF_ENTROPY, spawn_key=(index, k))) for k in range(3)]
+    steps = set(rngs[1].choice(np.arange(1, system.episode_steps), size=min(settings.solves_per_episode,
+                                                                            system.episode_steps - 1), replace=False).tolist())
+    labeller = _Labeller(parse_policy(base, system.error_weights, system.domain), steps,
+                         replace(settings, candidates=candidates, horizon=max(candidates) + settings.horizon), rngs[2])
+    run_episode(system, env, labeller, None, system.draw_episode(rngs[0]))
+    return labeller.rows
+
+
+def fit(features: np.ndarray, returns: np.ndarray, ridge: float) -> np.ndarray:
+    """``theta (C, 1 + p)`` of the softmax model, fitted to each row's best candidate with weights
+    ``best - mean return`` (normalised to mean 1) and ``ridge / 2 |theta[:, 1:]|^2``."""
+    n, p = features.shape
+    c = returns.shape[1]
+    design = np.hstack([np.ones((n, 1)), features])
+    best = np.argmax(returns, axis=1)
+    weight = returns.max(axis=1) - returns.mean(axis=1)
+    weight = weight / weight.mean() if weight.mean() > 0 else np.ones(n)
+    target = np.zeros((n, c))
+    target[np.arange(n), best] = 1.0
+    penalty = np.ones((c, 1 + p))
+    penalty[:, 0] = 0.0
+
+    def loss(flat):
+        theta = flat.reshape(c, 1 + p)
+        logits = design @ theta.T
+        logits -= logits.max(axis=1, keepdims=True)
+        log_p = logits - np.log(np.exp(logits).sum(axis=1, keepdims=True))
+        value = -np.sum(weight * np.sum(target * log_p, axis=1)) / n + 0.5 * ridge * np.sum(penalty * theta**2)
+        grad = ((np.exp(log_p) - target) * weight[:, None]).T @ design / n + ridge * penalty * theta
+        return value, grad.ravel()
+
+    result = minimize(loss, np.zeros(c * (1 + p)), jac=True, method="L-BFGS-B", options={"maxiter": 1000})
+    return result.x.reshape(c, 1 + p)
+
+
+def train_self(key: str, out: Path, settings: SelfSettings = SelfSettings(), workers: int = 1, backend: str = "local",
+               address: str | None = None, say=lambda line: None) -> SelfTrigger:
+    """Choose the base, label, fit, validate and write ``out`` (the policy file); returns the
+    policy. ``key``: a system key (``DOMAIN`` or ``DOMAIN@PRICE``, see :mod:`etmpc.systems`)."""
+    from etmpc.experiments.sweep import system_horizon
+    from etmpc.systems import make_system
+    from etmpc.learning.train import SELECTION_ENTROPY, VALIDATION_ENTROPY, _mean_scores
+    from etmpc.evaluation.workers import make_backend
+
+    system = make_system(key)
+    better = np.argmax if system.objective_sense == "max" else np.argmin
+    candidates = tuple(c for c in settings.candidates if c <= system_horizon(system))
+    if not candidates:
+        raise EtmpcError(f"no candidate keep length fits the MPC horizon ({system_horizon(system)} steps)")
+    with make_backend(backend, workers, address) as pool:
+        scores = _mean_scores(pool, key, list(settings.bases), SELECTION_ENTROPY, settings.selection_episodes)
+        base = settings.bases[int(better(scores))]
+        say(f"self-trigger: base {base} (best of {len(settings.bases)} on {settings.selection_episodes} training episodes)")
+        labelled = pool.map(_label_job, [(key, base, candidates, settings, i) for i in range(settings.episodes)])
+        rows = [row for episode in labelled for row in episode]
+        if not rows:
+            raise EtmpcError("no solves were labelled; give more episodes")
+        features = np.array([f for f, _ in rows])
+        returns = np.array([q for _, q in rows])
+        mean, scale = features.mean(axis=0), features.std(axis=0)
+        scale = np.where(scale > 1e-12, scale, 1.0)
+        fits = {}
+        period = _period(base, system)
+        if period in candidates:  # the base itself, as a self-trigger: what training must beat (first: it wins ties)
+            fits[f"constant {period} (the base)"] = SelfTrigger.constant(str(out), system.domain, candidates, period, mean.size)
+        for r in settings.ridges:
+            fits[f"ridge {r:g}"] = SelfTrigger(str(out), system.domain, candidates, fit((features - mean) / scale, returns, r),
+                                               mean, scale)
+        jsons = [policy.to_json() for policy in fits.values()]
+        validation = _mean_scores(pool, key, jsons, VALIDATION_ENTROPY, settings.validation_episodes)
+    chosen = list(fits)[int(better(validation))]
+    say(f"self-trigger: kept {chosen} ({', '.join(f'{n}: {v:.6g}' for n, v in zip(fits, validation))} on "
+        f"{settings.validation_episodes} validation episodes)")
+    policy = fits[chosen]
+    best = np.array(candidates)[np.argmax(returns, axis=1)]
+    hyper = dict(settings.to_json(), system=key, recompute_price=system.recompute_price, base=base,
+                 base_selection=dict(zip(settings.bases, scores)), labelled_solves=len(rows),
+                 best_keep_counts={str(c): int(np.sum(best == c)) for c in candidates},
+                 validation=dict(zip(fits, validation)), chosen=chosen)
+    write_json(Path(out), policy.to_json(hyper))
+    return policy
+
+
+def _period(spec: str, system) -> int:
+    """``T`` of a periodic base (``always``: 1, ``every:T``: T); 0 for anything else."""
+    policy = parse_policy(spec, system.error_weights, system.domain)
+    if isinstance(policy, Always):
+        return 1
+    return policy.period if isinstance(policy, Every) else 0
+
+
+def _label_job(job) -> list:
+    return label_episode(*job)

@@ -1,0 +1,32 @@
+"""The classic event trigger ``threshold:X``: recompute when the weighted prediction error exceeds ``X``."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+
+from etmpc.common.numerics import norm
+from etmpc.loop import AugmentedState
+
+
+@dataclass(frozen=True)
+class Threshold:
+    """Event trigger: recompute when ``|W (x_i - x_hat_i)|_2 > X``.
+
+    ``weights`` is the diagonal of ``W``, chosen per system (for the cart pendulum the square root
+    of the LQR's state weights, so the norm is the LQR's own measure of the error).
+    """
+
+    level: float
+    weights: np.ndarray
+    stochastic: bool = False
+    observes: ClassVar[bool] = False
+
+    @property
+    def spec(self) -> str:
+        return f"threshold:{self.level:g}"
+
+    def decide(self, s: AugmentedState, rng: np.random.Generator) -> bool:
+        return norm(self.weights * (s.x - s.x_predicted)) > self.level
