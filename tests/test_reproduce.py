@@ -8,7 +8,7 @@ import pytest
 
 from etmpc.common.errors import EtmpcError
 from etmpc.evaluation.evaluate import evaluate
-from etmpc.views.recording import replay_summary
+from etmpc.views.replay import replay_summary
 from etmpc.experiments.reproduce import BASELINES, Settings, reproduce
 
 TINY = Settings(seeds=(0, 1), episodes=2, eval_every=1, eval_episodes=2, test_episodes=3, repeats=2, record_episodes=1,

@@ -377,7 +377,7 @@ def _sweep(args) -> None:
 
 
 def _render(args) -> None:
-    from etmpc.views.video import render_rollout
+    from etmpc.evaluation.render import render_rollout
     from etmpc.systems import check_name
 
     check_name(args.task)
@@ -397,7 +397,7 @@ def _render(args) -> None:
 def _replay(args) -> None:
     from dataclasses import asdict
 
-    from etmpc.views.recording import format_replay, replay_summary
+    from etmpc.views.replay import format_replay, replay_summary
 
     check_outputs({"--json": args.json}, inputs={"recording": args.recording})
     episodes = replay_summary(args.recording)

@@ -17,7 +17,8 @@ from tqdm import tqdm
 
 from etmpc.evaluation import testsets as ts_mod
 from etmpc.policies import parse_policy
-from etmpc.views.recording import EpisodeRecord, Recorder
+from etmpc.views.record import EpisodeRecord
+from etmpc.views.recording import Recorder
 from etmpc.systems import make_system, system_key
 from etmpc.evaluation.workers import default_workers, make_backend, play_test_episode
 

@@ -31,7 +31,7 @@ import numpy as np
 from etmpc.evaluation import testsets as ts_mod
 from etmpc.common.errors import EtmpcError
 from etmpc.loop import Trajectory, run_episode
-from etmpc.views.recording import EpisodeRecord
+from etmpc.views.record import EpisodeRecord
 from etmpc.systems import make_system
 
 _CONTEXTS: dict = {}

@@ -214,7 +214,7 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
         _forecasts_png(folder / "figure1_forecasts.png", system)
         files["figure1"] = "figure1_forecasts.png"
     if domain == "cart_pendulum" and not (folder / "episode.mp4").exists():
-        from etmpc.views.video import render_rollout
+        from etmpc.evaluation.render import render_rollout
 
         render_rollout(domain, best, 0, folder / "episode.mp4", width=settings.video_size[0], height=settings.video_size[1])
     if domain == "cart_pendulum":

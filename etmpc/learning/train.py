@@ -52,7 +52,8 @@ from etmpc.policies.learned import (DEFAULT_FEATURES, LogisticPolicy, Normalisat
 from etmpc.loop import run_episode
 from etmpc.common.outputs import refuse_foreign
 from etmpc.policies import parse_policy
-from etmpc.views.recording import EpisodeRecord, Recorder
+from etmpc.views.record import EpisodeRecord
+from etmpc.views.recording import Recorder
 from etmpc.systems import make_system, system_key
 from etmpc.evaluation.workers import context, make_backend, play_test_episode
 

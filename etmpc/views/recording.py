@@ -34,102 +34,30 @@ In one view, Rerun draws entities in the order of their paths: ``realised/…`` 
 ``plan/…`` and ``forecast/…``. The file carries a blueprint (``etmpc.views.blueprint``): a tab per
 policy and episode. Each entity's whole series goes in with one ``send_columns`` call.
 
-``read_recording`` reads a file back with Rerun's own reader, and ``replay_summary`` recomputes
-each episode's figures from it with the same formulas as the live run.
+Reading a file back is :mod:`etmpc.views.replay`'s.
 """
 
 from __future__ import annotations
 
 import re
 import threading
-import warnings
 from collections.abc import Iterable
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from etmpc.views import blueprint as look
 from etmpc.common.errors import EtmpcError
-from etmpc.common.numerics import norm
+from etmpc.views.record import EpisodeRecord
 
 APPLICATION_ID = "etmpc"
+END_MARKER = "/etmpc_recording_end"  # static, logged last: {"episodes": how many the file holds}
 DECISION_SERIES = ("recompute", "forced")
 OBJECTIVE_SERIES = ("reward", "computation", "running")
 
 
-@dataclass(frozen=True, eq=False)
-class EpisodeRecord:
-    """What a recording keeps of one episode: small, picklable, built on the worker that ran it."""
-
-    identity: dict
-    state_names: tuple[str, ...]
-    input_names: tuple[str, ...]
-    error_weights: np.ndarray
-    states: np.ndarray  # (S + 1, nx)
-    planned: np.ndarray  # (S, nu)
-    correction: np.ndarray  # (S, nu)
-    applied: np.ndarray  # (S, nu)
-    recompute: np.ndarray  # (S,) bool
-    forced: np.ndarray  # (S,) bool
-    rewards: np.ndarray  # (S,)
-    prediction_error: np.ndarray  # (S,), NaN at step 0
-    plans: list = field(default_factory=list)  # (step, states (N+1, nx), inputs (N, nu), forecasts {name: (N,)})
-    signals: dict = field(default_factory=dict)  # name -> (>= S,)
-    input_bounds: tuple = ()  # (u_min (nu,), u_max (nu,)), or () if the system has none
-    announced: tuple = ()  # a self-trigger's (step a plan was made, steps it announced it would be kept)
-
-    @property
-    def steps(self) -> int:
-        return len(self.rewards)
-
-    @classmethod
-    def from_trajectory(cls, system, traj, identity: dict, episode, announce=None) -> EpisodeRecord:
-        """``announce``: a self-triggering policy's ``announce(plan)``, to record what it announced
-        at each solve (it is a function of the plan alone, so asking again gives the same answer)."""
-        n = traj.steps
-        bounds = (getattr(system, "u_min", None), getattr(system, "u_max", None))
-        return cls(
-            identity=dict(identity, domain=system.domain, task=system.task, objective_sense=system.objective_sense,
-                          recompute_price=float(system.recompute_price), control_interval_s=float(system.control_interval_s)),
-            state_names=tuple(system.state_names),
-            input_names=tuple(system.input_names),
-            error_weights=np.asarray(system.error_weights, float),
-            states=traj.states[: n + 1].copy(),
-            planned=traj.planned[:n].copy(),
-            correction=traj.correction[:n].copy(),
-            applied=traj.applied[:n].copy(),
-            recompute=traj.recompute[:n].copy(),
-            forced=traj.forced[:n].copy(),
-            rewards=traj.rewards[:n].copy(),
-            prediction_error=prediction_errors(traj, system.error_weights),
-            plans=[(k, p.states, p.inputs, {name: np.asarray(v) for name, v in p.forecasts.items()}) for k, p in traj.plans],
-            signals={name: np.asarray(v, float) for name, v in system.signals(episode).items()},
-            input_bounds=() if None in bounds else tuple(np.asarray(b, float) for b in bounds),
-            announced=tuple((int(k), int(announce(p))) for k, p in traj.plans) if announce is not None else (),
-        )
-
-
-def prediction_errors(traj, error_weights) -> np.ndarray:
-    """``‖W (x_i − x̂_i)‖`` per step, ``x̂_i`` from the plan in force before step i's decision."""
-    errors = np.full(traj.steps, np.nan)
-    plans = iter(traj.plans)
-    current, upcoming = None, next(plans, None)
-    w = np.asarray(error_weights, float)
-    for i in range(traj.steps):
-        if current is not None:
-            k, plan = current
-            errors[i] = norm(w * (traj.states[i] - plan.state_at(i - k)))  # the threshold policy's measure
-        while upcoming is not None and upcoming[0] <= i:  # a plan made at step i is in force from i on
-            current, upcoming = upcoming, next(plans, None)
-    return errors
-
-
 def episode_root(identity: dict, policy_part: str) -> str:
     return f"/{identity['domain']}/{policy_part}/episode_{int(identity['episode']):03d}/repeat_{int(identity['repeat'])}"
-
-
-_ROOT = re.compile(r"^(.*/episode_\d+/repeat_\d+)/(.+)$")
 
 
 class Recorder:
@@ -429,146 +357,3 @@ def _timeline(steps: np.ndarray, dt: float) -> list:
     # Whole nanoseconds as timedelta64: exact, and Rerun's fast path (floats go element by element).
     return [rr.TimeColumn("step", sequence=steps),
             rr.TimeColumn("time", duration=(steps * round(dt * 1e9)).astype("timedelta64[ns]"))]
-
-
-# -- reading back ------------------------------------------------------------------------------------
-END_MARKER = "/etmpc_recording_end"  # static, logged last: {"episodes": how many the file holds}
-# Entity (relative to its episode's root) -> the series it holds, in column order. ``objective``
-# with three columns is how files written before the objective's series were split hold them.
-READ = {"objective/reward": ("reward",), "objective/running": ("running",),
-        "objective": OBJECTIVE_SERIES, "decision": DECISION_SERIES, "prediction_error": ("prediction_error",)}
-
-
-def read_recording(path: str | Path) -> dict[str, dict]:
-    """``{episode root: {"identity": {...}, "reward": (steps, values), "recompute": …, "forced": …,
-    "computation": …, "running": …, "prediction_error": …}}`` from a ``.rrd`` file, read with
-    Rerun's own reader."""
-    from rerun.chunk import RrdReader
-
-    path = Path(path)
-    if not path.is_file():
-        raise EtmpcError(f"recording {path} not found")
-    with warnings.catch_warnings(record=True) as caught:  # said in the error below, not as a second line
-        warnings.simplefilter("always")
-        try:
-            chunks = list(RrdReader(str(path)).stream())
-        except Exception as exc:  # the reader raises its own types for a file that is not a recording
-            short = any("no footer" in str(w.message) for w in caught)
-            raise EtmpcError(f"recording {path} is cut short (no footer; {exc})" if short else
-                             f"{path} is not a readable Rerun recording ({exc})") from None
-    episodes: dict[str, dict] = {}
-    pieces: dict[tuple[str, str], list] = {}
-    end = None
-    for chunk in chunks:
-        if str(chunk.entity_path) == END_MARKER and chunk.is_static:
-            batch = chunk.to_record_batch()
-            end = int(batch.column("episodes").to_pylist()[0][0])
-            continue
-        found = _ROOT.match(str(chunk.entity_path))
-        if found is None:
-            continue
-        root, leaf = found.groups()
-        if leaf != "identity" and leaf not in READ:
-            continue
-        batch = chunk.to_record_batch()
-        if leaf == "identity" and chunk.is_static:
-            identity = {name: batch.column(name).to_pylist()[0][0] for name in batch.schema.names if not name.startswith("rerun.")}
-            episodes.setdefault(root, {})["identity"] = identity
-        elif leaf in READ and "Scalars:scalars" in batch.schema.names:
-            values = batch.column("Scalars:scalars").flatten().to_numpy().reshape(batch.num_rows, len(READ[leaf]))
-            pieces.setdefault((root, leaf), []).append((batch.column("step").to_numpy(), values))
-    for (root, leaf), parts in pieces.items():
-        steps = np.concatenate([s for s, _ in parts])
-        values = np.concatenate([v for _, v in parts])
-        order = np.argsort(steps, kind="stable")
-        for j, name in enumerate(READ[leaf]):
-            episodes.setdefault(root, {})[name] = (steps[order], values[order, j])
-    complete = {root: data for root, data in episodes.items() if "identity" in data and "reward" in data}
-    if end is None:
-        raise EtmpcError(f"recording {path} is incomplete: it has no end marker (the file was cut short, or its "
-                         "run did not finish)" if complete else f"{path} holds no etmpc episodes")
-    if len(complete) != end:
-        raise EtmpcError(f"recording {path} is incomplete: {len(complete)} of its {end} episodes can be read")
-    return complete
-
-
-@dataclass(frozen=True)
-class ReplayedEpisode:
-    domain: str
-    policy: str
-    episode: int
-    repeat: int
-    seed: int
-    objective_sense: str
-    objective: float
-    control_objective: float
-    recomputes: int
-    steps: int
-    prediction_error_mean: float
-    prediction_error_max: float
-    prediction_error_at_recompute: float  # mean error at the steps where the policy chose to recompute
-
-
-def replay_summary(path: str | Path) -> list[ReplayedEpisode]:
-    """Each recorded episode's figures, with the live run's formulas (``etmpc.evaluation.evaluate.scores``)."""
-    out = []
-    for root, data in read_recording(path).items():
-        identity = data["identity"]
-        _, rewards = data["reward"]
-        _, recompute = data["recompute"]
-        _, forced = data.get("forced", (None, np.zeros_like(recompute)))
-        steps_err, errors = data.get("prediction_error", (np.zeros(0, int), np.zeros(0)))
-        recomputes = int(recompute.sum())
-        # The same expressions as Trajectory.policy_return and evaluate.scores, on the same floats.
-        ret = float(rewards.sum() - identity["recompute_price"] * recomputes)
-        control = float(rewards.sum())
-        objective, control = (ret, control) if identity["objective_sense"] == "max" else (-ret, -control)
-        chosen = np.flatnonzero((recompute > 0) & (forced == 0))
-        at_recompute = errors[np.isin(steps_err, chosen)]
-        out.append(ReplayedEpisode(
-            domain=identity["domain"], policy=identity["policy"], episode=int(identity["episode"]),
-            repeat=int(identity["repeat"]), seed=int(identity["seed"]), objective_sense=identity["objective_sense"],
-            objective=objective, control_objective=control,
-            recomputes=recomputes, steps=len(rewards),
-            prediction_error_mean=_mean(errors),
-            prediction_error_max=float(errors.max()) if len(errors) else float("nan"),
-            prediction_error_at_recompute=_mean(at_recompute),
-        ))
-    out.sort(key=lambda r: (r.domain, r.policy, r.episode, r.repeat))
-    return out
-
-
-def _mean(values) -> float:
-    values = np.asarray(values, float)
-    values = values[np.isfinite(values)]
-    return float(values.mean()) if len(values) else float("nan")
-
-
-def _sense(group) -> str:
-    return group[0].objective_sense
-
-
-def format_replay(episodes: list[ReplayedEpisode], per_episode: bool = False) -> str:
-    lines = []
-    groups: dict[tuple[str, str], list[ReplayedEpisode]] = {}
-    for e in episodes:
-        groups.setdefault((e.domain, e.policy), []).append(e)
-    labels = [f"  episode {e.episode} repeat {e.repeat}" for e in episodes] if per_episode else []
-    width = max([16] + [len(p) + 2 for _, p in groups] + [len(label) + 2 for label in labels])
-    head = (f"{'policy':<{width}}{'episodes':>9}{'objective':>12}{'control':>11}{'recomputes':>12}"
-            f"{'pred.err mean':>15}{'max':>10}{'at recompute':>14}")
-    current = None
-    for (domain, policy), group in groups.items():
-        if domain != current:
-            lines += [f"{domain}: objective ({'higher' if _sense(group) == 'max' else 'lower'}"
-                      " is better); prediction error ‖W (x − x̂)‖ against the plan in force", head, "-" * len(head)]
-            current = domain
-        for e in [None] + (group if per_episode else []):  # the policy's line, then its episodes
-            chosen = group if e is None else [e]
-            label = policy if e is None else f"  episode {e.episode} repeat {e.repeat}"
-            mean = lambda attr: _mean([getattr(x, attr) for x in chosen])  # noqa: E731
-            top = max((x.prediction_error_max for x in chosen if np.isfinite(x.prediction_error_max)), default=float("nan"))
-            lines.append(f"{label:<{width}}{len(chosen):>9}{mean('objective'):>12.5f}{mean('control_objective'):>11.5f}"
-                         f"{mean('recomputes'):>12.2f}{mean('prediction_error_mean'):>15.4f}{top:>10.4f}"
-                         f"{mean('prediction_error_at_recompute'):>14.4f}")
-    return "\n".join(lines)

@@ -1,4 +1,7 @@
-"""Render a played episode as an MP4 video of the MuJoCo scene.
+"""Video of a played episode: each state drawn from the MuJoCo scene, encoded as an MP4 (H.264).
+
+Views only receive: this module draws states it is given (``etmpc.evaluation.render`` plays the
+episode). It may import ``etmpc.common``.
 
 Only the cart pendulum has a 3-D scene. Each measured state of the trajectory is put back into the
 physics (the exact inverse of how the task reports it: ``Physics.set_state_vector`` against
@@ -15,7 +18,6 @@ from __future__ import annotations
 
 import os
 from collections.abc import Iterable, Iterator
-from dataclasses import dataclass
 from fractions import Fraction
 from pathlib import Path
 
@@ -24,23 +26,10 @@ import mujoco
 import numpy as np
 
 from etmpc.common.errors import EtmpcError
-from etmpc.loop import Trajectory
 from etmpc.common.outputs import atomic_path
-from etmpc.policies import parse_policy
-from etmpc.views.recording import Recorder
-from etmpc.systems import check_name
-from etmpc.evaluation.workers import context, play_test_episode
 
 SCENES = ("cart_pendulum",)  # domains with a MuJoCo scene
 CAMERA = "track"  # models/cart_pendulum.xml: rides with the cart (the "fixed" camera only turns towards it)
-
-
-@dataclass(frozen=True)
-class RenderResult:
-    path: Path
-    frames: int  # frames written: the trajectory's steps + 1 (its finite states)
-    fps: float
-    trajectory: Trajectory
 
 
 def check_scene(domain: str) -> None:
@@ -74,7 +63,7 @@ def _render(physics, height: int, width: int, camera: str) -> np.ndarray:
                          "or osmesa with libOSMesa installed)") from None
 
 
-def _frames(system, env, states: np.ndarray, width: int, height: int, camera: str) -> Iterator[np.ndarray]:
+def iter_frames(system, env, states: np.ndarray, width: int, height: int, camera: str) -> Iterator[np.ndarray]:
     check_scene(system.domain)
     physics = env.physics
     for x in np.asarray(states, dtype=float):
@@ -91,7 +80,7 @@ def render_frames(system, env, states: np.ndarray, width: int = 640, height: int
 
     Leaves ``env.physics`` at the last state: reset the environment before playing it again.
     """
-    return list(_frames(system, env, states, width, height, camera))
+    return list(iter_frames(system, env, states, width, height, camera))
 
 
 def write_video(frames: Iterable[np.ndarray], path: str | Path, fps: float) -> int:
@@ -124,30 +113,3 @@ def write_video(frames: Iterable[np.ndarray], path: str | Path, fps: float) -> i
 def _chain(first: np.ndarray, rest: Iterator[np.ndarray]) -> Iterator[np.ndarray]:
     yield first
     yield from rest
-
-
-def render_rollout(domain: str, policy_spec: str, episode: int, out: str | Path, seed: int = 0,
-                   width: int = 640, height: int = 480, fps: float | None = None,
-                   testset_path: str | None = None, record: str | Path | None = None) -> RenderResult:
-    """Play test-set ``episode`` under ``policy_spec`` exactly as ``etmpc evaluate`` does (repeat 0
-    of ``seed``) and write its video to ``out``, at one frame per control interval by default.
-    With ``record``, also write the episode, its frames included, into that Rerun recording."""
-    check_name(domain)
-    check_scene(domain)
-    check_display()
-    check_size(width, height)
-    policy = parse_policy(policy_spec, context(domain, testset_path)[0].error_weights, domain)
-    # An out-of-range index raises TestSetError (an EtmpcError) before anything is drawn.
-    played = play_test_episode(domain, policy, seed, 0, episode, testset_path)
-    system, env, traj = played.system, played.env, played.trajectory
-    fps = 1.0 / env.control_timestep() if fps is None else fps
-    states = traj.states[: traj.steps + 1]
-    states = states[np.all(np.isfinite(states), axis=1)]  # an episode that diverged ends on a NaN row
-    if record is None:  # frames go straight into the encoder
-        count = write_video(_frames(system, env, states, width, height, CAMERA), out, fps)
-    else:
-        frames = render_frames(system, env, states, width, height, CAMERA)
-        count = write_video(frames, out, fps)
-        with Recorder(record) as recorder:
-            recorder.log_episode(played.record(policy_spec, getattr(policy, "announce", None)), frames)
-    return RenderResult(path=Path(out), frames=count, fps=fps, trajectory=traj)

@@ -1,0 +1,50 @@
+"""``etmpc render``: play one test-set episode as ``evaluate`` does, and write its video (and recording)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from etmpc.evaluation.workers import context, play_test_episode
+from etmpc.loop import Trajectory
+from etmpc.policies import parse_policy
+from etmpc.systems import check_name
+from etmpc.views.recording import Recorder
+from etmpc.views.video import CAMERA, iter_frames, check_display, check_scene, check_size, render_frames, write_video
+
+
+@dataclass(frozen=True)
+class RenderResult:
+    path: Path
+    frames: int  # frames written: the trajectory's steps + 1 (its finite states)
+    fps: float
+    trajectory: Trajectory
+
+
+def render_rollout(domain: str, policy_spec: str, episode: int, out: str | Path, seed: int = 0,
+                   width: int = 640, height: int = 480, fps: float | None = None,
+                   testset_path: str | None = None, record: str | Path | None = None) -> RenderResult:
+    """Play test-set ``episode`` under ``policy_spec`` exactly as ``etmpc evaluate`` does (repeat 0
+    of ``seed``) and write its video to ``out``, at one frame per control interval by default.
+    With ``record``, also write the episode, its frames included, into that Rerun recording."""
+    check_name(domain)
+    check_scene(domain)
+    check_display()
+    check_size(width, height)
+    policy = parse_policy(policy_spec, context(domain, testset_path)[0].error_weights, domain)
+    # An out-of-range index raises TestSetError (an EtmpcError) before anything is drawn.
+    played = play_test_episode(domain, policy, seed, 0, episode, testset_path)
+    system, env, traj = played.system, played.env, played.trajectory
+    fps = 1.0 / env.control_timestep() if fps is None else fps
+    states = traj.states[: traj.steps + 1]
+    states = states[np.all(np.isfinite(states), axis=1)]  # an episode that diverged ends on a NaN row
+    if record is None:  # frames go straight into the encoder
+        count = write_video(iter_frames(system, env, states, width, height, CAMERA), out, fps)
+    else:
+        frames = render_frames(system, env, states, width, height, CAMERA)
+        count = write_video(frames, out, fps)
+        with Recorder(record) as recorder:
+            recorder.log_episode(played.record(policy_spec, getattr(policy, "announce", None)), frames)
+    return RenderResult(path=Path(out), frames=count, fps=fps, trajectory=traj)

@@ -1,0 +1,160 @@
+"""Reading a recording back (``etmpc replay``): each episode's figures, recomputed from the file with
+the same formulas as the live run.
+
+``read_recording`` reads a ``.rrd`` with Rerun's own reader (``rerun.chunk.RrdReader``); a file
+without the end marker :data:`etmpc.views.recording.END_MARKER` was cut short and is refused.
+"""
+
+from __future__ import annotations
+
+import re
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from etmpc.common.errors import EtmpcError
+from etmpc.views.recording import DECISION_SERIES, END_MARKER, OBJECTIVE_SERIES
+
+_ROOT = re.compile(r"^(.*/episode_\d+/repeat_\d+)/(.+)$")
+
+# Entity (relative to its episode's root) -> the series it holds, in column order. ``objective``
+# with three columns is how files written before the objective's series were split hold them.
+READ = {"objective/reward": ("reward",), "objective/running": ("running",),
+        "objective": OBJECTIVE_SERIES, "decision": DECISION_SERIES, "prediction_error": ("prediction_error",)}
+
+
+def read_recording(path: str | Path) -> dict[str, dict]:
+    """``{episode root: {"identity": {...}, "reward": (steps, values), "recompute": …, "forced": …,
+    "computation": …, "running": …, "prediction_error": …}}`` from a ``.rrd`` file, read with
+    Rerun's own reader."""
+    from rerun.chunk import RrdReader
+
+    path = Path(path)
+    if not path.is_file():
+        raise EtmpcError(f"recording {path} not found")
+    with warnings.catch_warnings(record=True) as caught:  # said in the error below, not as a second line
+        warnings.simplefilter("always")
+        try:
+            chunks = list(RrdReader(str(path)).stream())
+        except Exception as exc:  # the reader raises its own types for a file that is not a recording
+            short = any("no footer" in str(w.message) for w in caught)
+            raise EtmpcError(f"recording {path} is cut short (no footer; {exc})" if short else
+                             f"{path} is not a readable Rerun recording ({exc})") from None
+    episodes: dict[str, dict] = {}
+    pieces: dict[tuple[str, str], list] = {}
+    end = None
+    for chunk in chunks:
+        if str(chunk.entity_path) == END_MARKER and chunk.is_static:
+            batch = chunk.to_record_batch()
+            end = int(batch.column("episodes").to_pylist()[0][0])
+            continue
+        found = _ROOT.match(str(chunk.entity_path))
+        if found is None:
+            continue
+        root, leaf = found.groups()
+        if leaf != "identity" and leaf not in READ:
+            continue
+        batch = chunk.to_record_batch()
+        if leaf == "identity" and chunk.is_static:
+            identity = {name: batch.column(name).to_pylist()[0][0] for name in batch.schema.names if not name.startswith("rerun.")}
+            episodes.setdefault(root, {})["identity"] = identity
+        elif leaf in READ and "Scalars:scalars" in batch.schema.names:
+            values = batch.column("Scalars:scalars").flatten().to_numpy().reshape(batch.num_rows, len(READ[leaf]))
+            pieces.setdefault((root, leaf), []).append((batch.column("step").to_numpy(), values))
+    for (root, leaf), parts in pieces.items():
+        steps = np.concatenate([s for s, _ in parts])
+        values = np.concatenate([v for _, v in parts])
+        order = np.argsort(steps, kind="stable")
+        for j, name in enumerate(READ[leaf]):
+            episodes.setdefault(root, {})[name] = (steps[order], values[order, j])
+    complete = {root: data for root, data in episodes.items() if "identity" in data and "reward" in data}
+    if end is None:
+        raise EtmpcError(f"recording {path} is incomplete: it has no end marker (the file was cut short, or its "
+                         "run did not finish)" if complete else f"{path} holds no etmpc episodes")
+    if len(complete) != end:
+        raise EtmpcError(f"recording {path} is incomplete: {len(complete)} of its {end} episodes can be read")
+    return complete
+
+
+@dataclass(frozen=True)
+class ReplayedEpisode:
+    domain: str
+    policy: str
+    episode: int
+    repeat: int
+    seed: int
+    objective_sense: str
+    objective: float
+    control_objective: float
+    recomputes: int
+    steps: int
+    prediction_error_mean: float
+    prediction_error_max: float
+    prediction_error_at_recompute: float  # mean error at the steps where the policy chose to recompute
+
+
+def replay_summary(path: str | Path) -> list[ReplayedEpisode]:
+    """Each recorded episode's figures, with the live run's formulas (``etmpc.evaluation.evaluate.scores``)."""
+    out = []
+    for root, data in read_recording(path).items():
+        identity = data["identity"]
+        _, rewards = data["reward"]
+        _, recompute = data["recompute"]
+        _, forced = data.get("forced", (None, np.zeros_like(recompute)))
+        steps_err, errors = data.get("prediction_error", (np.zeros(0, int), np.zeros(0)))
+        recomputes = int(recompute.sum())
+        # The same expressions as Trajectory.policy_return and evaluate.scores, on the same floats.
+        ret = float(rewards.sum() - identity["recompute_price"] * recomputes)
+        control = float(rewards.sum())
+        objective, control = (ret, control) if identity["objective_sense"] == "max" else (-ret, -control)
+        chosen = np.flatnonzero((recompute > 0) & (forced == 0))
+        at_recompute = errors[np.isin(steps_err, chosen)]
+        out.append(ReplayedEpisode(
+            domain=identity["domain"], policy=identity["policy"], episode=int(identity["episode"]),
+            repeat=int(identity["repeat"]), seed=int(identity["seed"]), objective_sense=identity["objective_sense"],
+            objective=objective, control_objective=control,
+            recomputes=recomputes, steps=len(rewards),
+            prediction_error_mean=_mean(errors),
+            prediction_error_max=float(errors.max()) if len(errors) else float("nan"),
+            prediction_error_at_recompute=_mean(at_recompute),
+        ))
+    out.sort(key=lambda r: (r.domain, r.policy, r.episode, r.repeat))
+    return out
+
+
+def _mean(values) -> float:
+    values = np.asarray(values, float)
+    values = values[np.isfinite(values)]
+    return float(values.mean()) if len(values) else float("nan")
+
+
+def _sense(group) -> str:
+    return group[0].objective_sense
+
+
+def format_replay(episodes: list[ReplayedEpisode], per_episode: bool = False) -> str:
+    lines = []
+    groups: dict[tuple[str, str], list[ReplayedEpisode]] = {}
+    for e in episodes:
+        groups.setdefault((e.domain, e.policy), []).append(e)
+    labels = [f"  episode {e.episode} repeat {e.repeat}" for e in episodes] if per_episode else []
+    width = max([16] + [len(p) + 2 for _, p in groups] + [len(label) + 2 for label in labels])
+    head = (f"{'policy':<{width}}{'episodes':>9}{'objective':>12}{'control':>11}{'recomputes':>12}"
+            f"{'pred.err mean':>15}{'max':>10}{'at recompute':>14}")
+    current = None
+    for (domain, policy), group in groups.items():
+        if domain != current:
+            lines += [f"{domain}: objective ({'higher' if _sense(group) == 'max' else 'lower'}"
+                      " is better); prediction error ‖W (x − x̂)‖ against the plan in force", head, "-" * len(head)]
+            current = domain
+        for e in [None] + (group if per_episode else []):  # the policy's line, then its episodes
+            chosen = group if e is None else [e]
+            label = policy if e is None else f"  episode {e.episode} repeat {e.repeat}"
+            mean = lambda attr: _mean([getattr(x, attr) for x in chosen])  # noqa: E731
+            top = max((x.prediction_error_max for x in chosen if np.isfinite(x.prediction_error_max)), default=float("nan"))
+            lines.append(f"{label:<{width}}{len(chosen):>9}{mean('objective'):>12.5f}{mean('control_objective'):>11.5f}"
+                         f"{mean('recomputes'):>12.2f}{mean('prediction_error_mean'):>15.4f}{top:>10.4f}"
+                         f"{mean('prediction_error_at_recompute'):>14.4f}")
+    return "\n".join(lines)
