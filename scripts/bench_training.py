@@ -29,7 +29,7 @@ import numpy as np
 
 from etmpc.learning.gpomdp import Learner, Settings
 from etmpc.policies.learned import INITIAL_KEEP_LOGIT, LogisticPolicy, Normalisation, load_policy
-from etmpc.learning.train import evaluate_theta, normalisation_states, train_block, _learner_to_json
+from etmpc.learning.jobs import evaluate_theta, normalisation_states, train_block, _learner_to_json
 from etmpc.evaluation.workers import context, make_backend
 
 

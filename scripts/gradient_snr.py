@@ -21,7 +21,7 @@ import numpy as np
 
 from etmpc.learning.gpomdp import VALUE_RIDGE, Settings, gradient, rewards_to_go
 from etmpc.policies.learned import LogisticPolicy, Normalisation, load_policy
-from etmpc.learning.train import normalisation_states, play
+from etmpc.learning.jobs import normalisation_states, play
 from etmpc.evaluation.workers import context, make_backend
 
 ENTROPY = 0x5A12  # this script's own episodes, apart from training's and the test set's

@@ -76,7 +76,7 @@ def test_a_worker_with_another_test_set_refuses_with_the_same_one_line_error(bac
     """Workers check the test set's digest against the driver's; the error reaches the user as the
     same one-line EtmpcError on either backend (not wrapped in Ray's remote traceback)."""
     from etmpc.common.errors import EtmpcError
-    from etmpc.learning.train import _call
+    from etmpc.learning.jobs import _call
     from etmpc.evaluation.workers import make_backend
 
     job = ("evaluate", ("battery", "0" * 64, {}, 0, 0))

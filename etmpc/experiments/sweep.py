@@ -191,7 +191,7 @@ def sweep(domain: str, out: Path, settings: SweepSettings, workers: int = 1, bac
     started = time.perf_counter()
     run = dict(domain=domain, episodes=settings.episodes, workers=workers, backend=backend, address=address,
                progress=progress)
-    periodic = [f"every:{t}" for t in range(1, system_horizon(system) + 1)]
+    periodic = [f"every:{t}" for t in range(1, system.horizon + 1)]
     events = [f"threshold:{x:g}" for x in settings.thresholds]
     say(f"{domain}: {len(periodic)} periodic schedules and {len(events)} event triggers")
     fixed = _stage(out / "fixed.json", policies=periodic + events, **run)
@@ -249,10 +249,6 @@ def _merge(a: dict, b: dict) -> dict:
     """Two evaluations of the same episodes as one (their policies and runs side by side)."""
     return {**a, "policies": {**a["policies"], **b["policies"]}, "runs": a["runs"] + b["runs"],
             "cost": {"wall_seconds": a["cost"]["wall_seconds"] + b["cost"]["wall_seconds"], "workers": a["cost"]["workers"]}}
-
-
-def system_horizon(system) -> int:
-    return int(system.config.horizon)
 
 
 # -- the numbers ------------------------------------------------------------------------------------

@@ -27,9 +27,13 @@ from scipy.optimize import minimize
 
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import write_json
+from etmpc.evaluation.workers import context, make_backend
+from etmpc.learning.config import SELECTION_ENTROPY, VALIDATION_ENTROPY
+from etmpc.learning.jobs import mean_scores
 from etmpc.loop import Snapshot, play_on, run_episode
 from etmpc.policies import Always, Every, parse_policy
 from etmpc.policies.selftrigger import CANDIDATES, SelfTrigger, plan_features
+from etmpc.systems import make_system
 
 SELF_ENTROPY = 0x73656C66  # "self"
 
@@ -101,8 +105,6 @@ class _Labeller:
 def label_episode(key: str, base: str, candidates: tuple[int, ...], settings: SelfSettings, index: int) -> list:
     """Training episode ``index`` played by ``base``: ``[(features, returns per candidate), ...]``
     at its picked steps (those where the loop asks the policy: a plan is in force)."""
-    from etmpc.evaluation.workers import context
-
     system, env, _ = context(key)
     rngs = [np.random.default_rng(np.random.SeedSequence(SELF_ENTROPY, spawn_key=(index, k))) for k in range(3)]
     steps = set(rngs[1].choice(np.arange(1, system.episode_steps), size=min(settings.solves_per_episode,
@@ -144,18 +146,13 @@ def train_self(key: str, out: Path, settings: SelfSettings = SelfSettings(), wor
                address: str | None = None, say=lambda line: None) -> SelfTrigger:
     """Choose the base, label, fit, validate and write ``out`` (the policy file); returns the
     policy. ``key``: a system key (``DOMAIN`` or ``DOMAIN@PRICE``, see :mod:`etmpc.systems`)."""
-    from etmpc.experiments.sweep import system_horizon
-    from etmpc.systems import make_system
-    from etmpc.learning.train import SELECTION_ENTROPY, VALIDATION_ENTROPY, _mean_scores
-    from etmpc.evaluation.workers import make_backend
-
     system = make_system(key)
     better = np.argmax if system.objective_sense == "max" else np.argmin
-    candidates = tuple(c for c in settings.candidates if c <= system_horizon(system))
+    candidates = tuple(c for c in settings.candidates if c <= system.horizon)
     if not candidates:
-        raise EtmpcError(f"no candidate keep length fits the MPC horizon ({system_horizon(system)} steps)")
+        raise EtmpcError(f"no candidate keep length fits the MPC horizon ({system.horizon} steps)")
     with make_backend(backend, workers, address) as pool:
-        scores = _mean_scores(pool, key, list(settings.bases), SELECTION_ENTROPY, settings.selection_episodes)
+        scores = mean_scores(pool, key, list(settings.bases), SELECTION_ENTROPY, settings.selection_episodes)
         base = settings.bases[int(better(scores))]
         say(f"self-trigger: base {base} (best of {len(settings.bases)} on {settings.selection_episodes} training episodes)")
         labelled = pool.map(_label_job, [(key, base, candidates, settings, i) for i in range(settings.episodes)])
@@ -174,7 +171,7 @@ def train_self(key: str, out: Path, settings: SelfSettings = SelfSettings(), wor
             fits[f"ridge {r:g}"] = SelfTrigger(str(out), system.domain, candidates, fit((features - mean) / scale, returns, r),
                                                mean, scale)
         jsons = [policy.to_json() for policy in fits.values()]
-        validation = _mean_scores(pool, key, jsons, VALIDATION_ENTROPY, settings.validation_episodes)
+        validation = mean_scores(pool, key, jsons, VALIDATION_ENTROPY, settings.validation_episodes)
     chosen = list(fits)[int(better(validation))]
     say(f"self-trigger: kept {chosen} ({', '.join(f'{n}: {v:.6g}' for n, v in zip(fits, validation))} on "
         f"{settings.validation_episodes} validation episodes)")

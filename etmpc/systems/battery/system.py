@@ -70,6 +70,7 @@ class BatterySystem:
         if config.horizon > config.market.forecast_steps:
             raise EtmpcError(f"horizon {config.horizon} exceeds the {config.market.forecast_steps} forecast values the task provides")
         self.config = config
+        self.horizon = config.horizon  # N: the MPC's plans are this many steps long
         battery = config.battery
         self.episode_steps = battery.episode_steps
         self.control_interval_s = battery.interval_s

@@ -44,6 +44,7 @@ class CartPendulumSystem:
 
     def __init__(self, config: Config = Config()):
         self.config = config
+        self.horizon = config.horizon  # N: the MPC's plans are this many steps long
         self.model = AnalyticModel(dt_s=cp_env.CONTROL_DT_S, rk4_substeps=config.rk4_substeps)
         self.recompute_price = config.recompute_price
         self.u_min = np.array([-config.force_limit_n])

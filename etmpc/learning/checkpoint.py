@@ -1,0 +1,113 @@
+"""A training run's state on disk: ``checkpoint.json`` (:class:`RunState`), the policy files and the
+learning curve, written so that the checkpoint never points past the files (see :func:`save`)."""
+
+from __future__ import annotations
+
+import json
+import re
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+
+import numpy as np
+
+from etmpc.learning.config import CHECKPOINT_FORMAT, TrainConfig
+from etmpc.policies.learned import LogisticPolicy, PolicyFileError, write_json_atomically
+from etmpc.systems import make_system
+from etmpc.views.curves import write_curve_png
+
+
+@dataclass
+class RunState:
+    """What ``checkpoint.json`` holds."""
+
+    config: TrainConfig
+    policy: dict  # the initial policy's JSON: normalisation, domain, hyperparameters
+    learners: dict  # seed (str) -> learner JSON
+    curve: list = field(default_factory=list)  # rows: {"episodes", "seed", "objective", "control", "recomputes"}
+    best: dict = field(default_factory=dict)  # seed (str) -> {"episodes", "objective", "theta"}
+    training: list = field(default_factory=list)  # per-episode stats, all seeds
+    base: str | None = None  # DPI: the fixed schedule iteration 0 rolls out over (chosen on training episodes)
+    validation: dict = field(default_factory=dict)  # seed (str) -> final policy's objective on the validation episodes
+
+    @cached_property
+    def objective_sense(self) -> str:
+        return make_system(self.config.system).objective_sense
+
+    @property
+    def done(self) -> int:
+        return min(int(data["episodes"]) for data in self.learners.values())
+
+    def to_json(self) -> dict:
+        return {"format": CHECKPOINT_FORMAT, "version": 1, "config": self.config.to_json(), "policy": self.policy,
+                "learners": self.learners, "curve": self.curve, "best": self.best, "training": self.training,
+                "base": self.base, "validation": self.validation}
+
+
+def load_checkpoint(path: Path) -> RunState:
+    try:
+        data = json.loads(path.read_text())
+        if data.get("format") != CHECKPOINT_FORMAT or data.get("version") != 1:
+            raise ValueError(f"format {data.get('format')!r} version {data.get('version')!r}")
+        config = TrainConfig.from_json(data["config"])
+        LogisticPolicy.from_json(data["policy"], where=f"checkpoint {path}")
+        state = RunState(config, data["policy"], data["learners"], data["curve"], data["best"], data["training"],
+                         data.get("base"), data.get("validation", {}))
+        if sorted(state.learners) != sorted(str(s) for s in config.seeds):
+            raise ValueError("learners do not match the seeds")
+        for learner in state.learners.values():
+            if len(learner["theta"]) != len(data["policy"]["theta"]):
+                raise ValueError("feature size differs between learners and policy")
+    except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError) as exc:
+        raise PolicyFileError(f"checkpoint {path} is corrupt or unreadable ({exc}); move it away to start afresh") from None
+    return state
+
+
+def policy_at(state: RunState, theta) -> dict:
+    return dict(state.policy, theta=list(theta))
+
+
+def save(out: Path, state: RunState) -> dict:
+    """Policies and curve first, the checkpoint last: the checkpoint never points past the files.
+    Returns the curve's summary."""
+    for seed in state.config.seeds:
+        key = str(seed)
+        hyper = dict(state.policy["hyperparameters"], seed=seed)
+        write_json_atomically(out / f"seed{seed}" / "last.json",
+                              dict(policy_at(state, state.learners[key]["theta"]), hyperparameters=dict(hyper, episodes=state.done)))
+        best = state.best[key]
+        write_json_atomically(out / f"seed{seed}" / "best.json",
+                              dict(policy_at(state, best["theta"]), hyperparameters=dict(hyper, episodes=best["episodes"])))
+    if state.validation:
+        sense = state.objective_sense
+        pick = (max if sense == "max" else min)(state.config.seeds, key=lambda seed: state.validation[str(seed)])
+        hyper = dict(state.policy["hyperparameters"], seed=pick, episodes=state.done,
+                     validation_objective=state.validation[str(pick)], validation_episodes=state.config.validation_episodes)
+        write_json_atomically(out / "selected.json", dict(policy_at(state, state.learners[str(pick)]["theta"]), hyperparameters=hyper))
+    summary = curve_summary(state)
+    write_json_atomically(out / "curve.json", summary)
+    write_curve_png(out / "curve.png", summary, len(state.config.seeds))
+    write_json_atomically(out / "checkpoint.json", state.to_json())
+    return summary
+
+
+def curve_summary(state: RunState) -> dict:
+    rows = {}
+    for row in state.curve:
+        rows.setdefault(row["episodes"], []).append(row)
+    points = []
+    for episodes, group in sorted(rows.items()):
+        values = np.array([r["objective"] for r in group])
+        points.append({"episodes": episodes, "objective_mean": float(values.mean()),
+                       "objective_std": float(values.std(ddof=1)) if len(values) > 1 else 0.0,
+                       "recomputes_mean": float(np.mean([r["recomputes"] for r in group])), "seeds": len(group)})
+    return {"domain": state.config.domain, "objective_sense": state.objective_sense, "algorithm": state.config.algorithm,
+            "features": state.config.features, "points": points, "per_seed": state.curve}
+
+
+_OUTPUTS = {"checkpoint.json", "curve.json", "curve.png", "selected.json", "recordings"}
+
+
+def ours(name: str) -> bool:
+    """What a training run writes in its directory."""
+    return name in _OUTPUTS or re.fullmatch(r"seed\d+", name) is not None

@@ -1,0 +1,101 @@
+"""A training run's settings (:class:`TrainConfig`) and the streams its random draws come from.
+
+Everything here must match when a run is resumed; see :mod:`etmpc.learning.train` for the run itself.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+from etmpc.common.errors import EtmpcError
+from etmpc.learning import dpi
+from etmpc.learning.gpomdp import Settings
+from etmpc.policies.learned import DEFAULT_FEATURES, check_features
+from etmpc.systems import system_key
+
+TRAIN_ENTROPY = 0x6574_6D70_6321  # "etmpc!"
+NORMALISATION_ENTROPY = 0x6E6F_726D  # "norm"
+SELECTION_ENTROPY = 0x7365_6C65_6374  # "select"
+VALIDATION_ENTROPY = 0x7661_6C69_64  # "valid"
+ALGORITHMS = ("gpomdp", "dpi")
+CHECKPOINT_FORMAT = "etmpc-train-checkpoint"
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """One training run. Everything here must match when a run is resumed."""
+
+    domain: str
+    seeds: tuple[int, ...] = (0, 1, 2, 3, 4)
+    episodes: int = 1500  # training episodes per seed
+    eval_every: int = 150  # evaluate on the test set after every this many episodes (and at 0)
+    eval_episodes: int | None = None  # first N test-set episodes (None: all)
+    eval_repeats: int = 1  # passes over the test set per evaluation
+    normalisation_episodes: int = 20
+    gpomdp: Settings = field(default_factory=Settings)
+    features: str = DEFAULT_FEATURES  # the policy's feature set (etmpc.policies.learned.FEATURE_SETS)
+    algorithm: str = "gpomdp"  # "gpomdp" or "dpi"
+    dpi: dpi.Settings = field(default_factory=dpi.Settings)  # used when algorithm == "dpi"
+    validation_episodes: int = 50  # training-distribution episodes that choose selected.json
+    recompute_price: float | None = None  # the price of a computation to train for (None: the system's)
+
+    def __post_init__(self):
+        if not self.seeds or len(set(self.seeds)) != len(self.seeds):
+            raise EtmpcError(f"seeds must be distinct and at least one, got {self.seeds}")
+        for name in ("episodes", "eval_every", "eval_repeats", "normalisation_episodes", "validation_episodes"):
+            if getattr(self, name) < 1:
+                raise EtmpcError(f"{name.replace('_', '-')} must be >= 1, got {getattr(self, name)}")
+        check_features(self.features)
+        if self.algorithm not in ALGORITHMS:
+            raise EtmpcError(f"unknown algorithm {self.algorithm!r}; valid: {', '.join(ALGORITHMS)}")
+        system_key(self.domain, self.recompute_price)  # a bad price fails here
+
+    @property
+    def system(self) -> str:
+        """The key workers build the system by: the domain, at ``recompute_price`` if one is set."""
+        return system_key(self.domain, self.recompute_price)
+
+    def to_json(self) -> dict:
+        data = asdict(self)
+        data["seeds"] = list(self.seeds)
+        data["dpi"]["bases"] = list(self.dpi.bases)
+        return data
+
+    @classmethod
+    def from_json(cls, data: dict) -> TrainConfig:
+        data = dict(data)
+        data["seeds"] = tuple(data["seeds"])
+        data["gpomdp"] = Settings(**data["gpomdp"])
+        data.setdefault("features", "paper")  # checkpoints from before feature sets
+        data.setdefault("recompute_price", None)  # checkpoints from before prices
+        dpi_settings = dict(data.get("dpi", {}))
+        if "bases" in dpi_settings:
+            dpi_settings["bases"] = tuple(dpi_settings["bases"])
+        data["dpi"] = dpi.Settings(**dpi_settings)
+        return cls(**data)
+
+    @property
+    def milestones(self) -> list[int]:
+        """Episode counts at which the policy is evaluated: 0, eval_every, ..., episodes."""
+        points = list(range(0, self.episodes, self.eval_every)) + [self.episodes]
+        return sorted(set(points))
+
+
+MAX_SEEDS = 1000
+
+
+def parse_seeds(text: str) -> tuple[int, ...]:
+    """``"0-4"`` -> (0, 1, 2, 3, 4); ``"1,3,7"``; ``"2"``."""
+    seeds = []
+    try:
+        for part in text.split(","):
+            lo, sep, hi = part.partition("-")
+            lo, hi = int(lo), int(hi) if sep else int(lo)
+            if hi - lo + 1 + len(seeds) > MAX_SEEDS:
+                raise EtmpcError(f"bad --seeds {text!r}: at most {MAX_SEEDS} seeds")
+            seeds += range(lo, hi + 1)
+    except ValueError:
+        raise EtmpcError(f"bad --seeds {text!r}: use a range like 0-4 or a list like 0,2,5") from None
+    if not seeds or min(seeds) < 0 or len(set(seeds)) != len(seeds):
+        raise EtmpcError(f"bad --seeds {text!r}: non-negative and distinct")
+    return tuple(seeds)
