@@ -106,7 +106,7 @@ def test_headroom_and_the_default_learner_are_direct_evaluations(run, domain):
 
 @pytest.mark.slow
 def test_a_smoke_report_says_so_at_its_top_and_gives_no_verdicts(run):
-    from etmpc.experiments.reproduce import report
+    from etmpc.experiments.report import report
 
     _, results = run
     smoke = dict(results, settings=dict(results["settings"], smoke=True))

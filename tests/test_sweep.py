@@ -11,7 +11,9 @@ import pytest
 
 from etmpc.common.errors import EtmpcError
 from etmpc.evaluation.evaluate import evaluate
+from etmpc.experiments import pareto as front_numbers
 from etmpc.experiments import sweep as sw
+from etmpc.views import curves
 from etmpc.learning.selftrigger import SelfSettings
 
 
@@ -22,7 +24,7 @@ def test_re_pricing_an_evaluation_gives_what_evaluating_at_that_price_gives():
     assert priced["recompute_price"] == 1e-3 and free["recompute_price"] == 5e-5
     for a, b in zip(free["runs"], priced["runs"], strict=True):
         assert (a["control_objective"], a["recomputes"]) == (b["control_objective"], b["recomputes"])  # decisions: price-free
-        assert sw.objective(a["control_objective"], a["recomputes"], 1e-3, "min") == pytest.approx(b["objective"], rel=1e-12)
+        assert front_numbers.objective(a["control_objective"], a["recomputes"], 1e-3, "min") == pytest.approx(b["objective"], rel=1e-12)
 
 
 def _table(rows: dict) -> dict:
@@ -37,30 +39,30 @@ BASE = {"every:1": [(1.0, 100), (3.0, 100)], "every:2": [(2.0, 50), (4.0, 50)], 
 def test_a_policy_on_the_front_gains_nothing_and_a_better_one_gains_its_margin():
     # Exactly halfway between every:2 and every:1 in rate and in control, per episode: on the front.
     halfway = [(1.5, 75), (3.5, 75)]
-    on = sw.versus_front(_table({**BASE, "event": halfway}), PERIODIC, "event", "min")
+    on = front_numbers.versus_front(_table({**BASE, "event": halfway}), PERIODIC, "event", "min")
     assert on["between"] == ["every:2", "every:1"] and on["weight"] == pytest.approx(0.5)
     assert on["gain"] == pytest.approx(0.0) and on["computations"] == 75
     # 0.25 better (lower cost) on every episode, at 30 computations (a fifth of the way from every:4 to every:2).
     better = [(4.0 - 0.4 - 0.25, 30), (6.0 - 0.4 - 0.25, 30)]
-    row = sw.versus_front(_table({**BASE, "event": better}), PERIODIC, "event", "min")
+    row = front_numbers.versus_front(_table({**BASE, "event": better}), PERIODIC, "event", "min")
     assert row["weight"] == pytest.approx(0.2) and row["front_control_objective"] == pytest.approx(np.mean([3.6, 5.6]))
     assert row["gain"] == pytest.approx(0.25) and row["gain_ci95"] == pytest.approx(0.0, abs=1e-12)
     assert row["better_episodes"] == 2
     # The same problem as a profit (every value negated): the same gain.
     negated = {spec: [(-c, n) for c, n in cells] for spec, cells in {**BASE, "event": better}.items()}
-    assert sw.versus_front(_table(negated), PERIODIC, "event", "max")["gain"] == pytest.approx(0.25)
+    assert front_numbers.versus_front(_table(negated), PERIODIC, "event", "max")["gain"] == pytest.approx(0.25)
     # As a profit the unnegated numbers make every:4 (fewest computations, most profit) the whole front.
-    assert sw.front(_table(BASE), PERIODIC, [0, 1], "max") == ["every:4"]
+    assert front_numbers.front(_table(BASE), PERIODIC, [0, 1], "max") == ["every:4"]
     # Outside the schedules' range there is no front to compare with.
-    assert sw.versus_front(_table({**BASE, "event": [(1.0, 10), (1.0, 10)]}), PERIODIC, "event", "min") is None
+    assert front_numbers.versus_front(_table({**BASE, "event": [(1.0, 10), (1.0, 10)]}), PERIODIC, "event", "min") is None
 
 
 def test_a_dominated_schedule_is_not_part_of_the_front():
     # every:3 at 34 computations but worse than every:2 at 50: dominated, so the front runs every:4 -> every:2.
     rows = {**BASE, "every:3": [(5.0, 34), (7.0, 34)], "event": [(3.0, 34), (5.0, 34)]}
     periodic = [*PERIODIC, "every:3"]
-    assert sw.front(_table(rows), periodic, [0, 1], "min") == ["every:4", "every:2", "every:1"]
-    row = sw.versus_front(_table(rows), periodic, "event", "min")
+    assert front_numbers.front(_table(rows), periodic, [0, 1], "min") == ["every:4", "every:2", "every:1"]
+    row = front_numbers.versus_front(_table(rows), periodic, "event", "min")
     assert row["between"] == ["every:4", "every:2"]
     w = (34 - 25) / (50 - 25)
     assert row["gain"] == pytest.approx(np.mean([(1 - w) * 4 + w * 2 - 3, (1 - w) * 6 + w * 4 - 5]))
@@ -69,7 +71,7 @@ def test_a_dominated_schedule_is_not_part_of_the_front():
 def test_the_ci_is_the_paired_normal_interval():
     gains = np.array([0.1, -0.2, 0.4, 0.3])
     cells = [(2.0 - g, 50) for g in gains]  # at every:2's rate: the front is every:2 itself
-    row = sw.versus_front(_table({"every:1": [(1.0, 100)] * 4, "every:2": [(2.0, 50)] * 4, "every:4": [(4.0, 25)] * 4,
+    row = front_numbers.versus_front(_table({"every:1": [(1.0, 100)] * 4, "every:2": [(2.0, 50)] * 4, "every:4": [(4.0, 25)] * 4,
                                   "event": cells}), PERIODIC, "event", "min")
     assert row["gain"] == pytest.approx(gains.mean())
     assert row["gain_ci95"] == pytest.approx(1.96 * gains.std(ddof=1) / 2.0)
@@ -81,8 +83,8 @@ def test_the_best_periodic_schedule_and_the_nearest_one_match_brute_force():
     fixed = {"runs": runs}
     for price in (0.0, 0.01, 0.05, 1.0):
         brute = min(PERIODIC, key=lambda s: np.mean([c + price * n for c, n in BASE[s]]))
-        assert sw.best_periodic(fixed, PERIODIC, price, "min") == brute
-    near = sw.versus_nearest(_table({**BASE, "event": [(3.0, 45), (5.0, 45)]}), PERIODIC, "event", 0.01, "min")
+        assert front_numbers.best_periodic(fixed, PERIODIC, price, "min") == brute
+    near = front_numbers.versus_nearest(_table({**BASE, "event": [(3.0, 45), (5.0, 45)]}), PERIODIC, "event", 0.01, "min")
     assert near["policy"] == "every:2" and near["gain"] == pytest.approx(3.5 - 4.45)  # (2.5, 4.5) against (3.45, 5.45)
 
 
@@ -165,7 +167,7 @@ def test_the_best_periodic_schedule_changes_with_the_price_as_the_evaluations_sa
 
 def test_the_figure_draws_the_points_of_the_json(tiny_sweep):
     _, pareto = tiny_sweep
-    fig = sw.draw_pareto(pareto)
+    fig = curves.draw_pareto(pareto)
     ax = fig.axes[0]
     first = [p for p in pareto["points"] if p["price"] == TINY.prices[0]]
     (dots,) = [line for line in ax.get_lines() if line.get_gid() == "periodic-points"]
@@ -191,7 +193,7 @@ def test_the_figure_draws_the_points_of_the_json(tiny_sweep):
 
 def test_the_report_section_gives_each_prices_answer(tiny_sweep):
     _, pareto = tiny_sweep
-    lines = sw.report_section(pareto)
+    lines = front_numbers.report_section(pareto)
     rows = [line for line in lines if line.startswith("| ") and not line.startswith("| price")]
     assert len(rows) == len(TINY.prices)
     for row, answer in zip(rows, pareto["answers"], strict=True):
@@ -200,4 +202,4 @@ def test_the_report_section_gives_each_prices_answer(tiny_sweep):
         for cell, kind in zip(cells[2:], ("rollout", "learned", "self", "best_event", "oracle"), strict=True):
             found = answer[kind]
             assert cell == "outside the periodic range" if found is None else (
-                cell.startswith(f"`{sw.short_name(found['policy'])}`") and f"{found['gain_percent']:+.2f} %" in cell)
+                cell.startswith(f"`{front_numbers.short_name(found['policy'])}`") and f"{found['gain_percent']:+.2f} %" in cell)

@@ -348,7 +348,8 @@ def _reproduce(args) -> None:
 
 
 def _sweep(args) -> None:
-    from etmpc.experiments.sweep import SweepSettings, check_directory, report_section, sweep
+    from etmpc.experiments.pareto import report_section
+    from etmpc.experiments.sweep import SweepSettings, check_directory, sweep
     from etmpc.systems import check_name, make_system, names
     from etmpc.evaluation.testsets import default_path, load
     from etmpc.evaluation.workers import default_workers

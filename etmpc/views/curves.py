@@ -1,4 +1,5 @@
-"""Curves: the learning curve of a training run (the paper's Figure 2), drawn from its summary."""
+"""Curves: the learning curve of a training run (the paper's Figure 2) and the trade-off curve of a
+sweep (control objective against computations), drawn from their JSON summaries."""
 
 from __future__ import annotations
 
@@ -26,3 +27,39 @@ def write_curve_png(path: Path, summary: dict, seeds: int) -> None:
     ax.legend()
     fig.tight_layout()
     save_png_atomically(fig, path, dpi=110)
+
+
+def draw_pareto(pareto: dict):
+    """Control objective against computations per episode: every periodic schedule as a grey dot and
+    the periodic front (the schedules no other beats) as a line, the event triggers as a dashed line
+    of points; at each price, coloured by price, the rollout (diamond), learned (square) and
+    self-triggering (triangle) policies as filled points and the oracle bound as a hollow circle."""
+    import matplotlib.pyplot as plt
+
+    points, sense = pareto["points"], pareto["objective_sense"]
+    prices = pareto["settings"]["prices"]
+    first = [p for p in points if p["price"] == prices[0]]
+    fig, ax = plt.subplots(figsize=(8, 5.2), layout="constrained")
+    periodic = [p for p in first if p["kind"] == "periodic"]
+    ax.plot([p["computations"] for p in periodic], [p["control_objective"] for p in periodic], "o", color="0.55",
+            markersize=4, label="periodic every:T", gid="periodic-points")
+    for kind, style, label in (("periodic", dict(color="black", marker="o", linestyle="-"), "the periodic front"),
+                               ("event", dict(color="tab:blue", marker="x", linestyle="--"), "event trigger threshold:X")):
+        rows = sorted((p for p in first if p["kind"] == kind and p.get("on_front", True)), key=lambda p: p["computations"])
+        ax.plot([p["computations"] for p in rows], [p["control_objective"] for p in rows], label=label, gid=kind, **style)
+    colours = plt.get_cmap("viridis")(np.linspace(0.0, 0.9, len(prices)))
+    for colour, price in zip(colours, prices, strict=True):
+        for kind, marker, face, name in (("rollout", "D", colour, "rollout"), ("learned", "s", colour, "learned (DPI)"),
+                                         ("self", "^", colour, "self-trigger"), ("oracle", "o", "none", "oracle bound")):
+            rows = [p for p in points if p["price"] == price and p["kind"] == kind]
+            if not rows:
+                continue
+            label = f"{name}, price {price:g}"
+            ax.scatter([p["computations"] for p in rows], [p["control_objective"] for p in rows], marker=marker, s=60,
+                       facecolors=face, edgecolors=colour, linewidths=1.5, label=label, gid=f"{kind}@{price!r}", zorder=3)
+    ax.set_xlabel("computations per episode")
+    ax.set_ylabel(f"control objective ({'lower' if sense == 'min' else 'higher'} is better)")
+    ax.set_title(f"{pareto['domain']}: the trade-off, {pareto['episodes']} test-set episodes (oracle: an upper bound)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, ncols=2, loc="best")
+    return fig

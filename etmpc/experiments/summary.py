@@ -1,0 +1,130 @@
+"""The numbers of ``etmpc reproduce``'s report, from the evaluation JSONs alone: per system, the best
+fixed policy, the learned policies against it (paired over test-set episodes, 95 % CIs), the default
+learner and the headroom (rollout and the oracle bound)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from etmpc.learning.train import curve_summary
+
+
+def summarise_system(system, baselines: dict, learned: dict, curve: dict) -> dict:
+    """The numbers of the report for one system, from the evaluation JSONs and the learning curve."""
+    sense = system.objective_sense
+    better = (lambda a, b: a > b) if sense == "max" else (lambda a, b: a < b)
+    fixed = baselines["policies"]
+    best = None
+    for spec, s in fixed.items():
+        if best is None or better(s["objective_mean"], fixed[best]["objective_mean"]):
+            best = spec
+    per_seed = [s["objective_mean"] for s in learned["policies"].values()]
+    # As evaluate does: a run that ended on a non-finite state is counted, never averaged in.
+    learned_runs = [r for r in learned["runs"] if r["finite"]]
+    # Paired over test-set episodes: the learned policy's mean over seeds and passes against the
+    # best fixed policy on the same episode.
+    by_episode: dict[int, list[float]] = {}
+    for r in learned_runs:
+        by_episode.setdefault(r["episode"], []).append(r["objective"])
+    fixed_by_episode = {r["episode"]: r["objective"] for r in baselines["runs"] if r["policy"] == best and r["finite"]}
+    episodes = sorted(set(by_episode) & set(fixed_by_episode))
+    diff = np.array([np.mean(by_episode[e]) - fixed_by_episode[e] for e in episodes])
+    gain = diff if sense == "max" else -diff  # > 0: the learned policy is better
+    learned_mean = float(np.mean([r["objective"] for r in learned_runs]))
+    best_value = fixed[best]["objective_mean"]
+    margin_percent = 100.0 * (learned_mean - best_value) / abs(best_value) * (1 if sense == "max" else -1)
+    points = curve["points"]
+    values = [p["objective_mean"] for p in points]
+    best_point = points[int(np.argmax(values) if sense == "max" else np.argmin(values))]
+    return {
+        "domain": system.domain,
+        "objective_sense": sense,
+        "episodes": baselines["policies"][best]["episodes"],
+        "fixed": {spec: _row(s) for spec, s in fixed.items()},
+        "best_fixed": dict(_row(fixed[best]), policy=best),
+        "learned": {
+            "objective_mean": learned_mean,
+            "objective_std_seeds": float(np.std(per_seed, ddof=1)) if len(per_seed) > 1 else 0.0,
+            "control_objective_mean": float(np.mean([r["control_objective"] for r in learned_runs])),
+            "recomputes_mean": float(np.mean([r["recomputes"] for r in learned_runs])),
+            "solver_failures": int(sum(r["solver_failures"] for r in learned["runs"])),
+            "nonfinite_episodes": len(learned["runs"]) - len(learned_runs),
+            "per_seed": per_seed,
+            "repeats": next(iter(learned["policies"].values()))["repeats"],
+        },
+        "paired": {
+            "mean_difference": float(diff.mean()),
+            "ci95": float(1.96 * diff.std(ddof=1) / np.sqrt(len(diff))) if len(diff) > 1 else float("nan"),
+            "learned_better_episodes": int((gain > 0).sum()),
+            "episodes": len(diff),
+        },
+        "margin_percent": margin_percent,
+        "curve": {"start": points[0], "best": best_point, "final": points[-1], "points": points},
+    }
+
+
+def per_episode(evaluation: dict, policies=None) -> dict[int, float]:
+    """Episode -> the mean objective of ``policies`` (default: every policy in the file) over their
+    finite runs (seeds and passes together)."""
+    values: dict[int, list[float]] = {}
+    for r in evaluation["runs"]:
+        if r["finite"] and (policies is None or r["policy"] in policies):
+            values.setdefault(r["episode"], []).append(r["objective"])
+    return {e: float(np.mean(v)) for e, v in values.items()}
+
+
+def paired(a: dict[int, float], b: dict[int, float], sense: str, episodes=None) -> dict:
+    """``a`` against ``b`` on their common episodes (or ``episodes``): the mean difference ``a - b``
+    with its 95 % CI, and the same as a percentage of ``|mean b|``, signed so that > 0 is better."""
+    common = sorted(set(a) & set(b) if episodes is None else set(episodes) & set(a) & set(b))
+    diff = np.array([a[e] - b[e] for e in common])
+    sign = 1.0 if sense == "max" else -1.0
+    scale = abs(float(np.mean([b[e] for e in common]))) if common else float("nan")
+    ci = float(1.96 * diff.std(ddof=1) / np.sqrt(len(diff))) if len(diff) > 1 else float("nan")
+    mean = float(diff.mean()) if len(diff) else float("nan")
+    return {"episodes": len(common), "objective_mean": float(np.mean([a[e] for e in common])) if common else float("nan"),
+            "reference_mean": float(np.mean([b[e] for e in common])) if common else float("nan"),
+            "mean_difference": mean, "ci95": ci, "gain_percent": 100.0 * sign * mean / scale,
+            "gain_percent_ci95": 100.0 * ci / scale, "better_episodes": int((sign * diff > 0).sum())}
+
+
+def summarise_default(system, baselines: dict, default: dict, state) -> dict:
+    """The default learner's shipped policy on the test set, against the best fixed policy."""
+    sense = system.objective_sense
+    fixed = baselines["policies"]
+    best = (max if sense == "max" else min)(fixed, key=lambda spec: fixed[spec]["objective_mean"])
+    (spec, row), = default["policies"].items()
+    hyper = json.loads(Path(spec[3:]).read_text())["hyperparameters"]
+    return {"policy": spec, "seed": hyper["seed"], "validation_objective": hyper["validation_objective"],
+            "validation": state.validation, "base": state.base, **_row(row),
+            "paired": paired(per_episode(default), per_episode(baselines, {best}), sense),
+            "curve": curve_summary(state)["points"]}
+
+
+def summarise_headroom(system, best: str, baselines: dict, learned: dict, default: dict, rollout: dict, oracle: dict) -> dict:
+    """Every contender and the oracle bound against the best fixed policy, paired on the episodes the
+    rollout policy played. Rows, in order: the oracle (an upper bound, not a policy), the rollout
+    policy, the default learner, the paper's learner, the best fixed policy."""
+    sense = system.objective_sense
+    reference = per_episode(baselines, {best})
+    episodes = sorted(per_episode(rollout))
+    rows = {}
+    for name, evaluation in (("oracle", oracle), ("rollout", rollout), ("learned_default", default), ("learned_paper", learned),
+                             ("best_fixed", None)):
+        evaluation = evaluation or {"policies": {best: None}, "runs": [r for r in baselines["runs"] if r["policy"] == best]}
+        runs = [r for r in evaluation["runs"] if r["episode"] in episodes and r["finite"]]
+        rows[name] = dict(paired(per_episode(evaluation), reference, sense, episodes), policies=list(evaluation["policies"]),
+                          recomputes_mean=float(np.mean([r["recomputes"] for r in runs])) if runs else float("nan"))
+    cost = rollout.get("cost", {})
+    steps = sum(r["steps"] for r in rollout["runs"])
+    return {"reference": best, "episodes": len(episodes), "rows": rows, "rollout_cost": cost,
+            # CPU seconds per step of the rollout policy (its decision and the step itself; the solve is a small part).
+            "rollout_seconds_per_step": cost["wall_seconds"] * cost["workers"] / steps if cost and steps else None}
+
+
+def _row(s: dict) -> dict:
+    keys = ("objective_mean", "objective_std", "control_objective_mean", "recomputes_mean", "solver_failures")
+    return {k: s[k] for k in keys}
