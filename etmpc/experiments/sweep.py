@@ -43,12 +43,13 @@ from pathlib import Path
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import refuse_foreign, write_json, write_text
 from etmpc.evaluation.evaluate import evaluate
+from etmpc.evaluation.testsets import default_path, load
 from etmpc.experiments.pareto import best_periodic, build_pareto, report_section
 from etmpc.learning import dpi
 from etmpc.learning.config import TrainConfig
 from etmpc.learning.selftrigger import SelfSettings, train_self
 from etmpc.learning.train import train
-from etmpc.systems import check_price, make_system, system_key
+from etmpc.systems import check_name, check_price, make_system, names, system_key
 from etmpc.views.curves import draw_pareto
 from etmpc.views.figures import save_png_atomically
 
@@ -126,6 +127,23 @@ class SweepSettings:
 
     def to_json(self) -> dict:
         return _lists(asdict(self))
+
+
+def plan(tasks: list[str] | None, prices=None, episodes: int | None = None, quick: bool = False) -> dict[str, SweepSettings]:
+    """The settings of a sweep of ``tasks`` (default: every system), each checked before any work:
+    known, given once, priced sensibly, and asking no more episodes than its stored test set has."""
+    tasks = list(tasks or names())
+    for task in tasks:
+        check_name(task)
+    if len(set(tasks)) != len(tasks):
+        raise EtmpcError("a task is given twice")
+    settings = {task: SweepSettings.default(task, prices, episodes, quick) for task in tasks}
+    for task, chosen in settings.items():
+        system = make_system(task)
+        stored = load(default_path(system.domain, system.task), system.domain, system.task)
+        if chosen.episodes > stored.episodes:
+            raise EtmpcError(f"--episodes must be in 1..{stored.episodes} for the {task} test set, got {chosen.episodes}")
+    return settings
 
 
 def _lists(value):

@@ -1,0 +1,174 @@
+"""One function per ``etmpc`` command: check what the options name, call the one function that does
+the work, print what it wrote. Each command imports the floor it calls when it runs, so that
+``etmpc --help`` does not load MuJoCo, Rerun and matplotlib."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from etmpc.common.errors import EtmpcError
+from etmpc.common.outputs import check_outputs, write_json
+
+
+def _check_backend(args) -> None:
+    if args.address is not None and args.backend != "ray":
+        raise EtmpcError("--address needs --backend ray")
+
+
+def _say(line: str) -> None:
+    """Progress of a long stage, on stderr (stdout keeps the results)."""
+    print(line, file=sys.stderr, flush=True)
+
+
+def _distinct_policies(specs: list[str]) -> None:
+    seen = set()
+    for spec in specs:
+        if spec in seen:
+            raise EtmpcError(f"--policy {spec} is given twice")
+        seen.add(spec)
+
+
+def _evaluate(args) -> None:
+    from etmpc.evaluation.evaluate import evaluate, format_table
+
+    _check_backend(args)
+    _distinct_policies(args.policy)
+    if args.test_set is not None and not Path(args.test_set).is_file():
+        raise EtmpcError(f"test set {args.test_set} not found")
+    check_outputs({"--json": args.json, "--record": args.record}, inputs={"--test-set": args.test_set})
+    result = evaluate(args.task, args.policy, args.episodes, args.repeats, args.workers, args.seed, args.test_set,
+                      backend=args.backend, address=args.address, record=args.record, recompute_price=args.price)
+    print(format_table(result))
+    if args.record is not None:
+        print(f"wrote {args.record} (open it with: rerun {args.record}; summarise it with: etmpc replay {args.record})")
+    if args.json is not None:
+        write_json(args.json, result.to_json())
+        print(f"wrote {args.json}")
+    nonfinite = sum(s.nonfinite_episodes for s in result.summaries)
+    if nonfinite:
+        print(f"warning: {nonfinite} run(s) ended on a non-finite state and are excluded from the means", file=sys.stderr)
+
+
+def _train(args) -> None:
+    from etmpc.learning.dpi import Settings as DpiSettings
+    from etmpc.learning.gpomdp import Settings
+    from etmpc.learning.train import TrainConfig, format_summary, parse_seeds, train
+    from etmpc.systems import check_name
+    from etmpc.evaluation.workers import default_workers
+
+    check_name(args.task)
+    _check_backend(args)
+    check_outputs({}, {"--out": args.out})
+    dpi_options = {"futures": args.futures, "horizon": args.horizon, "states_per_episode": args.labels}
+    if args.algorithm != "dpi" and any(v is not None for v in dpi_options.values()):
+        raise EtmpcError("--futures, --horizon and --labels are DPI's settings: add --algorithm dpi")
+    try:
+        settings = Settings(args.discount, args.learning_rate, args.baseline)
+        dpi_settings = DpiSettings(**{k: v for k, v in dpi_options.items() if v is not None})
+    except ValueError as exc:
+        raise EtmpcError(str(exc)) from None
+    config = TrainConfig(args.task, parse_seeds(args.seeds), args.episodes, args.eval_every, args.eval_episodes, gpomdp=settings,
+                         features=args.features, algorithm=args.algorithm, dpi=dpi_settings,
+                         validation_episodes=args.validation_episodes, recompute_price=args.price)
+    state = train(config, args.out, args.workers or default_workers(), args.resume, args.backend, args.address,
+                  record_episodes=args.record)
+    print(format_summary(state))
+    print(f"wrote {args.out}/selected.json, curve.json, curve.png, checkpoint.json and seed*/best.json, last.json")
+
+
+def _train_self(args) -> None:
+    from etmpc.learning.selftrigger import SelfSettings, train_self
+    from etmpc.systems import check_name, system_key
+    from etmpc.evaluation.workers import default_workers
+
+    check_name(args.task)
+    _check_backend(args)
+    check_outputs({"--out": args.out})
+    settings = SelfSettings(episodes=args.episodes, solves_per_episode=args.solves, futures=args.futures,
+                            validation_episodes=args.validation_episodes)
+    train_self(system_key(args.task, args.price), args.out, settings, args.workers or default_workers(), args.backend,
+               args.address, say=_say)
+    print(f"wrote {args.out} (evaluate it with: etmpc evaluate {args.task} --policy self:{args.out}"
+          f"{'' if args.price is None else f' --price {args.price:g}'})")
+
+
+def _reproduce(args) -> None:
+    from etmpc.experiments.reproduce import FULL, QUICK, reproduce
+    from etmpc.evaluation.workers import default_workers
+
+    _check_backend(args)
+    out = args.out or Path("results") / ("reproduce-quick" if args.quick else "reproduce")
+    check_outputs({}, {"--out": out})
+    reproduce(out, QUICK if args.quick else FULL, args.workers or default_workers(), args.backend, args.address,
+              sweep=args.sweep)
+    print(f"wrote {out}/REPORT.md and {out}/results.json")
+
+
+def _sweep(args) -> None:
+    from etmpc.evaluation.workers import default_workers
+    from etmpc.experiments.pareto import report_section
+    from etmpc.experiments.sweep import check_directory, plan, sweep
+
+    settings = plan(args.task, args.prices, args.episodes, args.quick)  # names, prices and sizes checked
+    _check_backend(args)
+    out = args.out or Path("results") / ("sweep-quick" if args.quick else "sweep")
+    check_outputs({}, {"--out": out})
+    for task, chosen in settings.items():  # every directory checked before any work
+        check_directory(out / task, task, chosen)
+    for task, chosen in settings.items():
+        pareto = sweep(task, out / task, chosen, args.workers or default_workers(), args.backend, args.address, say=_say)
+        print("\n".join(report_section(pareto)))
+        print(f"wrote {out / task}/pareto.json, pareto.png and SWEEP.md")
+
+
+def _render(args) -> None:
+    from etmpc.evaluation.render import render_rollout
+    from etmpc.systems import check_name
+
+    check_name(args.task)
+    if args.out.suffix != ".mp4":
+        raise EtmpcError(f"--out {args.out} does not end in .mp4")
+    check_outputs({"--out": args.out, "--record": args.record})
+    try:
+        result = render_rollout(args.task, args.policy, args.episode, args.out, args.seed, args.width, args.height,
+                                args.fps, record=args.record)
+    except ValueError as exc:
+        raise EtmpcError(str(exc)) from None
+    print(f"wrote {result.path}: {result.frames} frames at {result.fps:g} fps, {result.trajectory.recomputes} recomputes")
+    if args.record is not None:
+        print(f"wrote {args.record}")
+
+
+def _replay(args) -> None:
+    from dataclasses import asdict
+
+    from etmpc.views.replay import format_replay, replay_summary
+
+    check_outputs({"--json": args.json}, inputs={"recording": args.recording})
+    episodes = replay_summary(args.recording)
+    print(format_replay(episodes, args.per_episode))
+    if args.json is not None:
+        write_json(args.json, {"recording": str(args.recording), "episodes": [asdict(e) for e in episodes]})
+        print(f"wrote {args.json}")
+
+
+def _bench(args) -> None:
+    from etmpc.evaluation.bench import format_bench, run_bench
+    from etmpc.systems import check_name, names
+
+    domains = args.tasks or list(names())
+    for domain in domains:  # all names checked before any bench runs
+        check_name(domain)
+    check_outputs({"--json": args.json})
+    figures = {}
+    for domain in domains:
+        figures[domain] = run_bench(domain, episodes=args.episodes, references=not args.no_reference)
+        print(format_bench(figures[domain]), flush=True)
+    if args.json is not None:
+        write_json(args.json, figures)
+        print(f"wrote {args.json}")
+
+
+COMMANDS = {"evaluate": _evaluate, "train": _train, "train-self": _train_self, "reproduce": _reproduce, "sweep": _sweep,
+            "render": _render, "replay": _replay, "bench": _bench}
