@@ -35,15 +35,14 @@ from __future__ import annotations
 
 import collections
 import math
-from dataclasses import dataclass, fields
 
 import numpy as np
 from dm_control.rl import control
 from dm_control.utils import containers
 from dm_env import specs
 
-from etmpc.systems.battery.market import draw_signal
-from etmpc.systems.battery.parameters import SECONDS_PER_HOUR, Battery, Market
+from etmpc.systems.battery.market import Episode
+from etmpc.systems.battery.parameters import Battery, Market
 from etmpc.systems.episodes import Environment, EpisodeTask, Random, environment_kwargs_for, steps_for
 
 SUITE = containers.TaggedTasks()
@@ -151,62 +150,6 @@ class Physics(control.Physics):
 
     def after_reset(self) -> None:
         pass
-
-
-@dataclass(frozen=True, eq=False)
-class Episode:
-    """Everything random about one trading episode, drawn in advance: a test-set row.
-
-    Signals have one row per observation (``steps + 1``: the last is seen at the final timestep);
-    forecasts are ``(steps + 1, forecast_steps)``, ``[k, j]`` made at ``k`` for ``k + j``.
-    """
-
-    initial_soc: float
-    start_s: float  # seconds into the clock hour at step 0
-    production_kw: np.ndarray
-    production_base_kw: np.ndarray
-    production_forecast_kw: np.ndarray
-    price_eur_kwh: np.ndarray
-    price_base_eur_kwh: np.ndarray
-    price_forecast_eur_kwh: np.ndarray
-
-    def __post_init__(self):
-        for f in fields(self)[2:]:
-            getattr(self, f.name).flags.writeable = False  # observations hand out views of these
-
-    @property
-    def steps(self) -> int:
-        return self.production_kw.shape[0] - 1
-
-    @classmethod
-    def draw(cls, rng: np.random.Generator, battery: Battery = Battery(), market: Market = Market(),
-             steps: int | None = None) -> Episode:
-        steps = battery.episode_steps if steps is None else steps
-        initial_soc = float(rng.uniform(market.initial_soc_low, market.initial_soc_high))
-        start_s = float(rng.uniform(0.0, SECONDS_PER_HOUR))
-        signals = [
-            draw_signal(rng, signal, start_s, steps + 1, battery.interval_s, market.forecast_steps)
-            for signal in (market.production, market.price)
-        ]
-        return cls(initial_soc, start_s, *signals[0], *signals[1])
-
-    def arrays(self) -> dict[str, np.ndarray]:
-        return {f.name: np.asarray(getattr(self, f.name), dtype=float) for f in fields(self)}
-
-    @classmethod
-    def from_arrays(cls, arrays: dict[str, np.ndarray]) -> Episode:
-        names = [f.name for f in fields(cls)]
-        missing = [name for name in names if name not in arrays]
-        if missing:
-            raise ValueError(f"bad episode arrays: missing {', '.join(missing)}")
-        values = {name: np.array(arrays[name], dtype=float) for name in names}
-        rows = values["production_kw"].shape
-        signals, forecasts = names[2:], ("production_forecast_kw", "price_forecast_eur_kwh")
-        if values["initial_soc"].shape != () or len(rows) != 1 or any(
-            values[name].shape[0] != rows[0] or values[name].ndim != (2 if name in forecasts else 1) for name in signals
-        ):
-            raise ValueError("bad episode arrays: inconsistent shapes " + str({n: values[n].shape for n in names}))
-        return cls(float(values["initial_soc"]), float(values["start_s"]), *(values[name] for name in signals))
 
 
 OBSERVATIONS = ("state_of_charge", "net_production_kw", "price_eur_kwh", "production_forecast_kw", "price_forecast_eur_kwh")
