@@ -10,7 +10,7 @@ from etmpc.common.errors import EtmpcError
 from etmpc.loop import run_episode
 from etmpc.policies import parse_policy
 from etmpc.evaluation.render import render_rollout
-from etmpc.views.video import CAMERA, render_frames, write_video
+from etmpc.views.video import render_frames, write_video
 from etmpc.evaluation.workers import policy_rng
 
 W, H = 160, 120
@@ -68,7 +68,7 @@ def test_state_to_physics_matches_the_geometry(cart_system):
         tip = physics.named.data.site_xpos["tip"]
         np.testing.assert_allclose(tip, [eta + length * np.sin(beta), 0.0, length * np.cos(beta)], atol=1e-9)
         np.testing.assert_allclose(physics.named.data.xpos["cart"], [eta, 0.0, 0.0], atol=1e-12)
-        np.testing.assert_allclose(physics.named.data.cam_xpos[CAMERA][0], eta, atol=1e-12)  # the camera follows the cart
+        np.testing.assert_allclose(physics.named.data.cam_xpos[cart_system.camera][0], eta, atol=1e-12)  # the camera follows the cart
         np.testing.assert_allclose(physics.named.data.qvel[["slider", "hinge"]], [v, omega])
 
 

@@ -125,7 +125,9 @@ def _sweep(args) -> None:
 def _render(args) -> None:
     from etmpc.evaluation.render import render_rollout
     from etmpc.systems import check_name
+    from etmpc.views.video import check_display
 
+    check_display()  # before any domain is imported: an on-screen backend warns without a display
     check_name(args.task)
     if args.out.suffix != ".mp4":
         raise EtmpcError(f"--out {args.out} does not end in .mp4")

@@ -10,9 +10,9 @@ import numpy as np
 from etmpc.evaluation.workers import context, play_test_episode
 from etmpc.loop import Trajectory
 from etmpc.policies import parse_policy
-from etmpc.systems import check_name
+from etmpc.systems import check_name, system_class
 from etmpc.views.recording import Recorder
-from etmpc.views.video import CAMERA, iter_frames, check_display, check_scene, check_size, render_frames, write_video
+from etmpc.views.video import check_display, check_scene, check_size, iter_frames, render_frames, write_video
 
 
 @dataclass(frozen=True)
@@ -29,9 +29,9 @@ def render_rollout(domain: str, policy_spec: str, episode: int, out: str | Path,
     """Play test-set ``episode`` under ``policy_spec`` exactly as ``etmpc evaluate`` does (repeat 0
     of ``seed``) and write its video to ``out``, at one frame per control interval by default.
     With ``record``, also write the episode, its frames included, into that Rerun recording."""
+    check_display()  # before any domain is imported: an on-screen backend warns without a display
     check_name(domain)
-    check_scene(domain)
-    check_display()
+    check_scene(system_class(domain))
     check_size(width, height)
     policy = parse_policy(policy_spec, context(domain, testset_path)[0].error_weights, domain)
     # An out-of-range index raises TestSetError (an EtmpcError) before anything is drawn.
@@ -41,9 +41,9 @@ def render_rollout(domain: str, policy_spec: str, episode: int, out: str | Path,
     states = traj.states[: traj.steps + 1]
     states = states[np.all(np.isfinite(states), axis=1)]  # an episode that diverged ends on a NaN row
     if record is None:  # frames go straight into the encoder
-        count = write_video(iter_frames(system, env, states, width, height, CAMERA), out, fps)
+        count = write_video(iter_frames(system, env, states, width, height), out, fps)
     else:
-        frames = render_frames(system, env, states, width, height, CAMERA)
+        frames = render_frames(system, env, states, width, height)
         count = write_video(frames, out, fps)
         with Recorder(record) as recorder:
             recorder.log_episode(played.record(policy_spec, getattr(policy, "announce", None)), frames)

@@ -10,7 +10,7 @@ of a raw vector ``r`` chosen by the policy's *feature set*:
 * ``error`` (the default for training): ``r = [x_i - x_hat_i, i - k, exogenous]``, the prediction
   error per state (its square comes with ``r^2``) and the plan's age, as the authors' own
   environment feeds its policy; for the battery also the exogenous information a good trigger needs
-  (see ``etmpc.systems.battery.system.exogenous_features``: the price and net production now, what the plan
+  (its system's ``exogenous_features``; the battery's: the price and net production now, what the plan
   assumed for them, their differences, and the value at today's price of the trade the plan makes now);
 * ``paper``: ``r = s = [x_i, x_k, i - k]``, the augmented state as the paper's text defines it.
 
@@ -35,6 +35,7 @@ from etmpc.common.errors import EtmpcError
 from etmpc.common.numerics import dot
 from etmpc.common.outputs import write_text
 from etmpc.loop import AugmentedState
+from etmpc.systems import system_class
 
 FORMAT = "etmpc-logistic-policy"
 VERSION = 2
@@ -53,12 +54,11 @@ def raw_state(s: AugmentedState) -> np.ndarray:
 
 
 def _exogenous(domain: str):
-    """The domain's exogenous features ``f(s) -> array`` and their names, or None."""
-    if domain == "battery":
-        from etmpc.systems.battery.system import EXOGENOUS_FEATURES, exogenous_features
-
-        return exogenous_features, EXOGENOUS_FEATURES
-    return None
+    """The task's exogenous features ``f(s) -> array`` and their names (its system's optional
+    ``exogenous_features``, see :mod:`etmpc.systems.base`), or None."""
+    system = system_class(domain)
+    names = getattr(system, "exogenous_feature_names", ())
+    return (system.exogenous_features, names) if names else None
 
 
 def raw_features(features: str, domain: str, s: AugmentedState) -> np.ndarray:

@@ -22,37 +22,71 @@ from etmpc.control.plan import Plan
 
 
 class System(Protocol):
-    """What the control loop needs from a system (see ``etmpc/cart_pendulum/system.py`` and
-    ``etmpc/battery/system.py``)."""
+    """A task as the control loop sees it (``cart_pendulum/system.py`` and ``battery/system.py`` are two).
 
-    domain: str
-    task: str
+    Members by the feature that needs them. Everything under **the loop** is required; a system
+    leaves out a group whose feature it does not offer, and that feature says so in one line.
+    """
+
+    # -- the loop (etmpc.loop): required --------------------------------------------------------
+    Config: type  # the frozen settings it is built from: Config() is the paper's, with a recompute_price field
+    domain: str  # the domain's name in the registry (etmpc.systems.DOMAINS)
+    task: str  # the task's name in its domain's SUITE and SYSTEMS
     objective_sense: str  # "min": the objective is a cost; "max": a profit
     recompute_price: float  # charged per computation in the policy's objective
     episode_steps: int
     control_interval_s: float
-    state_names: tuple[str, ...]
-    input_names: tuple[str, ...]
+    horizon: int  # N: a plan's length; the loop forces a recompute when a plan is N steps old
+    state_names: tuple[str, ...]  # x, with units in the names (etmpc.views.blueprint reads them)
+    input_names: tuple[str, ...]  # u, likewise
     u_min: np.ndarray
     u_max: np.ndarray
-    error_weights: np.ndarray  # diagonal of W for the threshold policy
-    feedback: ErrorFeedback
+    feedback: ErrorFeedback  # the correction -K (x - x_hat) added to the planned input while a plan is kept
 
-    def make_env(self, random: Any = None) -> dm_env.Environment: ...
-    def episode_from_arrays(self, arrays: dict[str, np.ndarray]) -> Any: ...
-    def state(self, timestep: dm_env.TimeStep) -> np.ndarray: ...
+    def make_env(self, random: Any = None) -> dm_env.Environment: ...  # the dm-control environment (plant and task)
+    def state(self, timestep: dm_env.TimeStep) -> np.ndarray: ...  # x from an observation
     def measure(self, physics: Any) -> np.ndarray: ...  # the same x, read off the physics (no observation made)
     def plan(self, x: np.ndarray, u_prev: np.ndarray, warm: Plan | None, age: int, timestep: dm_env.TimeStep) -> Plan: ...
-    def action(self, u: np.ndarray, recompute: bool) -> np.ndarray: ...
+    def action(self, u: np.ndarray, recompute: bool) -> np.ndarray: ...  # the environment's action for input u
 
-    # Not used by the loop: test sets (etmpc.evaluation.testsets), `etmpc bench` and recordings.
-    def draw_episode(self, rng: np.random.Generator) -> Any: ...
-    def signals(self, episode: Any) -> dict[str, np.ndarray]: ...  # exogenous inputs per step (recordings)
-    def episode_parameters(self) -> dict: ...
-    def plan_cost(self, x: np.ndarray, u_prev: np.ndarray, timestep: dm_env.TimeStep, inputs: np.ndarray) -> float: ...
-    def reference_solvers(self) -> list: ...  # objects with .name and .solve(x, u_prev, timestep, continuing)
-    def interpreted(self) -> System | None: ...  # the same system with its MPC in CasADi's VM, if it is compiled
+    # -- test sets (etmpc.evaluation.testsets) and everything that replays them: required ---------
+    def draw_episode(self, rng: np.random.Generator) -> Any: ...  # everything random about an episode
+    def episode_parameters(self) -> dict: ...  # what episodes are drawn from (kept in the test set)
+    def episode_from_arrays(self, arrays: dict[str, np.ndarray]) -> Any: ...  # a stored episode back
 
-    # Used by the rollout policies (etmpc.policies.rollout).
-    def sample_future(self, episode: Any, step: int, rng: np.random.Generator) -> Any: ...  # see its docstrings
+    # -- the event trigger threshold:X --------------------------------------------------------------
+    error_weights: np.ndarray  # diagonal of W in ||W (x - x_hat)||
+
+    # -- recordings and figures (etmpc.views) ------------------------------------------------------
+    def signals(self, episode: Any) -> dict[str, np.ndarray]: ...  # exogenous inputs per step, by name with unit
+
+    # -- rollout:, oracle:, DPI and the self-trigger's training (futures simulated with the loop) -----
+    def sample_future(self, episode: Any, step: int, rng: np.random.Generator) -> Any: ...  # what is unknown at step, redrawn
     def truncation_value(self, x: np.ndarray) -> float: ...  # reward for the state a truncated rollout ends in
+
+    # -- optional ------------------------------------------------------------------------------------
+    # exogenous_feature_names: tuple[str, ...] and exogenous_features(s) -> array: what the learned
+    #     policy's "error" features add for this task (the battery's prices and production);
+    # camera: str and show(physics, x): a 3-D scene for `etmpc render` (the cart pendulum's);
+    # plan_cost, reference_solvers() and interpreted(): what `etmpc bench` compares the MPC with.
+
+
+#: The members each feature needs (tests/test_systems.py checks every registered system against it).
+FEATURES: dict[str, tuple[str, ...]] = {
+    "loop": ("Config", "domain", "task", "objective_sense", "recompute_price", "episode_steps", "control_interval_s",
+             "horizon", "state_names", "input_names", "u_min", "u_max", "feedback", "make_env", "state", "measure",
+             "plan", "action"),
+    "test sets": ("draw_episode", "episode_parameters", "episode_from_arrays"),
+    "threshold policy": ("error_weights",),
+    "recordings": ("signals",),
+    "rollouts": ("sample_future", "truncation_value"),
+    "exogenous features": ("exogenous_feature_names", "exogenous_features"),
+    "render": ("camera", "show"),
+    "bench": ("plan_cost", "reference_solvers", "interpreted"),
+}
+REQUIRED = ("loop", "test sets", "threshold policy", "recordings", "rollouts")
+
+
+def provides(system: Any, feature: str) -> bool:
+    """Whether ``system`` (an instance or its class) has every member ``feature`` needs."""
+    return all(hasattr(system, member) for member in FEATURES[feature])

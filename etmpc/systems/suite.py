@@ -13,13 +13,11 @@ etmpc's :class:`~etmpc.common.errors.UnknownNameError`, so the CLI prints it as 
 
 from __future__ import annotations
 
-import importlib
 from types import ModuleType
 
 from etmpc.common.errors import UnknownNameError
-
-# Domain name -> module holding a ``SUITE`` of task factories (as in dm_control.suite).
-_DOMAINS = {"cart_pendulum": "etmpc.systems.cart_pendulum.task", "battery": "etmpc.systems.battery.task"}
+from etmpc.systems import DOMAINS as _DOMAINS
+from etmpc.systems import domain as _package
 
 
 class UnknownSuiteNameError(UnknownNameError, ValueError):
@@ -33,7 +31,7 @@ def domains() -> tuple[str, ...]:
 def _domain(name: str) -> ModuleType:
     if name not in _DOMAINS:
         raise UnknownSuiteNameError(f"unknown domain {name!r}; valid: {', '.join(_DOMAINS)}")
-    return importlib.import_module(_DOMAINS[name])
+    return _package(name)
 
 
 def tasks(domain_name: str) -> tuple[str, ...]:

@@ -3,10 +3,9 @@
 Views only receive: this module draws states it is given (``etmpc.evaluation.render`` plays the
 episode). It may import ``etmpc.common``.
 
-Only the cart pendulum has a 3-D scene. Each measured state of the trajectory is put back into the
-physics (the exact inverse of how the task reports it: ``Physics.set_state_vector`` against
-``Physics.state``), positions are recomputed with ``mj_forward`` and the scene is drawn from the
-``track`` camera, which follows the cart. One frame per state, so a full episode of 100 control
+A system with a 3-D scene names its ``camera`` and puts a state back into its physics with ``show``
+(the cart pendulum: the exact inverse of how its task reports the state, then ``mj_forward``); the
+scene is drawn from that camera. One frame per state, so a full episode of 100 control
 intervals gives 101 frames, shown at one frame per control interval (10 fps) unless told otherwise.
 
 Videos are H.264 in yuv420p (plays everywhere; needs an even width and height), encoded with PyAV
@@ -28,13 +27,10 @@ import numpy as np
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import atomic_path
 
-SCENES = ("cart_pendulum",)  # domains with a MuJoCo scene
-CAMERA = "track"  # models/cart_pendulum.xml: rides with the cart (the "fixed" camera only turns towards it)
-
-
-def check_scene(domain: str) -> None:
-    if domain not in SCENES:
-        raise EtmpcError(f"domain {domain!r} has no 3-D scene to render (only {', '.join(SCENES)} has one)")
+def check_scene(system) -> None:
+    """A system has a scene when it names a ``camera`` and can ``show(physics, x)`` a state."""
+    if not (hasattr(system, "camera") and hasattr(system, "show")):
+        raise EtmpcError(f"domain {system.domain!r} has no 3-D scene to render")
 
 
 def check_size(width: int, height: int) -> None:
@@ -63,24 +59,23 @@ def _render(physics, height: int, width: int, camera: str) -> np.ndarray:
                          "or osmesa with libOSMesa installed)") from None
 
 
-def iter_frames(system, env, states: np.ndarray, width: int, height: int, camera: str) -> Iterator[np.ndarray]:
-    check_scene(system.domain)
+def iter_frames(system, env, states: np.ndarray, width: int, height: int) -> Iterator[np.ndarray]:
+    """Each state put into the physics by the system (``system.show``) and drawn from its camera."""
+    check_scene(system)
     physics = env.physics
     for x in np.asarray(states, dtype=float):
         if not np.all(np.isfinite(x)):
             raise ValueError(f"cannot render a non-finite state {x}")
-        physics.set_state_vector(x)  # the inverse of Physics.state(), which the observation reports
-        physics.forward()  # mj_forward: body poses (and cameras) for the new qpos
-        yield _render(physics, height, width, camera)
+        system.show(physics, x)
+        yield _render(physics, height, width, system.camera)
 
 
-def render_frames(system, env, states: np.ndarray, width: int = 640, height: int = 480,
-                  camera: str = CAMERA) -> list[np.ndarray]:
-    """One RGB frame, uint8 ``(height, width, 3)``, per row of ``states`` (``[eta, v, beta, omega]``).
+def render_frames(system, env, states: np.ndarray, width: int = 640, height: int = 480) -> list[np.ndarray]:
+    """One RGB frame, uint8 ``(height, width, 3)``, per row of ``states`` (the system's ``x``).
 
     Leaves ``env.physics`` at the last state: reset the environment before playing it again.
     """
-    return list(iter_frames(system, env, states, width, height, camera))
+    return list(iter_frames(system, env, states, width, height))
 
 
 def write_video(frames: Iterable[np.ndarray], path: str | Path, fps: float) -> int:

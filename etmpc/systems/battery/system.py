@@ -58,6 +58,9 @@ class Config:
 
 
 class BatterySystem:
+    Config = Config  # the settings it is built from (etmpc.systems.make_system)
+    exogenous_feature_names = EXOGENOUS_FEATURES  # what the learned policy's "error" features add
+    exogenous_features = staticmethod(exogenous_features)
     domain = "battery"
     task = "trading"
     objective_sense = "max"  # the objective is the profit, EUR

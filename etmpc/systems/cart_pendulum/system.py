@@ -34,6 +34,7 @@ class Config:
 
 
 class CartPendulumSystem:
+    Config = Config  # the settings it is built from (etmpc.systems.make_system)
     domain = "cart_pendulum"
     task = "balance"
     objective_sense = "min"  # the objective is sum(beta^2) + price * computations
@@ -116,6 +117,15 @@ class CartPendulumSystem:
 
     def action(self, u: np.ndarray, recompute: bool) -> np.ndarray:
         return u  # computing costs the cart no energy; the price is in the objective
+
+    # -- the scene, for etmpc render ----------------------------------------------------------------
+    camera = "track"  # models/cart_pendulum.xml: rides with the cart (the "fixed" camera only turns towards it)
+
+    def show(self, physics: cp_env.Physics, x: np.ndarray) -> None:
+        """Put state ``x`` into the physics for drawing: the exact inverse of ``Physics.state``, which
+        the observation reports, then ``mj_forward`` for the body poses (and cameras)."""
+        physics.set_state_vector(x)
+        physics.forward()
 
     # -- for etmpc bench --------------------------------------------------------------------------
     def plan_cost(self, x: np.ndarray, u_prev: np.ndarray, timestep: dm_env.TimeStep, inputs: np.ndarray) -> float:
