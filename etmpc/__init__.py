@@ -1,7 +1,22 @@
 """etmpc: a benchmark for event-triggered model predictive control.
 
 An MPC makes plans, an LQR corrects prediction errors while a plan is kept, and a recomputation
-policy decides when to re-plan. See README.md.
+policy decides when to re-plan. The package is built in floors, each importing only the ones below
+it (README "Layout"; import-linter checks it):
+
+* ``etmpc.common``: errors, safe file writing, where the data lives, exact sums;
+* ``etmpc.control``: the parts of a controller: plan, MPC, compiled code, LQR;
+* ``etmpc.systems``: the tasks: one folder per domain, the registry, what a system provides;
+* ``etmpc.loop``: Algorithm 1, the closed loop that plays a system under a policy;
+* ``etmpc.policies``: when to recompute: fixed, threshold, learned, self-triggering, rollout;
+* ``etmpc.views``: recordings, figures and video, drawn from what the floors below produce;
+* ``etmpc.evaluation``: test sets, workers, ``evaluate``, ``render``, ``bench``;
+* ``etmpc.learning``: GPOMDP, DPI, training runs, the self-trigger's training;
+* ``etmpc.experiments``: ``reproduce`` and its report, the price ``sweep``;
+* ``etmpc.cli``: the ``etmpc`` command.
+
+The Python surface: :func:`etmpc.evaluate` (policies on a stored test set), :mod:`etmpc.suite` (the
+tasks as dm-control environments) and :mod:`etmpc.systems` (the tasks as the loop plays them).
 """
 
 import os
@@ -10,4 +25,15 @@ import os
 # set MUJOCO_GL yourself to choose another backend.
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
+__all__ = ["evaluate"]
+
+
+def __getattr__(name: str):
+    """``etmpc.evaluate`` is :func:`etmpc.evaluation.evaluate.evaluate`, imported when first asked for
+    (so ``import etmpc`` loads neither MuJoCo nor CasADi)."""
+    if name == "evaluate":
+        from etmpc.evaluation.evaluate import evaluate
+
+        return evaluate
+    raise AttributeError(f"module 'etmpc' has no attribute {name!r}")

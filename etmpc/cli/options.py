@@ -127,7 +127,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="write every episode into a Rerun recording (open it with `rerun PATH.rrd`)")
     _backend_arguments(ev)
 
-    tr = sub.add_parser("train", help="train the learned recomputation policy with GPOMDP over several seeds")
+    tr = sub.add_parser("train", help="train the learned recomputation policy over several seeds: DPI (default) or GPOMDP, the paper's")
     tr.add_argument("task", help=f"system to train on: {tasks}")
     tr.add_argument("--seeds", default="0-4", help="seeds: a range 0-4 or a list 0,2,5 (default 0-4)")
     tr.add_argument("--episodes", type=_positive_int, default=1500, help="training episodes per seed (default 1500)")
