@@ -38,12 +38,10 @@ class _ContractTest(test_utils.EnvironmentTestMixin):
             yield rng.uniform(spec.minimum, spec.maximum)
 
 
-class CartPendulumContractTest(_ContractTest, absltest.TestCase):
-    domain, task = "cart_pendulum", "balance"
-
-
-class BatteryContractTest(_ContractTest, absltest.TestCase):
-    domain, task = "battery", "trading"
+# dm_env's contract for every task of the suite: a test class per (domain, task).
+for _domain, _task in suite.ALL_TASKS:
+    _name = "".join(part.title() for part in f"{_domain}_{_task}".split("_")) + "ContractTest"
+    globals()[_name] = type(_name, (_ContractTest, absltest.TestCase), {"domain": _domain, "task": _task})
 
 
 def test_suite_containers_list_every_task_as_dm_control_suite_does():
