@@ -14,7 +14,8 @@ This module may import ``etmpc.common``, ``etmpc.control`` and ``etmpc.systems``
 
 Two ways to play the same loop, bit for bit the same numbers:
 
-* :func:`run_episode` steps the ``dm_env`` interface and keeps everything (a :class:`Trajectory`);
+* :func:`run_episode` steps the ``dm_env`` interface and keeps everything (a :class:`Trajectory`),
+  one :class:`ClosedLoop` step per control interval (``etmpc.envs`` plays the same steps for an agent);
 * :func:`play_on` continues from a :class:`Snapshot` of a running episode, stepping the task and
   the physics directly (no ``TimeStep`` per step) and keeping only the return: the fast path the
   rollout policies simulate their futures with.
@@ -141,14 +142,6 @@ class Snapshot:
                    np.array(context.u_prev), x, context.timestep.observation)
 
 
-def _decide(policy: Policy, rng, x, plan: Plan | None, age: int, observation, context=None) -> tuple[bool, bool]:
-    """``(recompute, forced)`` for the step: forced when there is no plan or it has run out."""
-    forced = plan is None or age >= plan.horizon
-    if forced:
-        return True, True
-    return bool(policy.decide(AugmentedState(x, plan.states[0], age, plan.state_at(age), plan, observation, context), rng)), False
-
-
 def _input(system: System, plan: Plan, age: int, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """``(u, u_planned, correction, x_predicted)``: the plan's input plus the LQR correction, clipped."""
     u_planned = plan.input_at(age)
@@ -156,6 +149,107 @@ def _input(system: System, plan: Plan, age: int, x: np.ndarray) -> tuple[np.ndar
     correction = np.zeros(u_planned.shape) if age == 0 else system.feedback.correction(x, x_predicted)
     # np.minimum(np.maximum(.)) is np.clip's arithmetic without its Python-level overhead.
     return np.minimum(np.maximum(u_planned + correction, system.u_min), system.u_max), u_planned, correction, x_predicted
+
+
+class ClosedLoop:
+    """Algorithm 1, one control interval at a time: an episode in play, and its step.
+
+    :func:`run_episode` drives it with a policy; ``etmpc.envs`` hands each decision to an agent
+    instead. Both play this class, so the numbers are the same, bit for bit.
+
+    >>> loop = ClosedLoop(system, env).reset(episode)
+    >>> while not loop.done:
+    ...     s = loop.augmented_state()          # None when the decision is forced
+    ...     loop.step(s is not None and my_rule(s))
+    >>> loop.trajectory
+    """
+
+    def __init__(self, system: System, env: dm_env.Environment):
+        self.system, self.env = system, env
+        self.done = True
+
+    def reset(self, episode: Any = None) -> ClosedLoop:
+        """Start an episode: a stored one if given, else one drawn by the task."""
+        system = self.system
+        self.env.task.use_episode(episode)
+        self.timestep = self.env.reset()
+        self.x = system.state(self.timestep)
+        nu = system.u_min.shape[0]
+        self.trajectory = Trajectory.empty(system.episode_steps, self.x.shape[0], nu)
+        self.plan: Plan | None = None
+        self.age, self.u_prev, self.step_index, self.done = 0, np.zeros(nu), 0, False
+        self._arrive()
+        return self
+
+    @property
+    def forced(self) -> bool:
+        """The plan has run out (age = N), or there is none yet: the loop must solve, whatever is asked."""
+        return self.plan is None or self.age >= self.plan.horizon
+
+    def augmented_state(self, context: bool = False) -> AugmentedState | None:
+        """What a policy sees at this step's decision; ``None`` when the decision is forced. With
+        ``context``, the loop's whole state too (for policies that simulate)."""
+        return None if self.forced else self.observed_state(context)
+
+    def observed_state(self, context: bool = False) -> AugmentedState | None:
+        """The augmented state now, also when the decision is forced; ``None`` before the first plan."""
+        if self.plan is None:
+            return None
+        plan, age = self.plan, self.age
+        ctx = DecisionContext(self.system, self.env, self.step_index, plan, age, self.u_prev, self.timestep) if context else None
+        return AugmentedState(self.x, plan.states[0], age, plan.state_at(age), plan, self.timestep.observation, ctx)
+
+    def step(self, recompute: bool, started: float | None = None) -> float:
+        """Play this control interval: solve a new plan if ``recompute`` (or if forced), apply the
+        plan's input plus the LQR correction, clipped, and step the plant. Returns the environment's
+        reward (0 when the plant failed: the episode then ends, non-finite). ``started``: when the
+        step's decision began (the step's wall time counts from there)."""
+        if self.done:
+            raise RuntimeError("the episode is over: reset the loop")
+        start = time.perf_counter() if started is None else started
+        system, traj, i, x, plan = self.system, self.trajectory, self.step_index, self.x, self.plan
+        forced = self.forced
+        recompute = forced or bool(recompute)
+        if recompute:
+            solve_start = time.perf_counter()
+            new = system.plan(x, self.u_prev, plan, self.age, self.timestep)
+            traj.solve_time_s[i] = time.perf_counter() - solve_start  # the whole computation
+            if not new.success:
+                traj.solver_failures += 1
+            if new.success or plan is None:
+                plan, self.plan, self.age = new, new, 0
+                traj.plans.append((i, plan))
+        u, u_planned, correction, x_predicted = _input(system, plan, self.age, x)
+        try:
+            self.timestep = self.env.step(system.action(u, recompute))
+        except PhysicsError:
+            traj.nonfinite, self.done = True, True
+            return 0.0
+        traj.applied[i], traj.planned[i], traj.correction[i] = u, u_planned, correction
+        traj.predicted[i], traj.plan_age[i] = x_predicted, self.age
+        traj.recompute[i], traj.forced[i] = recompute, forced
+        traj.rewards[i] = reward = self.timestep.reward
+        traj.steps = self.step_index = i + 1
+        self.x = system.state(self.timestep)
+        self.age, self.u_prev = self.age + 1, u
+        traj.step_time_s[i] = time.perf_counter() - start
+        if self.timestep.last() or self.step_index >= system.episode_steps:
+            self._finish()
+        else:
+            self._arrive()
+        return reward
+
+    def _arrive(self) -> None:
+        """At the start of a step: the state is recorded; a non-finite one ends the episode."""
+        self.trajectory.states[self.step_index] = self.x
+        if not np.all(np.isfinite(self.x)):
+            self.trajectory.nonfinite, self.done = True, True
+
+    def _finish(self) -> None:
+        traj = self.trajectory
+        traj.states[traj.steps] = self.x
+        traj.nonfinite = not bool(np.all(np.isfinite(self.x)))
+        self.done = True
 
 
 def run_episode(
@@ -166,54 +260,13 @@ def run_episode(
     episode: Any = None,
 ) -> Trajectory:
     """Play one episode (a stored one if given, else one drawn by the task) under ``policy``."""
-    env.task.use_episode(episode)
-    timestep = env.reset()
-    x = system.state(timestep)
-    nx, nu, n = x.shape[0], system.u_min.shape[0], system.episode_steps
-    traj = Trajectory.empty(n, nx, nu)
-    plan: Plan | None = None
-    age, u_prev = 0, np.zeros(nu)
+    loop = ClosedLoop(system, env).reset(episode)
     simulates = getattr(policy, "simulates", False)
-
-    for i in range(n):
-        start = time.perf_counter()
-        traj.states[i] = x
-        if not np.all(np.isfinite(x)):
-            traj.nonfinite = True
-            break
-        context = DecisionContext(system, env, i, plan, age, u_prev, timestep) if simulates and plan is not None else None
-        recompute, forced = _decide(policy, rng, x, plan, age, timestep.observation, context)
-        if recompute:
-            solve_start = time.perf_counter()
-            new = system.plan(x, u_prev, plan, age, timestep)
-            traj.solve_time_s[i] = time.perf_counter() - solve_start  # the whole computation
-            if not new.success:
-                traj.solver_failures += 1
-            if new.success or plan is None:
-                plan, age = new, 0
-                traj.plans.append((i, plan))
-        u, u_planned, correction, x_predicted = _input(system, plan, age, x)
-
-        try:
-            timestep = env.step(system.action(u, recompute))
-        except PhysicsError:
-            traj.nonfinite = True
-            break
-        traj.applied[i], traj.planned[i], traj.correction[i] = u, u_planned, correction
-        traj.predicted[i], traj.plan_age[i] = x_predicted, age
-        traj.recompute[i], traj.forced[i] = recompute, forced
-        traj.rewards[i] = timestep.reward
-        traj.steps = i + 1
-        x = system.state(timestep)
-        age, u_prev = age + 1, u
-        traj.step_time_s[i] = time.perf_counter() - start
-        if timestep.last():
-            break
-
-    if traj.steps and not traj.nonfinite:
-        traj.states[traj.steps] = x
-        traj.nonfinite = not bool(np.all(np.isfinite(x)))
-    return traj
+    while not loop.done:
+        started = time.perf_counter()
+        s = loop.augmented_state(simulates)
+        loop.step(s is not None and bool(policy.decide(s, rng)), started)
+    return loop.trajectory
 
 
 def play_on(
