@@ -5,7 +5,7 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 export MUJOCO_GL ?= egl
 
-.PHONY: reproduce evaluate test setup clean
+.PHONY: reproduce evaluate example test setup clean
 
 setup: $(VENV)/.installed
 
@@ -30,6 +30,10 @@ evaluate: setup
 		--policy every:2 --policy every:5 --policy every:10 \
 		--policy threshold:0.01 --policy threshold:0.02 --json results/battery.json
 	$(BIN)/python scripts/figure_forecasts.py --policy every:20 --policy every:5 --out results/figure1_battery_forecasts.png
+
+# A trigger of your own (examples/my_trigger.py) against the built-in ones, with the paired table.
+example: setup
+	cd examples && ../$(BIN)/python my_trigger.py
 
 test: setup
 	$(BIN)/python -m pytest -q

@@ -11,6 +11,7 @@ it (README "Layout"; import-linter checks it):
 * ``etmpc.policies``: when to recompute: fixed, threshold, learned, self-triggering, rollout;
 * ``etmpc.views``: recordings, figures and video, drawn from what the floors below produce;
 * ``etmpc.evaluation``: test sets, workers, ``evaluate``, ``render``, ``bench``;
+* ``etmpc.envs``: the trigger problem as a ``dm_env`` and ``gymnasium`` environment, for any learner;
 * ``etmpc.learning``: GPOMDP, DPI, training runs, the self-trigger's training;
 * ``etmpc.experiments``: ``reproduce`` and its report, the price ``sweep``;
 * ``etmpc.cli``: the ``etmpc`` command.
@@ -27,6 +28,20 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 __version__ = "0.2.0"
 __all__ = ["evaluate"]
+
+
+def _register_environments() -> None:
+    """The trigger problem of every task as a gymnasium environment, ``etmpc/<domain>-<task>-v0``."""
+    from importlib.util import find_spec
+
+    if find_spec("gymnasium") is None:  # a dependency; an install without it still imports
+        return
+    from etmpc.envs.registration import register
+
+    register()
+
+
+_register_environments()
 
 
 def __getattr__(name: str):

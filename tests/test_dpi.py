@@ -7,7 +7,8 @@ import pytest
 
 from etmpc.learning import dpi
 from etmpc.cli import main
-from etmpc.policies.learned import LogisticPolicy, Normalisation, feature_size, load_policy, raw_features
+from etmpc.policies.features import feature_size, raw_features
+from etmpc.policies.learned import LogisticPolicy, Normalisation, load_policy
 from etmpc.control.plan import Plan
 from etmpc.policies import AugmentedState
 

@@ -13,7 +13,8 @@ from etmpc.experiments.reproduce import BASELINES, Settings, reproduce
 
 TINY = Settings(seeds=(0, 1), episodes=2, eval_every=1, eval_episodes=2, test_episodes=3, repeats=2, record_episodes=1,
                 video_size=(64, 48), dpi_seeds=(0, 1), dpi_episodes=2, dpi_eval_every=1, dpi_labels=3, dpi_futures=2,
-                dpi_horizon=5, validation_episodes=2, rollout_episodes=2, rollout_futures=2, rollout_horizon=5)
+                dpi_horizon=5, validation_episodes=2, rollout_episodes=2, rollout_futures=2, rollout_horizon=5,
+                ppo_timesteps=512)
 
 
 @pytest.fixture(scope="module")
@@ -114,3 +115,18 @@ def test_a_smoke_report_says_so_at_its_top_and_gives_no_verdicts(run):
     assert "smoke run" in text.split("## ")[0]
     assert "Holds" not in text and "Does not hold" not in text and "exclude 0" not in text
     assert "No verdicts in a smoke run." in text
+
+
+@pytest.mark.slow
+def test_the_learners_row_of_ppo_is_its_network_evaluated_against_the_best_fixed_policy(run):
+    pytest.importorskip("stable_baselines3")
+    out, results = run
+    r = results["systems"]["battery"]
+    row, best = r["learners"]["ppo"], r["learners"]["reference"]
+    spec = f"sb3:{out / 'battery' / 'train_ppo' / 'selected.zip'}"
+    direct = evaluate("battery", [spec, best], episodes=3, workers=1, progress=False)
+    by = {(x.policy, x.episode): x.objective for x in direct.runs}
+    assert row["policies"] == [spec] and row["episodes"] == 3
+    assert row["mean_difference"] == pytest.approx(np.mean([by[spec, e] - by[best, e] for e in range(3)]), rel=1e-12, abs=1e-15)
+    assert row["training"]["environment_steps"] == 512 and row["training"]["wall_seconds"] > 0
+    assert "PPO (Stable-Baselines3, `sb3:`)" in (out / "REPORT.md").read_text()

@@ -10,16 +10,35 @@ import pytest
 
 from etmpc.evaluation import testsets as testset
 from etmpc.common.errors import TestSetError
+from etmpc.systems import make_system
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
-@pytest.mark.parametrize("domain", ["cart_pendulum", "battery"])
-def test_stored_test_set_regenerates_bit_identically(domain):
-    result = subprocess.run([sys.executable, str(ROOT / "scripts" / "make_testset.py"), domain, "--check"],
-                            capture_output=True, text=True)
+@pytest.mark.parametrize("domain", sorted(testset.STORED))
+def test_stored_test_set_is_etmpc_testset_with_its_documented_seed(domain, tmp_path):
+    out = tmp_path / "set.npz"
+    result = subprocess.run([sys.executable, "-m", "etmpc.cli", "testset", domain, "--seed", str(testset.STORED[domain]),
+                             "--episodes", str(testset.STORED_EPISODES), "--out", str(out)], capture_output=True, text=True)
     assert result.returncode == 0, result.stdout + result.stderr
-    assert "identical" in result.stdout
+    system = make_system(domain)
+    stored = testset.default_path(system.domain, system.task)
+    assert out.read_bytes() == stored.read_bytes()
+    assert testset.checksum_path(out).read_text().split()[0] == testset.checksum_path(stored).read_text().split()[0]
+
+
+def test_a_drawn_test_set_is_what_evaluate_takes_and_never_overwrites(tmp_path, capsys):
+    from etmpc.cli import main
+
+    out = tmp_path / "mine.npz"
+    assert main(["testset", "battery", "--seed", "7", "--episodes", "3", "--out", str(out)]) == 0
+    loaded = testset.load(out, "battery", "trading")
+    assert loaded.episodes == 3 and loaded.meta["seed"] == 7
+    assert main(["evaluate", "battery", "--policy", "every:3", "--test-set", str(out), "--workers", "1"]) == 0
+    assert "3 episodes x 1 repeats" in capsys.readouterr().out
+    before = out.read_bytes()
+    assert main(["testset", "battery", "--seed", "8", "--out", str(out)]) == 2
+    assert "never overwritten" in capsys.readouterr().err and out.read_bytes() == before
 
 
 def test_loaded_test_set_matches_its_seed(cart_testset, cart_system):
@@ -42,10 +61,10 @@ def test_missing_test_set(tmp_path, monkeypatch):
     # Someone's own file: the advice is not to regenerate the stored set, which would not bring it back.
     with pytest.raises(TestSetError, match="not found") as info:
         testset.load(tmp_path / "nope.npz", "cart_pendulum", "balance")
-    assert "make_testset" not in str(info.value)
+    assert "etmpc testset" not in str(info.value)
     # The stored one (here: where the stored one is looked for) is regenerated from its seed.
     monkeypatch.setattr(testset, "default_path", lambda domain, task: tmp_path / "stored.npz")
-    with pytest.raises(TestSetError, match="not found.*make_testset.py cart_pendulum"):
+    with pytest.raises(TestSetError, match="not found.*etmpc testset cart_pendulum --seed 20210601"):
         testset.load(tmp_path / "stored.npz", "cart_pendulum", "balance")
 
 
@@ -61,7 +80,7 @@ def test_missing_checksum(copy):
     testset.checksum_path(copy).unlink()
     with pytest.raises(TestSetError, match="checksum file") as info:
         testset.load(copy, "cart_pendulum", "balance")
-    assert "make_testset" not in str(info.value)
+    assert "etmpc testset" not in str(info.value)
 
 
 @pytest.mark.parametrize("change, message", [

@@ -34,12 +34,18 @@ def _evaluate(args) -> None:
 
     _check_backend(args)
     _distinct_policies(args.policy)
+    if args.against is not None and args.against not in args.policy:
+        raise EtmpcError(f"--against {args.against} is not one of the --policy given")
     if args.test_set is not None and not Path(args.test_set).is_file():
         raise EtmpcError(f"test set {args.test_set} not found")
     check_outputs({"--json": args.json, "--record": args.record}, inputs={"--test-set": args.test_set})
     result = evaluate(args.task, args.policy, args.episodes, args.repeats, args.workers, args.seed, args.test_set,
                       backend=args.backend, address=args.address, record=args.record, recompute_price=args.price)
     print(format_table(result))
+    if args.against is not None:
+        from etmpc.evaluation.compare import format_against
+
+        print(format_against(result.to_json(), args.against))
     if args.record is not None:
         print(f"wrote {args.record} (open it with: rerun {args.record}; summarise it with: etmpc replay {args.record})")
     if args.json is not None:
@@ -60,6 +66,10 @@ def _train(args) -> None:
     check_name(args.task)
     _check_backend(args)
     check_outputs({}, {"--out": args.out})
+    if args.algorithm == "ppo":
+        return _train_ppo(args)
+    if args.timesteps is not None:
+        raise EtmpcError("--timesteps is PPO's setting: add --algorithm ppo")
     dpi_options = {"futures": args.futures, "horizon": args.horizon, "states_per_episode": args.labels}
     if args.algorithm != "dpi" and any(v is not None for v in dpi_options.values()):
         raise EtmpcError("--futures, --horizon and --labels are DPI's settings: add --algorithm dpi")
@@ -75,6 +85,26 @@ def _train(args) -> None:
                   record_episodes=args.record)
     print(format_summary(state))
     print(f"wrote {args.out}/selected.json, curve.json, curve.png, checkpoint.json and seed*/best.json, last.json")
+
+
+def _train_ppo(args) -> None:
+    from etmpc.evaluation.workers import default_workers
+    from etmpc.learning.ppo import PpoSettings, train_ppo
+    from etmpc.learning.train import parse_seeds
+
+    seeds = (0,) if args.seeds == "0-4" else parse_seeds(args.seeds)  # 0-4 is the other learners' default
+    if len(seeds) != 1:
+        raise EtmpcError(f"PPO trains one seed at a time: give --seeds S, got {args.seeds}")
+    if args.backend != "local" or args.resume or args.record:
+        raise EtmpcError("--algorithm ppo runs locally from the start: no --backend ray, --resume or --record")
+    settings = PpoSettings(**({} if args.timesteps is None else {"timesteps": args.timesteps}), seed=seeds[0],
+                           validation_episodes=args.validation_episodes)
+    result = train_ppo(args.task, args.out, settings, args.workers or default_workers(), args.price, say=_say)
+    print(f"PPO on {result['task']}: {result['environment_steps']} environment steps in {result['wall_seconds']:.0f} s; "
+          f"kept {result['selected']} (best of {len(result['checkpoints'])} on {settings.validation_episodes} "
+          "validation episodes)")
+    print(f"wrote {args.out}/selected.zip and selected.json (evaluate it with: etmpc evaluate {args.task} "
+          f"--policy sb3:{args.out}/selected.zip), training.json")
 
 
 def _train_self(args) -> None:
@@ -172,5 +202,14 @@ def _bench(args) -> None:
         print(f"wrote {args.json}")
 
 
+def _testset(args) -> None:
+    from etmpc.evaluation.testsets import draw
+    from etmpc.systems import make_system, system_key
+
+    digest = draw(make_system(system_key(args.task)), args.seed, args.episodes, args.out)
+    print(f"wrote {args.out} and {args.out}.sha256 ({args.episodes} episodes of {args.task}, seed {args.seed}, "
+          f"sha256 {digest}); use it with --test-set {args.out}")
+
+
 COMMANDS = {"evaluate": _evaluate, "train": _train, "train-self": _train_self, "reproduce": _reproduce, "sweep": _sweep,
-            "render": _render, "replay": _replay, "bench": _bench}
+            "render": _render, "replay": _replay, "bench": _bench, "testset": _testset}

@@ -13,7 +13,7 @@ from etmpc.common.errors import EtmpcError
 from etmpc.evaluation.workers import BACKENDS
 from etmpc.learning.config import ALGORITHMS
 from etmpc.learning.gpomdp import BASELINES
-from etmpc.policies.learned import DEFAULT_FEATURES, FEATURE_SETS
+from etmpc.policies.features import DEFAULT_FEATURES, FEATURE_SETS
 from etmpc.systems import names
 
 
@@ -112,8 +112,8 @@ def build_parser() -> argparse.ArgumentParser:
     ev = sub.add_parser("evaluate", help="compare recomputation policies on a stored test set")
     ev.add_argument("task", help=f"system to evaluate: {tasks}")
     ev.add_argument("--policy", action="append", required=True, metavar="SPEC",
-                    help="always | never | every:T | threshold:X | rl:PATH | self:PATH | rollout:BASE[:K[:H]] | "
-                         "oracle:BASE (an upper bound, not a policy) (repeatable)")
+                    help="always | never | every:T | threshold:X | rl:PATH | self:PATH | py:MODULE:NAME (your own) | "
+                         "rollout:BASE[:K[:H]] | oracle:BASE (an upper bound, not a policy) (repeatable)")
     ev.add_argument("--episodes", type=_positive_int, default=None, help="first N test-set episodes (default: all)")
     ev.add_argument("--repeats", type=_positive_int, default=1, help="passes over the test set (for stochastic policies)")
     ev.add_argument("--workers", type=_workers, default=None, help="worker processes (default: one per core)")
@@ -123,11 +123,14 @@ def build_parser() -> argparse.ArgumentParser:
                          "pendulum, 0 for the battery, whose computer draws eta_c from the battery)")
     ev.add_argument("--test-set", default=None, metavar="PATH", help="test set file (default: the stored one)")
     ev.add_argument("--json", type=_json_path, default=None, metavar="PATH", help="write the results as JSON")
+    ev.add_argument("--against", default=None, metavar="SPEC",
+                    help="also print every policy against this one (one of --policy), paired per episode with 95 %% CIs")
     ev.add_argument("--record", type=_rrd_path, default=None, metavar="PATH.rrd",
                     help="write every episode into a Rerun recording (open it with `rerun PATH.rrd`)")
     _backend_arguments(ev)
 
-    tr = sub.add_parser("train", help="train the learned recomputation policy over several seeds: DPI (default) or GPOMDP, the paper's")
+    tr = sub.add_parser("train", help="train a recomputation policy: DPI (default) or GPOMDP (the paper's) over seeds, "
+                                      "or PPO (Stable-Baselines3, the 'rl' extra) on the trigger environment")
     tr.add_argument("task", help=f"system to train on: {tasks}")
     tr.add_argument("--seeds", default="0-4", help="seeds: a range 0-4 or a list 0,2,5 (default 0-4)")
     tr.add_argument("--episodes", type=_positive_int, default=1500, help="training episodes per seed (default 1500)")
@@ -144,9 +147,12 @@ def build_parser() -> argparse.ArgumentParser:
                     help="GPOMDP baseline: none (the paper, default), mean (per step index), state (linear value function)")
     tr.add_argument("--learning-rate", type=float, default=0.05, help="GPOMDP's alpha (default 0.05)")
     tr.add_argument("--discount", type=float, default=0.975, help="GPOMDP's gamma (default 0.975)")
-    tr.add_argument("--algorithm", choices=ALGORITHMS, default="dpi",
+    tr.add_argument("--algorithm", choices=(*ALGORITHMS, "ppo"), default="dpi",
                     help="dpi (direct policy iteration: rollout-labelled classification, --eval-every episodes per "
-                         "iteration; default) or gpomdp (the paper's policy gradient)")
+                         "iteration; default), gpomdp (the paper's policy gradient), or ppo (Stable-Baselines3 on the "
+                         "trigger environment: --timesteps, one seed)")
+    tr.add_argument("--timesteps", type=_positive_int, default=None, metavar="N",
+                    help="PPO: environment steps in all (default 200000)")
     tr.add_argument("--features", choices=FEATURE_SETS, default=DEFAULT_FEATURES,
                     help="the policy's features: error (prediction error, its square, the plan's age and, for the "
                          "battery, prices and production now and as planned; default) or paper ([x_i, x_k, i-k] and squares)")
@@ -203,6 +209,12 @@ def build_parser() -> argparse.ArgumentParser:
     rn.add_argument("--fps", type=_fps, default=None, help="frames per second (default: one frame per control interval)")
     rn.add_argument("--record", type=_rrd_path, default=None, metavar="PATH.rrd",
                     help="also write the episode, frames included, into a Rerun recording")
+
+    tst = sub.add_parser("testset", help="draw a test set: N episodes of a task from a seed, with its sha256 (for --test-set)")
+    tst.add_argument("task", help=f"task to draw episodes of: {tasks}")
+    tst.add_argument("--seed", type=_seed, required=True, help="the seed every draw comes from")
+    tst.add_argument("--episodes", type=_positive_int, default=100, help="episodes (default 100)")
+    tst.add_argument("--out", type=Path, required=True, metavar="FILE.npz", help="a new file (never overwritten)")
 
     rp = sub.add_parser("replay", help="summarise a Rerun recording: objective, recomputes, prediction errors")
     rp.add_argument("recording", type=Path, metavar="PATH.rrd")

@@ -16,7 +16,9 @@ import numpy as np
 from tqdm import tqdm
 
 from etmpc.evaluation import testsets as ts_mod
+from etmpc.common.errors import EtmpcError
 from etmpc.policies import parse_policy
+from etmpc.policies.user import checked
 from etmpc.views.record import EpisodeRecord
 from etmpc.views.recording import Recorder
 from etmpc.systems import make_system, system_key
@@ -141,7 +143,7 @@ class Evaluation:
 
 def evaluate(
     domain: str,
-    policies: list[str],
+    policies: list,
     episodes: int | None = None,
     repeats: int = 1,
     workers: int | None = None,
@@ -154,13 +156,29 @@ def evaluate(
     recompute_price: float | None = None,
 ) -> Evaluation:
     """Run every policy on the first ``episodes`` test-set episodes, ``repeats`` times each, on
-    ``workers`` processes of ``backend`` (see ``etmpc.evaluation.workers.make_backend``). With ``record``, also
-    write every episode into that Rerun recording (``.rrd``). ``recompute_price``: the price of a
-    computation, if not the system's own (it enters every objective, and what rollouts optimise)."""
+    ``workers`` processes of ``backend`` (see ``etmpc.evaluation.workers.make_backend``).
+
+    ``domain``: a task name (``DOMAIN`` or ``DOMAIN/TASK``). ``policies``: spec strings
+    (``every:3``, ``rl:PATH``, ``py:MODULE:NAME``, ...) and policy objects (anything with ``spec``,
+    ``stochastic`` and ``decide(s, rng)``, see :mod:`etmpc.policies.user`), side by side; each is
+    named by its spec in the results, and every one meets the same episodes with the same draws.
+    With ``record``, also write every episode into that Rerun recording (``.rrd``).
+    ``recompute_price``: the price of a computation, if not the system's own (it enters every
+    objective, and what rollouts optimise)."""
     key = system_key(domain, recompute_price)
     system = make_system(key)
-    # Parsed once here (a bad spec fails before any work starts), then sent with each job.
-    parsed = {spec: parse_policy(spec, system.error_weights, system.domain, system.episode_steps) for spec in policies}
+    # Parsed (or checked) once here, so a bad policy fails before any work starts, then sent with each job.
+    parsed = {}
+    for policy in policies:
+        if isinstance(policy, str):
+            spec, policy = policy, parse_policy(policy, system.error_weights, system.domain, system.episode_steps)
+        else:
+            policy = checked(policy)
+            spec = policy.spec
+        if spec in parsed:
+            raise EtmpcError(f"policy {spec} is given twice")
+        parsed[spec] = policy
+    policies = list(parsed)
     path = testset_path or str(ts_mod.default_path(system.domain, system.task))
     testset = ts_mod.load(path, system.domain, system.task)
     testset.check_playable(system, system.make_env().task)  # a bad episode fails here, before any work

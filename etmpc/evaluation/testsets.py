@@ -3,7 +3,8 @@
 A test set is one ``.npz`` file in ``tasks/<domain>/`` with a ``.sha256`` file beside it. Each
 named array has the episode index as its first axis; ``meta`` holds a JSON description (task,
 seed, generator). The file is written with fixed zip timestamps so that regenerating it from its
-seed (``scripts/make_testset.py``) gives the same bytes, hence the same checksum.
+seed (``etmpc testset TASK --seed S --out FILE``; :data:`STORED` holds the stored sets' seeds) gives
+the same bytes, hence the same checksum.
 """
 
 from __future__ import annotations
@@ -17,10 +18,15 @@ from pathlib import Path
 
 import numpy as np
 
-from etmpc.common.errors import TestSetError
+from etmpc.common.errors import EtmpcError, TestSetError
+from etmpc.common.outputs import check_outputs, write_bytes
 from etmpc.common.resources import tasks_dir
 
 FORMAT_VERSION = 1
+STORED_EPISODES = 100
+# The seed of each stored test set (tasks/<domain>/<task>_testset.npz): each is
+# `etmpc testset TASK --seed SEED --episodes 100` (tests/test_testset.py regenerates them bit for bit).
+STORED = {"cart_pendulum": 20210601, "battery": 20210602}
 _ZIP_EPOCH = (1980, 1, 1, 0, 0, 0)
 
 
@@ -53,12 +59,11 @@ def encode(arrays: dict[str, np.ndarray], meta: dict) -> bytes:
 
 
 def write(path: Path, arrays: dict[str, np.ndarray], meta: dict) -> str:
-    """Write the test set and its checksum file; returns the sha256."""
+    """Write the test set and its checksum file, each atomically; returns the sha256."""
     data = encode(arrays, meta)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_bytes(data)
     digest = hashlib.sha256(data).hexdigest()
-    checksum_path(path).write_text(f"{digest}  {path.name}\n")
+    write_bytes(Path(path), data)
+    write_bytes(checksum_path(Path(path)), f"{digest}  {Path(path).name}\n".encode())
     return digest
 
 
@@ -106,7 +111,7 @@ def load(path: Path, domain: str, task: str) -> TestSet:
     path = Path(path)
     stored = path.resolve() == default_path(domain, task).resolve()
     # Only the stored test set is regenerated from its seed; someone else's file is theirs to fix.
-    advice = (f"regenerate it with: python scripts/make_testset.py {domain}" if stored else
+    advice = (f"regenerate it with: etmpc testset {domain} --seed {STORED.get(domain, 'SEED')} --out {path}" if stored else
               "use the stored test set (drop --test-set) or a complete one")
     if not path.is_file():
         raise TestSetError(f"test set {path} not found; {advice}")
@@ -156,3 +161,19 @@ def generate(system, seed: int, episodes: int) -> tuple[dict[str, np.ndarray], d
         "parameters": system.episode_parameters(),
     }
     return arrays, meta
+
+
+def draw(system, seed: int, episodes: int, out: Path) -> str:
+    """``etmpc testset``: ``episodes`` episodes of ``system`` drawn from ``seed`` into the new file
+    ``out`` (an ``.npz``; ``--test-set`` takes it), with its sha256 beside it. Returns the sha256."""
+    out = Path(out)
+    if out.suffix != ".npz":
+        raise EtmpcError(f"--out {out} does not end in .npz")
+    if not 1 <= episodes <= 100_000:
+        raise EtmpcError(f"--episodes must be in 1..100000, got {episodes}")
+    for path in (out, checksum_path(out)):
+        if path.exists():
+            raise EtmpcError(f"{path} exists: a test set is never overwritten; choose another --out")
+    check_outputs({"--out": out, "its checksum": checksum_path(out)})
+    arrays, meta = generate(system, seed, episodes)
+    return write(out, arrays, meta)

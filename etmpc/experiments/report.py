@@ -91,7 +91,7 @@ def report(results: dict) -> str:
             "",
             f"![learning curve]({r['files']['curve']}) ![Figure 3]({r['files']['figure3']})",
             "",
-        ] + headroom_section(r, s.get("smoke", False)) + [
+        ] + headroom_section(r, s.get("smoke", False)) + learners_section(r) + [
             f"Files: {', '.join(f'`{v}`' for v in r['files'].values())}.",
             "",
         ]
@@ -142,6 +142,31 @@ def headroom_section(r: dict, smoke: bool) -> list[str]:
     if not smoke:
         ci_low = p["gain_percent"] - p["gain_percent_ci95"]
         lines.append(f"Its CI {'excludes' if ci_low > 0 else 'does not exclude'} 0.")
+    return lines + [""]
+
+
+def learners_section(r: dict) -> list[str]:
+    """The learners side by side on every test-set episode, against the best fixed policy, with their cost."""
+    if "learners" not in r:
+        return []
+    le = r["learners"]
+    names = {"dpi": "DPI (the default learner, `rl:`)", "gpomdp": "GPOMDP (the paper's, `rl:`, seeds pooled)",
+             "ppo": "PPO (Stable-Baselines3, `sb3:`)"}
+    lines = [f"### The learners against `{le['reference']}`, on every test-set episode", "",
+             "| learner | recomputes | objective | gain over best fixed | better in | training |", "|---|---|---|---|---|---|"]
+    for key in ("dpi", "gpomdp", "ppo"):
+        if key not in le:
+            continue
+        row, cost = le[key], le[key]["training"]
+        spent = [f"{cost['environment_steps']:,} environment steps"]
+        if "simulated_steps_at_most" in cost:
+            spent.append(f"≤ {cost['simulated_steps_at_most']:,} simulated in rollouts")
+        if "wall_seconds" in cost:
+            spent.append(f"{cost['wall_seconds'] / 60:.1f} min on {cost['workers']} workers")
+        lines.append(f"| {names[key]} | {row['recomputes_mean']:.1f} | {_f(row['objective_mean'])} | {_pct(row)} | "
+                     f"{row['better_episodes']}/{row['episodes']} | {', '.join(spent)} |")
+    if "ppo" not in le:
+        lines += ["", "PPO did not run: it needs the 'rl' extra (`pip install 'etmpc[rl]'`)."]
     return lines + [""]
 
 

@@ -13,6 +13,8 @@ Per system, in ``DIR/<domain>/``:
    (``learned_default.json``);
 3c. ``headroom.json``: the rollout policy over the best fixed one and the ``oracle:`` upper bound on
    the first ``rollout_episodes`` test-set episodes (rollouts are expensive);
+3d. ``train_ppo/``: PPO from Stable-Baselines3 on the trigger environment (with the 'rl' extra), its
+   chosen network evaluated on the test set (``learned_ppo.json``);
 4. figures: ``figure1_forecasts.png`` (battery), ``train/curve.png`` (Figure 2),
    ``figure3.png``, ``trajectory.png`` (the best fixed policy's first episode);
 5. ``episodes.rrd``: a Rerun recording of representative episodes (the best fixed policy and
@@ -26,7 +28,9 @@ settings are kept in ``DIR/settings.json`` and a second run with other settings 
 
 from __future__ import annotations
 
+import importlib.util
 import json
+import shutil
 import sys
 import time
 from dataclasses import asdict, dataclass
@@ -39,8 +43,9 @@ from etmpc.evaluation.render import render_rollout
 from etmpc.evaluation.workers import play_test_episode
 from etmpc.experiments import sweep as sweeps
 from etmpc.experiments.report import machine, report, software_versions
-from etmpc.experiments.summary import summarise_default, summarise_headroom, summarise_system
+from etmpc.experiments.summary import summarise_default, summarise_headroom, summarise_learners, summarise_system
 from etmpc.learning.dpi import Settings as DpiSettings
+from etmpc.learning.ppo import PpoSettings, train_ppo
 from etmpc.learning.train import TrainConfig, curve_summary, load_checkpoint, train
 from etmpc.policies import parse_policy
 from etmpc.policies.learned import write_json_atomically
@@ -79,6 +84,7 @@ class Settings:
     rollout_episodes: int = 30  # first test-set episodes for rollout:BEST and oracle:BEST
     rollout_futures: int = 4  # K: 8 doubles its cost (2 K H simulated steps per decision)
     rollout_horizon: int | None = 20  # None: to the episode's end
+    ppo_timesteps: int = 60_000  # PPO (Stable-Baselines3, the 'rl' extra) on the trigger environment; 0: none
     smoke: bool = False  # a smoke run: its report gives no verdicts
 
     def to_json(self) -> dict:
@@ -90,7 +96,8 @@ class Settings:
 FULL = Settings()
 QUICK = Settings(episodes=30, eval_every=15, eval_episodes=10, test_episodes=20, repeats=2, record_episodes=2,
                  video_size=(320, 240), dpi_seeds=(0, 1), dpi_episodes=4, dpi_eval_every=2, dpi_labels=5, dpi_futures=2,
-                 dpi_horizon=10, validation_episodes=5, rollout_episodes=3, rollout_futures=2, rollout_horizon=10, smoke=True)
+                 dpi_horizon=10, validation_episodes=5, rollout_episodes=3, rollout_futures=2, rollout_horizon=10,
+                 ppo_timesteps=2048, smoke=True)
 
 
 def reproduce(out: Path, settings: Settings = FULL, workers: int = 1, backend: str = "local",
@@ -194,6 +201,8 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
     oracle = evaluated_once(folder / "headroom_oracle.json", timed=run["workers"], policies=[f"oracle:{best}"], **subset)
     summary["default_learner"] = summarise_default(system, baselines, default, load_checkpoint(dpi_dir / "checkpoint.json"))
     summary["headroom"] = summarise_headroom(system, best, baselines, learned, default, rollout, oracle)
+    ppo_run, ppo = _ppo(folder, domain, settings, run, common)
+    summary["learners"] = summarise_learners(system, baselines, learned, default, ppo, ppo_run, settings.to_json())
 
     _say(f"{domain}: figures, recording, video")
     if not (folder / "figure3.png").exists():
@@ -215,6 +224,23 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
         files["video"] = "episode.mp4"
     summary["files"] = {k: f"{domain}/{v}" for k, v in files.items()}
     return summary
+
+
+def _ppo(folder: Path, domain: str, settings: Settings, run: dict, common: dict) -> tuple[dict | None, dict | None]:
+    """PPO on the trigger environment (``train_ppo/``, redone whole if it was interrupted), its chosen
+    network evaluated on the test set (``learned_ppo.json``); ``(None, None)`` without the 'rl' extra."""
+    if not settings.ppo_timesteps or importlib.util.find_spec("stable_baselines3") is None:
+        _say(f"{domain}: PPO skipped" + ("" if not settings.ppo_timesteps else " (pip install 'etmpc[rl]' to run it)"))
+        return None, None
+    ppo_dir = folder / "train_ppo"
+    if not (ppo_dir / "training.json").exists():
+        _say(f"{domain}: PPO (Stable-Baselines3), {settings.ppo_timesteps} environment steps")
+        if ppo_dir.exists():
+            shutil.rmtree(ppo_dir)  # an interrupted run starts again
+        train_ppo(domain, ppo_dir, PpoSettings(timesteps=settings.ppo_timesteps, validation_episodes=settings.validation_episodes),
+                  run["workers"], say=_say)
+    training = json.loads((ppo_dir / "training.json").read_text())
+    return training, evaluated_once(folder / "learned_ppo.json", policies=[f"sb3:{ppo_dir / 'selected.zip'}"], **common)
 
 
 def _trajectory_png(path: Path, system, spec: str) -> None:

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from etmpc.evaluation.compare import paired, per_episode
 from etmpc.learning.train import curve_summary
 
 
@@ -66,31 +67,6 @@ def summarise_system(system, baselines: dict, learned: dict, curve: dict) -> dic
     }
 
 
-def per_episode(evaluation: dict, policies=None) -> dict[int, float]:
-    """Episode -> the mean objective of ``policies`` (default: every policy in the file) over their
-    finite runs (seeds and passes together)."""
-    values: dict[int, list[float]] = {}
-    for r in evaluation["runs"]:
-        if r["finite"] and (policies is None or r["policy"] in policies):
-            values.setdefault(r["episode"], []).append(r["objective"])
-    return {e: float(np.mean(v)) for e, v in values.items()}
-
-
-def paired(a: dict[int, float], b: dict[int, float], sense: str, episodes=None) -> dict:
-    """``a`` against ``b`` on their common episodes (or ``episodes``): the mean difference ``a - b``
-    with its 95 % CI, and the same as a percentage of ``|mean b|``, signed so that > 0 is better."""
-    common = sorted(set(a) & set(b) if episodes is None else set(episodes) & set(a) & set(b))
-    diff = np.array([a[e] - b[e] for e in common])
-    sign = 1.0 if sense == "max" else -1.0
-    scale = abs(float(np.mean([b[e] for e in common]))) if common else float("nan")
-    ci = float(1.96 * diff.std(ddof=1) / np.sqrt(len(diff))) if len(diff) > 1 else float("nan")
-    mean = float(diff.mean()) if len(diff) else float("nan")
-    return {"episodes": len(common), "objective_mean": float(np.mean([a[e] for e in common])) if common else float("nan"),
-            "reference_mean": float(np.mean([b[e] for e in common])) if common else float("nan"),
-            "mean_difference": mean, "ci95": ci, "gain_percent": 100.0 * sign * mean / scale,
-            "gain_percent_ci95": 100.0 * ci / scale, "better_episodes": int((sign * diff > 0).sum())}
-
-
 def summarise_default(system, baselines: dict, default: dict, state) -> dict:
     """The default learner's shipped policy on the test set, against the best fixed policy."""
     sense = system.objective_sense
@@ -128,3 +104,32 @@ def summarise_headroom(system, best: str, baselines: dict, learned: dict, defaul
 def _row(s: dict) -> dict:
     keys = ("objective_mean", "objective_std", "control_objective_mean", "recomputes_mean", "solver_failures")
     return {k: s[k] for k in keys}
+
+
+def summarise_learners(system, baselines: dict, learned: dict, default: dict, ppo: dict | None, ppo_run: dict | None,
+                       settings: dict) -> dict:
+    """Each learner's policy on every test-set episode against the best fixed policy (paired, 95 % CI),
+    with what its training cost: the default learner (DPI), the paper's (GPOMDP) and, if it ran, PPO."""
+    sense = system.objective_sense
+    fixed = baselines["policies"]
+    best = (max if sense == "max" else min)(fixed, key=lambda spec: fixed[spec]["objective_mean"])
+    reference = per_episode(baselines, {best})
+    steps = system.episode_steps
+    dpi_episodes = len(settings["dpi_seeds"]) * settings["dpi_episodes"]
+    rows = {
+        "dpi": (default, {"episodes": dpi_episodes, "environment_steps": dpi_episodes * steps,
+                          "simulated_steps_at_most": dpi_episodes * settings["dpi_labels"] * settings["dpi_futures"] * 2
+                          * settings["dpi_horizon"]}),
+        "gpomdp": (learned, {"episodes": len(settings["seeds"]) * settings["episodes"],
+                             "environment_steps": len(settings["seeds"]) * settings["episodes"] * steps}),
+    }
+    if ppo is not None:
+        rows["ppo"] = (ppo, {"environment_steps": ppo_run["environment_steps"], "wall_seconds": ppo_run["wall_seconds"],
+                             "workers": ppo_run["workers"]})
+    out = {"reference": best}
+    for name, (evaluation, cost) in rows.items():
+        runs = [r for r in evaluation["runs"] if r["finite"]]
+        out[name] = dict(paired(per_episode(evaluation), reference, sense), policies=list(evaluation["policies"]),
+                         recomputes_mean=float(np.mean([r["recomputes"] for r in runs])) if runs else float("nan"),
+                         training=cost)
+    return out

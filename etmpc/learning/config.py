@@ -10,7 +10,7 @@ from dataclasses import asdict, dataclass, field
 from etmpc.common.errors import EtmpcError
 from etmpc.learning import dpi
 from etmpc.learning.gpomdp import Settings
-from etmpc.policies.learned import DEFAULT_FEATURES, check_features
+from etmpc.policies.features import DEFAULT_FEATURES, check_features
 from etmpc.systems import system_key
 
 TRAIN_ENTROPY = 0x6574_6D70_6321  # "etmpc!"

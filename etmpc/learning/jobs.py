@@ -14,7 +14,8 @@ from etmpc.learning.config import NORMALISATION_ENTROPY, TRAIN_ENTROPY
 from etmpc.learning.gpomdp import Learner, Settings
 from etmpc.loop import run_episode
 from etmpc.policies import parse_policy, selftrigger
-from etmpc.policies.learned import LogisticPolicy, raw_features
+from etmpc.policies.features import raw_features
+from etmpc.policies.learned import LogisticPolicy
 from etmpc.views.record import EpisodeRecord
 
 

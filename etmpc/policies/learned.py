@@ -35,56 +35,15 @@ from etmpc.common.errors import EtmpcError
 from etmpc.common.numerics import dot
 from etmpc.common.outputs import write_text
 from etmpc.loop import AugmentedState
-from etmpc.systems import system_class
+from etmpc.policies.features import FEATURE_SETS, feature_size, raw_features
 
 FORMAT = "etmpc-logistic-policy"
 VERSION = 2
-FEATURE_SETS = ("error", "paper")
-DEFAULT_FEATURES = "error"
 INITIAL_KEEP_LOGIT = -3.0  # sigma(-3) = 0.047: at first the policy recomputes 95 % of the time
 
 
 class PolicyFileError(EtmpcError):
     """A policy or checkpoint file that is missing, corrupt, or made for another task."""
-
-
-def raw_state(s: AugmentedState) -> np.ndarray:
-    """``s = [x_i, x_k, i - k]``."""
-    return np.concatenate([s.x, s.x_plan, [float(s.age)]])
-
-
-def _exogenous(domain: str):
-    """The task's exogenous features ``f(s) -> array`` and their names (its system's optional
-    ``exogenous_features``, see :mod:`etmpc.systems.base`), or None."""
-    system = system_class(domain)
-    names = getattr(system, "exogenous_feature_names", ())
-    return (system.exogenous_features, names) if names else None
-
-
-def raw_features(features: str, domain: str, s: AugmentedState) -> np.ndarray:
-    """The raw vector ``r`` of feature set ``features`` (see the module docstring)."""
-    if features == "paper":
-        return raw_state(s)
-    exogenous = _exogenous(domain)
-    error = np.concatenate([s.x - s.x_predicted, [float(s.age)]])
-    return error if exogenous is None else np.concatenate([error, exogenous[0](s)])
-
-
-def raw_size(features: str, domain: str, nx: int) -> int:
-    if features == "paper":
-        return 2 * nx + 1
-    exogenous = _exogenous(domain)
-    return nx + 1 + (0 if exogenous is None else len(exogenous[1]))
-
-
-def feature_size(nx: int, features: str = "paper", domain: str = "") -> int:
-    return 2 * raw_size(features, domain, nx) + 1
-
-
-def check_features(name: str) -> str:
-    if name not in FEATURE_SETS:
-        raise EtmpcError(f"unknown feature set {name!r}; valid: {', '.join(FEATURE_SETS)}")
-    return name
 
 
 @dataclass(frozen=True, eq=False)

@@ -1,6 +1,7 @@
 """Policies from their command-line specs: ``always``, ``never``, ``every:T`` (T >= 1), ``threshold:X``
 (X >= 0), ``rl:PATH`` (a learned policy saved by ``etmpc train``), ``self:PATH`` (a self-triggering
-policy saved by ``etmpc train-self``), ``rollout:BASE[:K[:H]]`` and the upper bound ``oracle:BASE``.
+policy saved by ``etmpc train-self``), ``py:MODULE:NAME`` (a trigger of your own, see
+:mod:`etmpc.policies.user`), ``sb3:PATH`` (a network trained on the trigger environment), ``rollout:BASE[:K[:H]]`` and the upper bound ``oracle:BASE``.
 
 The parser sits above the policies it builds: it imports each kind, none of them imports it.
 """
@@ -15,8 +16,10 @@ from etmpc.common.errors import EtmpcError, UnknownNameError
 from etmpc.policies.fixed import Always, Every, Never
 from etmpc.policies.learned import load_policy
 from etmpc.policies.rollout import parse_rollout
+from etmpc.policies.sb3 import load_sb3
 from etmpc.policies.selftrigger import load_self
 from etmpc.policies.threshold import Threshold
+from etmpc.policies.user import load_user
 from etmpc.loop import Policy
 
 
@@ -55,9 +58,15 @@ def parse_policy(spec: str, error_weights: np.ndarray, domain: str | None = None
         if not arg:
             raise EtmpcError(f"bad policy {spec!r}: give the policy file, self:PATH")
         return load_self(arg, domain)
+    if name == "py":
+        return load_user(spec)
+    if name == "sb3":
+        if not arg:
+            raise EtmpcError(f"bad policy {spec!r}: give the model file, sb3:PATH")
+        return load_sb3(arg, domain)
     if name == "rl":
         if not arg:
             raise EtmpcError(f"bad policy {spec!r}: give the policy file, rl:PATH")
         return load_policy(arg, domain, nx=len(error_weights))
     raise UnknownNameError(f"unknown policy {spec!r}; valid: always, never, every:T, threshold:X, rl:PATH, self:PATH, "
-                           "rollout:BASE[:K[:H]], oracle:BASE")
+                           "py:MODULE:NAME, sb3:PATH, rollout:BASE[:K[:H]], oracle:BASE")

@@ -1,0 +1,50 @@
+"""The trigger environment as a ``gymnasium.Env`` (:class:`TriggerEnv`), registered for every task on
+``import etmpc`` as ``etmpc/<domain>-<task>-v0`` (``gymnasium.make("etmpc/cart_pendulum-balance-v0")``).
+
+Spaces: ``Discrete(2)`` actions (0 keep, 1 recompute) and a float32 ``Box`` of
+:attr:`TriggerEnv.observation_names` over the whole float32 range (the features are unbounded; a
+diverged plant's are clipped to that range, never NaN). ``reset(seed=S)`` draws a training-distribution episode from
+``gymnasium``'s generator seeded by ``S`` (the same ``S``, the same episode); ``reset(options=
+{"test_episode": i})`` plays episode ``i`` of the stored test set. An episode ends ``truncated`` at the
+task's time limit, ``terminated`` only when the plant fails. ``info`` holds the step's
+``control_reward`` and ``computation_cost`` (the reward is their difference), whether it
+``recompute``-d and whether that was ``forced``. See :mod:`etmpc.envs.trigger` for the rest.
+"""
+
+from __future__ import annotations
+
+import gymnasium
+import numpy as np
+from gymnasium import spaces
+
+from etmpc.envs.trigger import TriggerEnvironment
+
+class TriggerEnv(gymnasium.Env):
+    """``gymnasium`` face of :class:`~etmpc.envs.trigger.TriggerEnvironment` (the same loop)."""
+
+    metadata = {"render_modes": []}
+
+    def __init__(self, task: str = "cart_pendulum", price: float | None = None, test_set: str | None = None):
+        self.core = TriggerEnvironment(task, price=price, test_set=test_set)
+        self.observation_names = self.core.observation_names
+        self.action_space = spaces.Discrete(2)
+        top = np.finfo(np.float32).max
+        self.observation_space = spaces.Box(-top, top, shape=(len(self.observation_names),), dtype=np.float32)
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        self.core.generator = self.np_random
+        options = dict(options or {})
+        test_episode = options.pop("test_episode", None)
+        if options:
+            raise ValueError(f"unknown reset options {sorted(options)}; known: test_episode")
+        timestep = self.core.reset(test_episode=test_episode)
+        return timestep.observation, dict(self.core.info)
+
+    def step(self, action):
+        if self.core.loop.done:
+            raise RuntimeError("the episode is over: call reset()")
+        timestep = self.core.step(action)
+        terminated = timestep.last() and timestep.discount == 0.0
+        truncated = timestep.last() and not terminated
+        return timestep.observation, float(timestep.reward), terminated, truncated, dict(self.core.info)

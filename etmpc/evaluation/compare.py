@@ -1,0 +1,67 @@
+"""Policies against a reference on the same episodes: paired differences with 95 % confidence intervals.
+
+Every policy of an evaluation meets the same test-set episodes, so a policy is compared with a
+reference episode by episode: the mean difference, its 95 % CI (normal approximation, ``1.96 sd /
+sqrt(n)``), the same as a percentage of the reference's mean, and the episodes where it is better.
+``etmpc evaluate --against SPEC`` prints :func:`format_against`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from etmpc.common.errors import EtmpcError
+
+
+def per_episode(evaluation: dict, policies=None) -> dict[int, float]:
+    """Episode -> the mean objective of ``policies`` (default: every policy in the file) over their
+    finite runs (seeds and passes together)."""
+    values: dict[int, list[float]] = {}
+    for r in evaluation["runs"]:
+        if r["finite"] and (policies is None or r["policy"] in policies):
+            values.setdefault(r["episode"], []).append(r["objective"])
+    return {e: float(np.mean(v)) for e, v in values.items()}
+
+
+def paired(a: dict[int, float], b: dict[int, float], sense: str, episodes=None) -> dict:
+    """``a`` against ``b`` on their common episodes (or ``episodes``): the mean difference ``a - b``
+    with its 95 % CI, and the same as a percentage of ``|mean b|``, signed so that > 0 is better."""
+    common = sorted(set(a) & set(b) if episodes is None else set(episodes) & set(a) & set(b))
+    diff = np.array([a[e] - b[e] for e in common])
+    sign = 1.0 if sense == "max" else -1.0
+    scale = abs(float(np.mean([b[e] for e in common]))) if common else float("nan")
+    ci = float(1.96 * diff.std(ddof=1) / np.sqrt(len(diff))) if len(diff) > 1 else float("nan")
+    mean = float(diff.mean()) if len(diff) else float("nan")
+    return {"episodes": len(common), "objective_mean": float(np.mean([a[e] for e in common])) if common else float("nan"),
+            "reference_mean": float(np.mean([b[e] for e in common])) if common else float("nan"),
+            "mean_difference": mean, "ci95": ci, "gain_percent": 100.0 * sign * mean / scale,
+            "gain_percent_ci95": 100.0 * ci / scale, "better_episodes": int((sign * diff > 0).sum())}
+
+
+def against(evaluation: dict, reference: str) -> dict[str, dict]:
+    """Each policy of ``evaluation`` (an evaluation's JSON) against ``reference``, paired per episode;
+    gains > 0 are better, whatever the objective's sense."""
+    policies = evaluation["policies"]
+    if reference not in policies:
+        raise EtmpcError(f"--against {reference}: not one of the evaluated policies ({', '.join(policies)})")
+    sense = policies[reference]["objective_sense"]
+    base = per_episode(evaluation, {reference})
+    return {spec: dict(paired(per_episode(evaluation, {spec}), base, sense), recomputes_mean=row["recomputes_mean"],
+                       upper_bound=row.get("upper_bound", False))
+            for spec, row in policies.items() if spec != reference}
+
+
+def format_against(evaluation: dict, reference: str) -> str:
+    """The table of :func:`against`: objective, paired difference and gain (95 % CI), episodes better."""
+    rows = against(evaluation, reference)
+    ref = evaluation["policies"][reference]
+    width = max([16] + [len(spec) + 2 for spec in rows])
+    head = f"{'policy':<{width}}{'objective':>12}{'difference':>13}{'± 95 % CI':>11}{'gain %':>9}{'± CI':>7}{'better':>9}{'recomputes':>12}"
+    lines = [f"paired over the same test-set episodes against {reference} ({ref['objective_mean']:.5f}, "
+             f"{ref['recomputes_mean']:.2f} recomputes); gain > 0 is better", head, "-" * len(head)]
+    for spec, r in rows.items():
+        name = spec + (" (bound)" if r["upper_bound"] else "")
+        lines.append(f"{name:<{width}}{r['objective_mean']:>12.5f}{r['mean_difference']:>+13.5f}{r['ci95']:>11.5f}"
+                     f"{r['gain_percent']:>+9.2f}{r['gain_percent_ci95']:>7.2f}{r['better_episodes']:>5d}/{r['episodes']:<3d}"
+                     f"{r['recomputes_mean']:>12.2f}")
+    return "\n".join(lines)

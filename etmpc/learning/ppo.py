@@ -1,0 +1,144 @@
+"""A trigger trained by a standard RL library: Stable-Baselines3's PPO on the trigger environment.
+
+``etmpc train TASK --algorithm ppo --timesteps N --out DIR`` trains PPO (an MLP policy) on
+``etmpc.envs.gym.TriggerEnv`` for ``N`` environment steps, on ``--workers`` environments in parallel
+processes, with observations and rewards normalised by ``VecNormalize``. After each of ``checkpoints``
+equal slices of the budget the network is saved (``checkpoints/step_<n>.zip`` and, beside it, the
+``.json`` that ``sb3:PATH`` reads: the task and the frozen normalisation) and scored on
+``validation_episodes`` training-distribution episodes, drawn as ``etmpc train`` draws its own
+(never the test set). The best becomes ``selected.zip`` / ``selected.json``; ``training.json`` keeps
+the settings, the validation scores, the environment steps and the wall time.
+
+Evaluate it like any policy: ``etmpc evaluate TASK --policy sb3:DIR/selected.zip``. PyTorch runs on
+one thread per process, on the CPU. Stable-Baselines3 and PyTorch are the optional extra ``rl``.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+from etmpc.common.errors import EtmpcError
+from etmpc.common.outputs import refuse_foreign, write_json
+from etmpc.evaluation.workers import make_backend
+from etmpc.learning.config import VALIDATION_ENTROPY
+from etmpc.learning.jobs import mean_scores
+from etmpc.policies.sb3 import FORMAT, metadata_path
+from etmpc.systems import make_system, system_key
+
+
+@dataclass(frozen=True)
+class PpoSettings:
+    """PPO's settings (Stable-Baselines3's names); the defaults are its own but for the sizes."""
+
+    timesteps: int = 200_000  # environment steps in all
+    seed: int = 0
+    checkpoints: int = 4  # slices of the budget; each ends with a save and a validation score
+    validation_episodes: int = 30  # training-distribution episodes that choose selected.zip
+    n_steps: int = 512  # steps per environment between updates
+    batch_size: int = 256
+    n_epochs: int = 10
+    learning_rate: float = 3e-4
+    gamma: float = 0.99
+    gae_lambda: float = 0.95
+    clip_range: float = 0.2
+    ent_coef: float = 0.0
+    hidden: tuple[int, ...] = (64, 64)
+
+    def __post_init__(self):
+        for name in ("timesteps", "checkpoints", "validation_episodes", "n_steps", "batch_size", "n_epochs"):
+            if getattr(self, name) < 1:
+                raise EtmpcError(f"PPO needs {name} >= 1, got {getattr(self, name)}")
+
+
+def _libraries():
+    try:
+        import stable_baselines3
+        import torch
+    except ImportError:
+        raise EtmpcError("--algorithm ppo needs Stable-Baselines3 and PyTorch: pip install 'etmpc[rl]'") from None
+    return stable_baselines3, torch
+
+
+def _make_env(task: str, price: float | None, seed: int):
+    def make():
+        from stable_baselines3.common.monitor import Monitor
+
+        from etmpc.envs.gym import TriggerEnv
+
+        env = Monitor(TriggerEnv(task, price=price))
+        env.reset(seed=seed)
+        return env
+    return make
+
+
+def _ours(name: str) -> bool:
+    return name in ("checkpoints", "selected.zip", "selected.json", "training.json")
+
+
+def train_ppo(task: str, out: Path, settings: PpoSettings = PpoSettings(), workers: int = 1, price: float | None = None,
+              say=lambda line: None) -> dict:
+    """Train, checkpoint, choose on validation episodes; returns ``training.json``'s content."""
+    sb3, torch = _libraries()
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
+
+    out = Path(out)
+    key = system_key(task, price)
+    system = make_system(key)
+    refuse_foreign(out, _ours, "PPO training run")
+    if (out / "training.json").exists():
+        raise EtmpcError(f"{out} already holds a PPO run; choose another --out")
+    torch.set_num_threads(1)
+    # PPO collects n_steps per environment between updates: a budget too small for that shrinks n_steps,
+    # and each checkpoint's slice is a whole number of rollouts (so the steps reported are the steps run).
+    n_steps = min(settings.n_steps, max(1, settings.timesteps // (settings.checkpoints * workers)))
+    rollout = n_steps * workers
+    slices = [max(1, round(settings.timesteps / settings.checkpoints / rollout)) * rollout] * settings.checkpoints
+    envs = [_make_env(task, price, settings.seed * 1000 + i) for i in range(workers)]
+    vec = SubprocVecEnv(envs) if workers > 1 else DummyVecEnv(envs)
+    vec = VecNormalize(vec, norm_obs=True, norm_reward=True, gamma=settings.gamma)
+    model = sb3.PPO("MlpPolicy", vec, seed=settings.seed, device="cpu", n_steps=n_steps,
+                    batch_size=min(settings.batch_size, rollout), n_epochs=settings.n_epochs, learning_rate=settings.learning_rate,
+                    gamma=settings.gamma, gae_lambda=settings.gae_lambda, clip_range=settings.clip_range,
+                    ent_coef=settings.ent_coef, policy_kwargs={"net_arch": list(settings.hidden)}, verbose=0)
+    names = list(vec.get_attr("observation_names")[0])
+    checkpoints, started = [], time.perf_counter()
+    (out / "checkpoints").mkdir(parents=True, exist_ok=True)
+    try:
+        with make_backend("local", workers) as pool:
+            for steps in slices:
+                model.learn(total_timesteps=int(steps), reset_num_timesteps=False)
+                path = out / "checkpoints" / f"step_{model.num_timesteps:08d}.zip"
+                model.save(str(path))
+                write_json(metadata_path(path), {
+                    "format": FORMAT, "version": 1, "task": key.partition("@")[0], "algorithm": "ppo",
+                    "observation_names": names, "observation_mean": vec.obs_rms.mean.tolist(),
+                    "observation_var": vec.obs_rms.var.tolist(), "recompute_price": system.recompute_price,
+                    "timesteps": int(model.num_timesteps), "settings": _json(settings)})
+                score = mean_scores(pool, key, [f"sb3:{path}"], VALIDATION_ENTROPY, settings.validation_episodes)[0]
+                checkpoints.append({"timesteps": int(model.num_timesteps), "file": str(path.relative_to(out)),
+                                    "validation_objective": score, "wall_seconds": time.perf_counter() - started})
+                say(f"{task}: PPO {model.num_timesteps} steps, validation objective {score:.5f} "
+                    f"({time.perf_counter() - started:.0f} s)")
+    finally:
+        vec.close()
+    pick = (max if system.objective_sense == "max" else min)(checkpoints, key=lambda c: c["validation_objective"])
+    shutil.copyfile(out / pick["file"], out / "selected.zip")
+    meta = json.loads(metadata_path(out / pick["file"]).read_text())
+    write_json(out / "selected.json", dict(meta, validation_objective=pick["validation_objective"],
+                                           validation_episodes=settings.validation_episodes))
+    result = {"format": "etmpc-ppo-run", "version": 1, "task": key, "settings": _json(settings), "workers": workers,
+              "environment_steps": int(model.num_timesteps), "wall_seconds": time.perf_counter() - started,
+              "checkpoints": checkpoints, "selected": pick["file"], "objective_sense": system.objective_sense,
+              "stable_baselines3": sb3.__version__, "torch": torch.__version__}
+    write_json(out / "training.json", result)
+    return result
+
+
+def _json(settings: PpoSettings) -> dict:
+    data = asdict(settings)
+    data["hidden"] = list(settings.hidden)
+    return data

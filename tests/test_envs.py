@@ -1,0 +1,136 @@
+"""The trigger problem as an environment (etmpc.envs): the same loop as evaluate, bit for bit; gymnasium's
+own checker; deterministic resets; clear errors; vectorised environments."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import etmpc  # noqa: F401  (registers the environments)
+from etmpc.envs.registration import env_id, register
+from etmpc.envs.trigger import TriggerEnvironment
+from etmpc.evaluation.evaluate import evaluate
+from etmpc.evaluation.workers import play_test_episode
+from etmpc.policies import parse_policy
+from etmpc.systems import make_system, names
+
+TASKS = list(names())
+
+
+def test_every_task_is_registered_under_its_gymnasium_id():
+    ids = register()
+    assert ids == [env_id(t) for t in TASKS] and "etmpc/cart_pendulum-balance-v0" in ids
+    assert all(i in gym.registry for i in ids)
+
+
+@pytest.mark.parametrize("task", TASKS)
+def test_gymnasiums_checker_passes(task):
+    check_env(gym.make(env_id(task)).unwrapped, skip_render_check=True)
+
+
+def _play(env: gym.Env, rule, test_episode: int):
+    """Play a test-set episode through the gymnasium environment; ``rule(age) -> action``."""
+    obs, info = env.reset(options={"test_episode": test_episode})
+    rewards, control, recompute, forced = [], [], [], []
+    while True:
+        obs, reward, terminated, truncated, info = env.step(rule(env.unwrapped.core.loop.age))
+        rewards.append(reward)
+        control.append(info["control_reward"])
+        recompute.append(info["recompute"])
+        forced.append(info["forced"])
+        if terminated or truncated:
+            assert truncated and not terminated
+            return np.array(rewards), np.array(control), np.array(recompute), np.array(forced)
+
+
+RULES = {"always": lambda age: 1, "every:3": lambda age: int(age >= 3), "never": lambda age: 0}
+
+
+@pytest.mark.parametrize("task", TASKS)
+@pytest.mark.parametrize("spec", ["always", "every:3"])
+def test_an_agent_answering_like_a_fixed_policy_gets_what_evaluate_reports_bit_for_bit(task, spec):
+    env = gym.make(env_id(task))
+    system = make_system(task)
+    episodes = [0, 7]
+    result = evaluate(task, [spec], episodes=max(episodes) + 1, workers=1, progress=False).to_json()
+    objectives = {r["episode"]: r["objective"] for r in result["runs"]}
+    for e in episodes:
+        rewards, control, recompute, forced = _play(env, RULES[spec], e)
+        played = play_test_episode(system.domain, parse_policy(spec, system.error_weights), 0, 0, e).trajectory
+        # The loop is the same: the same rewards, computations and forced steps, to the last bit.
+        np.testing.assert_array_equal(control, played.rewards[: played.steps])
+        np.testing.assert_array_equal(recompute, played.recompute[: played.steps])
+        np.testing.assert_array_equal(forced, played.forced[: played.steps])
+        np.testing.assert_array_equal(rewards, control - system.recompute_price * recompute)
+        # And the objective evaluate reports is these rewards' sum, as evaluate sums them.
+        total = control.sum() - system.recompute_price * recompute.sum()
+        assert (total if system.objective_sense == "max" else -total) == objectives[e]
+
+
+def test_reset_with_a_seed_replays_the_same_episode_and_other_seeds_differ():
+    env = gym.make("etmpc/battery-trading-v0")
+    first = [env.reset(seed=3)[0]] + [env.step(0)[0] for _ in range(5)]
+    again = [env.reset(seed=3)[0]] + [env.step(0)[0] for _ in range(5)]
+    other = [env.reset(seed=4)[0]] + [env.step(0)[0] for _ in range(5)]
+    np.testing.assert_array_equal(np.array(first), np.array(again))
+    assert not np.array_equal(np.array(first), np.array(other))
+    assert first[0].dtype == np.float32 and not first[0].any()  # before the first plan: zeros
+
+
+def test_the_observation_is_the_error_features_and_their_squares():
+    env = gym.make("etmpc/cart_pendulum-balance-v0").unwrapped
+    env.reset(options={"test_episode": 0})
+    for _ in range(4):
+        obs, *_ = env.step(0)
+    loop = env.core.loop
+    error = loop.x - loop.plan.state_at(loop.age)
+    expected = np.concatenate([error, [loop.age]])
+    np.testing.assert_array_equal(obs, np.concatenate([expected, expected**2]).astype(np.float32))
+    assert env.observation_names[:5] == ("error_cart_position", "error_cart_velocity", "error_pole_angle",
+                                         "error_pole_angular_velocity", "plan_age")
+    battery = gym.make("etmpc/battery-trading-v0").unwrapped
+    assert "price_error_eur_kwh" in battery.observation_names and len(battery.observation_names) == 2 * (1 + 1 + 7)
+
+
+@pytest.mark.parametrize("action", [2, -1, 0.5, "1", [0, 1], None, np.float64(1.0)])
+def test_an_action_outside_the_space_is_a_clear_value_error(action):
+    env = gym.make("etmpc/cart_pendulum-balance-v0").unwrapped
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="0 .keep the plan. or 1 .recompute."):
+        env.step(action)
+    env.step(np.int64(1))  # numpy integers and 0-d arrays are fine
+    env.step(np.array(0))
+
+
+def test_unknown_reset_options_and_bad_test_episodes_are_refused():
+    env = gym.make("etmpc/cart_pendulum-balance-v0").unwrapped
+    with pytest.raises(ValueError, match="unknown reset options"):
+        env.reset(options={"episode": 3})
+    from etmpc.common.errors import TestSetError
+
+    with pytest.raises(TestSetError, match="out of range"):
+        env.reset(options={"test_episode": 1000})
+
+
+def test_a_dm_env_environment_underneath():
+    env = TriggerEnvironment("battery", seed=0)
+    timestep = env.reset()
+    assert timestep.first() and env.observation_spec().shape == timestep.observation.shape
+    steps = 0
+    while not timestep.last():
+        timestep = env.step(1)
+        steps += 1
+    assert steps == 100 and timestep.discount == 1.0  # a time limit, not a failure
+
+
+def test_vectorised_environments_work():
+    envs = gym.vector.AsyncVectorEnv([lambda: gym.make("etmpc/cart_pendulum-balance-v0")] * 2)
+    try:
+        obs, info = envs.reset(seed=[0, 1])
+        assert obs.shape == (2, 10) and obs.dtype == np.float32
+        for _ in range(5):
+            obs, reward, terminated, truncated, info = envs.step(np.array([1, 0]))
+        assert reward.shape == (2,) and np.all(np.isfinite(reward)) and not terminated.any()
+        assert info["recompute"][0] and np.all(info["forced"] == [False, False])
+    finally:
+        envs.close()

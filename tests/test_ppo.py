@@ -1,0 +1,74 @@
+"""PPO from Stable-Baselines3 on the trigger environment (the 'rl' extra), and its network as a policy."""
+
+import json
+
+import numpy as np
+import pytest
+
+pytest.importorskip("stable_baselines3")
+
+import gymnasium as gym  # noqa: E402
+
+from etmpc.cli import main  # noqa: E402
+from etmpc.evaluation.evaluate import evaluate  # noqa: E402
+from etmpc.learning.ppo import PpoSettings, train_ppo  # noqa: E402
+from etmpc.policies import parse_policy  # noqa: E402
+from etmpc.policies.sb3 import load_sb3  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("ppo")
+    settings = PpoSettings(timesteps=1024, checkpoints=2, validation_episodes=2, n_steps=256, batch_size=128, n_epochs=2)
+    return out, train_ppo("battery", out, settings, workers=1)
+
+
+def test_a_run_keeps_the_checkpoint_best_on_validation_episodes(run):
+    out, result = run
+    assert result["environment_steps"] == 1024 and len(result["checkpoints"]) == 2
+    best = max(result["checkpoints"], key=lambda c: c["validation_objective"])  # the battery's objective is a profit
+    assert result["selected"] == best["file"]
+    assert (out / "selected.zip").read_bytes() == (out / best["file"]).read_bytes()
+    meta = json.loads((out / "selected.json").read_text())
+    assert meta["task"] == "battery" and meta["validation_objective"] == best["validation_objective"]
+
+
+def test_the_policy_decides_as_the_network_does_on_the_environments_normalised_observation(run):
+    from stable_baselines3 import PPO
+
+    out, _ = run
+    policy = parse_policy(f"sb3:{out / 'selected.zip'}", np.ones(1), "battery")
+    model = PPO.load(str(out / "selected.zip"), device="cpu")
+    meta = json.loads((out / "selected.json").read_text())
+    mean, scale = np.array(meta["observation_mean"]), np.sqrt(np.array(meta["observation_var"]) + 1e-8)
+    env = gym.make("etmpc/battery-trading-v0").unwrapped
+    obs, _ = env.reset(seed=11)
+    decisions = 0
+    while True:
+        s = env.core.loop.augmented_state()
+        if s is not None:  # an unforced decision: the policy answers what the network answers
+            expected = int(model.predict(np.clip((obs - mean) / scale, -10, 10).astype(np.float32), deterministic=True)[0])
+            assert policy.decide(s, None) == (expected == 1)
+            decisions += 1
+        obs, _, terminated, truncated, _ = env.step(1)
+        if terminated or truncated:
+            break
+    assert decisions > 50
+
+
+def test_it_evaluates_like_any_policy(run):
+    out, _ = run
+    result = evaluate("battery", [f"sb3:{out / 'selected.zip'}", "every:3"], episodes=2, workers=2, progress=False)
+    assert [s.episodes for s in result.summaries] == [2, 2]
+
+
+def test_a_model_for_another_task_or_without_its_description_is_one_line(run, tmp_path, capsys):
+    out, _ = run
+    assert main(["evaluate", "cart_pendulum", "--policy", f"sb3:{out / 'selected.zip'}", "--episodes", "1"]) == 2
+    assert "trained on 'battery', not 'cart_pendulum'" in capsys.readouterr().err
+    lone = tmp_path / "lone.zip"
+    lone.write_bytes((out / "selected.zip").read_bytes())
+    assert main(["evaluate", "battery", "--policy", f"sb3:{lone}", "--episodes", "1"]) == 2
+    assert "has no lone.json beside it" in capsys.readouterr().err
+    with pytest.raises(Exception, match="not found"):
+        load_sb3(str(tmp_path / "missing.zip"), "battery")
