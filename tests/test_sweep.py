@@ -93,8 +93,12 @@ def test_settings_refuse_bad_prices():
         sw.SweepSettings.default("battery", [1e-3, 0.001])
     with pytest.raises(EtmpcError, match="finite"):
         sw.SweepSettings.default("battery", [-1.0])
-    assert sw.SweepSettings.default("cart_pendulum").prices == sw.DEFAULT_PRICES["cart_pendulum"]
-    assert len(sw.DEFAULT_PRICES["cart_pendulum"]) >= 5 and len(sw.DEFAULT_PRICES["battery"]) >= 5
+    from etmpc.systems import make_system, names
+
+    assert sw.SweepSettings.default("cart_pendulum").prices == make_system("cart_pendulum").benchmark.prices
+    for task in names():  # every task's own prices: several, its own price among them
+        benchmark = make_system(task).benchmark
+        assert len(benchmark.prices) >= 5 and make_system(task).recompute_price in benchmark.prices
 
 
 TINY_LEARNER = sw.LearnerSettings(seeds=(0,), episodes=2, eval_every=2, labels=3, futures=1, horizon=2,

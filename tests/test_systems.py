@@ -21,7 +21,7 @@ def test_every_task_provides_the_required_features_and_says_which_optional_ones(
     assert {f: m for f, m in missing.items() if m} == {}
     offered = {feature for feature in FEATURES if feature not in REQUIRED and provides(system, feature)}
     assert offered == OPTIONAL[name]
-    assert systems.canonical(f"{system.domain}/{system.task}") == name
+    assert systems.canonical(f"{system.domain}/{system.task}") == system.name == name
     assert system.horizon >= 1 and system.episode_steps >= system.horizon
 
 

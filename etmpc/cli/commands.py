@@ -139,17 +139,19 @@ def _sweep(args) -> None:
     from etmpc.evaluation.workers import default_workers
     from etmpc.experiments.pareto import report_section
     from etmpc.experiments.sweep import check_directory, plan, sweep
+    from etmpc.systems import folder_name
 
     settings = plan(args.task, args.prices, args.episodes, args.quick)  # names, prices and sizes checked
     _check_backend(args)
     out = args.out or Path("results") / ("sweep-quick" if args.quick else "sweep")
     check_outputs({}, {"--out": out})
     for task, chosen in settings.items():  # every directory checked before any work
-        check_directory(out / task, task, chosen)
+        check_directory(out / folder_name(task), task, chosen)
     for task, chosen in settings.items():
-        pareto = sweep(task, out / task, chosen, args.workers or default_workers(), args.backend, args.address, say=_say)
+        pareto = sweep(task, out / folder_name(task), chosen, args.workers or default_workers(), args.backend, args.address,
+                       say=_say)
         print("\n".join(report_section(pareto)))
-        print(f"wrote {out / task}/pareto.json, pareto.png and SWEEP.md")
+        print(f"wrote {out / folder_name(task)}/pareto.json, pareto.png and SWEEP.md")
 
 
 def _render(args) -> None:

@@ -62,7 +62,7 @@ class TriggerEnvironment(dm_env.Environment):
         self.key = system_key(task, price)
         self.system = make_system(self.key)
         self.loop = ClosedLoop(self.system, self.system.make_env())
-        self.observation_names = observation_names(self.system.domain, self.system.state_names)
+        self.observation_names = observation_names(self.system.name, self.system.state_names)
         self._size = len(self.observation_names)
         self._rng = np.random.default_rng(seed)
         self._test_set_path = test_set
@@ -125,7 +125,7 @@ class TriggerEnvironment(dm_env.Environment):
         return self.system.episode_from_arrays(self._test_set.episode_arrays(int(index)))
 
     def _observation(self) -> np.ndarray:
-        obs = observation(self.system.domain, self.loop.observed_state(), self._size)
+        obs = observation(self.system.name, self.loop.observed_state(), self._size)
         if not np.isfinite(obs.sum()):  # a diverged plant: clipped to the float32 range, NaN as 0
             obs = np.nan_to_num(obs, nan=0.0, posinf=np.finfo(np.float32).max, neginf=np.finfo(np.float32).min)
         return obs

@@ -171,7 +171,7 @@ def evaluate(
     parsed = {}
     for policy in policies:
         if isinstance(policy, str):
-            spec, policy = policy, parse_policy(policy, system.error_weights, system.domain, system.episode_steps)
+            spec, policy = policy, parse_policy(policy, system.error_weights, system.name, system.episode_steps)
         else:
             policy = checked(policy)
             spec = policy.spec

@@ -14,6 +14,7 @@ Backends (``make_backend``):
 from __future__ import annotations
 
 import ctypes
+import importlib
 import logging
 import os
 import signal
@@ -122,9 +123,9 @@ def single_threaded():
     """Run the numerical libraries (both OpenBLAS builds of numpy and scipy) on one thread each: the
     parallelism is across episodes, and a BLAS reduction split over threads adds in an order that
     depends on how many the machine has. Returns a context manager (``threadpoolctl``'s)."""
-    import scipy.linalg  # noqa: F401  (scipy's own OpenBLAS is loaded here, so that it is limited too)
     from threadpoolctl import threadpool_limits
 
+    importlib.import_module("scipy.linalg")  # scipy's own OpenBLAS is loaded here, so that it is limited too
     return threadpool_limits(limits=1)
 
 

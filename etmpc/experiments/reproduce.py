@@ -42,24 +42,16 @@ from etmpc.evaluation.evaluate import evaluate
 from etmpc.evaluation.render import render_rollout
 from etmpc.evaluation.workers import play_test_episode
 from etmpc.experiments import sweep as sweeps
-from etmpc.experiments.report import machine, report, software_versions
+from etmpc.experiments.report import PAPER, machine, report, software_versions
 from etmpc.experiments.summary import summarise_default, summarise_headroom, summarise_learners, summarise_system
 from etmpc.learning.dpi import Settings as DpiSettings
 from etmpc.learning.ppo import PpoSettings, train_ppo
 from etmpc.learning.train import TrainConfig, curve_summary, load_checkpoint, train
 from etmpc.policies import parse_policy
 from etmpc.policies.learned import write_json_atomically
-from etmpc.systems import make_system
+from etmpc.systems import folder_name, make_system, names
+from etmpc.systems.base import provides
 from etmpc.views import figures
-
-DOMAINS = ("cart_pendulum", "battery")
-BASELINES = {
-    "cart_pendulum": ["always", "never"] + [f"every:{t}" for t in (2, 3, 4, 5, 7, 10, 15)]
-    + [f"threshold:{x}" for x in (0.1, 0.2, 0.3, 0.5)],
-    "battery": ["always", "never"] + [f"every:{t}" for t in (2, 3, 4, 5, 7, 10, 15)]
-    + [f"threshold:{x}" for x in (0.005, 0.01, 0.02, 0.05)],
-}
-
 
 @dataclass(frozen=True)
 class Settings:
@@ -101,23 +93,25 @@ QUICK = Settings(episodes=30, eval_every=15, eval_episodes=10, test_episodes=20,
 
 
 def reproduce(out: Path, settings: Settings = FULL, workers: int = 1, backend: str = "local",
-              address: str | None = None, domains=DOMAINS, progress: bool = True, sweep: bool = False) -> dict:
+              address: str | None = None, domains=None, progress: bool = True, sweep: bool = False) -> dict:
     """Run (or continue) every stage into ``out``; returns ``results.json``'s content. With
     ``sweep``, also the price sweep of each system (``out/sweep/<task>``, see
     :mod:`etmpc.experiments.sweep`) and its equal-rate answer in the report."""
     out = Path(out)
+    domains = list(names()) if domains is None else list(domains)  # every task (its name: DOMAIN or DOMAIN/TASK)
     started = time.perf_counter()
     sweep_settings = {d: sweeps.SweepSettings.default(d, quick=settings.smoke) for d in domains} if sweep else {}
     for domain, chosen in sweep_settings.items():  # checked before any work
-        sweeps.check_directory(out / "sweep" / domain, domain, chosen)
+        sweeps.check_directory(out / "sweep" / folder_name(domain), domain, chosen)
     _check_settings(out, settings, domains)
     run = dict(workers=workers, backend=backend, address=address)
     systems = {}
     for domain in domains:
-        systems[domain] = _system(out / domain, domain, settings, run, progress)
+        systems[domain] = _system(out / folder_name(domain), domain, settings, run, progress)
     paretos = {}
     for domain, chosen in sweep_settings.items():
-        paretos[domain] = sweeps.sweep(domain, out / "sweep" / domain, chosen, workers, backend, address, progress, say=_say)
+        paretos[domain] = sweeps.sweep(domain, out / "sweep" / folder_name(domain), chosen, workers, backend, address, progress,
+                                       say=_say)
     results = {
         "format": "etmpc-reproduce", "version": 1, "settings": settings.to_json(), "systems": systems,
         "software": software_versions(), "machine": machine(),
@@ -160,23 +154,28 @@ def evaluated_once(path: Path, timed: int | None = None, **kwargs) -> dict:
 
 
 def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: bool) -> dict:
+    """One task's stages into ``folder``. ``domain`` is the task's name (``DOMAIN`` or ``DOMAIN/TASK``).
+    The paper's own tasks also get the paper's learner (GPOMDP, its protocol); every task gets the
+    fixed policies, the default learner, the headroom, PPO, figures, a recording and, with a scene, a video."""
     system = make_system(domain)
     folder.mkdir(parents=True, exist_ok=True)
     common = dict(domain=domain, episodes=settings.test_episodes, workers=run["workers"], backend=run["backend"],
                   address=run["address"], progress=progress)
     _say(f"{domain}: fixed policies")
-    baselines = evaluated_once(folder / "baselines.json", policies=BASELINES[domain], **common)
+    baselines = evaluated_once(folder / "baselines.json", policies=system.benchmark.baselines(), **common)
 
-    _say(f"{domain}: training {len(settings.seeds)} seeds x {settings.episodes} episodes")
-    config = TrainConfig(domain, settings.seeds, settings.episodes, settings.eval_every, settings.eval_episodes)
-    train_dir = folder / "train"
-    train(config, train_dir, run["workers"], resume=(train_dir / "checkpoint.json").exists(), backend=run["backend"],
-          address=run["address"], progress=progress)
-    state = load_checkpoint(train_dir / "checkpoint.json")
+    learned, state, learned_specs = None, None, []
+    if system.name in PAPER:
+        _say(f"{domain}: training {len(settings.seeds)} seeds x {settings.episodes} episodes")
+        config = TrainConfig(domain, settings.seeds, settings.episodes, settings.eval_every, settings.eval_episodes)
+        train_dir = folder / "train"
+        train(config, train_dir, run["workers"], resume=(train_dir / "checkpoint.json").exists(), backend=run["backend"],
+              address=run["address"], progress=progress)
+        state = load_checkpoint(train_dir / "checkpoint.json")
 
-    _say(f"{domain}: the learned policies, {settings.repeats} passes")
-    learned_specs = [f"rl:{train_dir / f'seed{s}' / 'last.json'}" for s in settings.seeds]
-    learned = evaluated_once(folder / "learned.json", policies=learned_specs, repeats=settings.repeats, **common)
+        _say(f"{domain}: the learned policies, {settings.repeats} passes")
+        learned_specs = [f"rl:{train_dir / f'seed{s}' / 'last.json'}" for s in settings.seeds]
+        learned = evaluated_once(folder / "learned.json", policies=learned_specs, repeats=settings.repeats, **common)
 
     _say(f"{domain}: the default learner (DPI), {len(settings.dpi_seeds)} seeds x {settings.dpi_episodes} episodes")
     dpi_config = TrainConfig(domain, settings.dpi_seeds, settings.dpi_episodes, settings.dpi_eval_every, settings.eval_episodes,
@@ -186,12 +185,12 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
     dpi_dir = folder / "train_dpi"
     train(dpi_config, dpi_dir, run["workers"], resume=(dpi_dir / "checkpoint.json").exists(), backend=run["backend"],
           address=run["address"], progress=progress)
-    shipped = folder.parent / "policies" / domain / "learned.json"
+    shipped = folder.parent / "policies" / folder_name(system.name) / "learned.json"
     if not shipped.exists():
         write_json_atomically(shipped, json.loads((dpi_dir / "selected.json").read_text()))
     default = evaluated_once(folder / "learned_default.json", policies=[f"rl:{shipped}"], **common)
 
-    summary = summarise_system(system, baselines, learned, curve_summary(state))
+    summary = summarise_system(system, baselines, learned, curve_summary(state) if state is not None else None)
     best = summary["best_fixed"]["policy"]
 
     _say(f"{domain}: headroom, rollout and oracle over {best} on {settings.rollout_episodes} episodes")
@@ -206,23 +205,25 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
 
     _say(f"{domain}: figures, recording, video")
     if not (folder / "figure3.png").exists():
-        figures.write_policy_bars_png(folder / "figure3.png", [baselines, learned])
+        figures.write_policy_bars_png(folder / "figure3.png", [baselines, learned if learned is not None else default])
     if not (folder / "episodes.rrd").exists():
-        evaluate(domain, [best, learned_specs[0], f"rl:{shipped}"], episodes=settings.record_episodes, workers=run["workers"],
+        evaluate(domain, [best, *learned_specs[:1], f"rl:{shipped}"], episodes=settings.record_episodes, workers=run["workers"],
                  progress=False, record=folder / "episodes.rrd")
     files = {"baselines": "baselines.json", "learned": "learned.json", "curve": "train/curve.png",
              "figure3": "figure3.png", "recording": "episodes.rrd", "trajectory": "trajectory.png",
              "default_learner": "learned_default.json", "curve_dpi": "train_dpi/curve.png",
              "headroom_rollout": "headroom_rollout.json", "headroom_oracle": "headroom_oracle.json"}
+    if learned is None:
+        del files["learned"], files["curve"]
     _trajectory_png(folder / "trajectory.png", system, best)
-    if domain == "battery":
+    if system.name == "battery":  # the paper's Figure 1: forecasts of the battery's prices and production
         _forecasts_png(folder / "figure1_forecasts.png", system)
         files["figure1"] = "figure1_forecasts.png"
-    if domain == "cart_pendulum" and not (folder / "episode.mp4").exists():
-        render_rollout(domain, best, 0, folder / "episode.mp4", width=settings.video_size[0], height=settings.video_size[1])
-    if domain == "cart_pendulum":
+    if provides(system, "render"):
+        if not (folder / "episode.mp4").exists():
+            render_rollout(domain, best, 0, folder / "episode.mp4", width=settings.video_size[0], height=settings.video_size[1])
         files["video"] = "episode.mp4"
-    summary["files"] = {k: f"{domain}/{v}" for k, v in files.items()}
+    summary["files"] = {k: f"{folder.name}/{v}" for k, v in files.items()}
     return summary
 
 
@@ -246,15 +247,15 @@ def _ppo(folder: Path, domain: str, settings: Settings, run: dict, common: dict)
 def _trajectory_png(path: Path, system, spec: str) -> None:
     if path.exists():
         return
-    played = play_test_episode(system.domain, parse_policy(spec, system.error_weights, system.domain), 0, 0, 0)
-    figures.write_trajectory_png(path, system, played.trajectory, title=f"{system.domain}: test-set episode 0 under {spec}",
+    played = play_test_episode(system.name, parse_policy(spec, system.error_weights, system.name), 0, 0, 0)
+    figures.write_trajectory_png(path, system, played.trajectory, title=f"{system.name}: test-set episode 0 under {spec}",
                                  signals=system.signals(played.episode))
 
 
 def _forecasts_png(path: Path, system) -> None:
     if path.exists():
         return
-    runs = [(spec, play_test_episode(system.domain, parse_policy(spec, system.error_weights), 0, 0, 0)) for spec in ("every:20", "every:5")]
+    runs = [(spec, play_test_episode(system.name, parse_policy(spec, system.error_weights), 0, 0, 0)) for spec in ("every:20", "every:5")]
     fig = figures.forecast_figure(runs[0][1].episode, [(spec, played.trajectory) for spec, played in runs],
                                   system.control_interval_s, system.terminal_price)
     figures.save_png_atomically(fig, path, dpi=110)

@@ -13,8 +13,9 @@ from etmpc.evaluation.compare import paired, per_episode
 from etmpc.learning.train import curve_summary
 
 
-def summarise_system(system, baselines: dict, learned: dict, curve: dict) -> dict:
-    """The numbers of the report for one system, from the evaluation JSONs and the learning curve."""
+def summarise_system(system, baselines: dict, learned: dict | None, curve: dict | None) -> dict:
+    """The numbers of the report for one system, from the evaluation JSONs and the learning curve of
+    the paper's learner (``learned`` and ``curve`` are None for a task the paper did not study)."""
     sense = system.objective_sense
     better = (lambda a, b: a > b) if sense == "max" else (lambda a, b: a < b)
     fixed = baselines["policies"]
@@ -22,6 +23,11 @@ def summarise_system(system, baselines: dict, learned: dict, curve: dict) -> dic
     for spec, s in fixed.items():
         if best is None or better(s["objective_mean"], fixed[best]["objective_mean"]):
             best = spec
+    head = {"domain": system.domain, "task": system.task, "name": system.name, "objective_sense": sense,
+            "episodes": baselines["policies"][best]["episodes"], "fixed": {spec: _row(s) for spec, s in fixed.items()},
+            "best_fixed": dict(_row(fixed[best]), policy=best)}
+    if learned is None:
+        return head
     per_seed = [s["objective_mean"] for s in learned["policies"].values()]
     # As evaluate does: a run that ended on a non-finite state is counted, never averaged in.
     learned_runs = [r for r in learned["runs"] if r["finite"]]
@@ -41,11 +47,7 @@ def summarise_system(system, baselines: dict, learned: dict, curve: dict) -> dic
     values = [p["objective_mean"] for p in points]
     best_point = points[int(np.argmax(values) if sense == "max" else np.argmin(values))]
     return {
-        "domain": system.domain,
-        "objective_sense": sense,
-        "episodes": baselines["policies"][best]["episodes"],
-        "fixed": {spec: _row(s) for spec, s in fixed.items()},
-        "best_fixed": dict(_row(fixed[best]), policy=best),
+        **head,
         "learned": {
             "objective_mean": learned_mean,
             "objective_std_seeds": float(np.std(per_seed, ddof=1)) if len(per_seed) > 1 else 0.0,
@@ -90,6 +92,8 @@ def summarise_headroom(system, best: str, baselines: dict, learned: dict, defaul
     rows = {}
     for name, evaluation in (("oracle", oracle), ("rollout", rollout), ("learned_default", default), ("learned_paper", learned),
                              ("best_fixed", None)):
+        if name == "learned_paper" and learned is None:  # a task the paper did not study
+            continue
         evaluation = evaluation or {"policies": {best: None}, "runs": [r for r in baselines["runs"] if r["policy"] == best]}
         runs = [r for r in evaluation["runs"] if r["episode"] in episodes and r["finite"]]
         rows[name] = dict(paired(per_episode(evaluation), reference, sense, episodes), policies=list(evaluation["policies"]),
@@ -120,9 +124,10 @@ def summarise_learners(system, baselines: dict, learned: dict, default: dict, pp
         "dpi": (default, {"episodes": dpi_episodes, "environment_steps": dpi_episodes * steps,
                           "simulated_steps_at_most": dpi_episodes * settings["dpi_labels"] * settings["dpi_futures"] * 2
                           * settings["dpi_horizon"]}),
-        "gpomdp": (learned, {"episodes": len(settings["seeds"]) * settings["episodes"],
-                             "environment_steps": len(settings["seeds"]) * settings["episodes"] * steps}),
     }
+    if learned is not None:
+        rows["gpomdp"] = (learned, {"episodes": len(settings["seeds"]) * settings["episodes"],
+                                    "environment_steps": len(settings["seeds"]) * settings["episodes"] * steps})
     if ppo is not None:
         rows["ppo"] = (ppo, {"environment_steps": ppo_run["environment_steps"], "wall_seconds": ppo_run["wall_seconds"],
                              "workers": ppo_run["workers"]})

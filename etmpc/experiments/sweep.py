@@ -53,21 +53,6 @@ from etmpc.systems import check_name, check_price, make_system, names, system_ke
 from etmpc.views.curves import draw_pareto
 from etmpc.views.figures import save_png_atomically
 
-# Prices of a computation, in the objective's unit. The cart pendulum: a log grid around the paper's
-# 5e-5 (where 100 computations cost 1.3 % of the objective) up to where `never` wins. The battery:
-# prices added to the energy its computer already draws from the battery (eta_c, in the control
-# objective), from the paper's 0 up to where `never` wins.
-DEFAULT_PRICES = {
-    "cart_pendulum": (5e-6, 1.6e-5, 5e-5, 1.6e-4, 5e-4, 1.6e-3),
-    "battery": (0.0, 3e-4, 1e-3, 3e-3, 1e-2),
-}
-# Event-trigger levels that span the periodic schedules' rates (from ~every step to ~never). The
-# battery's prediction error is mostly the computer's own draw (2.8e-5 of charge per interval), so
-# its grid is dense there.
-THRESHOLDS = {
-    "cart_pendulum": (0.05, 0.08, 0.13, 0.2, 0.3, 0.45, 0.7, 1.0, 1.5),
-    "battery": (1e-5, 2.6e-5, 2.75e-5, 2.9e-5, 1e-4, 1e-3, 3e-3, 1e-2, 3e-2, 0.1),
-}
 MAX_PRICES = 50
 
 
@@ -114,16 +99,17 @@ class SweepSettings:
 
     @classmethod
     def default(cls, domain: str, prices=None, episodes: int | None = None, quick: bool = False) -> SweepSettings:
-        prices = DEFAULT_PRICES[domain] if prices is None else tuple(prices)
+        benchmark = make_system(domain).benchmark  # the task's prices and threshold levels
+        prices = benchmark.prices if prices is None else tuple(prices)
         if not 1 <= len(prices) <= MAX_PRICES:
             raise EtmpcError(f"give 1 to {MAX_PRICES} prices, got {len(prices)}")
         prices = tuple(check_price(p) for p in prices)
         if len(set(prices)) != len(prices):
             raise EtmpcError(f"a price is given twice: {', '.join(f'{p:g}' for p in prices)}")
         if quick:
-            return cls(prices, episodes or 3, THRESHOLDS[domain][::2], futures=2, horizon=10, quick=True,
+            return cls(prices, episodes or 3, benchmark.sweep_thresholds[::2], futures=2, horizon=10, quick=True,
                        learner=QUICK_LEARNER, self_trigger=QUICK_SELF)
-        return cls(prices, episodes or 20, THRESHOLDS[domain])
+        return cls(prices, episodes or 20, benchmark.sweep_thresholds)
 
     def to_json(self) -> dict:
         return _lists(asdict(self))

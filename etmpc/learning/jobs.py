@@ -36,7 +36,7 @@ class _Coin:
 def normalisation_states(domain: str, index: int, features: str = "paper") -> np.ndarray:
     system, env, _ = context(domain)
     rng = np.random.default_rng(np.random.SeedSequence(NORMALISATION_ENTROPY, spawn_key=(index, 0)))
-    coin = _Coin(features, system.domain)
+    coin = _Coin(features, system.name)
     run_episode(system, env, coin, np.random.default_rng(np.random.SeedSequence(NORMALISATION_ENTROPY, spawn_key=(index, 1))),
                 system.draw_episode(rng))
     return np.array(coin.states)
@@ -119,9 +119,9 @@ def _policy(system, policy):
     """A policy from its spec (a fixed policy) or its JSON (a logistic policy being trained, or a
     self-trigger being chosen)."""
     if isinstance(policy, str):
-        return parse_policy(policy, system.error_weights, system.domain)
+        return parse_policy(policy, system.error_weights, system.name)
     if policy.get("format") == selftrigger.FORMAT:
-        return selftrigger.from_json(policy, "candidate", system.domain)
+        return selftrigger.from_json(policy, "candidate", system.name)
     return LogisticPolicy.from_json(policy)
 
 

@@ -109,7 +109,7 @@ def label_episode(key: str, base: str, candidates: tuple[int, ...], settings: Se
     rngs = [np.random.default_rng(np.random.SeedSequence(SELF_ENTROPY, spawn_key=(index, k))) for k in range(3)]
     steps = set(rngs[1].choice(np.arange(1, system.episode_steps), size=min(settings.solves_per_episode,
                                                                             system.episode_steps - 1), replace=False).tolist())
-    labeller = _Labeller(parse_policy(base, system.error_weights, system.domain), steps,
+    labeller = _Labeller(parse_policy(base, system.error_weights, system.name), steps,
                          replace(settings, candidates=candidates, horizon=max(candidates) + settings.horizon), rngs[2])
     run_episode(system, env, labeller, None, system.draw_episode(rngs[0]))
     return labeller.rows
@@ -166,9 +166,9 @@ def train_self(key: str, out: Path, settings: SelfSettings = SelfSettings(), wor
         fits = {}
         period = _period(base, system)
         if period in candidates:  # the base itself, as a self-trigger: what training must beat (first: it wins ties)
-            fits[f"constant {period} (the base)"] = SelfTrigger.constant(str(out), system.domain, candidates, period, mean.size)
+            fits[f"constant {period} (the base)"] = SelfTrigger.constant(str(out), system.name, candidates, period, mean.size)
         for r in settings.ridges:
-            fits[f"ridge {r:g}"] = SelfTrigger(str(out), system.domain, candidates, fit((features - mean) / scale, returns, r),
+            fits[f"ridge {r:g}"] = SelfTrigger(str(out), system.name, candidates, fit((features - mean) / scale, returns, r),
                                                mean, scale)
         jsons = [policy.to_json() for policy in fits.values()]
         validation = mean_scores(pool, key, jsons, VALIDATION_ENTROPY, settings.validation_episodes)
@@ -187,7 +187,7 @@ def train_self(key: str, out: Path, settings: SelfSettings = SelfSettings(), wor
 
 def _period(spec: str, system) -> int:
     """``T`` of a periodic base (``always``: 1, ``every:T``: T); 0 for anything else."""
-    policy = parse_policy(spec, system.error_weights, system.domain)
+    policy = parse_policy(spec, system.error_weights, system.name)
     if isinstance(policy, Always):
         return 1
     return policy.period if isinstance(policy, Every) else 0

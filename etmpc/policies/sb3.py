@@ -42,7 +42,7 @@ class SB3Policy:
         self.path, self.task, self.algorithm = Path(path), task, algorithm
         self.mean, self.scale = np.asarray(mean, float), np.sqrt(np.asarray(var, float) + EPSILON)
         cls = system_class(task)
-        self.domain = cls.domain
+        self.domain = cls.name
         self._size = self.mean.size
         self._model: Any = None
 
@@ -97,7 +97,7 @@ def load_sb3(path: str, task: str | None) -> SB3Policy:
         raise EtmpcError(f"{meta_file} is corrupt ({exc!r})") from None
     if task is not None and canonical(task) != trained_on:
         raise EtmpcError(f"policy {model} was trained on {trained_on!r}, not {canonical(task)!r}")
-    if names != observation_names(cls.domain, cls.state_names) or mean.shape != var.shape or mean.shape != (len(names),):
+    if names != observation_names(cls.name, cls.state_names) or mean.shape != var.shape or mean.shape != (len(names),):
         raise EtmpcError(f"{meta_file}: its observation does not match the task's")
     if not (np.all(np.isfinite(mean)) and np.all(np.isfinite(var)) and np.all(var >= 0)):
         raise EtmpcError(f"{meta_file} has non-finite or negative normalisation")

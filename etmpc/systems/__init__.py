@@ -69,6 +69,11 @@ def canonical(name: str) -> str:
     return domain_name if task == domain(domain_name).TASKS[0] else f"{domain_name}/{task}"
 
 
+def folder_name(name: str) -> str:
+    """A task's name as one folder: ``DOMAIN`` for a domain's default task, else ``DOMAIN-TASK``."""
+    return canonical(name).replace("/", "-")
+
+
 def check_price(price: float) -> float:
     """A price of a computation: a finite number >= 0 (in the objective's unit)."""
     price = float(price)

@@ -12,6 +12,7 @@ This module may import ``etmpc.common`` and ``etmpc.control``.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any, Protocol
 
 import dm_env
@@ -19,6 +20,22 @@ import numpy as np
 
 from etmpc.control.lqr import ErrorFeedback
 from etmpc.control.plan import Plan
+
+
+@dataclass(frozen=True)
+class Benchmark:
+    """How the experiments measure a task (``etmpc reproduce`` and ``etmpc sweep``), kept with it."""
+
+    prices: tuple[float, ...]  # the sweep's prices of a computation, in the objective's unit
+    sweep_thresholds: tuple[float, ...]  # threshold:X levels that span the periodic schedules' rates
+    report_thresholds: tuple[float, ...]  # the few threshold:X levels in reproduce's table of fixed policies
+    periods: tuple[int, ...] = (2, 3, 4, 5, 7, 10, 15)  # every:T in that table, beside always and never
+    objective_unit: str = "-"  # the objective's unit, for recordings and figures
+
+    def baselines(self) -> list[str]:
+        """Reproduce's fixed policies: always, never, every:T and threshold:X."""
+        return (["always", "never"] + [f"every:{t}" for t in self.periods]
+                + [f"threshold:{x:g}" for x in self.report_thresholds])
 
 
 class System(Protocol):
@@ -32,6 +49,7 @@ class System(Protocol):
     Config: type  # the frozen settings it is built from: Config() is the paper's, with a recompute_price field
     domain: str  # the domain's name in the registry (etmpc.systems.DOMAINS)
     task: str  # the task's name in its domain's SUITE and SYSTEMS
+    name: str  # DOMAIN for a domain's default task, else DOMAIN/TASK: how files and commands name it
     objective_sense: str  # "min": the objective is a cost; "max": a profit
     recompute_price: float  # charged per computation in the policy's objective
     episode_steps: int
@@ -60,6 +78,9 @@ class System(Protocol):
     # -- recordings and figures (etmpc.views) ------------------------------------------------------
     def signals(self, episode: Any) -> dict[str, np.ndarray]: ...  # exogenous inputs per step, by name with unit
 
+    # -- experiments (etmpc reproduce, etmpc sweep) ---------------------------------------------------
+    benchmark: Benchmark  # prices, threshold levels and the objective's unit
+
     # -- rollout:, oracle:, DPI and the self-trigger's training (futures simulated with the loop) -----
     def sample_future(self, episode: Any, step: int, rng: np.random.Generator) -> Any: ...  # what is unknown at step, redrawn
     def truncation_value(self, x: np.ndarray) -> float: ...  # reward for the state a truncated rollout ends in
@@ -73,18 +94,19 @@ class System(Protocol):
 
 #: The members each feature needs (tests/test_systems.py checks every registered system against it).
 FEATURES: dict[str, tuple[str, ...]] = {
-    "loop": ("Config", "domain", "task", "objective_sense", "recompute_price", "episode_steps", "control_interval_s",
+    "loop": ("Config", "domain", "task", "name", "objective_sense", "recompute_price", "episode_steps", "control_interval_s",
              "horizon", "state_names", "input_names", "u_min", "u_max", "feedback", "make_env", "state", "measure",
              "plan", "action"),
     "test sets": ("draw_episode", "episode_parameters", "episode_from_arrays"),
     "threshold policy": ("error_weights",),
     "recordings": ("signals",),
+    "experiments": ("benchmark",),
     "rollouts": ("sample_future", "truncation_value"),
     "exogenous features": ("exogenous_feature_names", "exogenous_features"),
     "render": ("camera", "show"),
     "bench": ("plan_cost", "reference_solvers", "interpreted"),
 }
-REQUIRED = ("loop", "test sets", "threshold policy", "recordings", "rollouts")
+REQUIRED = ("loop", "test sets", "threshold policy", "recordings", "experiments", "rollouts")
 
 
 def provides(system: Any, feature: str) -> bool:

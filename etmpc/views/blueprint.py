@@ -26,6 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
+from etmpc.systems import canonical, system_class
+
 MAX_EPISODE_TABS = 10  # per policy: each tab adds about 140 kB and 15 ms to a recording
 
 # -- names ------------------------------------------------------------------------------------------
@@ -44,8 +46,16 @@ LABELS = {
 }
 _SUFFIX_UNITS = (("_eur_kwh", "EUR/kWh"), ("_rad_s2", "rad/s²"), ("_rad_s", "rad/s"), ("_m_s", "m/s"), ("_kwh", "kWh"),
                  ("_kw", "kW"), ("_rad", "rad"), ("_eur", "EUR"), ("_n", "N"), ("_m", "m"), ("_s", "s"))
-# The objective's unit per domain (the cart pendulum's cost is a sum of squared pole angles).
-OBJECTIVE_UNITS = {"battery": "EUR", "cart_pendulum": "rad²"}
+def objective_unit(domain: str, task: str) -> str:
+    """The objective's unit of a task (its system's ``benchmark``; the cart pendulum's cost is a sum of
+    squared pole angles, rad²)."""
+    return system_class(f"{domain}/{task}").benchmark.objective_unit
+
+
+def task_part(domain: str, task: str) -> str:
+    """A task's first entity-path part: its name, ``DOMAIN`` for a domain's default task, else
+    ``DOMAIN-TASK`` (one path part)."""
+    return canonical(f"{domain}/{task}").replace("/", "-")
 
 
 def label(name: str) -> str:
@@ -109,7 +119,7 @@ class EpisodeLayout:
     episode; entity paths are relative to ``root``)."""
 
     root: str
-    domain: str
+    domain: str  # the task's entity-path part (task_part): the domain's name for its default task
     policy: str  # the policy's label (see policy_label)
     episode: int
     repeat: int
@@ -123,6 +133,7 @@ class EpisodeLayout:
     # Fixed y ranges by name. A forecast panel spans the true signal: forecasts may stray outside
     # it, and the viewer drops tick labels when it picks a tick step of 5·10^k (0.05 EUR/kWh).
     y_ranges: dict = field(default_factory=dict)
+    objective_unit: str = "-"
 
     @property
     def tab_name(self) -> str:
@@ -163,7 +174,7 @@ def episode_container(layout: EpisodeLayout):
     from rerun.blueprint.encodings import TextLogColumn, TimelineColumn
 
     view = lambda name, parts, **kw: _time_series(name, layout, parts, **kw)  # noqa: E731
-    units = OBJECTIVE_UNITS.get(layout.domain, "-")
+    units = layout.objective_unit
     panels = [view(f"{label(s)} · thin: plans", [f"realised/state/{s}", f"plan/state/{s}"]) for s in layout.states]
     panels += [view(f"{label(s)} · thin: forecasts", [f"realised/signal/{s}", f"forecast/{s}"],
                     y_range=layout.y_ranges.get(s)) for s in layout.forecast_signals]

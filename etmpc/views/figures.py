@@ -30,6 +30,7 @@ from matplotlib.patches import Patch  # noqa: E402
 from etmpc.common.errors import EtmpcError  # noqa: E402
 from etmpc.loop import Trajectory  # noqa: E402
 from etmpc.common.outputs import atomic_path  # noqa: E402
+from etmpc.views.blueprint import objective_unit  # noqa: E402
 
 # (forecast name in Plan.forecasts, episode attribute of the true values, axis label)
 _SIGNALS = (
@@ -273,9 +274,6 @@ def _short_path(path: str, parts: int = 3) -> str:
     return path if len(pieces) <= parts else "…/" + "/".join(pieces[-parts:])
 
 
-_OBJECTIVE = {"cart_pendulum": "cost", "battery": "profit (EUR)"}
-
-
 def draw_policy_bars(evaluations: Sequence[dict], group_learned: bool = True, sources: Sequence[str] | None = None):
     """The paper's Figure 3: one bar per policy (its mean objective over the test set), from one or
     more ``etmpc evaluate --json`` documents of the same task and test set.
@@ -325,7 +323,8 @@ def draw_policy_bars(evaluations: Sequence[dict], group_learned: bool = True, so
     ax.set_xticks(x)
     long = any(len(b.label) > 12 for b in bars)
     ax.set_xticklabels([b.label for b in bars], rotation=20 if long else 0, ha="right" if long else "center", fontsize=9)
-    what = _OBJECTIVE.get(first["domain"], "cost" if sense == "min" else "profit")
+    unit = objective_unit(first["domain"], first["task"])
+    what = ("cost" if sense == "min" else "profit") + ("" if unit in ("-", "rad²") else f" ({unit})")
     ax.set_ylabel(f"mean {what} per episode\n({'lower' if sense == 'min' else 'higher'} is better"
                   f"{'; axis not from 0' if zoomed else ''})")
     ax.set_title(f"{first['domain']}/{first['task']}: objective per policy ({episodes} test-set episodes)", fontsize=11)

@@ -1,6 +1,7 @@
 """Rerun recordings of episodes, and reading them back.
 
-One episode lives under ``/<domain>/<policy>/episode_<EEE>/repeat_<R>`` (``<policy>``: the
+One episode lives under ``/<task>/<policy>/episode_<EEE>/repeat_<R>`` (``<task>``: the domain's
+name for its default task, else ``<domain>-<task>``; ``<policy>``: the
 policy's label, its spec with a learned policy's file shortened to its stem: ``every:3``,
 ``rl:learned``), so several episodes and policies in one file stay apart. Under it, every series
 is a Rerun time series on two timelines, ``step`` (sequence) and ``time`` (seconds since the
@@ -57,7 +58,8 @@ OBJECTIVE_SERIES = ("reward", "computation", "running")
 
 
 def episode_root(identity: dict, policy_part: str) -> str:
-    return f"/{identity['domain']}/{policy_part}/episode_{int(identity['episode']):03d}/repeat_{int(identity['repeat'])}"
+    task = look.task_part(identity["domain"], identity["task"])
+    return f"/{task}/{policy_part}/episode_{int(identity['episode']):03d}/repeat_{int(identity['repeat'])}"
 
 
 class Recorder:
@@ -164,7 +166,8 @@ class Recorder:
         """Log one episode (and, optionally, rendered frames, one per state); returns its root path."""
         rr, stream = self._open()
         identity = record.identity
-        name, part = self._policy_part(identity["domain"], identity["policy"])
+        task = look.task_part(identity["domain"], identity["task"])
+        name, part = self._policy_part(task, identity["policy"])
         root = episode_root(identity, part)
         dt = identity["control_interval_s"]
         n = record.steps
@@ -282,10 +285,11 @@ class Recorder:
             pad = 0.1 * (hi - lo) or 0.1 * abs(hi) or 1.0
             y_ranges[s] = (lo - pad, hi + pad)
         self.layouts.append(look.EpisodeLayout(
-            root=root, domain=identity["domain"], policy=name, episode=int(identity["episode"]),
+            root=root, domain=task, policy=name, episode=int(identity["episode"]),
             repeat=int(identity["repeat"]), steps=n, control_interval_s=dt, states=record.state_names,
             inputs=record.input_names, signals=tuple(s for s in record.signals if s not in forecasts),
-            forecast_signals=tuple(s for s in record.signals if s in forecasts), entities=frozenset(written), y_ranges=y_ranges))
+            forecast_signals=tuple(s for s in record.signals if s in forecasts), entities=frozenset(written), y_ranges=y_ranges,
+            objective_unit=look.objective_unit(identity["domain"], identity["task"])))
         self.episodes += 1
         return root
 
@@ -311,9 +315,11 @@ def _about(name: str, record: EpisodeRecord, objective: float) -> str:
     bound = " (an upper bound, not a policy)" if identity.get("upper_bound") else ""
     sense = "profit: higher" if identity["objective_sense"] == "max" else "cost: lower"
     forced = int(record.forced[1:].sum())
-    return (f"**{name}**{bound} · {identity['domain']} · **test-set episode {identity['episode']}**"
+    task = look.task_part(identity["domain"], identity["task"])
+    unit = look.objective_unit(identity["domain"], identity["task"])
+    return (f"**{name}**{bound} · {task} · **test-set episode {identity['episode']}**"
             + (f", repeat {identity['repeat']}" if identity["repeat"] else "")
-            + f" · objective **{objective:.5g}** {look.OBJECTIVE_UNITS.get(identity['domain'], '')} ({sense} is better)"
+            + f" · objective **{objective:.5g}** {unit if unit != '-' else ''} ({sense} is better)"
             f" · {int(record.recompute.sum())} computations, {forced} forced · seed {identity['seed']}"
             + (f" · policy `{spec}`" if spec != name else "") + "  \n"
             "Orange: what happened. Thin lines: each plan's prediction from the step it was made, coloured by when: "

@@ -30,7 +30,7 @@ from etmpc.common.outputs import atomic_path
 def check_scene(system) -> None:
     """A system has a scene when it names a ``camera`` and can ``show(physics, x)`` a state."""
     if not (hasattr(system, "camera") and hasattr(system, "show")):
-        raise EtmpcError(f"domain {system.domain!r} has no 3-D scene to render")
+        raise EtmpcError(f"{system.name!r} has no 3-D scene to render")
 
 
 def check_size(width: int, height: int) -> None:
