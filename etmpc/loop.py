@@ -1,10 +1,12 @@
 """The control loop of the paper's Algorithm 1, generic over the system.
 
-Each step: measure ``x_i``; if there is no plan, or the plan has run out (age = N), or the policy
-draws ``a_i = 1``, solve a new plan from ``x_i``. Apply the planned input plus the LQR correction
-``-K (x_i - x_hat_i)``, clipped to the input bounds. If a solve fails, the previous plan is kept
-(the LQR keeps correcting around it) and the failure is counted; with no earlier plan the failed
-solve's last iterate is used. Every recompute attempt counts as a computation (``a_i = 1``).
+Each step: measure ``x_i``; if there is no plan, or the plan has run out (age = N), or the task put
+the plant back in the last step (``task.restarted``: a fallen pole re-erected), or the policy draws
+``a_i = 1``, solve a new plan from ``x_i``. Apply the planned input plus the feedback correction
+(``-K (x_i - x_hat_i)``, with a fixed LQR gain or one along the plan), clipped to the input bounds.
+If a solve fails, the previous plan is kept while it has steps left (the feedback keeps correcting
+around it) and the failure is counted; a forced solve that fails is used as it is (the solver's last
+iterate). Every recompute attempt counts as a computation (``a_i = 1``).
 
 A system plugs in by providing what :class:`etmpc.systems.base.System` lists; a policy by providing
 what :class:`Policy` lists, deciding from an :class:`AugmentedState`. Nothing here knows about MuJoCo,
@@ -146,7 +148,7 @@ def _input(system: System, plan: Plan, age: int, x: np.ndarray) -> tuple[np.ndar
     """``(u, u_planned, correction, x_predicted)``: the plan's input plus the LQR correction, clipped."""
     u_planned = plan.input_at(age)
     x_predicted = plan.state_at(age)
-    correction = np.zeros(u_planned.shape) if age == 0 else system.feedback.correction(x, x_predicted)
+    correction = np.zeros(u_planned.shape) if age == 0 else system.feedback.correction(x, x_predicted, plan, age)
     # np.minimum(np.maximum(.)) is np.clip's arithmetic without its Python-level overhead.
     return np.minimum(np.maximum(u_planned + correction, system.u_min), system.u_max), u_planned, correction, x_predicted
 
@@ -216,7 +218,7 @@ class ClosedLoop:
             traj.solve_time_s[i] = time.perf_counter() - solve_start  # the whole computation
             if not new.success:
                 traj.solver_failures += 1
-            if new.success or plan is None:
+            if new.success or forced:  # a failed solve keeps the old plan only while it has steps left
                 plan, self.plan, self.age = new, new, 0
                 traj.plans.append((i, plan))
         u, u_planned, correction, x_predicted = _input(system, plan, self.age, x)
@@ -232,6 +234,8 @@ class ClosedLoop:
         traj.steps = self.step_index = i + 1
         self.x = system.state(self.timestep)
         self.age, self.u_prev = self.age + 1, u
+        if self.env.task.restarted:  # the task put the plant back: the plan no longer applies
+            self.age = plan.horizon
         traj.step_time_s[i] = time.perf_counter() - start
         if self.timestep.last() or self.step_index >= system.episode_steps:
             self._finish()
@@ -319,7 +323,7 @@ def play_on(
                 if observation is None:
                     observation = task.get_observation(physics)
                 new = system.plan(x, u_prev, plan, age, dm_env.TimeStep(dm_env.StepType.MID, None, None, observation))
-            if new.success or plan is None:
+            if new.success or plan is None or age >= plan.horizon:
                 plan, age = new, 0
         u = _input(system, plan, age, x)[0]
         try:
@@ -333,6 +337,8 @@ def play_on(
         if not np.isfinite(x).all():
             return -math.inf
         age, u_prev = age + 1, u
+        if task.restarted:  # as in ClosedLoop.step: the next decision is forced
+            age = plan.horizon
     if end < system.episode_steps:
         total += system.truncation_value(x)
     return total

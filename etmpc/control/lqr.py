@@ -105,5 +105,17 @@ class ErrorFeedback:
 
     gain: np.ndarray  # (nu, nx)
 
-    def correction(self, x: np.ndarray, x_planned: np.ndarray) -> np.ndarray:
+    def correction(self, x: np.ndarray, x_planned: np.ndarray, plan=None, age: int = 0) -> np.ndarray:
         return -matvec(self.gain, x - x_planned)
+
+
+@dataclass(frozen=True)
+class PlanFeedback:
+    """``u_lqr = -K_j (x - x_planned)`` with the gains the plan carries (``Plan.gains``, a time-varying
+    LQR along it: see ``etmpc.control.mpc.FeedbackWeights``), ``j`` the plan's age (its last past the
+    horizon). Away from a fixed operating point (a swing, a reach), a gain linearised along the plan
+    corrects where one linearised at a single point cannot."""
+
+    def correction(self, x: np.ndarray, x_planned: np.ndarray, plan=None, age: int = 0) -> np.ndarray:
+        gains = plan.gains
+        return -matvec(gains[min(age, gains.shape[0] - 1)], x - x_planned)

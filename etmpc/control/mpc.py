@@ -42,12 +42,26 @@ from etmpc.control.plan import Plan
 
 @dataclass(frozen=True)
 class SolverSettings:
-    tolerance: float = 1e-8  # sqpmethod tol_pr and tol_du
+    tolerance: float = 1e-8  # sqpmethod tol_pr (and tol_du unless dual_tolerance is given)
     max_iterations: int = 100
     qpsol: str = "qrqp"
     qpsol_options: tuple[tuple[str, object], ...] = ()
     block: int = 4  # shooting nodes every `block` intervals (1: full multiple shooting)
     compiled: bool = True  # generated C, built once per machine; False: CasADi's virtual machine
+    dual_tolerance: float | None = None  # sqpmethod tol_du (None: tolerance)
+    regularisation: float = 0.0  # mu I added to the Gauss-Newton Hessian (Levenberg-Marquardt); 0: none
+    sqp_options: tuple[tuple[str, object], ...] = ()  # more sqpmethod options (merit_memory, max_iter_ls, ...)
+
+
+@dataclass(frozen=True)
+class FeedbackWeights:
+    """Weights of the time-varying LQR computed along each plan (``Plan.gains``): the discrete Riccati
+    recursion on the predictor's linearisation at each planned ``(x_k, u_k)``, from ``terminal`` (the
+    weight of ``x_N``; default 10 Q) backwards. A correction then follows the plan's own dynamics."""
+
+    Q: tuple[float, ...]  # diagonal state weights
+    R: tuple[float, ...]  # diagonal input weights
+    terminal_factor: float = 10.0
 
 
 class GaussNewtonMPC:
@@ -61,19 +75,30 @@ class GaussNewtonMPC:
         u_max: np.ndarray,
         settings: SolverSettings = SolverSettings(),
         name: str = "mpc",
+        parameters: int = 0,
+        feedback: FeedbackWeights | None = None,
     ):
-        """``model(x, u) -> x+``; ``stage_residual(x, u, du) -> r``; ``terminal_residual(x) -> r``."""
+        """``model(x, u) -> x+``; ``stage_residual(x, u, du) -> r``; ``terminal_residual(x) -> r``.
+
+        With ``parameters > 0`` the OCP has that many more parameters (a reference, say), given to
+        :meth:`solve` and passed to both residuals last: ``stage_residual(x, u, du, p)``,
+        ``terminal_residual(x, p)``. With ``feedback``, every plan carries the gains of a
+        time-varying LQR along it (:class:`FeedbackWeights`)."""
         if not 1 <= settings.block <= horizon:
             raise ValueError(f"block must be in 1..{horizon}, got {settings.block}")
         nx, nu = model.size1_in(0), model.size1_in(1)
         self.nx, self.nu, self.horizon, self.settings = nx, nu, horizon, settings
+        self.parameters, self.feedback = parameters, feedback
         self.u_min, self.u_max = np.atleast_1d(u_min).astype(float), np.atleast_1d(u_max).astype(float)
         self._model = model
+        self.stage_residual, self.terminal_residual = stage_residual, terminal_residual
         self.nodes = [k for k in range(settings.block, horizon, settings.block)] + [horizon]
 
-        # Variables in stage order: [u0 .. x_node u_node .. x_N]; x0 and u_prev are parameters.
+        # Variables in stage order: [u0 .. x_node u_node .. x_N]; x0, u_prev (and the parameters) are parameters.
         x_measured, u_prev = ca.SX.sym("x_measured", nx), ca.SX.sym("u_prev", nu)
-        params = ca.vertcat(x_measured, u_prev)
+        extra = ca.SX.sym("parameters", parameters)
+        params = ca.vertcat(x_measured, u_prev, extra) if parameters else ca.vertcat(x_measured, u_prev)
+        with_extra = (lambda *args: (*args, extra)) if parameters else (lambda *args: args)
         node_states = {k: ca.SX.sym(f"x{k}", nx) for k in self.nodes}
         us = [ca.SX.sym(f"u{k}", nu) for k in range(horizon)]
         order, self._u_index, self._node_index = [], [], {}
@@ -96,23 +121,27 @@ class GaussNewtonMPC:
             if k in node_states:
                 x = node_states[k]
             states.append(x)
-            residuals.append(stage_residual(x, us[k], us[k] - previous))
+            residuals.append(stage_residual(*with_extra(x, us[k], us[k] - previous)))
             previous = us[k]
             x = model(x, us[k])
             if k + 1 in node_states:
                 gaps.append(x - node_states[k + 1])
         states.append(node_states[horizon])
-        residuals.append(terminal_residual(node_states[horizon]))
+        residuals.append(terminal_residual(*with_extra(node_states[horizon])))
         r, g = ca.vertcat(*residuals), ca.vertcat(*gaps)
         f = ca.sumsqr(r)
 
         # Gauss-Newton Hessian of the Lagrangian.
         lam_f, lam_g = ca.SX.sym("lam_f"), ca.SX.sym("lam_g", g.shape[0])
         jac_r = ca.jacobian(r, w)
+        gauss_newton = lam_f * 2 * (jac_r.T @ jac_r)
+        if settings.regularisation:
+            gauss_newton = gauss_newton + settings.regularisation * ca.SX.eye(w.shape[0])
         hess = ca.Function(
-            "gauss_newton_hessian", [w, params, lam_f, lam_g], [lam_f * 2 * (jac_r.T @ jac_r)],
+            "gauss_newton_hessian", [w, params, lam_f, lam_g], [gauss_newton],
             ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"],
         )
+        self._dual_tolerance = settings.tolerance if settings.dual_tolerance is None else settings.dual_tolerance
         quiet = {"error_on_fail": False}
         if settings.qpsol == "qrqp":
             quiet |= {"print_iter": False, "print_header": False, "print_info": False}
@@ -122,14 +151,14 @@ class GaussNewtonMPC:
             "qpsol_options": quiet | dict(settings.qpsol_options),
             "hess_lag": hess,
             "tol_pr": settings.tolerance,
-            "tol_du": settings.tolerance,
+            "tol_du": self._dual_tolerance,
             "max_iter": settings.max_iterations,
             "print_time": False,
             "print_header": False,
             "print_iteration": False,
             "print_status": False,
             "error_on_fail": False,
-        })
+        } | dict(settings.sqp_options))
         nw = w.shape[0]
         self._lbw, self._ubw = np.full(nw, -np.inf), np.full(nw, np.inf)
         self._lbw[self._u_index], self._ubw[self._u_index] = self.u_min, self.u_max
@@ -141,14 +170,17 @@ class GaussNewtonMPC:
         kkt = ca.Function("kkt", [w, params, lam_x, lam_g], [ca.vertcat(violation, ca.norm_inf(grad_lagrangian))])
         trajectory = ca.Function("trajectory", [w, params], [ca.vertcat(*states)])
 
-        # One function: solve from a guess, then the plan's trajectory and the KKT residuals.
+        # One function: solve from a guess, then the plan's trajectory and the KKT residuals (and,
+        # with feedback weights, the gains of the time-varying LQR along the plan).
         guess, p = ca.MX.sym("guess", nw), ca.MX.sym("p", params.shape[0])
         sol = nlpsol(x0=guess, p=p, lbx=self._lbw, ubx=self._ubw, lbg=0, ubg=0)
-        self.function = ca.Function(
-            name, [guess, p],
-            [sol["x"], sol["f"], trajectory(sol["x"], p), kkt(sol["x"], p, sol["lam_x"], sol["lam_g"])],
-            ["guess", "p"], ["w", "f", "states", "kkt"],
-        )
+        planned = trajectory(sol["x"], p)
+        outputs = [sol["x"], sol["f"], planned, kkt(sol["x"], p, sol["lam_x"], sol["lam_g"])]
+        names = ["w", "f", "states", "kkt"]
+        if feedback is not None:
+            outputs.append(self._gains(planned, sol["x"], feedback))
+            names.append("gains")
+        self.function = ca.Function(name, [guess, p], outputs, ["guess", "p"], names)
         self._compiled = None
         if settings.compiled:
             try:
@@ -156,6 +188,45 @@ class GaussNewtonMPC:
             except CompileError as exc:
                 warnings.warn(f"{exc}; the MPC runs in CasADi's virtual machine instead (slower, same optimum)",
                               RuntimeWarning, stacklevel=2)
+
+    def objective(self, x: np.ndarray, u_prev: np.ndarray, inputs: np.ndarray, parameters: np.ndarray | None = None) -> float:
+        """The OCP's objective of an input sequence ``(N, nu)``, rolled out through the predictor
+        from ``x`` (single shooting: no variable but the inputs)."""
+        if not hasattr(self, "_objective"):
+            xs, up = ca.SX.sym("x", self.nx), ca.SX.sym("u_prev", self.nu)
+            us, extra = ca.SX.sym("u", self.nu, self.horizon), ca.SX.sym("p", self.parameters)
+            with_extra = (lambda *args: (*args, extra)) if self.parameters else (lambda *args: args)
+            total, state, previous = 0, xs, up
+            for k in range(self.horizon):
+                total += ca.sumsqr(self.stage_residual(*with_extra(state, us[:, k], us[:, k] - previous)))
+                previous = us[:, k]
+                state = self._model(state, us[:, k])
+            total += ca.sumsqr(self.terminal_residual(*with_extra(state)))
+            self._objective = ca.Function("objective", [xs, up, us, extra], [total])
+        extra = np.zeros(0) if parameters is None else np.asarray(parameters, float)
+        return float(self._objective(x, u_prev, np.asarray(inputs, float).reshape(self.horizon, self.nu).T, extra))
+
+    def _gains(self, states: ca.MX, w: ca.MX, weights: FeedbackWeights) -> ca.MX:
+        """The TV-LQR gains ``K_k`` (row-major, ``N nu nx`` values) of the plan ``(states, w)``: the
+        Riccati recursion ``K = (R + B'PB)^-1 B'PA``, ``P <- Q + A'P(A - BK)`` from ``P_N`` backwards."""
+        nx, nu = self.nx, self.nu
+        xs, us = ca.SX.sym("x", nx), ca.SX.sym("u", nu)
+        nxt = self._model(xs, us)
+        linearised = ca.Function("linearised", [xs, us], [ca.jacobian(nxt, xs), ca.jacobian(nxt, us)])
+        P, A, B = ca.SX.sym("P", nx, nx), ca.SX.sym("A", nx, nx), ca.SX.sym("B", nx, nu)
+        Q, R = ca.DM(np.diag(weights.Q)), ca.DM(np.diag(weights.R))
+        K = ca.solve(R + B.T @ P @ B, B.T @ P @ A)
+        P_next = Q + A.T @ P @ (A - B @ K)
+        riccati = ca.Function("riccati", [P, A, B], [K, 0.5 * (P_next + P_next.T)])
+        states = ca.reshape(states, nx, self.horizon + 1)
+        P_k = ca.DM(np.diag(weights.Q)) * weights.terminal_factor
+        gains = [None] * self.horizon
+        for k in range(self.horizon - 1, -1, -1):
+            u_k = ca.vertcat(*[w[int(i)] for i in self._u_index[k]])
+            A_k, B_k = linearised(states[:, k], u_k)
+            K_k, P_k = riccati(P_k, A_k, B_k)
+            gains[k] = ca.reshape(K_k.T, nu * nx, 1)  # K_k row by row
+        return ca.vertcat(*gains)
 
     @property
     def is_compiled(self) -> bool:
@@ -186,41 +257,49 @@ class GaussNewtonMPC:
             return self.pack(inputs, self.rollout(x, inputs))
         return self.pack(*warm.shifted(age))
 
-    def solve(self, x: np.ndarray, u_prev: np.ndarray, warm: Plan | None = None, age: int = 0) -> Plan:
-        """Plan from the measured state ``x``; the first input change is against ``u_prev``.
+    def solve(self, x: np.ndarray, u_prev: np.ndarray, warm: Plan | None = None, age: int = 0,
+              parameters: np.ndarray | None = None) -> Plan:
+        """Plan from the measured state ``x``; the first input change is against ``u_prev``;
+        ``parameters``: the OCP's other parameters (as many as the constructor was told).
 
         Warm started from ``warm`` shifted by ``age``; if that fails, retried once from a cold
         start (zero inputs), since a poor warm start is the usual cause of a failed SQP.
         """
         start = time.perf_counter()
-        p = np.concatenate([x, np.atleast_1d(u_prev)])
+        p = np.concatenate([x, np.atleast_1d(u_prev)] + ([np.asarray(parameters, float)] if self.parameters else []))
         result = self._solve_from(self.initial_guess(x, warm, age), p)
         if not result[3] and warm is not None:
             retry = self._solve_from(self.initial_guess(x, None, 0), p)
             if retry[3]:
                 result = retry
-        inputs, states, cost, success, status = result
-        return Plan(inputs, states, cost, time.perf_counter() - start, success, -1, status)
+        inputs, states, cost, success, status, gains = result
+        return Plan(inputs, states, cost, time.perf_counter() - start, success, -1, status, gains=gains)
 
-    def _solve_from(self, guess: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, bool, str]:
-        """``(inputs, states, cost, success, status)`` of one SQP run from ``guess``."""
+    def _solve_from(self, guess: np.ndarray, p: np.ndarray):
+        """``(inputs, states, cost, success, status, gains)`` of one SQP run from ``guess`` (``gains``:
+        ``(N, nu, nx)`` with feedback weights, else None)."""
         if self._compiled is not None:
-            (w, f, states, kkt), code = self._compiled.call(guess, p)
+            outputs, code = self._compiled.call(guess, p)
         else:
             code = 0
-            w, f, states, kkt = (np.asarray(v).ravel() for v in self.function(guess, p))
+            outputs = [np.asarray(v).ravel() for v in self.function(guess, p)]
+        w, f, states, kkt = outputs[:4]
         cost, violation, stationarity = float(f[0]), float(kkt[0]), float(kkt[1])
         inputs = w[self._u_index]  # (N, nu), a copy
         states = states.reshape(self.horizon + 1, self.nx).copy()
+        gains = outputs[4].reshape(self.horizon, self.nu, self.nx).copy() if self.feedback is not None else None
         finite = math.isfinite(cost) and math.isfinite(inputs.sum() + states.sum())
-        limit = 10 * self.settings.tolerance
-        success = bool(code == 0 and finite and violation <= limit and stationarity <= limit)
+        if gains is not None:
+            finite = finite and bool(np.all(np.isfinite(gains)))
+        success = bool(code == 0 and finite and violation <= 10 * self.settings.tolerance
+                       and stationarity <= 10 * self._dual_tolerance)
         if success:
             status = "converged"
         elif code != 0 or not finite:
             status = "evaluation failed" if code != 0 else "non-finite iterate"
             zeros = np.zeros((self.horizon, self.nu))
             inputs, states, cost = zeros, self.rollout(p[: self.nx], zeros), float("nan")
+            gains = None if gains is None else np.zeros((self.horizon, self.nu, self.nx))
         else:
             status = f"not converged: constraint violation {violation:.1e}, Lagrangian gradient {stationarity:.1e}"
-        return inputs, states, cost, success, status
+        return inputs, states, cost, success, status, gains

@@ -16,7 +16,8 @@ class Plan:
     ``k + j`` (``j = 0..N``). ``success`` is False when the solver did not converge; such a plan holds
     the solver's last iterate and is only used when there is no earlier plan to keep. ``cost`` is the
     value the solver minimised (for an economic MPC, the negative profit). ``forecasts`` holds the
-    forecasts of time-varying parameters the plan was made with (name -> values for ``k..k+N-1``).
+    forecasts of time-varying parameters the plan was made with (name -> values for ``k..k+N-1``);
+    ``gains`` the feedback gains along the plan, ``u = u_j - K_j (x - x_j)``, when its MPC computes them.
     """
 
     inputs: np.ndarray  # (N, nu)
@@ -27,6 +28,7 @@ class Plan:
     iterations: int = 0  # -1: the solver does not report it
     status: str = ""
     forecasts: Mapping[str, np.ndarray] = field(default_factory=dict)
+    gains: np.ndarray | None = None  # (N, nu, nx): a time-varying LQR along the plan, if its MPC computes one
 
     @property
     def horizon(self) -> int:

@@ -91,6 +91,9 @@ class EpisodeTask(control.Task):
         self._queued: Any = None
         self._episode: Any = None
         self._visualize_reward = False
+        # True after a step in which the task put the plant back (a fallen pole caught and re-erected):
+        # the plan no longer applies, and the control loop solves a new one at the next step.
+        self.restarted = False
 
     @property
     def random(self) -> np.random.Generator:

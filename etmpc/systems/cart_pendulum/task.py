@@ -1,17 +1,13 @@
-"""The cart-pendulum dm-control domain: MuJoCo physics, the `balance` task and its suite.
+"""The cart pendulum's `balance` task (the paper's), and the domain's suite of tasks.
 
-The plant is ``models/cart_pendulum.xml`` simulated by MuJoCo (RK4, 0.025 s) under a 0.1 s control
+The plant (``physics.py``) is ``models/cart_pendulum.xml`` simulated by MuJoCo (RK4, 0.025 s) under a 0.1 s control
 interval. Each interval draws an unmeasured angular disturbance ``w ~ N(0, 1)`` rad/s^2 that enters
 as the generalised force ``M(q) e_hinge w``, refreshed before every physics step, so it produces
 the angular acceleration ``w`` the paper adds to ``omega_dot`` (exactly at the start of each
 physics step; MuJoCo holds the force over the step's RK4 stages, so the cart coupling lags by up
 to one 0.025 s step: ~1e-3 over 2 s, see tests/test_cart_pendulum_model.py).
 
-Two plant settings (see the MJCF header for the numbers):
-  * ``"mismatched"`` (default): the MJCF as written: hinge damping, cart damping and drive armature,
-    a pole inertia that is not the ideal rod's; the analytic model does not know these.
-  * ``"matched"``: those differences removed by name, so MuJoCo integrates the same ODE as the
-    MPC's analytic model (``tests/test_cart_pendulum_model.py`` shows they agree).
+Two plant settings, ``mismatched`` (the default) and ``matched``: see ``physics.py``.
 
 **Action** ``[force]`` (N) on the cart. MuJoCo clamps it to the actuator's ``ctrlrange``
 (+-25 N), as it does for every limited actuator of the suite; a non-finite force or an action of
@@ -26,23 +22,19 @@ growing worse after the pole falls rather than rewarding a pole that swings over
 from __future__ import annotations
 
 import collections
-import copy
-import logging
 import math
 from dataclasses import dataclass
 
-import mujoco
 import numpy as np
-from dm_control import mjcf
-from dm_control.mujoco import Physics as MjPhysics
 from dm_control.rl import control
 from dm_control.utils import containers
 from dm_env import specs
 
-from etmpc.systems.cart_pendulum.model import NX, STATE_NAMES, Parameters
+from etmpc.systems.cart_pendulum.model import NX, STATE_NAMES
+from etmpc.systems.cart_pendulum.physics import PLANTS, Physics, load_model
 from etmpc.systems.episodes import Environment, EpisodeTask, Random, environment_kwargs_for, steps_for
-from etmpc.common.errors import UnknownNameError
-from etmpc.common.resources import model_path
+
+__all__ = ["PLANTS", "SUITE", "Episode", "Balance", "Physics", "balance", "load_model", "make_environment"]
 
 CONTROL_DT_S = 0.1
 EPISODE_STEPS = 100
@@ -50,127 +42,9 @@ DISTURBANCE_STD_RAD_S2 = 1.0
 INITIAL_STATE_LOW = np.array([0.0, -1.0, -0.78, -1.0])  # eta, v, beta, omega
 INITIAL_STATE_HIGH = np.array([0.0, 1.0, 0.78, 1.0])
 
-PLANTS = ("mismatched", "matched")
 _POLE_RGB = np.array([0.2, 0.45, 0.85])  # the MJCF's "pole" material
 _FALLEN_RGB = np.array([0.85, 0.1, 0.1])
-SUITE = containers.TaggedTasks()
-
-
-def _matched(root: mjcf.RootElement) -> None:
-    """Remove the MJCF's deliberate differences from the analytic model (edits by MJCF name)."""
-    p = Parameters()
-    root.find("joint", "hinge").damping = 0.0
-    slider = root.find("joint", "slider")
-    slider.damping = 0.0
-    slider.armature = 0.0
-    rod = p.pole_mass_kg * (2 * p.pole_half_length_m) ** 2 / 12  # uniform rod about its centre
-    pole = root.find("body", "pole")
-    pole.inertial.diaginertia = [rod, rod, 1e-6]
-    pole.inertial.mass = p.pole_mass_kg
-    root.find("body", "cart").inertial.mass = p.cart_mass_kg
-
-
-def load_model(plant: str = "mismatched") -> mjcf.RootElement:
-    if plant not in PLANTS:
-        raise UnknownNameError(f"unknown plant setting {plant!r}; valid: {', '.join(PLANTS)}")
-    root = mjcf.from_path(str(model_path("cart_pendulum.xml")))
-    if plant == "matched":
-        _matched(root)
-    return root
-
-
-class Physics(MjPhysics):
-    """Cart-pendulum physics with named accessors and the held angular disturbance."""
-
-    def _reload_from_data(self, data):  # called by dm-control whenever the model is (re)bound
-        super()._reload_from_data(data)
-        m = self.model
-        self._slider = (m.jnt_qposadr[m.name2id("slider", "joint")], m.jnt_dofadr[m.name2id("slider", "joint")])
-        self._hinge = (m.jnt_qposadr[m.name2id("hinge", "joint")], m.jnt_dofadr[m.name2id("hinge", "joint")])
-        self._hinge_unit = np.zeros(m.nv)
-        self._hinge_unit[self._hinge[1]] = 1.0
-        self._force = np.zeros(m.nv)
-
-    # -- vocabulary -------------------------------------------------------------------------------
-    def cart_position(self) -> float:
-        return float(self.data.qpos[self._slider[0]])
-
-    def cart_velocity(self) -> float:
-        return float(self.data.qvel[self._slider[1]])
-
-    def pole_angle(self) -> float:
-        return float(self.data.qpos[self._hinge[0]])
-
-    def pole_angular_velocity(self) -> float:
-        return float(self.data.qvel[self._hinge[1]])
-
-    def state(self) -> np.ndarray:
-        """``[eta, v, beta, omega]`` in the analytic model's order."""
-        q, v = self.data.qpos, self.data.qvel
-        return np.array([q[self._slider[0]], v[self._slider[1]], q[self._hinge[0]], v[self._hinge[1]]])
-
-    def set_state_vector(self, x: np.ndarray) -> None:
-        self.data.qpos[self._slider[0]], self.data.qvel[self._slider[1]] = x[0], x[1]
-        self.data.qpos[self._hinge[0]], self.data.qvel[self._hinge[1]] = x[2], x[3]
-
-    def disturbance(self) -> float:
-        """Angular disturbance of the current control interval (rad/s^2)."""
-        return float(self.data.userdata[0])
-
-    def set_disturbance(self, w_rad_s2: float) -> None:
-        self.data.userdata[0] = w_rad_s2
-
-    def set_control(self, control_) -> None:
-        """The force on the cart (N): one finite number (MuJoCo clamps it to ``ctrlrange``)."""
-        force = np.asarray(control_, dtype=float)
-        if force.size != 1:
-            raise ValueError(f"the cart pendulum's action is one force, got an action of shape {force.shape}")
-        value = float(force.reshape(()))
-        if not math.isfinite(value):
-            raise ValueError(f"the cart pendulum's force must be finite, got {value}")
-        self.data.ctrl[0] = value
-
-    # -- snapshots (rollouts) ---------------------------------------------------------------------
-    def snapshot(self) -> mujoco.MjData:
-        """A copy of the whole ``mjData`` (state, disturbance, and every derived quantity)."""
-        return copy.copy(self.data.ptr)
-
-    def restore(self, snapshot: mujoco.MjData) -> None:
-        """Put back a snapshot, taken here or in a twin physics of the same model, exactly."""
-        mujoco.mj_copyData(self.data.ptr, self.model.ptr, snapshot)
-
-    # -- stepping ---------------------------------------------------------------------------------
-    def step(self, nstep: int = 1) -> None:
-        """Advance ``nstep`` physics steps, refreshing ``qfrc_applied = M(q) e_hinge w`` before each.
-
-        ``mj_step1`` after every step keeps the mass matrix (and the rest of mjData) in sync with
-        the new state, as dm-control's legacy stepping does for RK4. A new MuJoCo warning (a
-        diverging state) raises ``PhysicsError`` as ``check_invalid_state`` does; this is the
-        hot loop of every rollout, so the check is inlined.
-        """
-        m, d = self.model.ptr, self.data.ptr
-        w = d.userdata[0]
-        force, push = d.qfrc_applied, self._hinge_unit * w
-        warnings_before = self._warnings.tolist()
-        for _ in range(nstep):
-            if w:
-                mujoco.mj_mulM(m, d, force, push)  # M(q) (e_hinge w): the same numbers as (M(q) e_hinge) w
-            else:
-                force[:] = 0.0
-            mujoco.mj_step(m, d)
-            mujoco.mj_step1(m, d)
-        warnings_after = self._warnings.tolist()
-        if warnings_after != warnings_before:
-            self._invalid_state(warnings_before, warnings_after)
-
-    def _invalid_state(self, before: list[int], after: list[int]) -> None:
-        """What ``check_invalid_state`` does when MuJoCo warned during a step."""
-        names = [name for name, b, a in zip(mujoco.mjtWarning.__members__, before, after) if a > b]
-        message = f"Physics state is invalid. Warning(s) raised: {', '.join(names)}"
-        if self._warnings_cause_exception:
-            raise control.PhysicsError(message)
-        logging.warning(message)
-
+SUITE = containers.TaggedTasks()  # the domain's tasks: balance here, kicks in kicks.py
 
 @dataclass(frozen=True)
 class Episode:
