@@ -18,8 +18,10 @@ from etmpc import suite
 from etmpc.systems.battery import task as battery_env
 from etmpc.systems.cart_pendulum import task as cp_env
 
-SHORT = {"cart_pendulum": 1.0, "battery": 50.0}  # time limits of a few steps, so episodes end in the tests
-STEPS = {"cart_pendulum": 10, "battery": 5}
+# A time limit of a few steps per task, so that episodes end in the tests: (seconds, steps).
+SHORT_LIMITS = {("cart_pendulum", "balance"): (1.0, 10), ("cart_pendulum", "kicks"): (1.0, 10), ("battery", "trading"): (50.0, 5)}
+SHORT = {task: seconds for task, (seconds, _) in SHORT_LIMITS.items()}
+STEPS = {task: steps for task, (_, steps) in SHORT_LIMITS.items()}
 
 
 class _ContractTest(test_utils.EnvironmentTestMixin):
@@ -29,12 +31,12 @@ class _ContractTest(test_utils.EnvironmentTestMixin):
     task: str
 
     def make_object_under_test(self):
-        kwargs = {"random": 0, "time_limit": SHORT[self.domain]}
+        kwargs = {"random": 0, "time_limit": SHORT[self.domain, self.task]}
         return suite.load(self.domain, self.task, task_kwargs=kwargs)
 
     def make_action_sequence(self):
         spec, rng = self.environment.action_spec(), np.random.default_rng(1)
-        for _ in range(2 * STEPS[self.domain] + 3):
+        for _ in range(2 * STEPS[self.domain, self.task] + 3):
             yield rng.uniform(spec.minimum, spec.maximum)
 
 
@@ -45,8 +47,8 @@ for _domain, _task in suite.ALL_TASKS:
 
 
 def test_suite_containers_list_every_task_as_dm_control_suite_does():
-    assert suite.ALL_TASKS == (("cart_pendulum", "balance"), ("battery", "trading"))
-    assert suite.TASKS_BY_DOMAIN == {"cart_pendulum": ("balance",), "battery": ("trading",)}
+    assert suite.ALL_TASKS == tuple(SHORT_LIMITS)  # every task of the registry, each with a short limit here
+    assert suite.TASKS_BY_DOMAIN == {"cart_pendulum": ("balance", "kicks"), "battery": ("trading",)}
     assert set(suite.BENCHMARKING) == set(suite.ALL_TASKS)
     # The same container types as the suite's.
     assert isinstance(suite.ALL_TASKS, type(dm_suite.ALL_TASKS)) and isinstance(suite.ALL_TASKS[0], tuple)
@@ -91,12 +93,12 @@ def test_random_takes_a_seed_a_random_state_or_a_generator(domain, task):
 
 @pytest.mark.parametrize("domain, task", suite.ALL_TASKS)
 def test_time_limit_sets_the_number_of_steps(domain, task):
-    env = suite.load(domain, task, task_kwargs={"random": 3, "time_limit": 2 * SHORT[domain]})
+    env = suite.load(domain, task, task_kwargs={"random": 3, "time_limit": 2 * SHORT[domain, task]})
     timestep, steps = env.reset(), 0
     action = np.zeros(env.action_spec().shape)
     while not timestep.last():
         timestep, steps = env.step(action), steps + 1
-    assert steps == 2 * STEPS[domain]
+    assert steps == 2 * STEPS[domain, task]
     interval = env.control_timestep()
     for bad in (0.5 * interval, 2.5 * interval, 0.0, -interval, math.inf, math.nan):
         with pytest.raises(ValueError, match="whole number"):

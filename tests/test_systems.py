@@ -10,6 +10,7 @@ from etmpc.systems.base import FEATURES, REQUIRED, provides
 # docs/adding-a-task.md says what each feature needs.
 OPTIONAL = {
     "cart_pendulum": {"render", "bench"},
+    "cart_pendulum/kicks": {"render", "bench", "failures"},
     "battery": {"exogenous features", "bench"},
 }
 
@@ -38,5 +39,5 @@ def test_keys_name_the_default_task_by_its_domain_and_carry_a_price():
     assert systems.system_key("battery", 0.001) == "battery@0.001"
     assert systems.make_system("battery@0.001").recompute_price == 0.001
     for bad in ("cartpole", "cart_pendulum/swing", "battery/balance", ""):
-        with pytest.raises(UnknownNameError, match="valid: cart_pendulum, battery"):
+        with pytest.raises(UnknownNameError, match="valid: cart_pendulum, cart_pendulum/kicks, battery"):
             systems.check_name(bad)

@@ -89,6 +89,8 @@ class System(Protocol):
     # exogenous_feature_names: tuple[str, ...] and exogenous_features(s) -> array: what the learned
     #     policy's "error" features add for this task (the battery's prices and production);
     # camera: str and show(physics, x): a 3-D scene for `etmpc render` (the cart pendulum's);
+    # failure_name: str and failures(rewards) -> int: how often an episode failed (a fall, say), counted
+    #     from its rewards and reported beside the mean objective;
     # plan_cost, reference_solvers() and interpreted(): what `etmpc bench` compares the MPC with.
 
 
@@ -105,6 +107,7 @@ FEATURES: dict[str, tuple[str, ...]] = {
     "exogenous features": ("exogenous_feature_names", "exogenous_features"),
     "render": ("camera", "show"),
     "bench": ("plan_cost", "reference_solvers", "interpreted"),
+    "failures": ("failure_name", "failures"),
 }
 REQUIRED = ("loop", "test sets", "threshold policy", "recordings", "experiments", "rollouts")
 
