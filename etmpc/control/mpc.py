@@ -51,6 +51,11 @@ class SolverSettings:
     dual_tolerance: float | None = None  # sqpmethod tol_du (None: tolerance)
     regularisation: float = 0.0  # mu I added to the Gauss-Newton Hessian (Levenberg-Marquardt); 0: none
     sqp_options: tuple[tuple[str, object], ...] = ()  # more sqpmethod options (merit_memory, max_iter_ls, ...)
+    # A cold start's guess: "rollout" (zero inputs, the predictor's states from x) or "hold" (zero
+    # inputs, every state x). Near an unstable equilibrium "hold" stays near it, where a rollout of
+    # zero inputs falls away and can lead the SQP to another optimum (a pole swung over the top).
+    cold_start: str = "rollout"
+    warm_from_expired: bool = True  # False: a plan kept to its end (or past a restart) gives no warm start
 
 
 @dataclass(frozen=True)
@@ -86,6 +91,8 @@ class GaussNewtonMPC:
         time-varying LQR along it (:class:`FeedbackWeights`)."""
         if not 1 <= settings.block <= horizon:
             raise ValueError(f"block must be in 1..{horizon}, got {settings.block}")
+        if settings.cold_start not in ("rollout", "hold"):
+            raise ValueError(f"cold_start must be 'rollout' or 'hold', got {settings.cold_start!r}")
         nx, nu = model.size1_in(0), model.size1_in(1)
         self.nx, self.nu, self.horizon, self.settings = nx, nu, horizon, settings
         self.parameters, self.feedback = parameters, feedback
@@ -251,9 +258,12 @@ class GaussNewtonMPC:
 
     # -- solving ----------------------------------------------------------------------------------
     def initial_guess(self, x: np.ndarray, warm: Plan | None, age: int) -> np.ndarray:
-        """The previous plan shifted by its age, or zero inputs rolled out from ``x``."""
-        if warm is None:
+        """The previous plan shifted by its age, or a cold guess: zero inputs, with the states they
+        roll out to from ``x`` (or ``x`` held, see ``SolverSettings.cold_start``)."""
+        if warm is None or (age >= self.horizon and not self.settings.warm_from_expired):
             inputs = np.zeros((self.horizon, self.nu))
+            if self.settings.cold_start == "hold":
+                return self.pack(inputs, np.tile(np.asarray(x, float), (self.horizon + 1, 1)))
             return self.pack(inputs, self.rollout(x, inputs))
         return self.pack(*warm.shifted(age))
 
@@ -268,7 +278,7 @@ class GaussNewtonMPC:
         start = time.perf_counter()
         p = np.concatenate([x, np.atleast_1d(u_prev)] + ([np.asarray(parameters, float)] if self.parameters else []))
         result = self._solve_from(self.initial_guess(x, warm, age), p)
-        if not result[3] and warm is not None:
+        if not result[3] and warm is not None and (age < self.horizon or self.settings.warm_from_expired):
             retry = self._solve_from(self.initial_guess(x, None, 0), p)
             if retry[3]:
                 result = retry

@@ -38,6 +38,7 @@ class RunResult:
     solver_failures: int
     steps: int
     finite: bool  # False: the episode ended early on a non-finite state
+    failures: int | None = None  # the task's own failures in the episode (falls, ...), if it counts them
 
 
 @dataclass(frozen=True)
@@ -54,6 +55,8 @@ class PolicySummary:
     episodes: int
     repeats: int
     upper_bound: bool = False  # an oracle: it knows the episode's future; a bound, not a policy
+    failures_mean: float | None = None  # the task's failures per episode (failure_name), if it counts them
+    failure_name: str | None = None
 
 
 # -- worker side ---------------------------------------------------------------------------------
@@ -81,6 +84,7 @@ def _run(job: tuple) -> tuple[RunResult, EpisodeRecord | None]:
         solver_failures=traj.solver_failures,
         steps=traj.steps,
         finite=not traj.nonfinite,
+        failures=played.system.failures(traj.rewards[: traj.steps]) if hasattr(played.system, "failures") else None,
     ), played.record(spec, getattr(policy, "announce", None), upper_bound=spec.startswith("oracle:")) if record else None
 
 
@@ -92,7 +96,8 @@ def run_jobs(jobs: list, workers: int, progress: bool, backend: str = "local", a
         return backend.map(_run, jobs, on_result=lambda job: bar.update(), chunksize=chunk)
 
 
-def summarise(spec: str, runs: list[RunResult], sense: str, episodes: int, repeats: int) -> PolicySummary:
+def summarise(spec: str, runs: list[RunResult], sense: str, episodes: int, repeats: int,
+              failure_name: str | None = None) -> PolicySummary:
     """Means over the runs that stayed finite; the others are counted, never averaged in."""
     finite = [r for r in runs if r.finite]
     by_episode: dict[int, list[float]] = {}
@@ -115,6 +120,8 @@ def summarise(spec: str, runs: list[RunResult], sense: str, episodes: int, repea
         episodes=episodes,
         repeats=repeats,
         upper_bound=spec.startswith("oracle:"),
+        failures_mean=mean([r.failures for r in finite]) if failure_name is not None else None,
+        failure_name=failure_name,
     )
 
 
@@ -136,9 +143,21 @@ class Evaluation:
             "test_set": {"path": self.testset_path, "sha256": self.testset_sha256},
             "seed": self.seed,
             "recompute_price": self.recompute_price,
-            "policies": {s.policy: asdict(s) for s in self.summaries},
-            "runs": [asdict(r) for r in self.runs],
+            "policies": {s.policy: _fields(s) for s in self.summaries},
+            "runs": [_fields(r) for r in self.runs],
         }
+
+
+_TASK_FAILURES = ("failures", "failures_mean", "failure_name")
+
+
+def _fields(row) -> dict:
+    """A run or summary as JSON; the task's failure counts only for a task that counts them."""
+    data = asdict(row)
+    if data.get("failure_name", data.get("failures")) is None:
+        for name in _TASK_FAILURES:
+            data.pop(name, None)
+    return data
 
 
 def evaluate(
@@ -206,7 +225,8 @@ def evaluate(
         recorder.close()
     runs = [result for result, _ in outcomes]
     summaries = [
-        summarise(spec, [r for r in runs if r.policy == spec], system.objective_sense, episodes, repeats) for spec in policies
+        summarise(spec, [r for r in runs if r.policy == spec], system.objective_sense, episodes, repeats,
+                  getattr(system, "failure_name", None)) for spec in policies
     ]
     return Evaluation(system.domain, system.task, str(testset.path.resolve()), testset.sha256, seed, summaries, runs,
                       system.recompute_price)
@@ -216,7 +236,10 @@ def format_table(evaluation: Evaluation) -> str:
     sense = evaluation.summaries[0].objective_sense if evaluation.summaries else "min"
     names = {s.policy: s.policy + (" (upper bound)" if s.upper_bound else "") for s in evaluation.summaries}
     width = max([16] + [len(name) + 2 for name in names.values()])  # long rl:PATH specs stay aligned
-    head = f"{'policy':<{width}}{'objective':>12}{'± std':>10}{'control':>11}{'recomputes':>12}{'failures':>10}{'non-finite':>12}"
+    task_failures = next((s.failure_name for s in evaluation.summaries if s.failure_name), None)
+    extra = f"{task_failures + '/episode':>{len(task_failures) + 10}}" if task_failures else ""
+    head = (f"{'policy':<{width}}{'objective':>12}{'± std':>10}{'control':>11}{'recomputes':>12}{extra}"
+            f"{'solver failures':>17}{'non-finite':>12}")
     lines = [
         f"{evaluation.domain}/{evaluation.task}: objective ({'lower' if sense == 'min' else 'higher'} is better), "
         f"test set {evaluation.testset_sha256[:12]}, {evaluation.recompute_price:g} per computation",
@@ -224,9 +247,10 @@ def format_table(evaluation: Evaluation) -> str:
         "-" * len(head),
     ]
     for s in evaluation.summaries:
+        column = f"{s.failures_mean:>{len(extra)}.2f}" if task_failures else ""
         lines.append(
             f"{names[s.policy]:<{width}}{s.objective_mean:>12.5f}{s.objective_std:>10.5f}{s.control_objective_mean:>11.5f}"
-            f"{s.recomputes_mean:>12.2f}{s.solver_failures:>10d}{s.nonfinite_episodes:>12d}"
+            f"{s.recomputes_mean:>12.2f}{column}{s.solver_failures:>17d}{s.nonfinite_episodes:>12d}"
         )
     lines.append(f"{evaluation.summaries[0].episodes} episodes x {evaluation.summaries[0].repeats} repeats per policy" if evaluation.summaries else "")
     if any(s.upper_bound for s in evaluation.summaries):

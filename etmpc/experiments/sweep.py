@@ -109,7 +109,8 @@ class SweepSettings:
         if quick:
             return cls(prices, episodes or 3, benchmark.sweep_thresholds[::2], futures=2, horizon=10, quick=True,
                        learner=QUICK_LEARNER, self_trigger=QUICK_SELF)
-        return cls(prices, episodes or 20, benchmark.sweep_thresholds)
+        return cls(prices, episodes or benchmark.sweep_episodes, benchmark.sweep_thresholds, futures=benchmark.sweep_futures,
+                   self_trigger=SelfSettings() if benchmark.sweep_self_trigger else None)
 
     def to_json(self) -> dict:
         return _lists(asdict(self))

@@ -31,6 +31,11 @@ class Benchmark:
     report_thresholds: tuple[float, ...]  # the few threshold:X levels in reproduce's table of fixed policies
     periods: tuple[int, ...] = (2, 3, 4, 5, 7, 10, 15)  # every:T in that table, beside always and never
     objective_unit: str = "-"  # the objective's unit, for recordings and figures
+    # The sweep's size: test-set episodes, rollout futures, and whether a self-trigger is trained at
+    # each price (a task whose simulated steps cost more can ask for less).
+    sweep_episodes: int = 20
+    sweep_futures: int = 4
+    sweep_self_trigger: bool = True
 
     def baselines(self) -> list[str]:
         """Reproduce's fixed policies: always, never, every:T and threshold:X."""
