@@ -56,7 +56,7 @@ def test_an_agent_answering_like_a_fixed_policy_gets_what_evaluate_reports_bit_f
     objectives = {r["episode"]: r["objective"] for r in result["runs"]}
     for e in episodes:
         rewards, control, recompute, forced = _play(env, RULES[spec], e)
-        played = play_test_episode(system.domain, parse_policy(spec, system.error_weights), 0, 0, e).trajectory
+        played = play_test_episode(system.name, parse_policy(spec, system.error_weights), 0, 0, e).trajectory
         # The loop is the same: the same rewards, computations and forced steps, to the last bit.
         np.testing.assert_array_equal(control, played.rewards[: played.steps])
         np.testing.assert_array_equal(recompute, played.recompute[: played.steps])
