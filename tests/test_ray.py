@@ -8,7 +8,6 @@ import shutil
 import socket
 import subprocess
 import sys
-from dataclasses import asdict
 from pathlib import Path
 
 import pytest
@@ -68,7 +67,7 @@ def test_joins_an_existing_cluster_by_address(tmp_path):
     finally:
         subprocess.run([ray_cli, "stop", "--force"], env=env, capture_output=True, timeout=120)
     local = evaluate("battery", POLICIES, episodes=3, workers=1, progress=False)
-    assert json.loads((tmp_path / "joined.json").read_text())["runs"] == [asdict(r) for r in local.runs]
+    assert json.loads((tmp_path / "joined.json").read_text())["runs"] == local.to_json()["runs"]
 
 
 @pytest.mark.parametrize("backend", ["local", "ray"])
