@@ -127,11 +127,14 @@ def _reproduce(args) -> None:
     from etmpc.experiments.reproduce import FULL, QUICK, reproduce
     from etmpc.evaluation.workers import default_workers
 
+    from etmpc.systems import canonical
+
+    tasks = None if args.task is None else list(dict.fromkeys(canonical(t) for t in args.task))  # names checked
     _check_backend(args)
     out = args.out or Path("results") / ("reproduce-quick" if args.quick else "reproduce")
     check_outputs({}, {"--out": out})
     reproduce(out, QUICK if args.quick else FULL, args.workers or default_workers(), args.backend, args.address,
-              sweep=args.sweep)
+              domains=tasks, sweep=args.sweep)
     print(f"wrote {out}/REPORT.md and {out}/results.json")
 
 

@@ -177,8 +177,10 @@ def build_parser() -> argparse.ArgumentParser:
     ts.add_argument("--workers", type=_workers, default=None, help="worker processes (default: one per core)")
     _backend_arguments(ts)
 
-    re_ = sub.add_parser("reproduce", help="the paper's experiments on both systems, with REPORT.md and results.json")
+    re_ = sub.add_parser("reproduce", help="the paper's experiments on every task, with REPORT.md and results.json")
     re_.add_argument("--quick", action="store_true", help="the same steps at small sizes (a few minutes)")
+    re_.add_argument("--task", action="append", default=None, metavar="TASK",
+                     help=f"only this task ({tasks}; repeatable; default: every task)")
     re_.add_argument("--sweep", action="store_true",
                      help="also sweep the price of a computation (etmpc sweep) and answer the equal-rate question in the report")
     re_.add_argument("--out", type=Path, default=None, metavar="DIR",
