@@ -19,7 +19,8 @@ from etmpc.systems.battery import task as battery_env
 from etmpc.systems.cart_pendulum import task as cp_env
 
 # A time limit of a few steps per task, so that episodes end in the tests: (seconds, steps).
-SHORT_LIMITS = {("cart_pendulum", "balance"): (1.0, 10), ("cart_pendulum", "kicks"): (1.0, 10), ("battery", "trading"): (50.0, 5)}
+SHORT_LIMITS = {("cart_pendulum", "balance"): (1.0, 10), ("cart_pendulum", "kicks"): (1.0, 10), ("battery", "trading"): (50.0, 5),
+                ("reacher", "jumps"): (1.0, 10)}
 SHORT = {task: seconds for task, (seconds, _) in SHORT_LIMITS.items()}
 STEPS = {task: steps for task, (_, steps) in SHORT_LIMITS.items()}
 
@@ -48,7 +49,7 @@ for _domain, _task in suite.ALL_TASKS:
 
 def test_suite_containers_list_every_task_as_dm_control_suite_does():
     assert suite.ALL_TASKS == tuple(SHORT_LIMITS)  # every task of the registry, each with a short limit here
-    assert suite.TASKS_BY_DOMAIN == {"cart_pendulum": ("balance", "kicks"), "battery": ("trading",)}
+    assert suite.TASKS_BY_DOMAIN == {"cart_pendulum": ("balance", "kicks"), "battery": ("trading",), "reacher": ("jumps",)}
     assert set(suite.BENCHMARKING) == set(suite.ALL_TASKS)
     # The same container types as the suite's.
     assert isinstance(suite.ALL_TASKS, type(dm_suite.ALL_TASKS)) and isinstance(suite.ALL_TASKS[0], tuple)

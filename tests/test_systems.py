@@ -12,6 +12,7 @@ OPTIONAL = {
     "cart_pendulum": {"render", "bench"},
     "cart_pendulum/kicks": {"render", "bench", "failures"},
     "battery": {"exogenous features", "bench"},
+    "reacher": {"exogenous features", "render", "bench", "failures"},
 }
 
 
@@ -39,5 +40,5 @@ def test_keys_name_the_default_task_by_its_domain_and_carry_a_price():
     assert systems.system_key("battery", 0.001) == "battery@0.001"
     assert systems.make_system("battery@0.001").recompute_price == 0.001
     for bad in ("cartpole", "cart_pendulum/swing", "battery/balance", ""):
-        with pytest.raises(UnknownNameError, match="valid: cart_pendulum, cart_pendulum/kicks, battery"):
+        with pytest.raises(UnknownNameError, match="valid: cart_pendulum, cart_pendulum/kicks, battery, reacher"):
             systems.check_name(bad)

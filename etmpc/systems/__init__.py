@@ -27,6 +27,7 @@ from etmpc.common.errors import EtmpcError, UnknownNameError
 DOMAINS = {
     "cart_pendulum": "etmpc.systems.cart_pendulum",
     "battery": "etmpc.systems.battery",
+    "reacher": "etmpc.systems.reacher",
 }
 
 

@@ -45,7 +45,8 @@ LABELS = {
     "net_production_kw": "net production [kW]",
 }
 _SUFFIX_UNITS = (("_eur_kwh", "EUR/kWh"), ("_rad_s2", "rad/s²"), ("_rad_s", "rad/s"), ("_m_s", "m/s"), ("_kwh", "kWh"),
-                 ("_kw", "kW"), ("_rad", "rad"), ("_eur", "EUR"), ("_n", "N"), ("_m", "m"), ("_s", "s"))
+                 ("_kw", "kW"), ("_rad", "rad"), ("_eur", "EUR"), ("_nm", "N m"), ("_n", "N"), ("_m", "m"),
+                 ("_s", "s"))
 def objective_unit(domain: str, task: str) -> str:
     """The objective's unit of a task (its system's ``benchmark``; the cart pendulum's cost is a sum of
     squared pole angles, rad²)."""

@@ -1,0 +1,196 @@
+"""The ``jumps`` task as the control loop sees it: an MPC that reaches for the current target, a
+feedback that follows the plan, and the price of a computation.
+
+* **MPC** (Gauss-Newton SQP, full multiple shooting, N = 20, compiled): the analytic arm
+  (``model.py``, RK4, 2 steps per interval) and the target ``p`` as the OCP's parameter; residuals
+  ``[e / 0.3, 0.02 qdot, 0.01 u, 0.02 du]`` per stage, ``e = fingertip - p`` (m), and
+  ``[2 e / 0.3, 0.1 qdot]`` at the end; ``|u_i| <= 2`` N m. The plan carries the target it was made
+  for as ``Plan.forecasts`` (``target_x_m``, ``target_y_m``, N values each), so recordings draw it
+  and a learned trigger compares it with the current one.
+* **Feedback** while a plan is kept: a time-varying LQR along the plan (``PlanFeedback``), from the
+  predictor's linearisation at each planned step, ``Q = diag(10, 10, 1, 1)``, ``R = diag(0.1, 0.1)``.
+  ``threshold:X`` weighs the prediction error by ``sqrt(Q)``.
+* **Objective** (lower is better): the episode's cost (``task.py``: the sum of ``d^2 / (d^2 +
+  0.1^2)`` over 100 steps, about 30 for a controller that re-plans every step) plus the price of
+  each computation.
+* **Exogenous features** for the learned trigger: the target now, the target of the kept plan,
+  their difference and its length. A state-error trigger cannot see a jump; these can.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from functools import cached_property
+
+import casadi as ca
+import dm_env
+import numpy as np
+
+from etmpc.control.lqr import PlanFeedback
+from etmpc.control.mpc import FeedbackWeights, GaussNewtonMPC, SolverSettings
+from etmpc.control.plan import Plan
+from etmpc.systems.base import Benchmark
+from etmpc.systems.reacher import task as reacher_task
+from etmpc.systems.reacher.model import INPUT_NAMES, NU, NX, STATE_NAMES, AnalyticModel, fingertip
+
+TARGET = ("target_x_m", "target_y_m")  # the observation's current target, and the plan's forecasts of it
+
+# What the learned policy's default ("error") feature set adds for the reacher (etmpc.policies.learned).
+EXOGENOUS_FEATURES = (
+    "target_x_m",  # the target now
+    "target_y_m",
+    "planned_target_x_m",  # the target the kept plan reaches for
+    "planned_target_y_m",
+    "target_change_x_m",  # the target now minus the plan's
+    "target_change_y_m",
+    "target_change_m",  # its length: 0 until the target jumps
+)
+
+
+def exogenous_features(s) -> np.ndarray:
+    """The values of :data:`EXOGENOUS_FEATURES` at augmented state ``s`` (it carries the kept plan
+    and the current observation)."""
+    obs, forecasts, age = s.observation, s.plan.forecasts, s.age
+    now = np.array([float(obs[TARGET[0]]), float(obs[TARGET[1]])])
+    j = min(age, len(forecasts[TARGET[0]]) - 1)
+    planned = np.array([float(forecasts[TARGET[0]][j]), float(forecasts[TARGET[1]][j])])
+    change = now - planned
+    return np.array([*now, *planned, *change, float(np.hypot(*change))])
+
+
+@dataclass(frozen=True)
+class Config:
+    """The reacher's controller and price."""
+
+    horizon: int = 20
+    torque_limit_nm: float = 2.0
+    distance_scale_m: float = 0.3  # stage residual e / 0.3
+    terminal_distance_factor: float = 2.0  # terminal residual 2 e / 0.3
+    velocity_weight: float = 0.02
+    terminal_velocity_weight: float = 0.1
+    torque_weight: float = 0.01
+    torque_change_weight: float = 0.02
+    feedback_state_weights: tuple[float, ...] = (10.0, 10.0, 1.0, 1.0)  # Q of the TV-LQR (and W of threshold:X: sqrt Q)
+    feedback_input_weights: tuple[float, ...] = (0.1, 0.1)  # R
+    recompute_price: float = 0.3
+    rk4_substeps: int = 2
+    plant: str = "mismatched"
+    solver: SolverSettings = field(default_factory=lambda: SolverSettings(
+        tolerance=1e-6, dual_tolerance=1e-4, max_iterations=150, block=1, regularisation=1e-4,
+        sqp_options=(("merit_memory", 1), ("max_iter_ls", 8))))
+
+
+class ReacherSystem:
+    Config = Config
+    domain = "reacher"
+    task = "jumps"
+    name = "reacher"
+    objective_sense = "min"
+    episode_steps = reacher_task.EPISODE_STEPS
+    control_interval_s = reacher_task.CONTROL_DT_S
+    state_names = STATE_NAMES
+    input_names = INPUT_NAMES
+    benchmark = Benchmark(
+        prices=(0.03, 0.1, 0.3, 1.0, 3.0),
+        sweep_thresholds=(0.02, 0.05, 0.1, 0.2, 0.3, 0.5, 0.8, 1.2, 2.0, 3.0),
+        report_thresholds=(0.1, 0.3, 1.0, 2.0),
+    )
+    exogenous_feature_names = EXOGENOUS_FEATURES  # what the learned policy's "error" features add
+    exogenous_features = staticmethod(exogenous_features)
+    failure_name = "far from target"  # steps ending > 0.1 m from the target, per episode
+    camera = "top"
+
+    def __init__(self, config: Config = Config()):
+        self.config = config
+        self.horizon = config.horizon
+        self.recompute_price = config.recompute_price
+        self.model = AnalyticModel(dt_s=reacher_task.CONTROL_DT_S, rk4_substeps=config.rk4_substeps)
+        self.u_max = np.full(NU, config.torque_limit_nm)
+        self.u_min = -self.u_max
+        self.error_weights = np.sqrt(np.asarray(config.feedback_state_weights))
+        self.feedback = PlanFeedback()
+
+    @cached_property
+    def mpc(self) -> GaussNewtonMPC:
+        c = self.config
+        x, u, du, target = ca.SX.sym("x", NX), ca.SX.sym("u", NU), ca.SX.sym("du", NU), ca.SX.sym("target", 2)
+        e = (fingertip(x, self.model.params) - target) / c.distance_scale_m
+        stage = ca.Function("stage_residual", [x, u, du, target], [ca.vertcat(
+            e, c.velocity_weight * x[2:], c.torque_weight * u, c.torque_change_weight * du)])
+        terminal = ca.Function("terminal_residual", [x, target], [ca.vertcat(
+            c.terminal_distance_factor * e, c.terminal_velocity_weight * x[2:])])
+        weights = FeedbackWeights(c.feedback_state_weights, c.feedback_input_weights)
+        return GaussNewtonMPC(self.model.discrete, stage, terminal, c.horizon, self.u_min, self.u_max, c.solver,
+                              name="reacher_jumps_mpc", parameters=2, feedback=weights)
+
+    # -- the loop ---------------------------------------------------------------------------------------
+    def make_env(self, random=None):
+        return reacher_task.make_environment(random=random, plant=self.config.plant)
+
+    def state(self, timestep: dm_env.TimeStep) -> np.ndarray:
+        obs = timestep.observation
+        return np.array([obs[name] for name in STATE_NAMES], dtype=float)
+
+    def measure(self, physics) -> np.ndarray:
+        return physics.state()
+
+    @staticmethod
+    def target(timestep: dm_env.TimeStep) -> np.ndarray:
+        """The current target ``(x, y)`` (m), as observed."""
+        obs = timestep.observation
+        return np.array([obs[TARGET[0]], obs[TARGET[1]]], dtype=float)
+
+    def plan(self, x: np.ndarray, u_prev: np.ndarray, warm: Plan | None, age: int, timestep: dm_env.TimeStep) -> Plan:
+        target = self.target(timestep)
+        plan = self.mpc.solve(x, u_prev, warm, age, parameters=target)
+        n = self.horizon
+        return replace(plan, forecasts={TARGET[0]: np.full(n, target[0]), TARGET[1]: np.full(n, target[1])})
+
+    def action(self, u: np.ndarray, recompute: bool) -> np.ndarray:
+        return u
+
+    # -- test sets, recordings, rollouts ----------------------------------------------------------------
+    def draw_episode(self, rng: np.random.Generator) -> reacher_task.Episode:
+        return reacher_task.Episode.draw(rng)
+
+    def episode_parameters(self) -> dict:
+        return {"initial_state_low": reacher_task.INITIAL_STATE_LOW.tolist(),
+                "initial_state_high": reacher_task.INITIAL_STATE_HIGH.tolist(),
+                "jump_probability": reacher_task.JUMP_PROBABILITY, "target_radius_m": list(reacher_task.TARGET_RADIUS_M),
+                "steps": reacher_task.EPISODE_STEPS, "distance_scale_m": reacher_task.DISTANCE_SCALE_M}
+
+    def episode_from_arrays(self, arrays: dict[str, np.ndarray]) -> reacher_task.Episode:
+        return reacher_task.Episode.from_arrays(arrays)
+
+    def signals(self, episode: reacher_task.Episode) -> dict[str, np.ndarray]:
+        return {TARGET[0]: episode.target[:, 0], TARGET[1]: episode.target[:, 1]}
+
+    def sample_future(self, episode: reacher_task.Episode, step: int, rng: np.random.Generator) -> reacher_task.Episode:
+        """``episode`` with the targets of intervals after ``step`` redrawn: at the decision of step
+        ``step`` the controller sees that interval's target, and jumps are memoryless."""
+        target = np.array(episode.target)
+        target[step + 1:] = reacher_task.continue_targets(rng, target[step], target.shape[0] - step - 1)
+        return reacher_task.Episode(episode.initial_state, target)
+
+    def truncation_value(self, x: np.ndarray) -> float:
+        return 0.0
+
+    def failures(self, rewards: np.ndarray) -> int:
+        """Steps ending farther than 0.1 m from the target."""
+        return reacher_task.far_steps(rewards)
+
+    # -- the scene, and etmpc bench -----------------------------------------------------------------------
+    def show(self, physics, x: np.ndarray) -> None:
+        """The arm at ``x`` (the target stays where the physics has it)."""
+        physics.set_state_vector(x)
+        physics.forward()
+
+    def plan_cost(self, x: np.ndarray, u_prev: np.ndarray, timestep: dm_env.TimeStep, inputs: np.ndarray) -> float:
+        """The OCP's objective of an input sequence, rolled out through the predictor."""
+        return self.mpc.objective(x, u_prev, inputs, self.target(timestep))
+
+    def reference_solvers(self) -> list:
+        return []
+
+    def interpreted(self) -> ReacherSystem:
+        return ReacherSystem(replace(self.config, solver=replace(self.config.solver, compiled=False)))

@@ -1,0 +1,173 @@
+"""The reacher's ``jumps`` task: keep the fingertip on a target that jumps at random times, and the
+domain's suite of tasks.
+
+A state-error trigger sees the arm drift from its plan, but not the target move: after a jump the
+kept plan still reaches for the old target, and the moment to re-plan is right then. The jumps come
+at random times (Bernoulli per interval), so a trigger that knows when to re-plan beats any periodic
+schedule at the same rate of computations.
+
+* **Plant**: the two-link arm of ``physics.py`` (``mismatched`` by default) in a horizontal plane,
+  torques ``|u_i| <= 2`` N m (MuJoCo clamps to the actuators' ``ctrlrange``), integrated by RK4 at
+  0.01 s under a 0.1 s control interval.
+* **Episodes**: 100 intervals. Initial state at rest, ``q1 ~ U(+-pi)``, ``q2 ~ U(+-2.5)`` rad. A
+  target is drawn at radius ``U(0.3, 0.95)`` m and angle ``U(+-pi)`` (the arm reaches 1 m); at each
+  later interval, with probability 0.04 (0.4 jumps per second), it jumps to a new one drawn alike.
+  All drawn in advance (:class:`Episode`). The target of interval ``i`` is observed at its decision.
+* **Observation**: the state (``model.STATE_NAMES``), the current target ``target_x_m``,
+  ``target_y_m`` and the fingertip ``fingertip_x_m``, ``fingertip_y_m``.
+* **Reward** ``-d^2 / (d^2 + 0.1^2)`` per step, in ``(-1, 0]``, with ``d`` the fingertip's distance
+  from the interval's target after the step: -1/2 at 0.1 m, -0.8 at 0.2 m, and bounded, so one long
+  reach does not rule an episode's mean. A step ending more than 0.1 m from the target (reward
+  below -1/2) is counted a failure, "far from target" (:func:`far_steps`).
+"""
+
+from __future__ import annotations
+
+import collections
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from dm_control.rl import control
+from dm_control.utils import containers
+from dm_env import specs
+
+from etmpc.systems.episodes import Environment, EpisodeTask, Random, environment_kwargs_for, steps_for
+from etmpc.systems.reacher.model import NX, STATE_NAMES
+from etmpc.systems.reacher.physics import PLANTS, Physics, load_model
+
+__all__ = ["PLANTS", "SUITE", "Episode", "Jumps", "Physics", "jumps", "load_model", "make_environment"]
+
+CONTROL_DT_S = 0.1
+PHYSICS_DT_S = 0.01  # 10 RK4 steps per interval
+EPISODE_STEPS = 100
+INITIAL_STATE_LOW = np.array([-math.pi, -2.5, 0.0, 0.0])  # q1, q2 (rad), at rest
+INITIAL_STATE_HIGH = np.array([math.pi, 2.5, 0.0, 0.0])
+JUMPS_PER_S = 0.4
+JUMP_PROBABILITY = JUMPS_PER_S * CONTROL_DT_S  # per interval after the first
+TARGET_RADIUS_M = (0.3, 0.95)  # radius ~ U(low, high), angle ~ U(-pi, pi)
+DISTANCE_SCALE_M = 0.1  # reward -d^2 / (d^2 + 0.1^2); farther than this is a failure
+OBSERVATION_NAMES = (*STATE_NAMES, "target_x_m", "target_y_m", "fingertip_x_m", "fingertip_y_m")
+SUITE = containers.TaggedTasks()
+
+
+@dataclass(frozen=True)
+class Episode:
+    """Everything random about one episode, drawn in advance: a test-set row."""
+
+    initial_state: np.ndarray  # (4,) [q1, q2, q1dot, q2dot]
+    target: np.ndarray  # (steps, 2) m: the target of each interval
+
+    @classmethod
+    def draw(cls, rng: np.random.Generator, steps: int = EPISODE_STEPS) -> Episode:
+        initial_state = rng.uniform(INITIAL_STATE_LOW, INITIAL_STATE_HIGH)
+        first = draw_target(rng)
+        return cls(initial_state, np.vstack([first, continue_targets(rng, first, steps - 1)]))
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        return {"initial_state": self.initial_state, "target": self.target}
+
+    @classmethod
+    def from_arrays(cls, arrays: dict[str, np.ndarray]) -> Episode:
+        initial_state = np.asarray(arrays["initial_state"], dtype=float)
+        target = np.asarray(arrays["target"], dtype=float)
+        if initial_state.shape != (NX,) or target.ndim != 2 or target.shape[1] != 2:
+            raise ValueError(f"bad episode arrays: {initial_state.shape}, {target.shape}")
+        return cls(initial_state, target)
+
+
+def draw_target(rng: np.random.Generator) -> np.ndarray:
+    """A target ``(x, y)``: radius ``U(TARGET_RADIUS_M)``, angle ``U(-pi, pi)``."""
+    radius, angle = rng.uniform(*TARGET_RADIUS_M), rng.uniform(-math.pi, math.pi)
+    return np.array([radius * math.cos(angle), radius * math.sin(angle)])
+
+
+def continue_targets(rng: np.random.Generator, current: np.ndarray, steps: int) -> np.ndarray:
+    """The targets of the ``steps`` intervals after one whose target is ``current``: each jumps to a
+    new target with probability ``JUMP_PROBABILITY``, else keeps the one before. Draws the jumps
+    first, then the new targets in order."""
+    jumps = rng.random(steps) < JUMP_PROBABILITY
+    targets, target = np.empty((steps, 2)), np.asarray(current, dtype=float)
+    new = [draw_target(rng) for _ in range(int(jumps.sum()))]
+    for j in range(steps):
+        if jumps[j]:
+            target = new.pop(0)
+        targets[j] = target
+    return targets
+
+
+def distance_reward(distance_m: float) -> float:
+    """``-d^2 / (d^2 + 0.1^2)``: 0 on the target, -1/2 at 0.1 m, towards -1 far away."""
+    d2 = distance_m * distance_m
+    return -d2 / (d2 + DISTANCE_SCALE_M**2)
+
+
+def far_steps(rewards: np.ndarray) -> int:
+    """The steps of an episode that ended farther than 0.1 m from the target (reward below -1/2)."""
+    return int(np.sum(np.asarray(rewards) < distance_reward(DISTANCE_SCALE_M)))
+
+
+class Jumps(EpisodeTask):
+    """Keep the fingertip on a target that jumps at random times (see the module's docstring)."""
+
+    def __init__(self, random: Random = None, steps: int = EPISODE_STEPS):
+        super().__init__(random)
+        self._steps = steps
+        self._step = 0
+
+    def check_episode(self, episode: Episode) -> None:
+        if episode.target.shape[0] < self._steps:
+            raise ValueError(f"episode has {episode.target.shape[0]} targets, need {self._steps}")
+
+    def draw_episode(self, random: np.random.Generator) -> Episode:
+        return Episode.draw(random, self._steps)
+
+    def current_target(self) -> np.ndarray:
+        """The target of the interval about to be played (the last one's once the episode is over)."""
+        return self._episode.target[min(self._step, self._episode.target.shape[0] - 1)]
+
+    def initialize_episode(self, physics: Physics) -> None:
+        episode = self.next_episode()
+        self._step = 0
+        physics.set_state_vector(episode.initial_state)
+        physics.set_target(self.current_target())
+
+    def before_step(self, action, physics: Physics) -> None:
+        physics.set_control(action)
+        physics.set_target(self.current_target())
+        self._step += 1
+
+    def get_reward(self, physics: Physics) -> float:
+        """Against the target of the interval just played."""
+        target = self._episode.target[self._step - 1]
+        return distance_reward(float(np.hypot(*(physics.fingertip() - target))))
+
+    def action_spec(self, physics: Physics) -> specs.BoundedArray:
+        low, high = physics.model.actuator_ctrlrange.T
+        return specs.BoundedArray((2,), np.float64, low, high, name="torque")
+
+    def observation_spec(self, physics: Physics) -> collections.OrderedDict:
+        return collections.OrderedDict((name, specs.Array((), np.float64, name=name)) for name in OBSERVATION_NAMES)
+
+    def get_observation(self, physics: Physics) -> collections.OrderedDict:
+        values = np.concatenate([physics.state(), self.current_target(), physics.fingertip()])
+        return collections.OrderedDict(zip(OBSERVATION_NAMES, values))
+
+    def get_termination(self, physics: Physics) -> float | None:
+        return None if np.all(np.isfinite(physics.state())) else 0.0
+
+
+def make_environment(random: Random = None, plant: str = "mismatched", steps: int = EPISODE_STEPS,
+                     environment_kwargs: dict | None = None) -> control.Environment:
+    root = load_model(plant, timestep_s=PHYSICS_DT_S)
+    physics = Physics.from_xml_string(root.to_xml_string(), assets=root.get_assets())
+    task = Jumps(random=random, steps=steps)
+    return Environment(physics, task, **environment_kwargs_for(steps * CONTROL_DT_S, CONTROL_DT_S, environment_kwargs))
+
+
+@SUITE.add("benchmarking")
+def jumps(time_limit: float = EPISODE_STEPS * CONTROL_DT_S, random: Random = None, plant: str = "mismatched",
+          environment_kwargs: dict | None = None):
+    """Keep the fingertip on a jumping target: 100 control intervals of 0.1 s by default."""
+    return make_environment(random=random, plant=plant, steps=steps_for(time_limit, CONTROL_DT_S),
+                            environment_kwargs=environment_kwargs)
