@@ -298,6 +298,18 @@ def test_a_stored_episode_replays_exactly(system, stored):
     np.testing.assert_array_equal(first.states, again.states)
 
 
+def test_an_episode_is_recorded_with_both_torques_bounds(system, stored):
+    """The first task with two inputs: a recording keeps each input's bounds (and the plan's target)."""
+    from etmpc.views.record import EpisodeRecord
+
+    episode = system.episode_from_arrays(stored.episode_arrays(1))
+    traj = run_episode(system, system.make_env(), parse_policy("every:4", system.error_weights), None, episode)
+    record = EpisodeRecord.from_trajectory(system, traj, {"policy": "every:4"}, episode)
+    np.testing.assert_array_equal(record.input_bounds[0], [-2.0, -2.0])
+    np.testing.assert_array_equal(record.input_bounds[1], [2.0, 2.0])
+    assert record.applied.shape == (100, 2) and set(record.plans[0][3]) == {"target_x_m", "target_y_m"}
+
+
 def test_the_observation_shows_the_target_of_the_interval_about_to_be_played(system):
     episode = rt.Episode(np.zeros(4), np.repeat(np.array([[0.5, 0.0], [0.0, 0.7], [-0.4, 0.1]]), [2, 2, 96], axis=0))
     env = system.make_env()

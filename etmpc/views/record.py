@@ -58,7 +58,7 @@ class EpisodeRecord:
             prediction_error=prediction_errors(traj, system.error_weights),
             plans=[(k, p.states, p.inputs, {name: np.asarray(v) for name, v in p.forecasts.items()}) for k, p in traj.plans],
             signals={name: np.asarray(v, float) for name, v in system.signals(episode).items()},
-            input_bounds=() if None in bounds else tuple(np.asarray(b, float) for b in bounds),
+            input_bounds=() if any(b is None for b in bounds) else tuple(np.asarray(b, float) for b in bounds),
             announced=tuple((int(k), int(announce(p))) for k, p in traj.plans) if announce is not None else (),
         )
 
