@@ -303,6 +303,9 @@ def _etmpc(args: list[str], cwd: Path, env: dict | None = None, file_size_limit:
     """``etmpc ARGS`` in its own session; ``file_size_limit`` bytes per file (RLIMIT_FSIZE): the
     kernel refuses writes past it as it does on a full disk."""
     def limit():
+        # Ctrl-C as a terminal delivers it: a command started in the background of a non-interactive
+        # shell (`cmd &`, as a CI script may run the suite) inherits SIGINT ignored, and so would etmpc.
+        signal.signal(signal.SIGINT, signal.SIG_DFL)
         if file_size_limit is not None:
             signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a refused write, not a killed process
             resource.setrlimit(resource.RLIMIT_FSIZE, (file_size_limit, file_size_limit))
