@@ -17,6 +17,8 @@ from functools import cached_property
 import casadi as ca
 import numpy as np
 
+from etmpc.control.discretise import rk4
+
 STATE_NAMES = ("cart_position", "cart_velocity", "pole_angle", "pole_angular_velocity")
 NX, NU = 4, 1
 
@@ -48,18 +50,6 @@ def ode(x, u, w=0.0, p: Parameters = Parameters()):
     v_dot = (m * g * sin * cos - 4.0 / 3.0 * push) / (m * cos**2 - 4.0 / 3.0 * M)
     omega_dot = (M * g * sin - cos * push) / (4.0 / 3.0 * M * l - m * l * cos**2) + w
     return ca.vertcat(v, v_dot, omega, omega_dot)
-
-
-def rk4(f, x, u, dt_s: float, substeps: int):
-    """Explicit Runge-Kutta 4 over ``dt_s`` with the input held (zero-order hold)."""
-    h = dt_s / substeps
-    for _ in range(substeps):
-        k1 = f(x, u)
-        k2 = f(x + h / 2 * k1, u)
-        k3 = f(x + h / 2 * k2, u)
-        k4 = f(x + h * k3, u)
-        x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-    return x
 
 
 @dataclass(frozen=True)

@@ -24,6 +24,8 @@ from functools import cached_property
 import casadi as ca
 import numpy as np
 
+from etmpc.control.discretise import rk4
+
 STATE_NAMES = ("shoulder_angle_rad", "elbow_angle_rad", "shoulder_velocity_rad_s", "elbow_velocity_rad_s")
 INPUT_NAMES = ("shoulder_torque_nm", "elbow_torque_nm")
 NX, NU = 4, 2
@@ -61,18 +63,6 @@ def fingertip(x, p: Parameters = Parameters()):
     """The fingertip's position ``(x, y)`` (m) in the plane; works on CasADi symbols and on numbers."""
     l1, l2 = p.upper_arm_length_m, p.forearm_length_m
     return ca.vertcat(l1 * ca.cos(x[0]) + l2 * ca.cos(x[0] + x[1]), l1 * ca.sin(x[0]) + l2 * ca.sin(x[0] + x[1]))
-
-
-def rk4(f, x, u, dt_s: float, substeps: int):
-    """Explicit Runge-Kutta 4 over ``dt_s`` with the input held (zero-order hold)."""
-    h = dt_s / substeps
-    for _ in range(substeps):
-        k1 = f(x, u)
-        k2 = f(x + h / 2 * k1, u)
-        k3 = f(x + h / 2 * k2, u)
-        k4 = f(x + h * k3, u)
-        x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-    return x
 
 
 @dataclass(frozen=True)
