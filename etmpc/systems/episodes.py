@@ -136,5 +136,9 @@ class EpisodeTask(control.Task):
     def check_episode(self, episode: Any) -> None:
         """Raise ``ValueError`` if ``episode`` cannot be played by this task."""
 
+    def get_termination(self, physics) -> float | None:
+        """A non-finite state (``physics.state()``) ends the episode (discount 0); the control loop reports it."""
+        return None if np.all(np.isfinite(physics.state())) else 0.0
+
     def draw_episode(self, random: np.random.Generator) -> Any:
         raise NotImplementedError

@@ -23,19 +23,17 @@ disturbance is (Åström and Bernhardsson 2002); this task makes it bursty.
 
 from __future__ import annotations
 
-import collections
 import math
 from dataclasses import dataclass
 
 import mujoco
 import numpy as np
 from dm_control.rl import control
-from dm_env import specs
 
-from etmpc.systems.cart_pendulum.model import NX, STATE_NAMES
+from etmpc.systems.cart_pendulum.model import NX
 from etmpc.systems.cart_pendulum.physics import Bumpers, Physics, load_model
-from etmpc.systems.cart_pendulum.task import SUITE
-from etmpc.systems.episodes import Environment, EpisodeTask, Random, environment_kwargs_for, steps_for
+from etmpc.systems.cart_pendulum.task import SUITE, CartPendulumTask
+from etmpc.systems.episodes import Environment, Random, environment_kwargs_for, steps_for
 
 CONTROL_DT_S = 0.1
 PHYSICS_DT_S = 0.01  # 10 RK4 steps per interval: the bumpers' spring (31 rad/s on the cart) needs them
@@ -89,13 +87,11 @@ def falls(rewards: np.ndarray) -> int:
     return int(np.sum(np.asarray(rewards) <= -FALL_COST))
 
 
-class Kicks(EpisodeTask):
+class Kicks(CartPendulumTask):
     """Keep the pole upright on the rail through random kicks (see the module's docstring)."""
 
     def __init__(self, random: Random = None, steps: int = EPISODE_STEPS):
-        super().__init__(random)
-        self._steps = steps
-        self._step = 0
+        super().__init__(random, steps)
         self._fell = False
 
     def check_episode(self, episode: KickEpisode) -> None:
@@ -132,18 +128,6 @@ class Kicks(EpisodeTask):
         angle = math.sin(0.5 * physics.pole_angle()) ** 2 / math.sin(ANGLE_SCALE_RAD) ** 2
         return -max(min(angle, 1.0), 1.0 if physics.touches_bumper() else 0.0)
 
-    def action_spec(self, physics: Physics) -> specs.BoundedArray:
-        low, high = physics.model.actuator_ctrlrange[0]
-        return specs.BoundedArray((1,), np.float64, [low], [high], name="force")
-
-    def observation_spec(self, physics: Physics) -> collections.OrderedDict:
-        return collections.OrderedDict((name, specs.Array((), np.float64, name=name)) for name in STATE_NAMES)
-
-    def get_observation(self, physics: Physics) -> collections.OrderedDict:
-        return collections.OrderedDict(zip(STATE_NAMES, physics.state()))
-
-    def get_termination(self, physics: Physics) -> float | None:
-        return None if np.all(np.isfinite(physics.state())) else 0.0
 
 
 def make_environment(random: Random = None, plant: str = "mismatched", steps: int = EPISODE_STEPS,

@@ -71,17 +71,32 @@ class Episode:
         return cls(initial_state, disturbance)
 
 
-class Balance(EpisodeTask):
-    """Keep the pole upright; reward ``-beta^2`` of the state each step leads to.
-
-    Each episode (initial state and disturbance sequence) is drawn from ``random`` on reset, or is
-    a stored one queued with :meth:`use_episode` (see :class:`etmpc.systems.episodes.EpisodeTask`).
-    """
+class CartPendulumTask(EpisodeTask):
+    """What the cart pendulum's tasks share: the force as action, the state as observation, a
+    non-finite state as the end (:meth:`EpisodeTask.get_termination`)."""
 
     def __init__(self, random: Random = None, steps: int = EPISODE_STEPS):
         super().__init__(random)
         self._steps = steps
         self._step = 0
+
+    def action_spec(self, physics: Physics) -> specs.BoundedArray:
+        low, high = physics.model.actuator_ctrlrange[0]
+        return specs.BoundedArray((1,), np.float64, [low], [high], name="force")
+
+    def observation_spec(self, physics: Physics) -> collections.OrderedDict:
+        return collections.OrderedDict((name, specs.Array((), np.float64, name=name)) for name in STATE_NAMES)
+
+    def get_observation(self, physics: Physics) -> collections.OrderedDict:
+        return collections.OrderedDict(zip(STATE_NAMES, physics.state()))
+
+
+class Balance(CartPendulumTask):
+    """Keep the pole upright; reward ``-beta^2`` of the state each step leads to.
+
+    Each episode (initial state and disturbance sequence) is drawn from ``random`` on reset, or is
+    a stored one queued with :meth:`use_episode` (see :class:`etmpc.systems.episodes.EpisodeTask`).
+    """
 
     def check_episode(self, episode: Episode) -> None:
         if episode.disturbance.shape[0] < self._steps:
@@ -115,22 +130,8 @@ class Balance(EpisodeTask):
             upright = math.exp(reward) if math.isfinite(reward) else 0.0
         physics.named.model.mat_rgba["pole", :3] = upright * _POLE_RGB + (1.0 - upright) * _FALLEN_RGB
 
-    def action_spec(self, physics: Physics) -> specs.BoundedArray:
-        low, high = physics.model.actuator_ctrlrange[0]
-        return specs.BoundedArray((1,), np.float64, [low], [high], name="force")
-
-    def observation_spec(self, physics: Physics) -> collections.OrderedDict:
-        return collections.OrderedDict((name, specs.Array((), np.float64, name=name)) for name in STATE_NAMES)
-
-    def get_observation(self, physics: Physics) -> collections.OrderedDict:
-        return collections.OrderedDict(zip(STATE_NAMES, physics.state()))
-
     def get_reward(self, physics: Physics) -> float:
         return -physics.pole_angle() ** 2
-
-    def get_termination(self, physics: Physics) -> float | None:
-        # A non-finite state ends the episode (discount 0); the control loop reports it.
-        return None if np.all(np.isfinite(physics.state())) else 0.0
 
 
 def make_environment(

@@ -153,9 +153,6 @@ class Jumps(EpisodeTask):
         values = np.concatenate([physics.state(), self.current_target(), physics.fingertip()])
         return collections.OrderedDict(zip(OBSERVATION_NAMES, values))
 
-    def get_termination(self, physics: Physics) -> float | None:
-        return None if np.all(np.isfinite(physics.state())) else 0.0
-
 
 def make_environment(random: Random = None, plant: str = "mismatched", steps: int = EPISODE_STEPS,
                      environment_kwargs: dict | None = None) -> control.Environment:
