@@ -33,6 +33,22 @@ def generator(random: Random) -> np.random.Generator:
                     f"got {type(random).__name__}")
 
 
+def jump_process(rng: np.random.Generator, current: np.ndarray, steps: int, probability: float, draw) -> np.ndarray:
+    """A signal that holds its value and, at each of ``steps`` intervals, jumps with ``probability``
+    to a new value ``draw(rng)``: the intervals after one whose value is ``current``, shape
+    ``(steps, *current.shape)``. Draws the jumps first, then the new values in order, so a future
+    redrawn from an interval on (a rollout's) uses the generator as the episode's own draw did."""
+    jumps = rng.random(steps) < probability
+    current = np.asarray(current, dtype=float)
+    values, value = np.empty((steps, *current.shape)), current
+    new = [draw(rng) for _ in range(int(jumps.sum()))]
+    for j in range(steps):
+        if jumps[j]:
+            value = np.asarray(new.pop(0), dtype=float)
+        values[j] = value
+    return values
+
+
 def steps_for(time_limit: float, interval_s: float) -> int:
     """The number of control intervals in ``time_limit`` seconds; a whole, positive number is required
     (an episode's exogenous signals are drawn in advance, so it cannot be open-ended)."""

@@ -32,7 +32,7 @@ from dm_control.rl import control
 from dm_control.utils import containers
 from dm_env import specs
 
-from etmpc.systems.episodes import Environment, EpisodeTask, Random, environment_kwargs_for, steps_for
+from etmpc.systems.episodes import Environment, EpisodeTask, Random, environment_kwargs_for, jump_process, steps_for
 from etmpc.systems.reacher.model import NX, STATE_NAMES
 from etmpc.systems.reacher.physics import PLANTS, Physics, load_model
 
@@ -84,16 +84,8 @@ def draw_target(rng: np.random.Generator) -> np.ndarray:
 
 def continue_targets(rng: np.random.Generator, current: np.ndarray, steps: int) -> np.ndarray:
     """The targets of the ``steps`` intervals after one whose target is ``current``: each jumps to a
-    new target with probability ``JUMP_PROBABILITY``, else keeps the one before. Draws the jumps
-    first, then the new targets in order."""
-    jumps = rng.random(steps) < JUMP_PROBABILITY
-    targets, target = np.empty((steps, 2)), np.asarray(current, dtype=float)
-    new = [draw_target(rng) for _ in range(int(jumps.sum()))]
-    for j in range(steps):
-        if jumps[j]:
-            target = new.pop(0)
-        targets[j] = target
-    return targets
+    new target with probability ``JUMP_PROBABILITY``, else keeps the one before."""
+    return jump_process(rng, current, steps, JUMP_PROBABILITY, draw_target)
 
 
 def distance_reward(distance_m: float) -> float:
