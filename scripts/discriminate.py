@@ -5,7 +5,8 @@
 On the first EPISODES stored test-set episodes it plays every periodic schedule ``every:1`` …
 ``every:N`` and the task's event triggers (``threshold:X`` at its Benchmark's sweep levels), picks
 the best periodic schedule at price P (default: the task's own), then plays ``oracle:BEST`` (an upper
-bound, not a policy) and ``rollout:BEST:4:20`` at that price. Each state-dependent policy is
+bound, not a policy) and ``rollout:BEST:4:H`` at that price (``H``: 20, or the task's shorter
+``Benchmark.lookahead``). Each state-dependent policy is
 compared with the periodic front interpolated to its own mean rate of computations, per episode
 (``etmpc.experiments.pareto.versus_front``, as ``etmpc sweep`` does): the gain in control objective,
 its 95 % CI and the episodes it wins. A task discriminates when the oracle gains clearly, with a CI
@@ -40,7 +41,7 @@ def main() -> None:
     started = time.perf_counter()
     fixed = etmpc.evaluate(args.task, periodic + events, **common).to_json()
     best = best_periodic(fixed, periodic, price, system.objective_sense)
-    specs = [f"oracle:{best}", f"rollout:{best}:4:20"]
+    specs = [f"oracle:{best}", f"rollout:{best}:4:{system.benchmark.capped(20)}"]
     priced = etmpc.evaluate(args.task, specs, recompute_price=price, **common).to_json()
     table = {**episode_table(fixed), **episode_table(priced)}
     print(f"{args.task}: best periodic schedule at price {price:g}: {best}; {args.episodes} episodes, "

@@ -71,11 +71,11 @@ class Settings:
     dpi_eval_every: int = 20
     dpi_labels: int = 25  # decisions labelled per training episode
     dpi_futures: int = 4
-    dpi_horizon: int = 20
+    dpi_horizon: int = 20  # at most the task's Benchmark.lookahead
     validation_episodes: int = 50  # training-distribution episodes that choose the shipped seed
     rollout_episodes: int = 30  # first test-set episodes for rollout:BEST and oracle:BEST
     rollout_futures: int = 4  # K: 8 doubles its cost (2 K H simulated steps per decision)
-    rollout_horizon: int | None = 20  # None: to the episode's end
+    rollout_horizon: int | None = 20  # None: to the episode's end; at most the task's Benchmark.lookahead
     ppo_timesteps: int = 60_000  # PPO (Stable-Baselines3, the 'rl' extra) on the trigger environment; 0: none
     smoke: bool = False  # a smoke run: its report gives no verdicts
 
@@ -180,7 +180,7 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
     _say(f"{domain}: the default learner (DPI), {len(settings.dpi_seeds)} seeds x {settings.dpi_episodes} episodes")
     dpi_config = TrainConfig(domain, settings.dpi_seeds, settings.dpi_episodes, settings.dpi_eval_every, settings.eval_episodes,
                              features="error", algorithm="dpi", validation_episodes=settings.validation_episodes,
-                             dpi=DpiSettings(futures=settings.dpi_futures, horizon=settings.dpi_horizon,
+                             dpi=DpiSettings(futures=settings.dpi_futures, horizon=system.benchmark.capped(settings.dpi_horizon),
                                              states_per_episode=settings.dpi_labels))
     dpi_dir = folder / "train_dpi"
     train(dpi_config, dpi_dir, run["workers"], resume=(dpi_dir / "checkpoint.json").exists(), backend=run["backend"],
@@ -194,7 +194,7 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
     best = summary["best_fixed"]["policy"]
 
     _say(f"{domain}: headroom, rollout and oracle over {best} on {settings.rollout_episodes} episodes")
-    rollout_spec = f"rollout:{best}:{settings.rollout_futures}" + (f":{settings.rollout_horizon}" if settings.rollout_horizon else "")
+    rollout_spec = f"rollout:{best}:{settings.rollout_futures}:{system.benchmark.capped(settings.rollout_horizon)}"
     subset = dict(common, episodes=settings.rollout_episodes)
     rollout = evaluated_once(folder / "headroom_rollout.json", timed=run["workers"], policies=[rollout_spec], **subset)
     oracle = evaluated_once(folder / "headroom_oracle.json", timed=run["workers"], policies=[f"oracle:{best}"], **subset)

@@ -74,7 +74,7 @@ class LearnerSettings:
 
     def config(self, domain: str, price: float) -> TrainConfig:
         return TrainConfig(domain, self.seeds, self.episodes, self.eval_every, self.eval_episodes, algorithm="dpi",
-                           dpi=dpi.Settings(self.futures, self.horizon, self.labels, bases=self.bases,
+                           dpi=dpi.Settings(self.futures, make_system(domain).benchmark.capped(self.horizon), self.labels, bases=self.bases,
                                             selection_episodes=self.selection_episodes),
                            validation_episodes=self.validation_episodes, recompute_price=price)
 
@@ -107,9 +107,10 @@ class SweepSettings:
         if len(set(prices)) != len(prices):
             raise EtmpcError(f"a price is given twice: {', '.join(f'{p:g}' for p in prices)}")
         if quick:
-            return cls(prices, episodes or 3, benchmark.sweep_thresholds[::2], futures=2, horizon=10, quick=True,
+            return cls(prices, episodes or 3, benchmark.sweep_thresholds[::2], futures=2, horizon=benchmark.capped(10), quick=True,
                        learner=QUICK_LEARNER, self_trigger=QUICK_SELF)
         return cls(prices, episodes or benchmark.sweep_episodes, benchmark.sweep_thresholds, futures=benchmark.sweep_futures,
+                   horizon=benchmark.capped(cls.horizon),
                    self_trigger=SelfSettings() if benchmark.sweep_self_trigger else None)
 
     def to_json(self) -> dict:

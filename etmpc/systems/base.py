@@ -36,6 +36,14 @@ class Benchmark:
     sweep_episodes: int = 20
     sweep_futures: int = 4
     sweep_self_trigger: bool = True
+    # The most steps a rollout looks ahead (the rollout meter's H and the DPI labels'): on a task whose
+    # events come often, a long lookahead sums their random timing, the same for both answers only in
+    # distribution, into noise that swamps the price of a computation.
+    lookahead: int = 20
+
+    def capped(self, horizon: int | None) -> int:
+        """A rollout's horizon ``horizon`` (None: to the episode's end) within the task's ``lookahead``."""
+        return self.lookahead if horizon is None else min(horizon, self.lookahead)
 
     def baselines(self) -> list[str]:
         """Reproduce's fixed policies: always, never, every:T and threshold:X."""
