@@ -10,7 +10,7 @@ from etmpc.systems.base import FEATURES, REQUIRED, provides
 # docs/adding-a-task.md says what each feature needs.
 OPTIONAL = {
     "cart_pendulum": {"render", "bench"},
-    "cart_pendulum/kicks": {"render", "bench", "failures"},
+    "cart_pendulum/kicks": {"exogenous features", "render", "bench", "failures"},
     "battery": {"exogenous features", "bench"},
     "reacher": {"exogenous features", "render", "bench", "failures"},
 }
@@ -42,3 +42,15 @@ def test_keys_name_the_default_task_by_its_domain_and_carry_a_price():
     for bad in ("cartpole", "cart_pendulum/swing", "battery/balance", ""):
         with pytest.raises(UnknownNameError, match="valid: cart_pendulum, cart_pendulum/kicks, battery, reacher"):
             systems.check_name(bad)
+
+
+def test_a_rollouts_lookahead_is_capped_by_the_task():
+    """The kicks task asks for a 10-step lookahead; the rollout meter, DPI's labels and the sweep take it."""
+    from etmpc.experiments.sweep import SweepSettings
+
+    benchmark = systems.make_system("cart_pendulum/kicks").benchmark
+    assert benchmark.lookahead == 10
+    assert (benchmark.capped(None), benchmark.capped(5), benchmark.capped(20)) == (10, 5, 10)
+    assert SweepSettings.default("cart_pendulum/kicks").horizon == 10
+    assert SweepSettings.default("cart_pendulum/kicks").learner.config("cart_pendulum/kicks", 0.1).dpi.horizon == 10
+    assert SweepSettings.default("reacher").horizon == 20  # the other tasks keep the default

@@ -26,7 +26,7 @@ FORMAT_VERSION = 1
 STORED_EPISODES = 100
 # The seed of each stored test set (tasks/<domain>/<task>_testset.npz): each is
 # `etmpc testset TASK --seed SEED --episodes 100` (tests/test_testset.py regenerates them bit for bit).
-STORED = {"cart_pendulum": 20210601, "battery": 20210602, "cart_pendulum/kicks": 20261124, "reacher": 20261125}
+STORED = {"cart_pendulum": 20210601, "battery": 20210602, "cart_pendulum/kicks": 20261126, "reacher": 20261125}
 _ZIP_EPOCH = (1980, 1, 1, 0, 0, 0)
 
 

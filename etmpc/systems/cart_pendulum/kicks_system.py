@@ -1,21 +1,28 @@
-"""The ``kicks`` task as the control loop sees it: an MPC that knows the rail, a feedback that follows
-the plan, and the price of a computation set where re-planning has a cost worth weighing.
+"""The ``kicks`` task as the control loop sees it: an MPC that follows the cart's current reference and
+knows the rail, a feedback that follows the plan, and the price of a computation.
 
 * **MPC** (Gauss-Newton SQP, full multiple shooting, N = 20, compiled): the paper's analytic model
-  (RK4, 2 steps per interval) and the residuals ``[3 sin(beta/2), 0.3 eta, 0.03 omega, 0.003 u,
-  0.01 du, 5 max(0, |eta| - 2)]`` per stage (the last keeps the plan 0.5 m from the bumpers),
-  ``[9 sin(beta/2), eta, 0.3 omega, 0.3 v, 5 max(0, |eta| - 2)]`` at the end; ``|u| <= 25`` N. With
-  a weaker pull to the rail's middle (0.1 eta, as first tried) the cart drifted to a bumper, where a
-  pole leaning towards it cannot be caught: falls then made most of the cost. A solve counts as
-  converged at constraint violation <= 1e-5 and Lagrangian gradient <= 1e-3 (the SQP's tolerances
-  1e-6 and 1e-4, times 10). Warm started from the kept plan; a cold start (the first plan, after a
-  fall, or after a plan kept to its end) begins with the state held and zero inputs: a rollout of zero
-  inputs lets the pole fall in the guess, and the SQP then found plans that swing it over the top.
+  (RK4, 2 steps per interval), the reference ``r`` as the OCP's parameter, and the residuals
+  ``[3 sin(beta/2), eta - r, 0.03 omega, 0.03 u, 0.01 du, 5 max(0, |eta| - 2)]`` per stage (the last
+  keeps the plan 0.5 m from the bumpers), ``[9 sin(beta/2), 3 (eta - r), 0.3 omega, 0.3 v,
+  5 max(0, |eta| - 2)]`` at the end; ``|u| <= 25`` N. The plan carries the reference it was made for
+  as ``Plan.forecasts`` (``cart_reference_m``), so recordings draw it and a learned trigger compares
+  it with the current one. A solve counts as converged at constraint violation <= 1e-5 and
+  Lagrangian gradient <= 1e-3 (the SQP's tolerances 1e-6 and 1e-4, times 10). Warm started from the
+  kept plan; a cold start (the first plan, after a fall, or after a plan kept to its end) begins
+  with the state held and zero inputs: a rollout of zero inputs lets the pole fall in the guess, and
+  the SQP then found plans that swing it over the top. Input weight 0.03 (0.003 first): the stiffer
+  MPC moved the cart harder, and under the plant's mismatch that made falls.
 * **Feedback** while a plan is kept: a time-varying LQR along the plan (``PlanFeedback``), from the
   predictor's linearisation at each planned step, ``Q = diag(1, 1, 10, 1)``, ``R = 0.1``. The pole is
   kicked far from upright, where one gain linearised at upright would not do.
-* **Objective** (lower is better): the episode's cost (``kicks.py``) plus 0.1 per computation: about
-  what a solve costs against 1 for a step with the pole 1.2 rad off, so that ``every:1`` is not free.
+* **Objective** (lower is better): the episode's cost (``kicks.py``) plus 0.1 per computation.
+* **Lookahead** 10 steps (``Benchmark.lookahead``) for the rollout meter and DPI's labels: with 20 (2
+  s, a jump every 2.5 s on average) the random timing of later jumps made the two answers' sampled
+  returns differ by more than the price, and the rollout recomputed at about half its decisions.
+* **Exogenous features** for the learned trigger: the reference now, the kept plan's, their
+  difference and its size. A state-error trigger sees a jump only once the cart lags; these see it
+  at once.
 """
 
 from __future__ import annotations
@@ -35,6 +42,24 @@ from etmpc.systems.cart_pendulum import kicks
 from etmpc.systems.cart_pendulum.model import NU, NX, STATE_NAMES, AnalyticModel
 
 
+REFERENCE = "cart_reference_m"  # the observation's current reference, and the plan's forecast of it
+
+# What the learned policy's default ("error") feature set adds for this task (etmpc.policies.learned).
+EXOGENOUS_FEATURES = (
+    "cart_reference_m",  # the reference now
+    "planned_cart_reference_m",  # the reference the kept plan was made for
+    "cart_reference_change_m",  # the reference now minus the plan's: 0 until it jumps
+    "cart_reference_change_abs_m",
+)
+
+
+def exogenous_features(s) -> np.ndarray:
+    """The values of :data:`EXOGENOUS_FEATURES` at augmented state ``s`` (it carries the kept plan
+    and the current observation)."""
+    now, planned = float(s.observation[REFERENCE]), float(s.plan.forecasts[REFERENCE][0])
+    return np.array([now, planned, now - planned, abs(now - planned)])
+
+
 @dataclass(frozen=True)
 class Config:
     """The kicks task's controller and price."""
@@ -42,8 +67,9 @@ class Config:
     horizon: int = 20
     force_limit_n: float = 25.0
     rail_margin_m: float = 0.5  # the MPC keeps the cart this far inside the bumpers
-    position_weight: float = 0.3  # on eta in each stage's residual: weaker, and the cart drifts to a bumper
-    terminal_position_weight: float = 1.0
+    position_weight: float = 1.0  # on eta - r in each stage's residual
+    terminal_position_weight: float = 3.0
+    input_weight: float = 0.03
     feedback_state_weights: tuple[float, ...] = (1.0, 1.0, 10.0, 1.0)  # Q of the TV-LQR (and W of threshold:X: sqrt Q)
     feedback_input_weight: float = 0.1  # R
     recompute_price: float = 0.1
@@ -68,7 +94,10 @@ class KicksSystem:
         prices=(0.01, 0.03, 0.1, 0.3, 1.0),
         sweep_thresholds=(0.1, 0.2, 0.3, 0.45, 0.6, 1.0, 1.5, 2.0, 3.0, 4.0),
         report_thresholds=(0.3, 0.6, 1.0, 2.0),
+        lookahead=10,  # 1 s: a reference jumps every 2.5 s on average, and a kick comes every 3.3 s
     )
+    exogenous_feature_names = EXOGENOUS_FEATURES  # what the learned policy's "error" features add
+    exogenous_features = staticmethod(exogenous_features)
     failure_name = "falls"  # per episode, beside the mean objective
     camera = "track"
 
@@ -83,18 +112,19 @@ class KicksSystem:
 
     @cached_property
     def mpc(self) -> GaussNewtonMPC:
-        x, u, du = ca.SX.sym("x", NX), ca.SX.sym("u", NU), ca.SX.sym("du", NU)
+        c = self.config
+        x, u, du, r = ca.SX.sym("x", NX), ca.SX.sym("u", NU), ca.SX.sym("du", NU), ca.SX.sym("r", 1)
         eta, v, beta, omega = x[0], x[1], x[2], x[3]
-        inside = kicks.BUMPERS.position_m - self.config.rail_margin_m
-        stage = ca.Function("stage_residual", [x, u, du], [ca.vertcat(
-            3 * ca.sin(beta / 2), self.config.position_weight * eta, 0.03 * omega, 0.003 * u, 0.01 * du,
+        inside = kicks.BUMPERS.position_m - c.rail_margin_m
+        stage = ca.Function("stage_residual", [x, u, du, r], [ca.vertcat(
+            3 * ca.sin(beta / 2), c.position_weight * (eta - r), 0.03 * omega, c.input_weight * u, 0.01 * du,
             5 * ca.fmax(0, ca.fabs(eta) - inside))])
-        terminal = ca.Function("terminal_residual", [x], [ca.vertcat(
-            9 * ca.sin(beta / 2), self.config.terminal_position_weight * eta, 0.3 * omega, 0.3 * v,
+        terminal = ca.Function("terminal_residual", [x, r], [ca.vertcat(
+            9 * ca.sin(beta / 2), c.terminal_position_weight * (eta - r), 0.3 * omega, 0.3 * v,
             5 * ca.fmax(0, ca.fabs(eta) - inside))])
-        weights = FeedbackWeights(self.config.feedback_state_weights, (self.config.feedback_input_weight,))
-        return GaussNewtonMPC(self.model.discrete, stage, terminal, self.config.horizon, self.u_min, self.u_max,
-                              self.config.solver, name="cart_pendulum_kicks_mpc", feedback=weights)
+        weights = FeedbackWeights(c.feedback_state_weights, (c.feedback_input_weight,))
+        return GaussNewtonMPC(self.model.discrete, stage, terminal, c.horizon, self.u_min, self.u_max, c.solver,
+                              name="cart_pendulum_kicks_mpc", parameters=1, feedback=weights)
 
     # -- the loop ---------------------------------------------------------------------------------------
     def make_env(self, random=None):
@@ -107,8 +137,15 @@ class KicksSystem:
     def measure(self, physics) -> np.ndarray:
         return physics.state()
 
+    @staticmethod
+    def reference(timestep: dm_env.TimeStep) -> np.ndarray:
+        """The cart's current reference (m), as observed, as the MPC's parameter vector."""
+        return np.array([timestep.observation[REFERENCE]], dtype=float)
+
     def plan(self, x: np.ndarray, u_prev: np.ndarray, warm: Plan | None, age: int, timestep: dm_env.TimeStep) -> Plan:
-        return self.mpc.solve(x, u_prev, warm, age)
+        reference = self.reference(timestep)
+        plan = self.mpc.solve(x, u_prev, warm, age, parameters=reference)
+        return replace(plan, forecasts={REFERENCE: np.full(self.horizon, reference[0])})
 
     def action(self, u: np.ndarray, recompute: bool) -> np.ndarray:
         return u
@@ -120,20 +157,24 @@ class KicksSystem:
     def episode_parameters(self) -> dict:
         return {"initial_state_low": kicks.INITIAL_STATE_LOW.tolist(), "initial_state_high": kicks.INITIAL_STATE_HIGH.tolist(),
                 "kicks_per_s": kicks.KICKS_PER_S, "kick_rad_s": list(kicks.KICK_RAD_S), "steps": kicks.EPISODE_STEPS,
+                "reference_m": kicks.REFERENCE_M, "reference_jump_probability": kicks.REFERENCE_JUMP_PROBABILITY,
+                "position_scale_m": kicks.POSITION_SCALE_M,
                 "bumpers": asdict(kicks.BUMPERS), "fall_rad": kicks.FALL_RAD, "fall_cost": kicks.FALL_COST}
 
     def episode_from_arrays(self, arrays: dict[str, np.ndarray]) -> kicks.KickEpisode:
         return kicks.KickEpisode.from_arrays(arrays)
 
     def signals(self, episode: kicks.KickEpisode) -> dict[str, np.ndarray]:
-        return {"kick_rad_s": episode.kick}
+        return {"kick_rad_s": episode.kick, REFERENCE: episode.reference}
 
     def sample_future(self, episode: kicks.KickEpisode, step: int, rng: np.random.Generator) -> kicks.KickEpisode:
-        """``episode`` with the kicks of intervals ``step..`` redrawn: at the decision of step ``step``
-        the controller has felt only the earlier ones (kicks are memoryless)."""
-        kick = np.array(episode.kick)
+        """``episode`` with the kicks of intervals ``step..`` and the references after ``step``
+        redrawn: at the decision of step ``step`` the controller has felt only the earlier kicks and
+        sees that interval's reference (kicks and jumps are memoryless)."""
+        kick, reference = np.array(episode.kick), np.array(episode.reference)
         kick[step:] = kicks.draw_kicks(rng, kick.size - step)
-        return kicks.KickEpisode(episode.initial_state, kick)
+        reference[step + 1:] = kicks.continue_references(rng, reference[step], reference.size - step - 1)
+        return kicks.KickEpisode(episode.initial_state, kick, reference)
 
     def truncation_value(self, x: np.ndarray) -> float:
         return 0.0
@@ -149,7 +190,7 @@ class KicksSystem:
 
     def plan_cost(self, x: np.ndarray, u_prev: np.ndarray, timestep: dm_env.TimeStep, inputs: np.ndarray) -> float:
         """The OCP's objective of an input sequence, rolled out through the predictor."""
-        return self.mpc.objective(x, u_prev, inputs)
+        return self.mpc.objective(x, u_prev, inputs, self.reference(timestep))
 
     def reference_solvers(self) -> list:
         return []

@@ -57,9 +57,12 @@ def _matched(root: mjcf.RootElement) -> None:
     root.find("body", "cart").inertial.mass = p.cart_mass_kg
 
 
-def load_model(plant: str = "mismatched", timestep_s: float | None = None, bumpers: Bumpers | None = None) -> mjcf.RootElement:
-    """The MJCF, with the plant setting's edits; ``timestep_s`` replaces the physics step, and
-    ``bumpers`` draws the rail's bumpers (their force is the physics', see :meth:`Physics.step`)."""
+def load_model(plant: str = "mismatched", timestep_s: float | None = None, bumpers: Bumpers | None = None,
+               reference: bool = False) -> mjcf.RootElement:
+    """The MJCF, with the plant setting's edits; ``timestep_s`` replaces the physics step,
+    ``bumpers`` draws the rail's bumpers (their force is the physics', see :meth:`Physics.step`), and
+    ``reference`` adds a marker on the rail where the cart should be (a mocap body: it shows the
+    reference, :meth:`Physics.set_reference`, and does not act on the cart)."""
     if plant not in PLANTS:
         raise UnknownNameError(f"unknown plant setting {plant!r}; valid: {', '.join(PLANTS)}")
     root = mjcf.from_path(str(model_path("cart_pendulum.xml")))
@@ -71,6 +74,10 @@ def load_model(plant: str = "mismatched", timestep_s: float | None = None, bumpe
         for side in (-1, 1):
             root.worldbody.add("geom", name=f"bumper_{'left' if side < 0 else 'right'}", type="box", material="rail",
                                pos=[side * (bumpers.position_m + 0.25 + 0.05), 0, 0], size=[0.05, 0.2, 0.2])
+    if reference:
+        marker = root.worldbody.add("body", name="reference", mocap=True, pos=[0, 0, 0])
+        marker.add("geom", name="reference", type="box", pos=[0, -0.2, -0.06], size=[0.03, 0.03, 0.2],
+                   rgba=[0.95, 0.8, 0.1, 1])
     return root
 
 
@@ -87,6 +94,7 @@ class Physics(MjPhysics):
         self._hinge_unit = np.zeros(m.nv)
         self._hinge_unit[self._hinge[1]] = 1.0
         self._force = np.zeros(m.nv)
+        self._reference = m.body_mocapid[m.name2id("reference", "body")] if m.nmocap else -1
 
     # -- vocabulary -------------------------------------------------------------------------------
     def cart_position(self) -> float:
@@ -117,6 +125,11 @@ class Physics(MjPhysics):
     def disturbance(self) -> float:
         """Angular disturbance of the current control interval (rad/s^2)."""
         return float(self.data.userdata[0])
+
+    def set_reference(self, position_m: float) -> None:
+        """Move the rail's reference marker (a model loaded with ``reference=True``) to ``position_m``."""
+        if self._reference >= 0:
+            self.data.mocap_pos[self._reference, 0] = position_m
 
     def set_disturbance(self, w_rad_s2: float) -> None:
         self.data.userdata[0] = w_rad_s2
