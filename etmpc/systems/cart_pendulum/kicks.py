@@ -41,7 +41,6 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 from dm_control.rl import control
-from dm_env import specs
 
 from etmpc.systems.cart_pendulum.model import NX, STATE_NAMES
 from etmpc.systems.cart_pendulum.physics import Bumpers, Physics, load_model
@@ -134,6 +133,8 @@ class Kicks(CartPendulumTask):
     """Keep the pole upright and the cart on its reference, on the rail, through random kicks and
     reference jumps (see the module's docstring)."""
 
+    observation_names = OBSERVATION_NAMES
+
     def __init__(self, random: Random = None, steps: int = EPISODE_STEPS):
         super().__init__(random, steps)
         self._fell = False
@@ -180,11 +181,8 @@ class Kicks(CartPendulumTask):
         error = physics.cart_position() - float(self._episode.reference[self._step - 1])
         return -step_cost(physics.pole_angle(), error, physics.touches_bumper())
 
-    def observation_spec(self, physics: Physics) -> collections.OrderedDict:
-        return collections.OrderedDict((name, specs.Array((), np.float64, name=name)) for name in OBSERVATION_NAMES)
-
     def get_observation(self, physics: Physics) -> collections.OrderedDict:
-        return collections.OrderedDict(zip(OBSERVATION_NAMES, np.append(physics.state(), self.current_reference())))
+        return collections.OrderedDict(zip(self.observation_names, np.append(physics.state(), self.current_reference())))
 
 
 def make_environment(random: Random = None, plant: str = "mismatched", steps: int = EPISODE_STEPS,

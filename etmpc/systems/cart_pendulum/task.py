@@ -73,7 +73,10 @@ class Episode:
 
 class CartPendulumTask(EpisodeTask):
     """What the cart pendulum's tasks share: the force as action, the state as observation, a
-    non-finite state as the end (:meth:`EpisodeTask.get_termination`)."""
+    non-finite state as the end (:meth:`EpisodeTask.get_termination`). A task that observes more
+    names it in ``observation_names`` and extends :meth:`get_observation`."""
+
+    observation_names: tuple[str, ...] = STATE_NAMES
 
     def __init__(self, random: Random = None, steps: int = EPISODE_STEPS):
         super().__init__(random)
@@ -85,7 +88,7 @@ class CartPendulumTask(EpisodeTask):
         return specs.BoundedArray((1,), np.float64, [low], [high], name="force")
 
     def observation_spec(self, physics: Physics) -> collections.OrderedDict:
-        return collections.OrderedDict((name, specs.Array((), np.float64, name=name)) for name in STATE_NAMES)
+        return collections.OrderedDict((name, specs.Array((), np.float64, name=name)) for name in self.observation_names)
 
     def get_observation(self, physics: Physics) -> collections.OrderedDict:
         return collections.OrderedDict(zip(STATE_NAMES, physics.state()))
