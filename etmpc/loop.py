@@ -122,6 +122,26 @@ class DecisionContext:
     timestep: dm_env.TimeStep
 
 
+@dataclass(eq=False)
+class Continuation:
+    """What one :func:`play_on` did, step by step, for a caller that picks it up again later (the
+    oracle's memo): what each step added to the return, whether it computed, and the controller's
+    state after it (``x``, the plan, its age, ``u_prev``). Summed from 0.0 in order, ``added[k:]``
+    gives exactly what a play on from the state after step ``k - 1`` returns."""
+
+    start: int  # the step it started at
+    added: list[float] = field(default_factory=list)
+    recomputed: list[bool] = field(default_factory=list)
+    after: list[tuple] = field(default_factory=list)
+
+    def return_from(self, k: int) -> float:
+        """The return from its ``k``-th step on, summed as :func:`play_on` sums it."""
+        total = 0.0
+        for added in self.added[k:]:
+            total += added
+        return total
+
+
 @dataclass(frozen=True, eq=False)
 class Snapshot:
     """A running episode, frozen at a decision: the plant, the task's position in its episode and the
@@ -283,6 +303,7 @@ def play_on(
     episode: Any = None,
     first_plan: Plan | None = None,
     stop: int | None = None,
+    trace: Continuation | None = None,
 ) -> float:
     """Continue ``snapshot`` in ``env`` (a twin of the one it was taken in) and return the policy's
     return from the snapshot's step on: rewards minus the price of each computation, plus
@@ -292,7 +313,8 @@ def play_on(
     replaces the episode being played from the snapshot's step on (a sampled future); ``first_plan``
     is the plan a recompute at the first step gives, when the caller has solved it already (it is
     the same for every future). ``stop`` is the step to stop before (default: the episode's end). A
-    plant that fails (non-finite state) returns ``-inf``.
+    plant that fails (non-finite state) returns ``-inf``. ``trace``, if given (a new :class:`Continuation`),
+    is filled step by step.
 
     Steps the task and the physics directly, as ``control.Environment.step`` does, without making
     a ``TimeStep``; reads the state off the physics (``system.measure``) and makes the task's
@@ -332,13 +354,18 @@ def play_on(
         except PhysicsError:
             return -math.inf
         task.after_step(physics)
-        total += task.get_reward(physics) - price * recompute
+        added = task.get_reward(physics) - price * recompute
+        total += added
         observation, x = None, system.measure(physics)
         if not np.isfinite(x).all():
             return -math.inf
         age, u_prev = age + 1, u
         if task.restarted:  # as in ClosedLoop.step: the next decision is forced
             age = plan.horizon
+        if trace is not None:
+            trace.added.append(added)
+            trace.recomputed.append(recompute)
+            trace.after.append((x, plan, age, u_prev))
     if end < system.episode_steps:
         total += system.truncation_value(x)
     return total

@@ -7,9 +7,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from etmpc import loop
 from etmpc.common.errors import EtmpcError, UnknownNameError
 from etmpc.loop import Snapshot, play_on, run_episode
-from etmpc.policies import parse_policy
+from etmpc.policies import parse_policy, rollout
+from etmpc.systems import make_system
 from etmpc.evaluation.workers import play_test_episode
 
 REPO = Path(__file__).resolve().parents[1]
@@ -103,6 +105,42 @@ def test_the_oracle_never_does_worse_than_its_base(cart_system, episode):
     assert -oracle.trajectory.policy_return(price) <= -base.trajectory.policy_return(price)
     assert oracle.trajectory.recomputes != base.trajectory.recomputes or \
         not np.array_equal(oracle.trajectory.recompute, base.trajectory.recompute)  # it did decide something
+
+
+@pytest.mark.parametrize("task, base", [("cart_pendulum", "every:3"), ("battery", "every:5")])
+def test_the_oracles_memo_changes_no_decision_and_halves_its_plays(task, base, monkeypatch):
+    """The memo hands the oracle, at step i + 1, the rest of the play it took at step i. Against the
+    oracle that plays both answers at every decision (the memo never consulted), the episode is the
+    same bit for bit, and the memo answers for almost every decision (all but the first and those
+    after a forced one), so the oracle plays about half as many steps."""
+    played = []
+
+    def counting_play_on(*args, **kwargs):
+        played.append(1)
+        return loop.play_on(*args, **kwargs)
+
+    monkeypatch.setattr(rollout, "play_on", counting_play_on)
+    lookups = []
+    real_lookup = rollout.OracleMemo.lookup
+
+    def counting_lookup(memo, snapshot):
+        lookups.append(real_lookup(memo, snapshot))
+        return lookups[-1]
+
+    monkeypatch.setattr(rollout.OracleMemo, "lookup", counting_lookup)
+    weights = make_system(task).error_weights
+    with_memo = play_test_episode(task, parse_policy(f"oracle:{base}", weights), 0, 0, 2).trajectory
+    plays_with_memo = len(played)
+    hits = sum(known is not None for known in lookups)
+    monkeypatch.setattr(rollout.OracleMemo, "lookup", lambda memo, snapshot: real_lookup(rollout.OracleMemo(), snapshot))
+    played.clear()
+    without = play_test_episode(task, parse_policy(f"oracle:{base}", weights), 0, 0, 2).trajectory
+    np.testing.assert_array_equal(with_memo.recompute, without.recompute)
+    np.testing.assert_array_equal(with_memo.rewards, without.rewards)
+    np.testing.assert_array_equal(with_memo.states, without.states)
+    decisions = len(lookups)
+    assert hits >= 0.9 * decisions
+    assert len(played) == 2 * decisions and plays_with_memo == 2 * decisions - hits
 
 
 def test_rollout_is_deterministic_given_its_generator(battery_system):

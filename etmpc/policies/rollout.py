@@ -21,39 +21,95 @@ and every table, JSON file, figure and recording that show it carry the word ``o
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from etmpc.common.errors import EtmpcError
-from etmpc.loop import DecisionContext, Snapshot, play_on
 from etmpc.common.numerics import fsum
-from etmpc.loop import AugmentedState, Policy
+from etmpc.loop import AugmentedState, Continuation, DecisionContext, Policy, Snapshot, play_on
 
 DEFAULT_FUTURES = 8
 MAX_FUTURES = 1000
 
 
 def q_values(context: DecisionContext, base: Policy, futures: int, rng: np.random.Generator | None, twin,
-             horizon: int | None = None, oracle: bool = False) -> tuple[np.ndarray, np.ndarray]:
+             horizon: int | None = None, oracle: bool = False, memo: OracleMemo | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Returns of keeping and of recomputing at ``context``'s decision, one per future (paired).
 
     ``twin`` is an environment of the same task to simulate in (``context.env`` is left untouched).
-    With ``oracle``, the one future is the episode's stored one.
+    With ``oracle``, the one future is the episode's stored one; then ``memo`` (an oracle's, whose
+    base is deterministic and which plays to the episode's end) may already hold one of the two
+    answers, and is given the plays made here.
     """
     system = context.system
     snapshot = Snapshot.take(context)
     episodes = [None] if oracle else [system.sample_future(snapshot.episode, context.step, rng) for _ in range(futures)]
     seeds = rng.integers(2**63, size=len(episodes)) if (base.stochastic and rng is not None) else [None] * len(episodes)
-    solved = system.plan(snapshot.x, snapshot.u_prev, snapshot.plan, snapshot.age, context.timestep)
+    known = memo.lookup(snapshot) if memo is not None else None
+    solved = None
     stop = None if horizon is None else context.step + horizon
     returns = np.empty((2, len(episodes)))
     for first in (0, 1):
+        if known is not None and known[0] == first:
+            returns[first, 0] = known[1]
+            continue
+        if first and solved is None:  # the same plan for every future
+            solved = system.plan(snapshot.x, snapshot.u_prev, snapshot.plan, snapshot.age, context.timestep)
         for k, (episode, seed) in enumerate(zip(episodes, seeds)):
             base_rng = None if seed is None else np.random.default_rng(seed)
-            returns[first, k] = play_on(system, twin, snapshot, base, base_rng, bool(first), episode, solved, stop)
+            trace = Continuation(context.step) if memo is not None else None
+            returns[first, k] = play_on(system, twin, snapshot, base, base_rng, bool(first), episode, solved, stop, trace)
+            if memo is not None:
+                memo.played(bool(first), trace, returns[first, k])
     return returns[0], returns[1]
+
+
+@dataclass(eq=False)
+class OracleMemo:
+    """The oracle's plays, kept from one decision to the next: half its cost, the same numbers.
+
+    At its decision of step ``i`` the oracle plays both answers on with the stored future and the
+    deterministic ``BASE``, and takes the better one. The play it took went through step ``i`` exactly
+    as the loop then does (:func:`etmpc.loop.play_on` is bit for bit :func:`etmpc.loop.run_episode`),
+    so at step ``i + 1`` one answer, the one ``BASE`` gave there, was played already: its return is
+    the rest of that play, summed as a new play would sum it. The memo is used only where the loop's
+    state is exactly the play's (``x``, the plan, its age, ``u_prev``); anywhere else both answers are
+    played, as without it (tests/test_rollout.py checks the decisions are the same).
+    """
+
+    episode: Any = None  # the episode the kept play belongs to
+    taken: tuple[Continuation, int] | None = None  # the play taken, and how many of its steps the loop has made
+    _plays: dict = field(default_factory=dict)  # this decision's plays, by answer
+
+    def lookup(self, snapshot: Snapshot) -> tuple[int, float] | None:
+        """``(answer, return)`` known at ``snapshot``'s decision, or None."""
+        self._plays = {}
+        if self.taken is None or snapshot.episode is not self.episode:
+            return None
+        trace, k = self.taken
+        if trace.start + k != snapshot.step or k >= len(trace.added):
+            return None
+        x, plan, age, u_prev = trace.after[k - 1]
+        same = (age == snapshot.age and np.array_equal(x, snapshot.x) and np.array_equal(u_prev, snapshot.u_prev)
+                and (plan is snapshot.plan or (np.array_equal(plan.inputs, snapshot.plan.inputs)
+                                               and np.array_equal(plan.states, snapshot.plan.states))))
+        if not same:
+            return None
+        answer = int(trace.recomputed[k])
+        self._plays[answer] = (trace, k)
+        return answer, trace.return_from(k)
+
+    def played(self, first: bool, trace: Continuation, value: float) -> None:
+        self._plays[int(first)] = (trace, 0) if math.isfinite(value) else None
+
+    def take(self, answer: bool, episode: Any) -> None:
+        """The oracle answered ``answer``: the loop now makes the first step of that play."""
+        chosen = self._plays.get(int(answer))
+        self.episode = episode
+        self.taken = None if chosen is None else (chosen[0], chosen[1] + 1)
 
 
 @dataclass(eq=False)
@@ -66,6 +122,7 @@ class Rollout:
     oracle: bool = False
     simulates: bool = True  # the loop hands it a DecisionContext
     _twin: Any = field(default=None, repr=False)
+    _memo: OracleMemo | None = field(default=None, repr=False)
 
     @property
     def stochastic(self) -> bool:
@@ -77,8 +134,8 @@ class Rollout:
             return f"oracle:{self.base.spec}"
         return f"rollout:{self.base.spec}:{self.futures}" + (f":{self.horizon}" if self.horizon is not None else "")
 
-    def __getstate__(self):  # the twin environment stays in its process
-        return {k: v for k, v in self.__dict__.items() if k != "_twin"} | {"_twin": None}
+    def __getstate__(self):  # the twin environment and the oracle's memo stay in their process
+        return {k: v for k, v in self.__dict__.items() if k not in ("_twin", "_memo")} | {"_twin": None, "_memo": None}
 
     def twin(self, system):
         if self._twin is None or self._twin[0] is not system:
@@ -88,8 +145,15 @@ class Rollout:
     def decide(self, s: AugmentedState, rng: np.random.Generator) -> bool:
         if s.context is None:
             raise EtmpcError(f"{self.spec} simulates the episode: it needs the control loop's context")
-        keep, recompute = q_values(s.context, self.base, self.futures, rng, self.twin(s.context.system), self.horizon, self.oracle)
-        return fsum(recompute.tolist()) > fsum(keep.tolist())  # the better mean over the same futures
+        memo = None
+        if self.oracle and not self.base.stochastic and self.horizon is None:
+            memo = self._memo = self._memo or OracleMemo()
+        keep, recompute = q_values(s.context, self.base, self.futures, rng, self.twin(s.context.system), self.horizon,
+                                   self.oracle, memo)
+        answer = fsum(recompute.tolist()) > fsum(keep.tolist())  # the better mean over the same futures
+        if memo is not None:
+            memo.take(answer, s.context.env.task.episode)
+        return answer
 
 
 def _split_count(spec: str, text: str, what: str, low: int, high: int) -> int:
