@@ -45,7 +45,8 @@ def test_keys_name_the_default_task_by_its_domain_and_carry_a_price():
 
 
 def test_a_rollouts_lookahead_is_capped_by_the_task():
-    """The kicks task asks for a 10-step lookahead; the rollout meter, DPI's labels and the sweep take it."""
+    """The kicks task and the reacher ask for a 10-step lookahead; the rollout meter, DPI's labels and
+    the sweep take it, and the paper's tasks keep the default 20."""
     from etmpc.experiments.sweep import SweepSettings
 
     benchmark = systems.make_system("cart_pendulum/kicks").benchmark
@@ -53,4 +54,5 @@ def test_a_rollouts_lookahead_is_capped_by_the_task():
     assert (benchmark.capped(None), benchmark.capped(5), benchmark.capped(20)) == (10, 5, 10)
     assert SweepSettings.default("cart_pendulum/kicks").horizon == 10
     assert SweepSettings.default("cart_pendulum/kicks").learner.config("cart_pendulum/kicks", 0.1).dpi.horizon == 10
-    assert SweepSettings.default("reacher").horizon == 20  # the other tasks keep the default
+    assert SweepSettings.default("reacher").horizon == 10
+    assert SweepSettings.default("cart_pendulum").horizon == SweepSettings.default("battery").horizon == 20

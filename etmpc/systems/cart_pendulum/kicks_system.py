@@ -94,6 +94,7 @@ class KicksSystem:
         prices=(0.01, 0.03, 0.1, 0.3, 1.0),
         sweep_thresholds=(0.1, 0.2, 0.3, 0.45, 0.6, 1.0, 1.5, 2.0, 3.0, 4.0),
         report_thresholds=(0.3, 0.6, 1.0, 2.0),
+        sweep_self_trigger=False,  # it kept its periodic base at every price (etmpc sweep, 5 prices, 20 episodes)
         lookahead=10,  # 1 s: a reference jumps every 2.5 s on average, and a kick comes every 3.3 s
     )
     exogenous_feature_names = EXOGENOUS_FEATURES  # what the learned policy's "error" features add

@@ -105,6 +105,8 @@ class ReacherSystem:
         prices=(0.02, 0.05, 0.1, 0.2, 0.5),
         sweep_thresholds=(0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 3.0),
         report_thresholds=(0.1, 0.3, 1.0, 2.0),
+        sweep_self_trigger=False,  # the suite's costliest steps: the sweep trains no self-trigger
+        lookahead=10,  # 1 s: a target jumps every 2.5 s on average (as the kicks task's reference does)
     )
     exogenous_feature_names = EXOGENOUS_FEATURES  # what the learned policy's "error" features add
     exogenous_features = staticmethod(exogenous_features)
