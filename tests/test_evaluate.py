@@ -5,6 +5,7 @@ import json
 import numpy as np
 import pytest
 
+from etmpc.evaluation import workers
 from etmpc.evaluation.evaluate import evaluate
 from etmpc.loop import run_episode
 from etmpc.policies import parse_policy
@@ -20,6 +21,33 @@ def serial():
 def test_same_numbers_for_any_worker_count(serial):
     parallel = evaluate("cart_pendulum", POLICIES, episodes=4, workers=2, progress=False)
     assert json.dumps(serial.to_json(), sort_keys=True) == json.dumps(parallel.to_json(), sort_keys=True)
+
+
+def test_stages_in_shared_pools_use_one_pool_and_give_the_same_numbers(serial):
+    """Inside ``shared_pools`` two stages run on the same worker processes, with the numbers of a
+    serial run; a stage that fails ends its pool (the next stage starts another), and leaving the
+    block ends every worker."""
+    with workers.shared_pools():
+        first = evaluate("cart_pendulum", POLICIES, episodes=4, workers=2, progress=False)
+        pool = workers._SHARED_POOLS[2]
+        processes = list(pool._processes.values())
+        second = evaluate("cart_pendulum", POLICIES, episodes=4, workers=2, progress=False)
+        assert workers._SHARED_POOLS[2] is pool and list(pool._processes.values()) == processes
+        with pytest.raises(RuntimeError, match="a stage failed"):
+            with workers.make_backend("local", 2):
+                raise RuntimeError("a stage failed")
+        assert 2 not in workers._SHARED_POOLS
+        with workers.make_backend("local", 2) as backend:
+            assert backend._pool is not pool and workers._SHARED_POOLS[2] is backend._pool
+        last = workers._SHARED_POOLS[2]
+    assert workers._SHARED_POOLS is None
+    for result in (first, second):
+        assert json.dumps(serial.to_json(), sort_keys=True) == json.dumps(result.to_json(), sort_keys=True)
+    for process in processes:
+        process.join(timeout=10)
+        assert not process.is_alive()
+    with pytest.raises(RuntimeError, match="shutdown"):
+        last.submit(abs, -1)  # ended too
 
 
 def test_summary_equals_a_direct_run(serial, cart_system, cart_testset):

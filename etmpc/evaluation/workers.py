@@ -6,13 +6,15 @@ results never depend on where they ran.
 
 Backends (``make_backend``):
 
-- ``local``: this process (one worker) or a pool of spawned processes;
+- ``local``: this process (one worker) or a pool of spawned processes, one per stage or, inside
+  :func:`shared_pools`, one for the whole command;
 - ``ray``: Ray tasks (the optional ``ray`` extra), on a Ray instance started for the run, or on an
   existing cluster given by its address. Every node of a cluster needs the same etmpc installed.
 """
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import importlib
 import logging
@@ -154,26 +156,65 @@ def die_with_parent(parent: int) -> None:
     threading.Thread(target=watch, name="die-with-parent", daemon=True).start()
 
 
+_SHARED_POOLS: dict[int, ProcessPoolExecutor] | None = None  # by size, inside shared_pools()
+
+
+@contextlib.contextmanager
+def shared_pools():
+    """Within it, every local backend of the same size runs its jobs on one pool of worker processes,
+    started once. A command of many stages (``reproduce``, ``sweep``: a hundred evaluations and
+    trainings) then pays a worker's start (imports, the compiled MPC, the test set: about 3 s) once
+    rather than at every stage. Results are the same: every job seeds itself, and a worker's cache
+    (:func:`context`) is keyed by what it holds. A stage that fails or is interrupted ends the pool;
+    the next stage starts another. Nested uses share the outermost one's pools."""
+    global _SHARED_POOLS
+    if _SHARED_POOLS is not None:
+        yield
+        return
+    _SHARED_POOLS = {}
+    try:
+        yield
+    finally:
+        pools, _SHARED_POOLS = _SHARED_POOLS, None
+        for pool in pools.values():
+            pool.shutdown(cancel_futures=True)
+
+
+def _new_pool(workers: int) -> ProcessPoolExecutor:
+    return ProcessPoolExecutor(workers, _QuietSpawnContext(), initializer=die_with_parent, initargs=(os.getpid(),))
+
+
 class LocalBackend:
-    """Jobs in this process (``workers=1``) or a pool of spawned processes, results in job order."""
+    """Jobs in this process (``workers=1``) or a pool of spawned processes (its own, or inside
+    :func:`shared_pools` the shared one of its size), results in job order."""
 
     def __init__(self, workers: int):
         self.workers = workers
         self._pool = None
+        self._shared = False
         self._limits = None
 
     def __enter__(self):
         if self.workers > 1:
-            self._pool = ProcessPoolExecutor(self.workers, _QuietSpawnContext(), initializer=die_with_parent,
-                                             initargs=(os.getpid(),))
+            if _SHARED_POOLS is None:
+                self._pool = _new_pool(self.workers)
+            else:
+                if self.workers not in _SHARED_POOLS:
+                    _SHARED_POOLS[self.workers] = _new_pool(self.workers)
+                self._pool, self._shared = _SHARED_POOLS[self.workers], True
         self._limits = single_threaded()  # this process runs jobs (one worker) or the driver's own sums
         return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, kind, value, traceback):
         if self._limits is not None:
             self._limits.restore_original_limits()
-        if self._pool is not None:
-            self._pool.shutdown(cancel_futures=True)
+        if self._pool is None:
+            return
+        if self._shared and kind is None:
+            return  # kept for the next stage
+        if self._shared and _SHARED_POOLS is not None and _SHARED_POOLS.get(self.workers) is self._pool:
+            del _SHARED_POOLS[self.workers]  # a failed or interrupted stage: its jobs may still be queued
+        self._pool.shutdown(cancel_futures=True)
 
     def map(self, fn, jobs: list, on_result=None, chunksize: int = 1) -> list:
         results = []

@@ -40,7 +40,7 @@ from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import refuse_foreign, write_text
 from etmpc.evaluation.evaluate import evaluate
 from etmpc.evaluation.render import render_rollout
-from etmpc.evaluation.workers import play_test_episode
+from etmpc.evaluation.workers import play_test_episode, shared_pools
 from etmpc.experiments import sweep as sweeps
 from etmpc.experiments.report import PAPER, machine, report, software_versions
 from etmpc.experiments.summary import summarise_default, summarise_headroom, summarise_learners, summarise_system
@@ -97,7 +97,12 @@ def reproduce(out: Path, settings: Settings = FULL, workers: int = 1, backend: s
     """Run (or continue) every stage into ``out``; returns ``results.json``'s content. With
     ``sweep``, also the price sweep of each system (``out/sweep/<task>``, see
     :mod:`etmpc.experiments.sweep`) and its equal-rate answer in the report."""
-    out = Path(out)
+    with shared_pools():  # one pool of workers for every stage
+        return _reproduce(Path(out), settings, workers, backend, address, domains, progress, sweep)
+
+
+def _reproduce(out: Path, settings: Settings, workers: int, backend: str, address: str | None, domains, progress: bool,
+               sweep: bool) -> dict:
     domains = list(names()) if domains is None else list(domains)  # every task (its name: DOMAIN or DOMAIN/TASK)
     started = time.perf_counter()
     sweep_settings = {d: sweeps.SweepSettings.default(d, quick=settings.smoke) for d in domains} if sweep else {}

@@ -44,6 +44,7 @@ from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import refuse_foreign, write_json, write_text
 from etmpc.evaluation.evaluate import evaluate
 from etmpc.evaluation.testsets import default_path, load
+from etmpc.evaluation.workers import shared_pools
 from etmpc.experiments.pareto import best_periodic, build_pareto, report_section
 from etmpc.learning import dpi
 from etmpc.learning.config import TrainConfig
@@ -190,7 +191,12 @@ def _stage(path: Path, **kwargs) -> dict:
 def sweep(domain: str, out: Path, settings: SweepSettings, workers: int = 1, backend: str = "local",
           address: str | None = None, progress: bool = True, say=lambda line: None) -> dict:
     """Run (or continue) the sweep of ``domain`` into ``out``; returns ``pareto.json``'s content."""
-    out = Path(out)
+    with shared_pools():  # one pool of workers for every stage
+        return _sweep(domain, Path(out), settings, workers, backend, address, progress, say)
+
+
+def _sweep(domain: str, out: Path, settings: SweepSettings, workers: int, backend: str, address: str | None, progress: bool,
+           say) -> dict:
     system = make_system(domain)
     _start(out, domain, settings)
     started = time.perf_counter()
