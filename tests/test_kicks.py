@@ -138,16 +138,10 @@ def test_the_observation_shows_the_reference_of_the_interval_about_to_be_played(
         assert timestep.reward == -expected  # the reward is for interval i's reference
 
 
-def test_exogenous_features_see_a_jump_that_the_state_error_cannot(system):
+def test_exogenous_features_see_a_jump_that_the_state_error_cannot(system, features_while_kept):
     reference = np.repeat([0.4, -0.6], [3, kicks.EPISODE_STEPS - 3])
     episode = kicks.KickEpisode(np.zeros(4), np.zeros(kicks.EPISODE_STEPS), reference)
-    loop = ClosedLoop(system, system.make_env()).reset(episode)
-    loop.step(True)  # a plan for 0.4 at step 0
-    seen = []
-    for _ in range(4):
-        s = loop.augmented_state()
-        seen.append(system.exogenous_features(s))
-        loop.step(False)
+    seen, s = features_while_kept(system, episode)  # a plan for 0.4 at step 0, kept
     assert len(EXOGENOUS_FEATURES) == seen[0].size == 4
     np.testing.assert_allclose(seen[0], [0.4, 0.4, 0, 0])  # step 1: the same reference
     np.testing.assert_allclose(seen[2], [-0.6, 0.4, -1.0, 1.0])  # step 3: it jumped

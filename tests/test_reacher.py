@@ -7,7 +7,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from etmpc.evaluation import testsets as testset
-from etmpc.loop import AugmentedState, ClosedLoop, run_episode
+from etmpc.loop import AugmentedState, run_episode
 from etmpc.policies import parse_policy
 from etmpc.policies.features import raw_features, raw_names
 from etmpc.systems.episodes import Environment, environment_kwargs_for
@@ -333,15 +333,9 @@ def test_failures_are_the_steps_farther_than_a_tenth_of_a_metre(system, stored):
     assert system.failures(traj.rewards) == int(far.sum()) > 0
 
 
-def test_exogenous_features_see_a_jump_that_the_state_error_cannot(system):
+def test_exogenous_features_see_a_jump_that_the_state_error_cannot(system, features_while_kept):
     episode = rt.Episode(np.array([0.5, 1.0, 0.0, 0.0]), np.repeat(np.array([[0.6, 0.2], [-0.3, 0.5]]), [3, 97], axis=0))
-    loop = ClosedLoop(system, system.make_env()).reset(episode)
-    loop.step(True)  # plan for (0.6, 0.2) at step 0
-    seen = []
-    for _ in range(4):
-        s = loop.augmented_state()
-        seen.append(system.exogenous_features(s))
-        loop.step(False)
+    seen, s = features_while_kept(system, episode)  # a plan for (0.6, 0.2) at step 0, kept
     assert len(EXOGENOUS_FEATURES) == seen[0].size == 7
     np.testing.assert_allclose(seen[0], [0.6, 0.2, 0.6, 0.2, 0, 0, 0])  # step 1: same target
     np.testing.assert_allclose(seen[2], [-0.3, 0.5, 0.6, 0.2, -0.9, 0.3, np.hypot(0.9, 0.3)])  # step 3: it jumped

@@ -163,7 +163,7 @@ _SHARED_POOLS: dict[int, ProcessPoolExecutor] | None = None  # by size, inside s
 def shared_pools():
     """Within it, every local backend of the same size runs its jobs on one pool of worker processes,
     started once. A command of many stages (``reproduce``, ``sweep``: a hundred evaluations and
-    trainings) then pays a worker's start (imports, the compiled MPC, the test set: about 3 s) once
+    trainings) then pays a worker's start (imports, the compiled MPC, the test set: about 2 s here) once
     rather than at every stage. Results are the same: every job seeds itself, and a worker's cache
     (:func:`context`) is keyed by what it holds. A stage that fails or is interrupted ends the pool;
     the next stage starts another. Nested uses share the outermost one's pools."""
