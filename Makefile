@@ -1,11 +1,12 @@
-# The README quick start: `make reproduce` (the main job) and `make test`. `make evaluate` is a shorter look.
+# The README quick start: `make reproduce` (the main job) and `make test`. `make sweep` adds the trade-off
+# curves to the same run; `make evaluate` is a shorter look.
 # Each creates the virtual environment in .venv on first use and install the project into it.
 PYTHON ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 export MUJOCO_GL ?= egl
 
-.PHONY: reproduce evaluate example test setup clean
+.PHONY: reproduce sweep evaluate example test setup clean
 
 setup: $(VENV)/.installed
 
@@ -15,9 +16,14 @@ $(VENV)/.installed: pyproject.toml
 	$(BIN)/python -m pip install --quiet -e '.[test]'
 	touch $@
 
-# The main job: the paper's experiments on both systems, with REPORT.md and results.json. Running it
+# The main job: the paper's experiments on every task, with REPORT.md and results.json. Running it
 # again after an interruption continues.
 reproduce: setup
+	$(BIN)/etmpc reproduce --out results/reproduce
+
+# The trade-off curve of every task (the price of a computation swept), added to the same run: its
+# finished stages are reused, and REPORT.md gains the equal-rate answer. Continues after an interruption.
+sweep: setup
 	$(BIN)/etmpc reproduce --sweep --out results/reproduce
 
 # A shorter look: compare recomputation policies on the stored 100-episode test set of each system,
