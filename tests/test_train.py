@@ -15,7 +15,7 @@ from etmpc.cli import main
 from etmpc.learning.gpomdp import Settings
 from etmpc.policies.learned import INITIAL_KEEP_LOGIT, LogisticPolicy, Normalisation, load_policy, sigmoid
 from etmpc.policies import AugmentedState, parse_policy
-from etmpc.learning.train import TrainConfig, train
+from etmpc.learning.train import TrainConfig, once_each, train
 
 ROOT = Path(__file__).resolve().parents[1]
 TINY = dict(seeds=(0, 1), episodes=4, eval_every=2, eval_episodes=3, normalisation_episodes=2, validation_episodes=2)
@@ -42,6 +42,37 @@ def test_curve_points_are_what_evaluate_reports(tmp_path):
     result = evaluate("battery", [f"rl:{tmp_path / 'seed1' / 'last.json'}"], episodes=3, workers=1, progress=False)
     row = [r for r in state.curve if r["seed"] == 1 and r["episodes"] == 4][0]
     assert result.summaries[0].objective_mean == pytest.approx(row["objective"], rel=1e-12)
+
+
+def test_the_first_point_is_the_initial_policy_played_once_for_every_seed(tmp_path):
+    """Every seed starts from the same policy: its episodes are played once (once_each) and the
+    point, the same for each seed, is what `etmpc evaluate` reports for that policy."""
+    from etmpc.evaluation.evaluate import evaluate
+
+    state = train(TrainConfig("battery", **TINY), tmp_path / "run", workers=1, progress=False)
+    (tmp_path / "initial.json").write_text(json.dumps(state.policy))
+    result = evaluate("battery", [f"rl:{tmp_path / 'initial.json'}"], episodes=3, workers=1, progress=False)
+    first = [r["objective"] for r in state.curve if r["episodes"] == 0]
+    assert len(first) == 2 and first[0] == first[1]
+    assert result.summaries[0].objective_mean == pytest.approx(first[0], rel=1e-12)
+
+
+def test_once_each_plays_each_distinct_job_once_and_answers_every_job_in_order():
+    class Serial:
+        seen = []
+
+        def map(self, fn, jobs, on_result=None):
+            self.seen += jobs
+            results = [fn(job) for job in jobs]
+            for job in jobs:
+                on_result(job)
+            return results
+
+    backend, ticks = Serial(), []
+    jobs = [("evaluate", (policy, episode)) for policy in ("a", "b", "a") for episode in (0, 1)]
+    results = once_each(backend, lambda job: f"{job[1][0]}{job[1][1]}", jobs, ticks.append)
+    assert results == ["a0", "a1", "b0", "b1", "a0", "a1"]
+    assert backend.seen == jobs[:4] and ticks == jobs  # the repeats too, after the played ones
 
 
 def test_training_moves_theta_and_keeps_the_gradient_step(tmp_path):

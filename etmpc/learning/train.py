@@ -69,7 +69,7 @@ def _evaluate_phase(state: RunState, backend, progress, testset: tuple[int, str]
 
     jobs = [("evaluate", (config.system, sha256, policy_at(state, state.learners[str(s)]["theta"]), r, e, identity(s, e)))
             for s in config.seeds for r in range(config.eval_repeats) for e in range(testset_n)]
-    results = backend.map(_call, jobs, progress)
+    results = once_each(backend, _call, jobs, progress)
     records = [c[3] for c in results if c[3] is not None]
     if records:
         with Recorder(out / "recordings" / f"eval_{done:05d}.rrd") as recorder:
@@ -86,6 +86,19 @@ def _evaluate_phase(state: RunState, backend, progress, testset: tuple[int, str]
         better = best is None or (row["objective"] > best["objective"] if sense == "max" else row["objective"] < best["objective"])
         if better:
             state.best[str(seed)] = {"episodes": done, "objective": row["objective"], "theta": state.learners[str(seed)]["theta"]}
+
+
+def once_each(backend, fn, jobs: list, progress) -> list:
+    """``backend.map(fn, jobs, progress)``, with each distinct job played once: an evaluation's
+    result is a function of its arguments alone, and every seed starts from the same policy, so the
+    first evaluation would otherwise play each episode once per seed."""
+    keys = [json.dumps(job, sort_keys=True) for job in jobs]
+    distinct = dict(zip(keys, jobs))
+    played = dict(zip(distinct, backend.map(fn, list(distinct.values()), progress)))
+    for key, job in zip(keys, jobs):  # the repeats, counted on the progress bar as played
+        if distinct.pop(key, None) is None and progress is not None:
+            progress(job)
+    return [played[key] for key in keys]
 
 
 def _eval_episodes(config: TrainConfig) -> tuple[int, str]:
