@@ -9,6 +9,7 @@ import pytest
 from etmpc.common.errors import EtmpcError
 from etmpc.evaluation.evaluate import evaluate
 from etmpc.views.replay import replay_summary
+from etmpc.experiments import sweep as sweeps
 from etmpc.experiments.reproduce import Settings, reproduce
 from etmpc.experiments.report import PAPER
 from etmpc.systems import folder_name, make_system, names
@@ -90,6 +91,23 @@ def test_a_second_run_continues_and_other_settings_are_refused(run):
     assert {p: p.stat().st_mtime_ns for p in mtimes} == mtimes  # nothing was redone
     with pytest.raises(EtmpcError, match="other settings"):
         reproduce(out, Settings(seeds=(0,), episodes=2, eval_every=1, test_episodes=3), workers=1, progress=False)
+
+
+@pytest.mark.slow
+def test_make_sweep_adds_the_trade_off_curves_to_a_finished_run(tmp_path, monkeypatch):
+    """`make reproduce`, then `make sweep` on the same directory: the second redoes no stage of the
+    first, and adds each task's sweep (exactly its pareto.json) and its section to the report."""
+    tiny = sweeps.SweepSettings(prices=(0.0, 1e-3), episodes=1, thresholds=(0.01,), futures=1, horizon=2, learner=None,
+                                self_trigger=None)
+    monkeypatch.setattr(sweeps.SweepSettings, "default", classmethod(lambda cls, domain, quick=False: tiny))
+    first = reproduce(tmp_path, TINY, workers=1, domains=["battery"], progress=False)
+    mtimes = {p: p.stat().st_mtime_ns for p in tmp_path.rglob("*") if p.is_file() and p.name not in ("results.json", "REPORT.md")}
+    second = reproduce(tmp_path, TINY, workers=1, domains=["battery"], progress=False, sweep=True)
+    assert {p: p.stat().st_mtime_ns for p in mtimes} == mtimes  # nothing was redone
+    assert "sweep" not in first and second["systems"] == first["systems"]
+    pareto = json.loads((tmp_path / "sweep" / "battery" / "pareto.json").read_text())
+    assert second["sweep"]["battery"]["points"] == pareto["points"]
+    assert "![trade-off](sweep/battery/pareto.png)" in (tmp_path / "REPORT.md").read_text()
 
 
 @pytest.mark.slow
