@@ -182,7 +182,8 @@ def build_parser() -> argparse.ArgumentParser:
     re_.add_argument("--task", action="append", default=None, metavar="TASK",
                      help=f"only this task ({tasks}; repeatable; default: every task)")
     re_.add_argument("--sweep", action="store_true",
-                     help="also sweep the price of a computation (etmpc sweep) and answer the equal-rate question in the report")
+                     help="also sweep the price of a computation (etmpc sweep) and answer the equal-rate question in the "
+                          "report; on a finished run's directory only the sweeps run (make sweep)")
     re_.add_argument("--out", type=Path, default=None, metavar="DIR",
                      help="run directory (default results/reproduce, or results/reproduce-quick with --quick)")
     re_.add_argument("--workers", type=_workers, default=None, help="worker processes (default: one per core)")
