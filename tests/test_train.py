@@ -45,8 +45,8 @@ def test_curve_points_are_what_evaluate_reports(tmp_path):
 
 
 def test_the_first_point_is_the_initial_policy_played_once_for_every_seed(tmp_path):
-    """Every seed starts from the same policy: its episodes are played once (once_each) and the
-    point, the same for each seed, is what `etmpc evaluate` reports for that policy."""
+    """Every seed starts from the same policy, whose episodes once_each plays once: the first point,
+    the same for each seed, is what `etmpc evaluate` reports for that policy."""
     from etmpc.evaluation.evaluate import evaluate
 
     state = train(TrainConfig("battery", **TINY), tmp_path / "run", workers=1, progress=False)
@@ -59,7 +59,8 @@ def test_the_first_point_is_the_initial_policy_played_once_for_every_seed(tmp_pa
 
 def test_once_each_plays_each_distinct_job_once_and_answers_every_job_in_order():
     class Serial:
-        seen = []
+        def __init__(self):
+            self.seen = []
 
         def map(self, fn, jobs, on_result=None):
             self.seen += jobs
