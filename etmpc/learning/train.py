@@ -93,10 +93,15 @@ def once_each(backend, fn, jobs: list, progress) -> list:
     result is a function of its arguments alone, and every seed starts from the same policy, so the
     first evaluation would otherwise play each episode once per seed."""
     keys = [json.dumps(job, sort_keys=True) for job in jobs]
-    distinct = dict(zip(keys, jobs))
+    distinct, repeats = {}, []
+    for key, job in zip(keys, jobs):
+        if key in distinct:
+            repeats.append(job)
+        else:
+            distinct[key] = job
     played = dict(zip(distinct, backend.map(fn, list(distinct.values()), progress)))
-    for key, job in zip(keys, jobs):  # the repeats, counted on the progress bar as played
-        if distinct.pop(key, None) is None and progress is not None:
+    if progress is not None:
+        for job in repeats:  # counted on the progress bar as played
             progress(job)
     return [played[key] for key in keys]
 
