@@ -35,6 +35,7 @@ import dm_env
 import numpy as np
 from dm_control.rl.control import PhysicsError
 
+from etmpc.common.frozen import frozen, readonly
 from etmpc.control.plan import Plan
 from etmpc.systems.base import System
 
@@ -45,7 +46,11 @@ class AugmentedState:
     """What a policy sees at a decision (paper, section 2.2): ``s = [x_i, x_k, i - k]`` (the current
     state, the state the plan was made from, the plan's age), the plan's prediction ``x_hat_i`` (a
     function of ``s``, handed along for the event trigger), the kept plan, the task's observation and,
-    for policies that simulate, the loop's whole state."""
+    for policies that simulate, the loop's whole state.
+
+    Everything in it is read-only (:mod:`etmpc.common.frozen`): the arrays are read-only views, the
+    plan a frozen value, the observation a frozen mapping. A policy that writes into what it is shown
+    gets an error, never a changed run; to compute with a value, copy it (``np.array(s.x)``)."""
 
     x: np.ndarray  # x_i, measured now
     x_plan: np.ndarray  # x_k, measured when the plan was made
@@ -164,6 +169,11 @@ class Snapshot:
                    np.array(context.u_prev), x, context.timestep.observation)
 
 
+def _shown(timestep: dm_env.TimeStep) -> dm_env.TimeStep:
+    """The step with its observation frozen: the loop shows it to policies, and they cannot write into it."""
+    return timestep._replace(observation=frozen(timestep.observation))
+
+
 def _input(system: System, plan: Plan, age: int, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """``(u, u_planned, correction, x_predicted)``: the plan's input plus the LQR correction, clipped."""
     u_planned = plan.input_at(age)
@@ -194,8 +204,8 @@ class ClosedLoop:
         """Start an episode: a stored one if given, else one drawn by the task."""
         system = self.system
         self.env.task.use_episode(episode)
-        self.timestep = self.env.reset()
-        self.x = system.state(self.timestep)
+        self.timestep = _shown(self.env.reset())
+        self.x = readonly(system.state(self.timestep))
         nu = system.u_min.shape[0]
         self.trajectory = Trajectory.empty(system.episode_steps, self.x.shape[0], nu)
         self.plan: Plan | None = None
@@ -243,7 +253,7 @@ class ClosedLoop:
                 traj.plans.append((i, plan))
         u, u_planned, correction, x_predicted = _input(system, plan, self.age, x)
         try:
-            self.timestep = self.env.step(system.action(u, recompute))
+            self.timestep = _shown(self.env.step(system.action(u, recompute)))
         except PhysicsError:
             traj.nonfinite, self.done = True, True
             return 0.0
@@ -252,8 +262,8 @@ class ClosedLoop:
         traj.recompute[i], traj.forced[i] = recompute, forced
         traj.rewards[i] = reward = self.timestep.reward
         traj.steps = self.step_index = i + 1
-        self.x = system.state(self.timestep)
-        self.age, self.u_prev = self.age + 1, u
+        self.x = readonly(system.state(self.timestep))
+        self.age, self.u_prev = self.age + 1, readonly(u)
         if self.env.task.restarted:  # the task put the plant back: the plan no longer applies
             self.age = plan.horizon
         traj.step_time_s[i] = time.perf_counter() - start
@@ -336,7 +346,7 @@ def play_on(
             recompute = True
         else:
             if observes and observation is None:
-                observation = task.get_observation(physics)
+                observation = frozen(task.get_observation(physics))
             recompute = bool(policy.decide(AugmentedState(x, plan.states[0], age, plan.state_at(age), plan, observation), rng))
         if recompute:
             if i == snapshot.step and first_plan is not None:
@@ -356,7 +366,7 @@ def play_on(
         task.after_step(physics)
         added = task.get_reward(physics) - price * recompute
         total += added
-        observation, x = None, system.measure(physics)
+        observation, x = None, readonly(system.measure(physics))
         if not np.isfinite(x).all():
             return -math.inf
         age, u_prev = age + 1, u

@@ -13,7 +13,8 @@ import signal
 import sys
 import threading
 
-from etmpc.common.errors import EtmpcError
+from etmpc.common import interrupts
+from etmpc.common.errors import EtmpcError, Terminated
 
 # MuJoCo's OpenGL backends on Linux (mujoco/rendering/classic/gl_context.py): anything else makes
 # importing dm-control fail, so the command checks it before importing anything that renders.
@@ -28,12 +29,8 @@ def _check_gl() -> None:
                          "osmesa (software) or glfw (with a display)")
 
 
-class _Terminated(BaseException):
-    """SIGTERM, turned into an orderly stop: workers shut down, partial files removed."""
-
-
 def _terminate(signum, frame):
-    raise _Terminated
+    raise Terminated
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -53,7 +50,8 @@ def main(argv: list[str] | None = None) -> int:
         from etmpc.cli import commands, options  # after the OpenGL check: importing dm-control picks the backend
 
         args = options.build_parser().parse_args(argv)
-        commands.COMMANDS[args.command](args)
+        with interrupts.watching():  # a Ctrl-C is told apart from a trigger that raises KeyboardInterrupt
+            commands.COMMANDS[args.command](args)
     except EtmpcError as exc:
         print(f"etmpc: error: {exc}", file=sys.stderr)
         return 2
@@ -64,7 +62,7 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("etmpc: interrupted", file=sys.stderr)
         return 130
-    except _Terminated:
+    except Terminated:
         print("etmpc: terminated", file=sys.stderr)
         return 143
     finally:

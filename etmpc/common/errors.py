@@ -16,3 +16,7 @@ class TestSetError(EtmpcError):
     """A stored test set is missing, corrupted or belongs to another task."""
 
     __test__ = False  # not a pytest test class
+
+
+class Terminated(BaseException):
+    """SIGTERM, turned into an orderly stop by the command line: workers shut down, partial files removed."""

@@ -7,6 +7,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from etmpc.common.frozen import FrozenMapping, readonly
+
 
 @dataclass(frozen=True, eq=False)
 class Plan:
@@ -18,6 +20,9 @@ class Plan:
     value the solver minimised (for an economic MPC, the negative profit). ``forecasts`` holds the
     forecasts of time-varying parameters the plan was made with (name -> values for ``k..k+N-1``);
     ``gains`` the feedback gains along the plan, ``u = u_j - K_j (x - x_j)``, when its MPC computes them.
+
+    A plan is a value: its arrays are read-only views and its forecasts a frozen mapping, so nothing
+    it is handed to (a trigger under test above all) can change what the loop applies.
     """
 
     inputs: np.ndarray  # (N, nu)
@@ -29,6 +34,13 @@ class Plan:
     status: str = ""
     forecasts: Mapping[str, np.ndarray] = field(default_factory=dict)
     gains: np.ndarray | None = None  # (N, nu, nx): a time-varying LQR along the plan, if its MPC computes one
+
+    def __post_init__(self):
+        for name in ("inputs", "states", "gains"):
+            value = getattr(self, name)
+            if value is not None:
+                object.__setattr__(self, name, readonly(np.asarray(value)))
+        object.__setattr__(self, "forecasts", FrozenMapping(self.forecasts))
 
     @property
     def horizon(self) -> int:

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from etmpc.common.frozen import readonly
 from etmpc.common.errors import EtmpcError, TestSetError
 from etmpc.common.outputs import check_outputs, write_bytes
 from etmpc.common.resources import tasks_dir
@@ -125,7 +126,8 @@ def load(path: Path, domain: str, task: str) -> TestSet:
         raise TestSetError(f"test set {path} is corrupted: sha256 {actual[:12]}... != {expected[:12]}... in {expected_file.name}; {advice}")
     try:
         with np.load(path, allow_pickle=False) as data:
-            arrays = {name: data[name] for name in data.files if name != "meta"}
+            # Read-only: every policy meets the same episodes, and nothing that plays one can change it.
+            arrays = {name: readonly(data[name]) for name in data.files if name != "meta"}
             meta = json.loads(data["meta"].item())
     except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
         raise TestSetError(f"test set {path} cannot be read ({exc}); {advice}") from None

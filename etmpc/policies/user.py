@@ -6,7 +6,13 @@ from the generator it is given?) and ``decide(s, rng) -> bool`` (True: recompute
 :class:`etmpc.loop.AugmentedState`. Optional: ``observes = False`` when ``decide`` never reads
 ``s.observation``, and ``simulates = True`` for a policy that needs the loop's whole state
 (``s.context``). :func:`checked` wraps one so that whatever goes wrong inside it is one line that names
-it: a ``decide`` that raises or answers anything but a bool.
+it: a ``decide`` that raises anything (``SystemExit`` and ``KeyboardInterrupt`` included: only a real
+Ctrl-C stops the command) or answers anything but a bool.
+
+A trigger cannot change the run it is scored on: what it is shown is read-only (see
+:class:`etmpc.loop.AugmentedState`), and a trigger that simulates (``simulates = True``) is handed a
+context whose environment is a twin of the loop's, set to the same state at each decision, never the
+loop's own.
 
 Policies run in worker processes: they must pickle, so define their class in a module (or in a script
 under ``if __name__ == "__main__":``), not inside a function.
@@ -17,17 +23,38 @@ from __future__ import annotations
 import importlib
 import os
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
 from etmpc.common.errors import EtmpcError
-from etmpc.loop import AugmentedState, Policy
+from etmpc.common.interrupts import described, genuine
+from etmpc.loop import AugmentedState, DecisionContext, Policy
+
+READ_ONLY_HINT = "what a trigger is shown is read-only: copy what you change, e.g. np.array(s.x)"
+
+
+def _failed(what: str, exc: BaseException) -> EtmpcError:
+    """Someone's code failed: one line saying where and how, with a hint when it wrote into what it was shown."""
+    hint = ""
+    if (isinstance(exc, ValueError) and "read-only" in str(exc)) or (
+            isinstance(exc, TypeError) and "does not support item assignment" in str(exc)):
+        hint = f" ({READ_ONLY_HINT})"
+    return EtmpcError(f"{what} raised {described(exc)}{hint}")
 
 
 def check_policy(policy: Any, where: str) -> None:
     """Raise :class:`EtmpcError` unless ``policy`` has the members a policy needs."""
+    try:
+        _check_members(policy, where)
+    except BaseException as exc:
+        if genuine(exc):
+            raise
+        raise _failed(f"{where}: reading its members", exc) from None
+
+
+def _check_members(policy: Any, where: str) -> None:
     problems = []
     if not isinstance(getattr(policy, "spec", None), str) or not getattr(policy, "spec", ""):
         problems.append("a non-empty str `spec`")
@@ -47,30 +74,47 @@ class Checked:
 
     policy: Any
     name: str
+    _twin: Any = field(default=None, repr=False)  # (system, environment) a simulating policy plays in
+
+    def __post_init__(self):  # read once: a property of the user's that changes cannot change the run
+        self.stochastic = bool(self._member("stochastic", None))
+        self.observes = bool(self._member("observes", True))
+        self.simulates = bool(self._member("simulates", False))
+
+    def _member(self, name: str, default):
+        try:
+            return getattr(self.policy, name) if default is None else getattr(self.policy, name, default)
+        except BaseException as exc:
+            if genuine(exc):
+                raise
+            raise _failed(f"policy {self.name}: reading {name}", exc) from None
 
     @property
     def spec(self) -> str:
         return self.name
 
-    @property
-    def stochastic(self) -> bool:
-        return bool(self.policy.stochastic)
+    def __getstate__(self):  # the twin environment stays in its process
+        return {k: v for k, v in self.__dict__.items() if k != "_twin"} | {"_twin": None}
 
-    @property
-    def observes(self) -> bool:
-        return bool(getattr(self.policy, "observes", True))
-
-    @property
-    def simulates(self) -> bool:
-        return bool(getattr(self.policy, "simulates", False))
+    def _sandboxed(self, context: DecisionContext) -> DecisionContext:
+        """``context`` with a twin of its environment, set to the loop's state: a simulating policy may
+        step and change it, and the loop's own plant and episode stay as they were."""
+        if self._twin is None or self._twin[0] is not context.system:
+            self._twin = (context.system, context.system.make_env())
+        twin = self._twin[1]
+        twin.physics.restore(context.env.physics.snapshot())
+        twin.task.resume(context.env.task.episode, context.step)
+        return replace(context, env=twin)
 
     def decide(self, s: AugmentedState, rng: np.random.Generator) -> bool:
+        if s.context is not None:
+            s = replace(s, context=self._sandboxed(s.context))
         try:
             answer = self.policy.decide(s, rng)
-        except EtmpcError:
-            raise
-        except Exception as exc:  # the user's code: any error becomes one line naming it
-            raise EtmpcError(f"policy {self.name}: decide raised {type(exc).__name__}: {exc}") from None
+        except BaseException as exc:  # the user's code: anything it raises becomes one line naming it
+            if genuine(exc):
+                raise
+            raise _failed(f"policy {self.name}: decide", exc) from None
         if not isinstance(answer, (bool, np.bool_)):
             raise EtmpcError(f"policy {self.name}: decide must return a bool (True: recompute), "
                              f"it returned {type(answer).__name__} {answer!r}")
@@ -81,7 +125,13 @@ def checked(policy: Any, name: str | None = None) -> Policy:
     """``policy`` (a policy object) checked on entry and at every decision."""
     if isinstance(policy, Checked):
         return policy
-    name = name or str(getattr(policy, "spec", type(policy).__name__))
+    if name is None:
+        try:
+            name = str(getattr(policy, "spec", type(policy).__name__))
+        except BaseException as exc:
+            if genuine(exc):
+                raise
+            raise _failed(f"policy {type(policy).__name__}: reading spec", exc) from None
     check_policy(policy, f"policy {name}")
     return Checked(policy, name)
 
@@ -97,17 +147,23 @@ def load_user(spec: str) -> Policy:
         sys.path.insert(0, os.getcwd())
     try:
         module = importlib.import_module(module_name)
-    except Exception as exc:
-        raise EtmpcError(f"policy {spec}: cannot import {module_name} ({type(exc).__name__}: {exc})") from None
+    except BaseException as exc:  # SystemExit on import included: one line, never the end of the command
+        if genuine(exc):
+            raise
+        raise EtmpcError(f"policy {spec}: cannot import {module_name} ({described(exc)})") from None
     try:
         factory = getattr(module, name)
     except AttributeError:
         raise EtmpcError(f"policy {spec}: {module_name} has no {name}") from None
-    if callable(factory) and not callable(getattr(factory, "decide", None)) or isinstance(factory, type):
-        try:
-            policy = factory()
-        except Exception as exc:
-            raise EtmpcError(f"policy {spec}: {name}() raised {type(exc).__name__}: {exc}") from None
-    else:
-        policy = factory
+    except BaseException as exc:  # a module-level __getattr__ of the user's
+        if genuine(exc):
+            raise
+        raise _failed(f"policy {spec}: {module_name}.{name}", exc) from None
+    try:
+        is_factory = isinstance(factory, type) or (callable(factory) and not callable(getattr(factory, "decide", None)))
+        policy = factory() if is_factory else factory
+    except BaseException as exc:
+        if genuine(exc):
+            raise
+        raise _failed(f"policy {spec}: {name}()", exc) from None
     return checked(policy, spec)
