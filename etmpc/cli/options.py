@@ -9,6 +9,7 @@ import argparse
 import math
 from pathlib import Path
 
+from etmpc.common import checks
 from etmpc.common.errors import EtmpcError
 from etmpc.evaluation.workers import BACKENDS
 from etmpc.learning.config import ALGORITHMS
@@ -45,30 +46,29 @@ def _number(text: str) -> float:
         raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
 
 
+def _checked(check, value):
+    """``check(value)`` (one of :mod:`etmpc.common.checks`, which the Python API uses too) as argparse's error."""
+    try:
+        return check(value)
+    except checks.BadValue as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def _positive_int(text: str) -> int:
-    value = _whole(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
-    return value
+    return _checked(lambda v: checks.at_least(v, 1), _whole(text))
 
 
-MAX_WORKERS = 512
-MAX_SEED = 2**63 - 1
+MAX_WORKERS = checks.MAX_WORKERS
+MAX_SEED = checks.MAX_SEED
 MAX_FPS = 1000.0
 
 
 def _workers(text: str) -> int:
-    value = _positive_int(text)
-    if value > MAX_WORKERS:
-        raise argparse.ArgumentTypeError(f"at most {MAX_WORKERS} worker processes, got {value}")
-    return value
+    return _checked(checks.workers, _whole(text))
 
 
 def _seed(text: str) -> int:
-    value = _whole(text)
-    if not 0 <= value <= MAX_SEED:
-        raise argparse.ArgumentTypeError(f"a seed is a whole number in 0..2**63-1, got {value}")
-    return value
+    return _checked(checks.seed, _whole(text))
 
 
 def _index(text: str) -> int:
@@ -86,10 +86,7 @@ def _fps(text: str) -> float:
 
 
 def _price(text: str) -> float:
-    value = _number(text)
-    if not (math.isfinite(value) and value >= 0):
-        raise argparse.ArgumentTypeError(f"a price of a computation is a finite number >= 0, got {text}")
-    return value
+    return _checked(checks.price, _number(text))
 
 
 def _prices(text: str) -> tuple[float, ...]:
@@ -201,8 +198,8 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--workers", type=_workers, default=None, help="worker processes (default: one per core)")
     _backend_arguments(sw)
 
-    rn = sub.add_parser("render", help="render one test-set episode headless to an MP4 video (cart_pendulum)")
-    rn.add_argument("task", help="system to render: cart_pendulum (the battery has no 3-D scene)")
+    rn = sub.add_parser("render", help="render one test-set episode headless to an MP4 video (a task with a 3-D scene)")
+    rn.add_argument("task", help=f"task to render, one with a 3-D scene: {tasks} (the battery has none)")
     rn.add_argument("--policy", required=True, metavar="SPEC", help="always | never | every:T | threshold:X | rl:PATH | self:PATH")
     rn.add_argument("--episode", type=_index, default=0, help="test-set episode (default 0)")
     rn.add_argument("--out", type=Path, required=True, metavar="FILE.mp4")

@@ -9,6 +9,8 @@ processes and gathered back in order, so the numbers do not depend on the number
 from __future__ import annotations
 
 import math
+import os
+import pickle
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -16,13 +18,15 @@ import numpy as np
 from tqdm import tqdm
 
 from etmpc.evaluation import testsets as ts_mod
+from etmpc.common import checks, interrupts
 from etmpc.common.errors import EtmpcError
+from etmpc.common.interrupts import described, genuine
 from etmpc.policies import parse_policy
 from etmpc.policies.user import checked
 from etmpc.views.record import EpisodeRecord
 from etmpc.views.recording import Recorder
 from etmpc.systems import make_system, system_key
-from etmpc.evaluation.workers import default_workers, make_backend, play_test_episode
+from etmpc.evaluation.workers import BACKENDS, default_workers, make_backend, play_test_episode
 
 
 @dataclass(frozen=True)
@@ -184,6 +188,59 @@ def evaluate(
     With ``record``, also write every episode into that Rerun recording (``.rrd``).
     ``recompute_price``: the price of a computation, if not the system's own (it enters every
     objective, and what rollouts optimise)."""
+    with interrupts.watching():  # a trigger that raises KeyboardInterrupt is its failure, not a Ctrl-C
+        return _evaluate(domain, policies, episodes, repeats, workers, seed, testset_path, progress, backend, address,
+                         record, recompute_price)
+
+
+def check_arguments(domain, policies, episodes, repeats, workers, seed, testset_path, progress, backend, address,
+                    record, recompute_price) -> None:
+    """What the command line's parser checks, checked for a call from Python, with the same messages
+    (raises :class:`EtmpcError`)."""
+    if not isinstance(domain, str):
+        raise EtmpcError(f"task: a task name (str) is needed, got {type(domain).__name__} {domain!r}")
+    if isinstance(policies, (str, bytes)) or not isinstance(policies, (list, tuple)):
+        hint = f" (for one policy: [{policies!r}])" if isinstance(policies, str) else ""
+        raise EtmpcError(f"policies: a list of policy specs or objects is needed, got {type(policies).__name__}{hint}")
+    if not policies:
+        raise EtmpcError("policies: the list is empty; give at least one policy (a spec such as 'every:3', or an object)")
+    if episodes is not None:
+        checks.argument("episodes", lambda v: checks.at_least(checks.whole(v), 1), episodes)
+    checks.argument("repeats", lambda v: checks.at_least(checks.whole(v), 1), repeats)
+    if workers is not None:
+        checks.argument("workers", checks.workers, workers)
+    checks.argument("seed", checks.seed, seed)
+    if recompute_price is not None:
+        checks.argument("recompute_price", checks.price, recompute_price)
+    for name, path in (("testset_path", testset_path), ("record", record)):
+        if path is not None and not isinstance(path, (str, os.PathLike)):
+            raise EtmpcError(f"{name}: a file path is needed, got {type(path).__name__} {path!r}")
+    if record is not None and Path(record).suffix != ".rrd":
+        raise EtmpcError(f"record: {record} does not end in .rrd")
+    if not isinstance(progress, bool):
+        raise EtmpcError(f"progress: True or False, got {progress!r}")
+    if backend not in BACKENDS:
+        raise EtmpcError(f"backend: unknown backend {backend!r}: {' | '.join(BACKENDS)}")
+    if address is not None and backend != "ray":
+        raise EtmpcError("--address needs --backend ray")
+
+
+def check_picklable(spec: str, policy) -> None:
+    """Raise :class:`EtmpcError` unless ``policy`` goes to a worker process and back (it is pickled)."""
+    try:
+        pickle.loads(pickle.dumps(policy))
+    except BaseException as exc:
+        if genuine(exc):
+            raise
+        raise EtmpcError(f"policy {spec} cannot be sent to worker processes ({described(exc)}): use --workers 1 "
+                         "(workers=1 in Python), or make it picklable (its class at the top level of a module, "
+                         "no lambdas, open files or locks in it)") from None
+
+
+def _evaluate(domain, policies, episodes, repeats, workers, seed, testset_path, progress, backend, address, record,
+              recompute_price) -> Evaluation:
+    check_arguments(domain, policies, episodes, repeats, workers, seed, testset_path, progress, backend, address,
+                    record, recompute_price)
     key = system_key(domain, recompute_price)
     system = make_system(key)
     # Parsed (or checked) once here, so a bad policy fails before any work starts, then sent with each job.
@@ -198,15 +255,16 @@ def evaluate(
             raise EtmpcError(f"policy {spec} is given twice")
         parsed[spec] = policy
     policies = list(parsed)
+    workers = default_workers() if workers is None else workers
+    if workers > 1 or backend != "local":
+        for spec, policy in parsed.items():
+            check_picklable(spec, policy)
     path = testset_path or str(ts_mod.default_path(system.domain, system.task))
     testset = ts_mod.load(path, system.domain, system.task)
     testset.check_playable(system, system.make_env().task)  # a bad episode fails here, before any work
     episodes = testset.episodes if episodes is None else episodes
     if not 1 <= episodes <= testset.episodes:
         raise ts_mod.TestSetError(f"--episodes must be in 1..{testset.episodes} for this test set, got {episodes}")
-    if repeats < 1:
-        raise ValueError("repeats must be >= 1")
-    workers = default_workers() if workers is None else workers
     # Workers find the stored test set themselves (a cluster node's install may live elsewhere) and
     # check that its digest is the one verified here.
     recorder = Recorder(record) if record is not None else None  # a bad path fails before any work

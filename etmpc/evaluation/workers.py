@@ -25,6 +25,7 @@ import sys
 import threading
 import time
 from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from multiprocessing.context import SpawnContext, SpawnProcess
 from typing import Any
@@ -219,10 +220,14 @@ class LocalBackend:
     def map(self, fn, jobs: list, on_result=None, chunksize: int = 1) -> list:
         results = []
         iterator = map(fn, jobs) if self._pool is None else self._pool.map(fn, jobs, chunksize=chunksize)
-        for job, result in zip(jobs, iterator):
-            results.append(result)
-            if on_result is not None:
-                on_result(job)
+        try:
+            for job, result in zip(jobs, iterator):
+                results.append(result)
+                if on_result is not None:
+                    on_result(job)
+        except BrokenProcessPool:  # a worker was killed or exited (os._exit in someone's code, out of memory)
+            raise EtmpcError("a worker process ended abruptly (killed, out of memory, or code in it called os._exit): "
+                             "run with --workers 1 to see where") from None
         return results
 
 

@@ -1,0 +1,63 @@
+"""The checks of the numbers a user gives, shared by the command line and the Python API, so that both
+refuse the same input with the same message (the command line prefixes ``argument --NAME:``, the API
+``NAME:``; both raise :class:`~etmpc.common.errors.EtmpcError`, exit code 2 on the command line)."""
+
+from __future__ import annotations
+
+import math
+import numbers
+from typing import Any
+
+from etmpc.common.errors import EtmpcError
+
+MAX_WORKERS = 512
+MAX_SEED = 2**63 - 1
+
+
+class BadValue(EtmpcError, ValueError):
+    """A number out of its range or of the wrong kind (a ``ValueError`` too, for callers that catch those)."""
+
+
+def whole(value: Any) -> int:
+    """``value`` as an int if it is a whole number (an int or numpy integer, never a bool or a float)."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        raise BadValue(f"{value!r} is not a whole number")
+    return int(value)
+
+
+def at_least(value: int, low: int) -> int:
+    if value < low:
+        raise BadValue(f"must be >= {low}, got {value}")
+    return value
+
+
+def workers(value: Any) -> int:
+    """A number of worker processes: 1..MAX_WORKERS."""
+    value = at_least(whole(value), 1)
+    if value > MAX_WORKERS:
+        raise BadValue(f"at most {MAX_WORKERS} worker processes, got {value}")
+    return value
+
+
+def seed(value: Any) -> int:
+    value = whole(value)
+    if not 0 <= value <= MAX_SEED:
+        raise BadValue(f"a seed is a whole number in 0..2**63-1, got {value}")
+    return value
+
+
+def price(value: Any) -> float:
+    """A price of a computation: a finite number >= 0."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise BadValue(f"{value!r} is not a number")
+    if not (math.isfinite(value) and value >= 0):
+        raise BadValue(f"a price of a computation is a finite number >= 0, got {value}")
+    return float(value)
+
+
+def argument(name: str, check, value: Any):
+    """``check(value)``, its error naming the argument ``name`` (``workers: must be >= 1, got 0``)."""
+    try:
+        return check(value)
+    except BadValue as exc:
+        raise BadValue(f"{name}: {exc}") from None
