@@ -72,3 +72,47 @@ def test_a_model_for_another_task_or_without_its_description_is_one_line(run, tm
     assert "has no lone.json beside it" in capsys.readouterr().err
     with pytest.raises(Exception, match="not found"):
         load_sb3(str(tmp_path / "missing.zip"), "battery")
+
+
+def _beside_a_valid_description(run, directory, name: str, data: bytes, meta_edit=None):
+    out, _ = run
+    model = directory / f"{name}.zip"
+    model.write_bytes(data)
+    meta = json.loads((out / "selected.json").read_text())
+    if meta_edit is not None:
+        meta_edit(meta)
+    model.with_suffix(".json").write_text(json.dumps(meta))
+    return model
+
+
+def _foreign_zip() -> bytes:
+    import io
+    import zipfile
+
+    buffer = io.BytesIO()
+    with zipfile.ZipFile(buffer, "w") as archive:
+        archive.writestr("notes.txt", "not a model")
+    return buffer.getvalue()
+
+
+@pytest.mark.parametrize("case, says", [
+    ("foreign-zip", "is not a Stable-Baselines3 model (its zip has no 'data' and 'policy.pth'"),
+    ("empty-file", "is not a Stable-Baselines3 model (not a readable zip file"),
+    ("truncated-model", "is not a Stable-Baselines3 model"),
+    ("the-description-itself", "is the model's description; give the model itself"),
+    ("unknown-algorithm", "names the algorithm 'nosuch', which Stable-Baselines3 does not have"),
+    ("algorithm-not-a-name", "algorithm 3 is not a name"),
+])
+def test_a_file_that_is_not_a_model_is_one_line_before_any_work(run, case, says, tmp_path, capsys):
+    out, _ = run
+    model_bytes = (out / "selected.zip").read_bytes()
+    data = {"foreign-zip": _foreign_zip(), "empty-file": b"", "truncated-model": model_bytes[: len(model_bytes) // 2]}
+    edit = {"unknown-algorithm": lambda m: m.update(algorithm="nosuch"),
+            "algorithm-not-a-name": lambda m: m.update(algorithm=3)}.get(case)
+    model = _beside_a_valid_description(run, tmp_path, case, data.get(case, model_bytes), edit)
+    spec = f"sb3:{model.with_suffix('.json') if case == 'the-description-itself' else model}"
+    assert main(["evaluate", "battery", "--policy", spec, "--episodes", "2", "--workers", "2",
+                 "--json", str(tmp_path / "ev.json")]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1 and says in err, err
+    assert not (tmp_path / "ev.json").exists()

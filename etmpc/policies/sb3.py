@@ -13,12 +13,15 @@ loaded in each worker process when first asked, on one thread.
 from __future__ import annotations
 
 import json
+import warnings
+import zipfile
 from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
 
 from etmpc.common.errors import EtmpcError
+from etmpc.common.interrupts import described, genuine
 from etmpc.loop import AugmentedState
 from etmpc.policies.features import observation, observation_names
 from etmpc.systems import canonical, system_class
@@ -54,14 +57,7 @@ class SB3Policy:
         return {k: v for k, v in self.__dict__.items() if k != "_model"} | {"_model": None}
 
     def _load(self):
-        try:
-            import stable_baselines3
-            import torch
-        except ImportError:
-            raise EtmpcError(f"{self.spec} needs Stable-Baselines3: pip install 'etmpc[rl]'") from None
-        torch.set_num_threads(1)
-        algorithm = getattr(stable_baselines3, self.algorithm.upper())
-        self._model = algorithm.load(str(self.path), device="cpu")
+        self._model = open_model(self.path, self.algorithm, self._size)
         return self._model
 
     def normalised(self, s: AugmentedState) -> np.ndarray:
@@ -74,9 +70,48 @@ class SB3Policy:
         return bool(int(action) == 1)
 
 
+def open_model(path: Path, algorithm: str, size: int):
+    """The Stable-Baselines3 model in ``path``, on the CPU and one thread; :class:`EtmpcError` (one line)
+    unless it is a model of ``algorithm`` with ``size`` observations and two actions."""
+    try:
+        import stable_baselines3
+        import torch
+    except ImportError:
+        raise EtmpcError(f"sb3:{path} needs Stable-Baselines3: pip install 'etmpc[rl]'") from None
+    torch.set_num_threads(1)
+    cls = getattr(stable_baselines3, algorithm.upper(), None)
+    if not (isinstance(cls, type) and hasattr(cls, "load")):
+        raise EtmpcError(f"sb3:{path}: {metadata_path(path).name} names the algorithm {algorithm!r}, which "
+                         "Stable-Baselines3 does not have (e.g. ppo, dqn, a2c)")
+    not_a_model = f"sb3:{path} is not a Stable-Baselines3 model"
+    try:
+        with zipfile.ZipFile(path) as archive:
+            members = set(archive.namelist())
+    except (zipfile.BadZipFile, OSError) as exc:
+        raise EtmpcError(f"{not_a_model} (not a readable zip file: {described(exc)})") from None
+    if not {"data", "policy.pth"} <= members:
+        raise EtmpcError(f"{not_a_model} (its zip has no 'data' and 'policy.pth'; save one with model.save(PATH))")
+    try:
+        with warnings.catch_warnings():  # a model saved by another version warns; the checks below decide
+            warnings.simplefilter("ignore")
+            model = cls.load(str(path), device="cpu")
+    except BaseException as exc:  # a truncated or foreign file fails deep inside torch or zipfile
+        if genuine(exc):
+            raise
+        raise EtmpcError(f"{not_a_model} of {algorithm} ({described(exc)})") from None
+    shape, actions = getattr(model.observation_space, "shape", None), getattr(model.action_space, "n", None)
+    if shape != (size,) or actions != 2:
+        raise EtmpcError(f"sb3:{path} takes observations of shape {shape} and {actions} actions; the trigger "
+                         f"environment has ({size},) and 2 (keep, recompute)")
+    return model
+
+
 def load_sb3(path: str, task: str | None) -> SB3Policy:
-    """``sb3:PATH``, checked against ``task`` (the one it is evaluated on)."""
+    """``sb3:PATH``, checked against ``task`` (the one it is evaluated on), and loaded once here so that
+    a file that is not a model fails before any work starts."""
     model = Path(path)
+    if model.suffix == ".json":
+        raise EtmpcError(f"sb3:{model} is the model's description; give the model itself, sb3:{model.with_suffix('.zip')}")
     if not model.is_file():
         raise EtmpcError(f"policy file {model} not found")
     meta_file = metadata_path(model)
@@ -101,4 +136,9 @@ def load_sb3(path: str, task: str | None) -> SB3Policy:
         raise EtmpcError(f"{meta_file}: its observation does not match the task's")
     if not (np.all(np.isfinite(mean)) and np.all(np.isfinite(var)) and np.all(var >= 0)):
         raise EtmpcError(f"{meta_file} has non-finite or negative normalisation")
-    return SB3Policy(model, trained_on, mean, var, str(meta.get("algorithm", "ppo")))
+    algorithm = meta.get("algorithm", "ppo")
+    if not isinstance(algorithm, str):
+        raise EtmpcError(f"{meta_file} is corrupt (algorithm {algorithm!r} is not a name)")
+    policy = SB3Policy(model, trained_on, mean, var, algorithm)
+    policy._load()
+    return policy
