@@ -92,14 +92,52 @@ def test_the_observation_is_the_error_features_and_their_squares():
     assert "price_error_eur_kwh" in battery.observation_names and len(battery.observation_names) == 2 * (1 + 1 + 7)
 
 
-@pytest.mark.parametrize("action", [2, -1, 0.5, "1", [0, 1], None, np.float64(1.0)])
+BAD_ACTIONS = [2, -1, 0.5, "1", [0, 1], [1], (1,), None, np.float64(1.0), np.array([1]), np.array([[0]]),
+               np.array(1.0), np.bool_(True), np.array(True), b"\x01"]
+GOOD_ACTIONS = [0, 1, True, False, np.int64(1), np.uint8(0), np.int32(1), np.array(0), np.array(1, dtype=np.int8)]
+
+
+@pytest.mark.parametrize("action", BAD_ACTIONS, ids=repr)
 def test_an_action_outside_the_space_is_a_clear_value_error(action):
     env = gym.make("etmpc/cart_pendulum-balance-v0").unwrapped
     env.reset(seed=0)
     with pytest.raises(ValueError, match="0 .keep the plan. or 1 .recompute."):
         env.step(action)
-    env.step(np.int64(1))  # numpy integers and 0-d arrays are fine
-    env.step(np.array(0))
+    assert not env.action_space.contains(action)  # exactly what the space holds: gymnasium's own answer agrees
+    assert env.core.loop.step_index == 0  # nothing was played
+
+
+def test_every_form_the_action_space_holds_is_taken_as_its_integer():
+    env = gym.make("etmpc/cart_pendulum-balance-v0").unwrapped
+    env.reset(options={"test_episode": 0})
+    for action in GOOD_ACTIONS:
+        assert env.action_space.contains(action)
+        *_, info = env.step(action)
+        assert info["recompute"] == (int(action) == 1 or info["forced"])
+
+
+@pytest.mark.parametrize("index", [1.5, 2.0, True, "3", np.float64(1.0), [1], None])
+def test_a_test_episode_must_be_an_integer_index(index):
+    env = gym.make("etmpc/battery-trading-v0").unwrapped
+    if index is None:  # None means: draw a training episode
+        env.reset(options={"test_episode": index})
+        return
+    with pytest.raises(ValueError, match="test_episode must be an integer index"):
+        env.reset(options={"test_episode": index})
+    obs, _ = env.reset(options={"test_episode": np.int16(3)})  # a numpy integer is an index
+    again, _ = env.reset(options={"test_episode": 3})
+    np.testing.assert_array_equal(obs, again)
+
+
+def test_an_environment_cannot_be_pickled_and_says_what_to_do_instead():
+    import copy
+    import pickle
+
+    for env in (gym.make("etmpc/battery-trading-v0"), TriggerEnvironment("battery")):
+        with pytest.raises(TypeError, match=r"cannot be pickled .*gymnasium.make\('etmpc/battery-trading-v0'\)"):
+            pickle.dumps(env)
+        with pytest.raises(TypeError, match="cannot be pickled"):
+            copy.deepcopy(env)
 
 
 def test_unknown_reset_options_and_bad_test_episodes_are_refused():

@@ -30,6 +30,8 @@ import dm_env
 import numpy as np
 from dm_env import specs
 
+from etmpc.common.errors import EtmpcError
+from etmpc.envs.registration import env_id
 from etmpc.evaluation import testsets
 from etmpc.loop import ClosedLoop
 from etmpc.policies.features import observation, observation_names
@@ -39,18 +41,43 @@ KEEP, RECOMPUTE = 0, 1
 
 
 def check_action(action: Any) -> int:
-    """``0`` or ``1`` (a Python or numpy integer or bool, or a 0-d or 1-element array of one); anything
-    else raises ``ValueError``."""
-    if isinstance(action, (int, np.integer)) and not isinstance(action, (bool, np.bool_)):
-        value = int(action)  # the common case, checked without building an array
-    else:
-        array = np.asarray(action)
-        if array.size != 1 or array.dtype.kind not in "biu":
-            raise ValueError(f"an action is 0 (keep the plan) or 1 (recompute), got {action!r}")
-        value = int(array.reshape(()))
-    if value not in (KEEP, RECOMPUTE):
-        raise ValueError(f"an action is 0 (keep the plan) or 1 (recompute), got {value}")
-    return value
+    """The action as an int, if it is exactly what the action space holds: ``0`` or ``1`` as a Python
+    int (``True``/``False`` are ints in Python), a numpy integer scalar (``np.int64(1)``, what a
+    vectorised environment hands each copy) or a 0-d integer array (``np.array(1)``, what
+    Stable-Baselines3's ``predict`` returns for one observation): the forms ``gymnasium.spaces.
+    Discrete(2).contains`` accepts. Anything else (a float, a list, an array of another shape, a
+    numpy bool, a string) raises :class:`InvalidAction`."""
+    if isinstance(action, int) or (isinstance(action, (np.integer, np.ndarray)) and action.shape == ()
+                                   and np.issubdtype(action.dtype, np.integer)):
+        value = int(action)
+        if value in (KEEP, RECOMPUTE):
+            return value
+        raise InvalidAction(f"an action is 0 (keep the plan) or 1 (recompute), got {value}")
+    shape = f" of shape {action.shape}" if isinstance(action, np.ndarray) else ""
+    raise InvalidAction(f"an action is 0 (keep the plan) or 1 (recompute): an int, a numpy integer or a 0-d integer "
+                        f"array, got {type(action).__name__}{shape} {action!r}")
+
+
+def check_index(index: Any, what: str = "test_episode") -> int:
+    """A test-set episode's index: a whole number (an int or numpy integer, never a float or a bool)."""
+    if isinstance(index, bool) or not isinstance(index, (int, np.integer)):
+        raise InvalidAction(f"{what} must be an integer index of the test set, got {type(index).__name__} {index!r}")
+    return int(index)
+
+
+class InvalidAction(EtmpcError, ValueError):
+    """An action or an episode index the environment does not take (a ``ValueError``, as gymnasium's are)."""
+
+
+def not_picklable(env) -> TypeError:
+    """What pickling a trigger environment raises: it holds a compiled MPC and a simulation."""
+    return NotPicklable(f"{type(env).__name__} of {env.key} cannot be pickled (it holds a compiled MPC and a MuJoCo "
+                        "or battery simulation): make one in each process instead, e.g. with "
+                        f"gymnasium.make({env.gym_id!r}), or a function that makes it (SubprocVecEnv takes those)")
+
+
+class NotPicklable(EtmpcError, TypeError):
+    """Pickling something that must be made in each process (a ``TypeError``, as pickle's own are)."""
 
 
 class TriggerEnvironment(dm_env.Environment):
@@ -69,9 +96,19 @@ class TriggerEnvironment(dm_env.Environment):
         self._test_set = None
         self.info: dict = {}
 
+    @property
+    def gym_id(self) -> str:
+        """This task's id in gymnasium's registry."""
+        return env_id(f"{self.system.domain}/{self.system.task}")
+
+    def __reduce__(self):
+        raise not_picklable(self)
+
     # -- dm_env ---------------------------------------------------------------------------------------
     def reset(self, test_episode: int | None = None) -> dm_env.TimeStep:
         """A new episode: drawn from the environment's generator, or test-set episode ``test_episode``."""
+        if test_episode is not None:
+            test_episode = check_index(test_episode)
         episode = self.system.draw_episode(self._rng) if test_episode is None else self.test_episode(test_episode)
         self.loop.reset(episode)
         self.info = {"step": 0}
@@ -122,7 +159,7 @@ class TriggerEnvironment(dm_env.Environment):
         if self._test_set is None:
             path = self._test_set_path or testsets.default_path(self.system.domain, self.system.task)
             self._test_set = testsets.load(path, self.system.domain, self.system.task)
-        return self.system.episode_from_arrays(self._test_set.episode_arrays(int(index)))
+        return self.system.episode_from_arrays(self._test_set.episode_arrays(check_index(index, "the index")))
 
     def _observation(self) -> np.ndarray:
         obs = observation(self.system.name, self.loop.observed_state(), self._size)
