@@ -45,14 +45,17 @@ def _files(root: Path) -> dict[str, bytes | None]:
 
 
 def _children(pid: int) -> list[int]:
+    """The processes ``pid`` started, but multiprocessing's resource tracker: one per interpreter, started
+    with the first pool and kept for the interpreter's life (not a worker left behind)."""
     kids = []
     for entry in os.listdir("/proc"):
         if entry.isdigit():
             try:
                 stat = Path(f"/proc/{entry}/stat").read_text()
+                command = Path(f"/proc/{entry}/cmdline").read_bytes()
             except OSError:
                 continue
-            if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
+            if int(stat.rsplit(")", 1)[1].split()[1]) == pid and b"resource_tracker" not in command:
                 kids.append(int(entry))
     return kids
 
@@ -156,8 +159,30 @@ def _setup(kind: str, d: Path) -> None:
         (d / "r.rrd").write_bytes(b"RRF2" + bytes(range(256)) * 8)
     elif kind == "text-file":
         (d / "r.rrd").write_text("hello\n")
+    elif kind.startswith("py-"):
+        (d / f"{kind.replace('-', '_')}.py").write_text(TRIGGERS[kind])
     elif kind != "none":
         raise AssertionError(kind)
+
+
+# Triggers of a hostile user's, each a module of its own (py:MODULE:NAME), named after its setup.
+_RULE = "    spec = 'mine'\n    stochastic = False\n"
+TRIGGERS = {
+    "py-exit-in-decide": f"class T:\n{_RULE}    def decide(self, s, rng):\n        raise SystemExit(3)\n",
+    "py-exit-on-import": "raise SystemExit(4)\n",
+    "py-exit-in-factory": "def T():\n    raise SystemExit(5)\n",
+    "py-exit-in-a-member": "class T:\n    spec = 'mine'\n    @property\n    def stochastic(self):\n        raise SystemExit(6)\n"
+                           "    def decide(self, s, rng):\n        return False\n",
+    "py-interrupt-in-decide": f"class T:\n{_RULE}    def decide(self, s, rng):\n        raise KeyboardInterrupt\n",
+    "py-base-exception": f"class Boom(BaseException):\n    pass\nclass T:\n{_RULE}"
+                         "    def decide(self, s, rng):\n        raise Boom('out of here')\n",
+    "py-import-fails": "import no_such_module_anywhere\n",
+    "py-writes-into-state": f"class T:\n{_RULE}    def decide(self, s, rng):\n        s.x[1] = 0.0\n        return False\n",
+    "py-writes-into-observation": f"class T:\n{_RULE}    def decide(self, s, rng):\n"
+                                  "        s.observation['soc'] = 1.0\n        return False\n",
+    "py-unpicklable": f"import threading\nclass T:\n{_RULE}    def __init__(self):\n        self.lock = threading.Lock()\n"
+                      "    def decide(self, s, rng):\n        return s.age >= 3\n",
+}
 
 
 # -- the in-process cases: (id, setup, argv, what the line must name) -------------------------------
@@ -279,12 +304,40 @@ CASES = [
     ("replay-json-is-directory", "a-dir", ["replay", "r.rrd", "--json", "out.json"], "directory"),
     ("bench-unknown-task", "none", ["bench", "cartpole"], "cartpole"),
     ("bench-episodes-too-many", "none", ["bench", "battery", "--episodes", "1000", "--no-reference"], "1000"),
+    # a trigger's own code cannot end the command, silently or otherwise, nor change its own run
+    ("py-exit-in-decide", "py-exit-in-decide", [*EV, "--policy", "py:py_exit_in_decide:T", "--episodes", "1",
+                                                "--workers", "1", "--json", "ev.json"], "SystemExit(3)"),
+    ("py-exit-in-decide-on-a-worker", "py-exit-in-decide", [*EV, "--policy", "py:py_exit_in_decide:T", "--episodes", "2",
+                                                            "--workers", "2", "--json", "ev.json"], "SystemExit(3)"),
+    ("py-exit-on-import", "py-exit-on-import", [*EV, "--policy", "py:py_exit_on_import:T"], "SystemExit(4)"),
+    ("py-exit-in-factory", "py-exit-in-factory", [*EV, "--policy", "py:py_exit_in_factory:T"], "SystemExit(5)"),
+    ("py-exit-in-a-member", "py-exit-in-a-member", [*EV, "--policy", "py:py_exit_in_a_member:T"], "SystemExit(6)"),
+    ("py-interrupt-in-decide", "py-interrupt-in-decide", [*EV, "--policy", "py:py_interrupt_in_decide:T", "--episodes", "1",
+                                                          "--workers", "1", "--record", "r.rrd"], "KeyboardInterrupt"),
+    ("py-base-exception", "py-base-exception", [*EV, "--policy", "py:py_base_exception:T", "--episodes", "1",
+                                                "--workers", "1"], "Boom: out of here"),
+    ("py-import-fails", "py-import-fails", [*EV, "--policy", "py:py_import_fails:T"], "no_such_module_anywhere"),
+    ("py-writes-into-state", "py-writes-into-state", [*EV, "--policy", "py:py_writes_into_state:T", "--episodes", "1",
+                                                      "--workers", "1"], "read-only"),
+    ("py-writes-into-observation", "py-writes-into-observation", ["evaluate", "battery", "--policy",
+                                                                  "py:py_writes_into_observation:T", "--episodes", "1",
+                                                                  "--workers", "1"], "read-only"),
+    ("py-unpicklable-on-workers", "py-unpicklable", [*EV, "--policy", "py:py_unpicklable:T", "--episodes", "2",
+                                                     "--workers", "2"], "--workers 1"),
+    # found on the way
+    ("render-beyond-the-framebuffer", "none", ["render", "reacher", "--policy", "always", "--out", "v.mp4",
+                                               "--width", "2560", "--height", "1440"], "framebuffer"),
+    ("reproduce-task-twice", "none", ["reproduce", "--quick", "--task", "battery", "--task", "battery/trading",
+                                      "--out", "run"], "twice"),
+    ("sweep-task-twice-by-two-names", "none", ["sweep", "battery", "battery/trading"], "twice"),
+    ("sweep-other-settings-named", "other-sweep", ["sweep", "battery", "--out", "run", "--quick"], "settings.episodes"),
 ]
 
 
 @pytest.mark.parametrize("setup, argv, names", [c[1:] for c in CASES], ids=[c[0] for c in CASES])
 def test_a_hostile_input_is_one_line_and_touches_nothing(setup, argv, names, tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(sys, "dont_write_bytecode", True)  # importing a py: trigger writes nothing either
     _setup(setup, tmp_path)
     before, processes = _files(tmp_path), set(_children(os.getpid()))  # earlier tests' helpers may live on
     with warnings.catch_warnings(record=True) as caught:  # a warning would be a second line on stderr
@@ -398,3 +451,57 @@ def test_version():
     proc = subprocess.run([sys.executable, "-m", "etmpc.cli", "--version"], capture_output=True, text=True)
     assert proc.returncode == 0 and proc.stdout.startswith("etmpc ")
 
+
+
+# -- the Python API: the same checks, the same messages, as EtmpcError -----------------------------
+class _Unpicklable:
+    spec, stochastic = "unpicklable", False
+
+    def __init__(self):
+        self.rule = lambda s: s.age >= 3
+
+    def decide(self, s, rng):
+        return self.rule(s)
+
+
+API_CASES = [  # (id, keyword arguments, what the message says, the command line's options for the same input)
+    ("workers-zero", {"workers": 0}, "workers: must be >= 1, got 0", ["--workers", "0"]),
+    ("workers-absurd", {"workers": 10**12}, "workers: at most 512 worker processes", ["--workers", str(10**12)]),
+    ("workers-fraction", {"workers": 1.5}, "workers: 1.5 is not a whole number", None),
+    ("episodes-fraction", {"episodes": 1.5}, "episodes: 1.5 is not a whole number", None),
+    ("episodes-zero", {"episodes": 0}, "episodes: must be >= 1, got 0", ["--episodes", "0"]),
+    ("episodes-a-bool", {"episodes": True}, "episodes: True is not a whole number", None),
+    ("repeats-zero", {"repeats": 0}, "repeats: must be >= 1, got 0", ["--repeats", "0"]),
+    ("seed-negative", {"seed": -1}, "seed: a seed is a whole number in 0..2**63-1, got -1", ["--seed", "-1"]),
+    ("seed-huge", {"seed": 2**64}, "seed: a seed is a whole number in 0..2**63-1", ["--seed", str(2**64)]),
+    ("seed-text", {"seed": "1"}, "seed: '1' is not a whole number", None),
+    ("price-nan", {"recompute_price": float("nan")}, "a price of a computation is a finite number >= 0, got nan",
+     ["--price", "nan"]),
+    ("price-text", {"recompute_price": "0.1"}, "recompute_price: '0.1' is not a number", None),
+    ("policies-a-string", {"policies": "always"}, "a list of policy specs or objects is needed, got str (for one policy: ['always'])", None),
+    ("policies-empty", {"policies": []}, "policies: the list is empty", None),
+    ("policies-a-dict", {"policies": {"always": 1}}, "a list of policy specs or objects is needed, got dict", None),
+    ("task-not-a-name", {"domain": 3}, "task: a task name (str) is needed, got int 3", None),
+    ("record-not-rrd", {"record": "r.txt"}, "r.txt does not end in .rrd", None),
+    ("unpicklable-on-workers", {"policies": [_Unpicklable()], "workers": 2}, "workers=1", None),
+    ("progress-not-a-bool", {"progress": "yes"}, "progress: True or False", None),
+]
+
+
+@pytest.mark.parametrize("kwargs, says, cli", [c[1:] for c in API_CASES], ids=[c[0] for c in API_CASES])
+def test_the_python_api_refuses_what_the_command_line_refuses_with_the_same_message(kwargs, says, cli, tmp_path,
+                                                                                   monkeypatch, capsys):
+    import etmpc
+    from etmpc.common.errors import EtmpcError
+
+    monkeypatch.chdir(tmp_path)
+    arguments = {"domain": "battery", "policies": ["always"], "episodes": 1, "workers": 1, "progress": False} | kwargs
+    with pytest.raises(EtmpcError) as raised:
+        etmpc.evaluate(**arguments)
+    message = str(raised.value)
+    assert says in message and "\n" not in message
+    assert _files(tmp_path) == {}
+    if cli is not None:  # the command line's line ends with the same words
+        assert main(["evaluate", "battery", "--policy", "always", *cli]) == 2
+        line = capsys.readouterr().err.strip()
+        assert line.endswith(message.split(": ", 1)[1]), (line, message)

@@ -39,6 +39,13 @@ def test_replay_gives_exactly_the_figures_the_run_computed_live(tmp_path, domain
             (run.objective, run.control_objective, run.recomputes, run.steps)  # bit for bit
 
 
+def test_replay_names_a_recording_by_its_task_not_its_domain(tmp_path, capsys):
+    _, replayed, path = live_and_replayed(tmp_path, "cart_pendulum/kicks", ["every:3"], episodes=1)
+    assert [(r.domain, r.task) for r in replayed] == [("cart_pendulum", "cart_pendulum/kicks")]
+    assert main(["replay", str(path)]) == 0
+    assert capsys.readouterr().out.splitlines()[0].startswith("cart_pendulum/kicks: objective")
+
+
 def test_prediction_error_is_what_the_threshold_trigger_compares(tmp_path):
     """Independent truth: `threshold:X` recomputes by choice exactly where the recorded error
     exceeds X, and keeps its plan exactly where it does not."""

@@ -127,9 +127,9 @@ def _reproduce(args) -> None:
     from etmpc.experiments.reproduce import FULL, QUICK, reproduce
     from etmpc.evaluation.workers import default_workers
 
-    from etmpc.systems import canonical
+    from etmpc.systems import distinct
 
-    tasks = None if args.task is None else list(dict.fromkeys(canonical(t) for t in args.task))  # names checked
+    tasks = None if args.task is None else distinct(args.task)
     _check_backend(args)
     out = args.out or Path("results") / ("reproduce-quick" if args.quick else "reproduce")
     check_outputs({}, {"--out": out})
@@ -171,7 +171,7 @@ def _render(args) -> None:
         result = render_rollout(args.task, args.policy, args.episode, args.out, args.seed, args.width, args.height,
                                 args.fps, record=args.record)
     except ValueError as exc:
-        raise EtmpcError(str(exc)) from None
+        raise EtmpcError(" ".join(str(exc).split())) from None
     print(f"wrote {result.path}: {result.frames} frames at {result.fps:g} fps, {result.trajectory.recomputes} recomputes")
     if args.record is not None:
         print(f"wrote {args.record}")

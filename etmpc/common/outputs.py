@@ -154,3 +154,20 @@ def refuse_foreign(directory: Path, ours, kind: str, option: str = "--out") -> N
         shown = ", ".join(foreign[:3]) + (f" and {len(foreign) - 3} more" if len(foreign) > 3 else "")
         raise EtmpcError(f"{option} {directory} holds files that are not a {kind}'s ({shown}): "
                          "choose a new or empty directory")
+
+
+def what_differs(stored, wanted, limit: int = 3) -> str:
+    """The settings that differ between a run's stored ``settings.json`` and the one asked for, named
+    one by one (``settings.episodes: 100 in the directory, 20 asked``), at most ``limit`` of them."""
+    found: list[str] = []
+
+    def walk(a, b, where: str) -> None:
+        if isinstance(a, dict) and isinstance(b, dict):
+            for key in sorted(set(a) | set(b), key=str):
+                walk(a.get(key, "(absent)"), b.get(key, "(absent)"), f"{where}.{key}" if where else str(key))
+        elif a != b:
+            found.append(f"{where or 'the file'}: {json.dumps(a)} in the directory, {json.dumps(b)} asked")
+
+    walk(stored, wanted, "")
+    more = f" and {len(found) - limit} more" if len(found) > limit else ""
+    return "; ".join(found[:limit]) + more

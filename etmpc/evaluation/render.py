@@ -12,7 +12,8 @@ from etmpc.loop import Trajectory
 from etmpc.policies import parse_policy
 from etmpc.systems import check_name, system_class
 from etmpc.views.recording import Recorder
-from etmpc.views.video import check_display, check_scene, check_size, iter_frames, render_frames, write_video
+from etmpc.views.video import (check_display, check_framebuffer, check_scene, check_size, iter_frames, render_frames,
+                               write_video)
 
 
 @dataclass(frozen=True)
@@ -33,7 +34,9 @@ def render_rollout(domain: str, policy_spec: str, episode: int, out: str | Path,
     check_name(domain)
     check_scene(system_class(domain))
     check_size(width, height)
-    policy = parse_policy(policy_spec, context(domain, testset_path)[0].error_weights, domain)
+    system, env, _ = context(domain, testset_path)
+    check_framebuffer(env.physics, width, height)
+    policy = parse_policy(policy_spec, system.error_weights, domain)
     # An out-of-range index raises TestSetError (an EtmpcError) before anything is drawn.
     played = play_test_episode(domain, policy, seed, 0, episode, testset_path)
     system, env, traj = played.system, played.env, played.trajectory

@@ -37,7 +37,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from etmpc.common.errors import EtmpcError
-from etmpc.common.outputs import refuse_foreign, write_text
+from etmpc.common.outputs import refuse_foreign, what_differs, write_text
 from etmpc.evaluation.evaluate import evaluate
 from etmpc.evaluation.render import render_rollout
 from etmpc.evaluation.workers import play_test_episode, shared_pools
@@ -138,7 +138,7 @@ def _check_settings(out: Path, settings: Settings, domains) -> None:
         except (OSError, ValueError) as exc:
             raise EtmpcError(f"{path} is unreadable ({exc}); move it away to start afresh") from None
         if stored != wanted:
-            raise EtmpcError(f"{out} holds a run with other settings ({stored['settings']}); use another --out")
+            raise EtmpcError(f"{out} holds a run with other settings ({what_differs(stored, wanted)}); use another --out")
     else:
         refuse_foreign(out, lambda name: False, "reproduce run")  # a new run starts in a new or empty directory
         out.mkdir(parents=True, exist_ok=True)

@@ -41,7 +41,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from etmpc.common.errors import EtmpcError
-from etmpc.common.outputs import refuse_foreign, write_json, write_text
+from etmpc.common.outputs import refuse_foreign, what_differs, write_json, write_text
 from etmpc.evaluation.evaluate import evaluate
 from etmpc.evaluation.testsets import default_path, load
 from etmpc.evaluation.workers import shared_pools
@@ -50,7 +50,7 @@ from etmpc.learning import dpi
 from etmpc.learning.config import TrainConfig
 from etmpc.learning.selftrigger import SelfSettings, train_self
 from etmpc.learning.train import train
-from etmpc.systems import check_name, check_price, make_system, names, system_key
+from etmpc.systems import check_price, distinct, make_system, names, system_key
 from etmpc.views.curves import draw_pareto
 from etmpc.views.figures import save_png_atomically
 
@@ -121,11 +121,7 @@ class SweepSettings:
 def plan(tasks: list[str] | None, prices=None, episodes: int | None = None, quick: bool = False) -> dict[str, SweepSettings]:
     """The settings of a sweep of ``tasks`` (default: every system), each checked before any work:
     known, given once, priced sensibly, and asking no more episodes than its stored test set has."""
-    tasks = list(tasks or names())
-    for task in tasks:
-        check_name(task)
-    if len(set(tasks)) != len(tasks):
-        raise EtmpcError("a task is given twice")
+    tasks = distinct(tasks or names())
     settings = {task: SweepSettings.default(task, prices, episodes, quick) for task in tasks}
     for task, chosen in settings.items():
         system = make_system(task)
@@ -159,8 +155,8 @@ def check_directory(out: Path, domain: str, settings: SweepSettings) -> bool:
     except (OSError, ValueError) as exc:
         raise EtmpcError(f"{path} is unreadable ({exc}); move it away to start afresh") from None
     if stored != _settings_json(domain, settings):
-        shown = stored.get("settings") if isinstance(stored, dict) else stored
-        raise EtmpcError(f"{out} holds a sweep with other settings ({shown}); use another --out")
+        raise EtmpcError(f"{out} holds a sweep with other settings ({what_differs(stored, _settings_json(domain, settings))}); "
+                         "use another --out")
     refuse_foreign(out, _ours, "sweep")
     return True
 

@@ -70,6 +70,18 @@ def canonical(name: str) -> str:
     return domain_name if task == domain(domain_name).TASKS[0] else f"{domain_name}/{task}"
 
 
+def distinct(names_given) -> list[str]:
+    """The tasks named, canonical, each once: a task named twice (even as ``battery`` and
+    ``battery/trading``) is refused, naming it; an unknown name is refused, listing the valid ones."""
+    tasks: list[str] = []
+    for name in names_given:
+        task = canonical(name)
+        if task in tasks:
+            raise EtmpcError(f"task {task} is given twice")
+        tasks.append(task)
+    return tasks
+
+
 def folder_name(name: str) -> str:
     """A task's name as one folder: ``DOMAIN`` for a domain's default task, else ``DOMAIN-TASK``."""
     return canonical(name).replace("/", "-")

@@ -16,6 +16,7 @@ import numpy as np
 
 from etmpc.common.errors import EtmpcError
 from etmpc.views.recording import DECISION_SERIES, END_MARKER, OBJECTIVE_SERIES
+from etmpc.systems import canonical
 
 _ROOT = re.compile(r"^(.*/episode_\d+/repeat_\d+)/(.+)$")
 
@@ -81,6 +82,7 @@ def read_recording(path: str | Path) -> dict[str, dict]:
 @dataclass(frozen=True)
 class ReplayedEpisode:
     domain: str
+    task: str  # the task's name as the command line takes it: DOMAIN for a domain's default task, else DOMAIN/TASK
     policy: str
     episode: int
     repeat: int
@@ -112,7 +114,7 @@ def replay_summary(path: str | Path) -> list[ReplayedEpisode]:
         chosen = np.flatnonzero((recompute > 0) & (forced == 0))
         at_recompute = errors[np.isin(steps_err, chosen)]
         out.append(ReplayedEpisode(
-            domain=identity["domain"], policy=identity["policy"], episode=int(identity["episode"]),
+            domain=identity["domain"], task=_task_name(identity), policy=identity["policy"], episode=int(identity["episode"]),
             repeat=int(identity["repeat"]), seed=int(identity["seed"]), objective_sense=identity["objective_sense"],
             objective=objective, control_objective=control,
             recomputes=recomputes, steps=len(rewards),
@@ -120,7 +122,7 @@ def replay_summary(path: str | Path) -> list[ReplayedEpisode]:
             prediction_error_max=float(errors.max()) if len(errors) else float("nan"),
             prediction_error_at_recompute=_mean(at_recompute),
         ))
-    out.sort(key=lambda r: (r.domain, r.policy, r.episode, r.repeat))
+    out.sort(key=lambda r: (r.task, r.policy, r.episode, r.repeat))
     return out
 
 
@@ -128,6 +130,18 @@ def _mean(values) -> float:
     values = np.asarray(values, float)
     values = values[np.isfinite(values)]
     return float(values.mean()) if len(values) else float("nan")
+
+
+def _task_name(identity: dict) -> str:
+    """``cart_pendulum/kicks``, not ``cart_pendulum``: the name ``etmpc evaluate`` took (a recording of a
+    task this install does not know keeps ``DOMAIN/TASK`` as recorded)."""
+    domain_name, task = str(identity["domain"]), identity.get("task")
+    if task is None:
+        return domain_name
+    try:
+        return canonical(f"{domain_name}/{task}")
+    except EtmpcError:
+        return f"{domain_name}/{task}"
 
 
 def _sense(group) -> str:
@@ -138,17 +152,17 @@ def format_replay(episodes: list[ReplayedEpisode], per_episode: bool = False) ->
     lines = []
     groups: dict[tuple[str, str], list[ReplayedEpisode]] = {}
     for e in episodes:
-        groups.setdefault((e.domain, e.policy), []).append(e)
+        groups.setdefault((e.task, e.policy), []).append(e)
     labels = [f"  episode {e.episode} repeat {e.repeat}" for e in episodes] if per_episode else []
     width = max([16] + [len(p) + 2 for _, p in groups] + [len(label) + 2 for label in labels])
     head = (f"{'policy':<{width}}{'episodes':>9}{'objective':>12}{'control':>11}{'recomputes':>12}"
             f"{'pred.err mean':>15}{'max':>10}{'at recompute':>14}")
     current = None
-    for (domain, policy), group in groups.items():
-        if domain != current:
-            lines += [f"{domain}: objective ({'higher' if _sense(group) == 'max' else 'lower'}"
+    for (task, policy), group in groups.items():
+        if task != current:
+            lines += [f"{task}: objective ({'higher' if _sense(group) == 'max' else 'lower'}"
                       " is better); prediction error ‖W (x − x̂)‖ against the plan in force", head, "-" * len(head)]
-            current = domain
+            current = task
         for e in [None] + (group if per_episode else []):  # the policy's line, then its episodes
             chosen = group if e is None else [e]
             label = policy if e is None else f"  episode {e.episode} repeat {e.repeat}"

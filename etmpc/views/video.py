@@ -39,6 +39,16 @@ def check_size(width: int, height: int) -> None:
         raise ValueError(f"video size must be even and positive for H.264/yuv420p, got {width}x{height}")
 
 
+def check_framebuffer(physics, width: int, height: int) -> None:
+    """A frame must fit the scene's offscreen framebuffer (``<visual><global offwidth offheight/>`` in
+    its model file): said in one line, before any work (MuJoCo's own refusal is a paragraph)."""
+    limits = physics.model.vis.global_
+    if width > limits.offwidth or height > limits.offheight:
+        raise EtmpcError(f"--width {width} --height {height} is larger than this scene's offscreen framebuffer "
+                         f"({limits.offwidth}x{limits.offheight}, set by <global offwidth offheight> in its model file): "
+                         f"render at most {limits.offwidth}x{limits.offheight}")
+
+
 def check_display() -> None:
     """An on-screen backend without a screen cannot render: said before any work (GLFW would
     print warnings, then fail deep in MuJoCo)."""
