@@ -1,6 +1,8 @@
 """The trigger problem as an environment (etmpc.envs): the same loop as evaluate, bit for bit; gymnasium's
 own checker; deterministic resets; clear errors; vectorised environments."""
 
+import re
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -144,6 +146,9 @@ def test_unknown_reset_options_and_bad_test_episodes_are_refused():
     env = gym.make("etmpc/cart_pendulum-balance-v0").unwrapped
     with pytest.raises(ValueError, match="unknown reset options"):
         env.reset(options={"episode": 3})
+    for options in ("test_episode", [("test_episode", 3)], 3):
+        with pytest.raises(ValueError, match="reset options are a dict"):
+            env.reset(options=options)
     from etmpc.common.errors import TestSetError
 
     with pytest.raises(TestSetError, match="out of range"):
@@ -172,3 +177,16 @@ def test_vectorised_environments_work():
         assert info["recompute"][0] and np.all(info["forced"] == [False, False])
     finally:
         envs.close()
+
+
+@pytest.mark.parametrize("kwargs, says", [
+    ({"task": 3}, "task: a task name"), ({"task": "cartpole"}, "unknown task 'cartpole'"),
+    ({"price": -1.0}, "price: a price of a computation is a finite number >= 0"), ({"price": "0.1"}, "price: '0.1' is not a number"),
+    ({"seed": -1}, "seed: a seed is a whole number"), ({"seed": 1.5}, "seed: 1.5 is not a whole number"),
+    ({"test_set": 3}, "test_set: a file path is needed"),
+])
+def test_a_bad_argument_to_an_environment_is_one_clear_error(kwargs, says):
+    from etmpc.common.errors import EtmpcError
+
+    with pytest.raises(EtmpcError, match=re.escape(says)):
+        TriggerEnvironment(**({"task": "battery"} | kwargs))

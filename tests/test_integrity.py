@@ -141,3 +141,56 @@ def test_what_a_stored_test_set_holds_cannot_be_written_through():
     for name, values in rows.items():
         with pytest.raises(ValueError, match="read-only"):
             values[...] = 0
+
+
+class Impostor:
+    """A trigger of someone's that calls itself by a built-in policy's name."""
+
+    spec = "every:3"
+    stochastic = False
+
+    def decide(self, s, rng) -> bool:
+        return True
+
+
+def test_a_trigger_cannot_take_a_built_in_policys_name():
+    with pytest.raises(EtmpcError, match="Impostor has the spec 'every:3', a built-in policy's"):
+        etmpc.evaluate("battery", [Impostor()], episodes=1, workers=1, progress=False)
+    Impostor.spec = "oracle:every:3"  # and so cannot be shown as an upper bound
+    with pytest.raises(EtmpcError, match="a built-in policy's"):
+        etmpc.evaluate("battery", ["every:3", Impostor()], episodes=1, workers=1, progress=False)
+    built_in = etmpc.evaluate("battery", [Every(3)], episodes=1, workers=1, progress=False)  # etmpc's own objects are
+    assert built_in.summaries[0].policy == "every:3"  # what their specs say
+
+
+class Unprintable(Exception):
+    def __str__(self):
+        raise RuntimeError("no")
+
+
+class Loud:
+    spec, stochastic = "loud", False
+
+    def decide(self, s, rng):
+        raise ValueError("x" * 100_000 + "\nsecond line")
+
+
+class Mute:
+    spec, stochastic = "mute", False
+
+    def decide(self, s, rng):
+        raise Unprintable()
+
+
+def test_whatever_a_trigger_raises_is_one_line_of_bounded_length():
+    for trigger, says in ((Loud(), "ValueError: xxx"), (Mute(), "Unprintable: (its message cannot be printed)")):
+        with pytest.raises(EtmpcError) as raised:
+            etmpc.evaluate("battery", [trigger], episodes=1, workers=1, progress=False)
+        message = str(raised.value)
+        assert says in message and "\n" not in message and len(message) < 500
+
+
+def test_a_spec_with_a_line_break_is_still_one_line_on_the_command_line(capsys):
+    assert main(["evaluate", "battery", "--policy", "every:\n3"]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "every:" in err

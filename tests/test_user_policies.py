@@ -58,6 +58,8 @@ def test_a_policy_object_is_checked_before_any_work():
     with pytest.raises(EtmpcError, match="is not a policy.*a bool `stochastic`.*decide"):
         etmpc.evaluate("cart_pendulum", [object()], episodes=1, workers=1, progress=False)
     with pytest.raises(EtmpcError, match="given twice"):
+        etmpc.evaluate("cart_pendulum", [EveryThird(), EveryThird()], episodes=1, workers=1, progress=False)
+    with pytest.raises(EtmpcError, match="a built-in policy's"):  # nor can it pass for one (tests/test_integrity.py)
         etmpc.evaluate("cart_pendulum", ["every:3", EveryThird(spec="every:3")], episodes=1, workers=1, progress=False)
 
 

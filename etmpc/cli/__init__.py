@@ -52,8 +52,8 @@ def main(argv: list[str] | None = None) -> int:
         args = options.build_parser().parse_args(argv)
         with interrupts.watching():  # a Ctrl-C is told apart from a trigger that raises KeyboardInterrupt
             commands.COMMANDS[args.command](args)
-    except EtmpcError as exc:
-        print(f"etmpc: error: {exc}", file=sys.stderr)
+    except EtmpcError as exc:  # one line, whatever a name in it (a spec, a path) holds
+        print(f"etmpc: error: {' '.join(str(exc).splitlines())}", file=sys.stderr)
         return 2
     except OSError as exc:  # the machine refused (a full disk, a vanished directory): one line, no traceback
         where = f"{exc.filename}: " if exc.filename else ""

@@ -52,9 +52,43 @@ def genuine(exc: BaseException) -> bool:
     return False
 
 
+MAX_MESSAGE = 300  # characters of someone's exception message kept in the one line
+
+
 def described(exc: BaseException) -> str:
-    """``Name: message`` of an exception, in one line (``SystemExit(3)`` for an exit)."""
-    if isinstance(exc, SystemExit):
-        return f"SystemExit({exc.code!r})"
-    text = " ".join(str(exc).split())
+    """``Name: message`` of an exception, in one line of bounded length (``SystemExit(3)`` for an exit);
+    a message that cannot even be turned into text is said to be so."""
+    try:
+        if isinstance(exc, SystemExit):
+            return f"SystemExit({exc.code!r})"[:MAX_MESSAGE]
+        text = " ".join(str(exc).split())
+    except Exception:  # its __str__ or __repr__ fails too
+        text = "(its message cannot be printed)"
+    if len(text) > MAX_MESSAGE:
+        text = text[:MAX_MESSAGE] + "…"
     return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+
+
+READ_ONLY_HINT = "what a trigger is shown is read-only: copy what you change, e.g. np.array(s.x)"
+
+
+def failed(what: str, exc: BaseException) -> EtmpcError:
+    """Someone's code failed: one line saying where and how (``what raised Name: message``), with a hint
+    when it wrote into a read-only value it was shown."""
+    hint = ""
+    if (isinstance(exc, ValueError) and "read-only" in str(exc)) or (
+            isinstance(exc, TypeError) and "does not support item assignment" in str(exc)):
+        hint = f" ({READ_ONLY_HINT})"
+    return EtmpcError(f"{what} raised {described(exc)}{hint}")
+
+
+@contextlib.contextmanager
+def users_code(what: str):
+    """Run someone's code (a trigger's import, factory, members, pickling): whatever it raises, short of
+    a real Ctrl-C or SIGTERM, becomes one :class:`EtmpcError` line, ``what raised Name: message``."""
+    try:
+        yield
+    except BaseException as exc:
+        if genuine(exc):
+            raise
+        raise failed(what, exc) from None

@@ -13,11 +13,15 @@ task's time limit, ``terminated`` only when the plant fails. ``info`` holds the 
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import gymnasium
 import numpy as np
 from gymnasium import spaces
 
+from etmpc.common.checks import BadValue
 from etmpc.envs.trigger import TriggerEnvironment
+
 
 class TriggerEnv(gymnasium.Env):
     """``gymnasium`` face of :class:`~etmpc.envs.trigger.TriggerEnvironment` (the same loop)."""
@@ -34,6 +38,8 @@ class TriggerEnv(gymnasium.Env):
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
         self.core.generator = self.np_random
+        if options is not None and not isinstance(options, Mapping):
+            raise BadValue(f"reset options are a dict such as {{'test_episode': 3}}, got {type(options).__name__} {options!r}")
         options = dict(options or {})
         test_episode = options.pop("test_episode", None)
         if options:

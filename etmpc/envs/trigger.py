@@ -24,12 +24,14 @@ trajectory that ``evaluate`` reports for them (``tests/test_envs.py``).
 from __future__ import annotations
 
 import math
+import os
 from typing import Any
 
 import dm_env
 import numpy as np
 from dm_env import specs
 
+from etmpc.common import checks
 from etmpc.common.errors import EtmpcError
 from etmpc.envs.registration import env_id
 from etmpc.evaluation import testsets
@@ -61,12 +63,12 @@ def check_action(action: Any) -> int:
 def check_index(index: Any, what: str = "test_episode") -> int:
     """A test-set episode's index: a whole number (an int or numpy integer, never a float or a bool)."""
     if isinstance(index, bool) or not isinstance(index, (int, np.integer)):
-        raise InvalidAction(f"{what} must be an integer index of the test set, got {type(index).__name__} {index!r}")
+        raise checks.BadValue(f"{what} must be an integer index of the test set, got {type(index).__name__} {index!r}")
     return int(index)
 
 
 class InvalidAction(EtmpcError, ValueError):
-    """An action or an episode index the environment does not take (a ``ValueError``, as gymnasium's are)."""
+    """An action the environment does not take (a ``ValueError``, as gymnasium's are)."""
 
 
 def not_picklable(env) -> TypeError:
@@ -86,6 +88,14 @@ class TriggerEnvironment(dm_env.Environment):
 
     def __init__(self, task: str = "cart_pendulum", seed: int | None = None, price: float | None = None,
                  test_set: str | None = None):
+        if not isinstance(task, str):
+            raise EtmpcError(f"task: a task name (str) is needed, got {type(task).__name__} {task!r}")
+        if seed is not None:
+            checks.argument("seed", checks.seed, seed)
+        if price is not None:
+            checks.argument("price", checks.price, price)
+        if test_set is not None and not isinstance(test_set, (str, os.PathLike)):
+            raise EtmpcError(f"test_set: a file path is needed, got {type(test_set).__name__} {test_set!r}")
         self.key = system_key(task, price)
         self.system = make_system(self.key)
         self.loop = ClosedLoop(self.system, self.system.make_env())

@@ -22,6 +22,7 @@ from etmpc.common import checks, interrupts
 from etmpc.common.errors import EtmpcError
 from etmpc.common.interrupts import described, genuine
 from etmpc.policies import parse_policy
+from etmpc.policies.specs import names_a_kind
 from etmpc.policies.user import checked
 from etmpc.views.record import EpisodeRecord
 from etmpc.views.recording import Recorder
@@ -251,6 +252,9 @@ def _evaluate(domain, policies, episodes, repeats, workers, seed, testset_path, 
         else:
             policy = checked(policy)
             spec = policy.spec
+            if names_a_kind(spec) and not type(policy.policy).__module__.startswith("etmpc."):
+                raise EtmpcError(f"policy object {type(policy.policy).__name__} has the spec {spec!r}, a built-in policy's: "
+                                 "give it a name of its own, or the results would show its numbers as that policy's")
         if spec in parsed:
             raise EtmpcError(f"policy {spec} is given twice")
         parsed[spec] = policy

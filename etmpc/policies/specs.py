@@ -23,8 +23,22 @@ from etmpc.policies.user import load_user
 from etmpc.loop import Policy
 
 
+# The kinds of policy a spec names (the text before its first colon).
+KINDS = ("always", "never", "every", "threshold", "rl", "self", "py", "sb3", "rollout", "oracle")
+
+
+def names_a_kind(spec: str) -> bool:
+    """True if ``spec`` is written as a built-in policy's spec (``every:3``, ``oracle:...``; ``py:`` is
+    the users' own kind and not counted): a policy object of someone's must not take such a name, or the
+    results would show its numbers under that policy's."""
+    kind = spec.partition(":")[0]
+    return kind in KINDS and kind != "py"
+
+
 def _number(text: str, kind: type, spec: str):
     try:
+        if text != text.strip():  # int(" 3") is 3, but "every: 3" is not how a spec is written
+            raise ValueError(text)
         value = kind(text)
     except ValueError:
         raise EtmpcError(f"bad policy {spec!r}: {text!r} is not a{'n integer' if kind is int else ' number'}") from None
@@ -37,6 +51,8 @@ def parse_policy(spec: str, error_weights: np.ndarray, domain: str | None = None
     ``rl:PATH`` is checked against ``domain`` and the state size ``len(error_weights)``; ``steps``
     (the episode length) bounds a rollout's look-ahead.
     """
+    if any(ord(c) < 32 or ord(c) == 127 for c in spec):  # a line break would split every table and message
+        raise EtmpcError(f"bad policy {spec!r}: it holds a control character (a line break?)")
     name, _, arg = spec.partition(":")
     if name in ("rollout", "oracle"):
         return parse_rollout(spec, lambda base: parse_policy(base, error_weights, domain, steps), steps)

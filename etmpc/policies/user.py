@@ -29,35 +29,20 @@ from typing import Any
 import numpy as np
 
 from etmpc.common.errors import EtmpcError
-from etmpc.common.interrupts import described, genuine
+from etmpc.common.interrupts import described, failed, genuine, users_code
 from etmpc.loop import AugmentedState, DecisionContext, Policy
-
-READ_ONLY_HINT = "what a trigger is shown is read-only: copy what you change, e.g. np.array(s.x)"
-
-
-def _failed(what: str, exc: BaseException) -> EtmpcError:
-    """Someone's code failed: one line saying where and how, with a hint when it wrote into what it was shown."""
-    hint = ""
-    if (isinstance(exc, ValueError) and "read-only" in str(exc)) or (
-            isinstance(exc, TypeError) and "does not support item assignment" in str(exc)):
-        hint = f" ({READ_ONLY_HINT})"
-    return EtmpcError(f"{what} raised {described(exc)}{hint}")
-
 
 def check_policy(policy: Any, where: str) -> None:
     """Raise :class:`EtmpcError` unless ``policy`` has the members a policy needs."""
-    try:
+    with users_code(f"{where}: reading its members"):
         _check_members(policy, where)
-    except BaseException as exc:
-        if genuine(exc):
-            raise
-        raise _failed(f"{where}: reading its members", exc) from None
 
 
 def _check_members(policy: Any, where: str) -> None:
     problems = []
-    if not isinstance(getattr(policy, "spec", None), str) or not getattr(policy, "spec", ""):
-        problems.append("a non-empty str `spec`")
+    spec = getattr(policy, "spec", None)
+    if not isinstance(spec, str) or not spec or any(ord(c) < 32 or ord(c) == 127 for c in spec):
+        problems.append("a non-empty str `spec` on one line")
     if not isinstance(getattr(policy, "stochastic", None), (bool, np.bool_)):
         problems.append("a bool `stochastic`")
     if not callable(getattr(policy, "decide", None)):
@@ -82,12 +67,8 @@ class Checked:
         self.simulates = bool(self._member("simulates", False))
 
     def _member(self, name: str, default):
-        try:
+        with users_code(f"policy {self.name}: reading {name}"):
             return getattr(self.policy, name) if default is None else getattr(self.policy, name, default)
-        except BaseException as exc:
-            if genuine(exc):
-                raise
-            raise _failed(f"policy {self.name}: reading {name}", exc) from None
 
     @property
     def spec(self) -> str:
@@ -114,7 +95,7 @@ class Checked:
         except BaseException as exc:  # the user's code: anything it raises becomes one line naming it
             if genuine(exc):
                 raise
-            raise _failed(f"policy {self.name}: decide", exc) from None
+            raise failed(f"policy {self.name}: decide", exc) from None
         if not isinstance(answer, (bool, np.bool_)):
             raise EtmpcError(f"policy {self.name}: decide must return a bool (True: recompute), "
                              f"it returned {type(answer).__name__} {answer!r}")
@@ -126,13 +107,9 @@ def checked(policy: Any, name: str | None = None) -> Policy:
     if isinstance(policy, Checked):
         return policy
     if name is None:
-        try:
+        with users_code(f"policy {type(policy).__name__}: reading spec"):
             name = str(getattr(policy, "spec", type(policy).__name__))
-        except BaseException as exc:
-            if genuine(exc):
-                raise
-            raise _failed(f"policy {type(policy).__name__}: reading spec", exc) from None
-    check_policy(policy, f"policy {name}")
+    check_policy(policy, f"policy {' '.join(name.splitlines())}")
     return Checked(policy, name)
 
 
@@ -158,12 +135,8 @@ def load_user(spec: str) -> Policy:
     except BaseException as exc:  # a module-level __getattr__ of the user's
         if genuine(exc):
             raise
-        raise _failed(f"policy {spec}: {module_name}.{name}", exc) from None
-    try:
+        raise failed(f"policy {spec}: {module_name}.{name}", exc) from None
+    with users_code(f"policy {spec}: {name}()"):
         is_factory = isinstance(factory, type) or (callable(factory) and not callable(getattr(factory, "decide", None)))
         policy = factory() if is_factory else factory
-    except BaseException as exc:
-        if genuine(exc):
-            raise
-        raise _failed(f"policy {spec}: {name}()", exc) from None
     return checked(policy, spec)
