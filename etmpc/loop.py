@@ -171,7 +171,7 @@ class Snapshot:
 
 def _shown(timestep: dm_env.TimeStep) -> dm_env.TimeStep:
     """The step with its observation frozen: the loop shows it to policies, and they cannot write into it."""
-    return timestep._replace(observation=frozen(timestep.observation))
+    return dm_env.TimeStep(timestep.step_type, timestep.reward, timestep.discount, frozen(timestep.observation))
 
 
 def _input(system: System, plan: Plan, age: int, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -209,7 +209,7 @@ class ClosedLoop:
         nu = system.u_min.shape[0]
         self.trajectory = Trajectory.empty(system.episode_steps, self.x.shape[0], nu)
         self.plan: Plan | None = None
-        self.age, self.u_prev, self.step_index, self.done = 0, np.zeros(nu), 0, False
+        self.age, self.u_prev, self.step_index, self.done = 0, readonly(np.zeros(nu)), 0, False
         self._arrive()
         return self
 
@@ -263,7 +263,8 @@ class ClosedLoop:
         traj.rewards[i] = reward = self.timestep.reward
         traj.steps = self.step_index = i + 1
         self.x = readonly(system.state(self.timestep))
-        self.age, self.u_prev = self.age + 1, readonly(u)
+        u.flags.writeable = False  # the loop's own new array (np.minimum's): shown as u_prev, never written again
+        self.age, self.u_prev = self.age + 1, u
         if self.env.task.restarted:  # the task put the plant back: the plan no longer applies
             self.age = plan.horizon
         traj.step_time_s[i] = time.perf_counter() - start

@@ -505,3 +505,18 @@ def test_the_python_api_refuses_what_the_command_line_refuses_with_the_same_mess
         assert main(["evaluate", "battery", "--policy", "always", *cli]) == 2
         line = capsys.readouterr().err.strip()
         assert line.endswith(message.split(": ", 1)[1]), (line, message)
+
+
+def test_a_real_ctrl_c_inside_a_triggers_decide_still_stops_the_command(tmp_path):
+    """The trigger's own KeyboardInterrupt is its failure (exit 2); the user's Ctrl-C, arriving while the
+    trigger decides, is still the user's (exit 130, 'interrupted')."""
+    (tmp_path / "slow_trigger.py").write_text(
+        "import time\nclass T:\n    spec = 'slow'\n    stochastic = False\n"
+        "    def decide(self, s, rng):\n        time.sleep(0.2)\n        return s.age >= 3\n")
+    proc = _etmpc(["evaluate", "battery", "--policy", "py:slow_trigger:T", "--workers", "1", "--json", "ev.json"], tmp_path)
+    time.sleep(8)  # imports, then deciding: a Ctrl-C now lands inside decide almost surely (it sleeps 0.2 s of each step)
+    os.killpg(proc.pid, signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    _assert_one_line(err, "interrupted")
+    assert not (tmp_path / "ev.json").exists()

@@ -31,7 +31,7 @@ class FrozenMapping(Mapping):
     __slots__ = ("_items",)
 
     def __init__(self, items: Mapping | None = None):
-        self._items = {key: readonly(value) for key, value in (items or {}).items()}
+        self._items = {key: readonly(value) if isinstance(value, np.ndarray) else value for key, value in (items or {}).items()}
 
     def __getitem__(self, key):
         return self._items[key]

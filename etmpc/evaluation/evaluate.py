@@ -8,6 +8,7 @@ processes and gathered back in order, so the numbers do not depend on the number
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import pickle
@@ -226,10 +227,17 @@ def check_arguments(domain, policies, episodes, repeats, workers, seed, testset_
         raise EtmpcError("--address needs --backend ray")
 
 
-def check_picklable(spec: str, policy) -> None:
-    """Raise :class:`EtmpcError` unless ``policy`` goes to a worker process and back (it is pickled)."""
+def check_picklable(spec: str, policy, backend: str = "local") -> None:
+    """Raise :class:`EtmpcError` unless ``policy`` goes to a worker process and back: pickled, or with
+    the ``ray`` backend cloudpickled (as Ray sends it)."""
+    dumps = pickle.dumps
+    if backend == "ray":
+        with contextlib.suppress(ImportError):
+            from ray import cloudpickle
+
+            dumps = cloudpickle.dumps
     try:
-        pickle.loads(pickle.dumps(policy))
+        pickle.loads(dumps(policy))
     except BaseException as exc:
         if genuine(exc):
             raise
@@ -262,7 +270,7 @@ def _evaluate(domain, policies, episodes, repeats, workers, seed, testset_path, 
     workers = default_workers() if workers is None else workers
     if workers > 1 or backend != "local":
         for spec, policy in parsed.items():
-            check_picklable(spec, policy)
+            check_picklable(spec, policy, backend)
     path = testset_path or str(ts_mod.default_path(system.domain, system.task))
     testset = ts_mod.load(path, system.domain, system.task)
     testset.check_playable(system, system.make_env().task)  # a bad episode fails here, before any work
