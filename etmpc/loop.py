@@ -87,6 +87,8 @@ class Trajectory:
     rewards: np.ndarray  # (T,) the environment's reward for the step
     solve_time_s: np.ndarray  # (T,) wall time of the MPC computation (NaN where none happened)
     step_time_s: np.ndarray  # (T,) wall time of the whole step, solve included
+    feedback_time_s: np.ndarray  # (T,) wall time of the input: the plan's, plus the LQR correction, clipped
+    decide_time_s: np.ndarray  # (T,) wall time of the policy's decision (0 where the loop did not ask it)
     plans: list[tuple[int, Plan]] = field(default_factory=list)  # (step made, plan), successful or used
     steps: int = 0
     solver_failures: int = 0
@@ -99,7 +101,16 @@ class Trajectory:
             states=nan(steps + 1, nx), applied=nan(steps, nu), planned=nan(steps, nu), correction=nan(steps, nu),
             predicted=nan(steps, nx), plan_age=np.zeros(steps, int), recompute=np.zeros(steps, bool),
             forced=np.zeros(steps, bool), rewards=np.zeros(steps), solve_time_s=nan(steps), step_time_s=nan(steps),
+            feedback_time_s=np.zeros(steps), decide_time_s=np.zeros(steps),
         )
+
+    def cpu_seconds(self) -> dict[str, float]:
+        """The controller's time spent in this episode, summed over its steps (wall clock per call, so a
+        machine-dependent figure): the MPC's ``solve``s, the ``feedback`` (the LQR), the trigger's
+        ``decide``s (a rollout's simulations included)."""
+        n = self.steps
+        return {"solve": float(np.nansum(self.solve_time_s[:n])), "feedback": float(self.feedback_time_s[:n].sum()),
+                "decide": float(self.decide_time_s[:n].sum())}
 
     @property
     def recomputes(self) -> int:
@@ -251,7 +262,9 @@ class ClosedLoop:
             if new.success or forced:  # a failed solve keeps the old plan only while it has steps left
                 plan, self.plan, self.age = new, new, 0
                 traj.plans.append((i, plan))
+        feedback_start = time.perf_counter()
         u, u_planned, correction, x_predicted = _input(system, plan, self.age, x)
+        traj.feedback_time_s[i] = time.perf_counter() - feedback_start
         try:
             self.timestep = _shown(self.env.step(system.action(u, recompute)))
         except PhysicsError:
@@ -300,7 +313,10 @@ def run_episode(
     while not loop.done:
         started = time.perf_counter()
         s = loop.augmented_state(simulates)
-        loop.step(s is not None and bool(policy.decide(s, rng)), started)
+        recompute = s is not None and bool(policy.decide(s, rng))
+        if s is not None:
+            loop.trajectory.decide_time_s[loop.step_index] = time.perf_counter() - started
+        loop.step(recompute, started)
     return loop.trajectory
 
 

@@ -73,9 +73,9 @@ def scores(system, traj) -> tuple[float, float]:
     return (ret, rewards) if system.objective_sense == "max" else (-ret, -rewards)
 
 
-def _run(job: tuple) -> tuple[RunResult, EpisodeRecord | None]:
+def _run(job: tuple) -> tuple[RunResult, EpisodeRecord | None, dict[str, float]]:
     """One test-set episode; with ``record``, also what a recording keeps of it (else nothing extra
-    is built or sent back)."""
+    is built or sent back); and the controller's CPU time in it (:meth:`Trajectory.cpu_seconds`)."""
     domain, testset_path, sha256, spec, policy, repeat, episode, seed, record = job
     played = play_test_episode(domain, policy, seed, repeat, episode, testset_path, sha256)
     traj = played.trajectory
@@ -91,7 +91,8 @@ def _run(job: tuple) -> tuple[RunResult, EpisodeRecord | None]:
         steps=traj.steps,
         finite=not traj.nonfinite,
         failures=played.system.failures(traj.rewards[: traj.steps]) if hasattr(played.system, "failures") else None,
-    ), played.record(spec, getattr(policy, "announce", None), upper_bound=spec.startswith("oracle:")) if record else None
+    ), (played.record(spec, getattr(policy, "announce", None), upper_bound=spec.startswith("oracle:")) if record
+        else None), traj.cpu_seconds()
 
 
 # -- driver side ---------------------------------------------------------------------------------
@@ -141,8 +142,13 @@ class Evaluation:
     summaries: list[PolicySummary]
     runs: list[RunResult]
     recompute_price: float = math.nan  # the price of a computation in every objective here
+    # Per run, in the order of ``runs``: the controller's CPU seconds (solve, feedback, decide). Measured
+    # wall time, so it depends on the machine and its load: kept out of ``to_json`` unless asked for.
+    cpu: list[dict[str, float]] | None = None
 
-    def to_json(self) -> dict:
+    def to_json(self, cpu: bool = False) -> dict:
+        """The evaluation as JSON; with ``cpu``, also each run's CPU seconds (machine-dependent)."""
+        extra = {"cpu_seconds": self.cpu} if cpu and self.cpu is not None else {}
         return {
             "domain": self.domain,
             "task": self.task,
@@ -151,7 +157,7 @@ class Evaluation:
             "recompute_price": self.recompute_price,
             "policies": {s.policy: _fields(s) for s in self.summaries},
             "runs": [_fields(r) for r in self.runs],
-        }
+        } | extra
 
 
 _TASK_FAILURES = ("failures", "failures_mean", "failure_name")
@@ -285,7 +291,7 @@ def _evaluate(domain, policies, episodes, repeats, workers, seed, testset_path, 
     try:
         outcomes = run_jobs(jobs, workers, progress, backend, address)
         if recorder is not None:
-            for _, kept in outcomes:
+            for _, kept, _ in outcomes:
                 recorder.log_episode(kept)
     except BaseException:
         if recorder is not None:
@@ -293,13 +299,13 @@ def _evaluate(domain, policies, episodes, repeats, workers, seed, testset_path, 
         raise
     if recorder is not None:
         recorder.close()
-    runs = [result for result, _ in outcomes]
+    runs = [result for result, _, _ in outcomes]
     summaries = [
         summarise(spec, [r for r in runs if r.policy == spec], system.objective_sense, episodes, repeats,
                   getattr(system, "failure_name", None)) for spec in policies
     ]
     return Evaluation(system.domain, system.task, str(testset.path.resolve()), testset.sha256, seed, summaries, runs,
-                      system.recompute_price)
+                      system.recompute_price, [cpu for _, _, cpu in outcomes])
 
 
 def format_table(evaluation: Evaluation) -> str:
