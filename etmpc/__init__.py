@@ -16,7 +16,8 @@ it (README "Layout"; import-linter checks it):
 * ``etmpc.experiments``: ``reproduce`` and its report, the price ``sweep``;
 * ``etmpc.cli``: the ``etmpc`` command.
 
-The Python surface: :func:`etmpc.evaluate` (policies on a stored test set), :mod:`etmpc.suite` (the
+The Python surface: :func:`etmpc.evaluate` (policies on a stored test set), :func:`etmpc.score` (triggers
+on every task against the suite's references: the scorecard), :mod:`etmpc.suite` (the
 tasks as dm-control environments) and :mod:`etmpc.systems` (the tasks as the loop plays them).
 """
 
@@ -27,7 +28,7 @@ import os
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 __version__ = "0.2.0"
-__all__ = ["evaluate"]
+__all__ = ["evaluate", "score"]
 
 
 def _register_environments() -> None:
@@ -51,4 +52,8 @@ def __getattr__(name: str):
         from etmpc.evaluation.evaluate import evaluate
 
         return evaluate
+    if name == "score":
+        from etmpc.evaluation.scorecard import score
+
+        return score
     raise AttributeError(f"module 'etmpc' has no attribute {name!r}")

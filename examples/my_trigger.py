@@ -10,10 +10,15 @@ task's observation. The same trigger from the command line, in this folder:
 
     etmpc evaluate cart_pendulum --policy every:3 --policy threshold:0.3 --policy py:my_trigger:AngleOrAge \\
         --against every:3
+
+``DriftOrAge`` below reads nothing task-specific: ``etmpc score py:my_trigger:DriftOrAge`` scores it on
+every task of the suite against the stored references.
 """
 
 import argparse
 from dataclasses import dataclass
+
+import numpy as np
 
 import etmpc
 from etmpc.evaluation.compare import format_against
@@ -31,6 +36,24 @@ class AngleOrAge:
 
     def decide(self, s, rng) -> bool:
         return bool(abs(s.x[2] - s.x_predicted[2]) > self.angle_rad or s.age >= self.max_age)
+
+
+@dataclass(frozen=True)
+class DriftOrAge:
+    """For any task: recompute when the state has drifted from the plan's prediction by more than
+    ``relative`` of its size, or the plan is old. Score it on the whole suite, in this folder:
+
+        etmpc score py:my_trigger:DriftOrAge
+    """
+
+    spec: str = "py:my_trigger:DriftOrAge"
+    stochastic: bool = False
+    relative: float = 0.05
+    max_age: int = 6
+
+    def decide(self, s, rng) -> bool:
+        drift = float(np.linalg.norm(s.x - s.x_predicted))
+        return bool(drift > self.relative * (1.0 + float(np.linalg.norm(s.x_predicted))) or s.age >= self.max_age)
 
 
 def main() -> None:

@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-COMMANDS = ("evaluate", "train", "train-self", "reproduce", "sweep", "render", "replay", "bench")
+COMMANDS = ("evaluate", "score", "train", "train-self", "reproduce", "sweep", "render", "replay", "bench")
 _LEFT_OUT = shutil.ignore_patterns(".git", ".venv", "build", "dist", "results", "*.egg-info", "__pycache__", ".pytest_cache")
 
 
@@ -34,6 +34,7 @@ def test_the_wheel_holds_every_module_and_the_data_and_nothing_else(wheel):
     assert modules and modules <= names, sorted(modules - names)
     data = {f"etmpc/_data/models/{p.name}" for p in (ROOT / "models").glob("*.xml")}
     data |= {f"etmpc/_data/tasks/{p.relative_to(ROOT / 'tasks').as_posix()}" for p in (ROOT / "tasks").glob("*/*_testset.npz*")}
+    data |= {f"etmpc/_data/tasks/{p.relative_to(ROOT / 'tasks').as_posix()}" for p in (ROOT / "tasks").glob("*/*_references.json")}
     assert data and data <= names, sorted(data - names)
     top_level = {name.split("/")[0] for name in names}
     assert top_level == {"etmpc", f"{wheel.name.split('-')[0]}-{wheel.name.split('-')[1]}.dist-info"}
@@ -69,6 +70,10 @@ def test_the_installed_commands_work_outside_the_checkout(wheel, tmp_path):
     here = evaluate("cart_pendulum", [f"rl:{shipped}", "every:3"], episodes=3, workers=1, progress=False).to_json()
     installed = json.loads((outside / "installed.json").read_text())
     assert installed["runs"] == here["runs"] and installed["test_set"]["sha256"] == here["test_set"]["sha256"]
+
+    result = run("score", "every:3", "--task", "battery", "--workers", "2")  # the stored references are installed
+    best = json.loads((ROOT / "tasks" / "battery" / "trading_references.json").read_text())["best"]
+    assert result.returncode == 0 and f"references: battery: {best} and oracle:{best}" in result.stdout, result.stderr
 
     result = run("sweep", "cart_pendulum", "--quick", "--prices", "5e-5", "--out", "sweep", "--workers", "2")
     assert result.returncode == 0, result.stderr

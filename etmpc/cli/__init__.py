@@ -1,4 +1,4 @@
-"""The ``etmpc`` command: ``reproduce``, ``evaluate``, ``sweep``, ``train``, ``train-self``, ``render``,
+"""The ``etmpc`` command: ``reproduce``, ``evaluate``, ``score``, ``sweep``, ``train``, ``train-self``, ``render``,
 ``replay`` and ``bench``.
 
 Bad input (unknown task or policy, bad numbers, missing or corrupt files) prints one line on

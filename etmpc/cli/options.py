@@ -126,6 +126,21 @@ def build_parser() -> argparse.ArgumentParser:
                     help="write every episode into a Rerun recording (open it with `rerun PATH.rrd`)")
     _backend_arguments(ev)
 
+    sc = sub.add_parser("score", help="score triggers on every task against the suite's fixed references: the scorecard")
+    sc.add_argument("policy", nargs="*", metavar="SPEC",
+                    help="triggers to score: any --policy spec of evaluate (py:MODULE:NAME for your own, sb3:PATH, ...)")
+    sc.add_argument("--task", action="append", default=None, metavar="TASK",
+                    help=f"only this task ({tasks}; repeatable; default: every task)")
+    sc.add_argument("--test-set", default=None, metavar="PATH",
+                    help="another test set, for one --task: its references are computed for the run")
+    sc.add_argument("--json", type=_json_path, default=None, metavar="PATH", help="write the scorecard as JSON")
+    sc.add_argument("--figure", type=_png_path, default=None, metavar="PATH.png",
+                    help="also draw the triggers' performance profiles (share of episodes above each score)")
+    sc.add_argument("--workers", type=_workers, default=None, help="worker processes (default: one per core)")
+    sc.add_argument("--references", action="store_true",
+                    help="rebuild the stored references of the tasks (every periodic schedule and the oracle on the "
+                         "stored test set; a maintainer's step after a task changes)")
+
     tr = sub.add_parser("train", help="train a recomputation policy: DPI (default) or GPOMDP (the paper's) over seeds, "
                                       "or PPO (Stable-Baselines3, the 'rl' extra) on the trigger environment")
     tr.add_argument("task", help=f"system to train on: {tasks}")
@@ -228,6 +243,13 @@ def build_parser() -> argparse.ArgumentParser:
     be.add_argument("--no-reference", action="store_true",
                     help="skip the reference solvers (do-mpc for cart_pendulum, scipy linprog for battery)")
     return parser
+
+
+def _png_path(text: str) -> Path:
+    path = _json_path(text)
+    if path.suffix != ".png":
+        raise argparse.ArgumentTypeError(f"{text} does not end in .png")
+    return path
 
 
 def _rrd_path(text: str) -> Path:

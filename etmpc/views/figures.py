@@ -8,6 +8,8 @@
   applied and planned inputs with their bounds, and the episode's exogenous signals.
 * :func:`draw_policy_bars` / :func:`write_policy_bars_png`: the paper's Figure 3, the mean objective
   per policy from ``etmpc evaluate --json`` documents, with the learned policy's seeds as one bar.
+* :func:`draw_performance_profile` / :func:`write_performance_profile_png`: the scorecard's
+  performance profiles (``etmpc score --figure``).
 
 PNGs are written atomically (a temporary file renamed into place).
 """
@@ -350,6 +352,30 @@ def write_policy_bars_png(path, evaluations: Sequence[dict], group_learned: bool
                           sources: Sequence[str] | None = None) -> Path:
     """:func:`draw_policy_bars` written atomically to ``path`` (PNG)."""
     return save_png_atomically(draw_policy_bars(evaluations, group_learned, sources), path)
+
+
+def draw_performance_profile(curves: Mapping[str, np.ndarray], thresholds: np.ndarray, tasks: Sequence[str]):
+    """The scorecard's performance profiles: per trigger, the share of episodes (averaged over tasks)
+    whose normalized score exceeds each threshold, with the two references' scores marked."""
+    fig, ax = plt.subplots(figsize=(7.5, 4.5), layout="constrained")
+    for policy, curve in curves.items():
+        ax.step(thresholds, curve, where="post", label=policy)
+    for x, name in ((0.0, "best periodic"), (100.0, "oracle")):
+        ax.axvline(x, color="0.6", linestyle=":", linewidth=1)
+        ax.text(x, 1.02, name, ha="center", va="bottom", fontsize=8, color="0.4", transform=ax.get_xaxis_transform())
+    ax.set_xlabel("normalized score τ (0: the task's best periodic schedule, 100: the oracle over it)")
+    ax.set_ylabel("share of episodes with score > τ")
+    ax.set_ylim(-0.02, 1.02)
+    ax.set_title(f"Performance profiles over {len(tasks)} task(s): {', '.join(tasks)}", fontsize=9, pad=20)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="lower left")
+    return fig
+
+
+def write_performance_profile_png(path, curves: Mapping[str, np.ndarray], thresholds: np.ndarray,
+                                  tasks: Sequence[str]) -> Path:
+    """:func:`draw_performance_profile` written atomically to ``path`` (PNG)."""
+    return save_png_atomically(draw_performance_profile(curves, thresholds, tasks), path)
 
 
 def save_png_atomically(fig, path, dpi: int = 120) -> Path:

@@ -1,0 +1,416 @@
+"""The suite's scorecard: how good is a trigger, on every task, against fixed reference points?
+
+**Normalized score, per task.** On a task's test set, with costs ``c`` (the objective where lower is
+better; a profit is negated), the task's references per episode ``e`` are its *best periodic
+schedule* ``B_e`` (the ``every:T``, ``T = 1..N``, with the best mean objective on that test set) and
+the *oracle* over that schedule ``O_e`` (``oracle:every:T``, the one-step lookahead with the stored
+future). With the reference gap ``D = mean_e (B_e - O_e)``, a trigger ``P`` scores
+
+    score = 100 * mean_e (B_e - P_e) / D,
+
+per episode ``s_e = 100 (B_e - P_e) / D`` (its mean is the score): 0 is the best periodic schedule,
+100 the oracle, exactly. Dividing by the *mean* gap, not each episode's own, keeps an episode whose
+two references nearly tie from dominating. Above 100 is possible: the oracle is a one-step lookahead
+over that schedule, not a bound on every trigger. The 95 % CI is ``1.96 sd(s_e) / sqrt(n)`` (as
+``etmpc evaluate --against``). An episode that ends on a non-finite state leaves the task unscored.
+
+**The suite's aggregate**, over the tasks scored (rliable's, Agarwal et al. 2021): the interquartile
+mean of the task scores (``scipy.stats.trim_mean(scores, 0.25)``: with four tasks, the mean of the
+middle two), and the probability of improvement over the best periodic schedule (per task, the share
+of episodes where the trigger's cost is lower, ties counting half; averaged over tasks), each with a
+95 % stratified bootstrap CI: episodes resampled within each task (``scipy.stats.bootstrap`` over
+one sample per task, 2000 resamples, percentile intervals, seeded), the references' gap held fixed.
+
+**References** are stored with the tasks (``tasks/<domain>/<task>_references.json``): every periodic
+schedule's and the oracle's objective per stored episode, with the suite's version, the test set's
+sha256 and the software that computed them, so scoring a trigger plays only that trigger.
+``etmpc score --references`` rebuilds them; on another test set they are computed for the run.
+
+**Compute.** Beside the count of computations, each episode's measured CPU time of the MPC's solves,
+the feedback (the LQR) and the trigger's own decisions (a rollout's simulations included), so that a
+saving is shown net of what the trigger itself costs. These are wall-clock figures of this machine.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import platform
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from importlib.metadata import PackageNotFoundError, version
+from pathlib import Path
+
+import numpy as np
+from scipy import stats
+
+from etmpc.common.errors import EtmpcError
+from etmpc.common.numerics import fsum
+from etmpc.common.outputs import check_outputs, write_json
+from etmpc.common.resources import tasks_dir
+from etmpc.evaluation import testsets as ts_mod
+from etmpc.evaluation.evaluate import Evaluation, evaluate
+from etmpc.systems import distinct, make_system, names
+
+SUITE_VERSION = 1  # a change to any task, its test set or its price makes a new version of the suite
+FORMAT = "etmpc-references"
+SOFTWARE = ("etmpc", "mujoco", "dm-control", "casadi", "numpy", "scipy")
+BOOTSTRAP_RESAMPLES = 2000
+BOOTSTRAP_SEED = 0
+
+
+def _software() -> dict[str, str]:
+    found = {}
+    for name in SOFTWARE:
+        try:
+            found[name] = version(name)
+        except PackageNotFoundError:
+            found[name] = "(not installed)"
+    return found | {"python": platform.python_version()}
+
+
+# -- references ------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class References:
+    """A task's reference points on one test set (see the module's docstring)."""
+
+    task: str
+    test_set_sha256: str
+    episodes: int
+    recompute_price: float
+    objective_sense: str
+    periodic: dict[str, list[float]]  # every:T -> objective per episode
+    best: str  # the periodic schedule with the best mean objective
+    oracle: list[float]  # oracle:BEST's objective per episode
+    suite_version: int = SUITE_VERSION
+    software: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def oracle_spec(self) -> str:
+        return f"oracle:{self.best}"
+
+    def costs(self, objectives) -> np.ndarray:
+        """Objectives as costs (lower is better), whatever the task's sense."""
+        values = np.asarray(objectives, dtype=float)
+        return values if self.objective_sense == "min" else -values
+
+    @property
+    def gap(self) -> float:
+        """``D = mean_e (B_e - O_e)``: what the oracle gains over the best periodic schedule, per episode."""
+        return _mean(self.costs(self.periodic[self.best]) - self.costs(self.oracle))
+
+    def to_json(self) -> dict:
+        return {"format": FORMAT} | asdict(self)
+
+
+def _mean(values) -> float:
+    values = list(np.asarray(values, dtype=float))
+    return fsum(values) / len(values)
+
+
+def references_path(task: str) -> Path:
+    system = make_system(task)
+    return tasks_dir() / system.domain / f"{system.task}_references.json"
+
+
+def _objectives(evaluation: Evaluation, spec: str) -> list[float]:
+    runs = sorted((r for r in evaluation.runs if r.policy == spec), key=lambda r: r.episode)
+    if not all(r.finite for r in runs):
+        raise EtmpcError(f"{evaluation.domain}/{evaluation.task}: {spec} ended an episode on a non-finite state; "
+                         "it cannot be a reference")
+    return [r.objective for r in runs]
+
+
+def build_references(task: str, testset_path: str | None = None, workers: int | None = None, progress: bool = True,
+                     say: Callable[[str], None] = lambda line: None) -> References:
+    """Play every periodic schedule and the oracle over the best of them on ``task``'s test set (the
+    stored one by default)."""
+    system = make_system(task)
+    periodic = [f"every:{t}" for t in range(1, system.horizon + 1)]
+    say(f"{system.name}: references: {len(periodic)} periodic schedules, then the oracle over the best")
+    fixed = evaluate(system.name, periodic, workers=workers, testset_path=testset_path, progress=progress)
+    table = {spec: _objectives(fixed, spec) for spec in periodic}
+    sign = 1.0 if system.objective_sense == "min" else -1.0
+    best = min(periodic, key=lambda spec: (sign * _mean(table[spec]), periodic.index(spec)))
+    oracle = evaluate(system.name, [f"oracle:{best}"], workers=workers, testset_path=testset_path, progress=progress)
+    refs = References(system.name, fixed.testset_sha256, len(table[best]), system.recompute_price,
+                      system.objective_sense, table, best, _objectives(oracle, f"oracle:{best}"), software=_software())
+    if not refs.gap > 0:
+        raise EtmpcError(f"{system.name}: the oracle over {best} does not improve on it on this test set "
+                         f"(gap {refs.gap:g}): there is no scale to score against")
+    return refs
+
+
+def load_references(task: str, test_set_sha256: str, path: Path | None = None) -> References:
+    """The stored references of ``task``, checked against the test set (its sha256), the suite's version
+    and the task's price; a mismatch is one line that says how to rebuild them."""
+    path = references_path(task) if path is None else Path(path)
+    rebuild = f"rebuild them with: etmpc score --references --task {task}"
+    try:
+        data = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise EtmpcError(f"{task}: no stored references ({path}); {rebuild}") from None
+    except (OSError, ValueError) as exc:
+        raise EtmpcError(f"{task}: references {path} cannot be read ({exc}); {rebuild}") from None
+    if not isinstance(data, dict) or data.get("format") != FORMAT:
+        raise EtmpcError(f"{task}: {path} is not an etmpc references file; {rebuild}")
+    if data.get("suite_version") != SUITE_VERSION:
+        raise EtmpcError(f"{task}: references {path} are of suite version {data.get('suite_version')!r}, this etmpc's is "
+                         f"{SUITE_VERSION}; {rebuild}")
+    if data.get("test_set_sha256") != test_set_sha256:
+        raise EtmpcError(f"{task}: references {path} were made on test set {str(data.get('test_set_sha256'))[:12]}…, not "
+                         f"{test_set_sha256[:12]}…; {rebuild}")
+    system = make_system(task)
+    if data.get("recompute_price") != system.recompute_price:
+        raise EtmpcError(f"{task}: references {path} are at price {data.get('recompute_price')!r}, the task's is "
+                         f"{system.recompute_price!r}; {rebuild}")
+    try:
+        fields = {k: data[k] for k in ("task", "test_set_sha256", "episodes", "recompute_price", "objective_sense",
+                                       "periodic", "best", "oracle", "suite_version", "software")}
+        refs = References(**fields)
+        lengths = {len(v) for v in refs.periodic.values()} | {len(refs.oracle)}
+        ok = lengths == {refs.episodes} and refs.best in refs.periodic and refs.gap > 0
+    except (KeyError, TypeError, ValueError, ZeroDivisionError) as exc:
+        raise EtmpcError(f"{task}: references {path} are corrupt ({exc!r}); {rebuild}") from None
+    if not ok:
+        raise EtmpcError(f"{task}: references {path} are inconsistent (episode counts, best schedule or gap); {rebuild}")
+    return refs
+
+
+def write_references(refs: References, path: Path | None = None) -> Path:
+    path = references_path(refs.task) if path is None else Path(path)
+    return write_json(path, refs.to_json())
+
+
+# -- scores ----------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class TaskScore:
+    """One trigger on one task."""
+
+    task: str
+    policy: str
+    episodes: int
+    objective_mean: float
+    objective_sense: str
+    recomputes_mean: float
+    failures_mean: float | None  # the task's own failures (falls, ...), if it counts them
+    solver_failures: int
+    nonfinite_episodes: int
+    score: float  # NaN when not scored (non-finite episodes, or an error)
+    score_ci95: float
+    episode_scores: list[float]  # s_e
+    better_share: float  # share of episodes with a lower cost than the best periodic schedule (ties: half)
+    cpu_ms: dict[str, float]  # mean per episode: solve, feedback, decide, total
+    reference: str  # the best periodic schedule
+    error: str | None = None
+
+
+def task_score(refs: References, evaluation: Evaluation, spec: str) -> TaskScore:
+    """``spec``'s score on ``refs``' task from ``evaluation`` (one run per episode, the references' test set)."""
+    runs = sorted((r for r in evaluation.runs if r.policy == spec), key=lambda r: r.episode)
+    cpu = [c for r, c in zip(evaluation.runs, evaluation.cpu or []) if r.policy == spec]
+    if [r.episode for r in runs] != list(range(refs.episodes)):
+        raise EtmpcError(f"{refs.task}: {spec} was not played on each of the references' {refs.episodes} episodes")
+    summary = next(s for s in evaluation.summaries if s.policy == spec)
+    nonfinite = sum(not r.finite for r in runs)
+    best = refs.costs(refs.periodic[refs.best])
+    costs = refs.costs([r.objective for r in runs])
+    gap = refs.gap
+    if nonfinite:
+        score = ci = math.nan
+        per_episode: list[float] = []
+        better = math.nan
+    else:
+        score = 100.0 * _mean(best - costs) / gap
+        per_episode = list(100.0 * (best - costs) / gap)
+        ci = float(1.96 * np.std(per_episode, ddof=1) / math.sqrt(len(per_episode))) if len(per_episode) > 1 else math.nan
+        better = float(np.mean((costs < best) + 0.5 * (costs == best)))
+    parts = {k: 1e3 * float(np.mean([c[k] for c in cpu])) if cpu else math.nan for k in ("solve", "feedback", "decide")}
+    return TaskScore(refs.task, spec, len(runs), summary.objective_mean, refs.objective_sense, summary.recomputes_mean,
+                     summary.failures_mean, summary.solver_failures, nonfinite, score, ci, per_episode, better,
+                     parts | {"total": sum(parts.values())}, refs.best)
+
+
+def failed_task(task: str, spec: str, error: str) -> TaskScore:
+    nan = math.nan
+    return TaskScore(task, spec, 0, nan, "", nan, None, 0, 0, nan, nan, [], nan, {}, "", error)
+
+
+@dataclass(frozen=True)
+class Aggregate:
+    """A trigger over the suite's tasks scored (see the module's docstring)."""
+
+    policy: str
+    tasks: int
+    iqm: float
+    iqm_ci95: tuple[float, float]
+    probability_of_improvement: float
+    probability_of_improvement_ci95: tuple[float, float]
+
+
+def _iqm_of_means(*samples, axis=-1):
+    means = np.stack([np.mean(s, axis=axis) for s in samples], axis=-1)
+    return stats.trim_mean(means, 0.25, axis=-1)
+
+
+def _mean_of_means(*samples, axis=-1):
+    return np.mean(np.stack([np.mean(s, axis=axis) for s in samples], axis=-1), axis=-1)
+
+
+def _interval(samples: list[np.ndarray], statistic) -> tuple[float, float]:
+    if any(len(s) < 2 for s in samples):
+        return (math.nan, math.nan)
+    result = stats.bootstrap(tuple(samples), statistic, n_resamples=BOOTSTRAP_RESAMPLES, method="percentile",
+                             vectorized=True, paired=False, rng=np.random.default_rng(BOOTSTRAP_SEED))
+    return float(result.confidence_interval.low), float(result.confidence_interval.high)
+
+
+def aggregate(rows: list[TaskScore]) -> Aggregate:
+    """The IQM and the probability of improvement over the tasks of ``rows`` that were scored."""
+    scored = [r for r in rows if math.isfinite(r.score)]
+    policy = rows[0].policy if rows else ""
+    if not scored:
+        return Aggregate(policy, 0, math.nan, (math.nan, math.nan), math.nan, (math.nan, math.nan))
+    scores = [np.asarray(r.episode_scores) for r in scored]
+    improved = [(np.asarray(r.episode_scores) > 0) + 0.5 * (np.asarray(r.episode_scores) == 0) for r in scored]
+    iqm = float(stats.trim_mean([r.score for r in scored], 0.25))
+    improvement = float(np.mean([np.mean(x) for x in improved]))
+    return Aggregate(policy, len(scored), iqm, _interval(scores, _iqm_of_means), improvement,
+                     _interval([x.astype(float) for x in improved], _mean_of_means))
+
+
+def profile(rows: list[TaskScore], thresholds: np.ndarray) -> np.ndarray:
+    """The performance profile (rliable's): at each threshold ``tau``, the share of episodes whose
+    score exceeds ``tau``, averaged over the tasks scored (each task weighs the same)."""
+    scored = [np.asarray(r.episode_scores) for r in rows if math.isfinite(r.score)]
+    if not scored:
+        return np.full(len(thresholds), math.nan)
+    return np.mean([(s[None, :] > np.asarray(thresholds)[:, None]).mean(axis=1) for s in scored], axis=0)
+
+
+def profiles(card: Scorecard, thresholds: np.ndarray) -> dict[str, np.ndarray]:
+    """Each trigger's :func:`profile` over the tasks it was scored on."""
+    by_policy: dict[str, list[TaskScore]] = {}
+    for row in card.rows:
+        by_policy.setdefault(row.policy, []).append(row)
+    return {policy: profile(rows, thresholds) for policy, rows in by_policy.items()}
+
+
+# -- the command ------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Scorecard:
+    tasks: list[str]
+    references: dict[str, dict]  # task -> what it was scored against (best schedule, sha256, stored or computed)
+    rows: list[TaskScore]
+    aggregates: list[Aggregate]
+
+    @property
+    def complete(self) -> bool:
+        """Every trigger was played on every task (none failed)."""
+        return all(r.error is None for r in self.rows)
+
+    def to_json(self) -> dict:
+        return {"format": "etmpc-scorecard", "suite_version": SUITE_VERSION, "tasks": self.tasks,
+                "references": self.references, "rows": [asdict(r) for r in self.rows],
+                "aggregates": [asdict(a) for a in self.aggregates], "software": _software(),
+                "machine": {"processor": platform.processor() or platform.machine(), "system": platform.platform()}}
+
+
+def score(policies: list, tasks: list[str] | None = None, test_set: str | None = None, workers: int | None = None,
+          progress: bool = True, json_path: str | Path | None = None,
+          say: Callable[[str], None] = lambda line: None) -> Scorecard:
+    """Score every trigger of ``policies`` (spec strings or policy objects, as :func:`etmpc.evaluate`
+    takes) on every task of ``tasks`` (default: the whole suite), each on its stored test set at its
+    own price, against the stored references (see the module's docstring). ``test_set``: another test
+    set, for one task; its references are computed for the run. A trigger that fails on a task has
+    that task's row say so; the others are still scored (:attr:`Scorecard.complete` is then False)."""
+    if isinstance(policies, (str, bytes)) or not isinstance(policies, (list, tuple)) or not policies:
+        raise EtmpcError("policies: a non-empty list of policy specs or objects is needed")
+    if tasks is not None and (isinstance(tasks, (str, bytes)) or not isinstance(tasks, (list, tuple))):
+        raise EtmpcError(f"tasks: a list of task names is needed, got {type(tasks).__name__} {tasks!r}")
+    tasks = distinct(tasks or names())
+    if test_set is not None and len(tasks) != 1:
+        raise EtmpcError("--test-set belongs to one task: give exactly one --task with it")
+    if json_path is not None:
+        check_outputs({"--json": Path(json_path)})
+    references: dict[str, References] = {}
+    shown: dict[str, dict] = {}
+    for task in tasks:  # every reference checked before any trigger is played
+        system = make_system(task)
+        path = test_set or str(ts_mod.default_path(system.domain, system.task))
+        sha = ts_mod.load(path, system.domain, system.task).sha256
+        if test_set is None:
+            references[task] = load_references(task, sha)
+            shown[task] = {"stored": str(references_path(task).name)}
+    for task in tasks:
+        if task not in references:
+            say(f"{task}: no stored references for test set {test_set}: computing them for this run")
+            references[task] = build_references(task, test_set, workers, progress, say)
+            shown[task] = {"stored": None}
+        refs = references[task]
+        shown[task] |= {"best_periodic": refs.best, "oracle": refs.oracle_spec, "test_set_sha256": refs.test_set_sha256,
+                        "episodes": refs.episodes, "recompute_price": refs.recompute_price, "gap": refs.gap}
+    rows: list[TaskScore] = []
+    for task in tasks:
+        refs = references[task]
+        try:
+            evaluation = evaluate(task, list(policies), workers=workers, testset_path=test_set, progress=progress)
+        except EtmpcError as exc:
+            if len(policies) > 1:  # find which trigger failed: play each alone
+                rows += [_alone(task, refs, policy, test_set, workers, progress) for policy in policies]
+                continue
+            rows.append(failed_task(task, _name(policies[0]), str(exc)))
+            say(f"{task}: {exc}")
+            continue
+        rows += [task_score(refs, evaluation, s.policy) for s in evaluation.summaries]
+    by_policy: dict[str, list[TaskScore]] = {}
+    for row in rows:
+        by_policy.setdefault(row.policy, []).append(row)
+    card = Scorecard(tasks, shown, rows, [aggregate(r) for r in by_policy.values()])
+    if json_path is not None:
+        write_json(Path(json_path), card.to_json())
+    return card
+
+
+def _name(policy) -> str:
+    return policy if isinstance(policy, str) else str(getattr(policy, "spec", type(policy).__name__))
+
+
+def _alone(task: str, refs: References, policy, test_set, workers, progress) -> TaskScore:
+    try:
+        evaluation = evaluate(task, [policy], workers=workers, testset_path=test_set, progress=progress)
+    except EtmpcError as exc:
+        return failed_task(task, _name(policy), str(exc))
+    return task_score(refs, evaluation, evaluation.summaries[0].policy)
+
+
+def format_scorecard(card: Scorecard) -> str:
+    """The scorecard as text: per task and trigger, then the suite's aggregate per trigger."""
+    width = max([18] + [len(r.policy) + 2 for r in card.rows])
+    task_width = max([14] + [len(t) + 2 for t in card.tasks])
+    head = (f"{'task':<{task_width}}{'policy':<{width}}{'objective':>11}{'computations':>14}{'failures':>10}"
+            f"{'score':>9}{'± 95 % CI':>11}{'CPU ms/ep':>11}{'(solve':>9}{'feedback':>10}{'trigger)':>10}")
+    lines = ["normalized score per task: 0 = its best periodic schedule, 100 = the oracle over it (a one-step "
+             "lookahead: above 100 is possible); CPU: measured on this machine, per episode", head, "-" * len(head)]
+    for r in card.rows:
+        if r.error is not None:
+            lines.append(f"{r.task:<{task_width}}{r.policy:<{width}}failed: {r.error}")
+            continue
+        failures = f"{r.failures_mean:.2f}" if r.failures_mean is not None else "-"
+        score = f"{r.score:>9.1f}{r.score_ci95:>11.1f}" if math.isfinite(r.score) else \
+            f"{'-':>9}{f'{r.nonfinite_episodes} non-finite':>11}"
+        cpu = r.cpu_ms
+        lines.append(f"{r.task:<{task_width}}{r.policy:<{width}}{r.objective_mean:>11.4f}{r.recomputes_mean:>14.2f}"
+                     f"{failures:>10}{score}{cpu['total']:>11.1f}{cpu['solve']:>9.1f}{cpu['feedback']:>10.1f}"
+                     f"{cpu['decide']:>10.1f}")
+    lines += ["", "the suite: interquartile mean of the task scores and probability of improvement over the best "
+                  "periodic schedule, 95 % stratified bootstrap CIs",
+              f"{'policy':<{width}}{'tasks':>6}{'IQM':>9}{'95 % CI':>18}{'P(improve)':>12}{'95 % CI':>16}"]
+    for a in card.aggregates:
+        lines.append(f"{a.policy:<{width}}{a.tasks:>6}{a.iqm:>9.1f}{f'[{a.iqm_ci95[0]:.1f}, {a.iqm_ci95[1]:.1f}]':>18}"
+                     f"{a.probability_of_improvement:>12.2f}"
+                     f"{f'[{a.probability_of_improvement_ci95[0]:.2f}, {a.probability_of_improvement_ci95[1]:.2f}]':>16}")
+    refs = "; ".join(f"{t}: {r['best_periodic']} and {r['oracle']}" + ("" if r.get("stored") else " (computed)")
+                     for t, r in card.references.items())
+    lines.append(f"references: {refs}")
+    return "\n".join(lines)

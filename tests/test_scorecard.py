@@ -1,0 +1,180 @@
+"""The scorecard (etmpc score): normalized scores between fixed references, the suite's aggregate, the
+stored references, and its bad inputs.
+
+Independent truths: the two references score exactly 0 and 100 (an identity of the formula); the score
+of any trigger equals the formula computed by hand from the per-episode objectives; the interquartile
+mean of four task scores is the mean of the middle two; a stored reference is what playing the same
+episode again gives, bit for bit.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+import etmpc
+from etmpc.cli import main
+from etmpc.common.errors import EtmpcError
+from etmpc.evaluation import testsets
+from etmpc.evaluation.evaluate import evaluate
+from etmpc.evaluation.scorecard import (SUITE_VERSION, References, TaskScore, aggregate, build_references,
+                                        load_references, references_path, task_score)
+from etmpc.systems import make_system, names
+
+
+@pytest.fixture(scope="module")
+def small_battery(tmp_path_factory):
+    """A 4-episode battery test set and its references, computed as ``score --test-set`` computes them."""
+    path = tmp_path_factory.mktemp("score") / "small.npz"
+    testsets.draw(make_system("battery"), 7, 4, path)
+    return path, build_references("battery", str(path), workers=1, progress=False)
+
+
+def test_the_two_references_score_exactly_0_and_100(small_battery):
+    path, refs = small_battery
+    played = evaluate("battery", [refs.best, refs.oracle_spec], workers=1, testset_path=str(path), progress=False)
+    best, oracle = task_score(refs, played, refs.best), task_score(refs, played, refs.oracle_spec)
+    assert best.score == 0.0 and oracle.score == 100.0
+    assert best.episode_scores == [0.0] * 4 and best.better_share == 0.5  # every episode a tie
+
+
+def test_a_score_is_the_formula_computed_by_hand(small_battery):
+    path, refs = small_battery
+    played = evaluate("battery", ["every:7", "always"], workers=1, testset_path=str(path), progress=False)
+    profits = {spec: np.array([r.objective for r in played.runs if r.policy == spec]) for spec in ("every:7", "always")}
+    best, oracle = np.array(refs.periodic[refs.best]), np.array(refs.oracle)  # the battery's objective is a profit
+    for spec, profit in profits.items():
+        by_hand = 100 * (profit.mean() - best.mean()) / (oracle.mean() - best.mean())
+        row = task_score(refs, played, spec)
+        assert row.score == pytest.approx(by_hand, rel=1e-12, abs=1e-9)
+        assert np.mean(row.episode_scores) == pytest.approx(by_hand, rel=1e-9, abs=1e-9)
+        assert row.better_share == np.mean((profit > best) + 0.5 * (profit == best))
+
+
+def _row(task: str, scores) -> TaskScore:
+    scores = list(map(float, scores))
+    return TaskScore(task, "mine", len(scores), 0.0, "min", 0.0, None, 0, 0, float(np.mean(scores)), 0.0, scores,
+                     0.0, {}, "every:3")
+
+
+def test_the_suites_interquartile_mean_is_the_mean_of_the_middle_two_of_four_tasks():
+    rng = np.random.default_rng(3)
+    rows = [_row(t, rng.normal(m, 10, 30)) for t, m in zip("abcd", (-50, 10, 30, 400))]
+    means = sorted(r.score for r in rows)
+    result = aggregate(rows)
+    assert result.iqm == pytest.approx((means[1] + means[2]) / 2, rel=1e-12)
+    assert result.iqm_ci95[0] < result.iqm < result.iqm_ci95[1]
+    assert aggregate(rows) == result  # the bootstrap is seeded
+    improved = np.mean([np.mean(np.asarray(r.episode_scores) > 0) for r in rows])
+    assert result.probability_of_improvement == pytest.approx(improved)
+
+
+def test_the_performance_profile_is_the_share_of_episodes_above_each_threshold_averaged_over_tasks():
+    from etmpc.evaluation.scorecard import profile
+
+    rows = [_row("a", [0, 50, 100]), _row("b", [-10, 200])]
+    curve = profile(rows, np.array([-20.0, -10.0, 0.0, 60.0, 100.0, 200.0]))
+    expected = [(3 / 3 + 2 / 2) / 2, (3 / 3 + 1 / 2) / 2, (2 / 3 + 1 / 2) / 2, (1 / 3 + 1 / 2) / 2, (0 + 1 / 2) / 2, 0.0]
+    np.testing.assert_allclose(curve, expected, rtol=0, atol=1e-15)
+
+
+def test_an_unscored_task_is_left_out_of_the_aggregate():
+    rows = [_row("a", [10, 20]), _row("b", [30, 50])]
+    unscored = TaskScore("c", "mine", 2, 0.0, "min", 0.0, None, 0, 1, math.nan, math.nan, [], math.nan, {}, "every:3")
+    assert aggregate(rows + [unscored]).tasks == 2
+    assert aggregate(rows + [unscored]).iqm == pytest.approx(27.5)
+
+
+@pytest.mark.parametrize("task", names())
+def test_the_stored_references_are_what_playing_the_episodes_again_gives(task):
+    system = make_system(task)
+    stored = testsets.load(testsets.default_path(system.domain, system.task), system.domain, system.task)
+    refs = load_references(task, stored.sha256)
+    assert refs.suite_version == SUITE_VERSION and refs.episodes == stored.episodes and refs.gap > 0
+    sign = 1 if system.objective_sense == "min" else -1
+    assert refs.best == min(refs.periodic, key=lambda s: sign * np.mean(refs.periodic[s]))
+    played = evaluate(task, [refs.best, refs.oracle_spec], episodes=1, workers=1, progress=False)
+    again = {r.policy: r.objective for r in played.runs}
+    assert again == {refs.best: refs.periodic[refs.best][0], refs.oracle_spec: refs.oracle[0]}
+
+
+def test_scoring_plays_only_the_trigger_and_says_what_it_costs(tmp_path):
+    best = json.loads(references_path("battery").read_text())["best"]
+    card = etmpc.score([best, "threshold:0.01"], tasks=["battery"], workers=1, progress=False,
+                       json_path=tmp_path / "card.json")
+    rows = {r.policy: r for r in card.rows}
+    assert rows[best].score == 0.0 and card.references["battery"]["best_periodic"] == best
+    assert all(r.cpu_ms["solve"] > 0 and r.cpu_ms["total"] >= r.cpu_ms["solve"] for r in card.rows)
+    assert json.loads((tmp_path / "card.json").read_text())["rows"][1]["policy"] == "threshold:0.01"
+
+
+def test_on_another_test_set_the_references_are_computed_and_said_so(small_battery, capsys):
+    path, refs = small_battery
+    assert main(["score", refs.best, refs.oracle_spec, "--task", "battery", "--test-set", str(path), "--workers", "1"]) == 0
+    out, err = capsys.readouterr()
+    assert f"battery: no stored references for test set {path}: computing them for this run" in err
+    assert f"references: battery: {refs.best} and {refs.oracle_spec} (computed)" in out
+    figure = path.with_name("profile.png")
+    assert main(["score", "always", "--task", "battery", "--test-set", str(path), "--workers", "1",
+                 "--figure", str(figure)]) == 0
+    assert figure.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_a_trigger_that_fails_on_one_task_has_that_row_say_so_and_the_others_scored(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr("sys.dont_write_bytecode", True)
+    (tmp_path / "picky_trigger.py").write_text(  # the battery's state has one component, the cart pendulum's four
+        "class T:\n    spec = 'picky'\n    stochastic = False\n    def decide(self, s, rng):\n"
+        "        if len(s.x) == 1:\n            raise RuntimeError('not for batteries')\n        return s.age >= 3\n")
+    code = main(["score", "py:picky_trigger:T", "--task", "battery", "--task", "cart_pendulum", "--workers", "2",
+                 "--json", "card.json"])
+    out, err = capsys.readouterr()
+    assert code == 2
+    assert "failed: policy py:picky_trigger:T: decide raised RuntimeError: not for batteries" in out
+    assert err.strip().splitlines()[-1] == ("etmpc: error: not every trigger could be scored on every task: "
+                                            "py:picky_trigger:T on battery (see its row)")
+    rows = {r["task"]: r for r in json.loads((tmp_path / "card.json").read_text())["rows"]}
+    assert rows["battery"]["error"] and rows["cart_pendulum"]["error"] is None
+    assert json.loads(references_path("cart_pendulum").read_text())["best"] == "every:3"
+    assert rows["cart_pendulum"]["score"] == 0.0  # it plays every:3, the cart pendulum's best periodic schedule
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["score", "every:3", "--task", "cartpole"], "unknown task 'cartpole'"),
+    (["score", "--task", "battery"], "give at least one trigger"),
+    (["score", "every:3", "every:3"], "given twice"),
+    (["score", "every:3", "--task", "battery", "--task", "reacher", "--test-set", "x.npz"], "x.npz not found"),
+    (["score", "every:3", "--references"], "--references rebuilds the stored references only"),
+])
+def test_bad_input_is_one_line(argv, says, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and says in err, err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_references_made_for_another_test_set_or_suite_version_are_refused(tmp_path, small_battery):
+    stored = json.loads(references_path("battery").read_text())
+    for change, says in ((dict(test_set_sha256="0" * 64), "were made on test set 000000000000"),
+                         (dict(suite_version=SUITE_VERSION + 1), f"suite version {SUITE_VERSION + 1}"),
+                         (dict(recompute_price=1.0), "at price 1.0"),
+                         (dict(oracle=stored["oracle"][:3]), "inconsistent")):
+        path = tmp_path / "refs.json"
+        path.write_text(json.dumps(stored | change))
+        with pytest.raises(EtmpcError, match=f"{says}.*rebuild them with: etmpc score --references --task battery"):
+            load_references("battery", stored["test_set_sha256"], path)
+    with pytest.raises(EtmpcError, match="--test-set belongs to one task"):
+        etmpc.score(["every:3"], tasks=["battery", "reacher"], test_set=str(small_battery[0]))
+
+
+def test_a_references_file_round_trips(small_battery, tmp_path):
+    _, refs = small_battery
+    from etmpc.evaluation.scorecard import write_references
+
+    path = write_references(refs, tmp_path / "refs.json")
+    assert load_references("battery", refs.test_set_sha256, path) == References(**{
+        k: v for k, v in json.loads(path.read_text()).items() if k != "format"})
