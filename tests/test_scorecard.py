@@ -20,8 +20,9 @@ from etmpc.cli import main
 from etmpc.common.errors import EtmpcError
 from etmpc.evaluation import testsets
 from etmpc.evaluation.evaluate import evaluate
-from etmpc.evaluation.scorecard import (SUITE_VERSION, References, TaskScore, aggregate, build_references,
-                                        load_references, references_path, task_score)
+from etmpc.evaluation.references import (SUITE_VERSION, References, build_references, load_references,
+                                         references_path, write_references)
+from etmpc.evaluation.scorecard import TaskScore, aggregate, task_score
 from etmpc.systems import make_system, names
 
 
@@ -173,8 +174,6 @@ def test_references_made_for_another_test_set_or_suite_version_are_refused(tmp_p
 
 def test_a_references_file_round_trips(small_battery, tmp_path):
     _, refs = small_battery
-    from etmpc.evaluation.scorecard import write_references
-
     path = write_references(refs, tmp_path / "refs.json")
     assert load_references("battery", refs.test_set_sha256, path) == References(**{
         k: v for k, v in json.loads(path.read_text()).items() if k != "format"})

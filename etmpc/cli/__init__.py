@@ -2,8 +2,9 @@
 ``replay`` and ``bench``.
 
 Bad input (unknown task or policy, bad numbers, missing or corrupt files) prints one line on
-stderr and exits with code 2, without a traceback. The options are :mod:`etmpc.cli.options`'s, the
-commands :mod:`etmpc.cli.commands`'s. This package sits on top: it may import any floor of etmpc.
+stderr and exits with code 2, without a traceback. The options are :mod:`etmpc.cli.options`'s (their
+value types :mod:`etmpc.cli.types`'s), the commands :mod:`etmpc.cli.commands`'s, and ``score``'s both
+:mod:`etmpc.cli.scoring`'s. This package sits on top: it may import any floor of etmpc.
 """
 
 from __future__ import annotations

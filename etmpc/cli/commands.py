@@ -7,6 +7,8 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from etmpc.cli import scoring
+from etmpc.cli.output import distinct_policies as _distinct_policies, say as _say
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import check_outputs, write_json
 
@@ -14,19 +16,6 @@ from etmpc.common.outputs import check_outputs, write_json
 def _check_backend(args) -> None:
     if args.address is not None and args.backend != "ray":
         raise EtmpcError("--address needs --backend ray")
-
-
-def _say(line: str) -> None:
-    """Progress of a long stage, on stderr (stdout keeps the results)."""
-    print(line, file=sys.stderr, flush=True)
-
-
-def _distinct_policies(specs: list[str]) -> None:
-    seen = set()
-    for spec in specs:
-        if spec in seen:
-            raise EtmpcError(f"--policy {spec} is given twice")
-        seen.add(spec)
 
 
 def _evaluate(args) -> None:
@@ -54,43 +43,6 @@ def _evaluate(args) -> None:
     nonfinite = sum(s.nonfinite_episodes for s in result.summaries)
     if nonfinite:
         print(f"warning: {nonfinite} run(s) ended on a non-finite state and are excluded from the means", file=sys.stderr)
-
-
-def _score(args) -> None:
-    from etmpc.evaluation.scorecard import build_references, format_scorecard, score, write_references
-    from etmpc.systems import distinct, names
-
-    tasks = distinct(args.task or names())
-    if args.references:
-        if args.policy or args.test_set is not None or args.json is not None or args.figure is not None:
-            raise EtmpcError("--references rebuilds the stored references only: no SPEC, --test-set, --json or --figure "
-                             "with it")
-        for task in tasks:
-            path = write_references(build_references(task, workers=args.workers, say=_say))
-            print(f"wrote {path}")
-        return
-    if not args.policy:
-        raise EtmpcError("give at least one trigger to score (a SPEC such as every:3 or py:MODULE:NAME)")
-    _distinct_policies(args.policy)
-    if args.test_set is not None and not Path(args.test_set).is_file():
-        raise EtmpcError(f"test set {args.test_set} not found")
-    check_outputs({"--json": args.json, "--figure": args.figure}, inputs={"--test-set": args.test_set})
-    card = score(args.policy, tasks, args.test_set, args.workers, json_path=args.json, say=_say)
-    print(format_scorecard(card))
-    if args.json is not None:
-        print(f"wrote {args.json}")
-    if args.figure is not None:
-        import numpy as np
-
-        from etmpc.evaluation.scorecard import profiles
-        from etmpc.views.figures import write_performance_profile_png
-
-        thresholds = np.linspace(-100.0, 200.0, 301)
-        write_performance_profile_png(args.figure, profiles(card, thresholds), thresholds, card.tasks)
-        print(f"wrote {args.figure}")
-    if not card.complete:
-        failed = sorted({f"{r.policy} on {r.task}" for r in card.rows if r.error is not None})
-        raise EtmpcError(f"not every trigger could be scored on every task: {', '.join(failed)} (see its row)")
 
 
 def _train(args) -> None:
@@ -253,5 +205,5 @@ def _testset(args) -> None:
           f"sha256 {digest}); use it with --test-set {args.out}")
 
 
-COMMANDS = {"evaluate": _evaluate, "score": _score, "train": _train, "train-self": _train_self, "reproduce": _reproduce, "sweep": _sweep,
+COMMANDS = {"evaluate": _evaluate, "score": scoring.run, "train": _train, "train-self": _train_self, "reproduce": _reproduce, "sweep": _sweep,
             "render": _render, "replay": _replay, "bench": _bench, "testset": _testset}

@@ -6,10 +6,9 @@ Every type refuses bad input with a one-line message (argparse's errors become :
 from __future__ import annotations
 
 import argparse
-import math
 from pathlib import Path
 
-from etmpc.common import checks
+from etmpc.cli import scoring, types
 from etmpc.common.errors import EtmpcError
 from etmpc.evaluation.workers import BACKENDS
 from etmpc.learning.config import ALGORITHMS
@@ -32,74 +31,6 @@ class _Parser(argparse.ArgumentParser):
         raise EtmpcError(message)
 
 
-def _whole(text: str) -> int:
-    try:
-        return int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
-
-
-def _number(text: str) -> float:
-    try:
-        return float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-
-
-def _checked(check, value):
-    """``check(value)`` (one of :mod:`etmpc.common.checks`, which the Python API uses too) as argparse's error."""
-    try:
-        return check(value)
-    except checks.BadValue as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-
-
-def _positive_int(text: str) -> int:
-    return _checked(lambda v: checks.at_least(v, 1), _whole(text))
-
-
-MAX_WORKERS = checks.MAX_WORKERS
-MAX_SEED = checks.MAX_SEED
-MAX_FPS = 1000.0
-
-
-def _workers(text: str) -> int:
-    return _checked(checks.workers, _whole(text))
-
-
-def _seed(text: str) -> int:
-    return _checked(checks.seed, _whole(text))
-
-
-def _index(text: str) -> int:
-    value = _whole(text)
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0, got {value}")
-    return value
-
-
-def _fps(text: str) -> float:
-    value = _number(text)
-    if not (math.isfinite(value) and 0 < value <= MAX_FPS):
-        raise argparse.ArgumentTypeError(f"frames per second must be in (0, {MAX_FPS:g}], got {text}")
-    return value
-
-
-def _price(text: str) -> float:
-    return _checked(checks.price, _number(text))
-
-
-def _prices(text: str) -> tuple[float, ...]:
-    return tuple(_price(part.strip()) for part in text.split(","))
-
-
-def _json_path(text: str) -> Path:
-    path = Path(text)
-    if path.exists() and path.is_dir():
-        raise argparse.ArgumentTypeError(f"{text} is a directory, not a file")
-    return path
-
-
 def build_parser() -> argparse.ArgumentParser:
     tasks = " | ".join(names())
     parser = _Parser(prog="etmpc", description="Event-triggered MPC benchmark.")
@@ -111,48 +42,35 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--policy", action="append", required=True, metavar="SPEC",
                     help="always | never | every:T | threshold:X | rl:PATH | self:PATH | py:MODULE:NAME (your own) | "
                          "rollout:BASE[:K[:H]] | oracle:BASE (an upper bound, not a policy) (repeatable)")
-    ev.add_argument("--episodes", type=_positive_int, default=None, help="first N test-set episodes (default: all)")
-    ev.add_argument("--repeats", type=_positive_int, default=1, help="passes over the test set (for stochastic policies)")
-    ev.add_argument("--workers", type=_workers, default=None, help="worker processes (default: one per core)")
-    ev.add_argument("--seed", type=_seed, default=0, help="seed of the policies' own randomness")
-    ev.add_argument("--price", type=_price, default=None, metavar="P",
+    ev.add_argument("--episodes", type=types.positive_int, default=None, help="first N test-set episodes (default: all)")
+    ev.add_argument("--repeats", type=types.positive_int, default=1, help="passes over the test set (for stochastic policies)")
+    ev.add_argument("--workers", type=types.workers, default=None, help="worker processes (default: one per core)")
+    ev.add_argument("--seed", type=types.seed, default=0, help="seed of the policies' own randomness")
+    ev.add_argument("--price", type=types.price, default=None, metavar="P",
                     help="price of a computation in the objective (default: the system's, 5e-5 for the cart "
                          "pendulum, 0 for the battery, whose computer draws eta_c from the battery)")
     ev.add_argument("--test-set", default=None, metavar="PATH", help="test set file (default: the stored one)")
-    ev.add_argument("--json", type=_json_path, default=None, metavar="PATH", help="write the results as JSON")
+    ev.add_argument("--json", type=types.json_path, default=None, metavar="PATH", help="write the results as JSON")
     ev.add_argument("--against", default=None, metavar="SPEC",
                     help="also print every policy against this one (one of --policy), paired per episode with 95 %% CIs")
-    ev.add_argument("--record", type=_rrd_path, default=None, metavar="PATH.rrd",
+    ev.add_argument("--record", type=types.rrd_path, default=None, metavar="PATH.rrd",
                     help="write every episode into a Rerun recording (open it with `rerun PATH.rrd`)")
     _backend_arguments(ev)
 
-    sc = sub.add_parser("score", help="score triggers on every task against the suite's fixed references: the scorecard")
-    sc.add_argument("policy", nargs="*", metavar="SPEC",
-                    help="triggers to score: any --policy spec of evaluate (py:MODULE:NAME for your own, sb3:PATH, ...)")
-    sc.add_argument("--task", action="append", default=None, metavar="TASK",
-                    help=f"only this task ({tasks}; repeatable; default: every task)")
-    sc.add_argument("--test-set", default=None, metavar="PATH",
-                    help="another test set, for one --task: its references are computed for the run")
-    sc.add_argument("--json", type=_json_path, default=None, metavar="PATH", help="write the scorecard as JSON")
-    sc.add_argument("--figure", type=_png_path, default=None, metavar="PATH.png",
-                    help="also draw the triggers' performance profiles (share of episodes above each score)")
-    sc.add_argument("--workers", type=_workers, default=None, help="worker processes (default: one per core)")
-    sc.add_argument("--references", action="store_true",
-                    help="rebuild the stored references of the tasks (every periodic schedule and the oracle on the "
-                         "stored test set; a maintainer's step after a task changes)")
+    scoring.add_parser(sub, tasks)
 
     tr = sub.add_parser("train", help="train a recomputation policy: DPI (default) or GPOMDP (the paper's) over seeds, "
                                       "or PPO (Stable-Baselines3, the 'rl' extra) on the trigger environment")
     tr.add_argument("task", help=f"system to train on: {tasks}")
     tr.add_argument("--seeds", default="0-4", help="seeds: a range 0-4 or a list 0,2,5 (default 0-4)")
-    tr.add_argument("--episodes", type=_positive_int, default=1500, help="training episodes per seed (default 1500)")
-    tr.add_argument("--eval-every", type=_positive_int, default=150, help="evaluate on the test set every N episodes (default 150)")
-    tr.add_argument("--eval-episodes", type=_positive_int, default=None, help="first N test-set episodes per evaluation (default: all)")
+    tr.add_argument("--episodes", type=types.positive_int, default=1500, help="training episodes per seed (default 1500)")
+    tr.add_argument("--eval-every", type=types.positive_int, default=150, help="evaluate on the test set every N episodes (default 150)")
+    tr.add_argument("--eval-episodes", type=types.positive_int, default=None, help="first N test-set episodes per evaluation (default: all)")
     tr.add_argument("--out", type=Path, required=True, metavar="DIR", help="run directory: checkpoint, policies, curve")
-    tr.add_argument("--workers", type=_workers, default=None, help="worker processes (default: one per core)")
+    tr.add_argument("--workers", type=types.workers, default=None, help="worker processes (default: one per core)")
     _backend_arguments(tr)
     tr.add_argument("--resume", action="store_true", help="continue the run in DIR from its last checkpoint")
-    tr.add_argument("--record", type=_index, default=0, metavar="N",
+    tr.add_argument("--record", type=types.index, default=0, metavar="N",
                     help="record the first N test-set episodes of each seed at every evaluation, "
                          "into DIR/recordings/eval_<episodes>.rrd (default 0: none)")
     tr.add_argument("--baseline", choices=BASELINES, default="none",
@@ -163,30 +81,30 @@ def build_parser() -> argparse.ArgumentParser:
                     help="dpi (direct policy iteration: rollout-labelled classification, --eval-every episodes per "
                          "iteration; default), gpomdp (the paper's policy gradient), or ppo (Stable-Baselines3 on the "
                          "trigger environment: --timesteps, one seed)")
-    tr.add_argument("--timesteps", type=_positive_int, default=None, metavar="N",
+    tr.add_argument("--timesteps", type=types.positive_int, default=None, metavar="N",
                     help="PPO: environment steps in all (default 200000)")
     tr.add_argument("--features", choices=FEATURE_SETS, default=DEFAULT_FEATURES,
                     help="the policy's features: error (prediction error, its square, the plan's age and, for the "
                          "battery, prices and production now and as planned; default) or paper ([x_i, x_k, i-k] and squares)")
-    tr.add_argument("--futures", type=_positive_int, default=None, metavar="K", help="DPI: sampled futures per labelled decision (default 4)")
-    tr.add_argument("--horizon", type=_positive_int, default=None, metavar="H", help="DPI: steps simulated ahead (default 20)")
-    tr.add_argument("--labels", type=_positive_int, default=None, metavar="D", help="DPI: decisions labelled per episode (default 25)")
-    tr.add_argument("--price", type=_price, default=None, metavar="P",
+    tr.add_argument("--futures", type=types.positive_int, default=None, metavar="K", help="DPI: sampled futures per labelled decision (default 4)")
+    tr.add_argument("--horizon", type=types.positive_int, default=None, metavar="H", help="DPI: steps simulated ahead (default 20)")
+    tr.add_argument("--labels", type=types.positive_int, default=None, metavar="D", help="DPI: decisions labelled per episode (default 25)")
+    tr.add_argument("--price", type=types.price, default=None, metavar="P",
                     help="train for this price of a computation (default: the system's; see evaluate --price)")
-    tr.add_argument("--validation-episodes", type=_positive_int, default=50,
+    tr.add_argument("--validation-episodes", type=types.positive_int, default=50,
                     help="training-distribution episodes that choose selected.json among the seeds (default 50)")
 
     ts = sub.add_parser("train-self", help="train a self-triggering policy (self:PATH): at each solve, how long to keep the plan")
     ts.add_argument("task", help=f"system to train on: {tasks}")
-    ts.add_argument("--out", type=_json_path, required=True, metavar="FILE", help="the policy file to write (use it as self:FILE)")
-    ts.add_argument("--price", type=_price, default=None, metavar="P",
+    ts.add_argument("--out", type=types.json_path, required=True, metavar="FILE", help="the policy file to write (use it as self:FILE)")
+    ts.add_argument("--price", type=types.price, default=None, metavar="P",
                     help="train for this price of a computation (default: the system's; see evaluate --price)")
-    ts.add_argument("--episodes", type=_positive_int, default=40, help="labelled training episodes (default 40)")
-    ts.add_argument("--solves", type=_positive_int, default=8, help="labelled solves per episode (default 8)")
-    ts.add_argument("--futures", type=_positive_int, default=2, metavar="K", help="sampled futures per labelled solve (default 2)")
-    ts.add_argument("--validation-episodes", type=_positive_int, default=20,
+    ts.add_argument("--episodes", type=types.positive_int, default=40, help="labelled training episodes (default 40)")
+    ts.add_argument("--solves", type=types.positive_int, default=8, help="labelled solves per episode (default 8)")
+    ts.add_argument("--futures", type=types.positive_int, default=2, metavar="K", help="sampled futures per labelled solve (default 2)")
+    ts.add_argument("--validation-episodes", type=types.positive_int, default=20,
                     help="training-distribution episodes that choose among the fits and the base (default 20)")
-    ts.add_argument("--workers", type=_workers, default=None, help="worker processes (default: one per core)")
+    ts.add_argument("--workers", type=types.workers, default=None, help="worker processes (default: one per core)")
     _backend_arguments(ts)
 
     re_ = sub.add_parser("reproduce", help="the paper's experiments on every task, with REPORT.md and results.json")
@@ -198,65 +116,51 @@ def build_parser() -> argparse.ArgumentParser:
                           "report; on a finished run's directory only the sweeps run (make sweep)")
     re_.add_argument("--out", type=Path, default=None, metavar="DIR",
                      help="run directory (default results/reproduce, or results/reproduce-quick with --quick)")
-    re_.add_argument("--workers", type=_workers, default=None, help="worker processes (default: one per core)")
+    re_.add_argument("--workers", type=types.workers, default=None, help="worker processes (default: one per core)")
     _backend_arguments(re_)
 
     sw = sub.add_parser("sweep", help="the trade-off curve over prices of a computation: pareto.json, pareto.png, SWEEP.md")
     sw.add_argument("task", nargs="*", help=f"systems to sweep: {tasks} (default: every system)")
-    sw.add_argument("--prices", type=_prices, default=None, metavar="P1,P2,...",
+    sw.add_argument("--prices", type=types.prices, default=None, metavar="P1,P2,...",
                     help="prices of a computation (default: a log grid per system, up to where `never` wins)")
-    sw.add_argument("--episodes", type=_positive_int, default=None,
+    sw.add_argument("--episodes", type=types.positive_int, default=None,
                     help="first N test-set episodes for every policy (default 20, 3 with --quick)")
     sw.add_argument("--quick", action="store_true", help="a smoke run: 3 episodes, half the thresholds, rollouts K=2 H=10")
     sw.add_argument("--out", type=Path, default=None, metavar="DIR",
                     help="run directory, a folder per system (default results/sweep, or results/sweep-quick with --quick)")
-    sw.add_argument("--workers", type=_workers, default=None, help="worker processes (default: one per core)")
+    sw.add_argument("--workers", type=types.workers, default=None, help="worker processes (default: one per core)")
     _backend_arguments(sw)
 
     rn = sub.add_parser("render", help="render one test-set episode headless to an MP4 video (a task with a 3-D scene)")
     rn.add_argument("task", help=f"task to render, one with a 3-D scene: {tasks} (the battery has none)")
     rn.add_argument("--policy", required=True, metavar="SPEC", help="always | never | every:T | threshold:X | rl:PATH | self:PATH")
-    rn.add_argument("--episode", type=_index, default=0, help="test-set episode (default 0)")
+    rn.add_argument("--episode", type=types.index, default=0, help="test-set episode (default 0)")
     rn.add_argument("--out", type=Path, required=True, metavar="FILE.mp4")
-    rn.add_argument("--seed", type=_seed, default=0, help="seed of the policy's own randomness, as in evaluate")
-    rn.add_argument("--width", type=_positive_int, default=640)
-    rn.add_argument("--height", type=_positive_int, default=480)
-    rn.add_argument("--fps", type=_fps, default=None, help="frames per second (default: one frame per control interval)")
-    rn.add_argument("--record", type=_rrd_path, default=None, metavar="PATH.rrd",
+    rn.add_argument("--seed", type=types.seed, default=0, help="seed of the policy's own randomness, as in evaluate")
+    rn.add_argument("--width", type=types.positive_int, default=640)
+    rn.add_argument("--height", type=types.positive_int, default=480)
+    rn.add_argument("--fps", type=types.fps, default=None, help="frames per second (default: one frame per control interval)")
+    rn.add_argument("--record", type=types.rrd_path, default=None, metavar="PATH.rrd",
                     help="also write the episode, frames included, into a Rerun recording")
 
     tst = sub.add_parser("testset", help="draw a test set: N episodes of a task from a seed, with its sha256 (for --test-set)")
     tst.add_argument("task", help=f"task to draw episodes of: {tasks}")
-    tst.add_argument("--seed", type=_seed, required=True, help="the seed every draw comes from")
-    tst.add_argument("--episodes", type=_positive_int, default=100, help="episodes (default 100)")
+    tst.add_argument("--seed", type=types.seed, required=True, help="the seed every draw comes from")
+    tst.add_argument("--episodes", type=types.positive_int, default=100, help="episodes (default 100)")
     tst.add_argument("--out", type=Path, required=True, metavar="FILE.npz", help="a new file (never overwritten)")
 
     rp = sub.add_parser("replay", help="summarise a Rerun recording: objective, recomputes, prediction errors")
     rp.add_argument("recording", type=Path, metavar="PATH.rrd")
     rp.add_argument("--per-episode", action="store_true", help="one line per episode, not only per policy")
-    rp.add_argument("--json", type=_json_path, default=None, metavar="PATH", help="write every episode's figures as JSON")
+    rp.add_argument("--json", type=types.json_path, default=None, metavar="PATH", help="write every episode's figures as JSON")
 
     be = sub.add_parser("bench", help="time the MPC solve, the rest of a step and whole episodes")
     be.add_argument("tasks", nargs="*", metavar="TASK", help=f"systems to bench (default: all: {tasks})")
-    be.add_argument("--episodes", type=_positive_int, default=10, help="test-set episodes per measurement")
-    be.add_argument("--json", type=_json_path, default=None, metavar="PATH", help="write the figures as JSON")
+    be.add_argument("--episodes", type=types.positive_int, default=10, help="test-set episodes per measurement")
+    be.add_argument("--json", type=types.json_path, default=None, metavar="PATH", help="write the figures as JSON")
     be.add_argument("--no-reference", action="store_true",
                     help="skip the reference solvers (do-mpc for cart_pendulum, scipy linprog for battery)")
     return parser
-
-
-def _png_path(text: str) -> Path:
-    path = _json_path(text)
-    if path.suffix != ".png":
-        raise argparse.ArgumentTypeError(f"{text} does not end in .png")
-    return path
-
-
-def _rrd_path(text: str) -> Path:
-    path = _json_path(text)
-    if path.suffix != ".rrd":
-        raise argparse.ArgumentTypeError(f"{text} does not end in .rrd")
-    return path
 
 
 def _backend_arguments(parser: argparse.ArgumentParser) -> None:

@@ -33,153 +33,25 @@ saving is shown net of what the trigger itself costs. These are wall-clock figur
 
 from __future__ import annotations
 
-import json
 import math
 import platform
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
-from importlib.metadata import PackageNotFoundError, version
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 from scipy import stats
 
 from etmpc.common.errors import EtmpcError
-from etmpc.common.numerics import fsum
 from etmpc.common.outputs import check_outputs, write_json
-from etmpc.common.resources import tasks_dir
 from etmpc.evaluation import testsets as ts_mod
 from etmpc.evaluation.evaluate import Evaluation, evaluate
+from etmpc.evaluation.references import (SUITE_VERSION, References, build_references, load_references, mean,
+                                         references_path, software)
 from etmpc.systems import distinct, make_system, names
 
-SUITE_VERSION = 1  # a change to any task, its test set or its price makes a new version of the suite
-FORMAT = "etmpc-references"
-SOFTWARE = ("etmpc", "mujoco", "dm-control", "casadi", "numpy", "scipy")
 BOOTSTRAP_RESAMPLES = 2000
 BOOTSTRAP_SEED = 0
-
-
-def _software() -> dict[str, str]:
-    found = {}
-    for name in SOFTWARE:
-        try:
-            found[name] = version(name)
-        except PackageNotFoundError:
-            found[name] = "(not installed)"
-    return found | {"python": platform.python_version()}
-
-
-# -- references ------------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class References:
-    """A task's reference points on one test set (see the module's docstring)."""
-
-    task: str
-    test_set_sha256: str
-    episodes: int
-    recompute_price: float
-    objective_sense: str
-    periodic: dict[str, list[float]]  # every:T -> objective per episode
-    best: str  # the periodic schedule with the best mean objective
-    oracle: list[float]  # oracle:BEST's objective per episode
-    suite_version: int = SUITE_VERSION
-    software: dict[str, str] = field(default_factory=dict)
-
-    @property
-    def oracle_spec(self) -> str:
-        return f"oracle:{self.best}"
-
-    def costs(self, objectives) -> np.ndarray:
-        """Objectives as costs (lower is better), whatever the task's sense."""
-        values = np.asarray(objectives, dtype=float)
-        return values if self.objective_sense == "min" else -values
-
-    @property
-    def gap(self) -> float:
-        """``D = mean_e (B_e - O_e)``: what the oracle gains over the best periodic schedule, per episode."""
-        return _mean(self.costs(self.periodic[self.best]) - self.costs(self.oracle))
-
-    def to_json(self) -> dict:
-        return {"format": FORMAT} | asdict(self)
-
-
-def _mean(values) -> float:
-    values = list(np.asarray(values, dtype=float))
-    return fsum(values) / len(values)
-
-
-def references_path(task: str) -> Path:
-    system = make_system(task)
-    return tasks_dir() / system.domain / f"{system.task}_references.json"
-
-
-def _objectives(evaluation: Evaluation, spec: str) -> list[float]:
-    runs = sorted((r for r in evaluation.runs if r.policy == spec), key=lambda r: r.episode)
-    if not all(r.finite for r in runs):
-        raise EtmpcError(f"{evaluation.domain}/{evaluation.task}: {spec} ended an episode on a non-finite state; "
-                         "it cannot be a reference")
-    return [r.objective for r in runs]
-
-
-def build_references(task: str, testset_path: str | None = None, workers: int | None = None, progress: bool = True,
-                     say: Callable[[str], None] = lambda line: None) -> References:
-    """Play every periodic schedule and the oracle over the best of them on ``task``'s test set (the
-    stored one by default)."""
-    system = make_system(task)
-    periodic = [f"every:{t}" for t in range(1, system.horizon + 1)]
-    say(f"{system.name}: references: {len(periodic)} periodic schedules, then the oracle over the best")
-    fixed = evaluate(system.name, periodic, workers=workers, testset_path=testset_path, progress=progress)
-    table = {spec: _objectives(fixed, spec) for spec in periodic}
-    sign = 1.0 if system.objective_sense == "min" else -1.0
-    best = min(periodic, key=lambda spec: (sign * _mean(table[spec]), periodic.index(spec)))
-    oracle = evaluate(system.name, [f"oracle:{best}"], workers=workers, testset_path=testset_path, progress=progress)
-    refs = References(system.name, fixed.testset_sha256, len(table[best]), system.recompute_price,
-                      system.objective_sense, table, best, _objectives(oracle, f"oracle:{best}"), software=_software())
-    if not refs.gap > 0:
-        raise EtmpcError(f"{system.name}: the oracle over {best} does not improve on it on this test set "
-                         f"(gap {refs.gap:g}): there is no scale to score against")
-    return refs
-
-
-def load_references(task: str, test_set_sha256: str, path: Path | None = None) -> References:
-    """The stored references of ``task``, checked against the test set (its sha256), the suite's version
-    and the task's price; a mismatch is one line that says how to rebuild them."""
-    path = references_path(task) if path is None else Path(path)
-    rebuild = f"rebuild them with: etmpc score --references --task {task}"
-    try:
-        data = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise EtmpcError(f"{task}: no stored references ({path}); {rebuild}") from None
-    except (OSError, ValueError) as exc:
-        raise EtmpcError(f"{task}: references {path} cannot be read ({exc}); {rebuild}") from None
-    if not isinstance(data, dict) or data.get("format") != FORMAT:
-        raise EtmpcError(f"{task}: {path} is not an etmpc references file; {rebuild}")
-    if data.get("suite_version") != SUITE_VERSION:
-        raise EtmpcError(f"{task}: references {path} are of suite version {data.get('suite_version')!r}, this etmpc's is "
-                         f"{SUITE_VERSION}; {rebuild}")
-    if data.get("test_set_sha256") != test_set_sha256:
-        raise EtmpcError(f"{task}: references {path} were made on test set {str(data.get('test_set_sha256'))[:12]}…, not "
-                         f"{test_set_sha256[:12]}…; {rebuild}")
-    system = make_system(task)
-    if data.get("recompute_price") != system.recompute_price:
-        raise EtmpcError(f"{task}: references {path} are at price {data.get('recompute_price')!r}, the task's is "
-                         f"{system.recompute_price!r}; {rebuild}")
-    try:
-        fields = {k: data[k] for k in ("task", "test_set_sha256", "episodes", "recompute_price", "objective_sense",
-                                       "periodic", "best", "oracle", "suite_version", "software")}
-        refs = References(**fields)
-        lengths = {len(v) for v in refs.periodic.values()} | {len(refs.oracle)}
-        ok = lengths == {refs.episodes} and refs.best in refs.periodic and refs.gap > 0
-    except (KeyError, TypeError, ValueError, ZeroDivisionError) as exc:
-        raise EtmpcError(f"{task}: references {path} are corrupt ({exc!r}); {rebuild}") from None
-    if not ok:
-        raise EtmpcError(f"{task}: references {path} are inconsistent (episode counts, best schedule or gap); {rebuild}")
-    return refs
-
-
-def write_references(refs: References, path: Path | None = None) -> Path:
-    path = references_path(refs.task) if path is None else Path(path)
-    return write_json(path, refs.to_json())
 
 
 # -- scores ----------------------------------------------------------------------------------------
@@ -221,7 +93,7 @@ def task_score(refs: References, evaluation: Evaluation, spec: str) -> TaskScore
         per_episode: list[float] = []
         better = math.nan
     else:
-        score = 100.0 * _mean(best - costs) / gap
+        score = 100.0 * mean(best - costs) / gap
         per_episode = list(100.0 * (best - costs) / gap)
         ci = float(1.96 * np.std(per_episode, ddof=1) / math.sqrt(len(per_episode))) if len(per_episode) > 1 else math.nan
         better = float(np.mean((costs < best) + 0.5 * (costs == best)))
@@ -312,18 +184,20 @@ class Scorecard:
     def to_json(self) -> dict:
         return {"format": "etmpc-scorecard", "suite_version": SUITE_VERSION, "tasks": self.tasks,
                 "references": self.references, "rows": [asdict(r) for r in self.rows],
-                "aggregates": [asdict(a) for a in self.aggregates], "software": _software(),
+                "aggregates": [asdict(a) for a in self.aggregates], "software": software(),
                 "machine": {"processor": platform.processor() or platform.machine(), "system": platform.platform()}}
 
 
 def score(policies: list, tasks: list[str] | None = None, test_set: str | None = None, workers: int | None = None,
           progress: bool = True, json_path: str | Path | None = None,
-          say: Callable[[str], None] = lambda line: None) -> Scorecard:
+          say: Callable[[str], None] = lambda line: None, episodes: int | None = None) -> Scorecard:
     """Score every trigger of ``policies`` (spec strings or policy objects, as :func:`etmpc.evaluate`
     takes) on every task of ``tasks`` (default: the whole suite), each on its stored test set at its
     own price, against the stored references (see the module's docstring). ``test_set``: another test
-    set, for one task; its references are computed for the run. A trigger that fails on a task has
-    that task's row say so; the others are still scored (:attr:`Scorecard.complete` is then False)."""
+    set, for one task; its references are computed for the run. ``episodes``: the first N episodes
+    only (each task's references then of those episodes: 0 and 100 stay exact). A trigger that fails
+    on a task has that task's row say so; the others are still scored (:attr:`Scorecard.complete` is
+    then False)."""
     if isinstance(policies, (str, bytes)) or not isinstance(policies, (list, tuple)) or not policies:
         raise EtmpcError("policies: a non-empty list of policy specs or objects is needed")
     if tasks is not None and (isinstance(tasks, (str, bytes)) or not isinstance(tasks, (list, tuple))):
@@ -347,6 +221,8 @@ def score(policies: list, tasks: list[str] | None = None, test_set: str | None =
             say(f"{task}: no stored references for test set {test_set}: computing them for this run")
             references[task] = build_references(task, test_set, workers, progress, say)
             shown[task] = {"stored": None}
+        if episodes is not None:
+            references[task] = references[task].head(episodes)
         refs = references[task]
         shown[task] |= {"best_periodic": refs.best, "oracle": refs.oracle_spec, "test_set_sha256": refs.test_set_sha256,
                         "episodes": refs.episodes, "recompute_price": refs.recompute_price, "gap": refs.gap}
@@ -354,10 +230,11 @@ def score(policies: list, tasks: list[str] | None = None, test_set: str | None =
     for task in tasks:
         refs = references[task]
         try:
-            evaluation = evaluate(task, list(policies), workers=workers, testset_path=test_set, progress=progress)
+            evaluation = evaluate(task, list(policies), episodes, workers=workers, testset_path=test_set,
+                                  progress=progress)
         except EtmpcError as exc:
             if len(policies) > 1:  # find which trigger failed: play each alone
-                rows += [_alone(task, refs, policy, test_set, workers, progress) for policy in policies]
+                rows += [_alone(task, refs, policy, test_set, workers, progress, episodes) for policy in policies]
                 continue
             rows.append(failed_task(task, _name(policies[0]), str(exc)))
             say(f"{task}: {exc}")
@@ -376,9 +253,9 @@ def _name(policy) -> str:
     return policy if isinstance(policy, str) else str(getattr(policy, "spec", type(policy).__name__))
 
 
-def _alone(task: str, refs: References, policy, test_set, workers, progress) -> TaskScore:
+def _alone(task: str, refs: References, policy, test_set, workers, progress, episodes=None) -> TaskScore:
     try:
-        evaluation = evaluate(task, [policy], workers=workers, testset_path=test_set, progress=progress)
+        evaluation = evaluate(task, [policy], episodes, workers=workers, testset_path=test_set, progress=progress)
     except EtmpcError as exc:
         return failed_task(task, _name(policy), str(exc))
     return task_score(refs, evaluation, evaluation.summaries[0].policy)

@@ -1,0 +1,104 @@
+"""``etmpc score``: its options and its command (the scorecard, the stored references, the leaderboard).
+
+See :mod:`etmpc.evaluation.scorecard` for what a score is and :mod:`etmpc.experiments.leaderboard`
+for the leaderboard. This module sits with the command line, on top: it may import any floor.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from etmpc.cli import types
+from etmpc.cli.output import distinct_policies as _distinct_policies, say as _say
+from etmpc.common.errors import EtmpcError
+from etmpc.common.outputs import check_outputs
+
+
+def add_parser(sub, tasks: str) -> None:
+    """The ``score`` subcommand's options, on the command line's subparsers ``sub``."""
+    sc = sub.add_parser("score", help="score triggers on every task against the suite's fixed references: the scorecard")
+    sc.add_argument("policy", nargs="*", metavar="SPEC",
+                    help="triggers to score: any --policy spec of evaluate (py:MODULE:NAME for your own, sb3:PATH, ...)")
+    sc.add_argument("--task", action="append", default=None, metavar="TASK",
+                    help=f"only this task ({tasks}; repeatable; default: every task)")
+    sc.add_argument("--test-set", default=None, metavar="PATH",
+                    help="another test set, for one --task: its references are computed for the run")
+    sc.add_argument("--episodes", type=types.positive_int, default=None,
+                    help="first N test-set episodes (default: all); the references are then those episodes'")
+    sc.add_argument("--json", type=types.json_path, default=None, metavar="PATH", help="write the scorecard as JSON")
+    sc.add_argument("--figure", type=types.png_path, default=None, metavar="PATH.png",
+                    help="also draw the triggers' performance profiles (share of episodes above each score)")
+    sc.add_argument("--workers", type=types.workers, default=None, help="worker processes (default: one per core)")
+    sc.add_argument("--leaderboard", action="store_true",
+                    help="score every built-in trigger (always, best periodic, best threshold, shipped DPI, rollout meter, "
+                         "oracle) and write DIR/leaderboard.md, .json and the profile figure (make leaderboard)")
+    sc.add_argument("--out", type=Path, default=Path("docs"), metavar="DIR",
+                    help="with --leaderboard: where the page goes (default docs); finished rows are kept in "
+                         "results/leaderboard, so an interrupted run continues")
+    sc.add_argument("--readme", type=Path, default=None, metavar="PATH",
+                    help="with --leaderboard: also rewrite this README's table between its leaderboard markers")
+    sc.add_argument("--references", action="store_true",
+                    help="rebuild the stored references of the tasks (every periodic schedule and the oracle on the "
+                         "stored test set; a maintainer's step after a task changes)")
+
+
+def run(args) -> None:
+    """``etmpc score``: the scorecard, ``--references`` or ``--leaderboard``."""
+    from etmpc.evaluation.references import build_references, write_references
+    from etmpc.evaluation.scorecard import format_scorecard, score
+    from etmpc.systems import distinct, names
+
+    tasks = distinct(args.task or names())
+    if args.leaderboard:
+        return _leaderboard(args, tasks)
+    if args.readme is not None or args.out != Path("docs"):
+        raise EtmpcError("--out and --readme are --leaderboard's")
+    if args.references:
+        if args.policy or args.test_set is not None or args.json is not None or args.figure is not None:
+            raise EtmpcError("--references rebuilds the stored references only: no SPEC, --test-set, --json or --figure "
+                             "with it")
+        for task in tasks:
+            path = write_references(build_references(task, workers=args.workers, say=_say))
+            print(f"wrote {path}")
+        return
+    if not args.policy:
+        raise EtmpcError("give at least one trigger to score (a SPEC such as every:3 or py:MODULE:NAME)")
+    _distinct_policies(args.policy)
+    if args.test_set is not None and not Path(args.test_set).is_file():
+        raise EtmpcError(f"test set {args.test_set} not found")
+    check_outputs({"--json": args.json, "--figure": args.figure}, inputs={"--test-set": args.test_set})
+    card = score(args.policy, tasks, args.test_set, args.workers, json_path=args.json, say=_say, episodes=args.episodes)
+    print(format_scorecard(card))
+    if args.json is not None:
+        print(f"wrote {args.json}")
+    if args.figure is not None:
+        import numpy as np
+
+        from etmpc.evaluation.scorecard import profiles
+        from etmpc.views.figures import write_performance_profile_png
+
+        thresholds = np.linspace(-100.0, 200.0, 301)
+        write_performance_profile_png(args.figure, profiles(card, thresholds), thresholds, card.tasks)
+        print(f"wrote {args.figure}")
+    if not card.complete:
+        failed = sorted({f"{r.policy} on {r.task}" for r in card.rows if r.error is not None})
+        raise EtmpcError(f"not every trigger could be scored on every task: {', '.join(failed)} (see its row)")
+
+
+def _leaderboard(args, tasks: list[str]) -> None:
+    from etmpc.evaluation.workers import default_workers
+    from etmpc.experiments.leaderboard import build
+
+    if args.policy or args.references or args.test_set is not None or args.json is not None or args.figure is not None:
+        raise EtmpcError("--leaderboard scores the built-in triggers on the stored test sets: no SPEC, --references, "
+                         "--test-set, --json or --figure with it")
+    if args.readme is not None and not args.readme.is_file():
+        raise EtmpcError(f"--readme {args.readme} not found")
+    check_outputs({}, {"--out": args.out})
+    data = build(args.out, Path("results") / "leaderboard", tasks, args.episodes, args.workers or default_workers(),
+                 args.readme, say=_say)
+    from etmpc.experiments.leaderboard import headline
+
+    print(headline(data))
+    print(f"wrote {args.out}/leaderboard.md, leaderboard.json and leaderboard_profile.png"
+          + (f"; the table in {args.readme}" if args.readme is not None else ""))

@@ -1,0 +1,160 @@
+"""A task's reference points for the scorecard, stored with the task: every periodic schedule and the
+oracle over the best of them, per episode of its test set (see :mod:`etmpc.evaluation.scorecard`).
+
+``tasks/<domain>/<task>_references.json`` holds them with the suite's version, the test set's sha256,
+the task's price and the software that computed them; a file that does not match what is being scored
+is refused in one line that says how to rebuild it (``etmpc score --references``).
+"""
+
+from __future__ import annotations
+
+import json
+import platform
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field, replace
+from importlib.metadata import PackageNotFoundError, version
+from pathlib import Path
+
+import numpy as np
+
+from etmpc.common.errors import EtmpcError
+from etmpc.common.numerics import fsum
+from etmpc.common.outputs import write_json
+from etmpc.common.resources import tasks_dir
+from etmpc.evaluation.evaluate import Evaluation, evaluate
+from etmpc.systems import make_system
+
+SUITE_VERSION = 1  # a change to any task, its test set or its price makes a new version of the suite
+FORMAT = "etmpc-references"
+SOFTWARE = ("etmpc", "mujoco", "dm-control", "casadi", "numpy", "scipy")
+
+
+def software() -> dict[str, str]:
+    found = {}
+    for name in SOFTWARE:
+        try:
+            found[name] = version(name)
+        except PackageNotFoundError:
+            found[name] = "(not installed)"
+    return found | {"python": platform.python_version()}
+
+
+@dataclass(frozen=True)
+class References:
+    """A task's reference points on one test set (see the module's docstring)."""
+
+    task: str
+    test_set_sha256: str
+    episodes: int
+    recompute_price: float
+    objective_sense: str
+    periodic: dict[str, list[float]]  # every:T -> objective per episode
+    best: str  # the periodic schedule with the best mean objective
+    oracle: list[float]  # oracle:BEST's objective per episode
+    suite_version: int = SUITE_VERSION
+    software: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def oracle_spec(self) -> str:
+        return f"oracle:{self.best}"
+
+    def costs(self, objectives) -> np.ndarray:
+        """Objectives as costs (lower is better), whatever the task's sense."""
+        values = np.asarray(objectives, dtype=float)
+        return values if self.objective_sense == "min" else -values
+
+    @property
+    def gap(self) -> float:
+        """``D = mean_e (B_e - O_e)``: what the oracle gains over the best periodic schedule, per episode."""
+        return mean(self.costs(self.periodic[self.best]) - self.costs(self.oracle))
+
+    def head(self, episodes: int) -> References:
+        """The references of the first ``episodes`` episodes only (the best schedule stays the one chosen
+        on the whole test set; the gap is that of these episodes)."""
+        if not 1 <= episodes <= self.episodes:
+            raise EtmpcError(f"--episodes must be in 1..{self.episodes} for these references, got {episodes}")
+        return replace(self, episodes=episodes, periodic={k: v[:episodes] for k, v in self.periodic.items()},
+                       oracle=self.oracle[:episodes])
+
+    def to_json(self) -> dict:
+        return {"format": FORMAT} | asdict(self)
+
+
+def mean(values) -> float:
+    """The mean, summed exactly (``fsum``): the same on every machine, and ``mean(x) / mean(x)`` is 1."""
+    values = list(np.asarray(values, dtype=float))
+    return fsum(values) / len(values)
+
+
+def references_path(task: str) -> Path:
+    system = make_system(task)
+    return tasks_dir() / system.domain / f"{system.task}_references.json"
+
+
+def _objectives(evaluation: Evaluation, spec: str) -> list[float]:
+    runs = sorted((r for r in evaluation.runs if r.policy == spec), key=lambda r: r.episode)
+    if not all(r.finite for r in runs):
+        raise EtmpcError(f"{evaluation.domain}/{evaluation.task}: {spec} ended an episode on a non-finite state; "
+                         "it cannot be a reference")
+    return [r.objective for r in runs]
+
+
+def build_references(task: str, testset_path: str | None = None, workers: int | None = None, progress: bool = True,
+                     say: Callable[[str], None] = lambda line: None) -> References:
+    """Play every periodic schedule and the oracle over the best of them on ``task``'s test set (the
+    stored one by default)."""
+    system = make_system(task)
+    periodic = [f"every:{t}" for t in range(1, system.horizon + 1)]
+    say(f"{system.name}: references: {len(periodic)} periodic schedules, then the oracle over the best")
+    fixed = evaluate(system.name, periodic, workers=workers, testset_path=testset_path, progress=progress)
+    table = {spec: _objectives(fixed, spec) for spec in periodic}
+    sign = 1.0 if system.objective_sense == "min" else -1.0
+    best = min(periodic, key=lambda spec: (sign * mean(table[spec]), periodic.index(spec)))
+    oracle = evaluate(system.name, [f"oracle:{best}"], workers=workers, testset_path=testset_path, progress=progress)
+    refs = References(system.name, fixed.testset_sha256, len(table[best]), system.recompute_price,
+                      system.objective_sense, table, best, _objectives(oracle, f"oracle:{best}"), software=software())
+    if not refs.gap > 0:
+        raise EtmpcError(f"{system.name}: the oracle over {best} does not improve on it on this test set "
+                         f"(gap {refs.gap:g}): there is no scale to score against")
+    return refs
+
+
+def load_references(task: str, test_set_sha256: str, path: Path | None = None) -> References:
+    """The stored references of ``task``, checked against the test set (its sha256), the suite's version
+    and the task's price; a mismatch is one line that says how to rebuild them."""
+    path = references_path(task) if path is None else Path(path)
+    rebuild = f"rebuild them with: etmpc score --references --task {task}"
+    try:
+        data = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise EtmpcError(f"{task}: no stored references ({path}); {rebuild}") from None
+    except (OSError, ValueError) as exc:
+        raise EtmpcError(f"{task}: references {path} cannot be read ({exc}); {rebuild}") from None
+    if not isinstance(data, dict) or data.get("format") != FORMAT:
+        raise EtmpcError(f"{task}: {path} is not an etmpc references file; {rebuild}")
+    if data.get("suite_version") != SUITE_VERSION:
+        raise EtmpcError(f"{task}: references {path} are of suite version {data.get('suite_version')!r}, this etmpc's is "
+                         f"{SUITE_VERSION}; {rebuild}")
+    if data.get("test_set_sha256") != test_set_sha256:
+        raise EtmpcError(f"{task}: references {path} were made on test set {str(data.get('test_set_sha256'))[:12]}…, not "
+                         f"{test_set_sha256[:12]}…; {rebuild}")
+    system = make_system(task)
+    if data.get("recompute_price") != system.recompute_price:
+        raise EtmpcError(f"{task}: references {path} are at price {data.get('recompute_price')!r}, the task's is "
+                         f"{system.recompute_price!r}; {rebuild}")
+    try:
+        fields = {k: data[k] for k in ("task", "test_set_sha256", "episodes", "recompute_price", "objective_sense",
+                                       "periodic", "best", "oracle", "suite_version", "software")}
+        refs = References(**fields)
+        lengths = {len(v) for v in refs.periodic.values()} | {len(refs.oracle)}
+        ok = lengths == {refs.episodes} and refs.best in refs.periodic and refs.gap > 0
+    except (KeyError, TypeError, ValueError, ZeroDivisionError) as exc:
+        raise EtmpcError(f"{task}: references {path} are corrupt ({exc!r}); {rebuild}") from None
+    if not ok:
+        raise EtmpcError(f"{task}: references {path} are inconsistent (episode counts, best schedule or gap); {rebuild}")
+    return refs
+
+
+def write_references(refs: References, path: Path | None = None) -> Path:
+    path = references_path(refs.task) if path is None else Path(path)
+    return write_json(path, refs.to_json())
