@@ -6,7 +6,7 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 export MUJOCO_GL ?= egl
 
-.PHONY: reproduce sweep evaluate example test setup clean
+.PHONY: reproduce sweep leaderboard evaluate example test setup clean
 
 setup: $(VENV)/.installed
 
@@ -25,6 +25,12 @@ reproduce: setup
 # finished stages are reused, and REPORT.md gains the equal-rate answer. Continues after an interruption.
 sweep: setup
 	$(BIN)/etmpc reproduce --sweep --out results/reproduce
+
+# The leaderboard: every built-in trigger scored on every task's stored test set (etmpc score
+# --leaderboard), written to docs/leaderboard.md and .json with the profile figure; the README's headline
+# table is rewritten from it. Finished rows are kept in results/leaderboard: an interrupted run continues.
+leaderboard: setup
+	$(BIN)/etmpc score --leaderboard --out docs --readme README.md
 
 # A shorter look: compare recomputation policies on the stored 100-episode test set of each system,
 # and draw the paper's Figure 1 (battery forecasts).

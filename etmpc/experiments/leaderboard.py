@@ -1,0 +1,279 @@
+"""``etmpc score --leaderboard``: every built-in trigger scored on the suite, written as a generated page.
+
+The entries, each one spec per task (:func:`entries`):
+
+* ``always``: standard MPC;
+* **best periodic**: the task's best ``every:T`` on its stored test set (its reference: 0);
+* **best threshold**: the event trigger ``threshold:X`` whose mean objective is best on
+  training-distribution episodes (the validation stream of ``etmpc train``, never the test set), over
+  the task's ``Benchmark.sweep_thresholds``;
+* **DPI (shipped)**: the learned policy shipped in ``policies/<task>/learned.json`` (from a checkout);
+* **rollout meter**: ``rollout:BEST:4:H``, the one-step lookahead over sampled futures with the task's
+  lookahead ``H``: a real policy, and the costliest to run (its CPU column shows it);
+* **oracle**: ``oracle:BEST`` (its reference: 100), which knows each episode's future.
+
+Each (entry, task) is scored by :mod:`etmpc.evaluation.scorecard` and kept in the work directory as it
+finishes, so an interrupted run continues where it stopped. The page (``docs/leaderboard.md``), its
+JSON and the performance profiles are written at the end, with the commit, date, machine and
+software that produced them; the README's headline table is the page's, rewritten between its markers.
+"""
+
+from __future__ import annotations
+
+import datetime
+import json
+import math
+import os
+import platform
+import re
+import subprocess
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from etmpc.common.errors import EtmpcError
+from etmpc.common.outputs import write_json, write_text
+from etmpc.common.resources import data_root
+from etmpc.evaluation import testsets as ts_mod
+from etmpc.evaluation.evaluate import evaluate
+from etmpc.evaluation.references import SUITE_VERSION, References, load_references, software
+from etmpc.evaluation.scorecard import Scorecard, TaskScore, aggregate, profiles, task_score
+from etmpc.evaluation.workers import make_backend
+from etmpc.learning.config import VALIDATION_ENTROPY
+from etmpc.learning.jobs import mean_scores
+from etmpc.systems import distinct, folder_name, make_system, names
+from etmpc.views.figures import write_performance_profile_png
+
+FORMAT = "etmpc-leaderboard"
+BEGIN, END = "<!-- leaderboard:begin -->", "<!-- leaderboard:end -->"
+VALIDATION_EPISODES = 20  # training-distribution episodes that choose the best threshold
+ROLLOUT_FUTURES = 4
+THRESHOLDS = np.linspace(-100.0, 200.0, 301)
+
+
+@dataclass(frozen=True)
+class Entry:
+    """A row of the leaderboard: a name, what kind of trigger it is, and its spec on each task."""
+
+    name: str
+    kind: str  # reference | baseline | learned | meter | bound
+    specs: dict[str, str]
+    note: str = ""
+
+
+def shipped_policy(task: str) -> Path | None:
+    """The DPI policy shipped for ``task`` in a checkout's ``policies/``, if there is one."""
+    path = data_root() / "policies" / folder_name(task) / "learned.json"
+    return path if path.is_file() else None
+
+
+def best_threshold(task: str, workers: int, say: Callable[[str], None]) -> str:
+    """The ``threshold:X`` of the task's grid with the best mean objective on training-distribution episodes."""
+    system = make_system(task)
+    specs = [f"threshold:{x:g}" for x in system.benchmark.sweep_thresholds]
+    with make_backend("local", workers) as pool:
+        means = mean_scores(pool, system.name, specs, VALIDATION_ENTROPY, VALIDATION_EPISODES)
+    sign = 1.0 if system.objective_sense == "min" else -1.0
+    chosen = min(zip(specs, means), key=lambda pair: sign * pair[1])[0]
+    say(f"{task}: best threshold on {VALIDATION_EPISODES} training-distribution episodes: {chosen}")
+    return chosen
+
+
+def entries(tasks: list[str], references: dict[str, References], workers: int,
+            say: Callable[[str], None]) -> list[Entry]:
+    best = {t: references[t].best for t in tasks}
+    found = [
+        Entry("always", "baseline", {t: "always" for t in tasks}, "standard MPC: a new plan every step"),
+        Entry("best periodic", "reference", {t: best[t] for t in tasks}, "each task's best every:T on its test set"),
+        Entry("best threshold", "baseline", {t: best_threshold(t, workers, say) for t in tasks},
+              f"threshold:X chosen on {VALIDATION_EPISODES} training-distribution episodes"),
+    ]
+    shipped = {t: shipped_policy(t) for t in tasks}
+    if any(path is not None for path in shipped.values()):
+        found.append(Entry("DPI (shipped)", "learned", {t: f"rl:{p}" for t, p in shipped.items() if p is not None},
+                           "policies/<task>/learned.json, chosen on validation episodes"))
+    found += [
+        Entry("rollout meter", "meter", {t: f"rollout:{best[t]}:{ROLLOUT_FUTURES}:{make_system(t).benchmark.lookahead}"
+                                         for t in tasks}, "one-step lookahead over sampled futures: a real policy"),
+        Entry("oracle", "bound", {t: references[t].oracle_spec for t in tasks}, "knows each episode's future: not a policy"),
+    ]
+    return found
+
+
+def _slug(name: str) -> str:
+    return re.sub(r"[^a-z0-9]+", "-", name.lower()).strip("-")
+
+
+def _row(entry: Entry, task: str, refs: References, work: Path, episodes: int, workers: int,
+         say: Callable[[str], None]) -> TaskScore:
+    """The entry's score on ``task``, from the work directory if an earlier run finished it."""
+    spec = entry.specs[task]
+    path = work / _slug(entry.name) / f"{folder_name(task)}.json"
+    key = {"spec": spec, "episodes": episodes, "test_set_sha256": refs.test_set_sha256, "suite_version": SUITE_VERSION}
+    if path.is_file():
+        try:
+            kept = json.loads(path.read_text())
+            if kept.get("key") == key:
+                return TaskScore(**kept["row"])
+        except (OSError, ValueError, TypeError):
+            pass  # an unreadable leftover is played again
+    say(f"{task}: {entry.name} ({spec})")
+    try:
+        played = evaluate(task, [spec], episodes, workers=workers, progress=False)
+        row = task_score(refs, played, spec)
+    except EtmpcError as exc:
+        row = TaskScore(task, spec, 0, math.nan, refs.objective_sense, math.nan, None, 0, 0, math.nan, math.nan, [],
+                        math.nan, {}, refs.best, str(exc))
+    write_json(path, {"key": key, "row": asdict(row)})
+    return row
+
+
+def _provenance() -> dict:
+    def git(*args: str) -> str | None:
+        try:
+            done = subprocess.run(["git", *args], cwd=data_root(), capture_output=True, text=True, timeout=10)
+        except (OSError, subprocess.SubprocessError):
+            return None
+        return done.stdout.strip() if done.returncode == 0 else None
+
+    commit = git("rev-parse", "--short", "HEAD")
+    dirty = bool(git("status", "--porcelain", "--untracked-files=no")) if commit else None
+    return {"commit": commit or "(not a git checkout)", "uncommitted_changes": dirty,
+            "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
+            "machine": {"processor": platform.processor() or platform.machine(), "system": platform.platform(),
+                        "cores": len(os.sched_getaffinity(0))},
+            "software": software()}
+
+
+def build(docs: Path, work: Path, tasks: list[str] | None = None, episodes: int | None = None, workers: int = 1,
+          readme: Path | None = None, say: Callable[[str], None] = lambda line: None) -> dict:
+    """Score every entry on every task and write ``docs/leaderboard.{md,json}`` and the profile figure;
+    with ``readme``, rewrite its headline table between the markers. Returns the JSON."""
+    tasks = distinct(tasks or names())
+    references = {}
+    for task in tasks:
+        system = make_system(task)
+        sha = ts_mod.load(ts_mod.default_path(system.domain, system.task), system.domain, system.task).sha256
+        references[task] = load_references(task, sha)
+        if episodes is not None:
+            references[task] = references[task].head(episodes)
+    if readme is not None and BEGIN not in Path(readme).read_text():
+        raise EtmpcError(f"{readme} has no {BEGIN} ... {END} block for the leaderboard's table")
+    board = entries(tasks, references, workers, say)
+    n = episodes or min(r.episodes for r in references.values())
+    result = []
+    rows_all: list[TaskScore] = []
+    for entry in board:
+        rows = [_row(entry, t, references[t], work, n, workers, say) for t in tasks if t in entry.specs]
+        named = [TaskScore(**(asdict(r) | {"policy": entry.name})) for r in rows]
+        rows_all += named
+        result.append({"name": entry.name, "kind": entry.kind, "note": entry.note, "specs": entry.specs,
+                       "rows": [asdict(r) for r in rows], "aggregate": asdict(aggregate(named))})
+    data = {"format": FORMAT, "suite_version": SUITE_VERSION, "tasks": tasks, "episodes": n,
+            "references": {t: {"best_periodic": r.best, "oracle": r.oracle_spec, "gap": r.gap,
+                               "test_set_sha256": r.test_set_sha256, "recompute_price": r.recompute_price,
+                               "objective_sense": r.objective_sense} for t, r in references.items()},
+            "generated": _provenance(), "entries": result}
+    docs.mkdir(parents=True, exist_ok=True)
+    card = Scorecard(tasks, {}, rows_all, [])
+    write_performance_profile_png(docs / "leaderboard_profile.png", profiles(card, THRESHOLDS), THRESHOLDS, tasks)
+    write_json(docs / "leaderboard.json", data)
+    write_text(docs / "leaderboard.md", page(data))
+    if readme is not None:
+        write_text(Path(readme), with_table(Path(readme).read_text(), headline(data)))
+    return data
+
+
+# -- what the page says ------------------------------------------------------------------------------
+def _cell(row: dict) -> str:
+    if row.get("error"):
+        return "failed"
+    if not math.isfinite(row["score"]):
+        return f"{row['nonfinite_episodes']} non-finite"
+    return f"{row['score']:.1f} ± {row['score_ci95']:.1f}"
+
+
+def headline(data: dict) -> str:
+    """The headline table (markdown): each entry's normalized score per task and the suite's aggregate."""
+    tasks = data["tasks"]
+    lines = ["| trigger | " + " | ".join(tasks) + " | IQM [95 % CI] | P(improve) | CPU ms/episode |",
+             "|---|" + "---:|" * len(tasks) + "---:|---:|---:|"]
+    for entry in data["entries"]:
+        rows = {r["task"]: r for r in entry["rows"]}
+        a = entry["aggregate"]
+        cpu = [rows[t]["cpu_ms"]["total"] for t in tasks if t in rows and rows[t].get("cpu_ms")]
+        iqm = f"{a['iqm']:.1f} [{a['iqm_ci95'][0]:.1f}, {a['iqm_ci95'][1]:.1f}]" if math.isfinite(a["iqm"]) else "-"
+        improve = f"{a['probability_of_improvement']:.2f}" if math.isfinite(a["probability_of_improvement"]) else "-"
+        cells = [_cell(rows[t]) if t in rows else "-" for t in tasks] + [iqm, improve, f"{np.mean(cpu):.1f}" if cpu else "-"]
+        lines.append(f"| {entry['name']} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def with_table(text: str, table: str) -> str:
+    """``text`` with the block between the leaderboard's markers replaced by ``table``."""
+    start, end = text.index(BEGIN) + len(BEGIN), text.index(END)
+    return text[:start] + "\n" + table + "\n" + text[end:]
+
+
+def table_in(text: str) -> str:
+    """The table between the leaderboard's markers of ``text``."""
+    return text[text.index(BEGIN) + len(BEGIN):text.index(END)].strip("\n")
+
+
+def page(data: dict) -> str:
+    g = data["generated"]
+    dirty = " (with uncommitted changes)" if g["uncommitted_changes"] else ""
+    software = ", ".join(f"{k} {v}" for k, v in g["software"].items())
+    lines = [
+        "# Leaderboard",
+        "",
+        f"Generated by `etmpc score --leaderboard` from commit {g['commit']}{dirty} on {g['date']}, on "
+        f"{g['machine']['cores']} cores of {g['machine']['processor']} ({g['machine']['system']}); {software}. "
+        "Do not edit: run `make leaderboard` again.",
+        "",
+        f"Each task's normalized score on its stored test set ({data['episodes']} episodes, at the task's price): "
+        "0 is its best periodic schedule, 100 the oracle over it (a one-step lookahead with the episode's future: "
+        "above 100 is possible, and the oracle is a bound, not a policy). ± is the 95 % CI over episodes; the suite's "
+        "interquartile mean and the probability of improving on the best periodic schedule carry 95 % stratified "
+        "bootstrap CIs. CPU is the controller's measured time per episode on this machine (solves, feedback and "
+        "the trigger's own decisions), averaged over the tasks. See `etmpc score --help` and the README.",
+        "",
+        BEGIN,
+        headline(data),
+        END,
+        "",
+        "![performance profiles](leaderboard_profile.png)",
+        "",
+        "## Entries",
+        "",
+    ]
+    for entry in data["entries"]:
+        distinct_specs = set(entry["specs"].values())
+        specs = (f"`{distinct_specs.pop()}`" if len(distinct_specs) == 1
+                 else ", ".join(f"{t}: `{spec}`" for t, spec in entry["specs"].items()))
+        lines.append(f"* **{entry['name']}** ({entry['kind']}): {entry['note']}; {specs}.")
+    lines += ["", "## Per task", ""]
+    for task in data["tasks"]:
+        ref = data["references"][task]
+        sense = "lower" if ref["objective_sense"] == "min" else "higher"
+        lines += [f"### {task}", "",
+                  f"References: `{ref['best_periodic']}` and `{ref['oracle']}` (mean gap {ref['gap']:.5g}); objective: "
+                  f"{sense} is better, at {ref['recompute_price']:g} per computation.", "",
+                  "| trigger | spec | objective | computations | failures | score | CPU ms/ep (solve / feedback / trigger) |",
+                  "|---|---|---:|---:|---:|---:|---:|"]
+        for entry in data["entries"]:
+            row = next((r for r in entry["rows"] if r["task"] == task), None)
+            if row is None:
+                continue
+            if row.get("error"):
+                lines.append(f"| {entry['name']} | `{row['policy']}` | failed: {row['error']} | | | | |")
+                continue
+            failures = "-" if row["failures_mean"] is None else f"{row['failures_mean']:.2f}"
+            cpu = row["cpu_ms"]
+            lines.append(f"| {entry['name']} | `{row['policy']}` | {row['objective_mean']:.5g} | {row['recomputes_mean']:.2f} "
+                         f"| {failures} | {_cell(row)} | {cpu['total']:.1f} ({cpu['solve']:.1f} / {cpu['feedback']:.1f} / "
+                         f"{cpu['decide']:.1f}) |")
+        lines.append("")
+    return "\n".join(lines)
