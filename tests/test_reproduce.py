@@ -6,6 +6,7 @@ import json
 import numpy as np
 import pytest
 
+import etmpc
 from etmpc.common.errors import EtmpcError
 from etmpc.evaluation.evaluate import evaluate
 from etmpc.views.replay import replay_summary
@@ -48,6 +49,22 @@ def test_json_equals_a_direct_evaluation(run, domain):
             - next(x.objective for x in fixed.runs if x.policy == best.policy and x.episode == e) for e in range(3)]
     assert r["paired"]["mean_difference"] == pytest.approx(np.mean(diff), rel=1e-12)
     assert r["paired"]["ci95"] == pytest.approx(1.96 * np.std(diff, ddof=1) / np.sqrt(3), rel=1e-12)
+
+
+@pytest.mark.slow
+def test_the_report_scores_what_the_run_trained_against_the_suites_references(run):
+    out, results = run
+    report = (out / "REPORT.md").read_text().split("## The scorecard")[1]
+    for name, r in results["systems"].items():
+        card = r["scorecard"]
+        assert card["references"]["episodes"] == 3  # the run's test-set episodes: the references of those
+        rows = card["rows"]
+        assert rows["best periodic"]["score"] == 0.0  # the reference, played by the run, scores exactly 0
+        assert {"best periodic", "best fixed", "DPI", "PPO"} <= set(rows) and (("GPOMDP seed 0" in rows) == (name in PAPER))
+        dpi = rows["DPI"]
+        direct = etmpc.score([dpi["policy"]], tasks=[name], workers=1, progress=False, episodes=3).rows[0]
+        assert dpi["score"] == direct.score and dpi["episode_scores"] == direct.episode_scores
+        assert f"{dpi['score']:.1f} ± {dpi['score_ci95']:.1f}" in report
 
 
 @pytest.mark.slow

@@ -81,26 +81,44 @@ def task_score(refs: References, evaluation: Evaluation, spec: str) -> TaskScore
     """``spec``'s score on ``refs``' task from ``evaluation`` (one run per episode, the references' test set)."""
     runs = sorted((r for r in evaluation.runs if r.policy == spec), key=lambda r: r.episode)
     cpu = [c for r, c in zip(evaluation.runs, evaluation.cpu or []) if r.policy == spec]
-    if [r.episode for r in runs] != list(range(refs.episodes)):
-        raise EtmpcError(f"{refs.task}: {spec} was not played on each of the references' {refs.episodes} episodes")
     summary = next(s for s in evaluation.summaries if s.policy == spec)
-    nonfinite = sum(not r.finite for r in runs)
-    best = refs.costs(refs.periodic[refs.best])
-    costs = refs.costs([r.objective for r in runs])
-    gap = refs.gap
+    parts = {k: 1e3 * float(np.mean([c[k] for c in cpu])) if cpu else math.nan for k in ("solve", "feedback", "decide")}
+    return _scored(refs, spec, [r.episode for r in runs], [r.objective for r in runs], sum(not r.finite for r in runs),
+                   asdict(summary), parts | {"total": sum(parts.values())})
+
+
+def task_score_from_json(refs: References, evaluation: dict, spec: str) -> TaskScore:
+    """The same from an evaluation's JSON (``etmpc evaluate --json``, reproduce's files), whose runs carry
+    no CPU time; a stochastic policy's passes are averaged per episode."""
+    by_episode: dict[int, list[float]] = {}
+    nonfinite = 0
+    for r in evaluation["runs"]:
+        if r["policy"] == spec:
+            by_episode.setdefault(r["episode"], []).append(r["objective"])
+            nonfinite += not r["finite"]
+    if evaluation["test_set"]["sha256"] != refs.test_set_sha256:
+        raise EtmpcError(f"{refs.task}: {spec} was evaluated on another test set than the references'")
+    episodes = sorted(by_episode)
+    return _scored(refs, spec, episodes, [float(np.mean(by_episode[e])) for e in episodes], nonfinite,
+                   evaluation["policies"][spec], {})
+
+
+def _scored(refs: References, spec: str, episodes: list[int], objectives: list[float], nonfinite: int, summary: dict,
+            cpu_ms: dict) -> TaskScore:
+    if episodes != list(range(refs.episodes)):
+        raise EtmpcError(f"{refs.task}: {spec} was not played on each of the references' {refs.episodes} episodes")
+    best, costs, gap = refs.costs(refs.periodic[refs.best]), refs.costs(objectives), refs.gap
     if nonfinite:
-        score = ci = math.nan
+        score = ci = better = math.nan
         per_episode: list[float] = []
-        better = math.nan
     else:
         score = 100.0 * mean(best - costs) / gap
         per_episode = list(100.0 * (best - costs) / gap)
         ci = float(1.96 * np.std(per_episode, ddof=1) / math.sqrt(len(per_episode))) if len(per_episode) > 1 else math.nan
         better = float(np.mean((costs < best) + 0.5 * (costs == best)))
-    parts = {k: 1e3 * float(np.mean([c[k] for c in cpu])) if cpu else math.nan for k in ("solve", "feedback", "decide")}
-    return TaskScore(refs.task, spec, len(runs), summary.objective_mean, refs.objective_sense, summary.recomputes_mean,
-                     summary.failures_mean, summary.solver_failures, nonfinite, score, ci, per_episode, better,
-                     parts | {"total": sum(parts.values())}, refs.best)
+    return TaskScore(refs.task, spec, len(episodes), summary["objective_mean"], refs.objective_sense,
+                     summary["recomputes_mean"], summary.get("failures_mean"), summary["solver_failures"], nonfinite,
+                     score, ci, per_episode, better, cpu_ms, refs.best)
 
 
 def failed_task(task: str, spec: str, error: str) -> TaskScore:

@@ -81,6 +81,7 @@ def report(results: dict) -> str:
             f"Files: {', '.join(f'`{v}`' for v in r['files'].values())}.",
             "",
         ]
+    lines += scorecard_section(results)
     if results.get("sweep"):
         lines += ["# Beyond the paper: the trade-off curve", ""]
         for domain, pareto in results["sweep"].items():
@@ -220,3 +221,33 @@ def against_the_paper(results: dict) -> list[str]:
                "price, a kept one at a forecast." if best["policy"] == "always" else
                "Keeping plans pays here."))
     return out
+
+
+def scorecard_section(results: dict) -> list[str]:
+    """What the run trained, on the suite's scorecard (``etmpc score``): each task's normalized score
+    (0: its best periodic schedule, 100: the oracle over it) and the interquartile mean over tasks."""
+    from etmpc.evaluation.scorecard import TaskScore, aggregate
+
+    cards = {task: r.get("scorecard", {}) for task, r in results["systems"].items()}
+    tasks = [task for task, card in cards.items() if "rows" in card]
+    lines = ["## The scorecard", ""]
+    missing = [f"{task}: {card['unavailable']}" for task, card in cards.items() if "unavailable" in card]
+    if not tasks:
+        return lines + ["No task could be scored." + (f" ({'; '.join(missing)})" if missing else ""), ""]
+    names: list[str] = []
+    for task in tasks:
+        names += [name for name in cards[task]["rows"] if name not in names]
+    lines += ["Each task's normalized score on the run's test-set episodes, against the suite's stored references "
+              "(0: the task's best periodic schedule, 100: the oracle over it; ± 95 % CI), as `etmpc score` gives it; "
+              "the IQM over the tasks a row was scored on, with its stratified bootstrap CI. CPU times are "
+              "`etmpc score`'s, not measured here.", "",
+              "| trained | " + " | ".join(tasks) + " | IQM [95 % CI] |", "|---|" + "---:|" * (len(tasks) + 1)]
+    for name in names:
+        rows = [cards[t]["rows"].get(name) for t in tasks]
+        cells = ["-" if r is None else f"{r['score']:.1f} ± {r['score_ci95']:.1f}" for r in rows]
+        a = aggregate([TaskScore(**r) for r in rows if r is not None])
+        lines.append(f"| {name} | " + " | ".join(cells) + f" | {a.iqm:.1f} [{a.iqm_ci95[0]:.1f}, {a.iqm_ci95[1]:.1f}] |")
+    refs = "; ".join(f"{t}: `{cards[t]['references']['best_periodic']}`, `{cards[t]['references']['oracle']}`"
+                     for t in tasks)
+    lines += ["", f"References: {refs}." + (f" Not scored: {'; '.join(missing)}." if missing else ""), ""]
+    return lines

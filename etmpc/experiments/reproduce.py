@@ -43,7 +43,9 @@ from etmpc.evaluation.render import render_rollout
 from etmpc.evaluation.workers import play_test_episode, shared_pools
 from etmpc.experiments import sweep as sweeps
 from etmpc.experiments.report import PAPER, machine, report, software_versions
-from etmpc.experiments.summary import summarise_default, summarise_headroom, summarise_learners, summarise_system
+from etmpc.evaluation.references import references_path
+from etmpc.experiments.summary import (summarise_default, summarise_headroom, summarise_learners, summarise_scorecard,
+                                       summarise_system)
 from etmpc.learning.dpi import Settings as DpiSettings
 from etmpc.learning.ppo import PpoSettings, train_ppo
 from etmpc.learning.train import TrainConfig, curve_summary, load_checkpoint, train
@@ -207,6 +209,10 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
     summary["headroom"] = summarise_headroom(system, best, baselines, learned, default, rollout, oracle)
     ppo_run, ppo = _ppo(folder, domain, settings, run, common)
     summary["learners"] = summarise_learners(system, baselines, learned, default, ppo, ppo_run, settings.to_json())
+    scored = {"best periodic": (baselines, _stored_best(system)), "best fixed": (baselines, best),
+              **{f"GPOMDP seed {s}": (learned, spec) for s, spec in zip(settings.seeds, learned_specs)},
+              "DPI": (default, f"rl:{shipped}"), "PPO": (ppo, f"sb3:{folder / 'train_ppo' / 'selected.zip'}")}
+    summary["scorecard"] = summarise_scorecard(system, scored)
 
     _say(f"{domain}: figures, recording, video")
     if not (folder / "figure3.png").exists():
@@ -230,6 +236,15 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
         files["video"] = "episode.mp4"
     summary["files"] = {k: f"{folder.name}/{v}" for k, v in files.items()}
     return summary
+
+
+def _stored_best(system) -> str:
+    """The task's best periodic schedule, as its stored references name it (``every:1`` if there are none)."""
+    try:
+        best = json.loads(references_path(system.name).read_text())["best"]
+    except (OSError, ValueError, KeyError):
+        best = "every:1"
+    return "always" if best == "every:1" else best  # the same schedule, as reproduce's fixed policies name it
 
 
 def _ppo(folder: Path, domain: str, settings: Settings, run: dict, common: dict) -> tuple[dict | None, dict | None]:

@@ -138,3 +138,27 @@ def summarise_learners(system, baselines: dict, learned: dict, default: dict, pp
                          recomputes_mean=float(np.mean([r["recomputes"] for r in runs])) if runs else float("nan"),
                          training=cost)
     return out
+
+
+def summarise_scorecard(system, evaluations: dict[str, tuple[dict | None, str]]) -> dict:
+    """The scorecard of what a run trained (:mod:`etmpc.evaluation.scorecard`), from its evaluation JSONs:
+    ``evaluations`` maps a row's name to ``(evaluation JSON, spec)`` (a None JSON: no such row). Returns
+    ``{"references": ..., "rows": {name: TaskScore as a dict}}``, or ``{"unavailable": why}`` when the
+    stored references do not fit the run (another test set, or too few episodes)."""
+    from dataclasses import asdict
+
+    from etmpc.common.errors import EtmpcError
+    from etmpc.evaluation.references import load_references
+    from etmpc.evaluation.scorecard import task_score_from_json
+
+    first = next(data for data, _ in evaluations.values() if data is not None)
+    try:
+        refs = load_references(system.name, first["test_set"]["sha256"])
+        episodes = len({r["episode"] for r in first["runs"]})
+        refs = refs.head(episodes) if episodes < refs.episodes else refs
+        rows = {name: asdict(task_score_from_json(refs, data, spec)) for name, (data, spec) in evaluations.items()
+                if data is not None and spec in data["policies"]}
+    except EtmpcError as exc:
+        return {"unavailable": str(exc)}
+    return {"references": {"best_periodic": refs.best, "oracle": refs.oracle_spec, "episodes": refs.episodes},
+            "rows": rows}
