@@ -14,12 +14,14 @@ two references nearly tie from dominating. Above 100 is possible: the oracle is 
 over that schedule, not a bound on every trigger. The 95 % CI is ``1.96 sd(s_e) / sqrt(n)`` (as
 ``etmpc evaluate --against``). An episode that ends on a non-finite state leaves the task unscored.
 
-**The suite's aggregate**, over the tasks scored (rliable's, Agarwal et al. 2021): the interquartile
-mean of the task scores (``scipy.stats.trim_mean(scores, 0.25)``: with four tasks, the mean of the
-middle two), and the probability of improvement over the best periodic schedule (per task, the share
-of episodes where the trigger's cost is lower, ties counting half; averaged over tasks), each with a
-95 % stratified bootstrap CI: episodes resampled within each task (``scipy.stats.bootstrap`` over
-one sample per task, 2000 resamples, percentile intervals, seeded), the references' gap held fixed.
+**The suite's aggregate**, over the tasks scored, as rliable computes it (Agarwal et al. 2021) with
+a task's episodes as its runs: the interquartile mean of every episode score of every task together
+(``scipy.stats.trim_mean(scores, 0.25)``: the middle half of the episodes, so neither a few extreme
+episodes nor one task decides it), and the probability of improvement over the best periodic schedule
+(per task, the share of episodes where the trigger's cost is lower, ties counting half; averaged over
+tasks), each with a 95 % stratified bootstrap CI: episodes resampled within each task
+(``scipy.stats.bootstrap`` over one sample per task, 2000 resamples, percentile intervals, seeded),
+the references' gap held fixed.
 
 **References** are stored with the tasks (``tasks/<domain>/<task>_references.json``): every periodic
 schedule's and the oracle's objective per stored episode, with the suite's version, the test set's
@@ -138,9 +140,9 @@ class Aggregate:
     probability_of_improvement_ci95: tuple[float, float]
 
 
-def _iqm_of_means(*samples, axis=-1):
-    means = np.stack([np.mean(s, axis=axis) for s in samples], axis=-1)
-    return stats.trim_mean(means, 0.25, axis=-1)
+def _iqm(*samples, axis=-1):
+    """rliable's IQM: the 25 %-trimmed mean of every task's episode scores together."""
+    return stats.trim_mean(np.concatenate(samples, axis=axis), 0.25, axis=axis)
 
 
 def _mean_of_means(*samples, axis=-1):
@@ -163,9 +165,9 @@ def aggregate(rows: list[TaskScore]) -> Aggregate:
         return Aggregate(policy, 0, math.nan, (math.nan, math.nan), math.nan, (math.nan, math.nan))
     scores = [np.asarray(r.episode_scores) for r in scored]
     improved = [(np.asarray(r.episode_scores) > 0) + 0.5 * (np.asarray(r.episode_scores) == 0) for r in scored]
-    iqm = float(stats.trim_mean([r.score for r in scored], 0.25))
+    iqm = float(_iqm(*scores))
     improvement = float(np.mean([np.mean(x) for x in improved]))
-    return Aggregate(policy, len(scored), iqm, _interval(scores, _iqm_of_means), improvement,
+    return Aggregate(policy, len(scored), iqm, _interval(scores, _iqm), improvement,
                      _interval([x.astype(float) for x in improved], _mean_of_means))
 
 
@@ -298,7 +300,7 @@ def format_scorecard(card: Scorecard) -> str:
         lines.append(f"{r.task:<{task_width}}{r.policy:<{width}}{r.objective_mean:>11.4f}{r.recomputes_mean:>14.2f}"
                      f"{failures:>10}{score}{cpu['total']:>11.1f}{cpu['solve']:>9.1f}{cpu['feedback']:>10.1f}"
                      f"{cpu['decide']:>10.1f}")
-    lines += ["", "the suite: interquartile mean of the task scores and probability of improvement over the best "
+    lines += ["", "the suite: interquartile mean of every task's episode scores and probability of improvement over the best "
                   "periodic schedule, 95 % stratified bootstrap CIs",
               f"{'policy':<{width}}{'tasks':>6}{'IQM':>9}{'95 % CI':>18}{'P(improve)':>12}{'95 % CI':>16}"]
     for a in card.aggregates:

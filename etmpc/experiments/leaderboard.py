@@ -254,7 +254,8 @@ def page(data: dict) -> str:
         f"Each task's normalized score on its stored test set ({data['episodes']} episodes, at the task's price): "
         "0 is its best periodic schedule, 100 the oracle over it (a one-step lookahead with the episode's future: "
         "above 100 is possible, and the oracle is a bound, not a policy). ± is the 95 % CI over episodes; the suite's "
-        "interquartile mean and the probability of improving on the best periodic schedule carry 95 % stratified "
+        "interquartile mean (of every task's episode scores together, as rliable computes it) and the probability of "
+        "improving on the best periodic schedule carry 95 % stratified "
         "bootstrap CIs. CPU is the controller's measured time per episode on this machine (solves, feedback and "
         "the trigger's own decisions), averaged over the tasks. See `etmpc score --help` and the README.",
         "",

@@ -225,7 +225,7 @@ def against_the_paper(results: dict) -> list[str]:
 
 def scorecard_section(results: dict) -> list[str]:
     """What the run trained, on the suite's scorecard (``etmpc score``): each task's normalized score
-    (0: its best periodic schedule, 100: the oracle over it) and the interquartile mean over tasks."""
+    (0: its best periodic schedule, 100: the oracle over it) and the interquartile mean of its episode scores."""
     from etmpc.evaluation.scorecard import TaskScore, aggregate
 
     cards = {task: r.get("scorecard", {}) for task, r in results["systems"].items()}
@@ -239,7 +239,7 @@ def scorecard_section(results: dict) -> list[str]:
         names += [name for name in cards[task]["rows"] if name not in names]
     lines += ["Each task's normalized score on the run's test-set episodes, against the suite's stored references "
               "(0: the task's best periodic schedule, 100: the oracle over it; ± 95 % CI), as `etmpc score` gives it; "
-              "the IQM over the tasks a row was scored on, with its stratified bootstrap CI. CPU times are "
+              "the IQM of every episode score of the tasks a row was scored on, with its stratified bootstrap CI. CPU times are "
               "`etmpc score`'s, not measured here.", "",
               "| trained | " + " | ".join(tasks) + " | IQM [95 % CI] |", "|---|" + "---:|" * (len(tasks) + 1)]
     for name in names:

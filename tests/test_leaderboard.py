@@ -1,0 +1,64 @@
+"""The generated leaderboard: its references score 0 and 100, every row says what it cost, an interrupted
+run continues without playing again, and the README's table is the page's, generated from its JSON."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from etmpc.experiments import leaderboard
+from etmpc.experiments.leaderboard import BEGIN, END, build, headline, table_in
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def board(tmp_path_factory):
+    out = tmp_path_factory.mktemp("board")
+    readme = out / "README.md"
+    readme.write_text(f"# etmpc\n\n{BEGIN}\n(the table goes here)\n{END}\n\nthe rest\n")
+    data = build(out / "docs", out / "work", ["battery"], episodes=2, workers=1, readme=readme)
+    return out, data
+
+
+def test_the_references_score_0_and_100_and_every_row_says_what_it_cost(board):
+    _, data = board
+    rows = {e["name"]: e["rows"][0] for e in data["entries"]}
+    assert set(rows) == {"always", "best periodic", "best threshold", "DPI (shipped)", "rollout meter", "oracle"}
+    assert rows["best periodic"]["score"] == 0.0 and rows["oracle"]["score"] == 100.0
+    assert all(r["error"] is None and r["cpu_ms"]["total"] > 0 for r in rows.values())
+    assert rows["rollout meter"]["cpu_ms"]["decide"] > rows["best periodic"]["cpu_ms"]["decide"]  # its net cost shows
+    assert data["generated"]["commit"] and data["generated"]["software"]["etmpc"]
+
+
+def test_the_page_and_the_readme_hold_the_table_made_from_the_json(board):
+    out, data = board
+    table = headline(json.loads((out / "docs" / "leaderboard.json").read_text()))
+    assert table == headline(data)
+    assert table_in((out / "docs" / "leaderboard.md").read_text()) == table
+    text = (out / "README.md").read_text()
+    assert table_in(text) == table and text.endswith("the rest\n")
+    assert (out / "docs" / "leaderboard_profile.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_an_interrupted_run_continues_without_playing_a_finished_row_again(board, monkeypatch):
+    out, data = board
+
+    def no_play(*args, **kwargs):
+        raise AssertionError("played again")
+
+    monkeypatch.setattr(leaderboard, "evaluate", no_play)
+    monkeypatch.setattr(leaderboard, "best_threshold", lambda task, workers, say: data["entries"][2]["specs"][task])
+    again = build(out / "again", out / "work", ["battery"], episodes=2, workers=1)
+    assert headline(again) == headline(data)
+
+
+def test_the_readmes_headline_table_is_the_generated_leaderboards():
+    generated = json.loads((ROOT / "docs" / "leaderboard.json").read_text())
+    table = headline(generated)
+    assert table_in((ROOT / "README.md").read_text()) == table
+    assert table_in((ROOT / "docs" / "leaderboard.md").read_text()) == table
+    names = [e["name"] for e in generated["entries"]]
+    assert generated["episodes"] == 100 and len(generated["tasks"]) == 4 and "DPI (shipped)" in names
