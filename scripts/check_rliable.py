@@ -27,8 +27,8 @@ def main(path: str) -> None:
         point, ci = library.get_interval_estimates({"x": matrix}, lambda x: np.array([metrics.aggregate_iqm(x)]),
                                                    reps=2000)
         low, high = ci["x"][:, 0]
-        print(f"{a['policy']:<28}{point['x'][0]:>14.4f}{a['iqm']:>12.4f}{f'[{low:.2f}, {high:.2f}]':>22}"
-              f"{f'[{a['iqm_ci95'][0]:.2f}, {a['iqm_ci95'][1]:.2f}]':>22}")
+        ours = "[{:.2f}, {:.2f}]".format(*a["iqm_ci95"])
+        print(f"{a['policy']:<28}{point['x'][0]:>14.4f}{a['iqm']:>12.4f}{f'[{low:.2f}, {high:.2f}]':>22}{ours:>22}")
 
 
 if __name__ == "__main__":
