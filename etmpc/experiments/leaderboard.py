@@ -7,7 +7,8 @@ The entries, each one spec per task (:func:`entries`):
 * **best threshold**: the event trigger ``threshold:X`` whose mean objective is best on
   training-distribution episodes (the validation stream of ``etmpc train``, never the test set), over
   the task's ``Benchmark.sweep_thresholds``;
-* **DPI (shipped)**: the learned policy shipped in ``policies/<task>/learned.json`` (from a checkout);
+* the learners shipped in ``policies/<task>/`` (from a checkout): **GPOMDP** (``gpomdp.json``, the
+  paper's tasks), **DPI** (``learned.json``) and **PPO** (``ppo.zip``), each where it is shipped;
 * **rollout meter**: ``rollout:BEST:4:H``, the one-step lookahead over sampled futures with the task's
   lookahead ``H``: a real policy, and the costliest to run (its CPU column shows it);
 * **oracle**: ``oracle:BEST`` (its reference: 100), which knows each episode's future.
@@ -66,9 +67,19 @@ class Entry:
     note: str = ""
 
 
-def shipped_policy(task: str) -> Path | None:
-    """The DPI policy shipped for ``task`` in a checkout's ``policies/``, if there is one."""
-    path = data_root() / "policies" / folder_name(task) / "learned.json"
+# The learners whose policies the project ships in policies/<task>/: (entry, file, spec prefix, what it is).
+SHIPPED = (
+    ("GPOMDP (shipped)", "gpomdp.json", "rl:",
+     "the paper's learner on its features (5 seeds x 1500 episodes), the seed chosen on validation episodes"),
+    ("DPI (shipped)", "learned.json", "rl:", "the default learner, chosen on validation episodes"),
+    ("PPO (shipped)", "ppo.zip", "sb3:",
+     "Stable-Baselines3 PPO on the trigger environment (60,000 steps), chosen on validation episodes"),
+)
+
+
+def shipped_policy(task: str, file: str = "learned.json") -> Path | None:
+    """A policy shipped for ``task`` in a checkout's ``policies/`` (``file`` there), if there is one."""
+    path = data_root() / "policies" / folder_name(task) / file
     if not path.is_file():
         return None
     try:  # named from where the command runs (make leaderboard: the checkout), so the page names no machine's paths
@@ -98,10 +109,11 @@ def entries(tasks: list[str], references: dict[str, References], workers: int,
         Entry("best threshold", "baseline", {t: best_threshold(t, workers, say) for t in tasks},
               f"threshold:X chosen on {VALIDATION_EPISODES} training-distribution episodes"),
     ]
-    shipped = {t: shipped_policy(t) for t in tasks}
-    if any(path is not None for path in shipped.values()):
-        found.append(Entry("DPI (shipped)", "learned", {t: f"rl:{p}" for t, p in shipped.items() if p is not None},
-                           "policies/<task>/learned.json, chosen on validation episodes"))
+    for name, file, prefix, note in SHIPPED:
+        shipped = {t: shipped_policy(t, file) for t in tasks}
+        if any(path is not None for path in shipped.values()):
+            found.append(Entry(name, "learned", {t: f"{prefix}{p}" for t, p in shipped.items() if p is not None},
+                               f"{note}; policies/<task>/{file}"))
     found += [
         Entry("rollout meter", "meter", {t: f"rollout:{best[t]}:{ROLLOUT_FUTURES}:{make_system(t).benchmark.lookahead}"
                                          for t in tasks}, "one-step lookahead over sampled futures: a real policy"),
