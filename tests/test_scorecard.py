@@ -177,3 +177,10 @@ def test_a_references_file_round_trips(small_battery, tmp_path):
     path = write_references(refs, tmp_path / "refs.json")
     assert load_references("battery", refs.test_set_sha256, path) == References(**{
         k: v for k, v in json.loads(path.read_text()).items() if k != "format"})
+
+
+def test_a_worker_builds_its_mpc_before_any_episode_so_no_solve_time_holds_the_build():
+    from etmpc.evaluation import workers
+
+    system, _, _ = workers.context("cart_pendulum/kicks")
+    assert "mpc" in vars(system)  # the cached MPC (and its compiled code) is there before the first episode
