@@ -195,7 +195,10 @@ def evaluate(
     named by its spec in the results, and every one meets the same episodes with the same draws.
     With ``record``, also write every episode into that Rerun recording (``.rrd``).
     ``recompute_price``: the price of a computation, if not the system's own (it enters every
-    objective, and what rollouts optimise)."""
+    objective, and what rollouts optimise).
+
+    Bad arguments, policies and files raise :class:`EtmpcError` with the command line's messages
+    (:func:`check_arguments`), before any work; so does a policy's own failure, naming it."""
     with interrupts.watching():  # a trigger that raises KeyboardInterrupt is its failure, not a Ctrl-C
         return _evaluate(domain, policies, episodes, repeats, workers, seed, testset_path, progress, backend, address,
                          record, recompute_price)
