@@ -51,7 +51,7 @@ def test_an_interrupted_run_continues_without_playing_a_finished_row_again(board
     def no_play(*args, **kwargs):
         raise AssertionError("played again")
 
-    monkeypatch.setattr(leaderboard, "evaluate", no_play)
+    monkeypatch.setattr(leaderboard, "play_and_score", no_play)
     monkeypatch.setattr(leaderboard, "best_threshold", lambda task, workers, say: data["entries"][2]["specs"][task])
     again = build(out / "again", out / "work", ["battery"], episodes=2, workers=1)
     assert headline(again) == headline(data)

@@ -87,7 +87,7 @@ def run(args) -> None:
 
 def _leaderboard(args, tasks: list[str]) -> None:
     from etmpc.evaluation.workers import default_workers
-    from etmpc.experiments.leaderboard import build
+    from etmpc.experiments.leaderboard import build, headline
 
     if args.policy or args.references or args.test_set is not None or args.json is not None or args.figure is not None:
         raise EtmpcError("--leaderboard scores the built-in triggers on the stored test sets: no SPEC, --references, "
@@ -97,8 +97,6 @@ def _leaderboard(args, tasks: list[str]) -> None:
     check_outputs({}, {"--out": args.out})
     data = build(args.out, Path("results") / "leaderboard", tasks, args.episodes, args.workers or default_workers(),
                  args.readme, say=_say)
-    from etmpc.experiments.leaderboard import headline
-
     print(headline(data))
     print(f"wrote {args.out}/leaderboard.md, leaderboard.json and leaderboard_profile.png"
           + (f"; the table in {args.readme}" if args.readme is not None else ""))

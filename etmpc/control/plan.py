@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from etmpc.common.frozen import FrozenMapping, readonly
+from etmpc.common.frozen import frozen, readonly
 
 
 @dataclass(frozen=True, eq=False)
@@ -40,7 +40,7 @@ class Plan:
             value = getattr(self, name)
             if value is not None:
                 object.__setattr__(self, name, readonly(np.asarray(value)))
-        object.__setattr__(self, "forecasts", FrozenMapping(self.forecasts))
+        object.__setattr__(self, "forecasts", frozen(self.forecasts))  # a plan's replace() keeps it as it is
 
     @property
     def horizon(self) -> int:

@@ -210,11 +210,7 @@ def check_arguments(domain, policies, episodes, repeats, workers, seed, testset_
     (raises :class:`EtmpcError`)."""
     if not isinstance(domain, str):
         raise EtmpcError(f"task: a task name (str) is needed, got {type(domain).__name__} {domain!r}")
-    if isinstance(policies, (str, bytes)) or not isinstance(policies, (list, tuple)):
-        hint = f" (for one policy: [{policies!r}])" if isinstance(policies, str) else ""
-        raise EtmpcError(f"policies: a list of policy specs or objects is needed, got {type(policies).__name__}{hint}")
-    if not policies:
-        raise EtmpcError("policies: the list is empty; give at least one policy (a spec such as 'every:3', or an object)")
+    check_policies(policies)
     if episodes is not None:
         checks.argument("episodes", lambda v: checks.at_least(checks.whole(v), 1), episodes)
     checks.argument("repeats", lambda v: checks.at_least(checks.whole(v), 1), repeats)
@@ -234,6 +230,15 @@ def check_arguments(domain, policies, episodes, repeats, workers, seed, testset_
         raise EtmpcError(f"backend: unknown backend {backend!r}: {' | '.join(BACKENDS)}")
     if address is not None and backend != "ray":
         raise EtmpcError("--address needs --backend ray")
+
+
+def check_policies(policies) -> None:
+    """Raise :class:`EtmpcError` unless ``policies`` is a non-empty list (or tuple) of specs or objects."""
+    if isinstance(policies, (str, bytes)) or not isinstance(policies, (list, tuple)):
+        hint = f" (for one policy: [{policies!r}])" if isinstance(policies, str) else ""
+        raise EtmpcError(f"policies: a list of policy specs or objects is needed, got {type(policies).__name__}{hint}")
+    if not policies:
+        raise EtmpcError("policies: the list is empty; give at least one policy (a spec such as 'every:3', or an object)")
 
 
 def check_picklable(spec: str, policy, backend: str = "local") -> None:

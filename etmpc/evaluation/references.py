@@ -21,6 +21,7 @@ from etmpc.common.errors import EtmpcError
 from etmpc.common.numerics import fsum
 from etmpc.common.outputs import write_json
 from etmpc.common.resources import tasks_dir
+from etmpc.evaluation import testsets
 from etmpc.evaluation.evaluate import Evaluation, evaluate
 from etmpc.systems import make_system
 
@@ -153,6 +154,14 @@ def load_references(task: str, test_set_sha256: str, path: Path | None = None) -
     if not ok:
         raise EtmpcError(f"{task}: references {path} are inconsistent (episode counts, best schedule or gap); {rebuild}")
     return refs
+
+
+def stored(task: str, episodes: int | None = None) -> References:
+    """``task``'s stored references, checked against its stored test set; of its first ``episodes`` only, if given."""
+    system = make_system(task)
+    sha = testsets.load(testsets.default_path(system.domain, system.task), system.domain, system.task).sha256
+    refs = load_references(task, sha)
+    return refs if episodes is None else refs.head(episodes)
 
 
 def write_references(refs: References, path: Path | None = None) -> Path:

@@ -47,9 +47,10 @@ from scipy import stats
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import check_outputs, write_json
 from etmpc.evaluation import testsets as ts_mod
-from etmpc.evaluation.evaluate import Evaluation, evaluate
-from etmpc.evaluation.references import (SUITE_VERSION, References, build_references, load_references, mean,
-                                         references_path, software)
+from etmpc.evaluation.evaluate import Evaluation, check_policies, evaluate
+from etmpc.evaluation.references import (SUITE_VERSION, References, build_references, mean, references_path,
+                                         software, stored)
+from etmpc.evaluation.workers import shared_pools
 from etmpc.systems import distinct, make_system, names
 
 BOOTSTRAP_RESAMPLES = 2000
@@ -218,8 +219,7 @@ def score(policies: list, tasks: list[str] | None = None, test_set: str | None =
     only (each task's references then of those episodes: 0 and 100 stay exact). A trigger that fails
     on a task has that task's row say so; the others are still scored (:attr:`Scorecard.complete` is
     then False)."""
-    if isinstance(policies, (str, bytes)) or not isinstance(policies, (list, tuple)) or not policies:
-        raise EtmpcError("policies: a non-empty list of policy specs or objects is needed")
+    check_policies(policies)
     if tasks is not None and (isinstance(tasks, (str, bytes)) or not isinstance(tasks, (list, tuple))):
         raise EtmpcError(f"tasks: a list of task names is needed, got {type(tasks).__name__} {tasks!r}")
     tasks = distinct(tasks or names())
@@ -227,39 +227,23 @@ def score(policies: list, tasks: list[str] | None = None, test_set: str | None =
         raise EtmpcError("--test-set belongs to one task: give exactly one --task with it")
     if json_path is not None:
         check_outputs({"--json": Path(json_path)})
-    references: dict[str, References] = {}
-    shown: dict[str, dict] = {}
-    for task in tasks:  # every reference checked before any trigger is played
+    if test_set is None:  # every task's references checked before any trigger is played
+        references = {task: stored(task, episodes) for task in tasks}
+        shown = {task: {"stored": references_path(task).name} for task in tasks}
+    else:
+        (task,) = tasks
         system = make_system(task)
-        path = test_set or str(ts_mod.default_path(system.domain, system.task))
-        sha = ts_mod.load(path, system.domain, system.task).sha256
-        if test_set is None:
-            references[task] = load_references(task, sha)
-            shown[task] = {"stored": str(references_path(task).name)}
-    for task in tasks:
-        if task not in references:
-            say(f"{task}: no stored references for test set {test_set}: computing them for this run")
-            references[task] = build_references(task, test_set, workers, progress, say)
-            shown[task] = {"stored": None}
-        if episodes is not None:
-            references[task] = references[task].head(episodes)
-        refs = references[task]
+        ts_mod.load(test_set, system.domain, system.task)  # a bad test set fails before the references are played
+        say(f"{task}: no stored references for test set {test_set}: computing them for this run")
+        refs = build_references(task, test_set, workers, progress, say)
+        references = {task: refs if episodes is None else refs.head(episodes)}
+        shown = {task: {"stored": None}}
+    for task, refs in references.items():
         shown[task] |= {"best_periodic": refs.best, "oracle": refs.oracle_spec, "test_set_sha256": refs.test_set_sha256,
                         "episodes": refs.episodes, "recompute_price": refs.recompute_price, "gap": refs.gap}
-    rows: list[TaskScore] = []
-    for task in tasks:
-        refs = references[task]
-        try:
-            evaluation = evaluate(task, list(policies), episodes, workers=workers, testset_path=test_set,
-                                  progress=progress)
-        except EtmpcError as exc:
-            if len(policies) > 1:  # find which trigger failed: play each alone
-                rows += [_alone(task, refs, policy, test_set, workers, progress, episodes) for policy in policies]
-                continue
-            rows.append(failed_task(task, _name(policies[0]), str(exc)))
-            say(f"{task}: {exc}")
-            continue
-        rows += [task_score(refs, evaluation, s.policy) for s in evaluation.summaries]
+    with shared_pools():  # each trigger played on its own (a failing one fails its row only), one pool for all
+        rows = [play_and_score(task, references[task], policy, test_set, workers, progress, say)
+                for task in tasks for policy in policies]
     by_policy: dict[str, list[TaskScore]] = {}
     for row in rows:
         by_policy.setdefault(row.policy, []).append(row)
@@ -273,10 +257,14 @@ def _name(policy) -> str:
     return policy if isinstance(policy, str) else str(getattr(policy, "spec", type(policy).__name__))
 
 
-def _alone(task: str, refs: References, policy, test_set, workers, progress, episodes=None) -> TaskScore:
+def play_and_score(task: str, refs: References, policy, test_set: str | None = None, workers: int | None = None,
+                   progress: bool = True, say: Callable[[str], None] = lambda line: None) -> TaskScore:
+    """``policy`` (a spec or an object) played on ``refs``' episodes of ``task`` and scored; a policy that
+    fails (bad spec, its own error) gives a row that says so."""
     try:
-        evaluation = evaluate(task, [policy], episodes, workers=workers, testset_path=test_set, progress=progress)
+        evaluation = evaluate(task, [policy], refs.episodes, workers=workers, testset_path=test_set, progress=progress)
     except EtmpcError as exc:
+        say(f"{task}: {exc}")
         return failed_task(task, _name(policy), str(exc))
     return task_score(refs, evaluation, evaluation.summaries[0].policy)
 

@@ -37,11 +37,9 @@ import numpy as np
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import write_json, write_text
 from etmpc.common.resources import data_root
-from etmpc.evaluation import testsets as ts_mod
-from etmpc.evaluation.evaluate import evaluate
-from etmpc.evaluation.references import SUITE_VERSION, References, load_references, software
-from etmpc.evaluation.scorecard import Scorecard, TaskScore, aggregate, profiles, task_score
-from etmpc.evaluation.workers import make_backend
+from etmpc.evaluation.references import SUITE_VERSION, References, software, stored
+from etmpc.evaluation.scorecard import Scorecard, TaskScore, aggregate, play_and_score, profiles
+from etmpc.evaluation.workers import make_backend, shared_pools
 from etmpc.learning.config import VALIDATION_ENTROPY
 from etmpc.learning.jobs import mean_scores
 from etmpc.systems import distinct, folder_name, make_system, names
@@ -52,9 +50,6 @@ BEGIN, END = "<!-- leaderboard:begin -->", "<!-- leaderboard:end -->"
 VALIDATION_EPISODES = 20  # training-distribution episodes that choose the best threshold
 ROLLOUT_FUTURES = 4
 THRESHOLDS = np.linspace(-100.0, 200.0, 301)
-
-
-UNRECORDED = {"commit": "(not recorded)", "uncommitted_changes": False, "date": ""}
 
 
 @dataclass(frozen=True)
@@ -137,24 +132,18 @@ def _row(entry: Entry, task: str, refs: References, work: Path, episodes: int, w
         try:
             kept = json.loads(path.read_text())
             if kept.get("key") == key:
-                return TaskScore(**kept["row"]), kept.get("played", UNRECORDED)
+                return TaskScore(**kept["row"]), kept["played"]
         except (OSError, ValueError, TypeError, KeyError):
             pass  # an unreadable leftover is played again
     say(f"{task}: {entry.name} ({spec})")
-    try:
-        played = evaluate(task, [spec], episodes, workers=workers, progress=False)
-        row = task_score(refs, played, spec)
-    except EtmpcError as exc:
-        row = TaskScore(task, spec, 0, math.nan, refs.objective_sense, math.nan, None, 0, 0, math.nan, math.nan, [],
-                        math.nan, {}, refs.best, str(exc))
-    played_at = _provenance()
-    played_at = {"commit": played_at["commit"], "uncommitted_changes": played_at["uncommitted_changes"],
-                 "date": played_at["date"]}
+    row = play_and_score(task, refs, spec, workers=workers, progress=False)
+    played_at = _commit()
     write_json(path, {"key": key, "row": asdict(row), "played": played_at})
     return row, played_at
 
 
-def _provenance() -> dict:
+def _commit() -> dict:
+    """The checkout's commit, whether it has uncommitted changes, and the date: when a row was played."""
     def git(*args: str) -> str | None:
         try:
             done = subprocess.run(["git", *args], cwd=data_root(), capture_output=True, text=True, timeout=10)
@@ -165,24 +154,27 @@ def _provenance() -> dict:
     commit = git("rev-parse", "--short", "HEAD")
     dirty = bool(git("status", "--porcelain", "--untracked-files=no")) if commit else None
     return {"commit": commit or "(not a git checkout)", "uncommitted_changes": dirty,
-            "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
-            "machine": {"processor": platform.processor() or platform.machine(), "system": platform.platform(),
-                        "cores": len(os.sched_getaffinity(0))},
-            "software": software()}
+            "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")}
+
+
+def _provenance() -> dict:
+    """:func:`_commit`, with the machine and the software: what made the page."""
+    return _commit() | {"machine": {"processor": platform.processor() or platform.machine(), "system": platform.platform(),
+                                    "cores": len(os.sched_getaffinity(0))},
+                        "software": software()}
 
 
 def build(docs: Path, work: Path, tasks: list[str] | None = None, episodes: int | None = None, workers: int = 1,
           readme: Path | None = None, say: Callable[[str], None] = lambda line: None) -> dict:
     """Score every entry on every task and write ``docs/leaderboard.{md,json}`` and the profile figure;
     with ``readme``, rewrite its headline table between the markers. Returns the JSON."""
-    tasks = distinct(tasks or names())
-    references = {}
-    for task in tasks:
-        system = make_system(task)
-        sha = ts_mod.load(ts_mod.default_path(system.domain, system.task), system.domain, system.task).sha256
-        references[task] = load_references(task, sha)
-        if episodes is not None:
-            references[task] = references[task].head(episodes)
+    with shared_pools():  # one pool of workers for every row (a row is one evaluation)
+        return _build(docs, work, distinct(tasks or names()), episodes, workers, readme, say)
+
+
+def _build(docs: Path, work: Path, tasks: list[str], episodes: int | None, workers: int, readme: Path | None,
+           say: Callable[[str], None]) -> dict:
+    references = {task: stored(task, episodes) for task in tasks}
     if readme is not None and BEGIN not in Path(readme).read_text():
         raise EtmpcError(f"{readme} has no {BEGIN} ... {END} block for the leaderboard's table")
     board = entries(tasks, references, workers, say)

@@ -43,7 +43,7 @@ from etmpc.evaluation.render import render_rollout
 from etmpc.evaluation.workers import play_test_episode, shared_pools
 from etmpc.experiments import sweep as sweeps
 from etmpc.experiments.report import PAPER, machine, report, software_versions
-from etmpc.evaluation.references import references_path
+from etmpc.evaluation.references import stored
 from etmpc.experiments.summary import (summarise_default, summarise_headroom, summarise_learners, summarise_scorecard,
                                        summarise_system)
 from etmpc.learning.dpi import Settings as DpiSettings
@@ -241,8 +241,8 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
 def _stored_best(system) -> str:
     """The task's best periodic schedule, as its stored references name it (``every:1`` if there are none)."""
     try:
-        best = json.loads(references_path(system.name).read_text())["best"]
-    except (OSError, ValueError, KeyError):
+        best = stored(system.name).best
+    except EtmpcError:
         best = "every:1"
     return "always" if best == "every:1" else best  # the same schedule, as reproduce's fixed policies name it
 

@@ -32,6 +32,7 @@ from etmpc.common.errors import EtmpcError
 from etmpc.common.interrupts import described, failed, genuine, users_code
 from etmpc.loop import AugmentedState, DecisionContext, Policy
 
+
 def check_policy(policy: Any, where: str) -> None:
     """Raise :class:`EtmpcError` unless ``policy`` has the members a policy needs."""
     with users_code(f"{where}: reading its members"):
@@ -113,6 +114,9 @@ def checked(policy: Any, name: str | None = None) -> Policy:
     return Checked(policy, name)
 
 
+_MISSING = object()
+
+
 def load_user(spec: str) -> Policy:
     """``py:MODULE:NAME``: ``NAME`` from ``MODULE`` (importable from the working directory or
     ``sys.path``), called with no arguments if it is a class or a factory, checked."""
@@ -128,14 +132,10 @@ def load_user(spec: str) -> Policy:
         if genuine(exc):
             raise
         raise EtmpcError(f"policy {spec}: cannot import {module_name} ({described(exc)})") from None
-    try:
-        factory = getattr(module, name)
-    except AttributeError:
-        raise EtmpcError(f"policy {spec}: {module_name} has no {name}") from None
-    except BaseException as exc:  # a module-level __getattr__ of the user's
-        if genuine(exc):
-            raise
-        raise failed(f"policy {spec}: {module_name}.{name}", exc) from None
+    with users_code(f"policy {spec}: {module_name}.{name}"):  # a module-level __getattr__ of the user's may raise
+        factory = getattr(module, name, _MISSING)
+    if factory is _MISSING:
+        raise EtmpcError(f"policy {spec}: {module_name} has no {name}")
     with users_code(f"policy {spec}: {name}()"):
         is_factory = isinstance(factory, type) or (callable(factory) and not callable(getattr(factory, "decide", None)))
         policy = factory() if is_factory else factory
