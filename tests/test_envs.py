@@ -181,7 +181,8 @@ def test_vectorised_environments_work():
 
 @pytest.mark.parametrize("kwargs, says", [
     ({"task": 3}, "task: a task name"), ({"task": "cartpole"}, "unknown task 'cartpole'"),
-    ({"price": -1.0}, "price: a price of a computation is a finite number >= 0"), ({"price": "0.1"}, "price: '0.1' is not a number"),
+    ({"recompute_price": -1.0}, "recompute_price: a price of a computation is a finite number >= 0"),
+    ({"recompute_price": "0.1"}, "recompute_price: '0.1' is not a number"),
     ({"seed": -1}, "seed: a seed is a whole number"), ({"seed": 1.5}, "seed: 1.5 is not a whole number"),
     ({"test_set": 3}, "test_set: a file path is needed"),
 ])

@@ -14,6 +14,7 @@ from etmpc.policies import selftrigger as st
 from etmpc.common.errors import EtmpcError
 from etmpc.policies import parse_policy
 from etmpc.evaluation.workers import play_test_episode
+from etmpc.systems import SystemKey
 
 
 def _constant(domain: str, n: int, p: int) -> st.SelfTrigger:
@@ -146,8 +147,8 @@ TINY = self_training.SelfSettings(bases=("every:3", "every:8"), selection_episod
 
 
 def test_training_is_the_same_on_one_or_two_workers_and_never_worse_than_its_base_on_validation(tmp_path):
-    one = self_training.train_self("cart_pendulum@0.0005", tmp_path / "one.json", TINY, workers=1)
-    two = self_training.train_self("cart_pendulum@0.0005", tmp_path / "two.json", TINY, workers=2)
+    one = self_training.train_self(SystemKey("cart_pendulum", 0.0005), tmp_path / "one.json", TINY, workers=1)
+    two = self_training.train_self(SystemKey("cart_pendulum", 0.0005), tmp_path / "two.json", TINY, workers=2)
     np.testing.assert_array_equal(one.theta, two.theta)
     a, b = (json.loads((tmp_path / n).read_text()) for n in ("one.json", "two.json"))
     assert a["hyperparameters"] == b["hyperparameters"] and a["theta"] == b["theta"]

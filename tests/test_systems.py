@@ -1,45 +1,89 @@
-"""What each registered task provides (etmpc.systems.base.FEATURES), and the registry's names."""
+"""What each registered task provides (etmpc.systems.base), derived from the task itself, and the registry's names."""
 
+import pickle
+
+import numpy as np
 import pytest
 
 from etmpc import systems
-from etmpc.common.errors import UnknownNameError
-from etmpc.systems.base import FEATURES, REQUIRED, provides
+from etmpc.common.errors import EtmpcError, UnknownNameError
+from etmpc.systems.base import CAPABILITIES, DERIVED, REQUIRED, Benchmark, SystemBase, provides
 
-# What each task offers beyond the required features. A new task adds its line here, and
-# docs/adding-a-task.md says what each feature needs.
-OPTIONAL = {
-    "cart_pendulum": {"render", "bench"},
-    "cart_pendulum/kicks": {"exogenous features", "render", "bench", "failures"},
-    "battery": {"exogenous features", "bench"},
-    "reacher": {"exogenous features", "render", "bench", "failures"},
-}
+
+def test_a_task_writes_at_most_twelve_members():
+    assert len(REQUIRED) <= 12
+    assert not set(REQUIRED) & set(DERIVED)
 
 
 @pytest.mark.parametrize("name", systems.names())
-def test_every_task_provides_the_required_features_and_says_which_optional_ones(name):
+def test_every_task_has_the_required_members_and_the_derived_ones(name):
     system = systems.make_system(name)
-    missing = {feature: [m for m in FEATURES[feature] if not hasattr(system, m)] for feature in REQUIRED}
-    assert {f: m for f, m in missing.items() if m} == {}
-    offered = {feature for feature in FEATURES if feature not in REQUIRED and provides(system, feature)}
-    assert offered == OPTIONAL[name]
-    assert systems.canonical(f"{system.domain}/{system.task}") == system.name == name
+    assert isinstance(system, SystemBase)
+    assert [m for m in REQUIRED + DERIVED if not hasattr(system, m)] == []
+    assert systems.canonical(f"{system.domain}/{system.task}") == system.name == type(system).name == name
     assert system.horizon >= 1 and system.episode_steps >= system.horizon
+    assert system.u_min.shape == system.u_max.shape == (len(system.input_names),)
+    assert system.error_weights.shape == (len(system.state_names),)
+    assert system.objective_sense in ("min", "max")
 
 
-@pytest.mark.parametrize("domain", list(systems.DOMAINS))
+@pytest.mark.parametrize("name", systems.names())
+def test_what_a_task_offers_works_as_its_capability_says(name):
+    """Each capability the task offers (not None) is checked by what it does; one it does not offer is None."""
+    system = systems.make_system(name)
+    offered = {feature for feature in CAPABILITIES if provides(system, feature)}
+    for feature in set(CAPABILITIES) - offered:
+        assert all(getattr(system, m) is None for m in CAPABILITIES[feature]), feature
+    episode = system.draw_episode(np.random.default_rng(0))
+    if "rollouts" in offered:  # redrawn from the generator alone, the episode given left as it was
+        before = {k: np.array(v) for k, v in episode.arrays().items()}
+        a, b = (system.sample_future(episode, 5, np.random.default_rng(1)) for _ in range(2))
+        assert all(np.array_equal(a.arrays()[k], b.arrays()[k]) for k in before)
+        assert all(np.array_equal(before[k], v) for k, v in episode.arrays().items())
+        assert {k: np.shape(v) for k, v in a.arrays().items()} == {k: v.shape for k, v in before.items()}
+    if "render" in offered:
+        physics = system.make_env().physics
+        assert physics.model.name2id(system.camera, "camera") >= 0
+    if "failures" in offered:
+        assert isinstance(system.failure_name, str) and system.failure_name
+        assert system.failures(np.zeros(system.episode_steps)) >= 0
+    if "experiments" in offered:
+        assert isinstance(system.benchmark, Benchmark) and system.benchmark.lookahead >= 1
+    if "exogenous features" in offered:
+        assert len(system.exogenous_feature_names) >= 1
+    if "bench" in offered and system.interpreted is not None:
+        assert type(system.interpreted()) is type(system)
+
+
+def test_a_missing_capability_is_one_line_naming_the_task_and_what_needs_it():
+    from etmpc.systems.base import require
+
+    class Bare(SystemBase):
+        domain, task = "cart_pendulum", "balance"
+    with pytest.raises(EtmpcError, match="etmpc sweep needs rollouts .sample_future., which task cart_pendulum does not"):
+        require(Bare(), "rollouts", "etmpc sweep")
+
+
+@pytest.mark.parametrize("domain", list(systems.domains()))
 def test_a_domain_names_the_same_tasks_in_its_registry_entry_its_suite_and_its_systems(domain):
     package = systems.domain(domain)
     assert tuple(package.SUITE) == package.TASKS == tuple(package.SYSTEMS)
+    assert set(package.TEST_SET_SEEDS) == set(package.TASKS)
     for task, cls in package.SYSTEMS.items():
         assert (cls.domain, cls.task) == (domain, task)
 
 
 def test_keys_name_the_default_task_by_its_domain_and_carry_a_price():
-    assert systems.system_key("cart_pendulum/balance") == systems.system_key("cart_pendulum") == "cart_pendulum"
-    assert systems.system_key("battery", 0.001) == "battery@0.001"
-    assert systems.make_system("battery@0.001").recompute_price == 0.001
-    for bad in ("cartpole", "cart_pendulum/swing", "battery/balance", ""):
+    assert systems.system_key("cart_pendulum/balance") == systems.system_key("cart_pendulum")
+    assert str(systems.system_key("cart_pendulum/balance")) == "cart_pendulum"
+    key = systems.system_key("battery/trading", 0.001)
+    assert (key.task, key.recompute_price, str(key)) == ("battery", 0.001, "battery@0.001")
+    assert key.make().recompute_price == 0.001 and systems.make_system(key).recompute_price == 0.001
+    assert pickle.loads(pickle.dumps(key)) == key and hash(key) == hash(systems.SystemKey("battery", 0.001))
+    for bad in (-1.0, float("nan"), float("inf"), "0.1", True):
+        with pytest.raises(EtmpcError, match="recompute_price: "):
+            systems.SystemKey("battery", bad)
+    for bad in ("cartpole", "cart_pendulum/swing", "battery/balance", "", "battery@0.001"):
         with pytest.raises(UnknownNameError, match="valid: cart_pendulum, cart_pendulum/kicks, battery, reacher"):
             systems.check_name(bad)
 

@@ -20,6 +20,7 @@ def _check_backend(args) -> None:
 
 def _evaluate(args) -> None:
     from etmpc.evaluation.evaluate import evaluate, format_table
+    from etmpc.systems import system_key
 
     _check_backend(args)
     _distinct_policies(args.policy)
@@ -28,8 +29,9 @@ def _evaluate(args) -> None:
     if args.test_set is not None and not Path(args.test_set).is_file():
         raise EtmpcError(f"test set {args.test_set} not found")
     check_outputs({"--json": args.json, "--record": args.record}, inputs={"--test-set": args.test_set})
-    result = evaluate(args.task, args.policy, args.episodes, args.repeats, args.workers, args.seed, args.test_set,
-                      backend=args.backend, address=args.address, record=args.record, recompute_price=args.price)
+    key = system_key(args.task, args.price)  # the task at its price: one value from here to the objective
+    result = evaluate(key, args.policy, args.episodes, args.repeats, args.workers, args.seed, args.test_set,
+                      backend=args.backend, address=args.address, record=args.record)
     print(format_table(result))
     if args.against is not None:
         from etmpc.evaluation.compare import format_against
@@ -80,6 +82,7 @@ def _train_ppo(args) -> None:
     from etmpc.evaluation.workers import default_workers
     from etmpc.learning.ppo import PpoSettings, train_ppo
     from etmpc.learning.train import parse_seeds
+    from etmpc.systems import system_key
 
     seeds = (0,) if args.seeds == "0-4" else parse_seeds(args.seeds)  # 0-4 is the other learners' default
     if len(seeds) != 1:
@@ -88,7 +91,7 @@ def _train_ppo(args) -> None:
         raise EtmpcError("--algorithm ppo runs locally from the start: no --backend ray, --resume or --record")
     settings = PpoSettings(**({} if args.timesteps is None else {"timesteps": args.timesteps}), seed=seeds[0],
                            validation_episodes=args.validation_episodes)
-    result = train_ppo(args.task, args.out, settings, args.workers or default_workers(), args.price, say=_say)
+    result = train_ppo(system_key(args.task, args.price), args.out, settings, args.workers or default_workers(), say=_say)
     print(f"PPO on {result['task']}: {result['environment_steps']} environment steps in {result['wall_seconds']:.0f} s; "
           f"kept {result['selected']} (best of {len(result['checkpoints'])} on {settings.validation_episodes} "
           "validation episodes)")
@@ -198,9 +201,9 @@ def _bench(args) -> None:
 
 def _testset(args) -> None:
     from etmpc.evaluation.testsets import draw
-    from etmpc.systems import make_system, system_key
+    from etmpc.systems import make_system
 
-    digest = draw(make_system(system_key(args.task)), args.seed, args.episodes, args.out)
+    digest = draw(make_system(args.task), args.seed, args.episodes, args.out)
     print(f"wrote {args.out} and {args.out}.sha256 ({args.episodes} episodes of {args.task}, seed {args.seed}, "
           f"sha256 {digest}); use it with --test-set {args.out}")
 

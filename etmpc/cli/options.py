@@ -14,6 +14,7 @@ from etmpc.evaluation.workers import BACKENDS
 from etmpc.learning.config import ALGORITHMS
 from etmpc.learning.gpomdp import BASELINES
 from etmpc.policies.features import DEFAULT_FEATURES, FEATURE_SETS
+from etmpc.policies.specs import syntax
 from etmpc.systems import names
 
 
@@ -40,8 +41,7 @@ def build_parser() -> argparse.ArgumentParser:
     ev = sub.add_parser("evaluate", help="compare recomputation policies on a stored test set")
     ev.add_argument("task", help=f"system to evaluate: {tasks}")
     ev.add_argument("--policy", action="append", required=True, metavar="SPEC",
-                    help="always | never | every:T | threshold:X | rl:PATH | self:PATH | py:MODULE:NAME (your own) | "
-                         "rollout:BASE[:K[:H]] | oracle:BASE (an upper bound, not a policy) (repeatable)")
+                    help=f"{syntax()} (repeatable; oracle:BASE is an upper bound, not a policy)")
     ev.add_argument("--episodes", type=types.positive_int, default=None, help="first N test-set episodes (default: all)")
     ev.add_argument("--repeats", type=types.positive_int, default=1, help="passes over the test set (for stochastic policies)")
     ev.add_argument("--workers", type=types.workers, default=None, help="worker processes (default: one per core)")

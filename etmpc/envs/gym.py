@@ -21,6 +21,7 @@ from gymnasium import spaces
 
 from etmpc.common.checks import BadValue
 from etmpc.envs.trigger import TriggerEnvironment
+from etmpc.systems import SystemKey
 
 
 class TriggerEnv(gymnasium.Env):
@@ -28,8 +29,8 @@ class TriggerEnv(gymnasium.Env):
 
     metadata = {"render_modes": []}
 
-    def __init__(self, task: str = "cart_pendulum", price: float | None = None, test_set: str | None = None):
-        self.core = TriggerEnvironment(task, price=price, test_set=test_set)
+    def __init__(self, task: str | SystemKey = "cart_pendulum", recompute_price: float | None = None, test_set: str | None = None):
+        self.core = TriggerEnvironment(task, recompute_price=recompute_price, test_set=test_set)
         self.observation_names = self.core.observation_names
         self.action_space = spaces.Discrete(2)
         top = np.finfo(np.float32).max

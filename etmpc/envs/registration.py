@@ -1,17 +1,18 @@
 """The trigger environments' gymnasium ids, registered on ``import etmpc`` without loading MuJoCo,
-CasADi or the environment itself (gymnasium imports ``etmpc.envs.gym`` when one is made)."""
+CasADi or the environment itself (gymnasium imports ``etmpc.envs.gym`` when one is made). Every task of
+the registry has one, a plugin's too."""
 
 from __future__ import annotations
 
-from etmpc.systems import DOMAINS, domain
+from etmpc.systems import domains, parse
 
 VERSION = 0
 
 
 def env_id(name: str) -> str:
     """``cart_pendulum`` or ``cart_pendulum/balance`` -> ``etmpc/cart_pendulum-balance-v0``."""
-    domain_name, _, task = name.partition("/")
-    return f"etmpc/{domain_name}-{task or domain(domain_name).TASKS[0]}-v{VERSION}"
+    domain_name, task = parse(name)
+    return f"etmpc/{domain_name}-{task}-v{VERSION}"
 
 
 def register() -> list[str]:
@@ -19,8 +20,8 @@ def register() -> list[str]:
     import gymnasium
 
     ids = []
-    for domain_name in DOMAINS:
-        for task in domain(domain_name).TASKS:
+    for domain_name, package in domains().items():
+        for task in package.TASKS:
             ids.append(env_id(f"{domain_name}/{task}"))
             if ids[-1] not in gymnasium.registry:
                 gymnasium.register(ids[-1], entry_point="etmpc.envs.gym:TriggerEnv", kwargs={"task": f"{domain_name}/{task}"})

@@ -37,7 +37,7 @@ from etmpc.envs.registration import env_id
 from etmpc.evaluation import testsets
 from etmpc.loop import ClosedLoop
 from etmpc.policies.features import observation, observation_names
-from etmpc.systems import make_system, system_key
+from etmpc.systems import SystemKey, system_key
 
 KEEP, RECOMPUTE = 0, 1
 
@@ -83,21 +83,20 @@ class NotPicklable(EtmpcError, TypeError):
 
 
 class TriggerEnvironment(dm_env.Environment):
-    """The trigger problem of task ``task`` (``DOMAIN`` or ``DOMAIN/TASK``), at ``price`` per
-    computation (default: the task's own). See the module's docstring."""
+    """The trigger problem of task ``task`` (``DOMAIN`` or ``DOMAIN/TASK``, or a
+    :class:`~etmpc.systems.SystemKey`), at ``recompute_price`` per computation (default: the task's own).
+    See the module's docstring."""
 
-    def __init__(self, task: str = "cart_pendulum", seed: int | None = None, price: float | None = None,
-                 test_set: str | None = None):
-        if not isinstance(task, str):
+    def __init__(self, task: str | SystemKey = "cart_pendulum", seed: int | None = None,
+                 recompute_price: float | None = None, test_set: str | None = None):
+        if not isinstance(task, (str, SystemKey)):
             raise EtmpcError(f"task: a task name (str) is needed, got {type(task).__name__} {task!r}")
         if seed is not None:
             checks.argument("seed", checks.seed, seed)
-        if price is not None:
-            checks.argument("price", checks.price, price)
         if test_set is not None and not isinstance(test_set, (str, os.PathLike)):
             raise EtmpcError(f"test_set: a file path is needed, got {type(test_set).__name__} {test_set!r}")
-        self.key = system_key(task, price)
-        self.system = make_system(self.key)
+        self.key = system_key(task, recompute_price)  # the task and the price, checked here
+        self.system = self.key.make()
         self.loop = ClosedLoop(self.system, self.system.make_env())
         self.observation_names = observation_names(self.system.name, self.system.state_names)
         self._size = len(self.observation_names)

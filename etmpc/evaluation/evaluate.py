@@ -27,7 +27,7 @@ from etmpc.policies.specs import names_a_kind
 from etmpc.policies.user import checked
 from etmpc.views.record import EpisodeRecord
 from etmpc.views.recording import Recorder
-from etmpc.systems import make_system, system_key
+from etmpc.systems import SystemKey, system_key
 from etmpc.evaluation.workers import BACKENDS, default_workers, make_backend, play_test_episode
 
 
@@ -90,8 +90,8 @@ def _run(job: tuple) -> tuple[RunResult, EpisodeRecord | None, dict[str, float]]
         solver_failures=traj.solver_failures,
         steps=traj.steps,
         finite=not traj.nonfinite,
-        failures=played.system.failures(traj.rewards[: traj.steps]) if hasattr(played.system, "failures") else None,
-    ), (played.record(spec, getattr(policy, "announce", None), upper_bound=spec.startswith("oracle:")) if record
+        failures=None if played.system.failures is None else played.system.failures(traj.rewards[: traj.steps]),
+    ), (played.record(spec, getattr(policy, "announce", None), upper_bound=bool(getattr(policy, "upper_bound", False))) if record
         else None), traj.cpu_seconds()
 
 
@@ -104,8 +104,9 @@ def run_jobs(jobs: list, workers: int, progress: bool, backend: str = "local", a
 
 
 def summarise(spec: str, runs: list[RunResult], sense: str, episodes: int, repeats: int,
-              failure_name: str | None = None) -> PolicySummary:
-    """Means over the runs that stayed finite; the others are counted, never averaged in."""
+              failure_name: str | None = None, upper_bound: bool = False) -> PolicySummary:
+    """Means over the runs that stayed finite; the others are counted, never averaged in. ``upper_bound``:
+    the policy knows each episode's future (an oracle's ``upper_bound``)."""
     finite = [r for r in runs if r.finite]
     by_episode: dict[int, list[float]] = {}
     by_repeat: dict[int, list[float]] = {}
@@ -126,7 +127,7 @@ def summarise(spec: str, runs: list[RunResult], sense: str, episodes: int, repea
         nonfinite_episodes=len(runs) - len(finite),
         episodes=episodes,
         repeats=repeats,
-        upper_bound=spec.startswith("oracle:"),
+        upper_bound=upper_bound,
         failures_mean=mean([r.failures for r in finite]) if failure_name is not None else None,
         failure_name=failure_name,
     )
@@ -189,7 +190,7 @@ def evaluate(
     """Run every policy on the first ``episodes`` test-set episodes, ``repeats`` times each, on
     ``workers`` processes of ``backend`` (see ``etmpc.evaluation.workers.make_backend``).
 
-    ``domain``: a task name (``DOMAIN`` or ``DOMAIN/TASK``). ``policies``: spec strings
+    ``domain``: a task name (``DOMAIN`` or ``DOMAIN/TASK``), or a :class:`~etmpc.systems.SystemKey`. ``policies``: spec strings
     (``every:3``, ``rl:PATH``, ``py:MODULE:NAME``, ...) and policy objects (anything with ``spec``,
     ``stochastic`` and ``decide(s, rng)``, see :mod:`etmpc.policies.user`), side by side; each is
     named by its spec in the results, and every one meets the same episodes with the same draws.
@@ -208,7 +209,7 @@ def check_arguments(domain, policies, episodes, repeats, workers, seed, testset_
                     record, recompute_price) -> None:
     """What the command line's parser checks, checked for a call from Python, with the same messages
     (raises :class:`EtmpcError`)."""
-    if not isinstance(domain, str):
+    if not isinstance(domain, (str, SystemKey)):
         raise EtmpcError(f"task: a task name (str) is needed, got {type(domain).__name__} {domain!r}")
     check_policies(policies)
     if episodes is not None:
@@ -217,8 +218,6 @@ def check_arguments(domain, policies, episodes, repeats, workers, seed, testset_
     if workers is not None:
         checks.argument("workers", checks.workers, workers)
     checks.argument("seed", checks.seed, seed)
-    if recompute_price is not None:
-        checks.argument("recompute_price", checks.price, recompute_price)
     for name, path in (("testset_path", testset_path), ("record", record)):
         if path is not None and not isinstance(path, (str, os.PathLike)):
             raise EtmpcError(f"{name}: a file path is needed, got {type(path).__name__} {path!r}")
@@ -264,8 +263,8 @@ def _evaluate(domain, policies, episodes, repeats, workers, seed, testset_path, 
               recompute_price) -> Evaluation:
     check_arguments(domain, policies, episodes, repeats, workers, seed, testset_path, progress, backend, address,
                     record, recompute_price)
-    key = system_key(domain, recompute_price)
-    system = make_system(key)
+    key = system_key(domain, recompute_price)  # the task and the price, checked once: every worker builds from it
+    system = key.make()
     # Parsed (or checked) once here, so a bad policy fails before any work starts, then sent with each job.
     parsed = {}
     for policy in policies:
@@ -310,7 +309,7 @@ def _evaluate(domain, policies, episodes, repeats, workers, seed, testset_path, 
     runs = [result for result, _, _ in outcomes]
     summaries = [
         summarise(spec, [r for r in runs if r.policy == spec], system.objective_sense, episodes, repeats,
-                  getattr(system, "failure_name", None)) for spec in policies
+                  system.failure_name, bool(getattr(parsed[spec], "upper_bound", False))) for spec in policies
     ]
     return Evaluation(system.domain, system.task, str(testset.path.resolve()), testset.sha256, seed, summaries, runs,
                       system.recompute_price, [cpu for _, _, cpu in outcomes])

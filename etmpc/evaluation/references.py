@@ -8,7 +8,6 @@ is refused in one line that says how to rebuild it (``etmpc score --references``
 
 from __future__ import annotations
 
-import json
 import platform
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
@@ -17,13 +16,13 @@ from pathlib import Path
 
 import numpy as np
 
+from etmpc.common.documents import read_document
 from etmpc.common.errors import EtmpcError
 from etmpc.common.numerics import fsum
 from etmpc.common.outputs import write_json
-from etmpc.common.resources import tasks_dir
 from etmpc.evaluation import testsets
 from etmpc.evaluation.evaluate import Evaluation, evaluate
-from etmpc.systems import make_system
+from etmpc.systems import data_dir, make_system
 
 SUITE_VERSION = 1  # a change to any task, its test set or its price makes a new version of the suite
 FORMAT = "etmpc-references"
@@ -89,7 +88,7 @@ def mean(values) -> float:
 
 def references_path(task: str) -> Path:
     system = make_system(task)
-    return tasks_dir() / system.domain / f"{system.task}_references.json"
+    return data_dir(system.domain) / f"{system.task}_references.json"
 
 
 def _objectives(evaluation: Evaluation, spec: str) -> list[float]:
@@ -125,14 +124,9 @@ def load_references(task: str, test_set_sha256: str, path: Path | None = None) -
     and the task's price; a mismatch is one line that says how to rebuild them."""
     path = references_path(task) if path is None else Path(path)
     rebuild = f"rebuild them with: etmpc score --references --task {task}"
-    try:
-        data = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise EtmpcError(f"{task}: no stored references ({path}); {rebuild}") from None
-    except (OSError, ValueError) as exc:
-        raise EtmpcError(f"{task}: references {path} cannot be read ({exc}); {rebuild}") from None
-    if not isinstance(data, dict) or data.get("format") != FORMAT:
-        raise EtmpcError(f"{task}: {path} is not an etmpc references file; {rebuild}")
+    data = read_document(path, FORMAT, missing=f"{task}: no stored references ({path}); {rebuild}",
+                         unreadable=f"{task}: references {path} cannot be read ({{error}}); {rebuild}",
+                         foreign=f"{task}: {path} is not an etmpc references file; {rebuild}")
     if data.get("suite_version") != SUITE_VERSION:
         raise EtmpcError(f"{task}: references {path} are of suite version {data.get('suite_version')!r}, this etmpc's is "
                          f"{SUITE_VERSION}; {rebuild}")

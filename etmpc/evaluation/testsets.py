@@ -3,7 +3,7 @@
 A test set is one ``.npz`` file in ``tasks/<domain>/`` with a ``.sha256`` file beside it. Each
 named array has the episode index as its first axis; ``meta`` holds a JSON description (task,
 seed, generator). The file is written with fixed zip timestamps so that regenerating it from its
-seed (``etmpc testset TASK --seed S --out FILE``; :data:`STORED` holds the stored sets' seeds) gives
+seed (``etmpc testset TASK --seed S --out FILE``; each domain's ``TEST_SET_SEEDS`` holds its stored sets' seeds) gives
 the same bytes, hence the same checksum.
 """
 
@@ -21,18 +21,18 @@ import numpy as np
 from etmpc.common.frozen import readonly
 from etmpc.common.errors import EtmpcError, TestSetError
 from etmpc.common.outputs import check_outputs, write_bytes
-from etmpc.common.resources import tasks_dir
+from etmpc.systems import canonical, data_dir, stored_seed
 
 FORMAT_VERSION = 1
 STORED_EPISODES = 100
-# The seed of each stored test set (tasks/<domain>/<task>_testset.npz): each is
-# `etmpc testset TASK --seed SEED --episodes 100` (tests/test_testset.py regenerates them bit for bit).
-STORED = {"cart_pendulum": 20210601, "battery": 20210602, "cart_pendulum/kicks": 20261126, "reacher": 20261125}
 _ZIP_EPOCH = (1980, 1, 1, 0, 0, 0)
 
 
 def default_path(domain: str, task: str) -> Path:
-    return tasks_dir() / domain / f"{task}_testset.npz"
+    """The stored test set of ``domain/task``, in its domain's data folder (:func:`etmpc.systems.data_dir`):
+    ``etmpc testset TASK --seed SEED --episodes 100``, SEED its domain's ``TEST_SET_SEEDS[task]``
+    (tests/test_testset.py regenerates each bit for bit)."""
+    return data_dir(domain) / f"{task}_testset.npz"
 
 
 def episode_generators(seed: int, episodes: int) -> list[np.random.Generator]:
@@ -112,7 +112,8 @@ def load(path: Path, domain: str, task: str) -> TestSet:
     path = Path(path)
     stored = path.resolve() == default_path(domain, task).resolve()
     # Only the stored test set is regenerated from its seed; someone else's file is theirs to fix.
-    advice = (f"regenerate it with: etmpc testset {domain} --seed {STORED.get(domain, 'SEED')} --out {path}" if stored else
+    name = canonical(f"{domain}/{task}")
+    advice = (f"regenerate it with: etmpc testset {name} --seed {stored_seed(name) or 'SEED'} --out {path}" if stored else
               "use the stored test set (drop --test-set) or a complete one")
     if not path.is_file():
         raise TestSetError(f"test set {path} not found; {advice}")

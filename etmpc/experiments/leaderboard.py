@@ -43,6 +43,7 @@ from etmpc.evaluation.workers import make_backend, shared_pools
 from etmpc.learning.config import VALIDATION_ENTROPY
 from etmpc.learning.jobs import mean_scores
 from etmpc.systems import distinct, folder_name, make_system, names
+from etmpc.systems.base import require
 from etmpc.views.figures import write_performance_profile_png
 
 FORMAT = "etmpc-leaderboard"
@@ -86,6 +87,7 @@ def shipped_policy(task: str, file: str = "learned.json") -> Path | None:
 def best_threshold(task: str, workers: int, say: Callable[[str], None]) -> str:
     """The ``threshold:X`` of the task's grid with the best mean objective on training-distribution episodes."""
     system = make_system(task)
+    require(system, "experiments", "the leaderboard's best threshold")
     specs = [f"threshold:{x:g}" for x in system.benchmark.sweep_thresholds]
     with make_backend("local", workers) as pool:
         means = mean_scores(pool, system.name, specs, VALIDATION_ENTROPY, VALIDATION_EPISODES)

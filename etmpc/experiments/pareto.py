@@ -13,6 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
+from etmpc.policies.specs import find, kind_of
+
 
 def episode_table(evaluation: dict) -> dict[str, dict[int, tuple[float, float]]]:
     """policy -> episode -> (control objective, computations), over finite runs (repeats averaged)."""
@@ -111,9 +113,9 @@ def build_pareto(domain: str, sense: str, settings, fixed: dict, periodic: list[
     for price, evaluation in zip(settings.prices, priced, strict=True):
         table = {**episode_table(evaluation), **fixed_table}
         kinds = {**{p: "periodic" for p in periodic}, **{p: "event" for p in events}}
-        for spec in evaluation["policies"]:
-            kinds[spec] = ("oracle" if spec.startswith("oracle:") else "learned" if spec.startswith("rl:")
-                           else "self" if spec.startswith("self:") else "rollout")
+        for spec in evaluation["policies"]:  # the priced policies: rollout, rl, self and the oracle
+            family = kind_of(spec).family
+            kinds[spec] = family if family in ("oracle", "learned", "self") else "rollout"
         rows = {}
         for spec, kind in kinds.items():
             by = table.get(spec, {})
@@ -153,11 +155,11 @@ def _answer(price: float, rows: dict, best: str) -> dict:
 def short_name(spec: str) -> str:
     """A policy's name for tables and legends: a learned policy by its run folder and file, a
     self-trigger by its file."""
-    if spec.startswith("rl:"):
-        path = Path(spec[3:])
+    kind, path = find(spec), Path(spec.partition(":")[2])
+    if kind is not None and kind.name == "rl":
         return f"rl:{path.parent.name}/{path.name}"
-    if spec.startswith("self:"):
-        return f"self:{Path(spec[5:]).name}"
+    if kind is not None and kind.name == "self":
+        return f"self:{path.name}"
     return spec
 
 

@@ -52,7 +52,7 @@ from etmpc.learning.train import TrainConfig, curve_summary, load_checkpoint, tr
 from etmpc.policies import parse_policy
 from etmpc.policies.learned import write_json_atomically
 from etmpc.systems import folder_name, make_system, names
-from etmpc.systems.base import provides
+from etmpc.systems.base import provides, require
 from etmpc.views import figures
 
 @dataclass(frozen=True)
@@ -165,6 +165,7 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
     The paper's own tasks also get the paper's learner (GPOMDP, its protocol); every task gets the
     fixed policies, the default learner, the headroom, PPO, figures, a recording and, with a scene, a video."""
     system = make_system(domain)
+    require(system, "experiments", "etmpc reproduce")
     folder.mkdir(parents=True, exist_ok=True)
     common = dict(domain=domain, episodes=settings.test_episodes, workers=run["workers"], backend=run["backend"],
                   address=run["address"], progress=progress)

@@ -50,7 +50,8 @@ from etmpc.learning import dpi
 from etmpc.learning.config import TrainConfig
 from etmpc.learning.selftrigger import SelfSettings, train_self
 from etmpc.learning.train import train
-from etmpc.systems import check_price, distinct, make_system, names, system_key
+from etmpc.systems import SystemKey, distinct, make_system, names, system_key
+from etmpc.systems.base import require
 from etmpc.views.curves import draw_pareto
 from etmpc.views.figures import save_png_atomically
 
@@ -100,11 +101,13 @@ class SweepSettings:
 
     @classmethod
     def default(cls, domain: str, prices=None, episodes: int | None = None, quick: bool = False) -> SweepSettings:
-        benchmark = make_system(domain).benchmark  # the task's prices and threshold levels
+        system = make_system(domain)
+        require(system, "experiments", "etmpc sweep")
+        benchmark = system.benchmark  # the task's prices and threshold levels
         prices = benchmark.prices if prices is None else tuple(prices)
         if not 1 <= len(prices) <= MAX_PRICES:
             raise EtmpcError(f"give 1 to {MAX_PRICES} prices, got {len(prices)}")
-        prices = tuple(check_price(p) for p in prices)
+        prices = tuple(SystemKey(domain, p).recompute_price for p in prices)  # each checked
         if len(set(prices)) != len(prices):
             raise EtmpcError(f"a price is given twice: {', '.join(f'{p:g}' for p in prices)}")
         if quick:

@@ -11,7 +11,7 @@ from etmpc.common.errors import EtmpcError
 from etmpc.learning import dpi
 from etmpc.learning.gpomdp import Settings
 from etmpc.policies.features import DEFAULT_FEATURES, check_features
-from etmpc.systems import canonical, system_key
+from etmpc.systems import SystemKey, canonical
 
 TRAIN_ENTROPY = 0x6574_6D70_6321  # "etmpc!"
 NORMALISATION_ENTROPY = 0x6E6F_726D  # "norm"
@@ -49,12 +49,12 @@ class TrainConfig:
         if self.algorithm not in ALGORITHMS:
             raise EtmpcError(f"unknown algorithm {self.algorithm!r}; valid: {', '.join(ALGORITHMS)}")
         object.__setattr__(self, "domain", canonical(self.domain))  # the task's own name; a bad one fails here
-        system_key(self.domain, self.recompute_price)  # a bad price fails here
+        self.system  # a bad price fails here
 
     @property
-    def system(self) -> str:
+    def system(self) -> SystemKey:
         """The key workers build the system by: the domain, at ``recompute_price`` if one is set."""
-        return system_key(self.domain, self.recompute_price)
+        return SystemKey(self.domain, self.recompute_price)
 
     def to_json(self) -> dict:
         data = asdict(self)

@@ -1,23 +1,32 @@
 """Direct policy iteration: rollout-labelled, cost-sensitive classification of the logistic policy.
 
 The stronger learner of ``etmpc train --algorithm dpi`` (Lagoudakis & Parr 2003; Lazaric,
-Ghavamzadeh & Munos 2010, "Analysis of a classification-based policy iteration algorithm"). Each
-iteration, for the current policy ``pi_t``:
+Ghavamzadeh & Munos 2010, "Analysis of a classification-based policy iteration algorithm"). The
+code below reads in the algorithm's order:
 
-1. **States.** Play training episodes under ``pi_t`` and pick ``states_per_episode`` of its
-   decisions in each at random.
-2. **Rollouts.** At each picked decision, estimate the return of keeping and of recomputing with
-   :func:`etmpc.policies.rollout.q_values`: ``futures`` futures sampled from what the controller knows,
-   the same for both answers (common random numbers), each simulated ``horizon`` steps ahead
-   under ``pi_t`` and valued at ``system.truncation_value`` there.
-3. **Classification.** Label the decision *keep* when keeping returns at least as much, weight it
-   by how much the better answer gains (``|Q(keep) - Q(recompute)|``: a mistake costs that much),
-   and fit ``theta`` by weighted, ridge-regularised logistic regression on every decision labelled
-   so far (L-BFGS). ``pi_{t+1}(keep | s) = sigma(theta . phi(s))``.
+0. **The first policy** (:func:`choose_base`). ``pi_0`` is the best fixed schedule among
+   :attr:`Settings.bases`, chosen on training episodes (never the test set): iteration 0 labels
+   decisions by rollouts over it, so ``pi_1`` already imitates the rollout policy over the best
+   schedule, which improves on it.
 
-``pi_0`` is the best fixed schedule among :attr:`Settings.bases`, chosen on training episodes
-(never the test set): iteration 0 labels decisions by rollouts over it, so ``pi_1`` already
-imitates the rollout policy over the best schedule, which improves on it.
+Then each iteration, for the current policy ``pi_t``:
+
+1. **States** (:func:`label_episode`). Play training episodes under ``pi_t`` and pick
+   ``states_per_episode`` of its decisions in each at random.
+2. **Rollouts** (:class:`Labeller`). At each picked decision, estimate the return of keeping and of
+   recomputing with :func:`etmpc.policies.rollout.q_values`: ``futures`` futures sampled from what the
+   controller knows, the same for both answers (common random numbers), each simulated ``horizon``
+   steps ahead under ``pi_t`` and valued at ``system.truncation_value`` there.
+3. **Classification** (:func:`fit`). Label the decision *keep* when keeping returns at least as
+   much, weight it by how much the better answer gains (``|Q(keep) - Q(recompute)|``: a mistake
+   costs that much), and fit ``theta`` by weighted, ridge-regularised logistic regression on every
+   decision labelled so far (L-BFGS).
+4. **The next policy** (:func:`iteration`). ``pi_{t+1}(keep | s) = sigma(theta . phi(s))``, for
+   every seed of the run.
+
+:func:`label_episode` is a worker's job (a pure function of its arguments, as those of
+:mod:`etmpc.learning.jobs`); the rest runs in the driver, :func:`etmpc.learning.train.train`.
+:class:`Labeller` also labels the self-trigger's training (:mod:`etmpc.learning.selftrigger`).
 """
 
 from __future__ import annotations
@@ -27,6 +36,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import minimize
 
+from etmpc.evaluation.workers import context
+from etmpc.loop import run_episode
+from etmpc.policies import parse_policy
+from etmpc.policies.learned import LogisticPolicy
 from etmpc.policies.rollout import q_values
 
 DPI_ENTROPY = 0x6470_6921  # "dpi!"
@@ -51,15 +64,38 @@ class Settings:
             raise ValueError(f"ridge must be >= 0, got {self.ridge}")
 
 
+# 0. The first policy.
+
+def choose_base(settings: Settings, sense: str, mean_scores) -> str:
+    """``pi_0``: the best of ``settings.bases``. ``mean_scores(policies, episodes)`` gives each
+    policy's mean objective on the first ``episodes`` of a stream of training-distribution episodes
+    (never the test set); ``sense`` (``"max"`` or ``"min"``) says which is best."""
+    means = mean_scores(list(settings.bases), settings.selection_episodes)
+    pick = int(np.argmax(means) if sense == "max" else np.argmin(means))
+    return settings.bases[pick]
+
+
+# 1-2. Labels by rollouts.
+
+def episode_rngs(seed: int, episode: int) -> list[np.random.Generator]:
+    """The draws of DPI's training ``episode`` of ``seed``: the episode, the picked steps, the
+    sampled futures and the policy's own decisions."""
+    return [np.random.default_rng(np.random.SeedSequence(DPI_ENTROPY, spawn_key=(seed, episode, k))) for k in range(4)]
+
+
 class Labeller:
-    """Plays ``base`` and, at the chosen steps, estimates both answers' returns by rollouts."""
+    """Plays ``base`` and, at the chosen ``steps``, appends ``label(s, twin)`` to :attr:`rows`:
+    whatever the learner estimates there by simulating in ``twin`` (an environment of the same task,
+    made at the first chosen step; the running episode is left untouched). DPI's label is both
+    answers' returns (:func:`label_episode`), the self-trigger's every keep length's
+    (:func:`etmpc.learning.selftrigger.label_episode`); ``name`` prefixes the spec."""
 
     simulates = True
 
-    def __init__(self, base, featurise, steps: set[int], settings: Settings, rng: np.random.Generator):
-        self.base, self.featurise, self.steps, self.settings, self.rng = base, featurise, steps, settings, rng
-        self.spec, self.stochastic = f"label:{base.spec}", base.stochastic
-        self.rows: list[tuple[np.ndarray, float, float, int]] = []
+    def __init__(self, base, steps: set[int], label, name: str = "label"):
+        self.base, self.steps, self.label = base, steps, label
+        self.spec, self.stochastic = f"{name}:{base.spec}", base.stochastic
+        self.rows: list = []
         self._twin = None
 
     def decide(self, s, rng) -> bool:
@@ -67,10 +103,35 @@ class Labeller:
         if ctx.step in self.steps:
             if self._twin is None:
                 self._twin = ctx.system.make_env()
-            keep, recompute = q_values(ctx, self.base, self.settings.futures, self.rng, self._twin, self.settings.horizon)
-            self.rows.append((self.featurise(s), float(np.mean(keep)), float(np.mean(recompute)), ctx.step))
+            self.rows.append(self.label(s, self._twin))
         return self.base.decide(s, rng)
 
+
+def label_episode(domain: str, base, settings: Settings, policy_json: dict, seed: int, e: int) -> list:
+    """DPI's training episode ``e`` of ``seed`` under ``base`` (``pi_t``: a fixed spec or a policy's
+    JSON): ``[(phi, q_keep, q_recompute, step), ...]`` at its picked decisions."""
+    system, env, _ = context(domain)
+    base = parse_policy(base, system.error_weights, system.name) if isinstance(base, str) else LogisticPolicy.from_json(base)
+    featurise = LogisticPolicy.from_json(policy_json).phi
+    episode_rng, pick_rng, future_rng, policy_rng = episode_rngs(seed, e)
+    picked = set(pick_rng.choice(system.episode_steps, size=min(settings.states_per_episode, system.episode_steps),
+                                 replace=False).tolist())
+
+    def label(s, twin):  # both answers over the same sampled futures, then phi(s)
+        keep, recompute = q_values(s.context, base, settings.futures, future_rng, twin, settings.horizon)
+        return featurise(s), float(np.mean(keep)), float(np.mean(recompute)), s.context.step
+
+    labeller = Labeller(base, picked, label)
+    run_episode(system, env, labeller, policy_rng, system.draw_episode(episode_rng))
+    return [(phi.tolist(), keep, recompute, step) for phi, keep, recompute, step in labeller.rows]
+
+
+def _label_job(job) -> list:
+    """A pool's job ``("label", args)``: :func:`label_episode` (the name is how progress counts it)."""
+    return label_episode(*job[1])
+
+
+# 3. Classification.
 
 def fit(features: np.ndarray, keep_advantage: np.ndarray, ridge: float, theta0: np.ndarray | None = None) -> np.ndarray:
     """``theta`` minimising the weighted logistic loss of labels ``keep = advantage >= 0`` with
@@ -97,7 +158,29 @@ def fit(features: np.ndarray, keep_advantage: np.ndarray, ridge: float, theta0: 
     return result.x
 
 
-def episode_rngs(seed: int, episode: int) -> list[np.random.Generator]:
-    """The draws of DPI's training ``episode`` of ``seed``: the episode, the picked steps, the
-    sampled futures and the policy's own decisions."""
-    return [np.random.default_rng(np.random.SeedSequence(DPI_ENTROPY, spawn_key=(seed, episode, k))) for k in range(4)]
+# 4. The next policy.
+
+def iteration(state, pool, tick, start: int, stop: int) -> None:
+    """One DPI iteration per seed of ``state`` (the run's :class:`etmpc.learning.checkpoint.RunState`,
+    updated in place): label episodes ``start..stop-1`` by rollouts over the current policy (over the
+    chosen schedule at iteration 0) on ``pool``, then refit ``theta`` on every label so far. ``tick``
+    is told of each finished job."""
+    config = state.config
+
+    def base(seed):  # pi_t: the schedule, then the policy at the learner's theta (checkpoint.policy_at)
+        learner = state.learners[str(seed)]
+        return state.base if learner["iterations"] == 0 else dict(state.policy, theta=list(learner["theta"]))
+    jobs = [("label", (config.system, base(s), config.dpi, state.policy, s, e)) for s in config.seeds for e in range(start, stop)]
+    results = pool.map(_label_job, jobs, tick)
+    per_seed = stop - start
+    for k, seed in enumerate(config.seeds):
+        learner = state.learners[str(seed)]
+        for rows in results[k * per_seed:(k + 1) * per_seed]:
+            learner["data"] += [list(row) for row in rows]
+        phi = np.array([row[0] for row in learner["data"]])
+        advantage = np.array([row[1] - row[2] for row in learner["data"]])
+        learner["theta"] = fit(phi, advantage, config.dpi.ridge).tolist()
+        learner["iterations"] += 1
+        learner["episodes"] = stop
+        state.training += [{"episode": e, "seed": seed, "labels": len(rows)}
+                           for e, rows in zip(range(start, stop), results[k * per_seed:(k + 1) * per_seed])]

@@ -1,5 +1,6 @@
 """The worker side of a training run: every function here is a pure function of its arguments, so
-a job gives the same result in any process, on any backend (see :mod:`etmpc.learning.train`)."""
+a job gives the same result in any process, on any backend (see :mod:`etmpc.learning.train`). DPI's
+labelling job is :func:`etmpc.learning.dpi.label_episode`, with the rest of DPI."""
 
 from __future__ import annotations
 
@@ -9,7 +10,6 @@ import numpy as np
 
 from etmpc.evaluation.evaluate import scores
 from etmpc.evaluation.workers import context, play_test_episode
-from etmpc.learning import dpi
 from etmpc.learning.config import NORMALISATION_ENTROPY, TRAIN_ENTROPY
 from etmpc.learning.gpomdp import Learner, Settings
 from etmpc.loop import run_episode
@@ -91,20 +91,6 @@ def evaluate_theta(domain: str, sha256: str, policy_json: dict, repeat: int, epi
     return (*scores(played.system, played.trajectory), played.trajectory.recomputes, record)
 
 
-def label_episode(domain: str, base, settings: dpi.Settings, policy_json: dict, seed: int, e: int) -> list:
-    """DPI's training episode ``e`` of ``seed`` under ``base`` (a fixed spec or a policy's JSON):
-    ``[(phi, q_keep, q_recompute, step), ...]`` at its picked decisions."""
-    system, env, _ = context(domain)
-    base = _policy(system, base)
-    featurise = LogisticPolicy.from_json(policy_json).phi
-    episode_rng, pick_rng, future_rng, policy_rng = dpi.episode_rngs(seed, e)
-    picked = set(pick_rng.choice(system.episode_steps, size=min(settings.states_per_episode, system.episode_steps),
-                                 replace=False).tolist())
-    labeller = dpi.Labeller(base, featurise, picked, settings, future_rng)
-    run_episode(system, env, labeller, policy_rng, system.draw_episode(episode_rng))
-    return [(phi.tolist(), keep, recompute, step) for phi, keep, recompute, step in labeller.rows]
-
-
 def training_return(domain: str, policy, entropy: int, index: int) -> float:
     """The policy's objective (sense-aware) on training-distribution episode ``index`` of ``entropy``'s
     stream (``policy``: a spec or a policy's JSON): how models are chosen without the test set."""
@@ -127,7 +113,7 @@ def _policy(system, policy):
 
 def _call(job):
     name, args = job
-    return {"normalisation": normalisation_states, "train": train_block, "evaluate": evaluate_theta, "label": label_episode,
+    return {"normalisation": normalisation_states, "train": train_block, "evaluate": evaluate_theta,
             "score": training_return}[name](*args)
 
 

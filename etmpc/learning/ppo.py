@@ -27,7 +27,7 @@ from etmpc.evaluation.workers import make_backend
 from etmpc.learning.config import VALIDATION_ENTROPY
 from etmpc.learning.jobs import mean_scores
 from etmpc.policies.sb3 import FORMAT, metadata_path
-from etmpc.systems import make_system, system_key
+from etmpc.systems import SystemKey, system_key
 
 
 @dataclass(frozen=True)
@@ -63,13 +63,13 @@ def _libraries():
     return stable_baselines3, torch
 
 
-def _make_env(task: str, price: float | None, seed: int):
+def _make_env(key: SystemKey, seed: int):
     def make():
         from stable_baselines3.common.monitor import Monitor
 
         from etmpc.envs.gym import TriggerEnv
 
-        env = Monitor(TriggerEnv(task, price=price))
+        env = Monitor(TriggerEnv(key))
         env.reset(seed=seed)
         return env
     return make
@@ -79,15 +79,16 @@ def _ours(name: str) -> bool:
     return name in ("checkpoints", "selected.zip", "selected.json", "training.json")
 
 
-def train_ppo(task: str, out: Path, settings: PpoSettings = PpoSettings(), workers: int = 1, price: float | None = None,
-              say=lambda line: None) -> dict:
-    """Train, checkpoint, choose on validation episodes; returns ``training.json``'s content."""
+def train_ppo(task: str | SystemKey, out: Path, settings: PpoSettings = PpoSettings(), workers: int = 1,
+              recompute_price: float | None = None, say=lambda line: None) -> dict:
+    """Train on ``task`` (a name, at ``recompute_price`` if given, or a :class:`SystemKey`), checkpoint,
+    choose on validation episodes; returns ``training.json``'s content."""
     sb3, torch = _libraries()
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
 
     out = Path(out)
-    key = system_key(task, price)
-    system = make_system(key)
+    key = system_key(task, recompute_price)
+    system = key.make()
     refuse_foreign(out, _ours, "PPO training run")
     if (out / "training.json").exists():
         raise EtmpcError(f"{out} already holds a PPO run; choose another --out")
@@ -97,7 +98,7 @@ def train_ppo(task: str, out: Path, settings: PpoSettings = PpoSettings(), worke
     n_steps = min(settings.n_steps, max(1, settings.timesteps // (settings.checkpoints * workers)))
     rollout = n_steps * workers
     slices = [max(1, round(settings.timesteps / settings.checkpoints / rollout)) * rollout] * settings.checkpoints
-    envs = [_make_env(task, price, settings.seed * 1000 + i) for i in range(workers)]
+    envs = [_make_env(key, settings.seed * 1000 + i) for i in range(workers)]
     vec = SubprocVecEnv(envs) if workers > 1 else DummyVecEnv(envs)
     vec = VecNormalize(vec, norm_obs=True, norm_reward=True, gamma=settings.gamma)
     model = sb3.PPO("MlpPolicy", vec, seed=settings.seed, device="cpu", n_steps=n_steps,
@@ -114,14 +115,14 @@ def train_ppo(task: str, out: Path, settings: PpoSettings = PpoSettings(), worke
                 path = out / "checkpoints" / f"step_{model.num_timesteps:08d}.zip"
                 model.save(str(path))
                 write_json(metadata_path(path), {
-                    "format": FORMAT, "version": 1, "task": key.partition("@")[0], "algorithm": "ppo",
+                    "format": FORMAT, "version": 1, "task": key.task, "algorithm": "ppo",
                     "observation_names": names, "observation_mean": vec.obs_rms.mean.tolist(),
                     "observation_var": vec.obs_rms.var.tolist(), "recompute_price": system.recompute_price,
                     "timesteps": int(model.num_timesteps), "settings": _json(settings)})
                 score = mean_scores(pool, key, [f"sb3:{path}"], VALIDATION_ENTROPY, settings.validation_episodes)[0]
                 checkpoints.append({"timesteps": int(model.num_timesteps), "file": str(path.relative_to(out)),
                                     "validation_objective": score, "wall_seconds": time.perf_counter() - started})
-                say(f"{task}: PPO {model.num_timesteps} steps, validation objective {score:.5f} "
+                say(f"{key.task}: PPO {model.num_timesteps} steps, validation objective {score:.5f} "
                     f"({time.perf_counter() - started:.0f} s)")
     finally:
         vec.close()
@@ -130,7 +131,7 @@ def train_ppo(task: str, out: Path, settings: PpoSettings = PpoSettings(), worke
     meta = json.loads(metadata_path(out / pick["file"]).read_text())
     write_json(out / "selected.json", dict(meta, validation_objective=pick["validation_objective"],
                                            validation_episodes=settings.validation_episodes))
-    result = {"format": "etmpc-ppo-run", "version": 1, "task": key, "settings": _json(settings), "workers": workers,
+    result = {"format": "etmpc-ppo-run", "version": 1, "task": str(key), "settings": _json(settings), "workers": workers,
               "environment_steps": int(model.num_timesteps), "wall_seconds": time.perf_counter() - started,
               "checkpoints": checkpoints, "selected": pick["file"], "objective_sense": system.objective_sense,
               "stable_baselines3": sb3.__version__, "torch": torch.__version__}

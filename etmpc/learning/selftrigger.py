@@ -8,7 +8,8 @@ as :mod:`etmpc.learning.dpi` does for event triggering:
 2. on training-distribution episodes played by the base, at a few picked steps, a plan is solved and
    every candidate ``n`` scored: the mean return, over ``K`` futures sampled from what the
    controller knows (common random numbers), of keeping that plan ``n`` steps and then following
-   the base, ``H`` steps past the longest candidate plus the truncation value;
+   the base, ``H`` steps past the longest candidate plus the truncation value (DPI's labeller,
+   :class:`etmpc.learning.dpi.Labeller`, with this label);
 3. the model is fitted to each labelled solve's best candidate by ridge-regularised cross-entropy,
    each solve weighted by how much the choice matters (best minus mean return), for each ridge of
    ``ridges``;
@@ -19,7 +20,7 @@ as :mod:`etmpc.learning.dpi` does for event triggering:
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
@@ -28,12 +29,13 @@ from scipy.optimize import minimize
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import write_json
 from etmpc.evaluation.workers import context, make_backend
+from etmpc.learning import dpi
 from etmpc.learning.config import SELECTION_ENTROPY, VALIDATION_ENTROPY
 from etmpc.learning.jobs import mean_scores
 from etmpc.loop import Snapshot, play_on, run_episode
 from etmpc.policies import Always, Every, parse_policy
 from etmpc.policies.selftrigger import CANDIDATES, SelfTrigger, plan_features
-from etmpc.systems import make_system
+from etmpc.systems import SystemKey, system_key
 
 SELF_ENTROPY = 0x73656C66  # "self"
 
@@ -75,31 +77,23 @@ class _KeepFor:
         return self.base.decide(s, rng)
 
 
-class _Labeller:
-    """Plays ``base``; at the picked steps, scores every candidate ``n`` for a plan solved there."""
+def _candidate_returns(base, candidates: tuple[int, ...], futures: int, horizon: int, rng: np.random.Generator):
+    """The label of a picked step (for :class:`etmpc.learning.dpi.Labeller`): a plan solved there, its
+    features, and every candidate ``n``'s mean return over ``futures`` futures sampled from what the
+    controller knows (the same for all, no draws of ``base``) of keeping that plan ``n`` steps and then
+    following ``base``, played ``horizon`` steps on."""
 
-    simulates = True
-
-    def __init__(self, base, steps: set[int], settings: SelfSettings, rng: np.random.Generator):
-        self.base, self.steps, self.settings, self.rng = base, steps, settings, rng
-        self.spec, self.stochastic = f"label-self:{base.spec}", base.stochastic
-        self.rows: list[tuple[list[float], list[float]]] = []
-        self._twin = None
-
-    def decide(self, s, rng) -> bool:
+    def label(s, twin) -> tuple[list[float], list[float]]:
         ctx = s.context
-        if ctx.step in self.steps:
-            system = ctx.system
-            if self._twin is None:
-                self._twin = system.make_env()
-            snapshot = Snapshot.take(ctx)
-            futures = [system.sample_future(snapshot.episode, ctx.step, self.rng) for _ in range(self.settings.futures)]
-            solved = system.plan(snapshot.x, snapshot.u_prev, snapshot.plan, snapshot.age, ctx.timestep)
-            stop = ctx.step + self.settings.horizon
-            returns = [np.mean([play_on(system, self._twin, snapshot, _KeepFor(solved, n, self.base), None, True, future,
-                                        solved, stop) for future in futures]) for n in self.settings.candidates]
-            self.rows.append((plan_features(solved).tolist(), [float(q) for q in returns]))
-        return self.base.decide(s, rng)
+        system = ctx.system
+        snapshot = Snapshot.take(ctx)
+        sampled = [system.sample_future(snapshot.episode, ctx.step, rng) for _ in range(futures)]
+        solved = system.plan(snapshot.x, snapshot.u_prev, snapshot.plan, snapshot.age, ctx.timestep)
+        stop = ctx.step + horizon
+        returns = [np.mean([play_on(system, twin, snapshot, _KeepFor(solved, n, base), None, True, future, solved, stop)
+                            for future in sampled]) for n in candidates]
+        return plan_features(solved).tolist(), [float(q) for q in returns]
+    return label
 
 
 def label_episode(key: str, base: str, candidates: tuple[int, ...], settings: SelfSettings, index: int) -> list:
@@ -109,8 +103,9 @@ def label_episode(key: str, base: str, candidates: tuple[int, ...], settings: Se
     rngs = [np.random.default_rng(np.random.SeedSequence(SELF_ENTROPY, spawn_key=(index, k))) for k in range(3)]
     steps = set(rngs[1].choice(np.arange(1, system.episode_steps), size=min(settings.solves_per_episode,
                                                                             system.episode_steps - 1), replace=False).tolist())
-    labeller = _Labeller(parse_policy(base, system.error_weights, system.name), steps,
-                         replace(settings, candidates=candidates, horizon=max(candidates) + settings.horizon), rngs[2])
+    policy = parse_policy(base, system.error_weights, system.name)
+    label = _candidate_returns(policy, candidates, settings.futures, max(candidates) + settings.horizon, rngs[2])
+    labeller = dpi.Labeller(policy, steps, label, "label-self")
     run_episode(system, env, labeller, None, system.draw_episode(rngs[0]))
     return labeller.rows
 
@@ -142,11 +137,12 @@ def fit(features: np.ndarray, returns: np.ndarray, ridge: float) -> np.ndarray:
     return result.x.reshape(c, 1 + p)
 
 
-def train_self(key: str, out: Path, settings: SelfSettings = SelfSettings(), workers: int = 1, backend: str = "local",
-               address: str | None = None, say=lambda line: None) -> SelfTrigger:
+def train_self(key: str | SystemKey, out: Path, settings: SelfSettings = SelfSettings(), workers: int = 1,
+               backend: str = "local", address: str | None = None, say=lambda line: None) -> SelfTrigger:
     """Choose the base, label, fit, validate and write ``out`` (the policy file); returns the
-    policy. ``key``: a system key (``DOMAIN`` or ``DOMAIN@PRICE``, see :mod:`etmpc.systems`)."""
-    system = make_system(key)
+    policy. ``key``: a :class:`~etmpc.systems.SystemKey` (a task at a price), or a task's name."""
+    key = system_key(key)
+    system = key.make()
     better = np.argmax if system.objective_sense == "max" else np.argmin
     candidates = tuple(c for c in settings.candidates if c <= system.horizon)
     if not candidates:
@@ -177,7 +173,7 @@ def train_self(key: str, out: Path, settings: SelfSettings = SelfSettings(), wor
         f"{settings.validation_episodes} validation episodes)")
     policy = fits[chosen]
     best = np.array(candidates)[np.argmax(returns, axis=1)]
-    hyper = dict(settings.to_json(), system=key, recompute_price=system.recompute_price, base=base,
+    hyper = dict(settings.to_json(), system=str(key), recompute_price=system.recompute_price, base=base,
                  base_selection=dict(zip(settings.bases, scores)), labelled_solves=len(rows),
                  best_keep_counts={str(c): int(np.sum(best == c)) for c in candidates},
                  validation=dict(zip(fits, validation)), chosen=chosen)

@@ -92,7 +92,7 @@ def once_each(backend, fn, jobs: list, progress) -> list:
     """``backend.map(fn, jobs, progress)``, with each distinct job played once: an evaluation's
     result is a function of its arguments alone, and every seed starts from the same policy, so the
     first evaluation would otherwise play each episode once per seed."""
-    keys = [json.dumps(job, sort_keys=True) for job in jobs]
+    keys = [json.dumps(job, sort_keys=True, default=str) for job in jobs]
     distinct, repeats = {}, []
     for key, job in zip(keys, jobs):
         if key in distinct:
@@ -159,7 +159,8 @@ def train(config: TrainConfig, out: Path, workers: int = 1, resume: bool = False
                 base = None
             else:
                 learner = {"theta": initial.theta.tolist(), "episodes": 0, "iterations": 0, "data": []}
-                base = _choose_base(config, pool)
+                base = dpi.choose_base(config.dpi, make_system(config.system).objective_sense,
+                                       lambda bases, n: mean_scores(pool, config.system, bases, SELECTION_ENTROPY, n))
             # One learner per seed, sharing nothing (a DPI learner's labels grow in place).
             state = RunState(config, initial.to_json(), {str(s): json.loads(json.dumps(learner)) for s in config.seeds}, base=base)
             _evaluate_phase(state, pool, tick, testset, out, record_episodes)
@@ -177,7 +178,7 @@ def train(config: TrainConfig, out: Path, workers: int = 1, resume: bool = False
                     state.learners[str(seed)] = learner
                     state.training += [dict(s, seed=seed) for s in stats]
             else:
-                _dpi_iteration(state, pool, tick, start, stop)
+                dpi.iteration(state, pool, tick, start, stop)
             _evaluate_phase(state, pool, tick, testset, out, record_episodes)
             summary = save(out, state)
             _report(state, summary["points"][-1], started, bar, resumed_from)
@@ -188,36 +189,6 @@ def train(config: TrainConfig, out: Path, workers: int = 1, resume: bool = False
             state.validation = {str(s): mean for s, mean in zip(config.seeds, means)}
             save(out, state)
     return state
-
-
-def _choose_base(config: TrainConfig, pool) -> str:
-    """DPI's iteration-0 schedule: the best of ``config.dpi.bases`` on training-distribution episodes."""
-    means = mean_scores(pool, config.system, list(config.dpi.bases), SELECTION_ENTROPY, config.dpi.selection_episodes)
-    pick = int(np.argmax(means) if make_system(config.system).objective_sense == "max" else np.argmin(means))
-    return config.dpi.bases[pick]
-
-
-def _dpi_iteration(state: RunState, pool, tick, start: int, stop: int) -> None:
-    """One DPI iteration per seed: label episodes ``start..stop-1`` by rollouts over the current
-    policy (over the chosen schedule at iteration 0), then refit ``theta`` on every label so far."""
-    config = state.config
-    def base(seed):
-        learner = state.learners[str(seed)]
-        return state.base if learner["iterations"] == 0 else policy_at(state, learner["theta"])
-    jobs = [("label", (config.system, base(s), config.dpi, state.policy, s, e)) for s in config.seeds for e in range(start, stop)]
-    results = pool.map(_call, jobs, tick)
-    per_seed = stop - start
-    for k, seed in enumerate(config.seeds):
-        learner = state.learners[str(seed)]
-        for rows in results[k * per_seed:(k + 1) * per_seed]:
-            learner["data"] += [list(row) for row in rows]
-        phi = np.array([row[0] for row in learner["data"]])
-        advantage = np.array([row[1] - row[2] for row in learner["data"]])
-        learner["theta"] = dpi.fit(phi, advantage, config.dpi.ridge).tolist()
-        learner["iterations"] += 1
-        learner["episodes"] = stop
-        state.training += [{"episode": e, "seed": seed, "labels": len(rows)}
-                           for e, rows in zip(range(start, stop), results[k * per_seed:(k + 1) * per_seed])]
 
 
 class _Progress:

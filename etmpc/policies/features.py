@@ -36,8 +36,8 @@ def _exogenous(domain: str):
     """The task's exogenous features ``f(s) -> array`` and their names (its system's optional
     ``exogenous_features``, see :mod:`etmpc.systems.base`), or None."""
     system = system_class(domain)
-    names = getattr(system, "exogenous_feature_names", ())
-    return (system.exogenous_features, names) if names else None
+    names = system.exogenous_feature_names
+    return (system.exogenous_features, names) if system.exogenous_features is not None and names else None
 
 
 def raw_features(features: str, domain: str, s: AugmentedState) -> np.ndarray:

@@ -45,6 +45,8 @@ def q_values(context: DecisionContext, base: Policy, futures: int, rng: np.rando
     answers, and is given the plays made here.
     """
     system = context.system
+    if not oracle and system.sample_future is None:
+        raise EtmpcError(f"rollouts need sampled futures (sample_future), which task {system.name} does not offer")
     snapshot = Snapshot.take(context)
     episodes = [None] if oracle else [system.sample_future(snapshot.episode, context.step, rng) for _ in range(futures)]
     seeds = rng.integers(2**63, size=len(episodes)) if (base.stochastic and rng is not None) else [None] * len(episodes)
@@ -129,6 +131,11 @@ class Rollout:
         return not self.oracle or self.base.stochastic
 
     @property
+    def upper_bound(self) -> bool:
+        """The oracle knows each episode's future: it bounds what a trigger can gain, and is not one."""
+        return self.oracle
+
+    @property
     def spec(self) -> str:
         if self.oracle:
             return f"oracle:{self.base.spec}"
@@ -166,15 +173,16 @@ def _split_count(spec: str, text: str, what: str, low: int, high: int) -> int:
     return value
 
 
-def parse_rollout(spec: str, parse_base, steps: int) -> Rollout:
+def parse_rollout(spec: str, parse_base, steps: int, simulating) -> Rollout:
     """``rollout:BASE[:K[:H]]`` or ``oracle:BASE``; ``parse_base`` parses BASE (a fixed or learned
-    policy); ``steps`` is the episode length (H's upper bound). Bad specs raise :class:`EtmpcError`."""
+    policy) and ``simulating(BASE)`` says whether it is written as a kind that simulates the loop
+    itself; ``steps`` is the episode length (H's upper bound). Bad specs raise :class:`EtmpcError`."""
     name, _, rest = spec.partition(":")
     usage = "rollout:BASE[:K[:H]] (e.g. rollout:every:3:8)" if name == "rollout" else "oracle:BASE (e.g. oracle:every:3)"
     if not rest:
         raise EtmpcError(f"bad policy {spec!r}: give the base policy, {usage}")
     tokens = rest.split(":")
-    if tokens[0] in ("rollout", "oracle"):
+    if simulating(rest):
         raise EtmpcError(f"bad policy {spec!r}: the base policy must not simulate; {usage}")
     # BASE may hold colons itself (every:3): take the longest head of the tokens that parses as a policy.
     extra_allowed = 2 if name == "rollout" else 0

@@ -12,7 +12,6 @@ loaded in each worker process when first asked, on one thread.
 
 from __future__ import annotations
 
-import json
 import warnings
 import zipfile
 from pathlib import Path
@@ -20,6 +19,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from etmpc.common.documents import read_document
 from etmpc.common.errors import EtmpcError
 from etmpc.common.interrupts import described, genuine
 from etmpc.loop import AugmentedState
@@ -115,14 +115,9 @@ def load_sb3(path: str, task: str | None) -> SB3Policy:
     if not model.is_file():
         raise EtmpcError(f"policy file {model} not found")
     meta_file = metadata_path(model)
-    try:
-        meta = json.loads(meta_file.read_text())
-    except FileNotFoundError:
-        raise EtmpcError(f"{model} has no {meta_file.name} beside it (what it was trained on)") from None
-    except (OSError, ValueError) as exc:
-        raise EtmpcError(f"{meta_file} cannot be read ({exc})") from None
-    if not isinstance(meta, dict) or meta.get("format") != FORMAT:
-        raise EtmpcError(f"{meta_file} is not an etmpc Stable-Baselines3 policy (format {FORMAT!r})")
+    meta = read_document(meta_file, FORMAT, missing=f"{model} has no {meta_file.name} beside it (what it was trained on)",
+                         unreadable=f"{meta_file} cannot be read ({{error}})",
+                         foreign=f"{meta_file} is not an etmpc Stable-Baselines3 policy (format {FORMAT!r})")
     try:
         trained_on = canonical(str(meta["task"]))
         cls = system_class(trained_on)

@@ -1,7 +1,14 @@
-"""Policies from their command-line specs: ``always``, ``never``, ``every:T`` (T >= 1), ``threshold:X``
-(X >= 0), ``rl:PATH`` (a learned policy saved by ``etmpc train``), ``self:PATH`` (a self-triggering
-policy saved by ``etmpc train-self``), ``py:MODULE:NAME`` (a trigger of your own, see
-:mod:`etmpc.policies.user`), ``sb3:PATH`` (a network trained on the trigger environment), ``rollout:BASE[:K[:H]]`` and the upper bound ``oracle:BASE``.
+"""The registry of policy kinds, and the parser it makes: a spec is ``KIND`` or ``KIND:ARG``.
+
+Each kind is a :class:`Kind`: its name (the text before the spec's first colon), its syntax and a
+line of help, whether it is an upper bound (an oracle: it knows each episode's future), and a builder
+that turns the argument into a policy. :data:`BUILT_IN` holds etmpc's own; other installed packages
+add theirs through the ``etmpc.policies`` entry point group (``name = "module:KIND"``, the name being
+the kind's), read once when first asked. A plugin that fails to load, names a built-in kind, or is not
+a :class:`Kind` gives one warning naming it; every other kind still works.
+
+The registry is the only reader of a spec's text: the CLI's help (:func:`syntax`), the error's list
+of valid kinds, and what a results file's spec was (:func:`kind_of`) all come from it.
 
 The parser sits above the policies it builds: it imports each kind, none of them imports it.
 """
@@ -9,10 +16,16 @@ The parser sits above the policies it builds: it imports each kind, none of them
 from __future__ import annotations
 
 import math
+import warnings
+from collections.abc import Callable
+from dataclasses import dataclass
+from functools import cache
+from importlib.metadata import entry_points
 
 import numpy as np
 
 from etmpc.common.errors import EtmpcError, UnknownNameError
+from etmpc.loop import Policy
 from etmpc.policies.fixed import Always, Every, Never
 from etmpc.policies.learned import load_policy
 from etmpc.policies.rollout import parse_rollout
@@ -20,69 +33,167 @@ from etmpc.policies.sb3 import load_sb3
 from etmpc.policies.selftrigger import load_self
 from etmpc.policies.threshold import Threshold
 from etmpc.policies.user import load_user
-from etmpc.loop import Policy
+
+ENTRY_POINTS = "etmpc.policies"
 
 
-# The kinds of policy a spec names (the text before its first colon).
-KINDS = ("always", "never", "every", "threshold", "rl", "self", "py", "sb3", "rollout", "oracle")
+@dataclass(frozen=True)
+class Context:
+    """What a kind's builder may use: the task's ``error_weights`` (the diagonal of W), its name
+    (``task``, for policy files made for one task), the episode's length, and ``parse`` for a kind that
+    wraps another policy (``rollout:BASE``)."""
+
+    error_weights: np.ndarray
+    task: str | None
+    steps: int
+    parse: Callable[[str], Policy]
 
 
-def names_a_kind(spec: str) -> bool:
-    """True if ``spec`` is written as a built-in policy's spec (``every:3``, ``oracle:...``; ``py:`` is
-    the users' own kind and not counted): a policy object of someone's must not take such a name, or the
-    results would show its numbers under that policy's."""
-    kind = spec.partition(":")[0]
-    return kind in KINDS and kind != "py"
+@dataclass(frozen=True)
+class Kind:
+    """A kind of policy: ``build(arg, spec, context)`` makes one from the text after the first colon
+    (``""`` when there is none), raising :class:`EtmpcError` with a one-line message on bad input."""
+
+    name: str
+    syntax: str  # how a spec of this kind is written, for the help and errors ("every:T")
+    summary: str  # one line: what it does
+    build: Callable[[str, str, Context], Policy]
+    upper_bound: bool = False  # True: it knows each episode's future; it bounds triggers and is not one
+    family: str = "other"  # periodic, event, learned, self, rollout, oracle, users, other: how tables group it
+    path: bool = False  # its argument is a file (rl:PATH): tables shorten it
+    simulates: bool = False  # it simulates the loop itself, so it may not be another such kind's base
 
 
 def _number(text: str, kind: type, spec: str):
     try:
         if text != text.strip():  # int(" 3") is 3, but "every: 3" is not how a spec is written
             raise ValueError(text)
-        value = kind(text)
+        return kind(text)
     except ValueError:
         raise EtmpcError(f"bad policy {spec!r}: {text!r} is not a{'n integer' if kind is int else ' number'}") from None
-    return value
+
+
+def _no_argument(policy: type) -> Callable[[str, str, Context], Policy]:
+    def build(arg: str, spec: str, context: Context) -> Policy:
+        if arg:
+            raise EtmpcError(f"bad policy {spec!r}: {spec.partition(':')[0]!r} takes no argument")
+        return policy()
+    return build
+
+
+def _every(arg: str, spec: str, context: Context) -> Policy:
+    period = _number(arg, int, spec)
+    if period < 1:
+        raise EtmpcError(f"bad policy {spec!r}: the period must be a whole number of steps >= 1")
+    return Every(period)
+
+
+def _threshold(arg: str, spec: str, context: Context) -> Policy:
+    level = _number(arg, float, spec)
+    if not (math.isfinite(level) and level >= 0):
+        raise EtmpcError(f"bad policy {spec!r}: the threshold must be a finite number >= 0")
+    return Threshold(level, np.asarray(context.error_weights, dtype=float))
+
+
+def _file(load: Callable[[str, Context], Policy], what: str) -> Callable[[str, str, Context], Policy]:
+    def build(arg: str, spec: str, context: Context) -> Policy:
+        if not arg:
+            raise EtmpcError(f"bad policy {spec!r}: give the {what} file, {spec.partition(':')[0]}:PATH")
+        return load(arg, context)
+    return build
+
+
+def _simulates(spec: str) -> bool:
+    kind = find(spec)
+    return kind is not None and kind.simulates
+
+
+def _rollout(arg: str, spec: str, context: Context) -> Policy:
+    return parse_rollout(spec, context.parse, context.steps, simulating=_simulates)
+
+
+BUILT_IN: tuple[Kind, ...] = (
+    Kind("always", "always", "recompute at every step (standard MPC)", _no_argument(Always), family="periodic"),
+    Kind("never", "never", "keep each plan to its end", _no_argument(Never), family="periodic"),
+    Kind("every", "every:T", "recompute when the plan is T steps old", _every, family="periodic"),
+    Kind("threshold", "threshold:X", "recompute when the weighted prediction error exceeds X", _threshold,
+         family="event"),
+    Kind("rl", "rl:PATH", "a learned policy (etmpc train)",
+         _file(lambda path, c: load_policy(path, c.task, nx=len(c.error_weights)), "policy"), family="learned", path=True),
+    Kind("self", "self:PATH", "a self-triggering policy (etmpc train-self)",
+         _file(lambda path, c: load_self(path, c.task), "policy"), family="self", path=True),
+    Kind("py", "py:MODULE:NAME", "your own trigger (a class or factory)", lambda arg, spec, c: load_user(spec),
+         family="users"),
+    Kind("sb3", "sb3:PATH", "a network trained on the trigger environment",
+         _file(lambda path, c: load_sb3(path, c.task), "model"), family="learned", path=True),
+    Kind("rollout", "rollout:BASE[:K[:H]]", "simulate both answers over K sampled futures, H steps ahead", _rollout,
+         family="rollout", simulates=True),
+    Kind("oracle", "oracle:BASE", "the same with the episode's own future: an upper bound, not a policy", _rollout,
+         upper_bound=True, family="oracle", simulates=True),
+)
+
+
+def _warn(what: str) -> None:
+    warnings.warn(f"etmpc: {what}; left out", RuntimeWarning, stacklevel=3)
+
+
+@cache
+def kinds() -> dict[str, Kind]:
+    """Every kind by name: the built-in ones, then the installed plugins' (``etmpc.policies``)."""
+    found = {kind.name: kind for kind in BUILT_IN}
+    for point in sorted(entry_points(group=ENTRY_POINTS), key=lambda p: p.name):
+        where = f"policy kind plugin {point.name!r} ({point.value})"
+        try:
+            kind = point.load()
+        except Exception as exc:  # a broken plugin must not take the other kinds with it
+            _warn(f"{where} failed to load ({type(exc).__name__}: {exc})")
+            continue
+        if not isinstance(kind, Kind):
+            _warn(f"{where} is not an etmpc.policies.specs.Kind")
+        elif kind.name != point.name or ":" in kind.name or not kind.name:
+            _warn(f"{where} names its kind {kind.name!r}, not {point.name!r}")
+        elif kind.name in found:
+            _warn(f"{where} names a kind etmpc already has")
+        else:
+            found[kind.name] = kind
+    return found
+
+
+def syntax() -> str:
+    """Every kind's syntax, for help texts: ``always | never | every:T | ...``."""
+    return " | ".join(kind.syntax for kind in kinds().values())
+
+
+def find(spec: str) -> Kind | None:
+    """The kind ``spec`` is written as, or None."""
+    return kinds().get(spec.partition(":")[0])
+
+
+def kind_of(spec: str) -> Kind:
+    """The kind of ``spec`` (a spec of a results file, say); an unknown one raises :class:`UnknownNameError`."""
+    kind = find(spec)
+    if kind is None:
+        raise UnknownNameError(f"unknown policy {spec!r}; valid: {syntax()}")
+    return kind
+
+
+def names_a_kind(spec: str) -> bool:
+    """True if ``spec`` is written as a registered kind's spec other than the users' own ``py:``
+    (``every:3``, ``oracle:...``): a policy object of someone's must not take such a name, or the results
+    would show its numbers under that policy's."""
+    kind = find(spec)
+    return kind is not None and kind.family != "users"
 
 
 def parse_policy(spec: str, error_weights: np.ndarray, domain: str | None = None, steps: int = 100) -> Policy:
-    """Build a policy from its command-line spec; bad specs raise :class:`EtmpcError`.
+    """Build a policy from its spec; a bad spec raises :class:`EtmpcError`, an unknown kind
+    :class:`UnknownNameError` listing the valid ones.
 
-    ``rl:PATH`` is checked against ``domain`` and the state size ``len(error_weights)``; ``steps``
+    ``rl:PATH`` is checked against task ``domain`` and the state size ``len(error_weights)``; ``steps``
     (the episode length) bounds a rollout's look-ahead.
     """
     if any(ord(c) < 32 or ord(c) == 127 for c in spec):  # a line break would split every table and message
         raise EtmpcError(f"bad policy {spec!r}: it holds a control character (a line break?)")
-    name, _, arg = spec.partition(":")
-    if name in ("rollout", "oracle"):
-        return parse_rollout(spec, lambda base: parse_policy(base, error_weights, domain, steps), steps)
-    if name in ("always", "never"):
-        if arg:
-            raise EtmpcError(f"bad policy {spec!r}: {name!r} takes no argument")
-        return Always() if name == "always" else Never()
-    if name == "every":
-        period = _number(arg, int, spec)
-        if period < 1:
-            raise EtmpcError(f"bad policy {spec!r}: the period must be a whole number of steps >= 1")
-        return Every(period)
-    if name == "threshold":
-        level = _number(arg, float, spec)
-        if not (math.isfinite(level) and level >= 0):
-            raise EtmpcError(f"bad policy {spec!r}: the threshold must be a finite number >= 0")
-        return Threshold(level, np.asarray(error_weights, dtype=float))
-    if name == "self":
-        if not arg:
-            raise EtmpcError(f"bad policy {spec!r}: give the policy file, self:PATH")
-        return load_self(arg, domain)
-    if name == "py":
-        return load_user(spec)
-    if name == "sb3":
-        if not arg:
-            raise EtmpcError(f"bad policy {spec!r}: give the model file, sb3:PATH")
-        return load_sb3(arg, domain)
-    if name == "rl":
-        if not arg:
-            raise EtmpcError(f"bad policy {spec!r}: give the policy file, rl:PATH")
-        return load_policy(arg, domain, nx=len(error_weights))
-    raise UnknownNameError(f"unknown policy {spec!r}; valid: always, never, every:T, threshold:X, rl:PATH, self:PATH, "
-                           "py:MODULE:NAME, sb3:PATH, rollout:BASE[:K[:H]], oracle:BASE")
+    kind = kind_of(spec)
+    context = Context(error_weights, domain, steps, lambda base: parse_policy(base, error_weights, domain, steps))
+    return kind.build(spec.partition(":")[2], spec, context)

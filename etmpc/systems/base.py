@@ -1,11 +1,12 @@
-"""What a system provides, by feature: the contract between a task's folder and the rest of etmpc.
+"""What a system provides: the contract between a task's folder and the rest of etmpc.
 
 A *system* is one task as the control loop sees it: the dm-control environment (plant and task), the
-MPC that makes plans, the feedback that corrects them, and the objective. :class:`System` lists its
-members, grouped by the feature that needs them; a system leaves out what its features do not need
-(a task without exogenous signals has no ``exogenous_features``; one without a 3-D scene no
-``scene``). ``tests/test_systems.py`` lists what every registered system provides, and
-``docs/adding-a-task.md`` says in which order a newcomer writes them.
+MPC that makes plans, the feedback that corrects them, and the objective. :class:`System` lists the
+members every task writes (:data:`REQUIRED`, eleven). :class:`SystemBase`, which every system
+subclasses, derives the rest from them with defaults a task may override (:data:`DERIVED`), and holds
+each optional capability as an attribute that is ``None`` when the task does not offer it
+(:data:`CAPABILITIES`: a 3-D scene, sampled futures for rollouts, failures, ...): a feature that needs
+one says so in one line. ``docs/adding-a-task.md`` says in which order a newcomer writes them.
 
 This module may import ``etmpc.common`` and ``etmpc.control``.
 """
@@ -13,12 +14,13 @@ This module may import ``etmpc.common`` and ``etmpc.control``.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any, Protocol
 
 import dm_env
 import numpy as np
 
-from etmpc.control.lqr import ErrorFeedback
+from etmpc.common.errors import EtmpcError
 from etmpc.control.plan import Plan
 
 
@@ -52,79 +54,139 @@ class Benchmark:
 
 
 class System(Protocol):
-    """A task as the control loop sees it (``cart_pendulum/system.py`` and ``battery/system.py`` are two).
+    """What every task writes (``cart_pendulum/system.py`` and ``battery/system.py`` are two)."""
 
-    Members by the feature that needs them. Everything under **the loop** is required; a system
-    leaves out a group whose feature it does not offer, and that feature says so in one line.
-    """
-
-    # -- the loop (etmpc.loop): required --------------------------------------------------------
-    Config: type  # the frozen settings it is built from: Config() is the paper's, with a recompute_price field
-    domain: str  # the domain's name in the registry (etmpc.systems.DOMAINS)
+    Config: type  # the frozen settings it is built from; Config() is the default, with fields horizon and recompute_price
+    domain: str  # the domain's name in the registry (etmpc.systems.registry)
     task: str  # the task's name in its domain's SUITE and SYSTEMS
-    name: str  # DOMAIN for a domain's default task, else DOMAIN/TASK: how files and commands name it
-    objective_sense: str  # "min": the objective is a cost; "max": a profit
-    recompute_price: float  # charged per computation in the policy's objective
     episode_steps: int
     control_interval_s: float
-    horizon: int  # N: a plan's length; the loop forces a recompute when a plan is N steps old
     state_names: tuple[str, ...]  # x, with units in the names (etmpc.views.blueprint reads them)
     input_names: tuple[str, ...]  # u, likewise
-    u_min: np.ndarray
-    u_max: np.ndarray
-    feedback: ErrorFeedback  # the correction -K (x - x_hat) added to the planned input while a plan is kept
+    feedback: Any  # ErrorFeedback or PlanFeedback: the correction added to the planned input while a plan is kept
+    Episode: type  # everything random about an episode: Episode.draw(rng), .arrays(), Episode.from_arrays(arrays)
 
     def make_env(self, random: Any = None) -> dm_env.Environment: ...  # the dm-control environment (plant and task)
-    def state(self, timestep: dm_env.TimeStep) -> np.ndarray: ...  # x from an observation
-    def measure(self, physics: Any) -> np.ndarray: ...  # the same x, read off the physics (no observation made)
     def plan(self, x: np.ndarray, u_prev: np.ndarray, warm: Plan | None, age: int, timestep: dm_env.TimeStep) -> Plan: ...
-    def action(self, u: np.ndarray, recompute: bool) -> np.ndarray: ...  # the environment's action for input u
-
-    # -- test sets (etmpc.evaluation.testsets) and everything that replays them: required ---------
-    def draw_episode(self, rng: np.random.Generator) -> Any: ...  # everything random about an episode
-    def episode_parameters(self) -> dict: ...  # what episodes are drawn from (kept in the test set)
-    def episode_from_arrays(self, arrays: dict[str, np.ndarray]) -> Any: ...  # a stored episode back
-
-    # -- the event trigger threshold:X --------------------------------------------------------------
-    error_weights: np.ndarray  # diagonal of W in ||W (x - x_hat)||
-
-    # -- recordings and figures (etmpc.views) ------------------------------------------------------
-    def signals(self, episode: Any) -> dict[str, np.ndarray]: ...  # exogenous inputs per step, by name with unit
-
-    # -- experiments (etmpc reproduce, etmpc sweep) ---------------------------------------------------
-    benchmark: Benchmark  # prices, threshold levels and the objective's unit
-
-    # -- rollout:, oracle:, DPI and the self-trigger's training (futures simulated with the loop) -----
-    def sample_future(self, episode: Any, step: int, rng: np.random.Generator) -> Any: ...  # what is unknown at step, redrawn
-    def truncation_value(self, x: np.ndarray) -> float: ...  # reward for the state a truncated rollout ends in
-
-    # -- optional ------------------------------------------------------------------------------------
-    # exogenous_feature_names: tuple[str, ...] and exogenous_features(s) -> array: what the learned
-    #     policy's "error" features add for this task (the battery's prices and production);
-    # camera: str and show(physics, x): a 3-D scene for `etmpc render` (the cart pendulum's);
-    # failure_name: str and failures(rewards) -> int: how often an episode failed (a fall, say), counted
-    #     from its rewards and reported beside the mean objective;
-    # plan_cost, reference_solvers() and interpreted(): what `etmpc bench` compares the MPC with.
 
 
-#: The members each feature needs (tests/test_systems.py checks every registered system against it).
-FEATURES: dict[str, tuple[str, ...]] = {
-    "loop": ("Config", "domain", "task", "name", "objective_sense", "recompute_price", "episode_steps", "control_interval_s",
-             "horizon", "state_names", "input_names", "u_min", "u_max", "feedback", "make_env", "state", "measure",
-             "plan", "action"),
-    "test sets": ("draw_episode", "episode_parameters", "episode_from_arrays"),
-    "threshold policy": ("error_weights",),
-    "recordings": ("signals",),
-    "experiments": ("benchmark",),
-    "rollouts": ("sample_future", "truncation_value"),
-    "exogenous features": ("exogenous_feature_names", "exogenous_features"),
-    "render": ("camera", "show"),
-    "bench": ("plan_cost", "reference_solvers", "interpreted"),
-    "failures": ("failure_name", "failures"),
+#: The members every task writes (:class:`System`).
+REQUIRED = ("Config", "domain", "task", "episode_steps", "control_interval_s", "state_names", "input_names", "feedback",
+            "Episode", "make_env", "plan")
+#: What :class:`SystemBase` derives from them, each a default a task may override.
+DERIVED = ("name", "horizon", "recompute_price", "objective_sense", "u_min", "u_max", "error_weights", "state", "measure",
+           "action", "draw_episode", "episode_from_arrays", "episode_parameters", "signals", "truncation_value", "show")
+#: Optional capabilities, by the feature that needs them: ``None`` on a task that does not offer it.
+CAPABILITIES: dict[str, tuple[str, ...]] = {
+    "experiments": ("benchmark",),  # etmpc reproduce, sweep and the leaderboard's rows: prices, thresholds, lookahead
+    "rollouts": ("sample_future",),  # rollout:, DPI and the self-trigger's training: futures the controller cannot know
+    "exogenous features": ("exogenous_features",),  # what the learned policy's "error" features add
+    "render": ("camera",),  # a 3-D scene for etmpc render and the recordings' video (with show)
+    "bench": ("plan_cost",),  # what etmpc bench compares the MPC with (with reference_solvers and interpreted)
+    "failures": ("failures",),  # how often an episode failed, reported beside the mean objective
 }
-REQUIRED = ("loop", "test sets", "threshold policy", "recordings", "experiments", "rollouts")
+
+
+class _Name:
+    """``DOMAIN`` for a domain's default task, else ``DOMAIN/TASK``, on the class and its instances."""
+
+    def __get__(self, system, cls) -> str:
+        from etmpc.systems.registry import canonical
+
+        return canonical(f"{cls.domain}/{cls.task}")
+
+
+class SystemBase:
+    """The base of every system: what :data:`DERIVED` lists, from the members a task writes, and every
+    capability of :data:`CAPABILITIES` as ``None``. A task overrides what differs for it."""
+
+    name = _Name()  # how files, folders and commands name the task
+    objective_sense = "min"  # "min": the objective is a cost; "max": a profit
+    config: Any
+
+    # -- optional capabilities (CAPABILITIES): None where the task offers none -----------------------
+    benchmark: Benchmark | None = None
+    sample_future: Any = None  # (episode, step, rng) -> the episode with what is unknown at step redrawn
+    exogenous_feature_names: tuple[str, ...] = ()
+    exogenous_features: Any = None  # (s) -> array: the values of exogenous_feature_names
+    camera: str | None = None  # the MJCF camera that films the scene
+    failure_name: str | None = None  # what a failure is called ("falls")
+    failures: Any = None  # (rewards) -> int: the failures of an episode, counted from its rewards
+    plan_cost: Any = None  # (x, u_prev, timestep, inputs) -> the OCP's objective of an input sequence
+    interpreted: Any = None  # () -> the same system with its MPC not compiled (None: it has no other way to run)
+
+    # -- derived from the members the task writes (a task may set its own in __init__) --------------------
+    @cached_property
+    def horizon(self) -> int:
+        """N: a plan's length; the loop forces a recompute when a plan is N steps old."""
+        return self.config.horizon
+
+    @cached_property
+    def recompute_price(self) -> float:
+        """Charged per computation in the policy's objective."""
+        return self.config.recompute_price
+
+    @cached_property
+    def u_min(self) -> np.ndarray:
+        return np.full(len(self.input_names), -np.inf)
+
+    @cached_property
+    def u_max(self) -> np.ndarray:
+        return np.full(len(self.input_names), np.inf)
+
+    @cached_property
+    def error_weights(self) -> np.ndarray:
+        """The diagonal of W in ``threshold:X``'s ``||W (x - x_hat)||``."""
+        return np.ones(len(self.state_names))
+
+    def state(self, timestep: dm_env.TimeStep) -> np.ndarray:
+        """x from an observation: its entries named as :attr:`state_names`."""
+        obs = timestep.observation
+        return np.array([obs[name] for name in self.state_names], dtype=float)
+
+    def measure(self, physics: Any) -> np.ndarray:
+        """The same x read off the physics (no observation made), bit for bit."""
+        return physics.state()
+
+    def action(self, u: np.ndarray, recompute: bool) -> np.ndarray:
+        """The environment's action for input ``u``."""
+        return u
+
+    def draw_episode(self, rng: np.random.Generator) -> Any:
+        return self.Episode.draw(rng)
+
+    def episode_from_arrays(self, arrays: dict[str, np.ndarray]) -> Any:
+        return self.Episode.from_arrays(arrays)
+
+    def episode_parameters(self) -> dict:
+        """What episodes are drawn from, kept in a test set's metadata."""
+        return {}
+
+    def signals(self, episode: Any) -> dict[str, np.ndarray]:
+        """The exogenous inputs per step, by name with unit, for recordings and figures."""
+        return {}
+
+    def truncation_value(self, x: np.ndarray) -> float:
+        """What a simulation stopped early adds for the state it ends in."""
+        return 0.0
+
+    def show(self, physics: Any, x: np.ndarray) -> None:
+        """Put state ``x`` into the physics for drawing (with a ``camera``)."""
+        physics.set_state_vector(x)
+        physics.forward()
+
+    def reference_solvers(self) -> list:
+        """Other solvers of the same OCP, for etmpc bench."""
+        return []
 
 
 def provides(system: Any, feature: str) -> bool:
-    """Whether ``system`` (an instance or its class) has every member ``feature`` needs."""
-    return all(hasattr(system, member) for member in FEATURES[feature])
+    """Whether ``system`` (an instance or its class) offers the capability ``feature`` needs."""
+    return all(getattr(system, member, None) is not None for member in CAPABILITIES[feature])
+
+
+def require(system: Any, feature: str, what: str) -> None:
+    """Raise :class:`EtmpcError` in one line unless ``system`` offers ``feature``, which ``what`` needs."""
+    if not provides(system, feature):
+        missing = ", ".join(CAPABILITIES[feature])
+        raise EtmpcError(f"{what} needs {feature} ({missing}), which task {system.name} does not offer")

@@ -77,6 +77,28 @@ def environment_kwargs_for(time_limit_s: float, interval_s: float, environment_k
     return dict(time_limit=time_limit_s, control_timestep=interval_s) | user
 
 
+def build_environment(physics, task, steps: int, interval_s: float, environment_kwargs: dict | None = None):
+    """The :class:`Environment` of ``task`` on ``physics``: ``steps`` intervals of ``interval_s``, then the
+    user's other ``environment_kwargs`` (:func:`environment_kwargs_for`)."""
+    return Environment(physics, task, **environment_kwargs_for(steps * interval_s, interval_s, environment_kwargs))
+
+
+def add_task(suite, name: str, make_environment, steps: int, interval_s: float, summary: str,
+             tags: tuple[str, ...] = ("benchmarking",)):
+    """Add task ``name`` to ``suite`` (a ``containers.TaggedTasks``) as ``dm_control.suite``'s factories
+    are: ``name(time_limit=steps * interval_s, random=None, environment_kwargs=None, **settings)`` returns
+    ``make_environment(random=..., steps=..., environment_kwargs=..., **settings)``, ``settings`` being
+    the task's own (the cart pendulum's ``plant``). ``summary`` is the factory's docstring."""
+    def factory(time_limit: float = steps * interval_s, random: Any = None, environment_kwargs: dict | None = None,
+                **settings):
+        return make_environment(random=random, steps=steps_for(time_limit, interval_s),
+                                environment_kwargs=environment_kwargs, **settings)
+
+    factory.__name__ = factory.__qualname__ = name
+    factory.__doc__ = summary
+    return suite.add(*tags)(factory)
+
+
 class Environment(control.Environment):
     """``control.Environment`` whose ``flat_observation`` spec is right for tasks that state their spec.
 

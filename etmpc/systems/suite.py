@@ -16,8 +16,7 @@ from __future__ import annotations
 from types import ModuleType
 
 from etmpc.common.errors import UnknownNameError
-from etmpc.systems import DOMAINS as _DOMAINS
-from etmpc.systems import domain as _package
+from etmpc.systems import domains as _domains
 
 
 class UnknownSuiteNameError(UnknownNameError, ValueError):
@@ -25,13 +24,13 @@ class UnknownSuiteNameError(UnknownNameError, ValueError):
 
 
 def domains() -> tuple[str, ...]:
-    return tuple(_DOMAINS)
+    return tuple(_domains())
 
 
 def _domain(name: str) -> ModuleType:
-    if name not in _DOMAINS:
-        raise UnknownSuiteNameError(f"unknown domain {name!r}; valid: {', '.join(_DOMAINS)}")
-    return _package(name)
+    if name not in _domains():
+        raise UnknownSuiteNameError(f"unknown domain {name!r}; valid: {', '.join(_domains())}")
+    return _domains()[name]
 
 
 def tasks(domain_name: str) -> tuple[str, ...]:
@@ -39,11 +38,11 @@ def tasks(domain_name: str) -> tuple[str, ...]:
 
 
 def _tagged(tag: str) -> tuple[tuple[str, str], ...]:
-    return tuple((d, t) for d in _DOMAINS for t in _domain(d).SUITE.tagged(tag))
+    return tuple((d, t) for d in _domains() for t in _domain(d).SUITE.tagged(tag))
 
 
-ALL_TASKS: tuple[tuple[str, str], ...] = tuple((d, t) for d in _DOMAINS for t in _domain(d).SUITE)
-TASKS_BY_DOMAIN: dict[str, tuple[str, ...]] = {d: tasks(d) for d in _DOMAINS}
+ALL_TASKS: tuple[tuple[str, str], ...] = tuple((d, t) for d in _domains() for t in _domain(d).SUITE)
+TASKS_BY_DOMAIN: dict[str, tuple[str, ...]] = {d: tasks(d) for d in _domains()}
 BENCHMARKING: tuple[tuple[str, str], ...] = _tagged("benchmarking")
 
 

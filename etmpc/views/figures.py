@@ -31,6 +31,7 @@ from matplotlib.patches import Patch  # noqa: E402
 
 from etmpc.common.errors import EtmpcError  # noqa: E402
 from etmpc.loop import Trajectory  # noqa: E402
+from etmpc.policies.specs import find  # noqa: E402
 from etmpc.common.outputs import atomic_path  # noqa: E402
 from etmpc.views.blueprint import objective_unit  # noqa: E402
 
@@ -257,18 +258,21 @@ def policy_bars(evaluations: Sequence[dict], group_learned: bool = True, sources
             bars.append(Bar(label, float(np.mean(means)), error, float(np.mean(recomputes)), tuple(members), True))
             drawn.update(members)
         else:
-            label = f"rl:{_short_path(spec[3:])}" if spec.startswith("rl:") else spec
+            kind = find(spec)  # None: a policy object's own name
+            learned = kind is not None and kind.name == "rl"
+            label = f"rl:{_short_path(spec.partition(':')[2])}" if learned else spec
             bound = is_upper_bound(spec)
             bars.append(Bar(label + ("\n(upper bound)" if bound else ""), float(summary["objective_mean"]),
                             float(summary["objective_std_repeats"]), float(summary["recomputes_mean"]), (spec,),
-                            spec.startswith("rl:"), bound))
+                            learned, bound))
             drawn.add(spec)
     return bars
 
 
 def is_upper_bound(spec: str) -> bool:
-    """``oracle:`` specs know the episode's future: an upper bound, never a contender."""
-    return spec.startswith("oracle:")
+    """Whether ``spec`` is an upper bound's (``oracle:``): it knows the episode's future, never a contender."""
+    kind = find(spec)
+    return kind is not None and kind.upper_bound
 
 
 def _short_path(path: str, parts: int = 3) -> str:

@@ -41,7 +41,7 @@ class EpisodeRecord:
         """``announce``: a self-triggering policy's ``announce(plan)``, to record what it announced
         at each solve (it is a function of the plan alone, so asking again gives the same answer)."""
         n = traj.steps
-        bounds = (getattr(system, "u_min", None), getattr(system, "u_max", None))
+        bounds = (np.asarray(system.u_min, float), np.asarray(system.u_max, float))
         return cls(
             identity=dict(identity, domain=system.domain, task=system.task, objective_sense=system.objective_sense,
                           recompute_price=float(system.recompute_price), control_interval_s=float(system.control_interval_s)),
@@ -58,7 +58,7 @@ class EpisodeRecord:
             prediction_error=prediction_errors(traj, system.error_weights),
             plans=[(k, p.states, p.inputs, {name: np.asarray(v) for name, v in p.forecasts.items()}) for k, p in traj.plans],
             signals={name: np.asarray(v, float) for name, v in system.signals(episode).items()},
-            input_bounds=() if any(b is None for b in bounds) else tuple(np.asarray(b, float) for b in bounds),
+            input_bounds=bounds if np.all(np.isfinite(bounds)) else (),  # none drawn for an unbounded input
             announced=tuple((int(k), int(announce(p))) for k, p in traj.plans) if announce is not None else (),
         )
 

@@ -28,8 +28,8 @@ from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import atomic_path
 
 def check_scene(system) -> None:
-    """A system has a scene when it names a ``camera`` and can ``show(physics, x)`` a state."""
-    if not (hasattr(system, "camera") and hasattr(system, "show")):
+    """A system has a scene when it names a ``camera`` (it can ``show(physics, x)`` a state)."""
+    if system.camera is None:
         raise EtmpcError(f"{system.name!r} has no 3-D scene to render")
 
 

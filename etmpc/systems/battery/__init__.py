@@ -3,18 +3,13 @@ forecasts drawn by ``market.py`` from the numbers in ``parameters.py``, the econ
 program (``mpc.py``, checked against ``reference.py``), and the system the loop plays (``system.py``).
 """
 
+from etmpc.systems.registry import lazy
+
 # Its tasks, the default first: what etmpc.systems lists without loading MuJoCo or dm-control (which
 # pick their OpenGL backend on import). SYSTEMS and SUITE load the domain's modules when first asked.
 TASKS = ("trading",)
+# The seed of each task's stored test set (tasks/battery/<task>_testset.npz: etmpc testset TASK --seed SEED).
+TEST_SET_SEEDS = {"trading": 20210602}
 
-
-def __getattr__(name: str):
-    if name == "SYSTEMS":  # task -> the System class the loop plays
-        from etmpc.systems.battery.system import BatterySystem
-
-        return {"trading": BatterySystem}
-    if name == "SUITE":  # the dm-control task factories, as a dm_control.suite domain has them
-        from etmpc.systems.battery.task import SUITE
-
-        return SUITE
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__ = lazy(__name__, {"trading": "etmpc.systems.battery.system:BatterySystem"},
+                   "etmpc.systems.battery.task:SUITE")

@@ -17,7 +17,7 @@ from etmpc.systems.battery.reference import LinprogReference
 from etmpc.common.errors import EtmpcError
 from etmpc.control.lqr import ErrorFeedback, discrete_lqr_gain
 from etmpc.control.plan import Plan
-from etmpc.systems.base import Benchmark
+from etmpc.systems.base import Benchmark, SystemBase
 
 
 # What the learned policy's default ("error") feature set adds for the battery (etmpc.policies.learned).
@@ -58,9 +58,8 @@ class Config:
     market: Market = Market()
 
 
-class BatterySystem:
+class BatterySystem(SystemBase):
     Config = Config  # the settings it is built from (etmpc.systems.make_system)
-    name = "battery"  # the domain's default task
     benchmark = Benchmark(
         # EUR per computation on top of the energy its computer already draws (eta_c), from the paper's
         # 0 up to where `never` wins.
@@ -77,6 +76,7 @@ class BatterySystem:
     objective_sense = "max"  # the objective is the profit, EUR
     state_names = ("state_of_charge",)
     input_names = ("trade_kw",)
+    Episode = battery_env.Episode
 
     def __init__(self, config: Config = Config()):
         if config.lqr_state_weight < 0 or config.lqr_input_weight <= 0:
@@ -84,11 +84,9 @@ class BatterySystem:
         if config.horizon > config.market.forecast_steps:
             raise EtmpcError(f"horizon {config.horizon} exceeds the {config.market.forecast_steps} forecast values the task provides")
         self.config = config
-        self.horizon = config.horizon  # N: the MPC's plans are this many steps long
         battery = config.battery
         self.episode_steps = battery.episode_steps
         self.control_interval_s = battery.interval_s
-        self.recompute_price = config.recompute_price
         self.terminal_price = config.market.price.mean
         self.u_min = np.array([-battery.trade_limit_kw])
         self.u_max = np.array([battery.trade_limit_kw])
@@ -112,9 +110,6 @@ class BatterySystem:
         """What the episodes are drawn from (recorded in the test set)."""
         return {"battery": asdict(self.config.battery), "market": asdict(self.config.market)}
 
-    def episode_from_arrays(self, arrays: dict[str, np.ndarray]) -> battery_env.Episode:
-        return battery_env.Episode.from_arrays(arrays)
-
     def signals(self, episode: battery_env.Episode) -> dict[str, np.ndarray]:
         """The episode's true prices and net production, per step, for recordings."""
         return {"price_eur_kwh": episode.price_eur_kwh, "net_production_kw": episode.production_kw}
@@ -130,10 +125,6 @@ class BatterySystem:
 
     def state(self, timestep: dm_env.TimeStep) -> np.ndarray:
         return np.array([timestep.observation["state_of_charge"]])
-
-    def measure(self, physics: battery_env.Physics) -> np.ndarray:
-        """``state`` read off the physics: the number the observation shows."""
-        return physics.state()
 
     def plan(self, x: np.ndarray, u_prev: np.ndarray, warm: Plan | None, age: int, timestep: dm_env.TimeStep) -> Plan:
         obs = timestep.observation
@@ -151,5 +142,3 @@ class BatterySystem:
     def reference_solvers(self) -> list:
         return [LinprogReference(self.config.battery, self.config.horizon, self.terminal_price)]
 
-    def interpreted(self):
-        return None  # the LP is solved inside HiGHS: there is no other way it runs

@@ -43,7 +43,7 @@ from dm_env import specs
 
 from etmpc.systems.battery.market import Episode
 from etmpc.systems.battery.parameters import Battery, Market
-from etmpc.systems.episodes import Environment, EpisodeTask, Random, environment_kwargs_for, steps_for
+from etmpc.systems.episodes import EpisodeTask, Random, add_task, build_environment
 
 SUITE = containers.TaggedTasks()
 
@@ -231,13 +231,8 @@ def make_environment(
 ) -> control.Environment:
     steps = battery.episode_steps if steps is None else steps
     task = Trading(random=random, battery=battery, market=market, steps=steps)
-    kwargs = environment_kwargs_for(steps * battery.interval_s, battery.interval_s, environment_kwargs)
-    return Environment(Physics(battery), task, **kwargs)
+    return build_environment(Physics(battery), task, steps, battery.interval_s, environment_kwargs)
 
 
-@SUITE.add("benchmarking")
-def trading(time_limit: float = Battery().episode_steps * Battery().interval_s, random: Random = None,
-            environment_kwargs: dict | None = None):
-    """Trade a 10 kWh battery on the balance market: 100 intervals of 10 s by default."""
-    steps = steps_for(time_limit, Battery().interval_s)
-    return make_environment(random=random, steps=steps, environment_kwargs=environment_kwargs)
+add_task(SUITE, "trading", make_environment, Battery().episode_steps, Battery().interval_s,
+         "Trade a 10 kWh battery on the balance market: 100 intervals of 10 s by default.")

@@ -5,19 +5,14 @@ kicked at random times on a rail with bumpers: ``kicks.py``, ``kicks_system.py``
 against the plant; ``dompc.py`` solves the same OCP with do-mpc, the paper's stack, for ``etmpc bench``.
 """
 
+from etmpc.systems.registry import lazy
+
 # Its tasks, the default first: what etmpc.systems lists without loading MuJoCo or dm-control (which
 # pick their OpenGL backend on import). SYSTEMS and SUITE load the domain's modules when first asked.
 TASKS = ("balance", "kicks")
+# The seed of each task's stored test set (tasks/cart_pendulum/<task>_testset.npz: etmpc testset TASK --seed SEED).
+TEST_SET_SEEDS = {"balance": 20210601, "kicks": 20261126}
 
-
-def __getattr__(name: str):
-    if name == "SYSTEMS":  # task -> the System class the loop plays
-        from etmpc.systems.cart_pendulum.kicks_system import KicksSystem
-        from etmpc.systems.cart_pendulum.system import CartPendulumSystem
-
-        return {"balance": CartPendulumSystem, "kicks": KicksSystem}
-    if name == "SUITE":  # the dm-control task factories, as a dm_control.suite domain has them
-        from etmpc.systems.cart_pendulum.kicks import SUITE  # balance's, with kicks added
-
-        return SUITE
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__ = lazy(__name__, {"balance": "etmpc.systems.cart_pendulum.system:CartPendulumSystem",
+                              "kicks": "etmpc.systems.cart_pendulum.kicks_system:KicksSystem"},
+                   "etmpc.systems.cart_pendulum.kicks:SUITE")

@@ -45,7 +45,7 @@ from dm_control.rl import control
 from etmpc.systems.cart_pendulum.model import NX, STATE_NAMES
 from etmpc.systems.cart_pendulum.physics import Bumpers, Physics, load_model
 from etmpc.systems.cart_pendulum.task import SUITE, CartPendulumTask
-from etmpc.systems.episodes import Environment, Random, environment_kwargs_for, jump_process, steps_for
+from etmpc.systems.episodes import Random, add_task, build_environment, jump_process
 
 CONTROL_DT_S = 0.1
 PHYSICS_DT_S = 0.01  # 10 RK4 steps per interval: the bumpers' spring (31 rad/s on the cart) needs them
@@ -190,13 +190,8 @@ def make_environment(random: Random = None, plant: str = "mismatched", steps: in
     root = load_model(plant, timestep_s=PHYSICS_DT_S, bumpers=BUMPERS, reference=True)
     physics = Physics.from_xml_string(root.to_xml_string(), assets=root.get_assets())
     physics.bumpers = BUMPERS
-    task = Kicks(random=random, steps=steps)
-    return Environment(physics, task, **environment_kwargs_for(steps * CONTROL_DT_S, CONTROL_DT_S, environment_kwargs))
+    return build_environment(physics, Kicks(random=random, steps=steps), steps, CONTROL_DT_S, environment_kwargs)
 
 
-@SUITE.add("benchmarking")
-def kicks(time_limit: float = EPISODE_STEPS * CONTROL_DT_S, random: Random = None, plant: str = "mismatched",
-          environment_kwargs: dict | None = None):
-    """Keep the pole up on a 5 m rail through random kicks: 150 control intervals of 0.1 s by default."""
-    return make_environment(random=random, plant=plant, steps=steps_for(time_limit, CONTROL_DT_S),
-                            environment_kwargs=environment_kwargs)
+add_task(SUITE, "kicks", make_environment, EPISODE_STEPS, CONTROL_DT_S,
+         "Keep the pole up on a 5 m rail through random kicks: 150 control intervals of 0.1 s by default (plant=...).")

@@ -27,17 +27,15 @@ knows the rail, a feedback that follows the plan, and the price of a computation
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field, replace
-from functools import cached_property
+from dataclasses import asdict, dataclass, field
 
 import casadi as ca
 import dm_env
 import numpy as np
 
-from etmpc.control.lqr import PlanFeedback
-from etmpc.control.mpc import FeedbackWeights, GaussNewtonMPC, SolverSettings
-from etmpc.control.plan import Plan
+from etmpc.control.mpc import FeedbackWeights, SolverSettings
 from etmpc.systems.base import Benchmark
+from etmpc.systems.gauss_newton import GaussNewtonSystem
 from etmpc.systems.cart_pendulum import kicks
 from etmpc.systems.cart_pendulum.model import NU, NX, STATE_NAMES, AnalyticModel
 
@@ -80,16 +78,17 @@ class Config:
         sqp_options=(("merit_memory", 1), ("max_iter_ls", 8))))
 
 
-class KicksSystem:
+class KicksSystem(GaussNewtonSystem):
     Config = Config
     domain = "cart_pendulum"
     task = "kicks"
-    name = "cart_pendulum/kicks"
-    objective_sense = "min"
     episode_steps = kicks.EPISODE_STEPS
     control_interval_s = kicks.CONTROL_DT_S
     state_names = STATE_NAMES
     input_names = ("force_n",)
+    Episode = kicks.KickEpisode
+    tracked = (REFERENCE,)  # the cart's current reference (m), as observed: the OCP's parameter
+    mpc_name = "cart_pendulum_kicks_mpc"
     benchmark = Benchmark(
         prices=(0.01, 0.03, 0.1, 0.3, 1.0),
         sweep_thresholds=(0.1, 0.2, 0.3, 0.45, 0.6, 1.0, 1.5, 2.0, 3.0, 4.0),
@@ -104,15 +103,11 @@ class KicksSystem:
 
     def __init__(self, config: Config = Config()):
         self.config = config
-        self.horizon = config.horizon
-        self.recompute_price = config.recompute_price
         self.model = AnalyticModel(dt_s=kicks.CONTROL_DT_S, rk4_substeps=config.rk4_substeps)
         self.u_min, self.u_max = np.array([-config.force_limit_n]), np.array([config.force_limit_n])
         self.error_weights = np.sqrt(np.asarray(config.feedback_state_weights))
-        self.feedback = PlanFeedback()
 
-    @cached_property
-    def mpc(self) -> GaussNewtonMPC:
+    def residuals(self) -> tuple[ca.Function, ca.Function]:
         c = self.config
         x, u, du, r = ca.SX.sym("x", NX), ca.SX.sym("u", NU), ca.SX.sym("du", NU), ca.SX.sym("r", 1)
         eta, v, beta, omega = x[0], x[1], x[2], x[3]
@@ -123,47 +118,25 @@ class KicksSystem:
         terminal = ca.Function("terminal_residual", [x, r], [ca.vertcat(
             9 * ca.sin(beta / 2), c.terminal_position_weight * (eta - r), 0.3 * omega, 0.3 * v,
             5 * ca.fmax(0, ca.fabs(eta) - inside))])
-        weights = FeedbackWeights(c.feedback_state_weights, (c.feedback_input_weight,))
-        return GaussNewtonMPC(self.model.discrete, stage, terminal, c.horizon, self.u_min, self.u_max, c.solver,
-                              name="cart_pendulum_kicks_mpc", parameters=1, feedback=weights)
+        return stage, terminal
 
-    # -- the loop ---------------------------------------------------------------------------------------
+    def feedback_weights(self) -> FeedbackWeights:
+        return FeedbackWeights(self.config.feedback_state_weights, (self.config.feedback_input_weight,))
+
     def make_env(self, random=None):
         return kicks.make_environment(random=random, plant=self.config.plant)
 
-    def state(self, timestep: dm_env.TimeStep) -> np.ndarray:
-        obs = timestep.observation
-        return np.array([obs[name] for name in STATE_NAMES], dtype=float)
-
-    def measure(self, physics) -> np.ndarray:
-        return physics.state()
-
-    @staticmethod
-    def reference(timestep: dm_env.TimeStep) -> np.ndarray:
+    def reference(self, timestep: dm_env.TimeStep) -> np.ndarray:
         """The cart's current reference (m), as observed, as the MPC's parameter vector."""
-        return np.array([timestep.observation[REFERENCE]], dtype=float)
-
-    def plan(self, x: np.ndarray, u_prev: np.ndarray, warm: Plan | None, age: int, timestep: dm_env.TimeStep) -> Plan:
-        reference = self.reference(timestep)
-        plan = self.mpc.solve(x, u_prev, warm, age, parameters=reference)
-        return replace(plan, forecasts={REFERENCE: np.full(self.horizon, reference[0])})
-
-    def action(self, u: np.ndarray, recompute: bool) -> np.ndarray:
-        return u
+        return self.observed(timestep)
 
     # -- test sets, recordings, rollouts ----------------------------------------------------------------
-    def draw_episode(self, rng: np.random.Generator) -> kicks.KickEpisode:
-        return kicks.KickEpisode.draw(rng)
-
     def episode_parameters(self) -> dict:
         return {"initial_state_low": kicks.INITIAL_STATE_LOW.tolist(), "initial_state_high": kicks.INITIAL_STATE_HIGH.tolist(),
                 "kicks_per_s": kicks.KICKS_PER_S, "kick_rad_s": list(kicks.KICK_RAD_S), "steps": kicks.EPISODE_STEPS,
                 "reference_m": kicks.REFERENCE_M, "reference_jump_probability": kicks.REFERENCE_JUMP_PROBABILITY,
                 "position_scale_m": kicks.POSITION_SCALE_M,
                 "bumpers": asdict(kicks.BUMPERS), "fall_rad": kicks.FALL_RAD, "fall_cost": kicks.FALL_COST}
-
-    def episode_from_arrays(self, arrays: dict[str, np.ndarray]) -> kicks.KickEpisode:
-        return kicks.KickEpisode.from_arrays(arrays)
 
     def signals(self, episode: kicks.KickEpisode) -> dict[str, np.ndarray]:
         return {"kick_rad_s": episode.kick, REFERENCE: episode.reference}
@@ -177,24 +150,6 @@ class KicksSystem:
         reference[step + 1:] = kicks.continue_references(rng, reference[step], reference.size - step - 1)
         return kicks.KickEpisode(episode.initial_state, kick, reference)
 
-    def truncation_value(self, x: np.ndarray) -> float:
-        return 0.0
-
     def failures(self, rewards: np.ndarray) -> int:
         """Falls in an episode."""
         return kicks.falls(rewards)
-
-    # -- the scene, and etmpc bench -----------------------------------------------------------------------
-    def show(self, physics, x: np.ndarray) -> None:
-        physics.set_state_vector(x)
-        physics.forward()
-
-    def plan_cost(self, x: np.ndarray, u_prev: np.ndarray, timestep: dm_env.TimeStep, inputs: np.ndarray) -> float:
-        """The OCP's objective of an input sequence, rolled out through the predictor."""
-        return self.mpc.objective(x, u_prev, inputs, self.reference(timestep))
-
-    def reference_solvers(self) -> list:
-        return []
-
-    def interpreted(self) -> KicksSystem:
-        return KicksSystem(replace(self.config, solver=replace(self.config.solver, compiled=False)))

@@ -17,7 +17,7 @@ from functools import cached_property
 import casadi as ca
 import numpy as np
 
-from etmpc.control.discretise import rk4
+from etmpc.control.discretise import RK4Model
 
 STATE_NAMES = ("cart_position", "cart_velocity", "pole_angle", "pole_angular_velocity")
 NX, NU = 4, 1
@@ -53,28 +53,23 @@ def ode(x, u, w=0.0, p: Parameters = Parameters()):
 
 
 @dataclass(frozen=True)
-class AnalyticModel:
+class AnalyticModel(RK4Model):
     """The MPC's predictor: the paper's ODE discretised with RK4 over one control interval."""
 
     params: Parameters = Parameters()
     dt_s: float = 0.1
     rk4_substeps: int = 1
+    NX, NU = NX, NU
+
+    def rate(self, x, u):
+        """``dx/dt`` with no disturbance: what the MPC predicts."""
+        return ode(x, u, 0.0, self.params)
 
     @cached_property
     def continuous(self) -> ca.Function:
         """``f(x, u, w) -> dx/dt``."""
         x, u, w = ca.SX.sym("x", NX), ca.SX.sym("u", NU), ca.SX.sym("w")
         return ca.Function("f", [x, u, w], [ode(x, u, w, self.params)], ["x", "u", "w"], ["xdot"])
-
-    @cached_property
-    def discrete(self) -> ca.Function:
-        """``F(x, u) -> x+``: one control interval, no disturbance (what the MPC predicts)."""
-        x, u = ca.SX.sym("x", NX), ca.SX.sym("u", NU)
-        f = lambda xx, uu: ode(xx, uu, 0.0, self.params)  # noqa: E731
-        return ca.Function("F", [x, u], [rk4(f, x, u, self.dt_s, self.rk4_substeps)], ["x", "u"], ["x_next"])
-
-    def predict(self, x: np.ndarray, u: float) -> np.ndarray:
-        return np.asarray(self.discrete(x, u)).ravel()
 
     def linearised_upright(self) -> tuple[np.ndarray, np.ndarray]:
         """Continuous-time ``(A, B)`` of the ODE at the upright equilibrium ``x = 0, u = 0``.

@@ -25,8 +25,7 @@ from dm_control import mjcf
 from dm_control.mujoco import Physics as MjPhysics
 from dm_control.rl import control
 
-from etmpc.common.errors import UnknownNameError
-from etmpc.common.resources import model_path
+from etmpc.systems.plants import load_plant
 from etmpc.systems.cart_pendulum.model import Parameters
 
 
@@ -40,7 +39,6 @@ class Bumpers:
     damping_n_s_m: float = 40.0
 
 
-PLANTS = ("mismatched", "matched")
 
 
 def _matched(root: mjcf.RootElement) -> None:
@@ -63,13 +61,7 @@ def load_model(plant: str = "mismatched", timestep_s: float | None = None, bumpe
     ``bumpers`` draws the rail's bumpers (their force is the physics', see :meth:`Physics.step`), and
     ``reference`` adds a marker on the rail where the cart should be (a mocap body: it shows the
     reference, :meth:`Physics.set_reference`, and does not act on the cart)."""
-    if plant not in PLANTS:
-        raise UnknownNameError(f"unknown plant setting {plant!r}; valid: {', '.join(PLANTS)}")
-    root = mjcf.from_path(str(model_path("cart_pendulum.xml")))
-    if plant == "matched":
-        _matched(root)
-    if timestep_s is not None:
-        root.option.timestep = timestep_s
+    root = load_plant("cart_pendulum.xml", plant, _matched, timestep_s)
     if bumpers is not None:  # where the cart's end meets them (the cart is 0.5 m long)
         for side in (-1, 1):
             root.worldbody.add("geom", name=f"bumper_{'left' if side < 0 else 'right'}", type="box", material="rail",

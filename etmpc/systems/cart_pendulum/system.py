@@ -16,7 +16,7 @@ from etmpc.systems.cart_pendulum.model import NU, NX, STATE_NAMES, AnalyticModel
 from etmpc.control.lqr import ErrorFeedback, discrete_lqr_gain
 from etmpc.control.mpc import GaussNewtonMPC, SolverSettings
 from etmpc.control.plan import Plan
-from etmpc.systems.base import Benchmark
+from etmpc.systems.base import Benchmark, SystemBase
 
 
 @dataclass(frozen=True)
@@ -34,11 +34,10 @@ class Config:
     solver: SolverSettings = SolverSettings()
 
 
-class CartPendulumSystem:
+class CartPendulumSystem(SystemBase):
     Config = Config  # the settings it is built from (etmpc.systems.make_system)
     domain = "cart_pendulum"
     task = "balance"
-    name = "cart_pendulum"  # the domain's default task
     benchmark = Benchmark(
         # A log grid around the paper's 5e-5 (where 100 computations cost 1.3 % of the objective) up to
         # where `never` wins.
@@ -47,17 +46,15 @@ class CartPendulumSystem:
         report_thresholds=(0.1, 0.2, 0.3, 0.5),
         objective_unit="rad²",
     )
-    objective_sense = "min"  # the objective is sum(beta^2) + price * computations
     episode_steps = cp_env.EPISODE_STEPS
     control_interval_s = cp_env.CONTROL_DT_S
     state_names = STATE_NAMES
     input_names = ("force_n",)
+    Episode = cp_env.Episode  # the objective is sum(beta^2) + price * computations (a cost)
 
     def __init__(self, config: Config = Config()):
         self.config = config
-        self.horizon = config.horizon  # N: the MPC's plans are this many steps long
         self.model = AnalyticModel(dt_s=cp_env.CONTROL_DT_S, rk4_substeps=config.rk4_substeps)
-        self.recompute_price = config.recompute_price
         self.u_min = np.array([-config.force_limit_n])
         self.u_max = np.array([config.force_limit_n])
         self.error_weights = np.sqrt(np.asarray(config.lqr_state_weights))
@@ -84,9 +81,6 @@ class CartPendulumSystem:
     def make_env(self, random=None):
         return cp_env.make_environment(random=random, plant=self.config.plant)
 
-    def draw_episode(self, rng: np.random.Generator) -> cp_env.Episode:
-        return cp_env.Episode.draw(rng)
-
     def episode_parameters(self) -> dict:
         """What the episodes are drawn from (recorded in the test set)."""
         return {
@@ -95,9 +89,6 @@ class CartPendulumSystem:
             "disturbance_std_rad_s2": cp_env.DISTURBANCE_STD_RAD_S2,
             "steps": cp_env.EPISODE_STEPS,
         }
-
-    def episode_from_arrays(self, arrays: dict[str, np.ndarray]) -> cp_env.Episode:
-        return cp_env.Episode.from_arrays(arrays)
 
     def signals(self, episode: cp_env.Episode) -> dict[str, np.ndarray]:
         """The episode's exogenous inputs, per step, for recordings."""
@@ -110,32 +101,11 @@ class CartPendulumSystem:
         disturbance[step:] = rng.normal(0.0, cp_env.DISTURBANCE_STD_RAD_S2, size=disturbance.size - step)
         return cp_env.Episode(episode.initial_state, disturbance)
 
-    def truncation_value(self, x: np.ndarray) -> float:
-        """A rollout stopped before the episode's end counts no cost beyond it."""
-        return 0.0
-
-    def state(self, timestep: dm_env.TimeStep) -> np.ndarray:
-        obs = timestep.observation
-        return np.array([obs[name] for name in STATE_NAMES], dtype=float)
-
-    def measure(self, physics: cp_env.Physics) -> np.ndarray:
-        """``state`` read off the physics: the numbers the observation is made of."""
-        return physics.state()
-
     def plan(self, x: np.ndarray, u_prev: np.ndarray, warm: Plan | None, age: int, timestep: dm_env.TimeStep) -> Plan:
         return self.mpc.solve(x, u_prev, warm, age)
 
-    def action(self, u: np.ndarray, recompute: bool) -> np.ndarray:
-        return u  # computing costs the cart no energy; the price is in the objective
-
     # -- the scene, for etmpc render ----------------------------------------------------------------
     camera = "track"  # models/cart_pendulum.xml: rides with the cart (the "fixed" camera only turns towards it)
-
-    def show(self, physics: cp_env.Physics, x: np.ndarray) -> None:
-        """Put state ``x`` into the physics for drawing: the exact inverse of ``Physics.state``, which
-        the observation reports, then ``mj_forward`` for the body poses (and cameras)."""
-        physics.set_state_vector(x)
-        physics.forward()
 
     # -- for etmpc bench --------------------------------------------------------------------------
     def plan_cost(self, x: np.ndarray, u_prev: np.ndarray, timestep: dm_env.TimeStep, inputs: np.ndarray) -> float:

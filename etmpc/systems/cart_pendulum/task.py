@@ -31,10 +31,11 @@ from dm_control.utils import containers
 from dm_env import specs
 
 from etmpc.systems.cart_pendulum.model import NX, STATE_NAMES
-from etmpc.systems.cart_pendulum.physics import PLANTS, Physics, load_model
-from etmpc.systems.episodes import Environment, EpisodeTask, Random, environment_kwargs_for, steps_for
+from etmpc.systems.cart_pendulum.physics import Physics, load_model
+from etmpc.systems.plants import PLANTS
+from etmpc.systems.episodes import EpisodeTask, Random, add_task, build_environment
 
-__all__ = ["PLANTS", "SUITE", "Episode", "Balance", "Physics", "balance", "load_model", "make_environment"]
+__all__ = ["PLANTS", "SUITE", "Episode", "Balance", "Physics", "load_model", "make_environment"]
 
 CONTROL_DT_S = 0.1
 EPISODE_STEPS = 100
@@ -145,13 +146,8 @@ def make_environment(
 ) -> control.Environment:
     root = load_model(plant)
     physics = Physics.from_xml_string(root.to_xml_string(), assets=root.get_assets())
-    task = Balance(random=random, steps=steps)
-    return Environment(physics, task, **environment_kwargs_for(steps * CONTROL_DT_S, CONTROL_DT_S, environment_kwargs))
+    return build_environment(physics, Balance(random=random, steps=steps), steps, CONTROL_DT_S, environment_kwargs)
 
 
-@SUITE.add("benchmarking")
-def balance(time_limit: float = EPISODE_STEPS * CONTROL_DT_S, random: Random = None, plant: str = "mismatched",
-            environment_kwargs: dict | None = None):
-    """Balance the pole under the angular disturbance: 100 control intervals of 0.1 s by default."""
-    return make_environment(random=random, plant=plant, steps=steps_for(time_limit, CONTROL_DT_S),
-                            environment_kwargs=environment_kwargs)
+add_task(SUITE, "balance", make_environment, EPISODE_STEPS, CONTROL_DT_S,
+         "Balance the pole under the angular disturbance: 100 control intervals of 0.1 s by default (plant=...).")

@@ -4,18 +4,13 @@ arm as the MPC's predictor (``model.py``), and the system the loop plays (``syst
 Gauss-Newton MPC with the target as a parameter and a time-varying LQR along each plan).
 """
 
+from etmpc.systems.registry import lazy
+
 # Its tasks, the default first: what etmpc.systems lists without loading MuJoCo or dm-control (which
 # pick their OpenGL backend on import). SYSTEMS and SUITE load the domain's modules when first asked.
 TASKS = ("jumps",)
+# The seed of each task's stored test set (tasks/reacher/<task>_testset.npz: etmpc testset TASK --seed SEED).
+TEST_SET_SEEDS = {"jumps": 20261125}
 
-
-def __getattr__(name: str):
-    if name == "SYSTEMS":  # task -> the System class the loop plays
-        from etmpc.systems.reacher.system import ReacherSystem
-
-        return {"jumps": ReacherSystem}
-    if name == "SUITE":  # the dm-control task factories, as a dm_control.suite domain has them
-        from etmpc.systems.reacher.task import SUITE
-
-        return SUITE
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__ = lazy(__name__, {"jumps": "etmpc.systems.reacher.system:ReacherSystem"},
+                   "etmpc.systems.reacher.task:SUITE")

@@ -19,12 +19,11 @@ more damped than this model (see its header), and its ``matched`` setting is thi
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cached_property
 
 import casadi as ca
 import numpy as np
 
-from etmpc.control.discretise import rk4
+from etmpc.control.discretise import RK4Model
 
 STATE_NAMES = ("shoulder_angle_rad", "elbow_angle_rad", "shoulder_velocity_rad_s", "elbow_velocity_rad_s")
 INPUT_NAMES = ("shoulder_torque_nm", "elbow_torque_nm")
@@ -66,28 +65,16 @@ def fingertip(x, p: Parameters = Parameters()):
 
 
 @dataclass(frozen=True)
-class AnalyticModel:
+class AnalyticModel(RK4Model):
     """The MPC's predictor: the arm's ODE discretised with RK4 over one control interval."""
 
     params: Parameters = Parameters()
     dt_s: float = 0.1
     rk4_substeps: int = 2
+    NX, NU = NX, NU
 
-    @cached_property
-    def continuous(self) -> ca.Function:
-        """``f(x, u) -> dx/dt``."""
-        x, u = ca.SX.sym("x", NX), ca.SX.sym("u", NU)
-        return ca.Function("f", [x, u], [ode(x, u, self.params)], ["x", "u"], ["xdot"])
-
-    @cached_property
-    def discrete(self) -> ca.Function:
-        """``F(x, u) -> x+``: one control interval."""
-        x, u = ca.SX.sym("x", NX), ca.SX.sym("u", NU)
-        f = lambda xx, uu: ode(xx, uu, self.params)  # noqa: E731
-        return ca.Function("F", [x, u], [rk4(f, x, u, self.dt_s, self.rk4_substeps)], ["x", "u"], ["x_next"])
-
-    def predict(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
-        return np.asarray(self.discrete(x, u)).ravel()
+    def rate(self, x, u):
+        return ode(x, u, self.params)
 
     def fingertip(self, x: np.ndarray) -> np.ndarray:
         return np.asarray(fingertip(np.asarray(x, float), self.params), dtype=float).ravel()

@@ -22,11 +22,9 @@ from dm_control import mjcf
 from dm_control.mujoco import Physics as MjPhysics
 from dm_control.rl import control
 
-from etmpc.common.errors import UnknownNameError
-from etmpc.common.resources import model_path
+from etmpc.systems.plants import load_plant
 from etmpc.systems.reacher.model import NU, Parameters
 
-PLANTS = ("mismatched", "matched")
 
 
 def _matched(root: mjcf.RootElement) -> None:
@@ -44,14 +42,7 @@ def _matched(root: mjcf.RootElement) -> None:
 
 def load_model(plant: str = "mismatched", timestep_s: float | None = None) -> mjcf.RootElement:
     """The MJCF, with the plant setting's edits; ``timestep_s`` replaces the physics step."""
-    if plant not in PLANTS:
-        raise UnknownNameError(f"unknown plant setting {plant!r}; valid: {', '.join(PLANTS)}")
-    root = mjcf.from_path(str(model_path("reacher.xml")))
-    if plant == "matched":
-        _matched(root)
-    if timestep_s is not None:
-        root.option.timestep = timestep_s
-    return root
+    return load_plant("reacher.xml", plant, _matched, timestep_s)
 
 
 class Physics(MjPhysics):

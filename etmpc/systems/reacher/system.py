@@ -35,17 +35,15 @@ feedback that follows the plan, and the price of a computation.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
-from functools import cached_property
+from dataclasses import dataclass, field
 
 import casadi as ca
 import dm_env
 import numpy as np
 
-from etmpc.control.lqr import PlanFeedback
-from etmpc.control.mpc import FeedbackWeights, GaussNewtonMPC, SolverSettings
-from etmpc.control.plan import Plan
+from etmpc.control.mpc import FeedbackWeights, SolverSettings
 from etmpc.systems.base import Benchmark
+from etmpc.systems.gauss_newton import GaussNewtonSystem
 from etmpc.systems.reacher import task as reacher_task
 from etmpc.systems.reacher.model import INPUT_NAMES, NU, NX, STATE_NAMES, AnalyticModel, fingertip
 
@@ -96,16 +94,17 @@ class Config:
         sqp_options=(("merit_memory", 1), ("max_iter_ls", 8))))
 
 
-class ReacherSystem:
+class ReacherSystem(GaussNewtonSystem):
     Config = Config
     domain = "reacher"
     task = "jumps"
-    name = "reacher"
-    objective_sense = "min"
     episode_steps = reacher_task.EPISODE_STEPS
     control_interval_s = reacher_task.CONTROL_DT_S
     state_names = STATE_NAMES
     input_names = INPUT_NAMES
+    Episode = reacher_task.Episode
+    tracked = TARGET  # the current target (m), as observed: the OCP's parameters
+    mpc_name = "reacher_jumps_mpc"
     benchmark = Benchmark(
         prices=(0.02, 0.05, 0.1, 0.2, 0.5),
         sweep_thresholds=(0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 3.0),
@@ -116,20 +115,16 @@ class ReacherSystem:
     exogenous_feature_names = EXOGENOUS_FEATURES  # what the learned policy's "error" features add
     exogenous_features = staticmethod(exogenous_features)
     failure_name = "far from target"  # steps ending > 0.1 m from the target, per episode
-    camera = "top"
+    camera = "top"  # the scene shows the arm; the target stays where the physics has it
 
     def __init__(self, config: Config = Config()):
         self.config = config
-        self.horizon = config.horizon
-        self.recompute_price = config.recompute_price
         self.model = AnalyticModel(dt_s=reacher_task.CONTROL_DT_S, rk4_substeps=config.rk4_substeps)
         self.u_max = np.full(NU, config.torque_limit_nm)
         self.u_min = -self.u_max
         self.error_weights = np.sqrt(np.asarray(config.feedback_state_weights))
-        self.feedback = PlanFeedback()
 
-    @cached_property
-    def mpc(self) -> GaussNewtonMPC:
+    def residuals(self) -> tuple[ca.Function, ca.Function]:
         c = self.config
         x, u, du, target = ca.SX.sym("x", NX), ca.SX.sym("u", NU), ca.SX.sym("du", NU), ca.SX.sym("target", 2)
         e = (fingertip(x, self.model.params) - target) / c.distance_scale_m
@@ -137,48 +132,24 @@ class ReacherSystem:
             e, c.velocity_weight * x[2:], c.torque_weight * u, c.torque_change_weight * du)])
         terminal = ca.Function("terminal_residual", [x, target], [ca.vertcat(
             c.terminal_distance_factor * e, c.terminal_velocity_weight * x[2:])])
-        weights = FeedbackWeights(c.feedback_state_weights, c.feedback_input_weights)
-        return GaussNewtonMPC(self.model.discrete, stage, terminal, c.horizon, self.u_min, self.u_max, c.solver,
-                              name="reacher_jumps_mpc", parameters=2, feedback=weights)
+        return stage, terminal
 
-    # -- the loop ---------------------------------------------------------------------------------------
+    def feedback_weights(self) -> FeedbackWeights:
+        return FeedbackWeights(self.config.feedback_state_weights, self.config.feedback_input_weights)
+
     def make_env(self, random=None):
         return reacher_task.make_environment(random=random, plant=self.config.plant)
 
-    def state(self, timestep: dm_env.TimeStep) -> np.ndarray:
-        obs = timestep.observation
-        return np.array([obs[name] for name in STATE_NAMES], dtype=float)
-
-    def measure(self, physics) -> np.ndarray:
-        return physics.state()
-
-    @staticmethod
-    def target(timestep: dm_env.TimeStep) -> np.ndarray:
+    def target(self, timestep: dm_env.TimeStep) -> np.ndarray:
         """The current target ``(x, y)`` (m), as observed."""
-        obs = timestep.observation
-        return np.array([obs[TARGET[0]], obs[TARGET[1]]], dtype=float)
-
-    def plan(self, x: np.ndarray, u_prev: np.ndarray, warm: Plan | None, age: int, timestep: dm_env.TimeStep) -> Plan:
-        target = self.target(timestep)
-        plan = self.mpc.solve(x, u_prev, warm, age, parameters=target)
-        n = self.horizon
-        return replace(plan, forecasts={TARGET[0]: np.full(n, target[0]), TARGET[1]: np.full(n, target[1])})
-
-    def action(self, u: np.ndarray, recompute: bool) -> np.ndarray:
-        return u
+        return self.observed(timestep)
 
     # -- test sets, recordings, rollouts ----------------------------------------------------------------
-    def draw_episode(self, rng: np.random.Generator) -> reacher_task.Episode:
-        return reacher_task.Episode.draw(rng)
-
     def episode_parameters(self) -> dict:
         return {"initial_state_low": reacher_task.INITIAL_STATE_LOW.tolist(),
                 "initial_state_high": reacher_task.INITIAL_STATE_HIGH.tolist(),
                 "jump_probability": reacher_task.JUMP_PROBABILITY, "target_radius_m": list(reacher_task.TARGET_RADIUS_M),
                 "steps": reacher_task.EPISODE_STEPS, "distance_scale_m": reacher_task.DISTANCE_SCALE_M}
-
-    def episode_from_arrays(self, arrays: dict[str, np.ndarray]) -> reacher_task.Episode:
-        return reacher_task.Episode.from_arrays(arrays)
 
     def signals(self, episode: reacher_task.Episode) -> dict[str, np.ndarray]:
         return {TARGET[0]: episode.target[:, 0], TARGET[1]: episode.target[:, 1]}
@@ -190,25 +161,6 @@ class ReacherSystem:
         target[step + 1:] = reacher_task.continue_targets(rng, target[step], target.shape[0] - step - 1)
         return reacher_task.Episode(episode.initial_state, target)
 
-    def truncation_value(self, x: np.ndarray) -> float:
-        return 0.0
-
     def failures(self, rewards: np.ndarray) -> int:
         """Steps ending farther than 0.1 m from the target."""
         return reacher_task.far_steps(rewards)
-
-    # -- the scene, and etmpc bench -----------------------------------------------------------------------
-    def show(self, physics, x: np.ndarray) -> None:
-        """The arm at ``x`` (the target stays where the physics has it)."""
-        physics.set_state_vector(x)
-        physics.forward()
-
-    def plan_cost(self, x: np.ndarray, u_prev: np.ndarray, timestep: dm_env.TimeStep, inputs: np.ndarray) -> float:
-        """The OCP's objective of an input sequence, rolled out through the predictor."""
-        return self.mpc.objective(x, u_prev, inputs, self.target(timestep))
-
-    def reference_solvers(self) -> list:
-        return []
-
-    def interpreted(self) -> ReacherSystem:
-        return ReacherSystem(replace(self.config, solver=replace(self.config.solver, compiled=False)))

@@ -32,11 +32,12 @@ from dm_control.rl import control
 from dm_control.utils import containers
 from dm_env import specs
 
-from etmpc.systems.episodes import Environment, EpisodeTask, Random, environment_kwargs_for, jump_process, steps_for
+from etmpc.systems.episodes import EpisodeTask, Random, add_task, build_environment, jump_process
 from etmpc.systems.reacher.model import NX, STATE_NAMES
-from etmpc.systems.reacher.physics import PLANTS, Physics, load_model
+from etmpc.systems.plants import PLANTS
+from etmpc.systems.reacher.physics import Physics, load_model
 
-__all__ = ["PLANTS", "SUITE", "Episode", "Jumps", "Physics", "jumps", "load_model", "make_environment"]
+__all__ = ["PLANTS", "SUITE", "Episode", "Jumps", "Physics", "load_model", "make_environment"]
 
 CONTROL_DT_S = 0.1
 PHYSICS_DT_S = 0.01  # 10 RK4 steps per interval
@@ -150,13 +151,8 @@ def make_environment(random: Random = None, plant: str = "mismatched", steps: in
                      environment_kwargs: dict | None = None) -> control.Environment:
     root = load_model(plant, timestep_s=PHYSICS_DT_S)
     physics = Physics.from_xml_string(root.to_xml_string(), assets=root.get_assets())
-    task = Jumps(random=random, steps=steps)
-    return Environment(physics, task, **environment_kwargs_for(steps * CONTROL_DT_S, CONTROL_DT_S, environment_kwargs))
+    return build_environment(physics, Jumps(random=random, steps=steps), steps, CONTROL_DT_S, environment_kwargs)
 
 
-@SUITE.add("benchmarking")
-def jumps(time_limit: float = EPISODE_STEPS * CONTROL_DT_S, random: Random = None, plant: str = "mismatched",
-          environment_kwargs: dict | None = None):
-    """Keep the fingertip on a jumping target: 100 control intervals of 0.1 s by default."""
-    return make_environment(random=random, plant=plant, steps=steps_for(time_limit, CONTROL_DT_S),
-                            environment_kwargs=environment_kwargs)
+add_task(SUITE, "jumps", make_environment, EPISODE_STEPS, CONTROL_DT_S,
+         "Keep the fingertip on a jumping target: 100 control intervals of 0.1 s by default (plant=...).")

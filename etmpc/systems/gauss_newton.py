@@ -1,0 +1,70 @@
+"""The base of a task whose MPC tracks what it observes: a least-squares OCP (:class:`GaussNewtonMPC`)
+whose parameters (a reference, a target) are read off each observation, and a time-varying LQR along
+each plan while it is kept (:class:`PlanFeedback`). The kicks task and the reacher are two; a task
+writes its residuals, its feedback weights and the names of what it tracks, and gets the rest:
+
+* ``plan``: the OCP solved at the observed parameters; the plan carries them as its forecasts (one
+  value per step), so recordings draw what it was made for and a trigger compares it with now;
+* ``plan_cost`` and ``interpreted`` for ``etmpc bench``;
+* ``feedback``: :class:`PlanFeedback`, the gains each plan carries.
+
+This module may import ``etmpc.common`` and ``etmpc.control``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from functools import cached_property
+
+import casadi as ca
+import dm_env
+import numpy as np
+
+from etmpc.control.lqr import PlanFeedback
+from etmpc.control.mpc import FeedbackWeights, GaussNewtonMPC
+from etmpc.control.plan import Plan
+from etmpc.systems.base import SystemBase
+
+
+class GaussNewtonSystem(SystemBase):
+    """A tracking task: a subclass sets :attr:`tracked` and :attr:`mpc_name`, builds ``self.model``
+    (``model.discrete``, the predictor over one interval) and ``self.u_min``/``self.u_max`` in its
+    ``__init__``, and writes :meth:`residuals` and :meth:`feedback_weights`. Its ``Config`` has a
+    ``solver`` (:class:`~etmpc.control.mpc.SolverSettings`)."""
+
+    tracked: tuple[str, ...] = ()  # observation entries that are the OCP's parameters, in order
+    mpc_name: str = "mpc"  # the compiled solver's name (its cache file)
+    feedback = PlanFeedback()
+
+    def residuals(self) -> tuple[ca.Function, ca.Function]:
+        """``stage_residual(x, u, du, p)`` and ``terminal_residual(x, p)``, ``p`` the tracked values."""
+        raise NotImplementedError
+
+    def feedback_weights(self) -> FeedbackWeights:
+        """Q and R of the LQR along each plan (the gains ``PlanFeedback`` applies)."""
+        raise NotImplementedError
+
+    @cached_property
+    def mpc(self) -> GaussNewtonMPC:
+        stage, terminal = self.residuals()
+        return GaussNewtonMPC(self.model.discrete, stage, terminal, self.config.horizon, self.u_min, self.u_max,
+                              self.config.solver, name=self.mpc_name, parameters=len(self.tracked),
+                              feedback=self.feedback_weights())
+
+    def observed(self, timestep: dm_env.TimeStep) -> np.ndarray:
+        """The tracked values now, as observed: the OCP's parameter vector."""
+        obs = timestep.observation
+        return np.array([obs[name] for name in self.tracked], dtype=float)
+
+    def plan(self, x: np.ndarray, u_prev: np.ndarray, warm: Plan | None, age: int, timestep: dm_env.TimeStep) -> Plan:
+        p = self.observed(timestep)
+        plan = self.mpc.solve(x, u_prev, warm, age, parameters=p)
+        return replace(plan, forecasts={name: np.full(self.horizon, p[i]) for i, name in enumerate(self.tracked)})
+
+    def plan_cost(self, x: np.ndarray, u_prev: np.ndarray, timestep: dm_env.TimeStep, inputs: np.ndarray) -> float:
+        """The OCP's objective of an input sequence, rolled out through the predictor."""
+        return self.mpc.objective(x, u_prev, inputs, self.observed(timestep))
+
+    def interpreted(self) -> GaussNewtonSystem:
+        """The same task with its MPC solved as before it was compiled (for etmpc bench)."""
+        return type(self)(replace(self.config, solver=replace(self.config.solver, compiled=False)))

@@ -1,0 +1,206 @@
+"""The registry of tasks: etmpc's own domains and those of other installed packages, found by name.
+
+A *domain* is a package (``etmpc/systems/cart_pendulum/``, or a plugin's own) that names
+
+* ``TASKS``: its tasks, the default first. Importing the package stays light: no MuJoCo or
+  dm-control, which pick their OpenGL backend on import;
+* ``TEST_SET_SEEDS``: task -> the seed its stored test set was drawn from (``etmpc testset``);
+* ``SUITE`` and ``SYSTEMS`` (loaded when first asked): its dm-control task factories, as a
+  ``dm_control.suite`` domain has them, and task -> the :class:`~etmpc.systems.base.System` class
+  the control loop plays;
+* optionally ``DATA``: the folder of its stored test sets and references (default: etmpc's
+  ``tasks/<domain>/``).
+
+:data:`BUILT_IN` lists etmpc's domains; another package adds one with an entry point in the
+``etmpc.tasks`` group (``slider = "etmpc_slider"``: the domain's name and its package), read once when
+first asked. A plugin that fails to import, or does not name its tasks, gives one warning naming it;
+every other task still works.
+
+A task's name is ``DOMAIN`` (its default task) or ``DOMAIN/TASK``. A :class:`SystemKey` is a task at a
+price of a computation, made and checked once at the edge and passed as a value: every worker builds
+the same system from it.
+"""
+
+from __future__ import annotations
+
+import importlib
+import warnings
+from dataclasses import dataclass, replace
+from functools import cache
+from importlib.metadata import entry_points
+from pathlib import Path
+from types import ModuleType
+
+from etmpc.common import checks
+from etmpc.common.errors import EtmpcError, UnknownNameError
+from etmpc.common.resources import tasks_dir
+
+# Domain name -> its package: a new domain of etmpc's own is a folder beside these and one line here.
+BUILT_IN = {
+    "cart_pendulum": "etmpc.systems.cart_pendulum",
+    "battery": "etmpc.systems.battery",
+    "reacher": "etmpc.systems.reacher",
+}
+ENTRY_POINTS = "etmpc.tasks"
+
+
+def lazy(module: str, systems: dict[str, str], suite: str):
+    """A domain package's module ``__getattr__``: ``SYSTEMS`` (task -> ``"module:Class"``) and ``SUITE``
+    (``"module:NAME"``) imported when first asked, so that naming the tasks loads neither MuJoCo nor
+    dm-control (they pick their OpenGL backend on import)."""
+    def load(target: str):
+        name, _, attribute = target.partition(":")
+        return getattr(importlib.import_module(name), attribute)
+
+    def __getattr__(name: str):
+        if name == "SYSTEMS":  # task -> the System class the loop plays
+            return {task: load(target) for task, target in systems.items()}
+        if name == "SUITE":  # the dm-control task factories, as a dm_control.suite domain has them
+            return load(suite)
+        raise AttributeError(f"module {module!r} has no attribute {name!r}")
+    return __getattr__
+
+
+def _problem(package: ModuleType) -> str | None:
+    """What is wrong with a domain's package, or None."""
+    tasks = getattr(package, "TASKS", None)
+    if not (isinstance(tasks, tuple) and tasks and all(isinstance(t, str) and t and "/" not in t for t in tasks)):
+        return "its TASKS is not a non-empty tuple of task names"
+    seeds = getattr(package, "TEST_SET_SEEDS", None)
+    if not (isinstance(seeds, dict) and set(seeds) <= set(tasks)):
+        return "its TEST_SET_SEEDS is not a dict of its tasks' seeds"
+    return None
+
+
+@cache
+def domains() -> dict[str, ModuleType]:
+    """Every domain's package by name: etmpc's own, then the installed plugins' (``etmpc.tasks``)."""
+    found = {name: importlib.import_module(package) for name, package in BUILT_IN.items()}
+    for point in sorted(entry_points(group=ENTRY_POINTS), key=lambda p: p.name):
+        where = f"task plugin {point.name!r} ({point.value})"
+        if point.name in found or not point.name.isidentifier():
+            problem = "names a domain etmpc already has" if point.name in found else "is not a valid domain name"
+        else:
+            try:
+                package = point.load()
+            except Exception as exc:  # a broken plugin must not take the other tasks with it
+                problem = f"failed to import ({type(exc).__name__}: {exc})"
+            else:
+                problem = _problem(package)
+                if problem is None:
+                    found[point.name] = package
+                    continue
+        warnings.warn(f"etmpc: {where} {problem}; its tasks are left out", RuntimeWarning, stacklevel=2)
+    return found
+
+
+def domain(name: str) -> ModuleType:
+    """The package of domain ``name`` (raises :class:`UnknownNameError`, listing the valid names)."""
+    packages = domains()
+    if name not in packages:
+        raise UnknownNameError(f"unknown domain {name!r}; valid: {', '.join(packages)}")
+    return packages[name]
+
+
+def names() -> tuple[str, ...]:
+    """The task names the command line takes: ``DOMAIN`` for a domain's default task, ``DOMAIN/TASK``
+    for the others."""
+    found = []
+    for name, package in domains().items():
+        found += [name] + [f"{name}/{task}" for task in package.TASKS[1:]]
+    return tuple(found)
+
+
+def parse(name: str) -> tuple[str, str]:
+    """``(domain, task)`` of a task name (``DOMAIN`` or ``DOMAIN/TASK``)."""
+    domain_name, _, task = name.partition("/")
+    package = domains().get(domain_name)
+    if package is None or (task and task not in package.TASKS):
+        raise UnknownNameError(f"unknown task {name!r}; valid: {', '.join(names())}")
+    return domain_name, task or package.TASKS[0]
+
+
+def check_name(name: str) -> None:
+    """Raise :class:`UnknownNameError`, listing the valid names, unless ``name`` is a known task."""
+    parse(name)
+
+
+def canonical(name: str) -> str:
+    """``DOMAIN`` for a domain's default task (however it was named), else ``DOMAIN/TASK``."""
+    domain_name, task = parse(name)
+    return domain_name if task == domain(domain_name).TASKS[0] else f"{domain_name}/{task}"
+
+
+def distinct(names_given) -> list[str]:
+    """The tasks named, canonical, each once: a task named twice (even as ``battery`` and
+    ``battery/trading``) is refused, naming it; an unknown name is refused, listing the valid ones."""
+    tasks: list[str] = []
+    for name in names_given:
+        task = canonical(name)
+        if task in tasks:
+            raise EtmpcError(f"task {task} is given twice")
+        tasks.append(task)
+    return tasks
+
+
+def folder_name(name: str) -> str:
+    """A task's name as one folder: ``DOMAIN`` for a domain's default task, else ``DOMAIN-TASK``."""
+    return canonical(name).replace("/", "-")
+
+
+def data_dir(domain_name: str) -> Path:
+    """The folder of a domain's stored test sets and references."""
+    data = getattr(domain(domain_name), "DATA", None)
+    return Path(data) if data is not None else tasks_dir() / domain_name
+
+
+def stored_seed(name: str) -> int | None:
+    """The seed task ``name``'s stored test set was drawn from (None if its domain does not say)."""
+    domain_name, task = parse(name)
+    return domain(domain_name).TEST_SET_SEEDS.get(task)
+
+
+def system_class(name: str) -> type:
+    """The :class:`~etmpc.systems.base.System` class of task ``name`` (``DOMAIN`` or ``DOMAIN/TASK``)."""
+    domain_name, task = parse(name)
+    return domain(domain_name).SYSTEMS[task]
+
+
+@dataclass(frozen=True)
+class SystemKey:
+    """A task (its canonical name) at a price of a computation (``None``: the task's own), checked when
+    made. ``str(key)`` is how files and messages show it: ``DOMAIN[/TASK]``, ``@PRICE`` when priced."""
+
+    task: str
+    recompute_price: float | None = None
+
+    def __post_init__(self):
+        object.__setattr__(self, "task", canonical(self.task))
+        if self.recompute_price is not None:
+            object.__setattr__(self, "recompute_price", checks.argument("recompute_price", checks.price,
+                                                                        self.recompute_price))
+
+    def __str__(self) -> str:
+        return self.task if self.recompute_price is None else f"{self.task}@{self.recompute_price!r}"
+
+    def make(self):
+        """The system: the task's class built from its ``Config()``, at this price if one is set."""
+        cls = system_class(self.task)
+        config = cls.Config()
+        if self.recompute_price is not None:
+            config = replace(config, recompute_price=self.recompute_price)
+        return cls(config)
+
+
+def system_key(name: str | SystemKey, recompute_price: float | None = None) -> SystemKey:
+    """The key of task ``name`` at ``recompute_price`` (None: the task's own); a key is returned as it is."""
+    if isinstance(name, SystemKey):
+        if recompute_price is not None:
+            raise TypeError("give a task's name with a price, or a SystemKey alone")
+        return name
+    return SystemKey(name, recompute_price)
+
+
+def make_system(key: str | SystemKey):
+    """The system of ``key``: a :class:`SystemKey`, or a task's name at its own price."""
+    return system_key(key).make()
