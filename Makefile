@@ -6,7 +6,7 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 export MUJOCO_GL ?= egl
 
-.PHONY: reproduce sweep leaderboard evaluate example test setup clean
+.PHONY: reproduce sweep leaderboard evaluate example test docs setup clean
 
 setup: $(VENV)/.installed
 
@@ -49,6 +49,11 @@ example: setup
 
 test: setup
 	$(BIN)/python -m pytest -q
+
+# The documentation site into site/ (mkdocs.yml; strict: a broken link or anchor fails it). `make test`
+# builds it too (tests/test_docs.py); `$(BIN)/mkdocs serve` shows it while you write.
+docs: setup
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict
 
 clean:
 	rm -rf $(VENV) results

@@ -16,8 +16,9 @@ PACKAGE = ROOT / "etmpc"
 
 
 def test_the_import_contracts_hold():
-    """Floors (cli > experiments > learning > evaluation > views > policies > loop > systems > control >
-    common), no cycles among siblings at any depth, the spec parser above the policies, domains apart."""
+    """Floors (cli > experiments > learning > envs > evaluation > views > policies > loop | suite > systems >
+    control > common: pyproject.toml's [tool.importlinter]), no cycles among siblings at any depth, the spec
+    registry above the policies, domains apart."""
     lint = Path(sys.executable).with_name("lint-imports")
     result = subprocess.run([str(lint), "--config", str(ROOT / "pyproject.toml")], cwd=ROOT, capture_output=True, text=True)
     assert result.returncode == 0, result.stdout[-3000:]

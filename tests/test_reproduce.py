@@ -2,6 +2,7 @@
 direct evaluation's, and a second run continues rather than redoes."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,6 +14,8 @@ from etmpc.views.replay import replay_summary
 from etmpc.experiments import sweep as sweeps
 from etmpc.experiments.reproduce import Settings, reproduce
 from etmpc.experiments.report import PAPER
+
+ROOT = Path(__file__).resolve().parents[1]
 from etmpc.systems import folder_name, make_system, names
 
 TINY = Settings(seeds=(0, 1), episodes=2, eval_every=1, eval_episodes=2, test_episodes=3, repeats=2, record_episodes=1,
@@ -176,3 +179,19 @@ def test_the_learners_row_of_ppo_is_its_network_evaluated_against_the_best_fixed
     assert row["mean_difference"] == pytest.approx(np.mean([by[spec, e] - by[best, e] for e in range(3)]), rel=1e-12, abs=1e-15)
     assert row["training"]["environment_steps"] == 512 and row["training"]["wall_seconds"] > 0
     assert "PPO (Stable-Baselines3, `sb3:`)" in (out / "REPORT.md").read_text()
+
+
+def test_the_docs_results_page_is_the_runs_report_with_its_provenance_and_figures(run, tmp_path):
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("results_pages", ROOT / "scripts" / "results_pages.py")
+    pages = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(pages)
+    out, results = run
+    page = pages.write_pages(out, tmp_path / "results").read_text()
+    assert f"commit {results['provenance']['commit']}" in page and results["provenance"]["date"] in page
+    report = (out / "REPORT.md").read_text()
+    lines = page.splitlines()
+    assert all(line in lines for line in report.splitlines()[1:] if "![" not in line)  # the run's report, whole
+    shown = pages.IMAGE.findall(page)
+    assert shown and all((tmp_path / "results" / target).is_file() for _, target in shown)

@@ -132,8 +132,9 @@ def build_parser() -> argparse.ArgumentParser:
     _backend_arguments(sw)
 
     rn = sub.add_parser("render", help="render one test-set episode headless to an MP4 video (a task with a 3-D scene)")
-    rn.add_argument("task", help=f"task to render, one with a 3-D scene: {tasks} (the battery has none)")
-    rn.add_argument("--policy", required=True, metavar="SPEC", help="always | never | every:T | threshold:X | rl:PATH | self:PATH")
+    rn.add_argument("task", help=f"task to render: {tasks} (one with a 3-D scene: a task without one, such as the "
+                                 "battery, says so)")
+    rn.add_argument("--policy", required=True, metavar="SPEC", help=f"the policy that plays it: {syntax()}")
     rn.add_argument("--episode", type=types.index, default=0, help="test-set episode (default 0)")
     rn.add_argument("--out", type=Path, required=True, metavar="FILE.mp4")
     rn.add_argument("--seed", type=types.seed, default=0, help="seed of the policy's own randomness, as in evaluate")

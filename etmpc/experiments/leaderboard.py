@@ -21,13 +21,11 @@ software that produced them; the README's headline table is the page's, rewritte
 
 from __future__ import annotations
 
-import datetime
 import json
 import math
 import os
 import platform
 import re
-import subprocess
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -36,6 +34,7 @@ import numpy as np
 
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import write_json, write_text
+from etmpc.common.provenance import commit_and_date
 from etmpc.common.resources import data_root
 from etmpc.evaluation.references import SUITE_VERSION, References, software, stored
 from etmpc.evaluation.scorecard import Scorecard, TaskScore, aggregate, play_and_score, profiles
@@ -139,29 +138,14 @@ def _row(entry: Entry, task: str, refs: References, work: Path, episodes: int, w
             pass  # an unreadable leftover is played again
     say(f"{task}: {entry.name} ({spec})")
     row = play_and_score(task, refs, spec, workers=workers, progress=False)
-    played_at = _commit()
+    played_at = commit_and_date()
     write_json(path, {"key": key, "row": asdict(row), "played": played_at})
     return row, played_at
 
 
-def _commit() -> dict:
-    """The checkout's commit, whether it has uncommitted changes, and the date: when a row was played."""
-    def git(*args: str) -> str | None:
-        try:
-            done = subprocess.run(["git", *args], cwd=data_root(), capture_output=True, text=True, timeout=10)
-        except (OSError, subprocess.SubprocessError):
-            return None
-        return done.stdout.strip() if done.returncode == 0 else None
-
-    commit = git("rev-parse", "--short", "HEAD")
-    dirty = bool(git("status", "--porcelain", "--untracked-files=no")) if commit else None
-    return {"commit": commit or "(not a git checkout)", "uncommitted_changes": dirty,
-            "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")}
-
-
 def _provenance() -> dict:
-    """:func:`_commit`, with the machine and the software: what made the page."""
-    return _commit() | {"machine": {"processor": platform.processor() or platform.machine(), "system": platform.platform(),
+    """:func:`~etmpc.common.provenance.commit_and_date`, with the machine and the software: what made the page."""
+    return commit_and_date() | {"machine": {"processor": platform.processor() or platform.machine(), "system": platform.platform(),
                                     "cores": len(os.sched_getaffinity(0))},
                         "software": software()}
 

@@ -92,6 +92,10 @@ def report(results: dict) -> str:
     lines += [f"| {k} | {v} |" for k, v in results["software"].items()]
     m = results["machine"]
     lines += ["", f"Machine: {m['cpu']}, {m['cores']} cores, {m['memory_gib']} GiB, {m['platform']}.", ""]
+    if "provenance" in results:  # a run's stages may have been played by earlier invocations (a run continues)
+        p = results["provenance"]
+        lines += [f"Written at commit {p['commit']}{' (with uncommitted changes)' if p['uncommitted_changes'] else ''} "
+                  f"on {p['date']}.", ""]
     return "\n".join(lines)
 
 

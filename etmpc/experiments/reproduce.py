@@ -38,6 +38,7 @@ from pathlib import Path
 
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import refuse_foreign, what_differs, write_text
+from etmpc.common.provenance import commit_and_date
 from etmpc.evaluation.evaluate import evaluate
 from etmpc.evaluation.render import render_rollout
 from etmpc.evaluation.workers import play_test_episode, shared_pools
@@ -121,7 +122,7 @@ def _reproduce(out: Path, settings: Settings, workers: int, backend: str, addres
                                        say=_say)
     results = {
         "format": "etmpc-reproduce", "version": 1, "settings": settings.to_json(), "systems": systems,
-        "software": software_versions(), "machine": machine(),
+        "software": software_versions(), "machine": machine(), "provenance": commit_and_date(),
         "wall_seconds_this_invocation": time.perf_counter() - started,
     }
     if paretos:

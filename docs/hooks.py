@@ -1,0 +1,39 @@
+"""MkDocs hooks: the command-line reference, generated from etmpc's own argument parsers at build time,
+so that the page cannot drift from the code (``docs/reference/cli.md``'s ``<!-- cli-reference -->``)."""
+
+from __future__ import annotations
+
+import argparse
+import re
+import os
+
+MARKER = "<!-- cli-reference -->"
+
+
+def cli_reference() -> str:
+    """Every command's ``--help``, as the terminal shows it at 100 columns."""
+    os.environ["COLUMNS"] = "100"
+    from etmpc.cli.options import build_parser
+
+    parser = build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    summaries = {choice.dest: choice.help for choice in sub._choices_actions}
+    parts = ["```text", parser.format_help().rstrip(), "```", ""]
+    for name, command in sub.choices.items():
+        parts += [f"## etmpc {name}", "", f"{summaries.get(name, '').capitalize()}.", "", "```text",
+                  command.format_help().rstrip(), "```", ""]
+    return "\n".join(parts)
+
+
+def on_page_markdown(markdown: str, page, config, files) -> str:
+    if MARKER in markdown:
+        return markdown.replace(MARKER, cli_reference())
+    return markdown
+
+
+_ROLE = re.compile(r":(?:class|func|meth|mod|attr|data|exc|obj):(<code>)~?")
+
+
+def on_page_content(html: str, page, config, files) -> str:
+    """Docstrings use Sphinx's roles (``:class:`Plan```); the API pages show the name alone, as code."""
+    return _ROLE.sub(r"\1", html)
