@@ -14,7 +14,7 @@ This module may import ``etmpc.common`` and ``etmpc.control``.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cache, cached_property
 from typing import Any, Protocol
 
 import dm_env
@@ -88,12 +88,18 @@ CAPABILITIES: dict[str, tuple[str, ...]] = {
 
 
 class _Name:
-    """``DOMAIN`` for a domain's default task, else ``DOMAIN/TASK``, on the class and its instances."""
+    """``DOMAIN`` for a domain's default task, else ``DOMAIN/TASK``, on the class and its instances (asked
+    of the registry once per task: the trigger environment reads it at every step)."""
 
     def __get__(self, system, cls) -> str:
-        from etmpc.systems.registry import canonical
+        return _canonical(cls.domain, cls.task)
 
-        return canonical(f"{cls.domain}/{cls.task}")
+
+@cache
+def _canonical(domain: str, task: str) -> str:
+    from etmpc.systems.registry import canonical
+
+    return canonical(f"{domain}/{task}")
 
 
 class SystemBase:

@@ -11,6 +11,7 @@ from scipy.integrate import solve_ivp
 
 import etmpc_slider
 from etmpc.common.errors import EtmpcError, UnknownNameError
+from etmpc.control.discretise import rk4
 from etmpc.evaluation import testsets
 from etmpc.loop import AugmentedState, run_episode
 from etmpc.policies import parse_policy
@@ -33,15 +34,11 @@ def f(x, u):
 
 
 def rk4_trajectory(x0, inputs, h, dt=st.CONTROL_DT_S):
-    """The model's ODE by classic RK4 of step ``h`` in numpy (MuJoCo's ``integrator="RK4"``)."""
+    """The model's ODE by classic RK4 of step ``h`` on numbers (MuJoCo's ``integrator="RK4"``), with
+    etmpc's ``rk4`` (the scheme the MPC's model uses, here on numpy arrays, not CasADi)."""
     states, x = [np.asarray(x0, float)], np.asarray(x0, float)
     for u in inputs:
-        for _ in range(round(dt / h)):
-            k1 = f(x, u)
-            k2 = f(x + h / 2 * k1, u)
-            k3 = f(x + h / 2 * k2, u)
-            k4 = f(x + h * k3, u)
-            x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        x = rk4(f, x, u, dt, round(dt / h))
         states.append(x)
     return np.array(states)
 
