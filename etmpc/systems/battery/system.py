@@ -36,8 +36,13 @@ _MEAN_PRICE, _INTERVAL_H = Market().price.mean, Battery().interval_h
 def exogenous_features(s) -> np.ndarray:
     """The values of :data:`EXOGENOUS_FEATURES` at augmented state ``s`` (it carries the kept plan
     and the current observation). The trade's value is against the mean price ``lambda_bar``, the
-    value the MPC gives stored energy: > 0 when the plan's trade now beats keeping the energy."""
-    obs, plan, age = s.observation, s.plan, s.age
+    value the MPC gives stored energy: > 0 when the plan's trade now beats keeping the energy.
+
+    A plan that has run out (age N: the loop must recompute, and no policy is asked, but the trigger
+    environment still observes it) assumed nothing for now: its last forecast stands in, as
+    :meth:`~etmpc.control.plan.Plan.input_at` holds its last input."""
+    obs, plan = s.observation, s.plan
+    age = min(s.age, plan.horizon - 1)
     price, production = float(obs["price_eur_kwh"]), float(obs["net_production_kw"])
     planned_price = float(plan.forecasts["price_eur_kwh"][age])
     planned_production = float(plan.forecasts["production_kw"][age])
