@@ -10,6 +10,8 @@ from gymnasium.utils.env_checker import check_env
 
 import etmpc  # noqa: F401  (registers the environments)
 from etmpc.envs.registration import env_id, register
+from etmpc.common.errors import EtmpcError
+from etmpc.envs.gym import TriggerEnv
 from etmpc.envs.trigger import TriggerEnvironment
 from etmpc.evaluation.evaluate import evaluate
 from etmpc.evaluation.workers import play_test_episode
@@ -49,7 +51,7 @@ RULES = {"always": lambda age: 1, "every:3": lambda age: int(age >= 3), "never":
 
 
 @pytest.mark.parametrize("task", TASKS)
-@pytest.mark.parametrize("spec", ["always", "every:3"])
+@pytest.mark.parametrize("spec", ["always", "every:3", "never"])
 def test_an_agent_answering_like_a_fixed_policy_gets_what_evaluate_reports_bit_for_bit(task, spec):
     env = gym.make(env_id(task))
     system = make_system(task)
@@ -67,6 +69,29 @@ def test_an_agent_answering_like_a_fixed_policy_gets_what_evaluate_reports_bit_f
         # And the objective evaluate reports is these rewards' sum, as evaluate sums them.
         total = control.sum() - system.recompute_price * recompute.sum()
         assert (total if system.objective_sense == "max" else -total) == objectives[e]
+
+
+@pytest.mark.parametrize("task", TASKS)
+def test_a_reward_against_a_baseline_is_the_agents_reward_minus_the_baselines_on_the_same_episode(task):
+    # The baseline's rewards are those evaluate's loop gives the baseline on the same test-set episode,
+    # step for step and to the last bit; the agent's own stay as they were.
+    system = make_system(task)
+    env = TriggerEnv(task, reward_baseline="every:4")
+    rewards, control, recompute, _ = _play(env, RULES["every:3"], 2)
+    baseline = play_test_episode(system.name, parse_policy("every:4", system.error_weights), 0, 0, 2).trajectory
+    own = play_test_episode(system.name, parse_policy("every:3", system.error_weights), 0, 0, 2).trajectory
+    np.testing.assert_array_equal(control, own.rewards[: own.steps])
+    paid = baseline.rewards[: baseline.steps] - system.recompute_price * baseline.recompute[: baseline.steps]
+    np.testing.assert_array_equal(rewards, (control - system.recompute_price * recompute) - paid)
+    # Its return is still the task's own, and both simulations are counted.
+    assert env.unwrapped.core.episode_return == own.policy_return(system.recompute_price)
+    assert env.unwrapped.core.simulated_steps == own.steps + baseline.steps
+
+
+@pytest.mark.parametrize("bad", ["threshold:0.1", "every:0", "rl:x.json", "sometimes", 3])
+def test_a_reward_baseline_must_be_a_fixed_schedule(bad):
+    with pytest.raises(EtmpcError, match="fixed schedule"):
+        TriggerEnv("cart_pendulum", reward_baseline=bad)
 
 
 def test_reset_with_a_seed_replays_the_same_episode_and_other_seeds_differ():

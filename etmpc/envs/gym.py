@@ -29,12 +29,19 @@ class TriggerEnv(gymnasium.Env):
 
     metadata = {"render_modes": []}
 
-    def __init__(self, task: str | SystemKey = "cart_pendulum", recompute_price: float | None = None, test_set: str | None = None):
-        self.core = TriggerEnvironment(task, recompute_price=recompute_price, test_set=test_set)
+    def __init__(self, task: str | SystemKey = "cart_pendulum", recompute_price: float | None = None, test_set: str | None = None,
+                 reward_baseline: str | None = None):
+        self.core = TriggerEnvironment(task, recompute_price=recompute_price, test_set=test_set,
+                                       reward_baseline=reward_baseline)
         self.observation_names = self.core.observation_names
         self.action_space = spaces.Discrete(2)
         top = np.finfo(np.float32).max
         self.observation_space = spaces.Box(-top, top, shape=(len(self.observation_names),), dtype=np.float32)
+
+    @property
+    def simulated_steps(self) -> int:
+        """Control intervals simulated so far, the reward baseline's included."""
+        return self.core.simulated_steps
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)

@@ -15,6 +15,13 @@ trajectory that ``evaluate`` reports for them (``tests/test_envs.py``).
 * **Reward**: the task's reward for the interval minus the price of a computation when one was made,
   forced ones included (:attr:`info` has both parts). Higher is better on every task: the cart
   pendulum's reward is ``-beta^2``.
+* **Reward against a baseline** (``reward_baseline="every:3"``, off by default): the same episode is
+  also played, in lockstep, under a fixed schedule (``always``, ``never`` or ``every:T``), and the
+  reward is the agent's minus the baseline's for the same interval. The baseline never depends on the
+  agent's actions, so every policy's ranking (and the optimal policy) is unchanged; what goes is most of
+  the variance the episode's own draw (its disturbances, prices, targets) puts into a return, which
+  otherwise drowns the effect of one decision. It costs a second simulation (and the baseline's
+  solves): :attr:`simulated_steps` counts both. :attr:`episode_return` stays the task's own return.
 * **Episodes**: ``reset()`` draws a training-distribution episode from the environment's own
   generator (``seed``); ``reset(test_episode=i)`` plays episode ``i`` of the stored test set. An
   episode ends at the task's time limit (``LAST`` with discount 1: a truncation), or early, with
@@ -36,7 +43,9 @@ from etmpc.common.errors import EtmpcError
 from etmpc.envs.registration import env_id
 from etmpc.evaluation import testsets
 from etmpc.loop import ClosedLoop
+from etmpc.policies import parse_policy
 from etmpc.policies.features import observation, observation_names
+from etmpc.policies.specs import find
 from etmpc.systems import SystemKey, system_key
 
 KEEP, RECOMPUTE = 0, 1
@@ -67,6 +76,17 @@ def check_index(index: Any, what: str = "test_episode") -> int:
     return int(index)
 
 
+def _fixed_schedule(spec: str, system):
+    """The baseline of a relative reward: a fixed schedule (it must not depend on what the agent does)."""
+    kind = find(spec) if isinstance(spec, str) else None
+    if kind is None or kind.family != "periodic":
+        raise EtmpcError(f"reward_baseline: a fixed schedule (always, never or every:T) is needed, got {spec!r}")
+    try:
+        return parse_policy(spec, system.error_weights, system.name)
+    except EtmpcError as exc:
+        raise EtmpcError(f"reward_baseline: a fixed schedule (always, never or every:T) is needed: {exc}") from None
+
+
 class InvalidAction(EtmpcError, ValueError):
     """An action the environment does not take (a ``ValueError``, as gymnasium's are)."""
 
@@ -88,7 +108,8 @@ class TriggerEnvironment(dm_env.Environment):
     See the module's docstring."""
 
     def __init__(self, task: str | SystemKey = "cart_pendulum", seed: int | None = None,
-                 recompute_price: float | None = None, test_set: str | None = None):
+                 recompute_price: float | None = None, test_set: str | None = None,
+                 reward_baseline: str | None = None):
         if not isinstance(task, (str, SystemKey)):
             raise EtmpcError(f"task: a task name (str) is needed, got {type(task).__name__} {task!r}")
         if seed is not None:
@@ -104,6 +125,9 @@ class TriggerEnvironment(dm_env.Environment):
         self._test_set_path = test_set
         self._test_set = None
         self.info: dict = {}
+        self.reward_baseline = None if reward_baseline is None else _fixed_schedule(reward_baseline, self.system)
+        self._shadow = None if reward_baseline is None else ClosedLoop(self.system, self.key.make().make_env())
+        self.simulated_steps = 0  # the agent's steps, and the baseline's
 
     @property
     def gym_id(self) -> str:
@@ -120,6 +144,8 @@ class TriggerEnvironment(dm_env.Environment):
             test_episode = check_index(test_episode)
         episode = self.system.draw_episode(self._rng) if test_episode is None else self.test_episode(test_episode)
         self.loop.reset(episode)
+        if self._shadow is not None:
+            self._shadow.reset(episode)
         self.info = {"step": 0}
         return dm_env.restart(self._observation())
 
@@ -135,11 +161,25 @@ class TriggerEnvironment(dm_env.Environment):
         reward = control - price
         self.info = {"step": loop.step_index, "recompute": recompute, "forced": forced, "control_reward": control,
                      "computation_cost": price, "nonfinite": loop.trajectory.nonfinite}
+        self.simulated_steps += 1
+        if self._shadow is not None:
+            baseline = self._baseline_step()
+            reward -= baseline
+            self.info["baseline_reward"] = baseline
         if not loop.done:
             return dm_env.transition(reward, self._observation())
         if loop.trajectory.nonfinite:  # the plant failed: a termination
             return dm_env.termination(reward, self._observation())
         return dm_env.truncation(reward, self._observation())
+
+    def _baseline_step(self) -> float:
+        """One interval of the baseline's loop (its reward net of its computations; 0 once it is over)."""
+        shadow = self._shadow
+        if shadow.done:
+            return 0.0
+        recompute = shadow.forced or self.reward_baseline.decide(shadow.observed_state(), None)
+        self.simulated_steps += 1
+        return shadow.step(recompute) - self.system.recompute_price * recompute
 
     def observation_spec(self) -> specs.Array:
         return specs.Array((self._size,), np.float32, name="trigger_features")
