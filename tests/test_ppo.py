@@ -116,3 +116,21 @@ def test_a_file_that_is_not_a_model_is_one_line_before_any_work(run, case, says,
     err = capsys.readouterr().err
     assert "Traceback" not in err and len(err.strip().splitlines()) == 1 and says in err, err
     assert not (tmp_path / "ev.json").exists()
+
+
+@pytest.mark.slow
+def test_the_numbers_do_not_depend_on_the_worker_processes_and_the_baselines_steps_are_counted(tmp_path):
+    from stable_baselines3 import PPO
+
+    settings = PpoSettings(timesteps=512, checkpoints=1, validation_episodes=1, n_steps=128, batch_size=128, n_epochs=1,
+                           n_envs=2, reward_baseline="every:2")
+    runs = [train_ppo("battery", tmp_path / f"w{w}", settings, workers=w) for w in (1, 2)]
+    weights = [PPO.load(str(tmp_path / f"w{w}" / "selected.zip"), device="cpu").policy.state_dict() for w in (1, 2)]
+    assert weights[0].keys() == weights[1].keys()
+    for name in weights[0]:  # the same network, trained in one process or in two
+        np.testing.assert_array_equal(weights[0][name].numpy(), weights[1][name].numpy(), err_msg=name)
+    assert runs[0]["checkpoints"][0]["validation_objective"] == runs[1]["checkpoints"][0]["validation_objective"]
+    # Byte for byte, the model file too (no clock in it): a regenerated shipped policy can be compared so.
+    assert (tmp_path / "w1" / "selected.zip").read_bytes() == (tmp_path / "w2" / "selected.zip").read_bytes()
+    # The agent's 512 steps and the baseline's as many (a battery episode never ends early).
+    assert runs[0]["environment_steps"] == 512 and runs[0]["simulated_steps"] == 1024

@@ -59,8 +59,8 @@ def _train(args) -> None:
     check_outputs({}, {"--out": args.out})
     if args.algorithm == "ppo":
         return _train_ppo(args)
-    if args.timesteps is not None:
-        raise EtmpcError("--timesteps is PPO's setting: add --algorithm ppo")
+    if args.timesteps is not None or args.hyperparams is not None:
+        raise EtmpcError("--timesteps and --hyperparams are PPO's settings: add --algorithm ppo")
     dpi_options = {"futures": args.futures, "horizon": args.horizon, "states_per_episode": args.labels}
     if args.algorithm != "dpi" and any(v is not None for v in dpi_options.values()):
         raise EtmpcError("--futures, --horizon and --labels are DPI's settings: add --algorithm dpi")
@@ -80,18 +80,23 @@ def _train(args) -> None:
 
 def _train_ppo(args) -> None:
     from etmpc.evaluation.workers import default_workers
-    from etmpc.learning.ppo import PpoSettings, train_ppo
+    from dataclasses import replace
+
+    from etmpc.learning import hyperparams
+    from etmpc.learning.ppo import train_ppo
     from etmpc.learning.train import parse_seeds
     from etmpc.systems import system_key
 
-    seeds = (0,) if args.seeds == "0-4" else parse_seeds(args.seeds)  # 0-4 is the other learners' default
-    if len(seeds) != 1:
+    seeds = None if args.seeds == "0-4" else parse_seeds(args.seeds)  # 0-4 is the other learners' default
+    if seeds is not None and len(seeds) != 1:
         raise EtmpcError(f"PPO trains one seed at a time: give --seeds S, got {args.seeds}")
     if args.backend != "local" or args.resume or args.record:
         raise EtmpcError("--algorithm ppo runs locally from the start: no --backend ray, --resume or --record")
-    settings = PpoSettings(**({} if args.timesteps is None else {"timesteps": args.timesteps}), seed=seeds[0],
-                           validation_episodes=args.validation_episodes)
-    result = train_ppo(system_key(args.task, args.price), args.out, settings, args.workers or default_workers(), say=_say)
+    key = system_key(args.task, args.price)
+    settings = (hyperparams.load(args.hyperparams, key.task) if args.hyperparams else hyperparams.shipped(key))
+    overrides = {"timesteps": args.timesteps, "seed": None if seeds is None else seeds[0]}
+    settings = replace(settings, validation_episodes=args.validation_episodes, **{k: v for k, v in overrides.items() if v is not None})
+    result = train_ppo(key, args.out, settings, args.workers or default_workers(), say=_say)
     print(f"PPO on {result['task']}: {result['environment_steps']} environment steps in {result['wall_seconds']:.0f} s; "
           f"kept {result['selected']} (best of {len(result['checkpoints'])} on {settings.validation_episodes} "
           "validation episodes)")

@@ -82,7 +82,10 @@ def build_parser() -> argparse.ArgumentParser:
                          "iteration; default), gpomdp (the paper's policy gradient), or ppo (Stable-Baselines3 on the "
                          "trigger environment: --timesteps, one seed)")
     tr.add_argument("--timesteps", type=types.positive_int, default=None, metavar="N",
-                    help="PPO: environment steps in all (default 200000)")
+                    help="PPO: environment steps in all (default: the hyperparameter file's n_timesteps)")
+    tr.add_argument("--hyperparams", type=Path, default=None, metavar="FILE",
+                    help="PPO: an rl-zoo3-style YAML file of hyperparameters, keyed by the task's gymnasium id "
+                         "(default: the task's shipped policies/<task>/ppo.yml)")
     tr.add_argument("--features", choices=FEATURE_SETS, default=DEFAULT_FEATURES,
                     help="the policy's features: error (prediction error, its square, the plan's age and, for the "
                          "battery, prices and production now and as planned; default) or paper ([x_i, x_k, i-k] and squares)")

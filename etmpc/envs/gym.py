@@ -24,6 +24,13 @@ from etmpc.envs.trigger import TriggerEnvironment
 from etmpc.systems import SystemKey
 
 
+def trigger_spaces(size: int) -> tuple[spaces.Box, spaces.Discrete]:
+    """The observation and action spaces of a trigger environment with ``size`` features, newly made
+    (a saved model pickles them: made afresh, they pickle to the same bytes however they travelled)."""
+    top = np.finfo(np.float32).max
+    return spaces.Box(-top, top, shape=(size,), dtype=np.float32, seed=0), spaces.Discrete(2, seed=0)
+
+
 class TriggerEnv(gymnasium.Env):
     """``gymnasium`` face of :class:`~etmpc.envs.trigger.TriggerEnvironment` (the same loop)."""
 
@@ -34,9 +41,7 @@ class TriggerEnv(gymnasium.Env):
         self.core = TriggerEnvironment(task, recompute_price=recompute_price, test_set=test_set,
                                        reward_baseline=reward_baseline)
         self.observation_names = self.core.observation_names
-        self.action_space = spaces.Discrete(2)
-        top = np.finfo(np.float32).max
-        self.observation_space = spaces.Box(-top, top, shape=(len(self.observation_names),), dtype=np.float32)
+        self.observation_space, self.action_space = trigger_spaces(len(self.observation_names))
 
     @property
     def simulated_steps(self) -> int:

@@ -1,8 +1,11 @@
 """A trigger trained by a standard RL library: Stable-Baselines3's PPO on the trigger environment.
 
-``etmpc train TASK --algorithm ppo --timesteps N --out DIR`` trains PPO (an MLP policy) on
-``etmpc.envs.gym.TriggerEnv`` for ``N`` environment steps, on ``--workers`` environments in parallel
-processes, with observations and rewards normalised by ``VecNormalize``. After each of ``checkpoints``
+``etmpc train TASK --algorithm ppo --out DIR`` trains PPO (an MLP policy) on ``etmpc.envs.gym.TriggerEnv``
+with the task's hyperparameters (``policies/<task>/ppo.yml``, rl-zoo3's layout, see
+:mod:`etmpc.learning.hyperparams`; ``--hyperparams FILE`` for others, ``--timesteps N`` to change the
+budget): ``n_envs`` environments, stepped in ``--workers`` processes (the numbers do not depend on
+how many), observations and rewards normalised by ``VecNormalize``, and the reward taken against a
+fixed schedule when ``env_kwargs`` names one (``reward_baseline``: see :mod:`etmpc.envs.trigger`). After each of ``checkpoints``
 equal slices of the budget the network is saved (``checkpoints/step_<n>.zip`` and, beside it, the
 ``.json`` that ``sb3:PATH`` reads: the task and the frozen normalisation) and scored on
 ``validation_episodes`` training-distribution episodes, drawn as ``etmpc train`` draws its own
@@ -18,8 +21,11 @@ from __future__ import annotations
 import json
 import shutil
 import time
+import zipfile
 from dataclasses import asdict, dataclass
 from pathlib import Path
+
+import numpy as np
 
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import refuse_foreign, write_json
@@ -34,8 +40,9 @@ from etmpc.systems import SystemKey, system_key
 class PpoSettings:
     """PPO's settings (Stable-Baselines3's names); the defaults are its own but for the sizes."""
 
-    timesteps: int = 200_000  # environment steps in all
+    timesteps: int = 200_000  # environment steps in all (the agent's: a reward baseline simulates as many again)
     seed: int = 0
+    n_envs: int = 2  # environments stepped together (a hyperparameter: the processes are train_ppo's workers)
     checkpoints: int = 4  # slices of the budget; each ends with a save and a validation score
     validation_episodes: int = 30  # training-distribution episodes that choose selected.zip
     n_steps: int = 512  # steps per environment between updates
@@ -47,9 +54,10 @@ class PpoSettings:
     clip_range: float = 0.2
     ent_coef: float = 0.0
     hidden: tuple[int, ...] = (64, 64)
+    reward_baseline: str | None = None  # the environment's reward relative to this fixed schedule (TriggerEnvironment)
 
     def __post_init__(self):
-        for name in ("timesteps", "checkpoints", "validation_episodes", "n_steps", "batch_size", "n_epochs"):
+        for name in ("timesteps", "checkpoints", "validation_episodes", "n_steps", "batch_size", "n_epochs", "n_envs"):
             if getattr(self, name) < 1:
                 raise EtmpcError(f"PPO needs {name} >= 1, got {getattr(self, name)}")
 
@@ -63,16 +71,35 @@ def _libraries():
     return stable_baselines3, torch
 
 
-def _make_env(key: SystemKey, seed: int):
+def _make_env(key: SystemKey, seed: int, reward_baseline: str | None):
     def make():
         from stable_baselines3.common.monitor import Monitor
 
         from etmpc.envs.gym import TriggerEnv
 
-        env = Monitor(TriggerEnv(key))
+        env = Monitor(TriggerEnv(key, reward_baseline=reward_baseline))
         env.reset(seed=seed)
         return env
     return make
+
+
+def save_model(model, path: Path) -> None:
+    """``model.save(path)`` without what differs between two runs of the same training (the wall-clock
+    start, the episode times the Monitor kept, the spaces' histories), its zip's entries dated 1980-01-01: the same training
+    gives the same bytes, so a regenerated shipped policy can be compared byte for byte."""
+    raw = path.with_name(path.stem + ".unpacked.zip")
+    from etmpc.envs.gym import trigger_spaces
+
+    fresh = trigger_spaces(model.observation_space.shape[0])  # the spaces pickle their generators and how they
+    assert fresh == (model.observation_space, model.action_space)  # travelled (from a process or not): the same
+    model.observation_space, model.action_space = fresh  # spaces, made afresh (PPO never samples from them)
+    model.save(str(raw), exclude=["start_time", "ep_info_buffer", "ep_success_buffer"])
+    with zipfile.ZipFile(raw) as source, zipfile.ZipFile(path, "w") as target:
+        for info in source.infolist():
+            entry = zipfile.ZipInfo(info.filename, date_time=(1980, 1, 1, 0, 0, 0))
+            entry.compress_type, entry.external_attr = info.compress_type, info.external_attr
+            target.writestr(entry, source.read(info.filename))
+    raw.unlink()
 
 
 def _ours(name: str) -> bool:
@@ -84,7 +111,18 @@ def train_ppo(task: str | SystemKey, out: Path, settings: PpoSettings = PpoSetti
     """Train on ``task`` (a name, at ``recompute_price`` if given, or a :class:`SystemKey`), checkpoint,
     choose on validation episodes; returns ``training.json``'s content."""
     sb3, torch = _libraries()
-    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnvWrapper, VecNormalize
+
+    class Float32Rewards(VecEnvWrapper):
+        """Rewards as float32, as DummyVecEnv keeps them (SubprocVecEnv hands float64): so that one
+        process or several give the same numbers."""
+
+        def reset(self):
+            return self.venv.reset()
+
+        def step_wait(self):
+            obs, rewards, dones, infos = self.venv.step_wait()
+            return obs, rewards.astype(np.float32), dones, infos
 
     out = Path(out)
     key = system_key(task, recompute_price)
@@ -95,11 +133,13 @@ def train_ppo(task: str | SystemKey, out: Path, settings: PpoSettings = PpoSetti
     torch.set_num_threads(1)
     # PPO collects n_steps per environment between updates: a budget too small for that shrinks n_steps,
     # and each checkpoint's slice is a whole number of rollouts (so the steps reported are the steps run).
-    n_steps = min(settings.n_steps, max(1, settings.timesteps // (settings.checkpoints * workers)))
-    rollout = n_steps * workers
+    n_envs = settings.n_envs
+    n_steps = min(settings.n_steps, max(1, settings.timesteps // (settings.checkpoints * n_envs)))
+    rollout = n_steps * n_envs
     slices = [max(1, round(settings.timesteps / settings.checkpoints / rollout)) * rollout] * settings.checkpoints
-    envs = [_make_env(key, settings.seed * 1000 + i) for i in range(workers)]
-    vec = SubprocVecEnv(envs) if workers > 1 else DummyVecEnv(envs)
+    envs = [_make_env(key, settings.seed * 1000 + i, settings.reward_baseline) for i in range(n_envs)]
+    # The environments in worker processes or in this one: the same numbers either way.
+    vec = Float32Rewards(SubprocVecEnv(envs) if min(workers, n_envs) > 1 else DummyVecEnv(envs))
     vec = VecNormalize(vec, norm_obs=True, norm_reward=True, gamma=settings.gamma)
     model = sb3.PPO("MlpPolicy", vec, seed=settings.seed, device="cpu", n_steps=n_steps,
                     batch_size=min(settings.batch_size, rollout), n_epochs=settings.n_epochs, learning_rate=settings.learning_rate,
@@ -113,14 +153,15 @@ def train_ppo(task: str | SystemKey, out: Path, settings: PpoSettings = PpoSetti
             for steps in slices:
                 model.learn(total_timesteps=int(steps), reset_num_timesteps=False)
                 path = out / "checkpoints" / f"step_{model.num_timesteps:08d}.zip"
-                model.save(str(path))
+                save_model(model, path)
                 write_json(metadata_path(path), {
                     "format": FORMAT, "version": 1, "task": key.task, "algorithm": "ppo",
                     "observation_names": names, "observation_mean": vec.obs_rms.mean.tolist(),
                     "observation_var": vec.obs_rms.var.tolist(), "recompute_price": system.recompute_price,
                     "timesteps": int(model.num_timesteps), "settings": _json(settings)})
                 score = mean_scores(pool, key, [f"sb3:{path}"], VALIDATION_ENTROPY, settings.validation_episodes)[0]
-                checkpoints.append({"timesteps": int(model.num_timesteps), "file": str(path.relative_to(out)),
+                checkpoints.append({"timesteps": int(model.num_timesteps), "simulated_steps": int(sum(vec.get_attr("simulated_steps"))),
+                                    "file": str(path.relative_to(out)),
                                     "validation_objective": score, "wall_seconds": time.perf_counter() - started})
                 say(f"{key.task}: PPO {model.num_timesteps} steps, validation objective {score:.5f} "
                     f"({time.perf_counter() - started:.0f} s)")
@@ -132,7 +173,8 @@ def train_ppo(task: str | SystemKey, out: Path, settings: PpoSettings = PpoSetti
     write_json(out / "selected.json", dict(meta, validation_objective=pick["validation_objective"],
                                            validation_episodes=settings.validation_episodes))
     result = {"format": "etmpc-ppo-run", "version": 1, "task": str(key), "settings": _json(settings), "workers": workers,
-              "environment_steps": int(model.num_timesteps), "wall_seconds": time.perf_counter() - started,
+              "environment_steps": int(model.num_timesteps), "simulated_steps": checkpoints[-1]["simulated_steps"],
+              "wall_seconds": time.perf_counter() - started,
               "checkpoints": checkpoints, "selected": pick["file"], "objective_sense": system.objective_sense,
               "stable_baselines3": sb3.__version__, "torch": torch.__version__}
     write_json(out / "training.json", result)
