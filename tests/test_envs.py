@@ -116,7 +116,7 @@ def test_the_observation_is_the_error_features_and_their_squares():
     assert env.observation_names[:5] == ("error_cart_position", "error_cart_velocity", "error_pole_angle",
                                          "error_pole_angular_velocity", "plan_age")
     battery = gym.make("etmpc/battery-trading-v0").unwrapped
-    assert "price_error_eur_kwh" in battery.observation_names and len(battery.observation_names) == 2 * (1 + 1 + 7)
+    assert "price_error_eur_kwh" in battery.observation_names and len(battery.observation_names) == 2 * (1 + 1 + 10)
 
 
 BAD_ACTIONS = [2, -1, 0.5, "1", [0, 1], [1], (1,), None, np.float64(1.0), np.array([1]), np.array([[0]]),

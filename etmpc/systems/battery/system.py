@@ -29,6 +29,9 @@ EXOGENOUS_FEATURES = (
     "price_error_eur_kwh",  # lambda_i minus the plan's assumption
     "production_error_kw",
     "trade_value_eur",  # (lambda_i - lambda_bar) u_plan,i delta: today's worth of the trade the plan makes now
+    "price_forecast_revision_eur_kwh",  # RMS over the plan's remaining steps: today's price forecast minus the plan's
+    "production_forecast_revision_kw",  # the same for the production forecast
+    "plan_value_revision_eur",  # sum over them of (today's forecast - the plan's) u_plan delta: what the plan's trades gained or lost
 )
 _MEAN_PRICE, _INTERVAL_H = Market().price.mean, Battery().interval_h
 
@@ -47,8 +50,14 @@ def exogenous_features(s) -> np.ndarray:
     planned_price = float(plan.forecasts["price_eur_kwh"][age])
     planned_production = float(plan.forecasts["production_kw"][age])
     trade_value = (price - _MEAN_PRICE) * float(plan.input_at(age)[0]) * _INTERVAL_H
+    # The forecasts now against those the plan was made with, over the steps it has left (index 0: now).
+    left = plan.horizon - age
+    price_revision = np.asarray(obs["price_forecast_eur_kwh"][:left]) - plan.forecasts["price_eur_kwh"][age:age + left]
+    production_revision = np.asarray(obs["production_forecast_kw"][:left]) - plan.forecasts["production_kw"][age:age + left]
+    value_revision = float(np.dot(price_revision, plan.inputs[age:age + left, 0])) * _INTERVAL_H
     return np.array([price, production, planned_price, planned_production, price - planned_price,
-                     production - planned_production, trade_value])
+                     production - planned_production, trade_value, float(np.sqrt(np.mean(price_revision**2))),
+                     float(np.sqrt(np.mean(production_revision**2))), value_revision])
 
 
 @dataclass(frozen=True)
