@@ -195,3 +195,30 @@ def test_the_docs_results_page_is_the_runs_report_with_its_provenance_and_figure
     assert all(line in lines for line in report.splitlines()[1:] if "![" not in line)  # the run's report, whole
     shown = pages.IMAGE.findall(page)
     assert shown and all((tmp_path / "results" / target).is_file() for _, target in shown)
+
+
+@pytest.mark.slow
+def test_the_run_ships_ppo_with_its_hyperparameters_and_draws_every_learners_sample_efficiency(run):
+    pytest.importorskip("stable_baselines3")
+    out, results = run
+    for name, r in results["systems"].items():
+        folder = folder_name(name)
+        ppo_dir, shipped = out / folder / "train_ppo", out / "policies" / folder
+        training = json.loads((ppo_dir / "training.json").read_text())
+        # The chosen network and its description, copied as they are, with the hyperparameters it used.
+        assert (shipped / "ppo.zip").read_bytes() == (ppo_dir / "selected.zip").read_bytes()
+        assert (shipped / "ppo.json").read_bytes() == (ppo_dir / "selected.json").read_bytes()
+        from etmpc.learning import hyperparams
+        used = hyperparams.load(shipped / "ppo.yml", name)
+        assert used.timesteps == 512 and used.reward_baseline == hyperparams.shipped(name).reward_baseline
+        # PPO's curve is its checkpoints on the test set; its last point is what the run simulated, the
+        # baseline's lockstep simulation included (no task's episode fails here: twice the agent's steps).
+        curves = r["efficiency"]
+        assert [p["timesteps"] for p in curves["ppo"]] == [c["timesteps"] for c in training["checkpoints"]]
+        assert curves["ppo"][-1]["simulated_steps"] == training["simulated_steps"] == 2 * training["environment_steps"]
+        assert ("gpomdp" in curves) == (name in PAPER) and len(curves["dpi"]) == TINY.dpi_episodes // TINY.dpi_eval_every + 1
+        row = r["learners"]["dpi"]["training"]
+        assert row["simulated_steps_per_seed"] == curves["dpi"][-1]["simulated_steps"] and row["wall_seconds"] > 0
+        assert (out / r["files"]["efficiency"]).read_bytes()[:4] == b"\x89PNG"
+    report = (out / "REPORT.md").read_text()
+    assert "simulated steps per run" in report and "![sample efficiency](battery/efficiency.png)" in report

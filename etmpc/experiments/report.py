@@ -158,27 +158,33 @@ def _paper_learner(r: dict) -> list[str]:
 
 
 def learners_section(r: dict) -> list[str]:
-    """The learners side by side on every test-set episode, against the best fixed policy, with their cost."""
+    """The learners side by side on every test-set episode, against the best fixed policy, with their cost
+    and their sample-efficiency figure."""
     if "learners" not in r:
         return []
     le = r["learners"]
     names = {"dpi": "DPI (the default learner, `rl:`)", "gpomdp": "GPOMDP (the paper's, `rl:`, seeds pooled)",
              "ppo": "PPO (Stable-Baselines3, `sb3:`)"}
     lines = [f"### The learners against `{le['reference']}`, on every test-set episode", "",
-             "| learner | recomputes | objective | gain over best fixed | better in | training |", "|---|---|---|---|---|---|"]
+             "| learner | recomputes | objective | gain over best fixed | better in | simulated steps per run | "
+             "runs | training wall time |", "|---|---|---|---|---|---|---|---|"]
     for key in ("dpi", "gpomdp", "ppo"):
         if key not in le:
             continue
         row, cost = le[key], le[key]["training"]
-        spent = [f"{cost['environment_steps']:,} environment steps"]
-        if "simulated_steps_at_most" in cost:
-            spent.append(f"≤ {cost['simulated_steps_at_most']:,} simulated in rollouts")
-        if "wall_seconds" in cost:
-            spent.append(f"{cost['wall_seconds'] / 60:.1f} min on {cost['workers']} workers")
+        simulated = cost.get("simulated_steps_per_seed")
+        wall = f"{cost['wall_seconds'] / 60:.1f} min on {cost['workers']} workers" if "wall_seconds" in cost else "not timed"
         lines.append(f"| {names[key]} | {row['recomputes_mean']:.1f} | {_f(row['objective_mean'])} | {_pct(row)} | "
-                     f"{row['better_episodes']}/{row['episodes']} | {', '.join(spent)} |")
+                     f"{row['better_episodes']}/{row['episodes']} | {'—' if simulated is None else f'{simulated:,}'} | "
+                     f"{cost.get('seeds', 1)} | {wall} |")
+    lines += ["", "Simulated steps count every control interval a run (one seed) simulated: its own episodes, the "
+              "rollouts that label DPI's decisions, PPO's reward baseline. DPI ships the best of its seeds on "
+              "validation episodes; GPOMDP's row pools its seeds' policies; PPO is one seed, its checkpoint chosen on "
+              "validation episodes. The wall time is the whole training stage, every seed."]
     if "ppo" not in le:
         lines += ["", "PPO did not run: it needs the 'rl' extra (`pip install 'etmpc[rl]'`)."]
+    if "efficiency" in r.get("files", {}):
+        lines += ["", f"![sample efficiency]({r['files']['efficiency']})"]
     return lines + [""]
 
 

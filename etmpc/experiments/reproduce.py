@@ -13,8 +13,12 @@ Per system, in ``DIR/<domain>/``:
    (``learned_default.json``);
 3c. ``headroom.json``: the rollout policy over the best fixed one and the ``oracle:`` upper bound on
    the first ``rollout_episodes`` test-set episodes (rollouts are expensive);
-3d. ``train_ppo/``: PPO from Stable-Baselines3 on the trigger environment (with the 'rl' extra), its
-   chosen network evaluated on the test set (``learned_ppo.json``);
+3d. ``train_ppo/``: PPO from Stable-Baselines3 on the trigger environment (with the 'rl' extra), with
+   the task's hyperparameters (``policies/<task>/ppo.yml``); its chosen network is copied with them to
+   ``DIR/policies/<domain>/ppo.zip`` (``.json``, ``.yml``) and evaluated on the test set
+   (``learned_ppo.json``), every checkpoint too, for its learning curve (``learned_ppo_checkpoints.json``);
+3e. ``efficiency.png``: every learner's test-set gain against the environment steps it simulated
+   (:mod:`etmpc.experiments.efficiency`); each training stage's wall time is in ``<stage>_cost.json``;
 4. figures: ``figure1_forecasts.png`` (battery), ``train/curve.png`` (Figure 2),
    ``figure3.png``, ``trajectory.png`` (the best fixed policy's first episode);
 5. ``episodes.rrd``: a Rerun recording of representative episodes (the best fixed policy and
@@ -33,7 +37,7 @@ import json
 import shutil
 import sys
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 from etmpc.common.errors import EtmpcError
@@ -48,6 +52,8 @@ from etmpc.evaluation.references import stored
 from etmpc.experiments.summary import (summarise_default, summarise_headroom, summarise_learners, summarise_scorecard,
                                        summarise_system)
 from etmpc.learning.dpi import Settings as DpiSettings
+from etmpc.experiments import efficiency
+from etmpc.learning import hyperparams
 from etmpc.learning.ppo import PpoSettings, train_ppo
 from etmpc.learning.train import TrainConfig, curve_summary, load_checkpoint, train
 from etmpc.policies import parse_policy
@@ -55,6 +61,7 @@ from etmpc.policies.learned import write_json_atomically
 from etmpc.systems import folder_name, make_system, names
 from etmpc.systems.base import provides, require
 from etmpc.views import figures
+from etmpc.views.curves import write_efficiency_png
 
 @dataclass(frozen=True)
 class Settings:
@@ -79,7 +86,7 @@ class Settings:
     rollout_episodes: int = 30  # first test-set episodes for rollout:BEST and oracle:BEST
     rollout_futures: int = 4  # K: 8 doubles its cost (2 K H simulated steps per decision)
     rollout_horizon: int | None = 20  # None: to the episode's end; at most the task's Benchmark.lookahead
-    ppo_timesteps: int = 60_000  # PPO (Stable-Baselines3, the 'rl' extra) on the trigger environment; 0: none
+    ppo_timesteps: int | None = None  # PPO (Stable-Baselines3, the 'rl' extra): None, its ppo.yml's budget; 0: none
     smoke: bool = False  # a smoke run: its report gives no verdicts
 
     def to_json(self) -> dict:
@@ -178,8 +185,9 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
         _say(f"{domain}: training {len(settings.seeds)} seeds x {settings.episodes} episodes")
         config = TrainConfig(domain, settings.seeds, settings.episodes, settings.eval_every, settings.eval_episodes)
         train_dir = folder / "train"
-        train(config, train_dir, run["workers"], resume=(train_dir / "checkpoint.json").exists(), backend=run["backend"],
-              address=run["address"], progress=progress)
+        with timed(train_dir, run["workers"]):
+            train(config, train_dir, run["workers"], resume=(train_dir / "checkpoint.json").exists(), backend=run["backend"],
+                  address=run["address"], progress=progress)
         state = load_checkpoint(train_dir / "checkpoint.json")
 
         _say(f"{domain}: the learned policies, {settings.repeats} passes")
@@ -192,8 +200,9 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
                              dpi=DpiSettings(futures=settings.dpi_futures, horizon=system.benchmark.capped(settings.dpi_horizon),
                                              states_per_episode=settings.dpi_labels))
     dpi_dir = folder / "train_dpi"
-    train(dpi_config, dpi_dir, run["workers"], resume=(dpi_dir / "checkpoint.json").exists(), backend=run["backend"],
-          address=run["address"], progress=progress)
+    with timed(dpi_dir, run["workers"]):
+        train(dpi_config, dpi_dir, run["workers"], resume=(dpi_dir / "checkpoint.json").exists(), backend=run["backend"],
+              address=run["address"], progress=progress)
     shipped = folder.parent / "policies" / folder_name(system.name) / "learned.json"
     if not shipped.exists():
         write_json_atomically(shipped, json.loads((dpi_dir / "selected.json").read_text()))
@@ -209,8 +218,15 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
     oracle = evaluated_once(folder / "headroom_oracle.json", timed=run["workers"], policies=[f"oracle:{best}"], **subset)
     summary["default_learner"] = summarise_default(system, baselines, default, load_checkpoint(dpi_dir / "checkpoint.json"))
     summary["headroom"] = summarise_headroom(system, best, baselines, learned, default, rollout, oracle)
-    ppo_run, ppo = _ppo(folder, domain, settings, run, common)
-    summary["learners"] = summarise_learners(system, baselines, learned, default, ppo, ppo_run, settings.to_json())
+    ppo_run, ppo, ppo_curve = _ppo(folder, domain, settings, run, common)
+    costs = {name: _cost(folder / stage) for name, stage in (("gpomdp", "train"), ("dpi", "train_dpi"), ("ppo", "train_ppo"))}
+    curves = _efficiency(folder, system, baselines, best, state, ppo_run, ppo_curve)
+    summary["learners"] = summarise_learners(system, baselines, learned, default, ppo, ppo_run, settings.to_json(), costs, curves)
+    summary["efficiency"] = curves
+    if not (folder / "efficiency.png").exists():
+        chosen = {name: dict(summary["learners"][name], simulated_steps=points[-1]["simulated_steps"])
+                  for name, points in curves.items() if name in summary["learners"]}
+        write_efficiency_png(folder / "efficiency.png", system.name, best, curves, chosen)
     scored = {"best periodic": (baselines, _stored_best(system)), "best fixed": (baselines, best),
               **{f"GPOMDP seed {s}": (learned, spec) for s, spec in zip(settings.seeds, learned_specs)},
               "DPI": (default, f"rl:{shipped}"), "PPO": (ppo, f"sb3:{folder / 'train_ppo' / 'selected.zip'}")}
@@ -225,7 +241,8 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
     files = {"baselines": "baselines.json", "learned": "learned.json", "curve": "train/curve.png",
              "figure3": "figure3.png", "recording": "episodes.rrd", "trajectory": "trajectory.png",
              "default_learner": "learned_default.json", "curve_dpi": "train_dpi/curve.png",
-             "headroom_rollout": "headroom_rollout.json", "headroom_oracle": "headroom_oracle.json"}
+             "headroom_rollout": "headroom_rollout.json", "headroom_oracle": "headroom_oracle.json",
+             "efficiency": "efficiency.png"}
     if learned is None:
         del files["learned"], files["curve"]
     _trajectory_png(folder / "trajectory.png", system, best)
@@ -249,21 +266,80 @@ def _stored_best(system) -> str:
     return "always" if best == "every:1" else best  # the same schedule, as reproduce's fixed policies name it
 
 
-def _ppo(folder: Path, domain: str, settings: Settings, run: dict, common: dict) -> tuple[dict | None, dict | None]:
-    """PPO on the trigger environment (``train_ppo/``, redone whole if it was interrupted), its chosen
-    network evaluated on the test set (``learned_ppo.json``); ``(None, None)`` without the 'rl' extra."""
-    if not settings.ppo_timesteps or importlib.util.find_spec("stable_baselines3") is None:
-        _say(f"{domain}: PPO skipped" + ("" if not settings.ppo_timesteps else " (pip install 'etmpc[rl]' to run it)"))
-        return None, None
+def _ppo(folder: Path, domain: str, settings: Settings, run: dict, common: dict) -> tuple[dict | None, dict | None, dict | None]:
+    """PPO on the trigger environment (``train_ppo/``, redone whole if it was interrupted) with the task's
+    hyperparameters, its chosen network copied to ``DIR/policies/`` and evaluated on the test set
+    (``learned_ppo.json``), and every checkpoint (``learned_ppo_checkpoints.json``, its learning curve);
+    ``(None, None, None)`` without the 'rl' extra."""
+    if settings.ppo_timesteps == 0 or importlib.util.find_spec("stable_baselines3") is None:
+        _say(f"{domain}: PPO skipped" + ("" if settings.ppo_timesteps == 0 else " (pip install 'etmpc[rl]' to run it)"))
+        return None, None, None
     ppo_dir = folder / "train_ppo"
+    chosen = hyperparams.shipped(domain, PpoSettings(validation_episodes=settings.validation_episodes))
+    if settings.ppo_timesteps is not None:
+        chosen = replace(chosen, timesteps=settings.ppo_timesteps)
     if not (ppo_dir / "training.json").exists():
-        _say(f"{domain}: PPO (Stable-Baselines3), {settings.ppo_timesteps} environment steps")
+        _say(f"{domain}: PPO (Stable-Baselines3), {chosen.timesteps} environment steps")
         if ppo_dir.exists():
             shutil.rmtree(ppo_dir)  # an interrupted run starts again
-        train_ppo(domain, ppo_dir, PpoSettings(timesteps=settings.ppo_timesteps, validation_episodes=settings.validation_episodes),
-                  run["workers"], say=_say)
+        with timed(ppo_dir, run["workers"]):
+            train_ppo(domain, ppo_dir, chosen, run["workers"], say=_say)
     training = json.loads((ppo_dir / "training.json").read_text())
-    return training, evaluated_once(folder / "learned_ppo.json", policies=[f"sb3:{ppo_dir / 'selected.zip'}"], **common)
+    shipped = folder.parent / "policies" / folder_name(domain)
+    if not (shipped / "ppo.zip").exists():
+        shipped.mkdir(parents=True, exist_ok=True)
+        source = hyperparams.shipped_path(domain)
+        if settings.ppo_timesteps is None and source.is_file():  # the file it trained with, as it is
+            shutil.copyfile(source, shipped / "ppo.yml")
+        else:
+            write_text(shipped / "ppo.yml", hyperparams.dump(chosen, domain, "the hyperparameters this run's PPO used"))
+        shutil.copyfile(ppo_dir / "selected.json", shipped / "ppo.json")
+        shutil.copyfile(ppo_dir / "selected.zip", shipped / "ppo.zip")
+    ppo = evaluated_once(folder / "learned_ppo.json", policies=[f"sb3:{ppo_dir / 'selected.zip'}"], **common)
+    curve = evaluated_once(folder / "learned_ppo_checkpoints.json",
+                           policies=[f"sb3:{ppo_dir / c['file']}" for c in training["checkpoints"]], **common)
+    return training, ppo, curve
+
+
+def cost_path(stage: Path) -> Path:
+    """Where the wall time of training stage ``stage`` (a folder) is kept: ``<stage>_cost.json`` beside it."""
+    return stage.with_name(f"{stage.name}_cost.json")
+
+
+class timed:
+    """Times a training stage into :func:`cost_path` (wall seconds, workers), unless an earlier invocation
+    finished it (the file is there): a resumed stage keeps its first, partial, count."""
+
+    def __init__(self, folder: Path, workers: int):
+        self.path, self.workers = cost_path(Path(folder)), workers
+
+    def __enter__(self):
+        self.started = time.perf_counter()
+
+    def __exit__(self, kind, *_):
+        if kind is None and not self.path.exists():
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            write_json_atomically(self.path, {"wall_seconds": time.perf_counter() - self.started, "workers": self.workers})
+
+
+def _cost(folder: Path) -> dict | None:
+    path = cost_path(folder)
+    return json.loads(path.read_text()) if path.exists() else None
+
+
+def _efficiency(folder: Path, system, baselines: dict, best: str, state, ppo_run: dict | None, ppo_curve: dict | None) -> dict:
+    """Each learner's curve of test-set gain against the steps one run (one seed) simulated."""
+    sense, steps = system.objective_sense, system.episode_steps
+    curves = {"dpi": efficiency.dpi_points(json.loads((folder / "train_dpi" / "checkpoint.json").read_text()),
+                                           json.loads((folder / "train_dpi" / "curve.json").read_text()),
+                                           baselines, best, sense, steps)}
+    if state is not None:
+        curves["gpomdp"] = efficiency.gpomdp_points(json.loads((folder / "train" / "checkpoint.json").read_text()),
+                                                    json.loads((folder / "train" / "curve.json").read_text()),
+                                                    baselines, best, sense, steps)
+    if ppo_run is not None:
+        curves["ppo"] = efficiency.ppo_points(ppo_run, ppo_curve, baselines, best, sense)
+    return curves
 
 
 def _trajectory_png(path: Path, system, spec: str) -> None:

@@ -111,9 +111,12 @@ def _row(s: dict) -> dict:
 
 
 def summarise_learners(system, baselines: dict, learned: dict, default: dict, ppo: dict | None, ppo_run: dict | None,
-                       settings: dict) -> dict:
+                       settings: dict, costs: dict | None = None, curves: dict | None = None) -> dict:
     """Each learner's policy on every test-set episode against the best fixed policy (paired, 95 % CI),
-    with what its training cost: the default learner (DPI), the paper's (GPOMDP) and, if it ran, PPO."""
+    with what its training cost: the default learner (DPI), the paper's (GPOMDP) and, if it ran, PPO.
+    ``costs``: each training stage's ``cost.json`` (wall seconds, workers); ``curves``: the learners'
+    sample-efficiency curves (:mod:`etmpc.experiments.efficiency`), whose last point gives the steps one
+    run (one seed) simulated."""
     sense = system.objective_sense
     fixed = baselines["policies"]
     best = (max if sense == "max" else min)(fixed, key=lambda spec: fixed[spec]["objective_mean"])
@@ -121,19 +124,24 @@ def summarise_learners(system, baselines: dict, learned: dict, default: dict, pp
     steps = system.episode_steps
     dpi_episodes = len(settings["dpi_seeds"]) * settings["dpi_episodes"]
     rows = {
-        "dpi": (default, {"episodes": dpi_episodes, "environment_steps": dpi_episodes * steps,
+        "dpi": (default, {"seeds": len(settings["dpi_seeds"]), "episodes": dpi_episodes, "environment_steps": dpi_episodes * steps,
                           "simulated_steps_at_most": dpi_episodes * settings["dpi_labels"] * settings["dpi_futures"] * 2
                           * settings["dpi_horizon"]}),
     }
     if learned is not None:
-        rows["gpomdp"] = (learned, {"episodes": len(settings["seeds"]) * settings["episodes"],
+        rows["gpomdp"] = (learned, {"seeds": len(settings["seeds"]), "episodes": len(settings["seeds"]) * settings["episodes"],
                                     "environment_steps": len(settings["seeds"]) * settings["episodes"] * steps})
     if ppo is not None:
-        rows["ppo"] = (ppo, {"environment_steps": ppo_run["environment_steps"], "wall_seconds": ppo_run["wall_seconds"],
+        rows["ppo"] = (ppo, {"seeds": 1, "environment_steps": ppo_run["environment_steps"], "wall_seconds": ppo_run["wall_seconds"],
                              "workers": ppo_run["workers"]})
     out = {"reference": best}
     for name, (evaluation, cost) in rows.items():
         runs = [r for r in evaluation["runs"] if r["finite"]]
+        stage = (costs or {}).get(name)
+        if stage is not None:
+            cost = dict(cost, wall_seconds=stage["wall_seconds"], workers=stage["workers"])
+        if (curves or {}).get(name):
+            cost = dict(cost, simulated_steps_per_seed=curves[name][-1]["simulated_steps"])
         out[name] = dict(paired(per_episode(evaluation), reference, sense), policies=list(evaluation["policies"]),
                          recomputes_mean=float(np.mean([r["recomputes"] for r in runs])) if runs else float("nan"),
                          training=cost)

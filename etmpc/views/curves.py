@@ -63,3 +63,36 @@ def draw_pareto(pareto: dict):
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7, ncols=2, loc="best")
     return fig
+
+
+LEARNER_STYLES = {"dpi": ("DPI", "o", "C0"), "gpomdp": ("GPOMDP", "s", "C1"), "ppo": ("PPO (SB3)", "^", "C2")}
+
+
+def write_efficiency_png(path: Path, task: str, reference: str, curves: dict[str, list[dict]],
+                         chosen: dict[str, dict] | None = None) -> None:
+    """Each learner's test-set gain over ``reference`` (%) against simulated environment steps (log
+    axis): ``curves`` maps ``dpi``/``gpomdp``/``ppo`` to points ``{"simulated_steps", "gain_percent"}``
+    (see :mod:`etmpc.experiments.efficiency`); ``chosen`` marks the policy each learner ships with its
+    95 % CI (``{"simulated_steps", "gain_percent", "gain_percent_ci95"}``)."""
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.4, 4.2))
+    ax.axhline(0.0, color="0.4", lw=1, ls="--", label=f"best fixed ({reference})")
+    for name, points in curves.items():
+        if not points:
+            continue
+        label, marker, colour = LEARNER_STYLES.get(name, (name, "x", None))
+        x = [max(p["simulated_steps"], 1) for p in points]
+        ax.plot(x, [p["gain_percent"] for p in points], marker=marker, color=colour, label=label)
+        pick = (chosen or {}).get(name)
+        if pick is not None:
+            ax.errorbar([pick["simulated_steps"]], [pick["gain_percent"]], yerr=[pick["gain_percent_ci95"]], fmt="*",
+                        ms=13, color=colour, capsize=4, mec="k")
+    ax.set_xscale("log")
+    ax.set_xlabel("simulated environment steps per learner run (loop and rollouts)")
+    ax.set_ylabel("test-set gain over the best fixed schedule (%)")
+    ax.set_title(f"{task}: sample efficiency (stars: the chosen policy, 95 % CI)")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    save_png_atomically(fig, path, dpi=110)
