@@ -64,3 +64,23 @@ def test_the_readmes_headline_table_is_the_generated_leaderboards():
     assert table_in((ROOT / "docs" / "leaderboard.md").read_text()) == table
     names = [e["name"] for e in generated["entries"]]
     assert generated["episodes"] == 100 and len(generated["tasks"]) == 4 and "DPI (shipped)" in names
+
+
+def test_a_row_is_played_again_when_the_policy_file_behind_its_spec_changed(tmp_path, monkeypatch):
+    # A shipped policy retrained in place keeps its path, so its spec; its finished row must not stand.
+    policy = tmp_path / "policies" / "cart_pendulum" / "learned.json"
+    policy.parent.mkdir(parents=True)
+    policy.write_bytes((ROOT / "policies" / "cart_pendulum" / "learned.json").read_bytes())
+    entry = leaderboard.Entry("DPI (shipped)", "learned", {"cart_pendulum": f"rl:{policy}"})
+    refs = leaderboard.stored("cart_pendulum")
+    played = []
+    real = leaderboard.play_and_score
+    monkeypatch.setattr(leaderboard, "play_and_score", lambda *a, **k: played.append(a[2]) or real(*a, **k))
+    first, _ = leaderboard._row(entry, "cart_pendulum", refs, tmp_path / "work", 1, 1, lambda line: None)
+    again, _ = leaderboard._row(entry, "cart_pendulum", refs, tmp_path / "work", 1, 1, lambda line: None)
+    assert len(played) == 1 and again == first  # unchanged: kept
+    data = json.loads(policy.read_text())
+    data["theta"] = [0.0] * (len(data["theta"]) - 1) + [5.0]  # keeps every plan it may
+    policy.write_text(json.dumps(data))
+    changed, _ = leaderboard._row(entry, "cart_pendulum", refs, tmp_path / "work", 1, 1, lambda line: None)
+    assert len(played) == 2 and changed.episode_scores != first.episode_scores

@@ -21,6 +21,7 @@ software that produced them; the README's headline table is the page's, rewritte
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import os
@@ -41,6 +42,7 @@ from etmpc.evaluation.scorecard import Scorecard, TaskScore, aggregate, play_and
 from etmpc.evaluation.workers import make_backend, shared_pools
 from etmpc.learning.config import VALIDATION_ENTROPY
 from etmpc.learning.jobs import mean_scores
+from etmpc.policies.specs import find
 from etmpc.systems import distinct, folder_name, make_system, names
 from etmpc.systems.base import require
 from etmpc.views.figures import write_performance_profile_png
@@ -129,6 +131,9 @@ def _row(entry: Entry, task: str, refs: References, work: Path, episodes: int, w
     spec = entry.specs[task]
     path = work / _slug(entry.name) / f"{folder_name(task)}.json"
     key = {"spec": spec, "episodes": episodes, "test_set_sha256": refs.test_set_sha256, "suite_version": SUITE_VERSION}
+    files = _policy_files(spec)
+    if files:  # a policy read from files (rl:, sb3:): a row played with other files is played again
+        key["files_sha256"] = {str(f): hashlib.sha256(f.read_bytes()).hexdigest() for f in files}
     if path.is_file():
         try:
             kept = json.loads(path.read_text())
@@ -141,6 +146,16 @@ def _row(entry: Entry, task: str, refs: References, work: Path, episodes: int, w
     played_at = commit_and_date()
     write_json(path, {"key": key, "row": asdict(row), "played": played_at})
     return row, played_at
+
+
+def _policy_files(spec: str) -> list[Path]:
+    """The files a spec's policy is read from: the file it names and, for a model, the description
+    beside it (``sb3:X.zip`` reads ``X.json`` too)."""
+    kind = find(spec)
+    if kind is None or not kind.path:
+        return []
+    named = Path(spec.partition(":")[2])
+    return [f for f in dict.fromkeys([named, named.with_suffix(".json")]) if f.is_file()]
 
 
 def _provenance() -> dict:
