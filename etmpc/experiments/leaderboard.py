@@ -70,7 +70,8 @@ SHIPPED = (
      "the paper's learner on its features (5 seeds x 1500 episodes), the seed chosen on validation episodes"),
     ("DPI (shipped)", "learned.json", "rl:", "the default learner, chosen on validation episodes"),
     ("PPO (shipped)", "ppo.zip", "sb3:",
-     "Stable-Baselines3 PPO on the trigger environment (60,000 steps), chosen on validation episodes"),
+     "Stable-Baselines3 PPO on the trigger environment with the task's policies/<task>/ppo.yml (its reward against "
+     "a fixed schedule), chosen on validation episodes"),
 )
 
 
