@@ -222,3 +222,12 @@ def test_the_run_ships_ppo_with_its_hyperparameters_and_draws_every_learners_sam
         assert (out / r["files"]["efficiency"]).read_bytes()[:4] == b"\x89PNG"
     report = (out / "REPORT.md").read_text()
     assert "simulated steps per run" in report and "![sample efficiency](battery/efficiency.png)" in report
+
+
+@pytest.mark.slow
+def test_the_papers_learner_trains_on_the_papers_features_as_the_report_says(run):
+    out, _ = run
+    for name in PAPER:
+        config = json.loads((out / folder_name(name) / "train" / "checkpoint.json").read_text())["config"]
+        assert config["algorithm"] == "gpomdp" and config["features"] == "paper"
+    assert "GPOMDP, paper features" in (out / "REPORT.md").read_text()

@@ -5,7 +5,7 @@ Per system, in ``DIR/<domain>/``:
 1. ``baselines.json``: the fixed policies (``always``, ``never``, ``every:T`` for every T that
    matters, thresholds) on the test set;
 2. ``train/``: the learned policy over the seeds with the paper's protocol (``etmpc train``: GPOMDP
-   on the paper's features);
+   on the paper's features, ``[x_i, x_k, i - k]``);
 3. ``learned.json``: each seed's final policy (``last.json``) evaluated ``repeats`` times;
 3b. ``train_dpi/``: the default learner (DPI on the ``error`` features) over its seeds; the seed
    chosen on validation episodes (``selected.json``) is copied to ``DIR/policies/<domain>/learned.json``
@@ -183,7 +183,8 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
     learned, state, learned_specs = None, None, []
     if system.name in PAPER:
         _say(f"{domain}: training {len(settings.seeds)} seeds x {settings.episodes} episodes")
-        config = TrainConfig(domain, settings.seeds, settings.episodes, settings.eval_every, settings.eval_episodes)
+        config = TrainConfig(domain, settings.seeds, settings.episodes, settings.eval_every, settings.eval_episodes,
+                             features="paper")  # the paper's learner on the paper's features, as the report says
         train_dir = folder / "train"
         with timed(train_dir, run["workers"]):
             train(config, train_dir, run["workers"], resume=(train_dir / "checkpoint.json").exists(), backend=run["backend"],
