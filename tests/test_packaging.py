@@ -35,7 +35,9 @@ def test_the_wheel_holds_every_module_and_the_data_and_nothing_else(wheel):
     data = {f"etmpc/_data/models/{p.name}" for p in (ROOT / "models").glob("*.xml")}
     data |= {f"etmpc/_data/tasks/{p.relative_to(ROOT / 'tasks').as_posix()}" for p in (ROOT / "tasks").glob("*/*_testset.npz*")}
     data |= {f"etmpc/_data/tasks/{p.relative_to(ROOT / 'tasks').as_posix()}" for p in (ROOT / "tasks").glob("*/*_references.json")}
-    assert data and data <= names, sorted(data - names)
+    data |= {f"etmpc/_data/policies/{p.relative_to(ROOT / 'policies').as_posix()}" for p in (ROOT / "policies").glob("*/ppo.yml")}
+    assert len(data) > 12 and data <= names, sorted(data - names)
+    assert not {n for n in names if n.startswith("etmpc/_data/policies/") and not n.endswith("/ppo.yml")}  # no policy ships in it
     top_level = {name.split("/")[0] for name in names}
     assert top_level == {"etmpc", f"{wheel.name.split('-')[0]}-{wheel.name.split('-')[1]}.dist-info"}
 

@@ -5,12 +5,13 @@ with the task's hyperparameters (``policies/<task>/ppo.yml``, rl-zoo3's layout, 
 :mod:`etmpc.learning.hyperparams`; ``--hyperparams FILE`` for others, ``--timesteps N`` to change the
 budget): ``n_envs`` environments, stepped in ``--workers`` processes (the numbers do not depend on
 how many), observations and rewards normalised by ``VecNormalize``, and the reward taken against a
-fixed schedule when ``env_kwargs`` names one (``reward_baseline``: see :mod:`etmpc.envs.trigger`). After each of ``checkpoints``
-equal slices of the budget the network is saved (``checkpoints/step_<n>.zip`` and, beside it, the
-``.json`` that ``sb3:PATH`` reads: the task and the frozen normalisation) and scored on
-``validation_episodes`` training-distribution episodes, drawn as ``etmpc train`` draws its own
+fixed schedule when ``env_kwargs`` names one (``reward_baseline``: see :mod:`etmpc.envs.trigger`).
+After each of ``checkpoints`` equal slices of the budget the network is saved
+(``checkpoints/step_<n>.zip``, byte for byte the same for the same training: :func:`save_model`, and
+beside it the ``.json`` that ``sb3:PATH`` reads: the task and the frozen normalisation) and scored
+on ``validation_episodes`` training-distribution episodes, drawn as ``etmpc train`` draws its own
 (never the test set). The best becomes ``selected.zip`` / ``selected.json``; ``training.json`` keeps
-the settings, the validation scores, the environment steps and the wall time.
+the settings, the validation scores, the environment and simulated steps and the wall time.
 
 Evaluate it like any policy: ``etmpc evaluate TASK --policy sb3:DIR/selected.zip``. PyTorch runs on
 one thread per process, on the CPU. Stable-Baselines3 and PyTorch are the optional extra ``rl``.
@@ -84,15 +85,18 @@ def _make_env(key: SystemKey, seed: int, reward_baseline: str | None):
 
 
 def save_model(model, path: Path) -> None:
-    """``model.save(path)`` without what differs between two runs of the same training (the wall-clock
-    start, the episode times the Monitor kept, the spaces' histories), its zip's entries dated 1980-01-01: the same training
-    gives the same bytes, so a regenerated shipped policy can be compared byte for byte."""
-    raw = path.with_name(path.stem + ".unpacked.zip")
+    """``model.save(path)`` without what differs between two runs of the same training: the wall-clock
+    start, the episode times the Monitor kept, and the spaces' histories (a space pickles its generator
+    and whether it came from another process; they are made afresh, equal, and PPO never samples from
+    them). The zip's entries are dated 1980-01-01. The same training gives the same bytes, so a
+    regenerated shipped policy can be compared byte for byte."""
     from etmpc.envs.gym import trigger_spaces
 
-    fresh = trigger_spaces(model.observation_space.shape[0])  # the spaces pickle their generators and how they
-    assert fresh == (model.observation_space, model.action_space)  # travelled (from a process or not): the same
-    model.observation_space, model.action_space = fresh  # spaces, made afresh (PPO never samples from them)
+    fresh = trigger_spaces(model.observation_space.shape[0])
+    if fresh != (model.observation_space, model.action_space):
+        raise EtmpcError(f"a trigger model's spaces are {fresh}, not {(model.observation_space, model.action_space)}")
+    model.observation_space, model.action_space = fresh
+    raw = path.with_name(path.stem + ".unpacked.zip")
     model.save(str(raw), exclude=["start_time", "ep_info_buffer", "ep_success_buffer"])
     with zipfile.ZipFile(raw) as source, zipfile.ZipFile(path, "w") as target:
         for info in source.infolist():
@@ -160,7 +164,8 @@ def train_ppo(task: str | SystemKey, out: Path, settings: PpoSettings = PpoSetti
                     "observation_var": vec.obs_rms.var.tolist(), "recompute_price": system.recompute_price,
                     "timesteps": int(model.num_timesteps), "settings": _json(settings)})
                 score = mean_scores(pool, key, [f"sb3:{path}"], VALIDATION_ENTROPY, settings.validation_episodes)[0]
-                checkpoints.append({"timesteps": int(model.num_timesteps), "simulated_steps": int(sum(vec.get_attr("simulated_steps"))),
+                simulated = int(sum(vec.get_attr("simulated_steps")))  # the baseline's steps too
+                checkpoints.append({"timesteps": int(model.num_timesteps), "simulated_steps": simulated,
                                     "file": str(path.relative_to(out)),
                                     "validation_objective": score, "wall_seconds": time.perf_counter() - started})
                 say(f"{key.task}: PPO {model.num_timesteps} steps, validation objective {score:.5f} "
