@@ -1,6 +1,8 @@
 """PPO from Stable-Baselines3 on the trigger environment (the 'rl' extra), and its network as a policy."""
 
 import json
+import platform
+import zipfile
 
 import numpy as np
 import pytest
@@ -134,3 +136,27 @@ def test_the_numbers_do_not_depend_on_the_worker_processes_and_the_baselines_ste
     assert (tmp_path / "w1" / "selected.zip").read_bytes() == (tmp_path / "w2" / "selected.zip").read_bytes()
     # The agent's 512 steps and the baseline's as many (a battery episode never ends early).
     assert runs[0]["environment_steps"] == 512 and runs[0]["simulated_steps"] == 1024
+
+
+@pytest.mark.slow
+def test_two_processes_save_the_same_training_byte_for_byte(tmp_path):
+    """What a process or a machine puts into Stable-Baselines3's zip (memory addresses in its descriptions,
+    the kernel's build) is left out: `make reproduce` regenerates the shipped zips byte for byte."""
+    import subprocess
+    import sys
+    from stable_baselines3 import PPO
+
+    def trained(name: str) -> bytes:
+        out = tmp_path / name
+        done = subprocess.run([sys.executable, "-m", "etmpc.cli", "train", "cart_pendulum", "--algorithm", "ppo", "--timesteps", "256",
+                               "--validation-episodes", "1", "--workers", "1", "--out", str(out)],
+                              capture_output=True, text=True, timeout=600)
+        assert done.returncode == 0, done.stderr
+        return (out / "selected.zip").read_bytes()
+
+    first, second = trained("a"), trained("b")
+    assert first == second
+    with zipfile.ZipFile(tmp_path / "a" / "selected.zip") as saved:
+        assert b" at 0x" not in saved.read("data")
+        assert saved.read("system_info.txt").splitlines()[0] == f"- OS: {platform.system()} {platform.machine()}".encode()
+    PPO.load(str(tmp_path / "a" / "selected.zip"), device="cpu")  # the descriptions were never what loading reads

@@ -20,6 +20,8 @@ one thread per process, on the CPU. Stable-Baselines3 and PyTorch are the option
 from __future__ import annotations
 
 import json
+import platform
+import re
 import shutil
 import time
 import zipfile
@@ -88,7 +90,10 @@ def save_model(model, path: Path) -> None:
     """``model.save(path)`` without what differs between two runs of the same training: the wall-clock
     start, the episode times the Monitor kept, and the spaces' histories (a space pickles its generator
     and whether it came from another process; they are made afresh, equal, and PPO never samples from
-    them). The zip's entries are dated 1980-01-01. The same training gives the same bytes, so a
+    them); the memory addresses in the descriptions Stable-Baselines3 writes beside each pickled object
+    (``<function f at 0x7f...>``: a description only, loading reads the pickle) and the kernel's build in
+    ``system_info.txt`` (the OS line keeps the system and the machine). The zip's entries are dated
+    1980-01-01. The same training gives the same bytes in any process on machines of a kind, so a
     regenerated shipped policy can be compared byte for byte."""
     from etmpc.envs.gym import trigger_spaces
 
@@ -102,8 +107,20 @@ def save_model(model, path: Path) -> None:
         for info in source.infolist():
             entry = zipfile.ZipInfo(info.filename, date_time=(1980, 1, 1, 0, 0, 0))
             entry.compress_type, entry.external_attr = info.compress_type, info.external_attr
-            target.writestr(entry, source.read(info.filename))
+            target.writestr(entry, _without_run_details(info.filename, source.read(info.filename)))
     raw.unlink()
+
+
+_ADDRESS = re.compile(rb" at 0x[0-9a-f]+>")
+
+
+def _without_run_details(name: str, data: bytes) -> bytes:
+    """An entry of a saved model without the addresses of this process and the kernel of this machine."""
+    if name == "data":
+        return _ADDRESS.sub(b">", data)
+    if name == "system_info.txt":
+        return re.sub(rb"^- OS: .*$", f"- OS: {platform.system()} {platform.machine()}".encode(), data, count=1, flags=re.M)
+    return data
 
 
 def _ours(name: str) -> bool:
