@@ -50,11 +50,16 @@ def _plan(inputs, states, price, production):
 
 def test_error_features_of_the_battery_are_worked_by_hand():
     plan = _plan([100.0, -50.0, 0.0], [0.5, 0.49, 0.5, 0.5], [0.06, 0.04, 0.05], [10.0, 20.0, 30.0])
-    observation = {"price_eur_kwh": 0.08, "net_production_kw": 5.0}
+    # Today's forecasts (index 0: now) against the plan's over the two steps it has left: [0.04, 0.05], [20, 30].
+    observation = {"price_eur_kwh": 0.08, "net_production_kw": 5.0,
+                   "price_forecast_eur_kwh": [0.08, 0.02, 0.07], "production_forecast_kw": [5.0, 26.0, 40.0]}
     s = AugmentedState(np.array([0.47]), np.array([0.5]), 1, plan.state_at(1), plan, observation)
     r = raw_features("error", "battery", s)
-    # error, age, price, production, planned price, planned production, their differences, trade value
-    expected = [0.47 - 0.49, 1, 0.08, 5.0, 0.04, 20.0, 0.08 - 0.04, 5.0 - 20.0, (0.08 - 0.05) * -50.0 * 10 / 3600]
+    # error, age, price, production, planned price, planned production, their differences, trade value,
+    # RMS revision of the price forecast ([+0.04, -0.03]) and of the production's ([-15, -4]), and the
+    # price revisions times the plan's remaining trades [-50, 0]
+    expected = [0.47 - 0.49, 1, 0.08, 5.0, 0.04, 20.0, 0.08 - 0.04, 5.0 - 20.0, (0.08 - 0.05) * -50.0 * 10 / 3600,
+                np.sqrt((0.04**2 + 0.03**2) / 2), np.sqrt((15.0**2 + 4.0**2) / 2), 0.04 * -50.0 * 10 / 3600]
     np.testing.assert_allclose(r, expected, rtol=1e-12)
     assert feature_size(1, "error", "battery") == 2 * len(expected) + 1
     np.testing.assert_array_equal(raw_features("paper", "battery", s), [0.47, 0.5, 1])
