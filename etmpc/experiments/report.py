@@ -107,12 +107,14 @@ def headroom_section(r: dict, smoke: bool) -> list[str]:
     """What any trigger could gain over the best fixed policy, and what the learners reach."""
     h, d = r["headroom"], r["default_learner"]
     best = h["reference"]
-    names = {"oracle": "upper bound, **not a policy**: knows the episode's future", "rollout": "rollout policy",
+    names = {"oracle": "upper bound on a one-step lookahead over it, **not a policy**: knows the episode's future",
+             "rollout": "rollout policy",
              "learned_default": "learned, default learner (DPI, error features)",
              "learned_paper": "learned, the paper's (GPOMDP, paper features)", "best_fixed": "best fixed"}
     lines = [f"### Headroom over `{best}`", "",
              f"Paired over test-set episodes 0–{h['episodes'] - 1} (the rollout policies are expensive); "
-             "gain > 0 is better than the best fixed policy; 95 % CIs.", "",
+             "gain > 0 is better than the best fixed policy; 95 % CIs. The oracle bounds what a one-step lookahead "
+             f"over `{best}` can gain, not every trigger: one that also saves computations can beat it.", "",
              "| | policies | recomputes | objective | gain over best fixed | gain % |", "|---|---|---|---|---|---|"]
     for key, row in h["rows"].items():
         specs = ", ".join(f"`{p}`" for p in row["policies"]) if len(row["policies"]) <= 2 else f"{len(row['policies'])} seeds"
