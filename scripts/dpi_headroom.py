@@ -27,9 +27,10 @@ from pathlib import Path
 
 import numpy as np
 
+from etmpc.evaluation.compare import paired
 from etmpc.evaluation.workers import default_workers, make_backend
 from etmpc.learning import dpi
-from etmpc.learning.jobs import _call
+from etmpc.learning.jobs import episode_scores
 from etmpc.policies.learned import load_policy
 from etmpc.systems import make_system
 
@@ -37,24 +38,17 @@ DEVELOPMENT_ENTROPY = 0x646576  # "dev": a stream of its own, apart from trainin
 REFINE_SEED = 1000  # DPI's episode streams for the refining iterations, apart from any training run's seeds
 
 
-def objectives(pool, task: str, policy, episodes: int) -> np.ndarray:
-    """``policy``'s objective (a spec or a logistic policy's JSON) on the development episodes."""
-    return np.array(pool.map(_call, [("score", (task, policy, DEVELOPMENT_ENTROPY, i)) for i in range(episodes)]))
-
-
-def paired(values: np.ndarray, reference: np.ndarray, sense: str) -> dict:
-    """Mean gain over ``reference`` in % of its mean (> 0 better), with a 95 % CI over episodes."""
-    gain = (values - reference) * (1 if sense == "max" else -1) / abs(reference.mean()) * 100
-    return {"objective": float(values.mean()), "gain_percent": float(gain.mean()),
-            "ci_percent": float(1.96 * gain.std(ddof=1) / np.sqrt(len(gain))), "better_in": int(np.sum(gain > 0))}
+def objectives(pool, task: str, policies: list, episodes: int) -> list[dict[int, float]]:
+    """Each policy's objective (a spec or a logistic policy's JSON) on each development episode."""
+    return [dict(enumerate(values.tolist())) for values in episode_scores(pool, task, policies, DEVELOPMENT_ENTROPY, episodes)]
 
 
 def score(pool, args, sense: str) -> dict:
-    found = {name: objectives(pool, args.task, name, args.episodes) for name in args.policies}
+    found = dict(zip(args.policies, objectives(pool, args.task, args.policies, args.episodes)))
     reference = found[args.policies[0]]
-    rows = {name: dict(paired(values, reference, sense), objectives=values.tolist()) for name, values in found.items()}
+    rows = {name: dict(paired(values, reference, sense), objectives=list(values.values())) for name, values in found.items()}
     for name, row in rows.items():
-        print(f"{name:55s} {row['objective']:.5f}  {row['gain_percent']:+.2f} % ± {row['ci_percent']:.2f} "
+        print(f"{name:55s} {row['objective_mean']:.5f}  {row['gain_percent']:+.2f} % ± {row['gain_percent_ci95']:.2f} "
               f"against {args.policies[0]}", flush=True)
     return {"reference": args.policies[0], "rows": rows}
 
@@ -63,21 +57,20 @@ def refine(pool, args, sense: str) -> dict:
     start = load_policy(args.policies[0].removeprefix("rl:"), make_system(args.task).name)
     settings = dpi.Settings(futures=args.futures, horizon=args.horizon, states_per_episode=args.labels, ridge=args.ridge)
     template = start.to_json()
-    reference = objectives(pool, args.task, template, args.episodes)
+    [reference] = objectives(pool, args.task, [template], args.episodes)
     current, rows = template, []
     for iteration in range(args.iterations):
         began = time.perf_counter()
         episodes = range(iteration * args.label_episodes, (iteration + 1) * args.label_episodes)
         labelled = pool.map(dpi._label_job, [("label", (args.task, current, settings, template, REFINE_SEED, e)) for e in episodes])
         labels = [row for rows_ in labelled for row in rows_]
-        phi = np.array([row[0] for row in labels])
-        advantage = np.array([row[1] - row[2] for row in labels])
-        current = dict(template, theta=dpi.fit(phi, advantage, settings.ridge, np.asarray(current["theta"])).tolist())
-        row = dict(paired(objectives(pool, args.task, current, args.episodes), reference, sense), iteration=iteration + 1,
-                   labels=len(labels), seconds=round(time.perf_counter() - began, 1))
+        current = dict(template, theta=dpi.fit_labels(labels, settings.ridge, np.asarray(current["theta"])).tolist())
+        [values] = objectives(pool, args.task, [current], args.episodes)
+        row = dict(paired(values, reference, sense), iteration=iteration + 1, labels=len(labels),
+                   seconds=round(time.perf_counter() - began, 1))
         rows.append(row)
-        print(f"iteration {iteration + 1}: {row['labels']} labels, {row['objective']:.5f}, {row['gain_percent']:+.2f} % "
-              f"± {row['ci_percent']:.2f} against {args.policies[0]} ({row['seconds']} s)", flush=True)
+        print(f"iteration {iteration + 1}: {row['labels']} labels, {row['objective_mean']:.5f}, {row['gain_percent']:+.2f} % "
+              f"± {row['gain_percent_ci95']:.2f} against {args.policies[0]} ({row['seconds']} s)", flush=True)
     return {"start": args.policies[0], "settings": vars(args) | {"out": str(args.out)}, "iterations": rows, "policy": current}
 
 

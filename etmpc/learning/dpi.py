@@ -158,6 +158,12 @@ def fit(features: np.ndarray, keep_advantage: np.ndarray, ridge: float, theta0: 
     return result.x
 
 
+def fit_labels(rows: list, ridge: float, theta0: np.ndarray | None = None) -> np.ndarray:
+    """:func:`fit` on :func:`label_episode`'s rows ``(phi, q_keep, q_recompute, ...)``: the advantage of
+    keeping is ``q_keep - q_recompute``."""
+    return fit(np.array([row[0] for row in rows]), np.array([row[1] - row[2] for row in rows]), ridge, theta0)
+
+
 # 4. The next policy.
 
 def iteration(state, pool, tick, start: int, stop: int) -> None:
@@ -177,9 +183,7 @@ def iteration(state, pool, tick, start: int, stop: int) -> None:
         learner = state.learners[str(seed)]
         for rows in results[k * per_seed:(k + 1) * per_seed]:
             learner["data"] += [list(row) for row in rows]
-        phi = np.array([row[0] for row in learner["data"]])
-        advantage = np.array([row[1] - row[2] for row in learner["data"]])
-        learner["theta"] = fit(phi, advantage, config.dpi.ridge).tolist()
+        learner["theta"] = fit_labels(learner["data"], config.dpi.ridge).tolist()
         learner["iterations"] += 1
         learner["episodes"] = stop
         state.training += [{"episode": e, "seed": seed, "labels": len(rows)}

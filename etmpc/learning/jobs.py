@@ -128,8 +128,13 @@ def _learner_from_json(data: dict) -> Learner:
                    int(data["episodes"]), np.asarray(data["value_gram"], float), np.asarray(data["value_target"], float))
 
 
-def mean_scores(pool, domain: str, policies: list, entropy: int, episodes: int, on_result=None) -> list[float]:
-    """Each policy's mean objective on the first ``episodes`` episodes of ``entropy``'s stream."""
+def episode_scores(pool, domain: str, policies: list, entropy: int, episodes: int, on_result=None) -> list[np.ndarray]:
+    """Each policy's objective on each of the first ``episodes`` episodes of ``entropy``'s stream."""
     jobs = [("score", (domain, policy, entropy, i)) for policy in policies for i in range(episodes)]
     values = pool.map(_call, jobs, on_result)
-    return [float(np.mean(values[k * episodes:(k + 1) * episodes])) for k in range(len(policies))]
+    return [np.array(values[k * episodes:(k + 1) * episodes]) for k in range(len(policies))]
+
+
+def mean_scores(pool, domain: str, policies: list, entropy: int, episodes: int, on_result=None) -> list[float]:
+    """Each policy's mean objective on the first ``episodes`` episodes of ``entropy``'s stream."""
+    return [float(np.mean(values)) for values in episode_scores(pool, domain, policies, entropy, episodes, on_result)]
