@@ -37,9 +37,15 @@ def _register_environments() -> None:
 
     if find_spec("gymnasium") is None:  # a dependency; an install without it still imports
         return
-    from etmpc.envs.registration import register
+    import warnings
 
-    register()
+    from etmpc.envs.registration import register
+    from etmpc.systems.registry import domains
+
+    with warnings.catch_warnings():  # a broken task plugin is warned of when the registry is next asked (the
+        warnings.simplefilter("ignore", RuntimeWarning)  # command line's first act), not while etmpc imports
+        register()
+    domains.cache_clear()
 
 
 _register_environments()

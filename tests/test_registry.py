@@ -166,3 +166,105 @@ def test_every_spec_reader_asks_the_registry():
     assert not specs.parse_policy("rollout:every:3", np.ones(4)).upper_bound
     with pytest.raises(EtmpcError, match="the base policy must not simulate"):
         specs.parse_policy("rollout:oracle:every:3", np.ones(4))
+
+
+# Plugins that are hostile rather than broken: their code exits, or raises what is not an Exception.
+STOP = "class Stop(BaseException):\n    pass\n\nraise Stop('halt')"
+HOSTILE_IMPORTS = [("raise SystemExit(0)", "SystemExit(0)"), ("raise SystemExit('bye')", "SystemExit('bye')"),
+                   ("raise KeyboardInterrupt", "KeyboardInterrupt"), (STOP, "Stop: halt"),
+                   ("raise ValueError('two\\nlines')", "ValueError: two lines"),
+                   ("from etmpc.common.errors import EtmpcError\nraise EtmpcError('no licence')", "EtmpcError: no licence")]
+
+
+@pytest.fixture
+def no_ctrl_c(monkeypatch):
+    """No Ctrl-C noted so far (another test's real one would make every KeyboardInterrupt count as one)."""
+    from etmpc.common import interrupts
+
+    monkeypatch.setattr(interrupts, "_received", 0)
+
+
+@pytest.mark.parametrize("source, raised", HOSTILE_IMPORTS)
+def test_a_task_plugin_whose_import_exits_or_raises_anything_is_one_warning(plugins, no_ctrl_c, source, raised):
+    plugins("etmpc.tasks", "hostile", "fake_hostile", source)
+    with pytest.warns(RuntimeWarning) as caught:
+        names = registry.names()
+    assert [str(w.message) for w in caught] == [
+        f"etmpc: task plugin 'hostile' (fake_hostile) failed to import ({raised}); its tasks are left out"]
+    assert names == ("cart_pendulum", "cart_pendulum/kicks", "battery", "reacher")
+    assert registry.make_system("battery").name == "battery"
+
+
+@pytest.mark.parametrize("source, raised", HOSTILE_IMPORTS)
+def test_a_policy_kind_plugin_whose_import_exits_or_raises_anything_is_one_warning(plugins, no_ctrl_c, source, raised):
+    plugins("etmpc.policies", "hostile", "fake_hostile:KIND", source)
+    with pytest.warns(RuntimeWarning) as caught:
+        kinds = specs.kinds()
+    assert [str(w.message) for w in caught] == [
+        f"etmpc: policy kind plugin 'hostile' (fake_hostile:KIND) failed to load ({raised}); left out"]
+    assert list(kinds) == [kind.name for kind in specs.BUILT_IN]
+    assert specs.parse_policy("every:3", np.ones(4)).period == 3
+
+
+def test_a_real_ctrl_c_while_a_plugin_imports_still_interrupts(plugins, no_ctrl_c):
+    plugins("etmpc.tasks", "slow", "fake_slow", "import os, signal, time\nos.kill(os.getpid(), signal.SIGINT)\ntime.sleep(5)")
+    with pytest.raises(KeyboardInterrupt):
+        registry.names()
+
+
+BOOM = """
+    from etmpc.common.errors import EtmpcError
+    from etmpc.policies.specs import Kind
+
+    class Stop(BaseException):
+        pass
+
+    def build(arg, spec, context):
+        if arg == "div":
+            return 1 / 0
+        if arg == "etmpc":
+            raise EtmpcError(f"bad policy {spec!r}: the plugin's own message")
+        if arg == "real-ctrl-c":
+            import os, signal, time
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(5)
+        raise {"exit": SystemExit(3), "ctrl-c": KeyboardInterrupt(), "stop": Stop("halt\\nnow")}[arg]
+
+    KIND = Kind("boom", "boom:HOW", "raises", build)
+"""
+
+
+@pytest.mark.parametrize("spec, message", [
+    ("boom:div", "bad policy 'boom:div': the 'boom' plugin (fake_boom:KIND) failed: ZeroDivisionError: division by zero"),
+    ("boom:exit", "bad policy 'boom:exit': the 'boom' plugin (fake_boom:KIND) failed: SystemExit(3)"),
+    ("boom:ctrl-c", "bad policy 'boom:ctrl-c': the 'boom' plugin (fake_boom:KIND) failed: KeyboardInterrupt"),
+    ("boom:stop", "bad policy 'boom:stop': the 'boom' plugin (fake_boom:KIND) failed: Stop: halt now"),
+    ("boom:etmpc", "bad policy 'boom:etmpc': the plugin's own message"),
+    ("rollout:boom:div", "bad policy 'rollout:boom:div': bad policy 'boom:div': the 'boom' plugin (fake_boom:KIND) failed: "
+                         "ZeroDivisionError: division by zero"),
+])
+def test_a_policy_kind_plugin_whose_builder_fails_is_one_error_naming_it(plugins, no_ctrl_c, spec, message):
+    plugins("etmpc.policies", "boom", "fake_boom:KIND", BOOM)
+    with pytest.raises(EtmpcError) as caught:
+        specs.parse_policy(spec, np.ones(4))
+    assert str(caught.value).startswith(message) and "\n" not in str(caught.value)
+    assert specs.parse_policy("every:3", np.ones(4)).period == 3
+
+
+def test_a_real_ctrl_c_while_a_plugin_kind_builds_still_interrupts(plugins, no_ctrl_c):
+    plugins("etmpc.policies", "boom", "fake_boom:KIND", BOOM)
+    with pytest.raises(KeyboardInterrupt):
+        specs.parse_policy("boom:real-ctrl-c", np.ones(4))
+
+
+def test_on_the_command_line_a_hostile_plugin_is_one_line_and_the_rest_works(plugins, no_ctrl_c, capsys):
+    from etmpc.cli import main
+
+    plugins("etmpc.tasks", "hostile", "fake_hostile", "raise SystemExit(0)")
+    plugins("etmpc.policies", "boom", "fake_boom:KIND", BOOM)
+    with pytest.warns(RuntimeWarning, match="'hostile' .fake_hostile. failed to import .SystemExit.0.."):
+        assert main(["evaluate", "battery", "--policy", "boom:div", "--episodes", "1", "--workers", "1"]) == 2
+    assert capsys.readouterr().err.splitlines() == [
+        "etmpc: error: bad policy 'boom:div': the 'boom' plugin (fake_boom:KIND) failed: ZeroDivisionError: division by zero"]
+    assert main(["evaluate", "battery", "--policy", "every:3", "--episodes", "1", "--workers", "1"]) == 0
+    assert "every:3" in capsys.readouterr().out

@@ -13,6 +13,7 @@ import os
 import signal
 import sys
 import threading
+import warnings
 
 from etmpc.common import interrupts
 from etmpc.common.errors import EtmpcError, Terminated
@@ -46,6 +47,10 @@ def main(argv: list[str] | None = None) -> int:
         os.environ.setdefault(name, "1")
     in_main_thread = threading.current_thread() is threading.main_thread()
     previous = signal.signal(signal.SIGTERM, _terminate) if in_main_thread else None
+    plain = warnings.formatwarning  # etmpc's own warnings (a broken plugin's) as one line each: etmpc: warning: ...
+    warnings.formatwarning = lambda message, category, *where: (
+        f"etmpc: warning: {' '.join(str(message).removeprefix('etmpc: ').split())}\n"
+        if issubclass(category, RuntimeWarning) and str(message).startswith("etmpc: ") else plain(message, category, *where))
     try:
         _check_gl()
         from etmpc.cli import commands, options  # after the OpenGL check: importing dm-control picks the backend
@@ -67,6 +72,7 @@ def main(argv: list[str] | None = None) -> int:
         print("etmpc: terminated", file=sys.stderr)
         return 143
     finally:
+        warnings.formatwarning = plain
         if in_main_thread:
             signal.signal(signal.SIGTERM, signal.SIG_DFL if previous is None else previous)
     return 0

@@ -24,12 +24,15 @@ The file holds one mapping under the task's gymnasium id, with rl-zoo3's key nam
 
 Two differences from rl-zoo3: ``policy_kwargs`` is a mapping, not Python text (nothing from a file is
 ever evaluated), and only keys this project reads are accepted (a misspelt one is an error, never
-silently a default). The project ships one per task beside its PPO policy, ``policies/<task>/ppo.yml``
-(:func:`shipped`), chosen on training-distribution episodes only.
+silently a default). Every value is checked against its range (:class:`PpoSettings`), and an error
+names the file and the key as written in it (``ppo.yml: gamma must be in (0, 1], got 1.5``). The project
+ships one per task beside its PPO policy, ``policies/<task>/ppo.yml`` (:func:`shipped`), chosen on
+training-distribution episodes only.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import fields, replace
 from pathlib import Path
 from typing import Any
@@ -37,11 +40,12 @@ from typing import Any
 from etmpc.common.errors import EtmpcError
 from etmpc.common.resources import data_root
 from etmpc.envs.registration import env_id
-from etmpc.learning.ppo import PpoSettings
+from etmpc.learning.ppo import PpoSettings, SettingError
 from etmpc.systems import SystemKey, folder_name
 
 # rl-zoo3's key -> PpoSettings' field (the same name where not listed)
 RENAMED = {"n_timesteps": "timesteps"}
+KEYS = {field: key for key, field in RENAMED.items()} | {"hidden": "net_arch"}  # how messages name the fields
 IGNORED = {"policy": "MlpPolicy", "normalize": True}  # keys that must say what this project does
 ENV_KWARGS = ("reward_baseline",)
 
@@ -93,13 +97,18 @@ def parse(document: Any, task: str, where: str, base: PpoSettings = PpoSettings(
         elif name == "env_kwargs":
             values.update(_env_kwargs(value, where))
         elif RENAMED.get(name, name) in known:
-            values[RENAMED.get(name, name)] = _number(name, value, where)
+            if isinstance(value, str) and _numeral(value):  # PyYAML's YAML 1.1 reads 3e-4 and 1e6 as text
+                raise HyperparameterError(f"{where}: {name} must be a number, got {value!r} (YAML reads it as text: "
+                                          "write it out, 0.0003, or with a dot and a signed exponent, 3.0e-4)")
+            values[RENAMED.get(name, name)] = value  # checked by PpoSettings, below
         else:
             raise HyperparameterError(f"{where}: unknown hyperparameter {name!r}; known: "
                                       f"{', '.join(sorted({*known - set(RENAMED.values()), *RENAMED, *IGNORED, 'policy_kwargs', 'env_kwargs'}))}")
     try:
         return replace(base, **values)
-    except (TypeError, ValueError, EtmpcError) as exc:
+    except SettingError as exc:  # named as the file names it
+        raise HyperparameterError(f"{where}: {exc.naming(KEYS)}") from None
+    except EtmpcError as exc:
         raise HyperparameterError(f"{where}: {exc}") from None
 
 
@@ -123,10 +132,11 @@ def dump(settings: PpoSettings, task: str, comment: str = "") -> str:
     return head + yaml.safe_dump(to_document(settings, task), sort_keys=False, default_flow_style=None)
 
 
-def _number(name: str, value: Any, where: str):
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise HyperparameterError(f"{where}: {name} must be a number, got {value!r}")
-    return value
+def _numeral(text: str) -> bool:
+    try:
+        return math.isfinite(float(text))
+    except ValueError:
+        return False
 
 
 def _net_arch(value: Any, where: str) -> tuple[int, ...]:

@@ -20,12 +20,14 @@ one thread per process, on the CPU. Stable-Baselines3 and PyTorch are the option
 from __future__ import annotations
 
 import json
+import math
+import numbers
 import platform
 import re
 import shutil
 import time
 import zipfile
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
 import numpy as np
@@ -39,9 +41,50 @@ from etmpc.policies.sb3 import FORMAT, metadata_path
 from etmpc.systems import SystemKey, system_key
 
 
+class SettingError(EtmpcError):
+    """A PPO setting out of its range. ``rule`` names the settings as ``{field}``: ``str`` spells them as
+    :class:`PpoSettings` does, :meth:`naming` as another reader does (a hyperparameter file, rl-zoo3's keys)."""
+
+    def __init__(self, rule: str, got: str, why: str = ""):
+        self.rule, self.got, self.why = rule, got, why
+        super().__init__(self.naming({}))
+
+    def naming(self, names: dict[str, str]) -> str:
+        rule = self.rule.format_map({f.name: names.get(f.name, f.name) for f in fields(PpoSettings)})
+        return f"{rule}, got {self.got}" + (f" ({self.why})" if self.why else "")
+
+
+def _integer(least: int, most: float = math.inf):
+    return lambda v: isinstance(v, numbers.Integral) and not isinstance(v, bool) and least <= v <= most  # 8.0 is not
+
+
+def _real(holds):
+    return lambda v: isinstance(v, numbers.Real) and not isinstance(v, bool) and holds(v)  # NaN holds nothing
+
+
+# field -> (what it must be, the test); the first out of range is the one reported
+RANGES = {
+    "timesteps": ("an integer >= 1", _integer(1)),
+    "seed": (f"an integer in [0, {2**32 - 1}]", _integer(0, 2**32 - 1)),  # NumPy's seeds (SB3 seeds it with this)
+    **{name: ("an integer >= 1", _integer(1)) for name in ("n_envs", "checkpoints", "validation_episodes", "n_steps")},
+    "batch_size": ("an integer >= 2 (Stable-Baselines3 asserts > 1)", _integer(2)),
+    "n_epochs": ("an integer >= 1", _integer(1)),
+    "learning_rate": ("a finite number > 0", _real(lambda x: 0 < x < math.inf)),
+    "gamma": ("in (0, 1]", _real(lambda x: 0 < x <= 1)),
+    "gae_lambda": ("in [0, 1]", _real(lambda x: 0 <= x <= 1)),
+    "clip_range": ("a finite number > 0", _real(lambda x: 0 < x < math.inf)),
+    "ent_coef": ("a finite number >= 0", _real(lambda x: 0 <= x < math.inf)),
+    "hidden": ("a non-empty tuple of positive layer sizes",
+               lambda v: isinstance(v, tuple) and bool(v) and all(type(n) is int and n > 0 for n in v)),
+    "reward_baseline": ("None or a fixed schedule's spec (always, never or every:T)", lambda v: v is None or isinstance(v, str)),
+}
+
+
 @dataclass(frozen=True)
 class PpoSettings:
-    """PPO's settings (Stable-Baselines3's names); the defaults are its own but for the sizes."""
+    """PPO's settings (Stable-Baselines3's names); the defaults are its own but for the sizes. Each is
+    checked when made (:class:`SettingError`), so that a file, an option or ``replace`` that sets one
+    out of its range is one line, never a traceback from deep inside Stable-Baselines3 or a silent run."""
 
     timesteps: int = 200_000  # environment steps in all (the agent's: a reward baseline simulates as many again)
     seed: int = 0
@@ -60,9 +103,23 @@ class PpoSettings:
     reward_baseline: str | None = None  # the environment's reward relative to this fixed schedule (TriggerEnvironment)
 
     def __post_init__(self):
-        for name in ("timesteps", "checkpoints", "validation_episodes", "n_steps", "batch_size", "n_epochs", "n_envs"):
-            if getattr(self, name) < 1:
-                raise EtmpcError(f"PPO needs {name} >= 1, got {getattr(self, name)}")
+        for name, (allowed, holds) in RANGES.items():
+            value = getattr(self, name)
+            if not holds(value):
+                raise SettingError(f"{{{name}}} must be {allowed}", repr(value))
+            if isinstance(value, numbers.Integral):  # a NumPy integer too: JSON writes it as a number
+                object.__setattr__(self, name, int(value))
+        # What train_ppo makes of them: a rollout (n_steps per environment, fewer for a small budget) must
+        # hold 2 steps (Stable-Baselines3 asserts it), and each checkpoint's slice of the budget at least one
+        # rollout of every environment, or the slices together would run more steps than the budget.
+        if self.n_steps * self.n_envs < 2:
+            raise SettingError("{n_steps} * {n_envs} must be >= 2 (Stable-Baselines3 asserts > 1)",
+                               f"{self.n_steps} * {self.n_envs}")
+        most = self.timesteps // max(2, self.n_envs)
+        if self.checkpoints > most:
+            raise SettingError(f"{{checkpoints}} must be at most {{timesteps}} // max(2, {{n_envs}}) = {most}",
+                               repr(self.checkpoints), "each slice of the budget holds a rollout of every environment, "
+                               "of 2 steps at least")
 
 
 def _libraries():

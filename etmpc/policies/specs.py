@@ -4,8 +4,10 @@ Each kind is a :class:`Kind`: its name (the text before the spec's first colon),
 line of help, whether it is an upper bound (an oracle: it knows each episode's future), and a builder
 that turns the argument into a policy. :data:`BUILT_IN` holds etmpc's own; other installed packages
 add theirs through the ``etmpc.policies`` entry point group (``name = "module:KIND"``, the name being
-the kind's), read once when first asked. A plugin that fails to load, names a built-in kind, or is not
-a :class:`Kind` gives one warning naming it; every other kind still works.
+the kind's), read once when first asked. A plugin that fails to load (whatever its code raises,
+``SystemExit`` too), names a built-in kind, or is not a :class:`Kind` gives one one-line warning naming it;
+every other kind still works. A plugin kind's builder that raises anything but an :class:`EtmpcError` is
+one error line naming the plugin. Only a real Ctrl-C or SIGTERM goes through (:mod:`etmpc.common.interrupts`).
 
 The registry is the only reader of a spec's text: the CLI's help (:func:`syntax`), the error's list
 of valid kinds, and what a results file's spec was (:func:`kind_of`) all come from it.
@@ -24,6 +26,7 @@ from importlib.metadata import entry_points
 
 import numpy as np
 
+from etmpc.common import interrupts
 from etmpc.common.errors import EtmpcError, UnknownNameError
 from etmpc.loop import Policy
 from etmpc.policies.fixed import Always, Every, Never
@@ -134,28 +137,32 @@ BUILT_IN: tuple[Kind, ...] = (
 
 
 def _warn(what: str) -> None:
-    warnings.warn(f"etmpc: {what}; left out", RuntimeWarning, stacklevel=3)
+    """One warning, of one line (the command line prints it as ``etmpc: warning: ...``)."""
+    warnings.warn(f"etmpc: {' '.join(what.split())}; left out", RuntimeWarning, stacklevel=3)
 
 
 @cache
 def kinds() -> dict[str, Kind]:
     """Every kind by name: the built-in ones, then the installed plugins' (``etmpc.policies``)."""
     found = {kind.name: kind for kind in BUILT_IN}
-    for point in sorted(entry_points(group=ENTRY_POINTS), key=lambda p: p.name):
-        where = f"policy kind plugin {point.name!r} ({point.value})"
-        try:
-            kind = point.load()
-        except Exception as exc:  # a broken plugin must not take the other kinds with it
-            _warn(f"{where} failed to load ({type(exc).__name__}: {exc})")
-            continue
-        if not isinstance(kind, Kind):
-            _warn(f"{where} is not an etmpc.policies.specs.Kind")
-        elif kind.name != point.name or ":" in kind.name or not kind.name:
-            _warn(f"{where} names its kind {kind.name!r}, not {point.name!r}")
-        elif kind.name in found:
-            _warn(f"{where} names a kind etmpc already has")
-        else:
-            found[kind.name] = kind
+    with interrupts.watching():  # a Ctrl-C is told apart from a KeyboardInterrupt a plugin raises
+        for point in sorted(entry_points(group=ENTRY_POINTS), key=lambda p: p.name):
+            where = f"policy kind plugin {point.name!r} ({point.value})"
+            try:  # the plugin's code: whatever it raises (SystemExit too) leaves the other kinds working
+                kind = point.load()
+            except BaseException as exc:
+                if not isinstance(exc, EtmpcError) and interrupts.genuine(exc):  # a real Ctrl-C or SIGTERM
+                    raise
+                _warn(f"{where} failed to load ({interrupts.described(exc)})")
+                continue
+            if not isinstance(kind, Kind):
+                _warn(f"{where} is not an etmpc.policies.specs.Kind")
+            elif kind.name != point.name or ":" in kind.name or not kind.name:
+                _warn(f"{where} names its kind {kind.name!r}, not {point.name!r}")
+            elif kind.name in found:
+                _warn(f"{where} names a kind etmpc already has")
+            else:
+                found[kind.name] = kind
     return found
 
 
@@ -196,4 +203,14 @@ def parse_policy(spec: str, error_weights: np.ndarray, domain: str | None = None
         raise EtmpcError(f"bad policy {spec!r}: it holds a control character (a line break?)")
     kind = kind_of(spec)
     context = Context(error_weights, domain, steps, lambda base: parse_policy(base, error_weights, domain, steps))
-    return kind.build(spec.partition(":")[2], spec, context)
+    if any(kind is own for own in BUILT_IN):
+        return kind.build(spec.partition(":")[2], spec, context)
+    with interrupts.watching():  # a plugin's builder: all it raises but an EtmpcError, a Ctrl-C or SIGTERM is one line
+        try:
+            return kind.build(spec.partition(":")[2], spec, context)
+        except BaseException as exc:
+            if interrupts.genuine(exc):
+                raise
+            origin = next((point.value for point in entry_points(group=ENTRY_POINTS) if point.name == kind.name), "?")
+            raise EtmpcError(f"bad policy {spec!r}: the {kind.name!r} plugin ({origin}) failed: "
+                             f"{interrupts.described(exc)}") from None

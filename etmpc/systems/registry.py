@@ -13,7 +13,8 @@ A *domain* is a package (``etmpc/systems/cart_pendulum/``, or a plugin's own) th
 
 :data:`BUILT_IN` lists etmpc's domains; another package adds one with an entry point in the
 ``etmpc.tasks`` group (``slider = "etmpc_slider"``: the domain's name and its package), read once when
-first asked. A plugin that fails to import, or does not name its tasks, gives one warning naming it;
+first asked. A plugin that fails to import (whatever its code raises, ``SystemExit`` too; only a real
+Ctrl-C or SIGTERM stops the command), or does not name its tasks, gives one one-line warning naming it;
 every other task still works.
 
 A task's name is ``DOMAIN`` (its default task) or ``DOMAIN/TASK``. A :class:`SystemKey` is a task at a
@@ -31,7 +32,7 @@ from importlib.metadata import entry_points
 from pathlib import Path
 from types import ModuleType
 
-from etmpc.common import checks
+from etmpc.common import checks, interrupts
 from etmpc.common.errors import EtmpcError, UnknownNameError
 from etmpc.common.resources import tasks_dir
 
@@ -76,21 +77,24 @@ def _problem(package: ModuleType) -> str | None:
 def domains() -> dict[str, ModuleType]:
     """Every domain's package by name: etmpc's own, then the installed plugins' (``etmpc.tasks``)."""
     found = {name: importlib.import_module(package) for name, package in BUILT_IN.items()}
-    for point in sorted(entry_points(group=ENTRY_POINTS), key=lambda p: p.name):
-        where = f"task plugin {point.name!r} ({point.value})"
-        if point.name in found or not point.name.isidentifier():
-            problem = "names a domain etmpc already has" if point.name in found else "is not a valid domain name"
-        else:
-            try:
-                package = point.load()
-            except Exception as exc:  # a broken plugin must not take the other tasks with it
-                problem = f"failed to import ({type(exc).__name__}: {exc})"
+    with interrupts.watching():  # a Ctrl-C is told apart from a KeyboardInterrupt a plugin raises
+        for point in sorted(entry_points(group=ENTRY_POINTS), key=lambda p: p.name):
+            where = f"task plugin {point.name!r} ({point.value})"
+            if point.name in found or not point.name.isidentifier():
+                problem = "names a domain etmpc already has" if point.name in found else "is not a valid domain name"
             else:
-                problem = _problem(package)
-                if problem is None:
-                    found[point.name] = package
-                    continue
-        warnings.warn(f"etmpc: {where} {problem}; its tasks are left out", RuntimeWarning, stacklevel=2)
+                try:  # the plugin's code: whatever it raises (SystemExit too) leaves the other tasks working
+                    package = point.load()
+                    problem = _problem(package)
+                except BaseException as exc:
+                    if not isinstance(exc, EtmpcError) and interrupts.genuine(exc):  # a real Ctrl-C or SIGTERM
+                        raise
+                    problem = f"failed to import ({interrupts.described(exc)})"
+                else:
+                    if problem is None:
+                        found[point.name] = package
+                        continue
+            warnings.warn(f"etmpc: {where} {problem}; its tasks are left out", RuntimeWarning, stacklevel=2)
     return found
 
 
