@@ -520,3 +520,182 @@ def test_a_real_ctrl_c_inside_a_triggers_decide_still_stops_the_command(tmp_path
     assert proc.returncode == 130, err
     _assert_one_line(err, "interrupted")
     assert not (tmp_path / "ev.json").exists()
+
+
+# -- nothing a user types destroys a file: an output is never an input nor in etmpc's data ----------
+STORED_REFERENCES = REPO / "tasks" / "battery" / "trading_references.json"
+STORED_TESTSET = REPO / "tasks" / "cart_pendulum" / "balance_testset.npz"
+SHIPPED_PPO = REPO / "policies" / "cart_pendulum" / "ppo.zip"
+
+
+def _data_files() -> dict[str, bytes | None]:
+    """Every file of etmpc's data folders in the checkout (stored test sets, references, models, policies)."""
+    return {f"{folder}/{k}": v for folder in ("tasks", "policies", "models") for k, v in _files(REPO / folder).items()}
+
+
+def _own_setup(kind: str, d: Path) -> None:
+    if kind == "mine-json":
+        (d / "mine.json").write_text('{"mine": true}\n')
+    elif kind == "policy-copy":
+        (d / "p.json").write_bytes(CART_POLICY.read_bytes())
+    elif kind == "sb3-copy":
+        (d / "m.zip").write_bytes(SHIPPED_PPO.read_bytes())
+        (d / "m.json").write_bytes(SHIPPED_PPO.with_suffix(".json").read_bytes())
+    elif kind == "readme-no-end":
+        (d / "R.md").write_text("# mine\n\n<!-- leaderboard:begin -->\n| a table |\n")
+    elif kind == "kept-row-a-list":
+        (d / "results" / "leaderboard" / "always").mkdir(parents=True)
+        (d / "results" / "leaderboard" / "always" / "battery.json").write_text("[1, 2, 3]\n")
+    elif kind == "kept-row-edited":
+        from etmpc.common.documents import sealed
+
+        row = sealed({"key": {"spec": "always"}, "row": {"score": -275.8}, "played": {"commit": "abc"}})
+        row["row"]["score"] = 99.9  # a better number, typed by hand
+        (d / "results" / "leaderboard" / "always").mkdir(parents=True)
+        (d / "results" / "leaderboard" / "always" / "battery.json").write_text(json.dumps(row))
+    else:
+        _setup(kind, d)
+
+
+OWN_CASES = [  # (id, setup, argv, what the one line must name)
+    ("score-json-on-the-stored-references", "none",
+     ["score", "every:3", "--task", "battery", "--json", str(STORED_REFERENCES)], "data folder"),
+    ("score-json-on-the-policy-it-scores", "none",
+     ["score", f"rl:{BATTERY_POLICY}", "--task", "battery", "--json", str(BATTERY_POLICY)], "data folder"),
+    ("score-json-on-a-users-policy-it-scores", "policy-copy",
+     ["score", "rl:p.json", "--task", "cart_pendulum", "--json", "p.json"], "policy"),
+    ("evaluate-json-on-its-rl-file", "policy-copy", [*EV, "--policy", "rl:p.json", "--json", "p.json"], "p.json"),
+    ("evaluate-json-on-a-rollouts-base-file", "policy-copy",
+     [*EV, "--policy", "rollout:rl:p.json:2", "--json", "p.json"], "p.json"),
+    ("evaluate-json-on-the-stored-test-set", "none", [*EV, "--policy", "always", "--json", str(STORED_TESTSET)],
+     "data folder"),
+    ("evaluate-json-on-an-sb3-sidecar", "sb3-copy", [*EV, "--policy", "sb3:m.zip", "--json", "m.json"], "m.json"),
+    ("render-out-into-the-data", "none", ["render", "cart_pendulum", "--policy", "always", "--out",
+                                          str(REPO / "tasks" / "cart_pendulum" / "v.mp4")], "data folder"),
+    ("train-into-the-shipped-policies", "none", ["train", "battery", "--out", str(REPO / "policies" / "battery")],
+     "data folder"),
+    ("train-out-holds-the-data", "none", ["train", "battery", "--out", str(REPO)], "data folder"),
+    ("testset-into-the-data", "none", ["testset", "battery", "--seed", "1", "--out",
+                                       str(REPO / "tasks" / "battery" / "new.npz")], "data folder"),
+    ("references-into-the-data", "none", ["score", "--references", "--task", "battery", "--out", str(REPO / "tasks")],
+     "data folder"),
+    ("score-misspelt-spec-keeps-the-old-card", "mine-json", ["score", "evry:3", "--json", "mine.json"], "evry:3"),
+    ("score-spec-for-another-task-before-any-episode", "mine-json",
+     ["score", f"rl:{CART_POLICY}", "--task", "cart_pendulum", "--task", "battery", "--json", "mine.json"], "battery"),
+    ("score-out-without-a-mode", "none", ["score", "every:3", "--out", "x"], "--out"),
+    ("score-overflowing-weights", "huge-theta", ["score", "rl:p.json", "--task", "cart_pendulum", "--episodes", "1",
+                                                 "--workers", "1", "--json", "card.json"], "card.json not written"),
+    ("leaderboard-readme-without-its-end-marker", "readme-no-end",
+     ["score", "--leaderboard", "--task", "battery", "--out", "docs", "--readme", "R.md"], "R.md"),
+    ("leaderboard-kept-row-a-list", "kept-row-a-list", ["score", "--leaderboard", "--task", "battery", "--out", "docs"],
+     "not a row"),
+    ("leaderboard-kept-row-edited", "kept-row-edited", ["score", "--leaderboard", "--task", "battery", "--out", "docs"],
+     "checksum"),
+]
+
+
+@pytest.mark.parametrize("setup, argv, names", [c[1:] for c in OWN_CASES], ids=[c[0] for c in OWN_CASES])
+def test_no_output_lands_on_an_input_or_in_the_data(setup, argv, names, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    _own_setup(setup, tmp_path)
+    before, data = _files(tmp_path), _data_files()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        code = main(list(argv))
+    _, err = capsys.readouterr()
+    assert code == 2, err
+    _assert_one_line(err + "".join(f"{w.message}\n" for w in caught), names)
+    assert _files(tmp_path) == before
+    assert _data_files() == data
+
+
+def test_a_card_with_a_failed_row_never_replaces_an_existing_card(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(sys, "dont_write_bytecode", True)
+    (tmp_path / "late_failure.py").write_text(
+        "class T:\n    spec = 'late'\n    stochastic = False\n    def decide(self, s, rng):\n"
+        "        raise RuntimeError('fails while playing')\n")
+    (tmp_path / "card.json").write_text('{"mine": true}\n')
+    assert main(["score", "py:late_failure:T", "--task", "battery", "--episodes", "1", "--workers", "1",
+                 "--json", "card.json"]) == 2
+    _assert_one_line(capsys.readouterr().err, "card.json not written")
+    assert (tmp_path / "card.json").read_text() == '{"mine": true}\n'
+
+
+def test_a_shipped_policy_changed_in_place_is_never_scored_under_its_name(tmp_path, monkeypatch, capsys):
+    """The checkout's policies/ with one file changed (as a retrain in place, or a swap, would leave it):
+    refused in one line; the same bytes elsewhere are a user's policy like any other."""
+    import shutil
+
+    from etmpc.evaluation import inputs
+
+    root = tmp_path / "root"
+    shutil.copytree(REPO / "policies", root / "policies")
+    for folder in ("tasks", "models"):
+        (root / folder).symlink_to(REPO / folder)
+    monkeypatch.setattr(inputs, "data_root", lambda: root)
+    changed = root / "policies" / "cart_pendulum" / "learned.json"
+    data = json.loads(changed.read_text())
+    data["theta"][0] += 1.0
+    changed.write_text(json.dumps(data))
+    assert main([*EV, "--policy", f"rl:{changed}", "--episodes", "1", "--workers", "1"]) == 2
+    _assert_one_line(capsys.readouterr().err, "not the policy etmpc ships")
+    mine = tmp_path / "mine.json"
+    mine.write_bytes(changed.read_bytes())
+    assert main([*EV, "--policy", f"rl:{mine}", "--episodes", "1", "--workers", "1"]) == 0
+    assert main([*EV, "--policy", f"rl:{root / 'policies' / 'battery' / 'learned.json'}", "--episodes", "1",
+                 "--workers", "1"]) == 2  # untouched, but for another task: its own line, not the checksum's
+    assert "not the policy etmpc ships" not in capsys.readouterr().err
+
+
+def test_every_shipped_policy_file_is_in_the_manifest_with_its_checksum():
+    import hashlib
+
+    from etmpc.evaluation.inputs import shipped_digests
+
+    digests = shipped_digests()
+    files = {p.resolve() for p in (REPO / "policies").glob("*/*") if p.is_file()}
+    assert set(digests) == files
+    assert all(hashlib.sha256(p.read_bytes()).hexdigest() == digests[p] for p in files)
+
+
+# -- the API checks its arguments as evaluate does ---------------------------------------------------
+SCORE_API_CASES = [
+    ("the-same-spec-twice", {"policies": ["every:3", "every:3"]}, "policy every:3 is given twice"),
+    ("no-task", {"tasks": []}, "tasks: the list is empty"),
+    ("a-task-twice", {"tasks": ["battery", "battery/trading"]}, "task battery is given twice"),
+    ("episodes-fraction", {"episodes": 1.5}, "episodes: 1.5 is not a whole number"),
+    ("episodes-zero", {"episodes": 0}, "episodes: must be >= 1, got 0"),
+    ("workers-zero", {"workers": 0}, "workers: must be >= 1, got 0"),
+    ("a-misspelt-spec", {"policies": ["evry:3"]}, "unknown policy 'evry:3'"),
+    ("test-set-not-a-path", {"test_set": 3}, "test_set: a file path is needed"),
+    ("json-on-the-stored-references", {"json_path": str(STORED_REFERENCES)}, "data folder"),
+]
+
+
+@pytest.mark.parametrize("kwargs, says", [c[1:] for c in SCORE_API_CASES], ids=[c[0] for c in SCORE_API_CASES])
+def test_the_score_api_refuses_bad_arguments_before_any_episode(kwargs, says, tmp_path, monkeypatch):
+    import etmpc
+    from etmpc.common.errors import EtmpcError
+    from etmpc.evaluation import scorecard
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(scorecard, "play_and_score", lambda *a, **k: pytest.fail("an episode was played"))
+    arguments = {"policies": ["every:3"], "tasks": ["battery"], "workers": 1, "progress": False} | kwargs
+    data = _data_files()
+    with pytest.raises(EtmpcError) as raised:
+        etmpc.score(**arguments)
+    assert says in str(raised.value) and "\n" not in str(raised.value)
+    assert _files(tmp_path) == {} and _data_files() == data
+
+
+def test_a_scorecard_is_strict_json_even_with_missing_numbers(tmp_path, monkeypatch):
+    """One episode: no confidence interval can be given; it is null, never NaN, which jq and JavaScript refuse."""
+    from etmpc.common.documents import loads
+
+    monkeypatch.chdir(tmp_path)
+    assert main(["score", "every:1", "--task", "battery", "--episodes", "1", "--workers", "1", "--json", "c.json"]) == 0  # its best
+    card = loads((tmp_path / "c.json").read_text())  # refuses NaN and Infinity
+    (row,) = card["rows"]
+    assert row["score_ci95"] is None and row["score"] == 0.0
+    assert card["aggregates"][0]["iqm_ci95"] == [None, None]

@@ -17,6 +17,7 @@ import pytest
 
 import etmpc
 from etmpc.cli import main
+from etmpc.common.documents import content_sha256, sealed
 from etmpc.common.errors import EtmpcError
 from etmpc.evaluation import testsets
 from etmpc.evaluation.evaluate import evaluate
@@ -136,11 +137,14 @@ def test_a_trigger_that_fails_on_one_task_has_that_row_say_so_and_the_others_sco
     assert code == 2
     assert "failed: policy py:picky_trigger:T: decide raised RuntimeError: not for batteries" in out
     assert err.strip().splitlines()[-1] == ("etmpc: error: not every trigger could be scored on every task: "
-                                            "py:picky_trigger:T on battery (see its row)")
-    rows = {r["task"]: r for r in json.loads((tmp_path / "card.json").read_text())["rows"]}
-    assert rows["battery"]["error"] and rows["cart_pendulum"]["error"] is None
+                                            "py:picky_trigger:T on battery (see its row); card.json not written (a card "
+                                            "with a failed row never is)")
+    assert not (tmp_path / "card.json").exists()
+    card = etmpc.score(["py:picky_trigger:T"], tasks=["battery", "cart_pendulum"], workers=1, progress=False)
+    rows = {r.task: r for r in card.rows}
+    assert not card.complete and rows["battery"].error and rows["cart_pendulum"].error is None
     assert json.loads(references_path("cart_pendulum").read_text())["best"] == "every:3"
-    assert rows["cart_pendulum"]["score"] == 0.0  # it plays every:3, the cart pendulum's best periodic schedule
+    assert rows["cart_pendulum"].score == 0.0  # it plays every:3, the cart pendulum's best periodic schedule
 
 
 @pytest.mark.parametrize("argv, says", [
@@ -165,18 +169,88 @@ def test_references_made_for_another_test_set_or_suite_version_are_refused(tmp_p
                          (dict(recompute_price=1.0), "at price 1.0"),
                          (dict(oracle=stored["oracle"][:3]), "inconsistent")):
         path = tmp_path / "refs.json"
-        path.write_text(json.dumps(stored | change))
+        path.write_text(json.dumps(sealed(stored | change)))  # sealed: the check of the content itself is reached
         with pytest.raises(EtmpcError, match=f"{says}.*rebuild them with: etmpc score --references --task battery"):
             load_references("battery", stored["test_set_sha256"], path)
     with pytest.raises(EtmpcError, match="--test-set belongs to one task"):
         etmpc.score(["every:3"], tasks=["battery", "reacher"], test_set=str(small_battery[0]))
 
 
+def _edited(stored: dict, edit) -> dict:
+    data = json.loads(json.dumps(stored))
+    edit(data)
+    return data
+
+
+def _swap_best(data: dict) -> None:
+    data["best"] = "every:2"
+
+
+def _worse_oracle(data: dict) -> None:  # the battery's objective is a profit: less is worse
+    data["oracle"][7] = data["periodic"][data["best"]][7] - 1.0
+
+
+def _periodic_a_list(data: dict) -> None:
+    data["periodic"] = list(data["periodic"].values())
+
+
+def _episodes_text(data: dict) -> None:
+    data["episodes"] = "100"
+
+
+def _best_a_number(data: dict) -> None:
+    data["best"] = 3
+
+
+def _a_missing_schedule(data: dict) -> None:
+    del data["periodic"]["every:20"]
+
+
+def _nan_objective(data: dict) -> None:
+    data["periodic"]["every:4"][0] = None
+
+
+@pytest.mark.parametrize("edit, says", [
+    (_swap_best, "best names 'every:2', but every:1 has the best mean objective"),
+    (_worse_oracle, "the oracle does worse than every:1 on episode 7"),
+    (_periodic_a_list, "periodic must hold every:1 .. every:20 in order"),
+    (_episodes_text, "episodes '100' is not a count"),
+    (_best_a_number, "best names 3"),
+    (_a_missing_schedule, "periodic must hold every:1 .. every:20"),
+    (_nan_objective, "need 100 finite objectives"),
+])
+def test_references_that_do_not_hold_together_are_refused_even_when_sealed(edit, says, tmp_path):
+    """Each edit is sealed again, as a careful forger would: the content checks themselves refuse it."""
+    stored = json.loads(references_path("battery").read_text())
+    path = tmp_path / "refs.json"
+    path.write_text(json.dumps(sealed(_edited(stored, edit))))
+    with pytest.raises(EtmpcError, match="inconsistent") as raised:
+        load_references("battery", stored["test_set_sha256"], path)
+    assert says in str(raised.value), raised.value
+
+
+def test_references_edited_by_hand_are_refused_by_their_checksum(tmp_path):
+    """The stored battery references with one number changed and the seal left as it was, or taken away."""
+    stored = json.loads(references_path("battery").read_text())
+    assert stored["sha256"] == content_sha256(stored)  # the shipped file is sealed
+    better = _edited(stored, lambda d: d["periodic"]["every:1"].__setitem__(0, d["periodic"]["every:1"][0] + 0.5))
+    unsealed = {k: v for k, v in stored.items() if k != "sha256"}
+    for data, says in ((better, "does not match its checksum"), (unsealed, "carries no checksum")):
+        path = tmp_path / "refs.json"
+        path.write_text(json.dumps(data))
+        with pytest.raises(EtmpcError, match=says):
+            load_references("battery", stored["test_set_sha256"], path)
+    nan = tmp_path / "nan.json"
+    nan.write_text(references_path("battery").read_text().replace('"every:2": [\n    ', '"every:2": [\n    NaN, ', 1))
+    with pytest.raises(EtmpcError, match="NaN is not a JSON number"):
+        load_references("battery", stored["test_set_sha256"], nan)
+
+
 def test_a_references_file_round_trips(small_battery, tmp_path):
     _, refs = small_battery
     path = write_references(refs, tmp_path / "refs.json")
     assert load_references("battery", refs.test_set_sha256, path) == References(**{
-        k: v for k, v in json.loads(path.read_text()).items() if k != "format"})
+        k: v for k, v in json.loads(path.read_text()).items() if k not in ("format", "sha256")})
 
 
 def test_a_worker_builds_its_mpc_before_any_episode_so_no_solve_time_holds_the_build():

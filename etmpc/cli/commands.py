@@ -10,7 +10,20 @@ from pathlib import Path
 from etmpc.cli import scoring
 from etmpc.cli.output import distinct_policies as _distinct_policies, say as _say
 from etmpc.common.errors import EtmpcError
-from etmpc.common.outputs import check_outputs, write_json
+from etmpc.common.outputs import write_json
+
+
+def check_run_outputs(outputs, directories=None, inputs=None) -> None:
+    """:func:`etmpc.evaluation.inputs.check_run_outputs`, imported when a command runs (not for ``--help``)."""
+    from etmpc.evaluation.inputs import check_run_outputs as check
+
+    check(outputs, directories, inputs)
+
+
+def run_inputs(policies, test_set=None) -> dict:
+    from etmpc.evaluation.inputs import run_inputs as inputs
+
+    return inputs(policies, test_set)
 
 
 def _check_backend(args) -> None:
@@ -28,7 +41,7 @@ def _evaluate(args) -> None:
         raise EtmpcError(f"--against {args.against} is not one of the --policy given")
     if args.test_set is not None and not Path(args.test_set).is_file():
         raise EtmpcError(f"test set {args.test_set} not found")
-    check_outputs({"--json": args.json, "--record": args.record}, inputs={"--test-set": args.test_set})
+    check_run_outputs({"--json": args.json, "--record": args.record}, inputs=run_inputs(args.policy, args.test_set))
     key = system_key(args.task, args.price)  # the task at its price: one value from here to the objective
     result = evaluate(key, args.policy, args.episodes, args.repeats, args.workers, args.seed, args.test_set,
                       backend=args.backend, address=args.address, record=args.record)
@@ -56,7 +69,7 @@ def _train(args) -> None:
 
     check_name(args.task)
     _check_backend(args)
-    check_outputs({}, {"--out": args.out})
+    check_run_outputs({}, {"--out": args.out}, {"--hyperparams": args.hyperparams})
     if args.algorithm == "ppo":
         return _train_ppo(args)
     if args.timesteps is not None or args.hyperparams is not None:
@@ -111,7 +124,7 @@ def _train_self(args) -> None:
 
     check_name(args.task)
     _check_backend(args)
-    check_outputs({"--out": args.out})
+    check_run_outputs({"--out": args.out})
     settings = SelfSettings(episodes=args.episodes, solves_per_episode=args.solves, futures=args.futures,
                             validation_episodes=args.validation_episodes)
     train_self(system_key(args.task, args.price), args.out, settings, args.workers or default_workers(), args.backend,
@@ -129,7 +142,7 @@ def _reproduce(args) -> None:
     tasks = None if args.task is None else distinct(args.task)
     _check_backend(args)
     out = args.out or Path("results") / ("reproduce-quick" if args.quick else "reproduce")
-    check_outputs({}, {"--out": out})
+    check_run_outputs({}, {"--out": out})
     reproduce(out, QUICK if args.quick else FULL, args.workers or default_workers(), args.backend, args.address,
               domains=tasks, sweep=args.sweep)
     print(f"wrote {out}/REPORT.md and {out}/results.json")
@@ -144,7 +157,7 @@ def _sweep(args) -> None:
     settings = plan(args.task, args.prices, args.episodes, args.quick)  # names, prices and sizes checked
     _check_backend(args)
     out = args.out or Path("results") / ("sweep-quick" if args.quick else "sweep")
-    check_outputs({}, {"--out": out})
+    check_run_outputs({}, {"--out": out})
     for task, chosen in settings.items():  # every directory checked before any work
         check_directory(out / folder_name(task), task, chosen)
     for task, chosen in settings.items():
@@ -163,7 +176,7 @@ def _render(args) -> None:
     check_name(args.task)
     if args.out.suffix != ".mp4":
         raise EtmpcError(f"--out {args.out} does not end in .mp4")
-    check_outputs({"--out": args.out, "--record": args.record})
+    check_run_outputs({"--out": args.out, "--record": args.record}, inputs=run_inputs([args.policy]))
     try:
         result = render_rollout(args.task, args.policy, args.episode, args.out, args.seed, args.width, args.height,
                                 args.fps, record=args.record)
@@ -179,7 +192,7 @@ def _replay(args) -> None:
 
     from etmpc.views.replay import format_replay, replay_summary
 
-    check_outputs({"--json": args.json}, inputs={"recording": args.recording})
+    check_run_outputs({"--json": args.json}, inputs={"recording": args.recording})
     episodes = replay_summary(args.recording)
     print(format_replay(episodes, args.per_episode))
     if args.json is not None:
@@ -194,7 +207,7 @@ def _bench(args) -> None:
     domains = args.tasks or list(names())
     for domain in domains:  # all names checked before any bench runs
         check_name(domain)
-    check_outputs({"--json": args.json})
+    check_run_outputs({"--json": args.json})
     figures = {}
     for domain in domains:
         figures[domain] = run_bench(domain, episodes=args.episodes, references=not args.no_reference)
@@ -208,6 +221,7 @@ def _testset(args) -> None:
     from etmpc.evaluation.testsets import draw
     from etmpc.systems import make_system
 
+    check_run_outputs({"--out": args.out})
     digest = draw(make_system(args.task), args.seed, args.episodes, args.out)
     print(f"wrote {args.out} and {args.out}.sha256 ({args.episodes} episodes of {args.task}, seed {args.seed}, "
           f"sha256 {digest}); use it with --test-set {args.out}")

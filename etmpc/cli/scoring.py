@@ -11,7 +11,9 @@ from pathlib import Path
 from etmpc.cli import types
 from etmpc.cli.output import distinct_policies as _distinct_policies, say as _say
 from etmpc.common.errors import EtmpcError
-from etmpc.common.outputs import check_outputs
+
+REFERENCES_OUT = Path("results") / "references"  # where --references writes, unless --out says
+LEADERBOARD_OUT = Path("docs")
 
 
 def add_parser(sub, tasks: str) -> None:
@@ -32,41 +34,50 @@ def add_parser(sub, tasks: str) -> None:
     sc.add_argument("--leaderboard", action="store_true",
                     help="score every built-in trigger (always, best periodic, best threshold, shipped DPI, rollout meter, "
                          "oracle) and write DIR/leaderboard.md, .json and the profile figure (make leaderboard)")
-    sc.add_argument("--out", type=Path, default=Path("docs"), metavar="DIR",
-                    help="with --leaderboard: where the page goes (default docs); finished rows are kept in "
-                         "results/leaderboard, so an interrupted run continues")
+    sc.add_argument("--out", type=Path, default=None, metavar="DIR",
+                    help=f"with --leaderboard: where the page goes (default {LEADERBOARD_OUT}); finished rows are kept in "
+                         f"results/leaderboard, so an interrupted run continues. With --references: where the rebuilt "
+                         f"files go (default {REFERENCES_OUT}; DIR/DOMAIN/TASK_references.json: copy one over the stored "
+                         "file to ship it)")
     sc.add_argument("--readme", type=Path, default=None, metavar="PATH",
                     help="with --leaderboard: also rewrite this README's table between its leaderboard markers")
     sc.add_argument("--references", action="store_true",
-                    help="rebuild the stored references of the tasks (every periodic schedule and the oracle on the "
-                         "stored test set; a maintainer's step after a task changes)")
+                    help="rebuild the references of the tasks (every periodic schedule and the oracle on the stored "
+                         "test set; a maintainer's step after a task changes), into --out: never over the stored ones")
 
 
 def run(args) -> None:
     """``etmpc score``: the scorecard, ``--references`` or ``--leaderboard``."""
-    from etmpc.evaluation.references import build_references, write_references
+    from etmpc.evaluation.inputs import check_run_outputs, run_inputs
+    from etmpc.evaluation.references import build_references, references_path, write_references
     from etmpc.evaluation.scorecard import format_scorecard, score
-    from etmpc.systems import distinct, names
+    from etmpc.systems import distinct, make_system, names
 
     tasks = distinct(args.task or names())
     if args.leaderboard:
         return _leaderboard(args, tasks)
-    if args.readme is not None or args.out != Path("docs"):
-        raise EtmpcError("--out and --readme are --leaderboard's")
+    if args.readme is not None:
+        raise EtmpcError("--readme is --leaderboard's")
     if args.references:
         if args.policy or args.test_set is not None or args.json is not None or args.figure is not None:
             raise EtmpcError("--references rebuilds the stored references only: no SPEC, --test-set, --json or --figure "
                              "with it")
+        out = args.out or REFERENCES_OUT
+        check_run_outputs({}, {"--out": out})
         for task in tasks:
-            path = write_references(build_references(task, workers=args.workers, say=_say))
-            print(f"wrote {path}")
+            system = make_system(task)
+            path = write_references(build_references(task, workers=args.workers, say=_say),
+                                    out / system.domain / f"{system.task}_references.json")
+            print(f"wrote {path} (to ship it: copy it over {references_path(task)})")
         return
+    if args.out is not None:
+        raise EtmpcError("--out is --leaderboard's and --references'")
     if not args.policy:
         raise EtmpcError("give at least one trigger to score (a SPEC such as every:3 or py:MODULE:NAME)")
     _distinct_policies(args.policy)
     if args.test_set is not None and not Path(args.test_set).is_file():
         raise EtmpcError(f"test set {args.test_set} not found")
-    check_outputs({"--json": args.json, "--figure": args.figure}, inputs={"--test-set": args.test_set})
+    check_run_outputs({"--json": args.json, "--figure": args.figure}, inputs=run_inputs(args.policy, args.test_set))
     card = score(args.policy, tasks, args.test_set, args.workers, json_path=args.json, say=_say, episodes=args.episodes)
     print(format_scorecard(card))
     if args.json is not None:
@@ -82,21 +93,23 @@ def run(args) -> None:
         print(f"wrote {args.figure}")
     if not card.complete:
         failed = sorted({f"{r.policy} on {r.task}" for r in card.rows if r.error is not None})
-        raise EtmpcError(f"not every trigger could be scored on every task: {', '.join(failed)} (see its row)")
+        unwritten = "" if args.json is None else f"; {args.json} not written (a card with a failed row never is)"
+        raise EtmpcError(f"not every trigger could be scored on every task: {', '.join(failed)} (see its row){unwritten}")
 
 
 def _leaderboard(args, tasks: list[str]) -> None:
+    from etmpc.evaluation.inputs import check_run_outputs
     from etmpc.evaluation.workers import default_workers
-    from etmpc.experiments.leaderboard import build, headline
+    from etmpc.experiments.leaderboard import WORK, build, check_readme, headline
 
     if args.policy or args.references or args.test_set is not None or args.json is not None or args.figure is not None:
         raise EtmpcError("--leaderboard scores the built-in triggers on the stored test sets: no SPEC, --references, "
                          "--test-set, --json or --figure with it")
-    if args.readme is not None and not args.readme.is_file():
-        raise EtmpcError(f"--readme {args.readme} not found")
-    check_outputs({}, {"--out": args.out})
-    data = build(args.out, Path("results") / "leaderboard", tasks, args.episodes, args.workers or default_workers(),
-                 args.readme, say=_say)
+    out = args.out or LEADERBOARD_OUT
+    if args.readme is not None:
+        check_readme(args.readme)
+    check_run_outputs({}, {"--out": out, "the kept rows' directory": WORK})
+    data = build(out, WORK, tasks, args.episodes, args.workers or default_workers(), args.readme, say=_say)
     print(headline(data))
-    print(f"wrote {args.out}/leaderboard.md, leaderboard.json and leaderboard_profile.png"
+    print(f"wrote {out}/leaderboard.md, leaderboard.json and leaderboard_profile.png"
           + (f"; the table in {args.readme}" if args.readme is not None else ""))

@@ -5,7 +5,9 @@ never a part, and nothing is left behind when writing fails.
 * :func:`check_outputs` refuses, before a run, two outputs that name the same file and any output
   that cannot be written (its directory is a file, read-only, or full);
 * :func:`atomic_path` gives the temporary name to write to and renames it on success;
-* :func:`write_text` and :func:`write_json` are the two common cases.
+* :func:`write_text` and :func:`write_json` are the two common cases; JSON is strict (RFC 8259): a
+  missing or non-finite number is ``null``, never ``NaN`` or ``Infinity``, which ``jq`` and JavaScript
+  refuse (:func:`strict`).
 
 Every failure is an :class:`~etmpc.common.errors.EtmpcError` that names the file and the reason, so the
 command line prints one line.
@@ -16,6 +18,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import json
+import math
 import os
 from collections.abc import Iterator, Mapping
 from pathlib import Path
@@ -133,8 +136,25 @@ def write_text(path: Path, text: str) -> Path:
     return write_bytes(path, text.encode())
 
 
+def strict(data):
+    """``data`` with every non-finite float (NaN, an infinity: a number that is missing or was not
+    scored) replaced by ``None``, so that it is strict JSON; tuples become lists, as ``json`` writes them."""
+    if isinstance(data, float):
+        return data if math.isfinite(data) else None
+    if isinstance(data, dict):
+        return {k: strict(v) for k, v in data.items()}
+    if isinstance(data, (list, tuple)):
+        return [strict(v) for v in data]
+    return data
+
+
+def dumps(data, indent: int | None = 2) -> str:
+    """``data`` as strict JSON text (:func:`strict`)."""
+    return json.dumps(strict(data), indent=indent, allow_nan=False)
+
+
 def write_json(path: Path, data, indent: int | None = 2) -> Path:
-    return write_text(path, json.dumps(data, indent=indent) + "\n")
+    return write_text(path, dumps(data, indent) + "\n")
 
 
 def foreign_entries(directory: Path, ours) -> list[str]:

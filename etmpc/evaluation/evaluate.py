@@ -28,6 +28,7 @@ from etmpc.policies.user import checked
 from etmpc.views.record import EpisodeRecord
 from etmpc.views.recording import Recorder
 from etmpc.systems import SystemKey, system_key
+from etmpc.evaluation.inputs import check_run_outputs, check_shipped, run_inputs
 from etmpc.evaluation.workers import BACKENDS, default_workers, make_backend, play_test_episode
 
 
@@ -259,16 +260,13 @@ def check_picklable(spec: str, policy, backend: str = "local") -> None:
                          "no lambdas, open files or locks in it)") from None
 
 
-def _evaluate(domain, policies, episodes, repeats, workers, seed, testset_path, progress, backend, address, record,
-              recompute_price) -> Evaluation:
-    check_arguments(domain, policies, episodes, repeats, workers, seed, testset_path, progress, backend, address,
-                    record, recompute_price)
-    key = system_key(domain, recompute_price)  # the task and the price, checked once: every worker builds from it
-    system = key.make()
-    # Parsed (or checked) once here, so a bad policy fails before any work starts, then sent with each job.
+def parse_policies(system, policies: list) -> dict:
+    """``policies`` (specs and objects) as the policies ``system``'s loop plays, by spec: each spec
+    parsed, each object checked; a bad one, or one named twice, raises :class:`EtmpcError`."""
     parsed = {}
     for policy in policies:
         if isinstance(policy, str):
+            check_shipped(policy)
             spec, policy = policy, parse_policy(policy, system.error_weights, system.name, system.episode_steps)
         else:
             policy = checked(policy)
@@ -279,7 +277,20 @@ def _evaluate(domain, policies, episodes, repeats, workers, seed, testset_path, 
         if spec in parsed:
             raise EtmpcError(f"policy {spec} is given twice")
         parsed[spec] = policy
+    return parsed
+
+
+def _evaluate(domain, policies, episodes, repeats, workers, seed, testset_path, progress, backend, address, record,
+              recompute_price) -> Evaluation:
+    check_arguments(domain, policies, episodes, repeats, workers, seed, testset_path, progress, backend, address,
+                    record, recompute_price)
+    key = system_key(domain, recompute_price)  # the task and the price, checked once: every worker builds from it
+    system = key.make()
+    # Parsed (or checked) once here, so a bad policy fails before any work starts, then sent with each job.
+    parsed = parse_policies(system, policies)
     policies = list(parsed)
+    if record is not None:  # the API's check of what the command line checks before calling (no input overwritten)
+        check_run_outputs({"record": record}, inputs=run_inputs(policies, testset_path))
     workers = default_workers() if workers is None else workers
     if workers > 1 or backend != "local":
         for spec, policy in parsed.items():

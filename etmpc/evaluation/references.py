@@ -2,8 +2,13 @@
 oracle over the best of them, per episode of its test set (see :mod:`etmpc.evaluation.scorecard`).
 
 ``tasks/<domain>/<task>_references.json`` holds them with the suite's version, the test set's sha256,
-the task's price and the software that computed them; a file that does not match what is being scored
-is refused in one line that says how to rebuild it (``etmpc score --references``).
+the task's price and the software that computed them, sealed with the SHA-256 of its content. A file
+that does not match what is being scored, was edited after it was written, or does not hold together
+is refused in one line that says how to rebuild it (``etmpc score --references``). Holding together
+means: a finite objective for every schedule ``every:1`` .. ``every:N`` (the task's horizon) and the
+oracle on every episode; the named best schedule is the one with the best mean (the first on a tie);
+and on every episode the oracle does no worse than that schedule, as a one-step lookahead over a
+schedule with the episode's future known must (it can always answer as the schedule does).
 """
 
 from __future__ import annotations
@@ -16,7 +21,9 @@ from pathlib import Path
 
 import numpy as np
 
-from etmpc.common.documents import read_document
+import math
+
+from etmpc.common.documents import check_seal, read_document, sealed
 from etmpc.common.errors import EtmpcError
 from etmpc.common.numerics import fsum
 from etmpc.common.outputs import write_json
@@ -77,13 +84,21 @@ class References:
                        oracle=self.oracle[:episodes])
 
     def to_json(self) -> dict:
-        return {"format": FORMAT} | asdict(self)
+        """The file's content, sealed with the SHA-256 of the rest."""
+        return sealed({"format": FORMAT} | asdict(self))
 
 
 def mean(values) -> float:
     """The mean, summed exactly (``fsum``): the same on every machine, and ``mean(x) / mean(x)`` is 1."""
     values = list(np.asarray(values, dtype=float))
     return fsum(values) / len(values)
+
+
+def best_schedule(periodic: dict[str, list[float]], sense: str) -> str:
+    """The schedule with the best mean objective (``sense``: ``min`` or ``max``), the first of a tie."""
+    sign = 1.0 if sense == "min" else -1.0
+    order = list(periodic)
+    return min(order, key=lambda spec: (sign * mean(periodic[spec]), order.index(spec)))
 
 
 def references_path(task: str) -> Path:
@@ -108,8 +123,7 @@ def build_references(task: str, testset_path: str | None = None, workers: int | 
     say(f"{system.name}: references: {len(periodic)} periodic schedules, then the oracle over the best")
     fixed = evaluate(system.name, periodic, workers=workers, testset_path=testset_path, progress=progress)
     table = {spec: _objectives(fixed, spec) for spec in periodic}
-    sign = 1.0 if system.objective_sense == "min" else -1.0
-    best = min(periodic, key=lambda spec: (sign * mean(table[spec]), periodic.index(spec)))
+    best = best_schedule(table, system.objective_sense)
     oracle = evaluate(system.name, [f"oracle:{best}"], workers=workers, testset_path=testset_path, progress=progress)
     refs = References(system.name, fixed.testset_sha256, len(table[best]), system.recompute_price,
                       system.objective_sense, table, best, _objectives(oracle, f"oracle:{best}"), software=software())
@@ -137,17 +151,43 @@ def load_references(task: str, test_set_sha256: str, path: Path | None = None) -
     if data.get("recompute_price") != system.recompute_price:
         raise EtmpcError(f"{task}: references {path} are at price {data.get('recompute_price')!r}, the task's is "
                          f"{system.recompute_price!r}; {rebuild}")
-    try:
-        fields = {k: data[k] for k in ("task", "test_set_sha256", "episodes", "recompute_price", "objective_sense",
-                                       "periodic", "best", "oracle", "suite_version", "software")}
-        refs = References(**fields)
-        lengths = {len(v) for v in refs.periodic.values()} | {len(refs.oracle)}
-        ok = lengths == {refs.episodes} and refs.best in refs.periodic and refs.gap > 0
-    except (KeyError, TypeError, ValueError, ZeroDivisionError) as exc:
-        raise EtmpcError(f"{task}: references {path} are corrupt ({exc!r}); {rebuild}") from None
-    if not ok:
-        raise EtmpcError(f"{task}: references {path} are inconsistent (episode counts, best schedule or gap); {rebuild}")
-    return refs
+    check_seal(data, f"{task}: references {path}", rebuild)
+    problem = _problem(data, system)
+    if problem is not None:
+        raise EtmpcError(f"{task}: references {path} are inconsistent ({problem}); {rebuild}")
+    return References(**{k: data[k] for k in ("task", "test_set_sha256", "episodes", "recompute_price", "objective_sense",
+                                              "periodic", "best", "oracle", "suite_version", "software")})
+
+
+def _numbers(values, episodes: int) -> bool:
+    return (isinstance(values, list) and len(values) == episodes
+            and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in values))
+
+
+def _problem(data: dict, system) -> str | None:
+    """What does not hold together in a references file's ``data`` (see the module's docstring), or None."""
+    episodes, periodic, sense = data.get("episodes"), data.get("periodic"), data.get("objective_sense")
+    if not (isinstance(episodes, int) and not isinstance(episodes, bool) and episodes >= 1):
+        return f"episodes {episodes!r} is not a count"
+    if sense != system.objective_sense:
+        return f"objective_sense {sense!r}, the task's is {system.objective_sense!r}"
+    if not isinstance(data.get("task"), str) or not isinstance(data.get("software"), dict):
+        return "task or software missing"
+    schedules = [f"every:{t}" for t in range(1, system.horizon + 1)]
+    if not isinstance(periodic, dict) or list(periodic) != schedules:
+        return f"periodic must hold {schedules[0]} .. {schedules[-1]} in order"
+    if not all(_numbers(v, episodes) for v in periodic.values()) or not _numbers(data.get("oracle"), episodes):
+        return f"every schedule and the oracle need {episodes} finite objectives"
+    best = best_schedule(periodic, sense)
+    if data.get("best") != best:
+        return f"best names {data.get('best')!r}, but {best} has the best mean objective"
+    sign = 1.0 if sense == "min" else -1.0
+    worse = [e for e, (o, b) in enumerate(zip(data["oracle"], periodic[best])) if sign * (o - b) > 0]
+    if worse:
+        return f"the oracle does worse than {best} on episode {worse[0]}, which the oracle over it cannot"
+    if not mean([sign * (b - o) for o, b in zip(data["oracle"], periodic[best])]) > 0:
+        return f"the oracle does not improve on {best}: there is no scale to score against"
+    return None
 
 
 def stored(task: str, episodes: int | None = None) -> References:

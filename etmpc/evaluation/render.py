@@ -10,6 +10,7 @@ import numpy as np
 from etmpc.evaluation.workers import context, play_test_episode
 from etmpc.loop import Trajectory
 from etmpc.policies import parse_policy
+from etmpc.evaluation.inputs import check_shipped
 from etmpc.systems import check_name, system_class
 from etmpc.views.recording import Recorder
 from etmpc.views.video import (check_display, check_framebuffer, check_scene, check_size, iter_frames, render_frames,
@@ -36,6 +37,7 @@ def render_rollout(domain: str, policy_spec: str, episode: int, out: str | Path,
     check_size(width, height)
     system, env, _ = context(domain, testset_path)
     check_framebuffer(env.physics, width, height)
+    check_shipped(policy_spec)
     policy = parse_policy(policy_spec, system.error_weights, domain)
     # An out-of-range index raises TestSetError (an EtmpcError) before anything is drawn.
     played = play_test_episode(domain, policy, seed, 0, episode, testset_path)

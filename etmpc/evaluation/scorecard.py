@@ -45,9 +45,11 @@ import numpy as np
 from scipy import stats
 
 from etmpc.common.errors import EtmpcError
-from etmpc.common.outputs import check_outputs, write_json
+from etmpc.common.outputs import write_json
 from etmpc.evaluation import testsets as ts_mod
-from etmpc.evaluation.evaluate import Evaluation, check_policies, evaluate
+from etmpc.common import checks
+from etmpc.evaluation.evaluate import Evaluation, check_policies, evaluate, parse_policies
+from etmpc.evaluation.inputs import check_run_outputs, run_inputs
 from etmpc.evaluation.references import (SUITE_VERSION, References, build_references, mean, references_path,
                                          software, stored)
 from etmpc.evaluation.workers import shared_pools
@@ -79,6 +81,18 @@ class TaskScore:
     reference: str  # the best periodic schedule
     error: str | None = None
 
+    @classmethod
+    def from_json(cls, data: dict) -> TaskScore:
+        """A row as :func:`dataclasses.asdict` gave it and strict JSON kept it (a number not scored is
+        ``null`` there, NaN here)."""
+        nan = lambda v: math.nan if v is None else v  # noqa: E731
+        fields = dict(data)
+        for name in ("objective_mean", "recomputes_mean", "score", "score_ci95", "better_share"):
+            fields[name] = nan(fields[name])
+        fields["episode_scores"] = [nan(v) for v in fields["episode_scores"]]
+        fields["cpu_ms"] = {k: nan(v) for k, v in dict(fields["cpu_ms"]).items()}
+        return cls(**fields)
+
 
 def task_score(refs: References, evaluation: Evaluation, spec: str) -> TaskScore:
     """``spec``'s score on ``refs``' task from ``evaluation`` (one run per episode, the references' test set)."""
@@ -96,8 +110,8 @@ def task_score_from_json(refs: References, evaluation: dict, spec: str) -> TaskS
     by_episode: dict[int, list[float]] = {}
     nonfinite = 0
     for r in evaluation["runs"]:
-        if r["policy"] == spec:
-            by_episode.setdefault(r["episode"], []).append(r["objective"])
+        if r["policy"] == spec:  # a non-finite episode's objective is null in strict JSON
+            by_episode.setdefault(r["episode"], []).append(math.nan if r["objective"] is None else r["objective"])
             nonfinite += not r["finite"]
     if evaluation["test_set"]["sha256"] != refs.test_set_sha256:
         raise EtmpcError(f"{refs.task}: {spec} was evaluated on another test set than the references'")
@@ -218,15 +232,33 @@ def score(policies: list, tasks: list[str] | None = None, test_set: str | None =
     set, for one task; its references are computed for the run. ``episodes``: the first N episodes
     only (each task's references then of those episodes: 0 and 100 stay exact). A trigger that fails
     on a task has that task's row say so; the others are still scored (:attr:`Scorecard.complete` is
-    then False)."""
+    then False, and ``json_path`` is not written: a card with a failed row never is).
+
+    Every argument, every trigger on every task, and the outputs are checked before any episode is
+    played, with the command line's messages (:class:`EtmpcError`): a spec that does not parse, a
+    trigger given twice, an empty or repeated task, an output that is one of the run's inputs."""
     check_policies(policies)
     if tasks is not None and (isinstance(tasks, (str, bytes)) or not isinstance(tasks, (list, tuple))):
         raise EtmpcError(f"tasks: a list of task names is needed, got {type(tasks).__name__} {tasks!r}")
-    tasks = distinct(tasks or names())
+    if tasks is not None and not tasks:
+        raise EtmpcError("tasks: the list is empty; give at least one task, or None for every task of the suite")
+    if episodes is not None:
+        checks.argument("episodes", lambda v: checks.at_least(checks.whole(v), 1), episodes)
+    if workers is not None:
+        checks.argument("workers", checks.workers, workers)
+    if test_set is not None and not isinstance(test_set, (str, Path)):
+        raise EtmpcError(f"test_set: a file path is needed, got {type(test_set).__name__} {test_set!r}")
+    tasks = distinct(names() if tasks is None else tasks)
     if test_set is not None and len(tasks) != 1:
         raise EtmpcError("--test-set belongs to one task: give exactly one --task with it")
-    if json_path is not None:
-        check_outputs({"--json": Path(json_path)})
+    if test_set is not None and not Path(test_set).is_file():
+        raise EtmpcError(f"test set {test_set} not found")
+    for task in tasks:  # each trigger parsed (or checked) on each task: a bad one fails before any episode
+        try:
+            parse_policies(make_system(task), policies)
+        except EtmpcError as exc:
+            raise EtmpcError(f"{task}: {exc}") from None
+    check_run_outputs({"--json": json_path}, inputs=run_inputs(policies, test_set))
     if test_set is None:  # every task's references checked before any trigger is played
         references = {task: stored(task, episodes) for task in tasks}
         shown = {task: {"stored": references_path(task).name} for task in tasks}
@@ -242,13 +274,13 @@ def score(policies: list, tasks: list[str] | None = None, test_set: str | None =
         shown[task] |= {"best_periodic": refs.best, "oracle": refs.oracle_spec, "test_set_sha256": refs.test_set_sha256,
                         "episodes": refs.episodes, "recompute_price": refs.recompute_price, "gap": refs.gap}
     with shared_pools():  # each trigger played on its own (a failing one fails its row only), one pool for all
-        rows = [play_and_score(task, references[task], policy, test_set, workers, progress, say)
+        rows = [play_and_score(task, references[task], policy, test_set, workers, progress)
                 for task in tasks for policy in policies]
     by_policy: dict[str, list[TaskScore]] = {}
     for row in rows:
         by_policy.setdefault(row.policy, []).append(row)
     card = Scorecard(tasks, shown, rows, [aggregate(r) for r in by_policy.values()])
-    if json_path is not None:
+    if json_path is not None and card.complete:
         write_json(Path(json_path), card.to_json())
     return card
 
@@ -258,13 +290,12 @@ def _name(policy) -> str:
 
 
 def play_and_score(task: str, refs: References, policy, test_set: str | None = None, workers: int | None = None,
-                   progress: bool = True, say: Callable[[str], None] = lambda line: None) -> TaskScore:
+                   progress: bool = True) -> TaskScore:
     """``policy`` (a spec or an object) played on ``refs``' episodes of ``task`` and scored; a policy that
     fails (bad spec, its own error) gives a row that says so."""
     try:
         evaluation = evaluate(task, [policy], refs.episodes, workers=workers, testset_path=test_set, progress=progress)
-    except EtmpcError as exc:
-        say(f"{task}: {exc}")
+    except EtmpcError as exc:  # the row says so (the table shows it): the command's own line says which rows failed
         return failed_task(task, _name(policy), str(exc))
     return task_score(refs, evaluation, evaluation.summaries[0].policy)
 

@@ -14,7 +14,9 @@ The entries, each one spec per task (:func:`entries`):
 * **oracle**: ``oracle:BEST`` (its reference: 100), which knows each episode's future.
 
 Each (entry, task) is scored by :mod:`etmpc.evaluation.scorecard` and kept in the work directory as it
-finishes, so an interrupted run continues where it stopped. The page (``docs/leaderboard.md``), its
+finishes, so an interrupted run continues where it stopped. A kept row is sealed with the SHA-256 of its
+content: one edited by hand is refused in one line, never published; one of an older etmpc (no seal)
+or of other policy files is played again. The page (``docs/leaderboard.md``), its
 JSON and the performance profiles are written at the end, with the commit, date, machine and
 software that produced them; the README's headline table is the page's, rewritten between its markers.
 """
@@ -33,21 +35,24 @@ from pathlib import Path
 
 import numpy as np
 
+from etmpc.common.documents import SEAL, check_seal, loads, sealed
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import write_json, write_text
 from etmpc.common.provenance import commit_and_date
 from etmpc.common.resources import data_root
 from etmpc.evaluation.references import SUITE_VERSION, References, software, stored
+from etmpc.evaluation.evaluate import parse_policies
+from etmpc.evaluation.inputs import policy_files
 from etmpc.evaluation.scorecard import Scorecard, TaskScore, aggregate, play_and_score, profiles
 from etmpc.evaluation.workers import make_backend, shared_pools
 from etmpc.learning.config import VALIDATION_ENTROPY
 from etmpc.learning.jobs import mean_scores
-from etmpc.policies.specs import find
 from etmpc.systems import distinct, folder_name, make_system, names
 from etmpc.systems.base import require
 from etmpc.views.figures import write_performance_profile_png
 
 FORMAT = "etmpc-leaderboard"
+WORK = Path("results") / "leaderboard"  # where finished rows are kept (make leaderboard runs from the checkout)
 BEGIN, END = "<!-- leaderboard:begin -->", "<!-- leaderboard:end -->"
 VALIDATION_EPISODES = 20  # training-distribution episodes that choose the best threshold
 ROLLOUT_FUTURES = 4
@@ -132,31 +137,67 @@ def _row(entry: Entry, task: str, refs: References, work: Path, episodes: int, w
     spec = entry.specs[task]
     path = work / _slug(entry.name) / f"{folder_name(task)}.json"
     key = {"spec": spec, "episodes": episodes, "test_set_sha256": refs.test_set_sha256, "suite_version": SUITE_VERSION}
-    files = _policy_files(spec)
+    files = policy_files(spec)
     if files:  # a policy read from files (rl:, sb3:): a row played with other files is played again
         key["files_sha256"] = {str(f): hashlib.sha256(f.read_bytes()).hexdigest() for f in files}
-    if path.is_file():
-        try:
-            kept = json.loads(path.read_text())
-            if kept.get("key") == key:
-                return TaskScore(**kept["row"]), kept["played"]
-        except (OSError, ValueError, TypeError, KeyError):
-            pass  # an unreadable leftover is played again
+    kept = _kept(path, key)
+    if kept is not None:
+        return kept
     say(f"{task}: {entry.name} ({spec})")
     row = play_and_score(task, refs, spec, workers=workers, progress=False)
     played_at = commit_and_date()
-    write_json(path, {"key": key, "row": asdict(row), "played": played_at})
+    write_json(path, sealed({"key": key, "row": asdict(row), "played": played_at}))
     return row, played_at
 
 
-def _policy_files(spec: str) -> list[Path]:
-    """The files a spec's policy is read from: the file it names and, for a model, the description
-    beside it (``sb3:X.zip`` reads ``X.json`` too)."""
-    kind = find(spec)
-    if kind is None or not kind.path:
-        return []
-    named = Path(spec.partition(":")[2])
-    return [f for f in dict.fromkeys([named, named.with_suffix(".json")]) if f.is_file()]
+def _kept(path: Path, key: dict) -> tuple[TaskScore, dict] | None:
+    """The row kept in ``path`` for ``key`` and when it was played; None if there is none to keep (no
+    file, an older etmpc's without a seal, or another key: it is played again). A kept row that was
+    changed after it was written, or is not a row, is refused in one line (:func:`check_kept`)."""
+    kept = _read_kept(path)
+    if kept is None or SEAL not in kept or kept.get("key") != key:
+        return None
+    try:
+        return TaskScore.from_json(kept["row"]), dict(kept["played"])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise EtmpcError(f"kept leaderboard row {path} is not a row ({exc!r}); {_DELETE}") from None
+
+
+_DELETE = "delete it to play the row again"
+
+
+def _read_kept(path: Path) -> dict | None:
+    if not path.is_file():
+        return None
+    try:
+        kept = loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise EtmpcError(f"kept leaderboard row {path} cannot be read ({exc}); {_DELETE}") from None
+    if not isinstance(kept, dict):
+        raise EtmpcError(f"kept leaderboard row {path} is not a row (a JSON {type(kept).__name__}); {_DELETE}")
+    if SEAL in kept:
+        check_seal(kept, f"kept leaderboard row {path}", _DELETE)
+    return kept
+
+
+def check_kept(work: Path) -> None:
+    """Every row kept in ``work``, checked before any is played (see :func:`_kept`)."""
+    for path in sorted(Path(work).glob("*/*.json")):
+        _read_kept(path)
+
+
+def check_readme(readme: Path) -> None:
+    """Raise :class:`EtmpcError` unless ``readme`` has the leaderboard's markers, once each and in order
+    (checked before any row is played)."""
+    try:
+        text = Path(readme).read_text()
+    except FileNotFoundError:
+        raise EtmpcError(f"--readme {readme} not found") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise EtmpcError(f"--readme {readme} cannot be read ({exc})") from None
+    if text.count(BEGIN) != 1 or text.count(END) != 1 or text.index(BEGIN) > text.index(END):
+        raise EtmpcError(f"--readme {readme} needs one {BEGIN} ... {END} block for the leaderboard's table "
+                         f"(found {text.count(BEGIN)} begin and {text.count(END)} end markers)")
 
 
 def _provenance() -> dict:
@@ -176,9 +217,14 @@ def build(docs: Path, work: Path, tasks: list[str] | None = None, episodes: int 
 
 def _build(docs: Path, work: Path, tasks: list[str], episodes: int | None, workers: int, readme: Path | None,
            say: Callable[[str], None]) -> dict:
+    if readme is not None:
+        check_readme(readme)
+    check_kept(work)
     references = {task: stored(task, episodes) for task in tasks}
-    if readme is not None and BEGIN not in Path(readme).read_text():
-        raise EtmpcError(f"{readme} has no {BEGIN} ... {END} block for the leaderboard's table")
+    for task in tasks:  # the shipped policies parse (and are the files shipped) before any row is played
+        system = make_system(task)
+        parse_policies(system, [f"{prefix}{path}" for _, file, prefix, _ in SHIPPED
+                                if (path := shipped_policy(task, file)) is not None])
     board = entries(tasks, references, workers, say)
     n = episodes or min(r.episodes for r in references.values())
     result = []
@@ -210,12 +256,21 @@ def _build(docs: Path, work: Path, tasks: list[str], episodes: int | None, worke
 
 
 # -- what the page says ------------------------------------------------------------------------------
+def _finite(value) -> bool:
+    """A number that was scored (the JSON's ``null`` is one that was not)."""
+    return value is not None and math.isfinite(value)
+
+
 def _cell(row: dict) -> str:
     if row.get("error"):
         return "failed"
-    if not math.isfinite(row["score"]):
+    if not _finite(row["score"]):
         return f"{row['nonfinite_episodes']} non-finite"
-    return f"{row['score']:.1f} ± {row['score_ci95']:.1f}"
+    return f"{row['score']:.1f} ± {_number(row['score_ci95'], '.1f')}"
+
+
+def _number(value, spec: str) -> str:
+    return format(value, spec) if _finite(value) else "-"
 
 
 def headline(data: dict) -> str:
@@ -227,8 +282,9 @@ def headline(data: dict) -> str:
         rows = {r["task"]: r for r in entry["rows"]}
         a = entry["aggregate"]
         cpu = [rows[t]["cpu_ms"]["total"] for t in tasks if t in rows and rows[t].get("cpu_ms")]
-        iqm = f"{a['iqm']:.1f} [{a['iqm_ci95'][0]:.1f}, {a['iqm_ci95'][1]:.1f}]" if math.isfinite(a["iqm"]) else "-"
-        improve = f"{a['probability_of_improvement']:.2f}" if math.isfinite(a["probability_of_improvement"]) else "-"
+        iqm = (f"{a['iqm']:.1f} [{a['iqm_ci95'][0]:.1f}, {a['iqm_ci95'][1]:.1f}]"
+               if _finite(a["iqm"]) and all(map(_finite, a["iqm_ci95"])) else "-")
+        improve = f"{a['probability_of_improvement']:.2f}" if _finite(a["probability_of_improvement"]) else "-"
         cells = [_cell(rows[t]) if t in rows else "-" for t in tasks] + [iqm, improve, f"{np.mean(cpu):.1f}" if cpu else "-"]
         lines.append(f"| {entry['name']} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
@@ -299,8 +355,9 @@ def page(data: dict) -> str:
                 continue
             failures = "-" if row["failures_mean"] is None else f"{row['failures_mean']:.2f}"
             cpu = row["cpu_ms"]
-            lines.append(f"| {entry['name']} | `{row['policy']}` | {row['objective_mean']:.5g} | {row['recomputes_mean']:.2f} "
-                         f"| {failures} | {_cell(row)} | {cpu['total']:.1f} ({cpu['solve']:.1f} / {cpu['feedback']:.1f} / "
-                         f"{cpu['decide']:.1f}) |")
+            lines.append(f"| {entry['name']} | `{row['policy']}` | {_number(row['objective_mean'], '.5g')} | "
+                         f"{_number(row['recomputes_mean'], '.2f')} | {failures} | {_cell(row)} | "
+                         f"{_number(cpu['total'], '.1f')} ({_number(cpu['solve'], '.1f')} / {_number(cpu['feedback'], '.1f')} / "
+                         f"{_number(cpu['decide'], '.1f')}) |")
         lines.append("")
     return "\n".join(lines)

@@ -33,7 +33,7 @@ import numpy as np
 
 from etmpc.common.errors import EtmpcError
 from etmpc.common.numerics import dot
-from etmpc.common.outputs import write_text
+from etmpc.common.outputs import dumps, write_text
 from etmpc.loop import AugmentedState
 from etmpc.policies.features import FEATURE_SETS, feature_size, raw_features
 
@@ -211,4 +211,4 @@ def load_policy(path: str | Path, domain: str | None = None, nx: int | None = No
 
 def write_json_atomically(path: Path, data: dict) -> None:
     """``data`` as compact JSON (the shipped policy files' format), written atomically."""
-    write_text(path, json.dumps(data))
+    write_text(path, dumps(data, indent=None))
