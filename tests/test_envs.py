@@ -95,7 +95,7 @@ def test_a_reward_baseline_must_be_a_fixed_schedule(bad):
 
 
 def test_reset_with_a_seed_replays_the_same_episode_and_other_seeds_differ():
-    env = gym.make("etmpc/battery-trading-v0")
+    env = gym.make("etmpc/battery-trading-v1")
     first = [env.reset(seed=3)[0]] + [env.step(0)[0] for _ in range(5)]
     again = [env.reset(seed=3)[0]] + [env.step(0)[0] for _ in range(5)]
     other = [env.reset(seed=4)[0]] + [env.step(0)[0] for _ in range(5)]
@@ -115,7 +115,7 @@ def test_the_observation_is_the_error_features_and_their_squares():
     np.testing.assert_array_equal(obs, np.concatenate([expected, expected**2]).astype(np.float32))
     assert env.observation_names[:5] == ("error_cart_position", "error_cart_velocity", "error_pole_angle",
                                          "error_pole_angular_velocity", "plan_age")
-    battery = gym.make("etmpc/battery-trading-v0").unwrapped
+    battery = gym.make("etmpc/battery-trading-v1").unwrapped
     assert "price_error_eur_kwh" in battery.observation_names and len(battery.observation_names) == 2 * (1 + 1 + 10)
 
 
@@ -145,7 +145,7 @@ def test_every_form_the_action_space_holds_is_taken_as_its_integer():
 
 @pytest.mark.parametrize("index", [1.5, 2.0, True, "3", np.float64(1.0), [1], None])
 def test_a_test_episode_must_be_an_integer_index(index):
-    env = gym.make("etmpc/battery-trading-v0").unwrapped
+    env = gym.make("etmpc/battery-trading-v1").unwrapped
     if index is None:  # None means: draw a training episode
         env.reset(options={"test_episode": index})
         return
@@ -160,8 +160,8 @@ def test_an_environment_cannot_be_pickled_and_says_what_to_do_instead():
     import copy
     import pickle
 
-    for env in (gym.make("etmpc/battery-trading-v0"), TriggerEnvironment("battery")):
-        with pytest.raises(TypeError, match=r"cannot be pickled .*gymnasium.make\('etmpc/battery-trading-v0'\)"):
+    for env in (gym.make("etmpc/battery-trading-v1"), TriggerEnvironment("battery")):
+        with pytest.raises(TypeError, match=r"cannot be pickled .*gymnasium.make\('etmpc/battery-trading-v1'\)"):
             pickle.dumps(env)
         with pytest.raises(TypeError, match="cannot be pickled"):
             copy.deepcopy(env)
@@ -216,3 +216,13 @@ def test_a_bad_argument_to_an_environment_is_one_clear_error(kwargs, says):
 
     with pytest.raises(EtmpcError, match=re.escape(says)):
         TriggerEnvironment(**({"task": "battery"} | kwargs))
+
+
+def test_an_older_version_of_a_tasks_id_points_at_the_current_one():
+    """The battery's observation grew (0b5a03e): its environment is version 1, and gymnasium answers the old
+    id with the new one, in one line."""
+    from gymnasium.error import DeprecatedEnv
+
+    assert env_id("battery") == "etmpc/battery-trading-v1" and env_id("cart_pendulum") == "etmpc/cart_pendulum-balance-v0"
+    with pytest.raises(DeprecatedEnv, match="Please use `etmpc/battery-trading-v1` instead"):
+        gym.make("etmpc/battery-trading-v0")

@@ -43,7 +43,7 @@ def test_the_policy_decides_as_the_network_does_on_the_environments_normalised_o
     model = PPO.load(str(out / "selected.zip"), device="cpu")
     meta = json.loads((out / "selected.json").read_text())
     mean, scale = np.array(meta["observation_mean"]), np.sqrt(np.array(meta["observation_var"]) + 1e-8)
-    env = gym.make("etmpc/battery-trading-v0").unwrapped
+    env = gym.make("etmpc/battery-trading-v1").unwrapped
     obs, _ = env.reset(seed=11)
     decisions = 0
     while True:

@@ -217,6 +217,19 @@ def _bench(args) -> None:
         print(f"wrote {args.json}")
 
 
+def _verify(args) -> None:
+    from etmpc.evaluation.verify import verify
+    from etmpc.evaluation.workers import default_workers
+
+    verdict = verify(args.card, args.sample, args.seed, args.workers or default_workers())
+    for line in verdict.mismatches:
+        print(line)
+    if not verdict.verified:
+        raise EtmpcError(f"card {args.card} does not verify: {len(verdict.mismatches)} mismatch(es), listed above")
+    print(f"verified: card {args.card}: {verdict.rows} rows; their scores and the aggregates follow from the episodes, "
+          f"and {verdict.replayed} episodes replayed give the card's scores bit for bit")
+
+
 def _testset(args) -> None:
     from etmpc.evaluation.testsets import draw
     from etmpc.systems import make_system
@@ -228,4 +241,4 @@ def _testset(args) -> None:
 
 
 COMMANDS = {"evaluate": _evaluate, "score": scoring.run, "train": _train, "train-self": _train_self, "reproduce": _reproduce, "sweep": _sweep,
-            "render": _render, "replay": _replay, "bench": _bench, "testset": _testset}
+            "render": _render, "replay": _replay, "bench": _bench, "testset": _testset, "verify": _verify}

@@ -147,6 +147,14 @@ def build_parser() -> argparse.ArgumentParser:
     rn.add_argument("--record", type=types.rrd_path, default=None, metavar="PATH.rrd",
                     help="also write the episode, frames included, into a Rerun recording")
 
+    vf = sub.add_parser("verify", help="check a scorecard (etmpc score --json) by replaying a seeded sample of its "
+                                       "episodes bit for bit: one line per mismatch")
+    vf.add_argument("card", type=Path, metavar="CARD.json")
+    vf.add_argument("--sample", type=types.non_negative_int, default=5, metavar="N",
+                    help="episodes replayed per row (default 5; 0: every episode)")
+    vf.add_argument("--seed", type=types.seed, default=0, help="the seed the sample is drawn from")
+    vf.add_argument("--workers", type=types.workers, default=None, help="worker processes (default: one per core)")
+
     tst = sub.add_parser("testset", help="draw a test set: N episodes of a task from a seed, with its sha256 (for --test-set)")
     tst.add_argument("task", help=f"task to draw episodes of: {tasks}")
     tst.add_argument("--seed", type=types.seed, required=True, help="the seed every draw comes from")

@@ -39,6 +39,8 @@ def positive_int(text: str) -> int:
     return checked(lambda v: checks.at_least(v, 1), whole(text))
 
 
+def non_negative_int(text: str) -> int:
+    return checked(lambda v: checks.at_least(v, 0), whole(text))
 
 
 def workers(text: str) -> int:

@@ -4,15 +4,15 @@ the registry has one, a plugin's too."""
 
 from __future__ import annotations
 
-from etmpc.systems import domains, parse
-
-VERSION = 0
+from etmpc.systems import domains, parse, task_version
 
 
 def env_id(name: str) -> str:
-    """``cart_pendulum`` or ``cart_pendulum/balance`` -> ``etmpc/cart_pendulum-balance-v0``."""
+    """``cart_pendulum`` or ``cart_pendulum/balance`` -> ``etmpc/cart_pendulum-balance-v0``: the task's
+    version (:func:`~etmpc.systems.task_version`) is the id's. gymnasium answers an older version's id
+    with a pointer to the current one."""
     domain_name, task = parse(name)
-    return f"etmpc/{domain_name}-{task}-v{VERSION}"
+    return f"etmpc/{domain_name}-{task}-v{task_version(name)}"
 
 
 def register() -> list[str]:

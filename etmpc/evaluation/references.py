@@ -31,7 +31,7 @@ from etmpc.evaluation import testsets
 from etmpc.evaluation.evaluate import Evaluation, evaluate
 from etmpc.systems import data_dir, make_system
 
-SUITE_VERSION = 1  # a change to any task, its test set or its price makes a new version of the suite
+SUITE_VERSION = 1  # what changes it, and what changes a task's version instead: docs/versioning.md
 FORMAT = "etmpc-references"
 SOFTWARE = ("etmpc", "mujoco", "dm-control", "casadi", "numpy", "scipy")
 

@@ -53,7 +53,7 @@ from etmpc.evaluation.inputs import check_run_outputs, run_inputs
 from etmpc.evaluation.references import (SUITE_VERSION, References, build_references, mean, references_path,
                                          software, stored)
 from etmpc.evaluation.workers import shared_pools
-from etmpc.systems import distinct, make_system, names
+from etmpc.systems import distinct, make_system, names, task_version
 
 BOOTSTRAP_RESAMPLES = 2000
 BOOTSTRAP_SEED = 0
@@ -80,6 +80,7 @@ class TaskScore:
     cpu_ms: dict[str, float]  # mean per episode: solve, feedback, decide, total
     reference: str  # the best periodic schedule
     error: str | None = None
+    task_version: int = 0  # the task's version it was scored on (docs/versioning.md)
 
     @classmethod
     def from_json(cls, data: dict) -> TaskScore:
@@ -135,12 +136,12 @@ def _scored(refs: References, spec: str, episodes: list[int], objectives: list[f
         better = float(np.mean((costs < best) + 0.5 * (costs == best)))
     return TaskScore(refs.task, spec, len(episodes), summary["objective_mean"], refs.objective_sense,
                      summary["recomputes_mean"], summary.get("failures_mean"), summary["solver_failures"], nonfinite,
-                     score, ci, per_episode, better, cpu_ms, refs.best)
+                     score, ci, per_episode, better, cpu_ms, refs.best, task_version=task_version(refs.task))
 
 
 def failed_task(task: str, spec: str, error: str) -> TaskScore:
     nan = math.nan
-    return TaskScore(task, spec, 0, nan, "", nan, None, 0, 0, nan, nan, [], nan, {}, "", error)
+    return TaskScore(task, spec, 0, nan, "", nan, None, 0, 0, nan, nan, [], nan, {}, "", error, task_version(task))
 
 
 @dataclass(frozen=True)
@@ -218,6 +219,7 @@ class Scorecard:
 
     def to_json(self) -> dict:
         return {"format": "etmpc-scorecard", "suite_version": SUITE_VERSION, "tasks": self.tasks,
+                "task_versions": {task: task_version(task) for task in self.tasks},
                 "references": self.references, "rows": [asdict(r) for r in self.rows],
                 "aggregates": [asdict(a) for a in self.aggregates], "software": software(),
                 "machine": {"processor": platform.processor() or platform.machine(), "system": platform.platform()}}

@@ -9,7 +9,7 @@ This package may import ``etmpc.common`` and ``etmpc.control``.
 """
 
 from etmpc.systems.registry import (SystemKey, canonical, check_name, data_dir, distinct, domain, domains, folder_name,
-                                    make_system, names, parse, system_class, system_key, stored_seed)
+                                    make_system, names, parse, system_class, system_key, stored_seed, task_version)
 
 __all__ = ["SystemKey", "canonical", "check_name", "data_dir", "distinct", "domain", "domains", "folder_name",
-           "make_system", "names", "parse", "system_class", "system_key", "stored_seed"]
+           "make_system", "names", "parse", "system_class", "system_key", "stored_seed", "task_version"]

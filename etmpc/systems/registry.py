@@ -9,7 +9,9 @@ A *domain* is a package (``etmpc/systems/cart_pendulum/``, or a plugin's own) th
   ``dm_control.suite`` domain has them, and task -> the :class:`~etmpc.systems.base.System` class
   the control loop plays;
 * optionally ``DATA``: the folder of its stored test sets and references (default: etmpc's
-  ``tasks/<domain>/``).
+  ``tasks/<domain>/``);
+* optionally ``VERSIONS``: task -> its version, where it is not 0 (what bumps it: ``docs/versioning.md``);
+  it is the ``-vN`` of the task's environment id and is carried by every score made on it.
 
 :data:`BUILT_IN` lists etmpc's domains; another package adds one with an entry point in the
 ``etmpc.tasks`` group (``slider = "etmpc_slider"``: the domain's name and its package), read once when
@@ -156,6 +158,15 @@ def data_dir(domain_name: str) -> Path:
     """The folder of a domain's stored test sets and references."""
     data = getattr(domain(domain_name), "DATA", None)
     return Path(data) if data is not None else tasks_dir() / domain_name
+
+
+def task_version(name: str) -> int:
+    """Task ``name``'s version: its domain's ``VERSIONS`` entry, 0 if it names none."""
+    domain_name, task = parse(name)
+    version = getattr(domain(domain_name), "VERSIONS", {}).get(task, 0)
+    if not (isinstance(version, int) and not isinstance(version, bool) and version >= 0):
+        raise EtmpcError(f"domain {domain_name!r} gives task {task!r} the version {version!r}, not a whole number >= 0")
+    return version
 
 
 def stored_seed(name: str) -> int | None:

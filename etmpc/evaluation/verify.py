@@ -1,0 +1,200 @@
+"""``etmpc verify CARD``: check somebody's scorecard by replaying it.
+
+A scorecard (``etmpc score --json``) holds, per task and trigger, every episode's normalised score
+against the task's stored references. Anyone with the trigger can check it:
+
+1. **It is this suite's card**: the suite's version, each task's version and test set are this
+   etmpc's, and it was scored against the stored references (a card scored on another test set is
+   not a suite result).
+2. **It holds together**: per row, the episode count, the score (the mean of the episode scores),
+   the confidence interval and the share of better episodes follow from its episode scores, and the
+   suite's aggregates (IQM, probability of improvement, their bootstrap intervals) follow from the rows,
+   as :mod:`etmpc.evaluation.scorecard` computes them.
+3. **It replays**: a seeded sample of each row's episodes is played again with the trigger the row
+   names (its spec: the handed-in ``py:MODULE:NAME``, ``rl:PATH``, ``sb3:PATH`` must be importable or
+   readable here), and each episode's score must be the card's bit for bit (the loop's numbers do not
+   depend on the machine's kernels or the number of workers: ``docs/using.md``).
+
+Every mismatch is one line; :func:`verify` returns them (an empty list: the card verifies).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from etmpc.common.documents import read_document
+from etmpc.common.errors import EtmpcError
+from etmpc.evaluation import testsets as ts_mod
+from etmpc.evaluation.evaluate import parse_policies, run_jobs
+from etmpc.evaluation.references import SUITE_VERSION, References, stored
+from etmpc.evaluation.scorecard import TaskScore, aggregate
+from etmpc.systems import make_system, system_key, task_version
+
+FORMAT = "etmpc-scorecard"
+SAMPLE = 5  # episodes replayed per row by default
+TOLERANCE = 1e-9  # relative: a row's score against the mean of its episode scores (two summations)
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """What :func:`verify` found: every mismatch (one line each) and what it replayed."""
+
+    card: str
+    rows: int
+    replayed: int  # episodes played again
+    mismatches: list[str]
+
+    @property
+    def verified(self) -> bool:
+        return not self.mismatches
+
+
+def read_card(path: str | Path) -> dict:
+    return read_document(path, FORMAT, missing=f"card {path} not found", unreadable=f"card {path} cannot be read ({{error}})",
+                         foreign=f"{path} is not an etmpc scorecard (format {FORMAT!r}): make one with etmpc score --json")
+
+
+def _suite(card: dict, where: str) -> dict[str, References]:
+    """The references each task of ``card`` was scored against (raises :class:`EtmpcError`, one line, for a
+    card of another suite, task version or test set)."""
+    if card.get("suite_version") != SUITE_VERSION:
+        raise EtmpcError(f"{where} was made under suite version {card.get('suite_version')!r}; this etmpc's is "
+                         f"{SUITE_VERSION}: verify it with the etmpc it was made with")
+    tasks, versions, shown = card.get("tasks"), card.get("task_versions"), card.get("references")
+    if not (isinstance(tasks, list) and tasks and isinstance(versions, dict) and isinstance(shown, dict)):
+        raise EtmpcError(f"{where} names no tasks, task versions or references (made by an older etmpc?)")
+    references = {}
+    for task in tasks:
+        if versions.get(task) != task_version(task):
+            raise EtmpcError(f"{where} scored {task} at version {versions.get(task)!r}; this etmpc's is "
+                             f"{task_version(task)}")
+        ref = shown.get(task)
+        if not isinstance(ref, dict) or not ref.get("stored"):
+            raise EtmpcError(f"{where} scored {task} on another test set than the stored one: it is not a suite result")
+        episodes = ref.get("episodes")
+        if not (isinstance(episodes, int) and not isinstance(episodes, bool)):
+            raise EtmpcError(f"{where} gives {task} {episodes!r} episodes, not a count")
+        refs = stored(task, episodes)
+        if ref.get("test_set_sha256") != refs.test_set_sha256:
+            raise EtmpcError(f"{where} scored {task} on test set {str(ref.get('test_set_sha256'))[:12]}…, not the "
+                             f"stored {refs.test_set_sha256[:12]}…")
+        references[task] = refs
+    return references
+
+
+def _rows(card: dict, where: str) -> list[TaskScore]:
+    try:
+        rows = [TaskScore.from_json(row) for row in card["rows"]]
+    except (KeyError, TypeError, ValueError) as exc:
+        raise EtmpcError(f"{where} holds a row that is not a row ({exc!r})") from None
+    failed = [f"{r.policy} on {r.task}" for r in rows if r.error is not None]
+    if failed:
+        raise EtmpcError(f"{where} holds a failed row ({failed[0]}): there is nothing to verify")
+    foreign = [r.task for r in rows if r.task not in card["tasks"]]
+    if foreign:
+        raise EtmpcError(f"{where} holds a row of {foreign[0]!r}, which is not among its tasks")
+    return rows
+
+
+def _same(a, b) -> bool:
+    """Equal as the card stores numbers: NaN (JSON's null) equals NaN."""
+    return (isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b)) or a == b
+
+
+def _complete(row: TaskScore, refs: References) -> bool:
+    """``row`` has a score for each of the references' episodes (else nothing of it can be checked)."""
+    return row.episodes == refs.episodes == len(row.episode_scores)
+
+
+def _consistency(row: TaskScore, refs: References) -> list[str]:
+    """What in a complete ``row`` does not follow from its own episode scores."""
+    name = f"{row.task} {row.policy}"
+    s = np.asarray(row.episode_scores, dtype=float)
+    if row.reference != refs.best:
+        return [f"{name}: scored against {row.reference}, the references' best schedule is {refs.best}"]
+    if not np.all(np.isfinite(s)):
+        return [f"{name}: an episode score is not a number"]
+    found = []
+    if not math.isclose(row.score, float(np.mean(s)), rel_tol=TOLERANCE, abs_tol=TOLERANCE):
+        found.append(f"{name}: score {row.score!r} in the card, the mean of its episode scores is {float(np.mean(s))!r}")
+    ci = float(1.96 * np.std(s, ddof=1) / math.sqrt(s.size)) if s.size > 1 else math.nan
+    if not _same(row.score_ci95, ci):
+        found.append(f"{name}: 95 % CI {row.score_ci95!r} in the card, {ci!r} from its episode scores")
+    better = float(np.mean((s > 0) + 0.5 * (s == 0)))
+    if not _same(row.better_share, better):
+        found.append(f"{name}: better in {row.better_share!r} of the episodes in the card, {better!r} from its episode scores")
+    return found
+
+
+def _aggregates(card: dict, rows: list[TaskScore]) -> list[str]:
+    by_policy: dict[str, list[TaskScore]] = {}
+    for row in rows:
+        by_policy.setdefault(row.policy, []).append(row)
+    given = {a.get("policy"): a for a in card.get("aggregates", []) if isinstance(a, dict)}
+    found = []
+    for policy, mine in by_policy.items():
+        expected = {k: v for k, v in asdict(aggregate(mine)).items()}
+        stated = given.get(policy)
+        if stated is None:
+            found.append(f"{policy}: no aggregate in the card")
+            continue
+        for key, value in expected.items():
+            card_value = stated.get(key)
+            card_value = [math.nan if v is None else v for v in card_value] if isinstance(card_value, list) else \
+                (math.nan if card_value is None else card_value)
+            value = list(value) if isinstance(value, tuple) else value
+            pairs = zip(value, card_value) if isinstance(value, list) and isinstance(card_value, list) else [(value, card_value)]
+            if not all(_same(a, b) for a, b in pairs):
+                found.append(f"{policy}: aggregate {key} {stated.get(key)!r} in the card, {value!r} from its rows")
+    return found
+
+
+def sample(episodes: int, size: int, seed: int, row: int) -> list[int]:
+    """The episodes replayed of a row: ``size`` of ``episodes`` (0: all), drawn from ``seed`` and the row's index."""
+    if size == 0 or size >= episodes:
+        return list(range(episodes))
+    rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(row,)))
+    return sorted(int(e) for e in rng.choice(episodes, size=size, replace=False))
+
+
+def verify(path: str | Path, size: int = SAMPLE, seed: int = 0, workers: int = 1, progress: bool = False) -> Verdict:
+    """Check the card at ``path`` (see the module's docstring), replaying ``size`` episodes of each row
+    (0: all of them) drawn from ``seed``. A card that is not a suite result raises :class:`EtmpcError`."""
+    where = f"card {path}"
+    card = read_card(path)
+    references = _suite(card, where)
+    rows = _rows(card, where)
+    mismatches, replayable = [], []
+    for index, row in enumerate(rows):
+        if _complete(row, references[row.task]):
+            mismatches += [f"{path}: {line}" for line in _consistency(row, references[row.task])]
+            replayable.append(index)
+        else:
+            mismatches.append(f"{path}: {row.task} {row.policy}: {len(row.episode_scores)} episode scores for "
+                              f"{row.episodes} episodes; the references have {references[row.task].episodes}")
+    mismatches += [f"{path}: {line}" for line in _aggregates(card, rows)]
+    jobs, expected = [], []
+    for index in replayable:
+        row, refs = rows[index], references[rows[index].task]
+        key = system_key(row.task)
+        system = make_system(row.task)
+        try:
+            (policy,) = parse_policies(system, [row.policy]).values()
+        except EtmpcError as exc:
+            raise EtmpcError(f"{where}: cannot replay {row.policy} on {row.task}: {exc}") from None
+        testset = ts_mod.load(ts_mod.default_path(system.domain, system.task), system.domain, system.task)
+        for episode in sample(refs.episodes, size, seed, index):
+            jobs.append((key, None, testset.sha256, row.policy, policy, 0, episode, 0, False))
+            expected.append((row, refs, episode))
+    outcomes = run_jobs(jobs, workers, progress) if jobs else []
+    for (result, _, _), (row, refs, episode) in zip(outcomes, expected):
+        best, cost = refs.costs(refs.periodic[refs.best][episode]), refs.costs(result.objective)
+        replayed = float(100.0 * (best - cost) / refs.gap) if result.finite else math.nan
+        if not _same(replayed, row.episode_scores[episode]):
+            mismatches.append(f"{path}: {row.task} {row.policy} episode {episode}: score {row.episode_scores[episode]!r} "
+                              f"in the card, {replayed!r} replayed")
+    return Verdict(str(path), len(rows), len(jobs), mismatches)
