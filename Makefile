@@ -6,7 +6,7 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 export MUJOCO_GL ?= egl
 
-.PHONY: reproduce sweep leaderboard evaluate example test docs setup clean
+.PHONY: reproduce sweep leaderboard evaluate example test docs dist setup clean
 
 setup: $(VENV)/.installed
 
@@ -54,6 +54,13 @@ test: setup
 # builds it too (tests/test_docs.py); `$(BIN)/mkdocs serve` shows it while you write.
 docs: setup
 	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict
+
+# The release artifacts: the sdist and the wheel (built from the sdist) into dist/, then `twine check`
+# (the metadata, and the README as PyPI renders it). tests/test_packaging.py builds and checks them too.
+dist: setup
+	rm -rf dist
+	$(BIN)/python -m build --outdir dist .
+	$(BIN)/twine check --strict dist/*
 
 clean:
 	rm -rf $(VENV) results
