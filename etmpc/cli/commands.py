@@ -219,9 +219,8 @@ def _bench(args) -> None:
 
 def _verify(args) -> None:
     from etmpc.evaluation.verify import verify
-    from etmpc.evaluation.workers import default_workers
 
-    verdict = verify(args.card, args.sample, args.seed, args.workers or default_workers())
+    verdict = verify(args.card, args.sample, args.seed, args.workers)
     for line in verdict.mismatches:
         print(line)
     if not verdict.verified:

@@ -44,7 +44,8 @@ def build_parser() -> argparse.ArgumentParser:
                     help=f"{syntax()} (repeatable; oracle:BASE is an upper bound, not a policy)")
     ev.add_argument("--episodes", type=types.positive_int, default=None, help="first N test-set episodes (default: all)")
     ev.add_argument("--repeats", type=types.positive_int, default=1, help="passes over the test set (for stochastic policies)")
-    ev.add_argument("--workers", type=types.workers, default=None, help="worker processes (default: one per core)")
+    ev.add_argument("--workers", type=types.workers, default=None,
+                    help="worker processes (default: one for fewer than 32 episode runs, else one per core)")
     ev.add_argument("--seed", type=types.seed, default=0, help="seed of the policies' own randomness")
     ev.add_argument("--price", type=types.price, default=None, metavar="P",
                     help="price of a computation in the objective (default: the system's, 5e-5 for the cart "
@@ -153,7 +154,7 @@ def build_parser() -> argparse.ArgumentParser:
     vf.add_argument("--sample", type=types.non_negative_int, default=5, metavar="N",
                     help="episodes replayed per row (default 5; 0: every episode)")
     vf.add_argument("--seed", type=types.seed, default=0, help="the seed the sample is drawn from")
-    vf.add_argument("--workers", type=types.workers, default=None, help="worker processes (default: one per core)")
+    vf.add_argument("--workers", type=types.workers, default=None, help="worker processes (default: one for fewer than 32 episodes to replay, else one per core)")
 
     tst = sub.add_parser("testset", help="draw a test set: N episodes of a task from a seed, with its sha256 (for --test-set)")
     tst.add_argument("task", help=f"task to draw episodes of: {tasks}")

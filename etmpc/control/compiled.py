@@ -23,6 +23,7 @@ import os
 import platform
 import shutil
 import subprocess
+import sys
 import tempfile
 from pathlib import Path
 
@@ -90,6 +91,11 @@ def _build(source: str, library: Path, digest_file: Path, cc: str) -> None:
         os.replace(pending, digest_file)
 
 
+def _described(name: str) -> str:
+    """``cart_pendulum_mpc`` as ``cart_pendulum MPC``; another function by its name."""
+    return f"{name.removesuffix('_mpc')} MPC" if name.endswith("_mpc") else f"{name} code"
+
+
 def library_for(function: ca.Function, cache: Path | None = None) -> Path:
     """The shared library of ``function``'s generated C code: from the cache if valid, else built."""
     cache = cache_dir() if cache is None else Path(cache)
@@ -114,6 +120,10 @@ def library_for(function: ca.Function, cache: Path | None = None) -> Path:
         if not _valid(library, digest_file):
             with contextlib.suppress(FileNotFoundError):
                 digest_file.unlink()  # the library is about to change: its old digest must not vouch for it
+            # Said by the one process that builds (under the lock: another that waited finds it built), so a
+            # first run is not silent for the half minute a build takes.
+            print(f"etmpc: compiling the {_described(function.name())} to C once (about 20-30 s; cached in {cache})",
+                  file=sys.stderr, flush=True)
             _build(source, library, digest_file, cc)
     return library
 

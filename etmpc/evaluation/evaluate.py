@@ -9,6 +9,7 @@ processes and gathered back in order, so the numbers do not depend on the number
 from __future__ import annotations
 
 import contextlib
+import io
 import math
 import os
 import pickle
@@ -29,7 +30,8 @@ from etmpc.views.record import EpisodeRecord
 from etmpc.views.recording import Recorder
 from etmpc.systems import SystemKey, system_key
 from etmpc.evaluation.inputs import check_run_outputs, check_shipped, run_inputs
-from etmpc.evaluation.workers import BACKENDS, default_workers, make_backend, play_test_episode
+from etmpc.evaluation.mainscript import refuse_in_rerun_main, unimportable_main
+from etmpc.evaluation.workers import BACKENDS, make_backend, play_test_episode, workers_for
 
 
 @dataclass(frozen=True)
@@ -241,9 +243,29 @@ def check_policies(policies) -> None:
         raise EtmpcError("policies: the list is empty; give at least one policy (a spec such as 'every:3', or an object)")
 
 
+class MainOnlyError(EtmpcError):
+    """A policy whose class lives in a ``__main__`` that worker processes cannot re-create."""
+
+
+class _MainReferences(pickle.Pickler):
+    """A pickler that notes the classes and functions of ``__main__`` that it pickles by name."""
+
+    def __init__(self, file):
+        super().__init__(file)
+        self.found: list[str] = []
+
+    def persistent_id(self, obj):
+        if isinstance(obj, type) or callable(obj) and hasattr(obj, "__qualname__"):
+            if getattr(obj, "__module__", None) == "__main__":
+                self.found.append(obj.__qualname__)
+        return None
+
+
 def check_picklable(spec: str, policy, backend: str = "local") -> None:
     """Raise :class:`EtmpcError` unless ``policy`` goes to a worker process and back: pickled, or with
-    the ``ray`` backend cloudpickled (as Ray sends it)."""
+    the ``ray`` backend cloudpickled (as Ray sends it). Pickle names a class by its module, so a class
+    of a ``__main__`` that a spawned worker cannot re-create (``python -c``, stdin, a notebook) round-trips
+    here but not there: refused too (Ray's cloudpickle sends such a class by value)."""
     dumps = pickle.dumps
     if backend == "ray":
         with contextlib.suppress(ImportError):
@@ -251,13 +273,25 @@ def check_picklable(spec: str, policy, backend: str = "local") -> None:
 
             dumps = cloudpickle.dumps
     try:
-        pickle.loads(dumps(policy))
+        if backend == "local":
+            buffer = io.BytesIO()
+            pickler = _MainReferences(buffer)
+            pickler.dump(policy)
+            data = buffer.getvalue()
+        else:
+            data, pickler = dumps(policy), None
+        pickle.loads(data)
     except BaseException as exc:
         if genuine(exc):
             raise
         raise EtmpcError(f"policy {spec} cannot be sent to worker processes ({described(exc)}): use --workers 1 "
                          "(workers=1 in Python), or make it picklable (its class at the top level of a module, "
                          "no lambdas, open files or locks in it)") from None
+    where = unimportable_main() if pickler is not None and pickler.found else None
+    if where is not None:
+        raise MainOnlyError(f"policy {spec}: {pickler.found[0]} is defined in __main__ ({where}), which worker "
+                            'processes cannot import: define it in a module (or a script run under `if __name__ == '
+                            '"__main__":`), or use workers=1')
 
 
 def parse_policies(system, policies: list) -> dict:
@@ -282,6 +316,7 @@ def parse_policies(system, policies: list) -> dict:
 
 def _evaluate(domain, policies, episodes, repeats, workers, seed, testset_path, progress, backend, address, record,
               recompute_price) -> Evaluation:
+    refuse_in_rerun_main()  # a worker spawned from a script without a __main__ guard, re-running it: not again
     check_arguments(domain, policies, episodes, repeats, workers, seed, testset_path, progress, backend, address,
                     record, recompute_price)
     key = system_key(domain, recompute_price)  # the task and the price, checked once: every worker builds from it
@@ -291,16 +326,24 @@ def _evaluate(domain, policies, episodes, repeats, workers, seed, testset_path, 
     policies = list(parsed)
     if record is not None:  # the API's check of what the command line checks before calling (no input overwritten)
         check_run_outputs({"record": record}, inputs=run_inputs(policies, testset_path))
-    workers = default_workers() if workers is None else workers
-    if workers > 1 or backend != "local":
-        for spec, policy in parsed.items():
-            check_picklable(spec, policy, backend)
     path = testset_path or str(ts_mod.default_path(system.domain, system.task))
     testset = ts_mod.load(path, system.domain, system.task)
     testset.check_playable(system, system.make_env().task)  # a bad episode fails here, before any work
     episodes = testset.episodes if episodes is None else episodes
     if not 1 <= episodes <= testset.episodes:
         raise ts_mod.TestSetError(f"--episodes must be in 1..{testset.episodes} for this test set, got {episodes}")
+    # By default, one worker (this process) for a small run, where starting workers costs more than it saves;
+    # and for a policy of a __main__ that workers cannot re-create (python -c, a notebook): it can only run here.
+    chosen = workers is None
+    workers = workers_for(len(policies) * repeats * episodes) if chosen else workers
+    if workers > 1 or backend != "local":
+        try:
+            for spec, policy in parsed.items():
+                check_picklable(spec, policy, backend)
+        except MainOnlyError:
+            if not chosen:
+                raise
+            workers = 1
     # Workers find the stored test set themselves (a cluster node's install may live elsewhere) and
     # check that its digest is the one verified here.
     recorder = Recorder(record) if record is not None else None  # a bad path fails before any work

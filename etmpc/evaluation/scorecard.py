@@ -52,6 +52,7 @@ from etmpc.evaluation.evaluate import Evaluation, check_policies, evaluate, pars
 from etmpc.evaluation.inputs import check_run_outputs, run_inputs
 from etmpc.evaluation.references import (SUITE_VERSION, References, build_references, mean, references_path,
                                          software, stored)
+from etmpc.evaluation.mainscript import UnguardedScript
 from etmpc.evaluation.workers import shared_pools
 from etmpc.systems import distinct, make_system, names, task_version
 
@@ -297,6 +298,8 @@ def play_and_score(task: str, refs: References, policy, test_set: str | None = N
     fails (bad spec, its own error) gives a row that says so."""
     try:
         evaluation = evaluate(task, [policy], refs.episodes, workers=workers, testset_path=test_set, progress=progress)
+    except UnguardedScript:  # the script's error, not the trigger's: no row can be played
+        raise
     except EtmpcError as exc:  # the row says so (the table shows it): the command's own line says which rows failed
         return failed_task(task, _name(policy), str(exc))
     return task_score(refs, evaluation, evaluation.summaries[0].policy)

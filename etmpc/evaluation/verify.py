@@ -32,6 +32,7 @@ from etmpc.evaluation import testsets as ts_mod
 from etmpc.evaluation.evaluate import parse_policies, run_jobs
 from etmpc.evaluation.references import SUITE_VERSION, References, stored
 from etmpc.evaluation.scorecard import TaskScore, aggregate
+from etmpc.evaluation.workers import workers_for
 from etmpc.systems import make_system, system_key, task_version
 
 FORMAT = "etmpc-scorecard"
@@ -161,9 +162,12 @@ def sample(episodes: int, size: int, seed: int, row: int) -> list[int]:
     return sorted(int(e) for e in rng.choice(episodes, size=size, replace=False))
 
 
-def verify(path: str | Path, size: int = SAMPLE, seed: int = 0, workers: int = 1, progress: bool = False) -> Verdict:
+def verify(path: str | Path, size: int = SAMPLE, seed: int = 0, workers: int | None = None,
+           progress: bool = False) -> Verdict:
     """Check the card at ``path`` (see the module's docstring), replaying ``size`` episodes of each row
-    (0: all of them) drawn from ``seed``. A card that is not a suite result raises :class:`EtmpcError`."""
+    (0: all of them) drawn from ``seed`` on ``workers`` processes (default: by the work,
+    :func:`~etmpc.evaluation.workers.workers_for`). A card that is not a suite result raises
+    :class:`EtmpcError`."""
     where = f"card {path}"
     card = read_card(path)
     references = _suite(card, where)
@@ -190,7 +194,7 @@ def verify(path: str | Path, size: int = SAMPLE, seed: int = 0, workers: int = 1
         for episode in sample(refs.episodes, size, seed, index):
             jobs.append((key, None, testset.sha256, row.policy, policy, 0, episode, 0, False))
             expected.append((row, refs, episode))
-    outcomes = run_jobs(jobs, workers, progress) if jobs else []
+    outcomes = run_jobs(jobs, workers or workers_for(len(jobs)), progress) if jobs else []
     for (result, _, _), (row, refs, episode) in zip(outcomes, expected):
         best, cost = refs.costs(refs.periodic[refs.best][episode]), refs.costs(result.objective)
         replayed = float(100.0 * (best - cost) / refs.gap) if result.finite else math.nan
