@@ -9,10 +9,16 @@ diverged plant's are clipped to that range, never NaN). ``reset(seed=S)`` draws 
 task's time limit, ``terminated`` only when the plant fails. ``info`` holds the step's
 ``control_reward`` and ``computation_cost`` (the reward is their difference), whether it
 ``recompute``-d and whether that was ``forced``. See :mod:`etmpc.envs.trigger` for the rest.
+
+``normalize="policies/<task>/ppo.json"`` hands out the observation normalised as that trained policy
+saw it (:class:`~etmpc.envs.normalization.Normalization`: ``VecNormalize``'s statistics, frozen, read
+from JSON): ``PPO.load`` of the shipped ``ppo.zip`` then decides on it as ``sb3:`` does. The spaces
+stay the same (so ``PPO.load(path, env=env)`` takes it); ``info["observation"]`` is the raw one then.
 """
 
 from __future__ import annotations
 
+import os
 from collections.abc import Mapping
 
 import gymnasium
@@ -20,6 +26,7 @@ import numpy as np
 from gymnasium import spaces
 
 from etmpc.common.checks import BadValue
+from etmpc.envs.normalization import Normalization
 from etmpc.envs.trigger import TriggerEnvironment
 from etmpc.systems import SystemKey
 
@@ -37,7 +44,8 @@ class TriggerEnv(gymnasium.Env):
     metadata = {"render_modes": []}
 
     def __init__(self, task: str | SystemKey = "cart_pendulum", recompute_price: float | None = None, test_set: str | None = None,
-                 reward_baseline: str | None = None):
+                 reward_baseline: str | None = None, normalize: str | os.PathLike | None = None):
+        self.normalization = None if normalize is None else Normalization.read(normalize, task)  # before the MPC is built
         self.core = TriggerEnvironment(task, recompute_price=recompute_price, test_set=test_set,
                                        reward_baseline=reward_baseline)
         self.observation_names = self.core.observation_names
@@ -58,7 +66,7 @@ class TriggerEnv(gymnasium.Env):
         if options:
             raise ValueError(f"unknown reset options {sorted(options)}; known: test_episode")
         timestep = self.core.reset(test_episode=test_episode)
-        return timestep.observation, dict(self.core.info)
+        return self._observed(timestep.observation)
 
     def step(self, action):
         if self.core.loop.done:
@@ -66,4 +74,12 @@ class TriggerEnv(gymnasium.Env):
         timestep = self.core.step(action)
         terminated = timestep.last() and timestep.discount == 0.0
         truncated = timestep.last() and not terminated
-        return timestep.observation, float(timestep.reward), terminated, truncated, dict(self.core.info)
+        obs, info = self._observed(timestep.observation)
+        return obs, float(timestep.reward), terminated, truncated, info
+
+    def _observed(self, obs: np.ndarray) -> tuple[np.ndarray, dict]:
+        """The observation handed out (normalised with ``normalize``) and the step's ``info``."""
+        info = dict(self.core.info)
+        if self.normalization is None:
+            return obs, info
+        return self.normalization(obs), info | {"observation": obs}

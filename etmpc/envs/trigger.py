@@ -45,6 +45,7 @@ from etmpc.evaluation import testsets
 from etmpc.loop import ClosedLoop
 from etmpc.policies import parse_policy
 from etmpc.policies.features import observation, observation_names
+from etmpc.policies.sb3 import finite_observation
 from etmpc.policies.specs import find
 from etmpc.systems import SystemKey, system_key
 
@@ -211,10 +212,8 @@ class TriggerEnvironment(dm_env.Environment):
         return self.system.episode_from_arrays(self._test_set.episode_arrays(check_index(index, "the index")))
 
     def _observation(self) -> np.ndarray:
-        obs = observation(self.system.name, self.loop.observed_state(), self._size)
-        if not np.isfinite(obs.sum()):  # a diverged plant: clipped to the float32 range, NaN as 0
-            obs = np.nan_to_num(obs, nan=0.0, posinf=np.finfo(np.float32).max, neginf=np.finfo(np.float32).min)
-        return obs
+        # a diverged plant's: clipped to the float32 range, NaN as 0, as sb3: sees it too (the same function)
+        return finite_observation(observation(self.system.name, self.loop.observed_state(), self._size))
 
     @property
     def episode_return(self) -> float:

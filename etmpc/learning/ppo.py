@@ -8,7 +8,8 @@ how many), observations and rewards normalised by ``VecNormalize``, and the rewa
 fixed schedule when ``env_kwargs`` names one (``reward_baseline``: see :mod:`etmpc.envs.trigger`).
 After each of ``checkpoints`` equal slices of the budget the network is saved
 (``checkpoints/step_<n>.zip``, byte for byte the same for the same training: :func:`save_model`, and
-beside it the ``.json`` that ``sb3:PATH`` reads: the task and the frozen normalisation) and scored
+beside it the ``.json`` that ``sb3:PATH`` reads: the task and the frozen normalisation, written by
+:func:`etmpc.envs.save_normalization`; ``gymnasium.make(ID, normalize=JSON)`` applies it) and scored
 on ``validation_episodes`` training-distribution episodes, drawn as ``etmpc train`` draws its own
 (never the test set). The best becomes ``selected.zip`` / ``selected.json``; ``training.json`` keeps
 the settings, the validation scores, the environment and simulated steps and the wall time.
@@ -37,7 +38,9 @@ from etmpc.common.outputs import refuse_foreign, write_json
 from etmpc.evaluation.workers import make_backend
 from etmpc.learning.config import VALIDATION_ENTROPY
 from etmpc.learning.jobs import mean_scores
-from etmpc.policies.sb3 import FORMAT, metadata_path
+from etmpc.envs.normalization import save_normalization
+from etmpc.policies.features import observation_names
+from etmpc.policies.sb3 import metadata_path
 from etmpc.systems import SystemKey, system_key
 
 
@@ -223,7 +226,8 @@ def train_ppo(task: str | SystemKey, out: Path, settings: PpoSettings = PpoSetti
                     batch_size=min(settings.batch_size, rollout), n_epochs=settings.n_epochs, learning_rate=settings.learning_rate,
                     gamma=settings.gamma, gae_lambda=settings.gae_lambda, clip_range=settings.clip_range,
                     ent_coef=settings.ent_coef, policy_kwargs={"net_arch": list(settings.hidden)}, verbose=0)
-    names = list(vec.get_attr("observation_names")[0])
+    if list(vec.get_attr("observation_names")[0]) != list(observation_names(system.name, system.state_names)):
+        raise EtmpcError(f"{key.task}: the environment's observation is not the one sb3: computes")
     checkpoints, started = [], time.perf_counter()
     (out / "checkpoints").mkdir(parents=True, exist_ok=True)
     try:
@@ -232,11 +236,8 @@ def train_ppo(task: str | SystemKey, out: Path, settings: PpoSettings = PpoSetti
                 model.learn(total_timesteps=int(steps), reset_num_timesteps=False)
                 path = out / "checkpoints" / f"step_{model.num_timesteps:08d}.zip"
                 save_model(model, path)
-                write_json(metadata_path(path), {
-                    "format": FORMAT, "version": 1, "task": key.task, "algorithm": "ppo",
-                    "observation_names": names, "observation_mean": vec.obs_rms.mean.tolist(),
-                    "observation_var": vec.obs_rms.var.tolist(), "recompute_price": system.recompute_price,
-                    "timesteps": int(model.num_timesteps), "settings": _json(settings)})
+                save_normalization(vec, key, metadata_path(path), recompute_price=system.recompute_price,
+                                   timesteps=int(model.num_timesteps), settings=_json(settings))
                 score = mean_scores(pool, key, [f"sb3:{path}"], VALIDATION_ENTROPY, settings.validation_episodes)[0]
                 simulated = int(sum(vec.get_attr("simulated_steps")))  # the baseline's steps too
                 checkpoints.append({"timesteps": int(model.num_timesteps), "simulated_steps": simulated,

@@ -3,8 +3,17 @@
 ``PATH`` is the model's ``.zip`` (``stable_baselines3.PPO.save``); beside it, ``PATH`` with the suffix
 ``.json`` says what it was trained on: the task, the observation's names, and the running mean and
 variance of the observations it was normalised with while training (``VecNormalize``'s, frozen). The
-policy computes the environment's observation (:func:`etmpc.policies.features.observation`),
-normalises it the same way and takes the network's likelier action (deterministic: it draws nothing).
+policy computes the environment's observation (:func:`etmpc.policies.features.observation`, made
+finite as the environment makes it: :func:`finite_observation`), normalises it the same way
+(:func:`normalise`, what ``gymnasium.make(ID, normalize=JSON)`` applies too) and takes the network's
+likelier action (deterministic: it draws nothing).
+
+Without the ``.json`` (a model saved by a plain ``model.save(PATH)``), the policy is evaluated on the
+task it is given and sees the raw observation, as a model trained on the plain environment saw it; its
+observation size is checked against the task's. A model trained behind ``VecNormalize`` (its zip keeps
+the last un-normalised observation, ``_last_original_obs``) is refused then: its statistics are not in
+the zip (``etmpc.envs.save_normalization`` writes the ``.json``). A normalising ``gymnasium`` wrapper
+leaves no such trace: such a model needs its ``.json`` too.
 
 A policy file is data, never code. ``PPO.load`` unpickles every ``:serialized:`` entry of the zip's
 ``data``, so a file could run anything in every process that loads it; here nothing of it is
@@ -62,6 +71,23 @@ def metadata_path(model: Path) -> Path:
     return Path(model).with_suffix(".json")
 
 
+def finite_observation(obs: np.ndarray) -> np.ndarray:
+    """The trigger environment's observation as it hands it out: a diverged plant's features clipped to
+    the float32 range, NaN as 0 (unchanged, the same array, when all are finite)."""
+    if np.isfinite(obs.sum()):
+        return obs
+    return np.nan_to_num(obs, nan=0.0, posinf=np.finfo(np.float32).max, neginf=np.finfo(np.float32).min)
+
+
+def normalise(obs: np.ndarray, mean: np.ndarray | None, scale: np.ndarray | None) -> np.ndarray:
+    """What the network sees of the environment's observation ``obs``: ``VecNormalize``'s frozen
+    ``clip((obs - mean) / scale, -10, 10)`` as float32, ``scale = sqrt(var + 1e-8)`` (float64 ``mean`` and
+    ``scale``); ``obs`` itself as float32 without a normalisation (``mean`` None)."""
+    if mean is None:
+        return np.asarray(obs, dtype=np.float32)
+    return np.clip((obs - mean) / scale, -CLIP, CLIP).astype(np.float32)
+
+
 class Network:
     """The actor of a PPO ``MlpPolicy``: ``hidden`` layers ``h = tanh(W h + b)``, then the action logits
     ``W h + b`` (``head``); the deterministic action is the larger logit's (SB3's Categorical mode).
@@ -110,24 +136,31 @@ def _exact_layer(weight: np.ndarray, bias: np.ndarray, h: np.ndarray) -> np.ndar
 
 class SB3Policy:
     """A Stable-Baselines3 model as a recomputation policy (see the module's docstring). It pickles
-    with its network's numpy weights: a worker process decides without reading the file again."""
+    with its network's numpy weights: a worker process decides without reading the file again.
+    ``mean`` and ``var`` None: the raw observation (a model trained on the plain environment)."""
 
     stochastic: ClassVar[bool] = False
     observes: ClassVar[bool] = True
 
-    def __init__(self, path: str | Path, task: str, mean: np.ndarray, var: np.ndarray, network: Network):
+    def __init__(self, path: str | Path, task: str, mean: np.ndarray | None, var: np.ndarray | None, network: Network):
         self.path, self.task, self.network = Path(path), task, network
-        self.mean, self.scale = np.asarray(mean, float), np.sqrt(np.asarray(var, float) + EPSILON)
+        self.mean = None if mean is None else np.asarray(mean, float)
+        self.scale = None if var is None else np.sqrt(np.asarray(var, float) + EPSILON)
         self.domain = system_class(task).name
-        self._size = self.mean.size
+        self._size = (network.hidden[0][0] if network.hidden else network.head[0]).shape[1]
+
+    @property
+    def normalises(self) -> bool:
+        """Whether the observation is normalised (a ``.json`` beside the model), or seen raw."""
+        return self.mean is not None
 
     @property
     def spec(self) -> str:
         return f"sb3:{self.path}"
 
     def normalised(self, s: AugmentedState) -> np.ndarray:
-        obs = (observation(self.domain, s, self._size) - self.mean) / self.scale
-        return np.clip(obs, -CLIP, CLIP).astype(np.float32)
+        """What the network sees at ``s``: the environment's observation, normalised (:func:`normalise`)."""
+        return normalise(finite_observation(observation(self.domain, s, self._size)), self.mean, self.scale)
 
     def decide(self, s: AugmentedState, rng: np.random.Generator) -> bool:
         return self.network.action(self.normalised(s)) == 1
@@ -184,15 +217,21 @@ def _entries(path: Path) -> tuple[bytes, bytes]:
             raise EtmpcError(f"{not_a_model} (its zip cannot be read: {described(exc)})") from None
 
 
-def _architecture(path: Path, data: bytes, size: int) -> list[int]:
-    """The widths of the policy's hidden layers, from the zip's ``data`` read as JSON, if it is PPO's
-    ``MlpPolicy`` on ``size`` observations and two actions; else :class:`EtmpcError`."""
+def _fields(path: Path, data: bytes) -> dict:
+    """The zip's ``data``, read as JSON (a ``:serialized:`` value stays the base64 text it is)."""
     try:
         fields = json.loads(data)
     except (ValueError, RecursionError) as exc:
         raise EtmpcError(f"sb3:{path} is not a Stable-Baselines3 model (its data is not JSON: {described(exc)})") from None
     if not isinstance(fields, dict):
         raise EtmpcError(f"sb3:{path} is not a Stable-Baselines3 model (its data is not a JSON object)")
+    return fields
+
+
+def _architecture(path: Path, data: bytes, size: int) -> list[int]:
+    """The widths of the policy's hidden layers, from the zip's ``data`` read as JSON, if it is PPO's
+    ``MlpPolicy`` on ``size`` observations and two actions; else :class:`EtmpcError`."""
+    fields = _fields(path, data)
     policy_class = fields.get("policy_class")
     try:
         named, only = pickled_globals(policy_class.get(":serialized:") if isinstance(policy_class, dict) else None)
@@ -306,17 +345,11 @@ def open_network(path: Path, algorithm: str, size: int) -> Network:
     return _network(path, _state_dict(path, blob), widths, size)
 
 
-def load_sb3(path: str, task: str | None) -> SB3Policy:
-    """``sb3:PATH``, checked against ``task`` (the one it is evaluated on), and loaded once here so that
-    a file that is not a model fails before any work starts."""
-    model = Path(path)
-    if model.suffix == ".json":
-        raise EtmpcError(f"sb3:{model} is the model's description; give the model itself, sb3:{model.with_suffix('.zip')}")
-    if not model.is_file():
-        raise EtmpcError(f"policy file {model} not found")
-    meta_file = metadata_path(model)
-    meta = read_document(meta_file, FORMAT, missing=f"{model} has no {meta_file.name} beside it (what it was trained on)",
-                         unreadable=f"{meta_file} cannot be read ({{error}})",
+def read_description(meta_file: Path, task: str | None, trained: str, missing: str) -> tuple[str, np.ndarray, np.ndarray, dict]:
+    """The task, the observation's mean and variance and the whole of an etmpc description (``sb3:``'s
+    ``.json`` beside a model, what ``normalize=`` reads), checked against ``task`` if given (``trained``
+    names what was trained in that message, ``missing`` is the message of a missing file)."""
+    meta = read_document(meta_file, FORMAT, missing=missing, unreadable=f"{meta_file} cannot be read ({{error}})",
                          foreign=f"{meta_file} is not an etmpc Stable-Baselines3 policy (format {FORMAT!r})")
     try:
         trained_on = canonical(str(meta["task"]))
@@ -326,12 +359,39 @@ def load_sb3(path: str, task: str | None) -> SB3Policy:
     except (KeyError, TypeError, ValueError) as exc:
         raise EtmpcError(f"{meta_file} is corrupt ({exc!r})") from None
     if task is not None and canonical(task) != trained_on:
-        raise EtmpcError(f"policy {model} was trained on {trained_on!r}, not {canonical(task)!r}")
+        raise EtmpcError(f"{trained} was trained on {trained_on!r}, not {canonical(task)!r}")
     if names != observation_names(cls.name, cls.state_names) or mean.shape != var.shape or mean.shape != (len(names),):
         raise EtmpcError(f"{meta_file}: its observation does not match the task's")
     if not (np.all(np.isfinite(mean)) and np.all(np.isfinite(var)) and np.all(var >= 0)):
         raise EtmpcError(f"{meta_file} has non-finite or negative normalisation")
+    return trained_on, mean, var, meta
+
+
+def load_sb3(path: str, task: str | None) -> SB3Policy:
+    """``sb3:PATH``, checked against ``task`` (the one it is evaluated on), and loaded once here so that
+    a file that is not a model fails before any work starts. Without ``PATH.json``: on ``task``, on the
+    raw observation, unless the zip shows it was trained behind ``VecNormalize`` (see the module's docstring)."""
+    model = Path(path)
+    if model.suffix == ".json":
+        raise EtmpcError(f"sb3:{model} is the model's description; give the model itself, sb3:{model.with_suffix('.zip')}")
+    if not model.is_file():
+        raise EtmpcError(f"policy file {model} not found")
+    meta_file = metadata_path(model)
+    missing = f"{model} has no {meta_file.name} beside it (what it was trained on)"
+    if task is not None and not meta_file.exists():
+        return _raw(model, canonical(task), missing)
+    trained_on, mean, var, meta = read_description(meta_file, task, f"policy {model}", missing)
     algorithm = meta.get("algorithm", "ppo")
     if not isinstance(algorithm, str):
         raise EtmpcError(f"{meta_file} is corrupt (algorithm {algorithm!r} is not a name)")
     return SB3Policy(model, trained_on, mean, var, open_network(model, algorithm, mean.size))
+
+
+def _raw(model: Path, task: str, missing: str) -> SB3Policy:
+    """A model with no description, on ``task``'s raw observation; refused if it was trained behind ``VecNormalize``."""
+    if _fields(model, _entries(model)[0]).get("_last_original_obs") is not None:
+        raise EtmpcError(f"{missing}, and it was trained behind VecNormalize, whose statistics its zip does not keep: "
+                         f"write them with etmpc.envs.save_normalization(vec_normalize, {task!r}, "
+                         f"{str(metadata_path(model))!r})")
+    cls = system_class(task)
+    return SB3Policy(model, task, None, None, open_network(model, "ppo", len(observation_names(cls.name, cls.state_names))))
