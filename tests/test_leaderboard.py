@@ -84,3 +84,23 @@ def test_a_row_is_played_again_when_the_policy_file_behind_its_spec_changed(tmp_
     policy.write_text(json.dumps(data))
     changed, _ = leaderboard._row(entry, "cart_pendulum", refs, tmp_path / "work", 1, 1, lambda line: None)
     assert len(played) == 2 and changed.episode_scores != first.episode_scores
+
+
+def test_a_verified_card_joins_as_a_row_and_a_forged_one_is_refused_before_any_row(board, monkeypatch, tmp_path):
+    from etmpc.cli import main
+    from etmpc.common.errors import EtmpcError
+
+    out, data = board
+    card = tmp_path / "card.json"
+    assert main(["score", "every:2", "--task", "battery", "--episodes", "2", "--workers", "1", "--json", str(card)]) == 0
+    monkeypatch.setattr(leaderboard, "play_and_score", lambda *a, **k: pytest.fail("a row was played"))
+    monkeypatch.setattr(leaderboard, "best_threshold", lambda task, workers, say: data["entries"][2]["specs"][task])
+    joined = build(tmp_path / "docs", out / "work", ["battery"], episodes=2, workers=1, cards=[card])
+    entry = next(e for e in joined["entries"] if e["name"] == "every:2 (submitted)")
+    assert entry["kind"] == "submitted" and entry["specs"] == {"battery": "every:2"}
+    assert entry["rows"][0]["episode_scores"] == json.loads(card.read_text())["rows"][0]["episode_scores"]
+    forged = json.loads(card.read_text())
+    forged["rows"][0]["score"] += 10.0
+    (tmp_path / "forged.json").write_text(json.dumps(forged))
+    with pytest.raises(EtmpcError, match="does not verify"):
+        build(tmp_path / "docs", out / "work", ["battery"], episodes=2, workers=1, cards=[tmp_path / "forged.json"])

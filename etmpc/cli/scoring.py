@@ -16,6 +16,19 @@ REFERENCES_OUT = Path("results") / "references"  # where --references writes, un
 LEADERBOARD_OUT = Path("docs")
 
 
+class _LeaderboardHelp(str):
+    """``--leaderboard``'s help, naming the leaderboard's rows from :mod:`etmpc.experiments.leaderboard` (imported
+    only when the help is shown: it is a heavy import)."""
+
+    def __mod__(self, params):
+        from etmpc.experiments.leaderboard import row_names
+
+        rows = ", ".join(row_names()).replace("%", "%%")
+        return (f"score every built-in trigger ({rows}; a shipped learner where policies/<task>/ holds it; the oracle "
+                "is the clairvoyant reference, 100) and write DIR/leaderboard.md, .json and the profile figure (make "
+                "leaderboard)") % params
+
+
 def add_parser(sub, tasks: str) -> None:
     """The ``score`` subcommand's options, on the command line's subparsers ``sub``."""
     sc = sub.add_parser("score", help="score triggers on every task against the suite's fixed references: the scorecard")
@@ -30,15 +43,19 @@ def add_parser(sub, tasks: str) -> None:
     sc.add_argument("--json", type=types.json_path, default=None, metavar="PATH", help="write the scorecard as JSON")
     sc.add_argument("--figure", type=types.png_path, default=None, metavar="PATH.png",
                     help="also draw the triggers' performance profiles (share of episodes above each score)")
-    sc.add_argument("--workers", type=types.workers, default=None, help="worker processes (default: one per core)")
+    sc.add_argument("--workers", type=types.workers, default=None,
+                    help="worker processes (default: one per task for fewer than 32 episodes, else one per core)")
     sc.add_argument("--leaderboard", action="store_true",
-                    help="score every built-in trigger (always, best periodic, best threshold, shipped DPI, rollout meter, "
-                         "oracle) and write DIR/leaderboard.md, .json and the profile figure (make leaderboard)")
+                    help=_LeaderboardHelp("score every built-in trigger and write DIR/leaderboard.md, .json and the "
+                                          "profile figure (make leaderboard)"))
     sc.add_argument("--out", type=Path, default=None, metavar="DIR",
                     help=f"with --leaderboard: where the page goes (default {LEADERBOARD_OUT}); finished rows are kept in "
                          f"results/leaderboard, so an interrupted run continues. With --references: where the rebuilt "
                          f"files go (default {REFERENCES_OUT}; DIR/DOMAIN/TASK_references.json: copy one over the stored "
                          "file to ship it)")
+    sc.add_argument("--card", type=Path, action="append", default=None, metavar="CARD.json",
+                    help="with --leaderboard: add the triggers of a scorecard made elsewhere (etmpc score --json, every "
+                         "task on its whole test set) as rows, once it verifies (etmpc verify; repeatable)")
     sc.add_argument("--readme", type=Path, default=None, metavar="PATH",
                     help="with --leaderboard: also rewrite this README's table between its leaderboard markers")
     sc.add_argument("--references", action="store_true",
@@ -56,8 +73,8 @@ def run(args) -> None:
     tasks = distinct(args.task or names())
     if args.leaderboard:
         return _leaderboard(args, tasks)
-    if args.readme is not None:
-        raise EtmpcError("--readme is --leaderboard's")
+    if args.readme is not None or args.card is not None:
+        raise EtmpcError("--readme and --card are --leaderboard's")
     if args.references:
         if args.policy or args.test_set is not None or args.json is not None or args.figure is not None:
             raise EtmpcError("--references rebuilds the stored references only: no SPEC, --test-set, --json or --figure "
@@ -108,8 +125,12 @@ def _leaderboard(args, tasks: list[str]) -> None:
     out = args.out or LEADERBOARD_OUT
     if args.readme is not None:
         check_readme(args.readme)
-    check_run_outputs({}, {"--out": out, "the kept rows' directory": WORK})
-    data = build(out, WORK, tasks, args.episodes, args.workers or default_workers(), args.readme, say=_say)
+    cards = args.card or []
+    for card in cards:
+        if not card.is_file():
+            raise EtmpcError(f"--card {card} not found")
+    check_run_outputs({}, {"--out": out, "the kept rows' directory": WORK}, {f"--card {c}": c for c in cards})
+    data = build(out, WORK, tasks, args.episodes, args.workers or default_workers(), args.readme, say=_say, cards=cards)
     print(headline(data))
     print(f"wrote {out}/leaderboard.md, leaderboard.json and leaderboard_profile.png"
           + (f"; the table in {args.readme}" if args.readme is not None else ""))

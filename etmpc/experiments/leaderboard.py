@@ -11,7 +11,10 @@ The entries, each one spec per task (:func:`entries`):
   paper's tasks), **DPI** (``learned.json``) and **PPO** (``ppo.zip``), each where it is shipped;
 * **rollout meter**: ``rollout:BEST:4:H``, the one-step lookahead over sampled futures with the task's
   lookahead ``H``: a real policy, and the costliest to run (its CPU column shows it);
-* **oracle**: ``oracle:BEST`` (its reference: 100), which knows each episode's future.
+* **oracle**: ``oracle:BEST`` (its reference: 100), the clairvoyant reference: a one-step lookahead over the best
+  periodic schedule with each episode's future known. Not a policy, and no bound on every trigger: it bounds a
+  one-step lookahead over that schedule, so a trigger that saves computations it spends can score above 100 (the
+  page says, per task, where and why).
 
 Each (entry, task) is scored by :mod:`etmpc.evaluation.scorecard` and kept in the work directory as it
 finishes, so an interrupted run continues where it stopped. A kept row is sealed with the SHA-256 of its
@@ -24,8 +27,6 @@ software that produced them; the README's headline table is the page's, rewritte
 from __future__ import annotations
 
 import hashlib
-import json
-import math
 import os
 import platform
 import re
@@ -44,16 +45,18 @@ from etmpc.evaluation.references import SUITE_VERSION, References, software, sto
 from etmpc.evaluation.evaluate import parse_policies
 from etmpc.evaluation.inputs import policy_files
 from etmpc.evaluation.scorecard import Scorecard, TaskScore, aggregate, play_and_score, profiles
+from etmpc.evaluation.verify import read_card, verify
 from etmpc.evaluation.workers import make_backend, shared_pools
+from etmpc.experiments.leaderboard_page import (BEGIN, END, ORACLE_NOTE, headline, page, table_in,  # noqa: F401
+                                               with_table)
 from etmpc.learning.config import VALIDATION_ENTROPY
 from etmpc.learning.jobs import mean_scores
-from etmpc.systems import distinct, folder_name, make_system, names
+from etmpc.systems import distinct, folder_name, make_system, names, task_version
 from etmpc.systems.base import require
 from etmpc.views.figures import write_performance_profile_png
 
 FORMAT = "etmpc-leaderboard"
 WORK = Path("results") / "leaderboard"  # where finished rows are kept (make leaderboard runs from the checkout)
-BEGIN, END = "<!-- leaderboard:begin -->", "<!-- leaderboard:end -->"
 VALIDATION_EPISODES = 20  # training-distribution episodes that choose the best threshold
 ROLLOUT_FUTURES = 4
 THRESHOLDS = np.linspace(-100.0, 200.0, 301)
@@ -64,10 +67,14 @@ class Entry:
     """A row of the leaderboard: a name, what kind of trigger it is, and its spec on each task."""
 
     name: str
-    kind: str  # reference | baseline | learned | meter | bound
+    kind: str  # reference | baseline | learned | meter | bound | submitted (a verified card's)
     specs: dict[str, str]
     note: str = ""
 
+
+# The rows, in order (``etmpc score --help`` lists them from here): the fixed entries around the shipped learners.
+FIRST = ("always", "best periodic", "best threshold")
+LAST = ("rollout meter", "oracle")
 
 # The learners whose policies the project ships in policies/<task>/: (entry, file, spec prefix, what it is).
 SHIPPED = (
@@ -78,6 +85,11 @@ SHIPPED = (
      "Stable-Baselines3 PPO on the trigger environment with the task's policies/<task>/ppo.yml (its reward against "
      "a fixed schedule), chosen on validation episodes"),
 )
+
+
+def row_names() -> list[str]:
+    """The leaderboard's rows, in order (a shipped learner's only where its policies are shipped)."""
+    return [*FIRST, *(name for name, *_ in SHIPPED), *LAST]
 
 
 def shipped_policy(task: str, file: str = "learned.json") -> Path | None:
@@ -108,9 +120,9 @@ def entries(tasks: list[str], references: dict[str, References], workers: int,
             say: Callable[[str], None]) -> list[Entry]:
     best = {t: references[t].best for t in tasks}
     found = [
-        Entry("always", "baseline", {t: "always" for t in tasks}, "standard MPC: a new plan every step"),
-        Entry("best periodic", "reference", {t: best[t] for t in tasks}, "each task's best every:T on its test set"),
-        Entry("best threshold", "baseline", {t: best_threshold(t, workers, say) for t in tasks},
+        Entry(FIRST[0], "baseline", {t: "always" for t in tasks}, "standard MPC: a new plan every step"),
+        Entry(FIRST[1], "reference", {t: best[t] for t in tasks}, "each task's best every:T on its test set"),
+        Entry(FIRST[2], "baseline", {t: best_threshold(t, workers, say) for t in tasks},
               f"threshold:X chosen on {VALIDATION_EPISODES} training-distribution episodes"),
     ]
     for name, file, prefix, note in SHIPPED:
@@ -119,9 +131,9 @@ def entries(tasks: list[str], references: dict[str, References], workers: int,
             found.append(Entry(name, "learned", {t: f"{prefix}{p}" for t, p in shipped.items() if p is not None},
                                f"{note}; policies/<task>/{file}"))
     found += [
-        Entry("rollout meter", "meter", {t: f"rollout:{best[t]}:{ROLLOUT_FUTURES}:{make_system(t).benchmark.lookahead}"
+        Entry(LAST[0], "meter", {t: f"rollout:{best[t]}:{ROLLOUT_FUTURES}:{make_system(t).benchmark.lookahead}"
                                          for t in tasks}, "one-step lookahead over sampled futures: a real policy"),
-        Entry("oracle", "bound", {t: references[t].oracle_spec for t in tasks}, "knows each episode's future: not a policy"),
+        Entry(LAST[1], "bound", {t: references[t].oracle_spec for t in tasks}, ORACLE_NOTE),
     ]
     return found
 
@@ -136,7 +148,8 @@ def _row(entry: Entry, task: str, refs: References, work: Path, episodes: int, w
     at which commit it was played."""
     spec = entry.specs[task]
     path = work / _slug(entry.name) / f"{folder_name(task)}.json"
-    key = {"spec": spec, "episodes": episodes, "test_set_sha256": refs.test_set_sha256, "suite_version": SUITE_VERSION}
+    key = {"spec": spec, "episodes": episodes, "test_set_sha256": refs.test_set_sha256, "suite_version": SUITE_VERSION,
+           "task_version": task_version(task)}
     files = policy_files(spec)
     if files:  # a policy read from files (rl:, sb3:): a row played with other files is played again
         key["files_sha256"] = {str(f): hashlib.sha256(f.read_bytes()).hexdigest() for f in files}
@@ -208,24 +221,50 @@ def _provenance() -> dict:
 
 
 def build(docs: Path, work: Path, tasks: list[str] | None = None, episodes: int | None = None, workers: int = 1,
-          readme: Path | None = None, say: Callable[[str], None] = lambda line: None) -> dict:
+          readme: Path | None = None, say: Callable[[str], None] = lambda line: None, cards: list[Path] = ()) -> dict:
     """Score every entry on every task and write ``docs/leaderboard.{md,json}`` and the profile figure;
-    with ``readme``, rewrite its headline table between the markers. Returns the JSON."""
+    with ``readme``, rewrite its headline table between the markers. Each of ``cards`` (an external
+    scorecard, ``etmpc score --json``) is verified first (:mod:`etmpc.evaluation.verify`) and its triggers
+    join as rows, not played here. Returns the JSON."""
     with shared_pools():  # one pool of workers for every row (a row is one evaluation)
-        return _build(docs, work, distinct(tasks or names()), episodes, workers, readme, say)
+        return _build(docs, work, distinct(tasks or names()), episodes, workers, readme, say, list(cards))
+
+
+def submitted(cards: list[Path], tasks: list[str], episodes: int, workers: int,
+              say: Callable[[str], None]) -> tuple[list[Entry], dict[tuple[str, str], TaskScore]]:
+    """Each card's triggers as entries, and their rows by (entry, task): a card must verify (a seeded
+    sample of each row replayed bit for bit) and be scored on the leaderboard's tasks and episodes."""
+    found, rows = [], {}
+    for card in cards:
+        verdict = verify(card, workers=workers)
+        if not verdict.verified:
+            raise EtmpcError(f"--card {card} does not verify ({verdict.mismatches[0]}; etmpc verify {card} lists all)")
+        say(f"--card {card}: verified ({verdict.replayed} episodes replayed bit for bit)")
+        data = read_card(card)
+        if set(data["tasks"]) != set(tasks) or any(r["episodes"] != episodes for r in data["rows"]):
+            raise EtmpcError(f"--card {card} scores {', '.join(data['tasks'])} on {data['rows'][0]['episodes']} episodes; "
+                             f"the leaderboard has {', '.join(tasks)} on {episodes}: score every task on its whole test set")
+        for row in map(TaskScore.from_json, data["rows"]):
+            name = f"{row.policy} (submitted)"
+            if name not in [e.name for e in found]:
+                found.append(Entry(name, "submitted", {}, f"from {Path(card).name}, verified by replaying a seeded sample"))
+            next(e for e in found if e.name == name).specs[row.task] = row.policy
+            rows[name, row.task] = row
+    return found, rows
 
 
 def _build(docs: Path, work: Path, tasks: list[str], episodes: int | None, workers: int, readme: Path | None,
-           say: Callable[[str], None]) -> dict:
+           say: Callable[[str], None], cards: list[Path]) -> dict:
     if readme is not None:
         check_readme(readme)
     check_kept(work)
     references = {task: stored(task, episodes) for task in tasks}
+    extra, given = submitted(cards, tasks, episodes or min(r.episodes for r in references.values()), workers, say)
     for task in tasks:  # the shipped policies parse (and are the files shipped) before any row is played
         system = make_system(task)
         parse_policies(system, [f"{prefix}{path}" for _, file, prefix, _ in SHIPPED
                                 if (path := shipped_policy(task, file)) is not None])
-    board = entries(tasks, references, workers, say)
+    board = entries(tasks, references, workers, say) + extra
     n = episodes or min(r.episodes for r in references.values())
     result = []
     rows_all: list[TaskScore] = []
@@ -233,6 +272,9 @@ def _build(docs: Path, work: Path, tasks: list[str], episodes: int | None, worke
     for entry in board:
         rows = []
         for task in [t for t in tasks if t in entry.specs]:
+            if (entry.name, task) in given:  # a verified card's row: not played here
+                rows.append(given[entry.name, task])
+                continue
             row, at = _row(entry, task, references[task], work, n, workers, say)
             rows.append(row)
             played[f"{at['commit']}{' (with uncommitted changes)' if at['uncommitted_changes'] else ''}"] = at
@@ -241,6 +283,7 @@ def _build(docs: Path, work: Path, tasks: list[str], episodes: int | None, worke
         result.append({"name": entry.name, "kind": entry.kind, "note": entry.note, "specs": entry.specs,
                        "rows": [asdict(r) for r in rows], "aggregate": asdict(aggregate(named))})
     data = {"format": FORMAT, "suite_version": SUITE_VERSION, "tasks": tasks, "episodes": n,
+            "task_versions": {t: task_version(t) for t in tasks},
             "references": {t: {"best_periodic": r.best, "oracle": r.oracle_spec, "gap": r.gap,
                                "test_set_sha256": r.test_set_sha256, "recompute_price": r.recompute_price,
                                "objective_sense": r.objective_sense} for t, r in references.items()},
@@ -253,111 +296,3 @@ def _build(docs: Path, work: Path, tasks: list[str], episodes: int | None, worke
     if readme is not None:
         write_text(Path(readme), with_table(Path(readme).read_text(), headline(data)))
     return data
-
-
-# -- what the page says ------------------------------------------------------------------------------
-def _finite(value) -> bool:
-    """A number that was scored (the JSON's ``null`` is one that was not)."""
-    return value is not None and math.isfinite(value)
-
-
-def _cell(row: dict) -> str:
-    if row.get("error"):
-        return "failed"
-    if not _finite(row["score"]):
-        return f"{row['nonfinite_episodes']} non-finite"
-    return f"{row['score']:.1f} ± {_number(row['score_ci95'], '.1f')}"
-
-
-def _number(value, spec: str) -> str:
-    return format(value, spec) if _finite(value) else "-"
-
-
-def headline(data: dict) -> str:
-    """The headline table (markdown): each entry's normalized score per task and the suite's aggregate."""
-    tasks = data["tasks"]
-    lines = ["| trigger | " + " | ".join(tasks) + " | IQM [95 % CI] | P(improve) | CPU ms/episode |",
-             "|---|" + "---:|" * len(tasks) + "---:|---:|---:|"]
-    for entry in data["entries"]:
-        rows = {r["task"]: r for r in entry["rows"]}
-        a = entry["aggregate"]
-        cpu = [rows[t]["cpu_ms"]["total"] for t in tasks if t in rows and rows[t].get("cpu_ms")]
-        iqm = (f"{a['iqm']:.1f} [{a['iqm_ci95'][0]:.1f}, {a['iqm_ci95'][1]:.1f}]"
-               if _finite(a["iqm"]) and all(map(_finite, a["iqm_ci95"])) else "-")
-        improve = f"{a['probability_of_improvement']:.2f}" if _finite(a["probability_of_improvement"]) else "-"
-        cells = [_cell(rows[t]) if t in rows else "-" for t in tasks] + [iqm, improve, f"{np.mean(cpu):.1f}" if cpu else "-"]
-        lines.append(f"| {entry['name']} | " + " | ".join(cells) + " |")
-    return "\n".join(lines)
-
-
-def with_table(text: str, table: str) -> str:
-    """``text`` with the block between the leaderboard's markers replaced by ``table``."""
-    start, end = text.index(BEGIN) + len(BEGIN), text.index(END)
-    return text[:start] + "\n" + table + "\n" + text[end:]
-
-
-def table_in(text: str) -> str:
-    """The table between the leaderboard's markers of ``text``."""
-    return text[text.index(BEGIN) + len(BEGIN):text.index(END)].strip("\n")
-
-
-def page(data: dict) -> str:
-    g = data["generated"]
-    dirty = " (with uncommitted changes)" if g["uncommitted_changes"] else ""
-    software = ", ".join(f"{k} {v}" for k, v in g["software"].items())
-    lines = [
-        "# Leaderboard",
-        "",
-        f"Generated by `etmpc score --leaderboard` from commit {g['commit']}{dirty} on {g['date']}, on "
-        f"{g['machine']['cores']} cores of {g['machine']['processor']} ({g['machine']['system']}); {software}. "
-        f"Its rows were played at commit(s) {', '.join(g.get('rows_played_at', [g['commit']]))} (an interrupted or "
-        "repeated run keeps the rows it finished). Do not edit: run `make leaderboard` again.",
-        "",
-        f"Each task's normalized score on its stored test set ({data['episodes']} episodes, at the task's price): "
-        "0 is its best periodic schedule, 100 the oracle over it (a one-step lookahead with the episode's future: "
-        "above 100 is possible, and the oracle is a bound, not a policy). ± is the 95 % CI over episodes; the suite's "
-        "interquartile mean (of every task's episode scores together, as rliable computes it) and the probability of "
-        "improving on the best periodic schedule carry 95 % stratified "
-        "bootstrap CIs. The oracle scores exactly 100 on every task, yet its IQM is lower: the IQM trims the quarter "
-        "of episodes at each end, and the oracle's episode scores are skewed (a few episodes gain far more than the "
-        "mean). CPU is the controller's measured time per episode on this machine (solves, feedback and the "
-        "trigger's own decisions), averaged over the tasks. See `etmpc score --help` and the README.",
-        "",
-        BEGIN,
-        headline(data),
-        END,
-        "",
-        "![performance profiles](leaderboard_profile.png)",
-        "",
-        "## Entries",
-        "",
-    ]
-    for entry in data["entries"]:
-        distinct_specs = set(entry["specs"].values())
-        specs = (f"`{distinct_specs.pop()}`" if len(distinct_specs) == 1
-                 else ", ".join(f"{t}: `{spec}`" for t, spec in entry["specs"].items()))
-        lines.append(f"* **{entry['name']}** ({entry['kind']}): {entry['note']}; {specs}.")
-    lines += ["", "## Per task", ""]
-    for task in data["tasks"]:
-        ref = data["references"][task]
-        sense = "lower" if ref["objective_sense"] == "min" else "higher"
-        lines += [f"### {task}", "",
-                  f"References: `{ref['best_periodic']}` and `{ref['oracle']}` (mean gap {ref['gap']:.5g}); objective: "
-                  f"{sense} is better, at {ref['recompute_price']:g} per computation.", "",
-                  "| trigger | spec | objective | computations | failures | score | CPU ms/ep (solve / feedback / trigger) |",
-                  "|---|---|---:|---:|---:|---:|---:|"]
-        for entry in data["entries"]:
-            row = next((r for r in entry["rows"] if r["task"] == task), None)
-            if row is None:
-                continue
-            if row.get("error"):
-                lines.append(f"| {entry['name']} | `{row['policy']}` | failed: {row['error']} | | | | |")
-                continue
-            failures = "-" if row["failures_mean"] is None else f"{row['failures_mean']:.2f}"
-            cpu = row["cpu_ms"]
-            lines.append(f"| {entry['name']} | `{row['policy']}` | {_number(row['objective_mean'], '.5g')} | "
-                         f"{_number(row['recomputes_mean'], '.2f')} | {failures} | {_cell(row)} | "
-                         f"{_number(cpu['total'], '.1f')} ({_number(cpu['solve'], '.1f')} / {_number(cpu['feedback'], '.1f')} / "
-                         f"{_number(cpu['decide'], '.1f')}) |")
-        lines.append("")
-    return "\n".join(lines)

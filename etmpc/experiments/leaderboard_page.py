@@ -1,0 +1,160 @@
+"""The leaderboard's page, from its JSON alone (``docs/leaderboard.json``): the headline table (the README's
+too, between its markers), the entries, each task's rows, and where a learner scores above the
+clairvoyant reference and why. :mod:`etmpc.experiments.leaderboard` plays the rows and writes the files."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+BEGIN, END = "<!-- leaderboard:begin -->", "<!-- leaderboard:end -->"
+ORACLE_NOTE = ("a one-step lookahead over the best periodic schedule with each episode's future known, not a policy; "
+               "it bounds that lookahead, not every trigger")
+
+
+def _finite(value) -> bool:
+    """A number that was scored (the JSON's ``null`` is one that was not)."""
+    return value is not None and math.isfinite(value)
+
+
+def _cell(row: dict) -> str:
+    if row.get("error"):
+        return "failed"
+    if not _finite(row["score"]):
+        return f"{row['nonfinite_episodes']} non-finite"
+    return f"{row['score']:.1f} ± {_number(row['score_ci95'], '.1f')}"
+
+
+def _number(value, spec: str) -> str:
+    return format(value, spec) if _finite(value) else "-"
+
+
+def headline(data: dict) -> str:
+    """The headline table (markdown): each entry's normalized score per task and the suite's aggregate."""
+    tasks = data["tasks"]
+    lines = ["| trigger | " + " | ".join(tasks) + " | IQM [95 % CI] | P(improve) | CPU ms/episode |",
+             "|---|" + "---:|" * len(tasks) + "---:|---:|---:|"]
+    for entry in data["entries"]:
+        rows = {r["task"]: r for r in entry["rows"]}
+        a = entry["aggregate"]
+        cpu = [rows[t]["cpu_ms"]["total"] for t in tasks if t in rows and rows[t].get("cpu_ms")]
+        iqm = (f"{a['iqm']:.1f} [{a['iqm_ci95'][0]:.1f}, {a['iqm_ci95'][1]:.1f}]"
+               if _finite(a["iqm"]) and all(map(_finite, a["iqm_ci95"])) else "-")
+        improve = f"{a['probability_of_improvement']:.2f}" if _finite(a["probability_of_improvement"]) else "-"
+        cells = [_cell(rows[t]) if t in rows else "-" for t in tasks] + [iqm, improve, f"{np.mean(cpu):.1f}" if cpu else "-"]
+        lines.append(f"| {entry['name']} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def with_table(text: str, table: str) -> str:
+    """``text`` with the block between the leaderboard's markers replaced by ``table``."""
+    start, end = text.index(BEGIN) + len(BEGIN), text.index(END)
+    return text[:start] + "\n" + table + "\n" + text[end:]
+
+
+def table_in(text: str) -> str:
+    """The table between the leaderboard's markers of ``text``."""
+    return text[text.index(BEGIN) + len(BEGIN):text.index(END)].strip("\n")
+
+
+def above_the_oracle(data: dict, task: str) -> list[str]:
+    """Lines saying, for each learner and meter that scores above 100 on ``task``, why: the computations it
+    saves against the oracle's, what they are worth at the task's price, and what it gives up in control
+    objective (the objective without that price). Every number is the JSON's."""
+    ref = data["references"][task]
+    price, sign = ref["recompute_price"], 1.0 if ref["objective_sense"] == "min" else -1.0
+    oracle = next((r for e in data["entries"] if e["kind"] == "bound" for r in e["rows"] if r["task"] == task), None)
+    if oracle is None or not _finite(oracle["objective_mean"]):
+        return []
+    lines = []
+    for entry in data["entries"]:
+        row = next((r for r in entry["rows"] if r["task"] == task), None)
+        if entry["kind"] not in ("learned", "meter") or row is None or row.get("error") or not _finite(row["score"]) \
+                or row["score"] <= 100 or not _finite(row["objective_mean"]):
+            continue
+        saved = oracle["recomputes_mean"] - row["recomputes_mean"]
+        worth = saved * price
+        better = sign * (oracle["objective_mean"] - row["objective_mean"])  # > 0: its objective is the better
+        control_loss = worth - better  # what it gives up in control objective, against the oracle's
+        head = (f"* **{entry['name']}** scores {row['score']:.1f}: {row['recomputes_mean']:.2f} computations per episode "
+                f"against the oracle's {oracle['recomputes_mean']:.2f}")
+        if saved > 0 and price > 0:
+            lines.append(f"{head}. The {saved:.2f} it saves are worth {worth:.4g} at {price:g} per computation; it gives "
+                         f"up {control_loss:.4g} in control objective to the oracle, so its objective is {better:.4g} "
+                         "better than the oracle's.")
+        else:
+            lines.append(f"{head}, saving none the price counts ({price:g} per computation): its control objective "
+                         f"itself is {better:.4g} better than the oracle's.")
+    if lines:
+        lines = [f"Above 100 on {task}: the oracle is a one-step lookahead over `{ref['best_periodic']}` and spends about "
+                 "as many computations as that schedule; these save some of them:", "", *lines, ""]
+    return lines
+
+
+def page(data: dict) -> str:
+    g = data["generated"]
+    dirty = " (with uncommitted changes)" if g["uncommitted_changes"] else ""
+    software = ", ".join(f"{k} {v}" for k, v in g["software"].items())
+    lines = [
+        "# Leaderboard",
+        "",
+        f"Generated by `etmpc score --leaderboard` from commit {g['commit']}{dirty} on {g['date']}, on "
+        f"{g['machine']['cores']} cores of {g['machine']['processor']} ({g['machine']['system']}); {software}. "
+        f"Its rows were played at commit(s) {', '.join(g.get('rows_played_at', [g['commit']]))} (an interrupted or "
+        "repeated run keeps the rows it finished). Do not edit: run `make leaderboard` again.",
+        "",
+        f"Each task's normalized score on its stored test set ({data['episodes']} episodes, at the task's price): "
+        "0 is its best periodic schedule, 100 the clairvoyant reference: the oracle over that schedule, a one-step "
+        "lookahead with each episode's future known (not a policy). It bounds what a one-step lookahead over the best "
+        "periodic schedule can gain, not every trigger: a learner that saves computations the oracle spends can score "
+        "above 100 (each task's section says where, and what the saved computations are worth). ± is the 95 % CI "
+        "over episodes; the suite's "
+        "interquartile mean (of every task's episode scores together, as rliable computes it) and the probability of "
+        "improving on the best periodic schedule carry 95 % stratified "
+        "bootstrap CIs. The oracle scores exactly 100 on every task, yet its IQM is lower: the IQM trims the quarter "
+        "of episodes at each end, and the oracle's episode scores are skewed (a few episodes gain far more than the "
+        "mean). CPU is the controller's measured time per episode on this machine (solves, feedback and the "
+        "trigger's own decisions), averaged over the tasks. See `etmpc score --help` and the README.",
+        "",
+        BEGIN,
+        headline(data),
+        END,
+        "",
+        "![performance profiles](leaderboard_profile.png)",
+        "",
+        "## Entries",
+        "",
+    ]
+    for entry in data["entries"]:
+        distinct_specs = set(entry["specs"].values())
+        specs = (f"`{distinct_specs.pop()}`" if len(distinct_specs) == 1
+                 else ", ".join(f"{t}: `{spec}`" for t, spec in entry["specs"].items()))
+        note = ORACLE_NOTE if entry["kind"] == "bound" else entry["note"]  # a page from an older JSON says it too
+        kind = "clairvoyant reference" if entry["kind"] == "bound" else entry["kind"]
+        lines.append(f"* **{entry['name']}** ({kind}): {note}; {specs}.")
+    lines += ["", "## Per task", ""]
+    for task in data["tasks"]:
+        ref = data["references"][task]
+        sense = "lower" if ref["objective_sense"] == "min" else "higher"
+        lines += [f"### {task}", "",
+                  f"References: `{ref['best_periodic']}` and `{ref['oracle']}` (mean gap {ref['gap']:.5g}); objective: "
+                  f"{sense} is better, at {ref['recompute_price']:g} per computation.", "",
+                  "| trigger | spec | objective | computations | failures | score | CPU ms/ep (solve / feedback / trigger) |",
+                  "|---|---|---:|---:|---:|---:|---:|"]
+        for entry in data["entries"]:
+            row = next((r for r in entry["rows"] if r["task"] == task), None)
+            if row is None:
+                continue
+            if row.get("error"):
+                lines.append(f"| {entry['name']} | `{row['policy']}` | failed: {row['error']} | | | | |")
+                continue
+            failures = "-" if row["failures_mean"] is None else f"{row['failures_mean']:.2f}"
+            cpu = row["cpu_ms"]
+            lines.append(f"| {entry['name']} | `{row['policy']}` | {_number(row['objective_mean'], '.5g')} | "
+                         f"{_number(row['recomputes_mean'], '.2f')} | {failures} | {_cell(row)} | "
+                         f"{_number(cpu['total'], '.1f')} ({_number(cpu['solve'], '.1f')} / {_number(cpu['feedback'], '.1f')} / "
+                         f"{_number(cpu['decide'], '.1f')}) |")
+        lines.append("")
+        lines += above_the_oracle(data, task)
+    return "\n".join(lines)
