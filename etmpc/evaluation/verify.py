@@ -28,12 +28,12 @@ import numpy as np
 
 from etmpc.common.documents import read_document
 from etmpc.common.errors import EtmpcError
-from etmpc.evaluation import testsets as ts_mod
+from etmpc.common.outputs import strict
 from etmpc.evaluation.evaluate import parse_policies, run_jobs
 from etmpc.evaluation.references import SUITE_VERSION, References, stored
 from etmpc.evaluation.scorecard import TaskScore, aggregate
 from etmpc.evaluation.workers import workers_for
-from etmpc.systems import make_system, system_key, task_version
+from etmpc.systems import system_key, task_version
 
 FORMAT = "etmpc-scorecard"
 SAMPLE = 5  # episodes replayed per row by default
@@ -132,24 +132,20 @@ def _consistency(row: TaskScore, refs: References) -> list[str]:
 
 
 def _aggregates(card: dict, rows: list[TaskScore]) -> list[str]:
+    """Which of the card's aggregates do not follow from its rows: each computed again and compared as the
+    card stores it (strict JSON: a tuple a list, NaN null), where equal floats are equal bits."""
     by_policy: dict[str, list[TaskScore]] = {}
     for row in rows:
         by_policy.setdefault(row.policy, []).append(row)
     given = {a.get("policy"): a for a in card.get("aggregates", []) if isinstance(a, dict)}
     found = []
     for policy, mine in by_policy.items():
-        expected = {k: v for k, v in asdict(aggregate(mine)).items()}
         stated = given.get(policy)
         if stated is None:
             found.append(f"{policy}: no aggregate in the card")
             continue
-        for key, value in expected.items():
-            card_value = stated.get(key)
-            card_value = [math.nan if v is None else v for v in card_value] if isinstance(card_value, list) else \
-                (math.nan if card_value is None else card_value)
-            value = list(value) if isinstance(value, tuple) else value
-            pairs = zip(value, card_value) if isinstance(value, list) and isinstance(card_value, list) else [(value, card_value)]
-            if not all(_same(a, b) for a, b in pairs):
+        for key, value in strict(asdict(aggregate(mine))).items():
+            if stated.get(key) != value:
                 found.append(f"{policy}: aggregate {key} {stated.get(key)!r} in the card, {value!r} from its rows")
     return found
 
@@ -185,14 +181,13 @@ def verify(path: str | Path, size: int = SAMPLE, seed: int = 0, workers: int | N
     for index in replayable:
         row, refs = rows[index], references[rows[index].task]
         key = system_key(row.task)
-        system = make_system(row.task)
         try:
-            (policy,) = parse_policies(system, [row.policy]).values()
+            (policy,) = parse_policies(key.make(), [row.policy]).values()
         except EtmpcError as exc:
             raise EtmpcError(f"{where}: cannot replay {row.policy} on {row.task}: {exc}") from None
-        testset = ts_mod.load(ts_mod.default_path(system.domain, system.task), system.domain, system.task)
+        # The stored test set, which the references were checked against when loaded: workers check its digest.
         for episode in sample(refs.episodes, size, seed, index):
-            jobs.append((key, None, testset.sha256, row.policy, policy, 0, episode, 0, False))
+            jobs.append((key, None, refs.test_set_sha256, row.policy, policy, 0, episode, 0, False))
             expected.append((row, refs, episode))
     outcomes = run_jobs(jobs, workers or workers_for(len(jobs)), progress) if jobs else []
     for (result, _, _), (row, refs, episode) in zip(outcomes, expected):
