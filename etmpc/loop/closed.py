@@ -1,35 +1,11 @@
-"""The control loop of the paper's Algorithm 1, generic over the system.
-
-Each step: measure ``x_i``; if there is no plan, or the plan has run out (age = N), or the task put
-the plant back in the last step (``task.restarted``: a fallen pole re-erected), or the policy draws
-``a_i = 1``, solve a new plan from ``x_i``. Apply the planned input plus the feedback correction
-(``-K (x_i - x_hat_i)``, with a fixed LQR gain or one along the plan), clipped to the input bounds.
-If a solve fails, the previous plan is kept while it has steps left (the feedback keeps correcting
-around it) and the failure is counted; a forced solve that fails is used as it is (the solver's last
-iterate). Every recompute attempt counts as a computation (``a_i = 1``).
-
-A system plugs in by providing what :class:`etmpc.systems.base.System` lists; a policy by providing
-what :class:`Policy` lists, deciding from an :class:`AugmentedState`. Nothing here knows about MuJoCo,
-batteries or any particular policy.
-
-This module may import ``etmpc.common``, ``etmpc.control`` and ``etmpc.systems``.
-
-Two ways to play the same loop, bit for bit the same numbers:
-
-* :func:`run_episode` steps the ``dm_env`` interface and keeps everything (a :class:`Trajectory`),
-  one :class:`ClosedLoop` step per control interval (``etmpc.envs`` plays the same steps for an agent);
-* :func:`play_on` continues from a :class:`Snapshot` of a running episode, stepping the task and
-  the physics directly (no ``TimeStep`` per step) and keeping only the return: the fast path the
-  rollout policies simulate their futures with.
-"""
+"""The loop itself: :class:`ClosedLoop` (one control interval per step), :func:`run_episode` and
+:func:`play_on` (see :mod:`etmpc.loop`)."""
 
 from __future__ import annotations
 
 import math
 import time
-from collections.abc import Mapping
-from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any
 
 import dm_env
 import numpy as np
@@ -37,147 +13,9 @@ from dm_control.rl.control import PhysicsError
 
 from etmpc.common.frozen import frozen, readonly
 from etmpc.control.plan import Plan
+from etmpc.loop.records import Continuation, Trajectory
+from etmpc.loop.state import AugmentedState, DecisionContext, Policy, Snapshot
 from etmpc.systems.base import System
-
-
-# -- what the loop asks of a policy ------------------------------------------------------------------
-@dataclass(frozen=True)
-class AugmentedState:
-    """What a policy sees at a decision (paper, section 2.2): ``s = [x_i, x_k, i - k]`` (the current
-    state, the state the plan was made from, the plan's age), the plan's prediction ``x_hat_i`` (a
-    function of ``s``, handed along for the event trigger), the kept plan, the task's observation and,
-    for policies that simulate, the loop's whole state.
-
-    Everything in it is read-only (:mod:`etmpc.common.frozen`): the arrays are read-only views, the
-    plan a frozen value, the observation a frozen mapping. A policy that writes into what it is shown
-    gets an error, never a changed run; to compute with a value, copy it (``np.array(s.x)``)."""
-
-    x: np.ndarray  # x_i, measured now
-    x_plan: np.ndarray  # x_k, measured when the plan was made
-    age: int  # i - k
-    x_predicted: np.ndarray  # x_hat_i, the plan's prediction for now
-    plan: Any = None  # the kept Plan (its inputs and the forecasts it was made with)
-    observation: Mapping | None = None  # what the task shows now (for the exogenous features)
-    context: Any = None  # a DecisionContext: the loop's whole state, for policies that simulate (simulates = True)
-
-
-class Policy(Protocol):
-    spec: str
-    stochastic: bool
-    # Optional ``observes = False``: decide never reads ``s.observation`` (the fast path of
-    # etmpc.loop.play_on then skips making it). Without the attribute, a policy is assumed to read it.
-
-    def decide(self, s: AugmentedState, rng: np.random.Generator) -> bool: ...
-
-
-
-# -- what one episode did --------------------------------------------------------------------------
-@dataclass
-class Trajectory:
-    """Everything one episode did, step by step (arrays preallocated for the full episode)."""
-
-    states: np.ndarray  # (T + 1, nx) measured; rows past `steps` stay NaN
-    applied: np.ndarray  # (T, nu) input sent to the plant
-    planned: np.ndarray  # (T, nu) the plan's input for that step
-    correction: np.ndarray  # (T, nu) LQR correction before clipping
-    predicted: np.ndarray  # (T, nx) the plan's prediction x_hat_i
-    plan_age: np.ndarray  # (T,) i - k at the decision
-    recompute: np.ndarray  # (T,) a_i: a computation was spent (includes forced ones)
-    forced: np.ndarray  # (T,) the plan had run out (or there was none)
-    rewards: np.ndarray  # (T,) the environment's reward for the step
-    solve_time_s: np.ndarray  # (T,) wall time of the MPC computation (NaN where none happened)
-    step_time_s: np.ndarray  # (T,) wall time of the whole step, solve included
-    feedback_time_s: np.ndarray  # (T,) wall time of the input: the plan's, plus the LQR correction, clipped
-    decide_time_s: np.ndarray  # (T,) wall time of the policy's decision (0 where the loop did not ask it)
-    plans: list[tuple[int, Plan]] = field(default_factory=list)  # (step made, plan), successful or used
-    steps: int = 0
-    solver_failures: int = 0
-    nonfinite: bool = False  # the episode ended early on a non-finite state
-
-    @classmethod
-    def empty(cls, steps: int, nx: int, nu: int) -> Trajectory:
-        nan = lambda *shape: np.full(shape, np.nan)  # noqa: E731
-        return cls(
-            states=nan(steps + 1, nx), applied=nan(steps, nu), planned=nan(steps, nu), correction=nan(steps, nu),
-            predicted=nan(steps, nx), plan_age=np.zeros(steps, int), recompute=np.zeros(steps, bool),
-            forced=np.zeros(steps, bool), rewards=np.zeros(steps), solve_time_s=nan(steps), step_time_s=nan(steps),
-            feedback_time_s=np.zeros(steps), decide_time_s=np.zeros(steps),
-        )
-
-    def cpu_seconds(self) -> dict[str, float]:
-        """The controller's time spent in this episode, summed over its steps (wall clock per call, so a
-        machine-dependent figure): the MPC's ``solve``s, the ``feedback`` (the LQR), the trigger's
-        ``decide``s (a rollout's simulations included)."""
-        n = self.steps
-        return {"solve": float(np.nansum(self.solve_time_s[:n])), "feedback": float(self.feedback_time_s[:n].sum()),
-                "decide": float(self.decide_time_s[:n].sum())}
-
-    @property
-    def recomputes(self) -> int:
-        return int(self.recompute[: self.steps].sum())
-
-    def policy_rewards(self, recompute_price: float) -> np.ndarray:
-        """Per-step rewards the policy maximises: the environment's, minus the price of a computation."""
-        return self.rewards[: self.steps] - recompute_price * self.recompute[: self.steps]
-
-    def policy_return(self, recompute_price: float) -> float:
-        """The policy's return: rewards minus the price of every computation."""
-        return float(self.rewards[: self.steps].sum() - recompute_price * self.recomputes)
-
-
-@dataclass(frozen=True, eq=False)
-class DecisionContext:
-    """The loop's whole state at a decision, for policies that simulate futures (``rollout:``)."""
-
-    system: Any
-    env: dm_env.Environment
-    step: int  # i: the decision is about the input of interval i
-    plan: Plan
-    age: int
-    u_prev: np.ndarray
-    timestep: dm_env.TimeStep
-
-
-@dataclass(eq=False)
-class Continuation:
-    """What one :func:`play_on` did, step by step, for a caller that picks it up again later (the
-    oracle's memo): what each step added to the return, whether it computed, and the controller's
-    state after it (``x``, the plan, its age, ``u_prev``). Summed from 0.0 in order, ``added[k:]``
-    gives exactly what a play on from the state after step ``k - 1`` returns."""
-
-    start: int  # the step it started at
-    added: list[float] = field(default_factory=list)
-    recomputed: list[bool] = field(default_factory=list)
-    after: list[tuple] = field(default_factory=list)
-
-    def return_from(self, k: int) -> float:
-        """The return from its ``k``-th step on, summed as :func:`play_on` sums it."""
-        total = 0.0
-        for added in self.added[k:]:
-            total += added
-        return total
-
-
-@dataclass(frozen=True, eq=False)
-class Snapshot:
-    """A running episode, frozen at a decision: the plant, the task's position in its episode and the
-    controller's memory. :func:`play_on` continues from it exactly."""
-
-    physics: Any  # the physics' own snapshot (see each Physics.snapshot)
-    step: int
-    episode: Any  # the episode the task was playing
-    plan: Plan
-    age: int
-    u_prev: np.ndarray
-    x: np.ndarray
-    observation: Mapping
-
-    @classmethod
-    def take(cls, context: DecisionContext) -> Snapshot:
-        env = context.env
-        x = context.system.state(context.timestep)
-        return cls(env.physics.snapshot(), context.step, env.task.episode, context.plan, context.age,
-                   np.array(context.u_prev), x, context.timestep.observation)
 
 
 def _shown(timestep: dm_env.TimeStep) -> dm_env.TimeStep:
