@@ -154,14 +154,12 @@ class TriggerEnvironment(dm_env.Environment):
         if self.loop.done:
             return self.reset()
         asked = check_action(action)
-        loop, system = self.loop, self.system
+        loop = self.loop
         forced = loop.forced
         recompute = forced or asked == RECOMPUTE
-        control = loop.step(recompute)
-        price = system.recompute_price * recompute
-        reward = control - price
-        self.info = {"step": loop.step_index, "recompute": recompute, "forced": forced, "control_reward": control,
-                     "computation_cost": price, "nonfinite": loop.trajectory.nonfinite}
+        reward = loop.step(recompute)  # the task's reward, net of the computation's price
+        self.info = {"step": loop.step_index, "recompute": recompute, "forced": forced, "control_reward": loop.reward,
+                     "computation_cost": loop.cost, "nonfinite": loop.trajectory.nonfinite}
         self.simulated_steps += 1
         if self._shadow is not None:
             baseline = self._baseline_step()
@@ -180,7 +178,7 @@ class TriggerEnvironment(dm_env.Environment):
             return 0.0
         recompute = shadow.forced or self.reward_baseline.decide(shadow.observed_state(), None)
         self.simulated_steps += 1
-        return shadow.step(recompute) - self.system.recompute_price * recompute
+        return shadow.step(recompute)
 
     def observation_spec(self) -> specs.Array:
         return specs.Array((self._size,), np.float32, name="trigger_features")

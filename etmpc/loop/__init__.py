@@ -24,8 +24,8 @@ Two ways to play the same loop, bit for bit the same numbers:
 """
 
 from etmpc.loop.closed import ClosedLoop, play_on, run_episode
-from etmpc.loop.records import Continuation, Trajectory
+from etmpc.loop.records import Continuation, Trajectory, computation_cost
 from etmpc.loop.state import AugmentedState, DecisionContext, Policy, Snapshot
 
 __all__ = ["AugmentedState", "ClosedLoop", "Continuation", "DecisionContext", "Policy", "Snapshot", "Trajectory",
-           "play_on", "run_episode"]
+           "computation_cost", "play_on", "run_episode"]

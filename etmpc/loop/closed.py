@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Mapping
 from typing import Any
 
 import dm_env
@@ -13,7 +14,7 @@ from dm_control.rl.control import PhysicsError
 
 from etmpc.common.frozen import frozen, readonly
 from etmpc.control.plan import Plan
-from etmpc.loop.records import Continuation, Trajectory
+from etmpc.loop.records import Continuation, Trajectory, computation_cost
 from etmpc.loop.state import AugmentedState, DecisionContext, Policy, Snapshot
 from etmpc.systems.base import System
 
@@ -33,24 +34,37 @@ def _input(system: System, plan: Plan, age: int, x: np.ndarray) -> tuple[np.ndar
 
 
 class ClosedLoop:
-    """Algorithm 1, one control interval at a time: an episode in play, and its step.
+    """Algorithm 1, one control interval at a time: an episode in play, and its step. The only place
+    a control interval is played.
 
     :func:`run_episode` drives it with a policy; ``etmpc.envs`` hands each decision to an agent
-    instead. Both play this class, so the numbers are the same, bit for bit.
+    instead; :func:`play_on` (the rollouts, the oracle, the self-trigger's labels) continues a
+    :class:`Snapshot` in its light mode. All of them play :meth:`step`, so the numbers are the same,
+    bit for bit.
 
     >>> loop = ClosedLoop(system, env).reset(episode)
     >>> while not loop.done:
     ...     s = loop.augmented_state()          # None when the decision is forced
     ...     loop.step(s is not None and my_rule(s))
     >>> loop.trajectory
+
+    ``records=False`` is the light mode: the task and the physics are stepped directly, as
+    ``control.Environment.step`` steps them, without a ``TimeStep`` (the state is read off the
+    physics, ``system.measure``, and the task's observation is made only when a solve or a policy
+    reads it), and nothing is recorded or timed (no :attr:`trajectory`). It starts from a snapshot
+    (:meth:`resume`); a plant that fails sets :attr:`failed`.
     """
 
-    def __init__(self, system: System, env: dm_env.Environment):
-        self.system, self.env = system, env
-        self.done = True
+    def __init__(self, system: System, env: dm_env.Environment, records: bool = True):
+        self.system, self.env, self.records = system, env, records
+        self.done, self.failed = True, False
+        # the last step's: the task's reward, whether it computed, and the price of that computation
+        self.reward, self.recomputed, self.cost = 0.0, False, 0.0
 
     def reset(self, episode: Any = None) -> ClosedLoop:
         """Start an episode: a stored one if given, else one drawn by the task."""
+        if not self.records:
+            raise RuntimeError("a light loop continues a snapshot: use resume()")
         system = self.system
         self.env.task.use_episode(episode)
         self.timestep = _shown(self.env.reset())
@@ -58,8 +72,20 @@ class ClosedLoop:
         nu = system.u_min.shape[0]
         self.trajectory = Trajectory.empty(system.episode_steps, self.x.shape[0], nu)
         self.plan: Plan | None = None
-        self.age, self.u_prev, self.step_index, self.done = 0, readonly(np.zeros(nu)), 0, False
+        self.age, self.u_prev, self.step_index, self.done, self.failed = 0, readonly(np.zeros(nu)), 0, False, False
         self._arrive()
+        return self
+
+    def resume(self, snapshot: Snapshot, episode: Any = None) -> ClosedLoop:
+        """Continue ``snapshot`` (taken in a twin of this loop's environment) in the light mode;
+        ``episode`` replaces the episode being played from the snapshot's step on (a sampled future)."""
+        if self.records:
+            raise RuntimeError("only a light loop (records=False) resumes a snapshot")
+        self.env.physics.restore(snapshot.physics)
+        self.env.task.resume(snapshot.episode if episode is None else episode, snapshot.step)
+        self.plan, self.age, self.u_prev, self.x = snapshot.plan, snapshot.age, snapshot.u_prev, snapshot.x
+        self._observation, self.step_index, self.done, self.failed = snapshot.observation, snapshot.step, False, False
+        self.timestep = None
         return self
 
     @property
@@ -67,74 +93,131 @@ class ClosedLoop:
         """The plan has run out (age = N), or there is none yet: the loop must solve, whatever is asked."""
         return self.plan is None or self.age >= self.plan.horizon
 
-    def augmented_state(self, context: bool = False) -> AugmentedState | None:
-        """What a policy sees at this step's decision; ``None`` when the decision is forced. With
-        ``context``, the loop's whole state too (for policies that simulate)."""
-        return None if self.forced else self.observed_state(context)
+    @property
+    def observation(self) -> Mapping:
+        """What the task shows now (frozen); in the light mode made when first read."""
+        if self.records:
+            return self.timestep.observation
+        if self._observation is None:
+            self._observation = frozen(self.env.task.get_observation(self.env.physics))
+        return self._observation
 
-    def observed_state(self, context: bool = False) -> AugmentedState | None:
+    def augmented_state(self, context: bool = False, observes: bool = True) -> AugmentedState | None:
+        """What a policy sees at this step's decision; ``None`` when the decision is forced. With
+        ``context``, the loop's whole state too (for policies that simulate); without ``observes``,
+        no observation (a policy that never reads it: the light mode then does not make it)."""
+        return None if self.forced else self.observed_state(context, observes)
+
+    def observed_state(self, context: bool = False, observes: bool = True) -> AugmentedState | None:
         """The augmented state now, also when the decision is forced; ``None`` before the first plan."""
         if self.plan is None:
             return None
         plan, age = self.plan, self.age
         ctx = DecisionContext(self.system, self.env, self.step_index, plan, age, self.u_prev, self.timestep) if context else None
-        return AugmentedState(self.x, plan.states[0], age, plan.state_at(age), plan, self.timestep.observation, ctx)
+        return AugmentedState(self.x, plan.states[0], age, plan.state_at(age), plan, self.observation if observes else None, ctx)
 
-    def step(self, recompute: bool, started: float | None = None) -> float:
+    def step(self, recompute: bool, started: float | None = None, solved: Plan | None = None) -> float:
         """Play this control interval: solve a new plan if ``recompute`` (or if forced), apply the
-        plan's input plus the LQR correction, clipped, and step the plant. Returns the environment's
-        reward (0 when the plant failed: the episode then ends, non-finite). ``started``: when the
-        step's decision began (the step's wall time counts from there)."""
+        plan's input plus the LQR correction, clipped, and step the plant. Returns the trigger's
+        reward for it: the task's (:attr:`reward`) minus the price of the computation, if one was
+        made (:attr:`cost`). A plant that fails (non-finite) ends the episode; the step's reward is
+        then 0. ``started``: when the step's decision began (the step's wall time counts from there).
+        ``solved``: the plan a solve now gives, when the caller has it already."""
         if self.done:
             raise RuntimeError("the episode is over: reset the loop")
-        start = time.perf_counter() if started is None else started
-        system, traj, i, x, plan = self.system, self.trajectory, self.step_index, self.x, self.plan
+        records = self.records
+        start = (time.perf_counter() if started is None else started) if records else 0.0
+        system, i, x, plan = self.system, self.step_index, self.x, self.plan
         forced = self.forced
         recompute = forced or bool(recompute)
         if recompute:
-            solve_start = time.perf_counter()
-            new = system.plan(x, self.u_prev, plan, self.age, self.timestep)
-            traj.solve_time_s[i] = time.perf_counter() - solve_start  # the whole computation
-            if not new.success:
-                traj.solver_failures += 1
+            new = solved if solved is not None else self._solve(i)
             if new.success or forced:  # a failed solve keeps the old plan only while it has steps left
                 plan, self.plan, self.age = new, new, 0
-                traj.plans.append((i, plan))
-        feedback_start = time.perf_counter()
+                if records:
+                    self.trajectory.plans.append((i, plan))
+        feedback_start = time.perf_counter() if records else 0.0
         u, u_planned, correction, x_predicted = _input(system, plan, self.age, x)
-        traj.feedback_time_s[i] = time.perf_counter() - feedback_start
-        try:
-            self.timestep = _shown(self.env.step(system.action(u, recompute)))
-        except PhysicsError:
-            traj.nonfinite, self.done = True, True
-            return 0.0
-        traj.applied[i], traj.planned[i], traj.correction[i] = u, u_planned, correction
-        traj.predicted[i], traj.plan_age[i] = x_predicted, self.age
-        traj.recompute[i], traj.forced[i] = recompute, forced
-        traj.rewards[i] = reward = self.timestep.reward
-        traj.steps = self.step_index = i + 1
-        self.x = readonly(system.state(self.timestep))
+        if records:
+            self.trajectory.feedback_time_s[i] = time.perf_counter() - feedback_start
+        reward = self._advance(system.action(u, recompute))
+        self.recomputed, self.cost = recompute, computation_cost(recompute, system.recompute_price)
+        if reward is None:  # the plant failed
+            self.failed = self.done = True
+            if records:
+                self.trajectory.nonfinite = True
+            self.reward = 0.0
+            return self.reward - self.cost
+        self.reward = reward
+        if records:
+            traj = self.trajectory
+            traj.applied[i], traj.planned[i], traj.correction[i] = u, u_planned, correction
+            traj.predicted[i], traj.plan_age[i] = x_predicted, self.age
+            traj.recompute[i], traj.forced[i] = recompute, forced
+            traj.rewards[i] = reward
+            traj.steps = i + 1
+        self.step_index = i + 1
         u.flags.writeable = False  # the loop's own new array (np.minimum's): shown as u_prev, never written again
         self.age, self.u_prev = self.age + 1, u
         if self.env.task.restarted:  # the task put the plant back: the plan no longer applies
             self.age = plan.horizon
-        traj.step_time_s[i] = time.perf_counter() - start
-        if self.timestep.last() or self.step_index >= system.episode_steps:
-            self._finish()
-        else:
-            self._arrive()
+        if records:
+            self.trajectory.step_time_s[i] = time.perf_counter() - start
+            if self.timestep.last() or self.step_index >= system.episode_steps:
+                self._finish()
+            else:
+                self._arrive()
+        elif not np.isfinite(self.x).all():
+            self.failed = self.done = True
+        elif self.step_index >= system.episode_steps:
+            self.done = True
+        return reward - self.cost
+
+    def _solve(self, i: int) -> Plan:
+        """A new plan from the state now (the whole computation timed, a failure counted, when recording)."""
+        if not self.records:
+            observation = self._observation
+            if observation is None:
+                observation = self.env.task.get_observation(self.env.physics)
+            return self.system.plan(self.x, self.u_prev, self.plan, self.age,
+                                    dm_env.TimeStep(dm_env.StepType.MID, None, None, observation))
+        solve_start = time.perf_counter()
+        new = self.system.plan(self.x, self.u_prev, self.plan, self.age, self.timestep)
+        self.trajectory.solve_time_s[i] = time.perf_counter() - solve_start
+        if not new.success:
+            self.trajectory.solver_failures += 1
+        return new
+
+    def _advance(self, action) -> float | None:
+        """Step the plant over one control interval; the task's reward, or None if the plant failed."""
+        if self.records:
+            try:
+                self.timestep = _shown(self.env.step(action))
+            except PhysicsError:
+                return None
+            self.x = readonly(self.system.state(self.timestep))
+            return self.timestep.reward
+        task, physics = self.env.task, self.env.physics  # as control.Environment.step, without a TimeStep
+        try:
+            task.before_step(action, physics)
+            physics.step(self.env._n_sub_steps)
+        except PhysicsError:
+            return None
+        task.after_step(physics)
+        reward = task.get_reward(physics)
+        self._observation, self.x = None, readonly(self.system.measure(physics))
         return reward
 
     def _arrive(self) -> None:
         """At the start of a step: the state is recorded; a non-finite one ends the episode."""
         self.trajectory.states[self.step_index] = self.x
         if not np.all(np.isfinite(self.x)):
-            self.trajectory.nonfinite, self.done = True, True
+            self.trajectory.nonfinite, self.done, self.failed = True, True, True
 
     def _finish(self) -> None:
         traj = self.trajectory
         traj.states[traj.steps] = self.x
-        traj.nonfinite = not bool(np.all(np.isfinite(self.x)))
+        traj.nonfinite = self.failed = not bool(np.all(np.isfinite(self.x)))
         self.done = True
 
 
@@ -171,8 +254,9 @@ def play_on(
     trace: Continuation | None = None,
 ) -> float:
     """Continue ``snapshot`` in ``env`` (a twin of the one it was taken in) and return the policy's
-    return from the snapshot's step on: rewards minus the price of each computation, plus
-    ``system.truncation_value`` of the last state when the play stops before the episode's end.
+    return from the snapshot's step on: the sum of :meth:`ClosedLoop.step`'s rewards (the price of
+    each computation taken off), plus ``system.truncation_value`` of the last state when the play
+    stops before the episode's end.
 
     The first decision is ``first`` (recompute or keep), the later ones ``policy``'s. ``episode``
     replaces the episode being played from the snapshot's step on (a sampled future); ``first_plan``
@@ -181,56 +265,26 @@ def play_on(
     plant that fails (non-finite state) returns ``-inf``. ``trace``, if given (a new :class:`Continuation`),
     is filled step by step.
 
-    Steps the task and the physics directly, as ``control.Environment.step`` does, without making
-    a ``TimeStep``; reads the state off the physics (``system.measure``) and makes the task's
-    observation only when a solve or a policy reads it (a policy that does not sets ``observes =
-    False``): the same numbers as :func:`run_episode`, bit for bit (tests/test_rollout.py).
+    Plays :class:`ClosedLoop` in its light mode (a policy that never reads the observation sets
+    ``observes = False``): the same numbers as :func:`run_episode`, bit for bit (tests/test_rollout.py).
     """
-    task, physics = env.task, env.physics
-    physics.restore(snapshot.physics)
-    task.resume(snapshot.episode if episode is None else episode, snapshot.step)
-    n_sub_steps, price = env._n_sub_steps, system.recompute_price
+    loop = ClosedLoop(system, env, records=False).resume(snapshot, episode)
     end = system.episode_steps if stop is None else min(stop, system.episode_steps)
-    plan, age, u_prev, x, observation = snapshot.plan, snapshot.age, snapshot.u_prev, snapshot.x, snapshot.observation
     observes = getattr(policy, "observes", True)  # the observation is made only when someone reads it
     total = 0.0
-    for i in range(snapshot.step, end):
-        if i == snapshot.step:
-            recompute = plan is None or age >= plan.horizon or first  # a plan that has run out forces a solve
-        elif plan is None or age >= plan.horizon:
-            recompute = True
+    while loop.step_index < end:
+        if loop.step_index == snapshot.step:
+            added = loop.step(first, solved=first_plan)
         else:
-            if observes and observation is None:
-                observation = frozen(task.get_observation(physics))
-            recompute = bool(policy.decide(AugmentedState(x, plan.states[0], age, plan.state_at(age), plan, observation), rng))
-        if recompute:
-            if i == snapshot.step and first_plan is not None:
-                new = first_plan
-            else:
-                if observation is None:
-                    observation = task.get_observation(physics)
-                new = system.plan(x, u_prev, plan, age, dm_env.TimeStep(dm_env.StepType.MID, None, None, observation))
-            if new.success or plan is None or age >= plan.horizon:
-                plan, age = new, 0
-        u = _input(system, plan, age, x)[0]
-        try:
-            task.before_step(system.action(u, recompute), physics)
-            physics.step(n_sub_steps)
-        except PhysicsError:
+            s = loop.augmented_state(observes=observes)
+            added = loop.step(s is not None and bool(policy.decide(s, rng)))
+        if loop.failed:
             return -math.inf
-        task.after_step(physics)
-        added = task.get_reward(physics) - price * recompute
         total += added
-        observation, x = None, readonly(system.measure(physics))
-        if not np.isfinite(x).all():
-            return -math.inf
-        age, u_prev = age + 1, u
-        if task.restarted:  # as in ClosedLoop.step: the next decision is forced
-            age = plan.horizon
         if trace is not None:
             trace.added.append(added)
-            trace.recomputed.append(recompute)
-            trace.after.append((x, plan, age, u_prev))
+            trace.recomputed.append(loop.recomputed)
+            trace.after.append((loop.x, loop.plan, loop.age, loop.u_prev))
     if end < system.episode_steps:
-        total += system.truncation_value(x)
+        total += system.truncation_value(loop.x)
     return total

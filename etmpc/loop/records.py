@@ -9,6 +9,12 @@ import numpy as np
 from etmpc.control.plan import Plan
 
 
+def computation_cost(computations, price: float):
+    """The price of ``computations`` (a count, a flag, or an array of either, elementwise) at ``price``
+    each: the one place etmpc prices a computation. A trigger's reward is the task's minus this."""
+    return price * computations
+
+
 # -- what one episode did --------------------------------------------------------------------------
 @dataclass
 class Trajectory:
@@ -56,11 +62,11 @@ class Trajectory:
 
     def policy_rewards(self, recompute_price: float) -> np.ndarray:
         """Per-step rewards the policy maximises: the environment's, minus the price of a computation."""
-        return self.rewards[: self.steps] - recompute_price * self.recompute[: self.steps]
+        return self.rewards[: self.steps] - computation_cost(self.recompute[: self.steps], recompute_price)
 
     def policy_return(self, recompute_price: float) -> float:
         """The policy's return: rewards minus the price of every computation."""
-        return float(self.rewards[: self.steps].sum() - recompute_price * self.recomputes)
+        return float(self.rewards[: self.steps].sum() - computation_cost(self.recomputes, recompute_price))
 
 
 @dataclass(eq=False)

@@ -49,6 +49,7 @@ import numpy as np
 
 from etmpc.views import blueprint as look
 from etmpc.common.errors import EtmpcError
+from etmpc.loop import computation_cost
 from etmpc.views.record import EpisodeRecord
 
 APPLICATION_ID = "etmpc"
@@ -263,9 +264,8 @@ class Recorder:
                    colors=[look.BOUND], widths=[1.0])
 
         # The objective.
-        price = identity["recompute_price"] * record.recompute
         sign = 1.0 if identity["objective_sense"] == "max" else -1.0
-        running = sign * np.cumsum(record.rewards - price)
+        running = sign * np.cumsum(record.rewards - computation_cost(record.recompute, identity["recompute_price"]))
         series("objective/reward", self._steps(n, dt), record.rewards, ["reward"], **realised)
         series("objective/running", self._steps(n, dt), running,
                [f"running {'profit (higher' if sign > 0 else 'cost (lower'} is better)"], **realised)

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from etmpc.common.errors import EtmpcError
+from etmpc.loop import computation_cost
 from etmpc.views.recording import DECISION_SERIES, END_MARKER, OBJECTIVE_SERIES
 from etmpc.systems import canonical
 
@@ -108,7 +109,7 @@ def replay_summary(path: str | Path) -> list[ReplayedEpisode]:
         steps_err, errors = data.get("prediction_error", (np.zeros(0, int), np.zeros(0)))
         recomputes = int(recompute.sum())
         # The same expressions as Trajectory.policy_return and evaluate.scores, on the same floats.
-        ret = float(rewards.sum() - identity["recompute_price"] * recomputes)
+        ret = float(rewards.sum() - computation_cost(recomputes, identity["recompute_price"]))
         control = float(rewards.sum())
         objective, control = (ret, control) if identity["objective_sense"] == "max" else (-ret, -control)
         chosen = np.flatnonzero((recompute > 0) & (forced == 0))
