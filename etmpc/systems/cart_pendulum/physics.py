@@ -147,38 +147,54 @@ class Physics(MjPhysics):
 
     # -- stepping ---------------------------------------------------------------------------------
     def step(self, nstep: int = 1) -> None:
-        """Advance ``nstep`` physics steps, refreshing ``qfrc_applied = M(q) e_hinge w`` before each.
+        """Advance ``nstep`` physics steps, refreshing ``qfrc_applied = M(q) e_hinge w`` (plus the
+        bumpers' force) before each.
 
-        ``mj_step1`` after every step keeps the mass matrix (and the rest of mjData) in sync with
-        the new state, as dm-control's legacy stepping does for RK4. A new MuJoCo warning (a
-        diverging state) raises ``PhysicsError`` as ``check_invalid_state`` does; this is the
-        hot loop of every rollout, so the check is inlined.
+        ``mj_step1`` after a step brings the mass matrix (and the rest of mjData) up to the new state,
+        as dm-control's legacy stepping does for RK4: the disturbance's force needs ``M(q)`` there.
+        Without a disturbance (``w = 0``) only the last step needs it, because ``mj_step`` computes all
+        it uses from the state itself: the same numbers, bit for bit, with a tenth of the passes. A new
+        MuJoCo warning (a diverging state) raises ``PhysicsError`` as ``check_invalid_state`` does;
+        this is the hot loop of every rollout, so the check is inlined.
         """
         m, d = self.model.ptr, self.data.ptr
         w = d.userdata[0]
-        force, push = d.qfrc_applied, self._hinge_unit * w
+        force = d.qfrc_applied
         warnings_before = self._warnings.tolist()
-        for _ in range(nstep):
-            if w:
+        if w:
+            push = self._hinge_unit * w
+            for _ in range(nstep):
                 mujoco.mj_mulM(m, d, force, push)  # M(q) (e_hinge w): the same numbers as (M(q) e_hinge) w
-            else:
+                if self.bumpers is not None:
+                    force[self._slider[1]] += self._bumper_force(d.qpos, d.qvel)
+                mujoco.mj_step(m, d)
+                mujoco.mj_step1(m, d)
+        elif self.bumpers is None:
+            force[:] = 0.0
+            mujoco.mj_step(m, d, nstep)
+            mujoco.mj_step1(m, d)
+        else:
+            qpos, qvel, slider = d.qpos, d.qvel, self._slider[1]
+            for _ in range(nstep):
                 force[:] = 0.0
-            if self.bumpers is not None:
-                force[self._slider[1]] += self._bumper_force()
-            mujoco.mj_step(m, d)
+                force[slider] += self._bumper_force(qpos, qvel)
+                mujoco.mj_step(m, d)
             mujoco.mj_step1(m, d)
         warnings_after = self._warnings.tolist()
         if warnings_after != warnings_before:
             self._invalid_state(warnings_before, warnings_after)
 
-    def _bumper_force(self) -> float:
-        """The bumpers' force on the slider now (N): 0 on the rail, a spring-damper past its ends."""
+    def _bumper_force(self, qpos: np.ndarray | None = None, qvel: np.ndarray | None = None) -> float:
+        """The bumpers' force on the slider now (N): 0 on the rail, a spring-damper past its ends
+        (``qpos``, ``qvel``: mjData's own arrays, if the caller has them at hand)."""
         b = self.bumpers
-        eta = float(self.data.qpos[self._slider[0]])
+        qpos = self.data.qpos if qpos is None else qpos
+        qvel = self.data.qvel if qvel is None else qvel
+        eta = float(qpos[self._slider[0]])
         over = abs(eta) - b.position_m
         if over <= 0.0:
             return 0.0
-        return -math.copysign(b.stiffness_n_m * over, eta) - b.damping_n_s_m * float(self.data.qvel[self._slider[1]])
+        return -math.copysign(b.stiffness_n_m * over, eta) - b.damping_n_s_m * float(qvel[self._slider[1]])
 
     def touches_bumper(self) -> bool:
         return self.bumpers is not None and abs(self.cart_position()) > self.bumpers.position_m

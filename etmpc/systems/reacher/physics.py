@@ -114,9 +114,8 @@ class Physics(MjPhysics):
         (this is the hot loop of every rollout)."""
         m, d = self.model.ptr, self.data.ptr
         warnings_before = self._warnings.tolist()
-        for _ in range(nstep):
-            mujoco.mj_step(m, d)
-            mujoco.mj_step1(m, d)
+        mujoco.mj_step(m, d, nstep)  # mj_step computes all it uses from the state: mj_step1 is needed after the last only
+        mujoco.mj_step1(m, d)
         warnings_after = self._warnings.tolist()
         if warnings_after != warnings_before:
             names = [name for name, b, a in zip(mujoco.mjtWarning.__members__, warnings_before, warnings_after) if a > b]
