@@ -53,7 +53,7 @@ def test_stages_in_shared_pools_use_one_pool_and_give_the_same_numbers(serial):
 def test_summary_equals_a_direct_run(serial, cart_system, cart_testset):
     env = cart_system.make_env()
     for summary in serial.summaries:
-        policy = parse_policy(summary.policy, cart_system.error_weights)
+        policy = parse_policy(summary.policy, cart_system)
         objectives, recomputes = [], []
         for e in range(4):
             traj = run_episode(cart_system, env, policy, None, cart_system.episode_from_arrays(cart_testset.episode_arrays(e)))

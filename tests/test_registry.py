@@ -6,6 +6,7 @@ import sys
 import textwrap
 import warnings
 from importlib.metadata import EntryPoint
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -13,6 +14,9 @@ import pytest
 from etmpc.common.errors import EtmpcError, UnknownNameError
 from etmpc.policies import specs
 from etmpc.systems import registry
+
+# What parse_policy reads of a system, for kinds that need no real one.
+TASK = SimpleNamespace(error_weights=np.ones(4), name="cart_pendulum", episode_steps=100)
 
 
 @pytest.fixture
@@ -115,7 +119,7 @@ KIND = """
 
 def test_a_policy_kind_plugin_is_parsed_listed_in_the_help_and_scored_as_its_kind(plugins):
     plugins("etmpc.policies", "twice", "fake_kind:KIND", KIND)
-    policy = specs.parse_policy("twice:2", np.ones(4))
+    policy = specs.parse_policy("twice:2", TASK)
     assert policy.period == 4
     assert specs.syntax().endswith("oracle:BASE | twice:T")
     assert specs.kind_of("twice:2").family == "periodic" and not specs.kind_of("twice:2").upper_bound
@@ -124,7 +128,7 @@ def test_a_policy_kind_plugin_is_parsed_listed_in_the_help_and_scored_as_its_kin
 
     assert "rollout:BASE[:K[:H]] | oracle:BASE | twice:T (repeatable" in _evaluate_help(build_parser())
     with pytest.raises(UnknownNameError, match=r"valid: always \| never .* oracle:BASE \| twice:T$"):
-        specs.parse_policy("thrice:2", np.ones(4))
+        specs.parse_policy("thrice:2", TASK)
 
 
 def _evaluate_help(parser) -> str:
@@ -146,13 +150,13 @@ def test_a_broken_policy_kind_plugin_is_one_warning_and_the_built_in_kinds_still
         kinds = specs.kinds()
     assert [str(w.message) for w in caught] == [f"etmpc: policy kind plugin {name!r} ({value}) {problem}; left out"]
     assert list(kinds) == [kind.name for kind in specs.BUILT_IN]
-    assert specs.parse_policy("every:3", np.ones(4)).period == 3
+    assert specs.parse_policy("every:3", TASK).period == 3
 
 
 def test_a_policy_kind_plugin_may_not_replace_a_built_in_kind(plugins):
     plugins("etmpc.policies", "every", "fake_every:KIND", KIND.replace('Kind("twice"', 'Kind("every"'))
     with pytest.warns(RuntimeWarning, match="'every' .fake_every:KIND. names a kind etmpc already has"):
-        assert specs.parse_policy("every:3", np.ones(4)).period == 3
+        assert specs.parse_policy("every:3", TASK).period == 3
 
 
 def test_every_spec_reader_asks_the_registry():
@@ -162,10 +166,10 @@ def test_every_spec_reader_asks_the_registry():
 
     assert [is_upper_bound(s) for s in ("oracle:every:3", "rollout:every:3", "every:3", "my-own")] == [True, False, False, False]
     assert short_name("rl:runs/a/seed0/best.json") == "rl:seed0/best.json" and short_name("self:x/y.json") == "self:y.json"
-    assert specs.parse_policy("oracle:every:3", np.ones(4)).upper_bound
-    assert not specs.parse_policy("rollout:every:3", np.ones(4)).upper_bound
+    assert specs.parse_policy("oracle:every:3", TASK).upper_bound
+    assert not specs.parse_policy("rollout:every:3", TASK).upper_bound
     with pytest.raises(EtmpcError, match="the base policy must not simulate"):
-        specs.parse_policy("rollout:oracle:every:3", np.ones(4))
+        specs.parse_policy("rollout:oracle:every:3", TASK)
 
 
 # Plugins that are hostile rather than broken: their code exits, or raises what is not an Exception.
@@ -203,7 +207,7 @@ def test_a_policy_kind_plugin_whose_import_exits_or_raises_anything_is_one_warni
     assert [str(w.message) for w in caught] == [
         f"etmpc: policy kind plugin 'hostile' (fake_hostile:KIND) failed to load ({raised}); left out"]
     assert list(kinds) == [kind.name for kind in specs.BUILT_IN]
-    assert specs.parse_policy("every:3", np.ones(4)).period == 3
+    assert specs.parse_policy("every:3", TASK).period == 3
 
 
 def test_a_real_ctrl_c_while_a_plugin_imports_still_interrupts(plugins, no_ctrl_c):
@@ -246,15 +250,15 @@ BOOM = """
 def test_a_policy_kind_plugin_whose_builder_fails_is_one_error_naming_it(plugins, no_ctrl_c, spec, message):
     plugins("etmpc.policies", "boom", "fake_boom:KIND", BOOM)
     with pytest.raises(EtmpcError) as caught:
-        specs.parse_policy(spec, np.ones(4))
+        specs.parse_policy(spec, TASK)
     assert str(caught.value).startswith(message) and "\n" not in str(caught.value)
-    assert specs.parse_policy("every:3", np.ones(4)).period == 3
+    assert specs.parse_policy("every:3", TASK).period == 3
 
 
 def test_a_real_ctrl_c_while_a_plugin_kind_builds_still_interrupts(plugins, no_ctrl_c):
     plugins("etmpc.policies", "boom", "fake_boom:KIND", BOOM)
     with pytest.raises(KeyboardInterrupt):
-        specs.parse_policy("boom:real-ctrl-c", np.ones(4))
+        specs.parse_policy("boom:real-ctrl-c", TASK)
 
 
 def test_on_the_command_line_a_hostile_plugin_is_one_line_and_the_rest_works(plugins, no_ctrl_c, capsys):

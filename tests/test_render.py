@@ -122,7 +122,7 @@ def test_failed_encoding_leaves_no_partial_file(tmp_path):
 
 def test_rollout_is_the_evaluated_episode(rollout, cart_system, cart_testset):
     """The rendered episode is repeat 0 of seed 0 on test-set episode 0, as `etmpc evaluate` plays it."""
-    traj = run_episode(cart_system, cart_system.make_env(), parse_policy("every:3", cart_system.error_weights),
+    traj = run_episode(cart_system, cart_system.make_env(), parse_policy("every:3", cart_system),
                        policy_rng(0, 0, 0), cart_system.episode_from_arrays(cart_testset.episode_arrays(0)))
     np.testing.assert_array_equal(traj.states, rollout.trajectory.states)
     assert traj.recomputes == rollout.trajectory.recomputes

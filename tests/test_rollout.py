@@ -11,7 +11,6 @@ from etmpc import loop
 from etmpc.common.errors import EtmpcError, UnknownNameError
 from etmpc.loop import Snapshot, play_on, run_episode
 from etmpc.policies import parse_policy, rollout
-from etmpc.systems import make_system
 from etmpc.evaluation.workers import play_test_episode
 
 REPO = Path(__file__).resolve().parents[1]
@@ -53,7 +52,7 @@ def test_the_fast_path_replays_the_dm_env_loop_bit_for_bit(domain, spec, step, c
                                                             cart_testset, battery_testset):
     system, testset = {"cart_pendulum": (cart_system, cart_testset), "battery": (battery_system, battery_testset)}[domain]
     episode = system.episode_from_arrays(testset.episode_arrays(3))
-    inner = parse_policy(spec.replace("rl:", "rl:" + str(REPO) + "/").removesuffix("+sample"), system.error_weights, domain)
+    inner = parse_policy(spec.replace("rl:", "rl:" + str(REPO) + "/").removesuffix("+sample"), system)
     if spec.endswith("+sample"):  # drawing each decision from pi, as in training
         inner = dataclasses.replace(inner, greedy=False)
         assert inner.stochastic
@@ -99,8 +98,8 @@ def test_the_oracle_never_does_worse_than_its_base(cart_system, episode):
     """Rollout's cost-improvement property: with the stored (deterministic) future, the one-step
     lookahead over a base policy costs at most what the base costs, on every episode, because the
     simulation is the plant, bit for bit (Bertsekas, Rollout algorithms, sequential consistency)."""
-    base = play_test_episode("cart_pendulum", parse_policy("every:5", cart_system.error_weights), 0, 0, episode)
-    oracle = play_test_episode("cart_pendulum", parse_policy("oracle:every:5", cart_system.error_weights), 0, 0, episode)
+    base = play_test_episode("cart_pendulum", parse_policy("every:5", cart_system), 0, 0, episode)
+    oracle = play_test_episode("cart_pendulum", parse_policy("oracle:every:5", cart_system), 0, 0, episode)
     price = cart_system.recompute_price
     assert -oracle.trajectory.policy_return(price) <= -base.trajectory.policy_return(price)
     assert oracle.trajectory.recomputes != base.trajectory.recomputes or \
@@ -128,13 +127,12 @@ def test_the_oracles_memo_changes_no_decision_and_halves_its_plays(task, base, m
         return lookups[-1]
 
     monkeypatch.setattr(rollout.OracleMemo, "lookup", counting_lookup)
-    weights = make_system(task).error_weights
-    with_memo = play_test_episode(task, parse_policy(f"oracle:{base}", weights), 0, 0, 2).trajectory
+    with_memo = play_test_episode(task, parse_policy(f"oracle:{base}", task), 0, 0, 2).trajectory
     plays_with_memo = len(played)
     hits = sum(known is not None for known in lookups)
     monkeypatch.setattr(rollout.OracleMemo, "lookup", lambda memo, snapshot: real_lookup(rollout.OracleMemo(), snapshot))
     played.clear()
-    without = play_test_episode(task, parse_policy(f"oracle:{base}", weights), 0, 0, 2).trajectory
+    without = play_test_episode(task, parse_policy(f"oracle:{base}", task), 0, 0, 2).trajectory
     np.testing.assert_array_equal(with_memo.recompute, without.recompute)
     np.testing.assert_array_equal(with_memo.rewards, without.rewards)
     np.testing.assert_array_equal(with_memo.states, without.states)
@@ -144,7 +142,7 @@ def test_the_oracles_memo_changes_no_decision_and_halves_its_plays(task, base, m
 
 
 def test_rollout_is_deterministic_given_its_generator(battery_system):
-    policy = parse_policy("rollout:every:5:2:10", battery_system.error_weights)
+    policy = parse_policy("rollout:every:5:2:10", battery_system)
     a = play_test_episode("battery", policy, 3, 0, 1).trajectory
     b = play_test_episode("battery", policy, 3, 0, 1).trajectory
     c = play_test_episode("battery", policy, 4, 0, 1).trajectory
@@ -159,7 +157,7 @@ def test_rollout_is_deterministic_given_its_generator(battery_system):
     ("oracle:every:3", "oracle:every:3"), ("oracle:never", "oracle:never"),
 ])
 def test_rollout_specs(cart_system, spec, canonical):
-    policy = parse_policy(spec, cart_system.error_weights)
+    policy = parse_policy(spec, cart_system)
     assert policy.spec == canonical
     assert policy.oracle == spec.startswith("oracle")
 
@@ -172,13 +170,13 @@ def test_rollout_specs(cart_system, spec, canonical):
 ])
 def test_bad_rollout_specs_are_one_line_errors(cart_system, spec):
     with pytest.raises(EtmpcError) as info:
-        parse_policy(spec, cart_system.error_weights)
+        parse_policy(spec, cart_system)
     assert "\n" not in str(info.value) and spec in str(info.value)
 
 
 def test_unknown_policy_lists_the_rollouts(cart_system):
     with pytest.raises(UnknownNameError, match="rollout:BASE"):
-        parse_policy("rollouts:always", cart_system.error_weights)
+        parse_policy("rollouts:always", cart_system)
 
 
 def test_the_oracle_is_labelled_an_upper_bound_in_the_table_json_and_figure(tmp_path, capsys):

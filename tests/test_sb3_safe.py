@@ -119,7 +119,7 @@ def test_a_payload_in_a_policy_file_never_runs(entry, tmp_path, capsys):
     model = _poisoned(tmp_path, entry, marker)
     says = REFUSED.get(entry)
     if says is None:  # an entry etmpc never reads: the model loads, with the shipped model's network
-        policy = parse_policy(f"sb3:{model}", np.ones(1), "cart_pendulum")
+        policy = parse_policy(f"sb3:{model}", "cart_pendulum")
         shipped = load_sb3(str(CART), "cart_pendulum")
         assert isinstance(policy, SB3Policy)
         for (w, b), (w0, b0) in zip([*policy.network.hidden, policy.network.head], [*shipped.network.hidden, shipped.network.head]):
@@ -127,7 +127,7 @@ def test_a_payload_in_a_policy_file_never_runs(entry, tmp_path, capsys):
             np.testing.assert_array_equal(b, b0)
     else:
         with pytest.raises(EtmpcError, match="^sb3:") as refused:
-            parse_policy(f"sb3:{model}", np.ones(1), "cart_pendulum")
+            parse_policy(f"sb3:{model}", "cart_pendulum")
         assert says in str(refused.value) and len(str(refused.value).splitlines()) == 1
     out = tmp_path / "ev.json"
     code = main(["evaluate", "cart_pendulum", "--policy", f"sb3:{model}", "--episodes", "1", "--workers", "1",

@@ -83,7 +83,7 @@ def _fixed_schedule(spec: str, system):
     if kind is None or kind.family != "periodic":
         raise EtmpcError(f"reward_baseline: a fixed schedule (always, never or every:T) is needed, got {spec!r}")
     try:
-        return parse_policy(spec, system.error_weights, system.name)
+        return parse_policy(spec, system)
     except EtmpcError as exc:
         raise EtmpcError(f"reward_baseline: a fixed schedule (always, never or every:T) is needed: {exc}") from None
 

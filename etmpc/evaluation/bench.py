@@ -49,7 +49,7 @@ def _episode(system, testset, index: int):
 
 
 def _play(system, env, testset, spec: str, episodes: int):
-    policy = parse_policy(spec, system.error_weights)
+    policy = parse_policy(spec, system)
     start = time.perf_counter()
     trajectories = [run_episode(system, env, policy, np.random.default_rng(e), _episode(system, testset, e)) for e in range(episodes)]
     return trajectories, time.perf_counter() - start
@@ -73,7 +73,7 @@ class _Capture:
 def _problems(system, env, testset, count: int) -> list:
     """The first ``count`` OCPs an ``always`` run meets on the test set (an untimed run)."""
     capture = _Capture(system, count)
-    policy = parse_policy("always", system.error_weights)
+    policy = parse_policy("always", system)
     episode = 0
     while len(capture.problems) < count and episode < testset.episodes:
         run_episode(capture, env, policy, np.random.default_rng(episode), _episode(system, testset, episode))
@@ -157,7 +157,7 @@ def _rollout_steps(system, env, testset, episodes: int, repeats: int = 5) -> dic
     """Wall time per step of :func:`etmpc.loop.play_on` under ``never`` from step 1 of each
     episode (the plan made at step 0 kept, forced solves every N steps excluded): a rollout step
     without a solve, the fast path rollouts and the oracle bound simulate with."""
-    never, twin = parse_policy("never", system.error_weights), system.make_env()
+    never, twin = parse_policy("never", system), system.make_env()
     per_step, solve_s, steps = [], [0.0], 0
 
     class _Timed:  # system.plan timed, so that forced solves can be taken out

@@ -301,7 +301,7 @@ def parse_policies(system, policies: list) -> dict:
     for policy in policies:
         if isinstance(policy, str):
             check_shipped(policy)
-            spec, policy = policy, parse_policy(policy, system.error_weights, system.name, system.episode_steps)
+            spec, policy = policy, parse_policy(policy, system)
         else:
             policy = checked(policy)
             spec = policy.spec

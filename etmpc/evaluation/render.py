@@ -38,7 +38,7 @@ def render_rollout(domain: str, policy_spec: str, episode: int, out: str | Path,
     system, env, _ = context(domain, testset_path)
     check_framebuffer(env.physics, width, height)
     check_shipped(policy_spec)
-    policy = parse_policy(policy_spec, system.error_weights, domain)
+    policy = parse_policy(policy_spec, system)
     # An out-of-range index raises TestSetError (an EtmpcError) before anything is drawn.
     played = play_test_episode(domain, policy, seed, 0, episode, testset_path)
     system, env, traj = played.system, played.env, played.trajectory

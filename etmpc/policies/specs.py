@@ -36,6 +36,7 @@ from etmpc.policies.sb3 import load_sb3
 from etmpc.policies.selftrigger import load_self
 from etmpc.policies.threshold import Threshold
 from etmpc.policies.user import load_user
+from etmpc.systems import SystemKey, make_system
 
 ENTRY_POINTS = "etmpc.policies"
 
@@ -192,17 +193,30 @@ def names_a_kind(spec: str) -> bool:
     return kind is not None and kind.family != "users"
 
 
-def parse_policy(spec: str, error_weights: np.ndarray, domain: str | None = None, steps: int = 100) -> Policy:
-    """Build a policy from its spec; a bad spec raises :class:`EtmpcError`, an unknown kind
-    :class:`UnknownNameError` listing the valid ones.
+def parse_policy(spec: str, system, *legacy) -> Policy:
+    """Build the policy ``spec`` for ``system`` (the built task it will play, or its name: its ``error_weights``,
+    the diagonal of W, its ``name``, which ``rl:`` files made for one task are checked against, and
+    its ``episode_steps``, which bound a rollout's look-ahead). A bad spec raises :class:`EtmpcError`,
+    an unknown kind :class:`UnknownNameError` listing the valid ones.
 
-    ``rl:PATH`` is checked against task ``domain`` and the state size ``len(error_weights)``; ``steps``
-    (the episode length) bounds a rollout's look-ahead.
+    The older form ``parse_policy(spec, error_weights, task=None, steps=100)`` still works in this
+    release, with a ``DeprecationWarning``.
     """
+    if isinstance(system, (str, SystemKey)):
+        system = make_system(system)
+    if isinstance(system, np.ndarray) or legacy:
+        warnings.warn("parse_policy(spec, error_weights, task, steps) is deprecated: pass the system, "
+                      "parse_policy(spec, system)", DeprecationWarning, stacklevel=2)
+        return _parse(spec, Context(np.asarray(system), *(legacy + (None, 100)[len(legacy):]), None))
+    return _parse(spec, Context(system.error_weights, system.name, system.episode_steps, None))
+
+
+def _parse(spec: str, context: Context) -> Policy:
+    if context.parse is None:
+        context = Context(context.error_weights, context.task, context.steps, lambda base: _parse(base, context))
     if any(ord(c) < 32 or ord(c) == 127 for c in spec):  # a line break would split every table and message
         raise EtmpcError(f"bad policy {spec!r}: it holds a control character (a line break?)")
     kind = kind_of(spec)
-    context = Context(error_weights, domain, steps, lambda base: parse_policy(base, error_weights, domain, steps))
     if any(kind is own for own in BUILT_IN):
         return kind.build(spec.partition(":")[2], spec, context)
     with interrupts.watching():  # a plugin's builder: all it raises but an EtmpcError, a Ctrl-C or SIGTERM is one line
