@@ -5,6 +5,7 @@ import json
 import numpy as np
 import pytest
 
+from etmpc.common.errors import EtmpcError
 from etmpc.evaluation import workers
 from etmpc.evaluation.evaluate import evaluate
 from etmpc.loop import run_episode
@@ -75,3 +76,14 @@ def test_json_has_the_documented_fields(serial, cart_testset):
                     "solver_failures", "episodes", "repeats", "nonfinite_episodes"):
             assert key in entry
     assert len(data["runs"]) == 3 * 4
+
+
+def test_the_task_is_called_task_and_the_old_keyword_domain_still_works_with_a_warning():
+    new = evaluate(task="cart_pendulum", policies=["every:5"], episodes=1, workers=1, progress=False)
+    with pytest.warns(DeprecationWarning, match="domain= is deprecated: call it task="):
+        old = evaluate(domain="cart_pendulum", policies=["every:5"], episodes=1, workers=1, progress=False)
+    assert old.to_json()["runs"] == new.to_json()["runs"]
+    with pytest.raises(EtmpcError, match=r"^task: give it once \(domain= is its old name\)$"):
+        evaluate("cart_pendulum", ["every:5"], domain="cart_pendulum", episodes=1, workers=1, progress=False)
+    with pytest.raises(EtmpcError, match="^task: missing$"):
+        evaluate(policies=["every:5"], episodes=1, workers=1, progress=False)

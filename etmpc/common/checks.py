@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 import numbers
+import warnings
 from typing import Any
 
 from etmpc.common.errors import EtmpcError
@@ -61,3 +62,17 @@ def argument(name: str, check, value: Any):
         return check(value)
     except BadValue as exc:
         raise BadValue(f"{name}: {exc}") from None
+
+
+def renamed(new: str, value: Any, old: str, old_value: Any, required: bool = True) -> Any:
+    """The value of a parameter that was called ``old`` before it was called ``new``: the old keyword
+    works for one release, with a ``DeprecationWarning``; both at once, or neither when ``required``,
+    is an error naming them."""
+    if old_value is not None:
+        if value is not None:
+            raise EtmpcError(f"{new}: give it once ({old}= is its old name)")
+        warnings.warn(f"the keyword {old}= is deprecated: call it {new}=", DeprecationWarning, stacklevel=3)
+        return old_value
+    if value is None and required:
+        raise EtmpcError(f"{new}: missing")
+    return value

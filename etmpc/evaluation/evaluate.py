@@ -177,8 +177,8 @@ def _fields(row) -> dict:
 
 
 def evaluate(
-    domain: str,
-    policies: list,
+    task: str | SystemKey | None = None,
+    policies: list | None = None,
     episodes: int | None = None,
     repeats: int = 1,
     workers: int | None = None,
@@ -189,11 +189,14 @@ def evaluate(
     address: str | None = None,
     record: str | Path | None = None,
     recompute_price: float | None = None,
+    *,
+    domain: str | SystemKey | None = None,
 ) -> Evaluation:
     """Run every policy on the first ``episodes`` test-set episodes, ``repeats`` times each, on
     ``workers`` processes of ``backend`` (see ``etmpc.evaluation.workers.make_backend``).
 
-    ``domain``: a task name (``DOMAIN`` or ``DOMAIN/TASK``), or a :class:`~etmpc.systems.SystemKey`. ``policies``: spec strings
+    ``task``: a task's name (``DOMAIN`` or ``DOMAIN/TASK``), or a :class:`~etmpc.systems.SystemKey`
+    (``domain=``, its old name, works for this release with a ``DeprecationWarning``). ``policies``: spec strings
     (``every:3``, ``rl:PATH``, ``py:MODULE:NAME``, ...) and policy objects (anything with ``spec``,
     ``stochastic`` and ``decide(s, rng)``, see :mod:`etmpc.policies.user`), side by side; each is
     named by its spec in the results, and every one meets the same episodes with the same draws.
@@ -203,8 +206,9 @@ def evaluate(
 
     Bad arguments, policies and files raise :class:`EtmpcError` with the command line's messages
     (:func:`check_arguments`), before any work; so does a policy's own failure, naming it."""
+    task = checks.renamed("task", task, "domain", domain)
     with interrupts.watching():  # a trigger that raises KeyboardInterrupt is its failure, not a Ctrl-C
-        return _evaluate(domain, policies, episodes, repeats, workers, seed, testset_path, progress, backend, address,
+        return _evaluate(task, policies, episodes, repeats, workers, seed, testset_path, progress, backend, address,
                          record, recompute_price)
 
 

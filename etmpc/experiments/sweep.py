@@ -199,7 +199,7 @@ def _sweep(domain: str, out: Path, settings: SweepSettings, workers: int, backen
     system = make_system(domain)
     _start(out, domain, settings)
     started = time.perf_counter()
-    run = dict(domain=domain, episodes=settings.episodes, workers=workers, backend=backend, address=address,
+    run = dict(task=domain, episodes=settings.episodes, workers=workers, backend=backend, address=address,
                progress=progress)
     periodic = [f"every:{t}" for t in range(1, system.horizon + 1)]
     events = [f"threshold:{x:g}" for x in settings.thresholds]
