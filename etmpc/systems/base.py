@@ -112,7 +112,6 @@ class SystemBase:
 
     # -- optional capabilities (CAPABILITIES): None where the task offers none -----------------------
     benchmark: Benchmark | None = None
-    sample_future: Any = None  # (episode, step, rng) -> the episode with what is unknown at step redrawn
     exogenous_feature_names: tuple[str, ...] = ()
     exogenous_features: Any = None  # (s) -> array: the values of exogenous_feature_names
     camera: str | None = None  # the MJCF camera that films the scene
@@ -158,19 +157,43 @@ class SystemBase:
         """The environment's action for input ``u``."""
         return u
 
+    # -- the world, read through one reference ----------------------------------------------------------
+    @cached_property
+    def world(self) -> Any:
+        """The task as the world: the dm-control ``Task`` of an environment made once. Its laws are the
+        world's, not the controller's: how an episode's random future is drawn (``draw_episode``) and,
+        where the task offers it, redrawn past a step from what a controller knows there
+        (``resample_episode``), what episodes are drawn from (``episode_parameters``) and their
+        exogenous signals (``signals``). The system reads them through this one reference."""
+        return self.make_env().task
+
     def draw_episode(self, rng: np.random.Generator) -> Any:
-        return self.Episode.draw(rng)
+        """A new episode, drawn by the task from ``rng``."""
+        return self.world.draw_episode(rng)
+
+    @property
+    def sample_future(self) -> Any:
+        """``(episode, step, rng) -> episode`` with what a controller cannot know at the decision of
+        ``step`` redrawn: the task's ``resample_episode``, or None where the task offers none."""
+        return getattr(self.world, "resample_episode", None)
 
     def episode_from_arrays(self, arrays: dict[str, np.ndarray]) -> Any:
         return self.Episode.from_arrays(arrays)
 
     def episode_parameters(self) -> dict:
-        """What episodes are drawn from, kept in a test set's metadata."""
-        return {}
+        """What episodes are drawn from, kept in a test set's metadata (the task's, if it says)."""
+        parameters = getattr(self.world, "episode_parameters", None)
+        return {} if parameters is None else parameters()
 
     def signals(self, episode: Any) -> dict[str, np.ndarray]:
-        """The exogenous inputs per step, by name with unit, for recordings and figures."""
-        return {}
+        """The exogenous inputs per step, by name with unit, for recordings and figures (the task's)."""
+        signals = getattr(self.world, "signals", None)
+        return {} if signals is None else signals(episode)
+
+    def __getstate__(self) -> dict:
+        state = dict(self.__dict__)
+        state.pop("world", None)  # an environment: each process makes its own
+        return state
 
     def truncation_value(self, x: np.ndarray) -> float:
         """What a simulation stopped early adds for the state it ends in."""

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from functools import cached_property
 
 import control as ct
@@ -10,7 +10,6 @@ import dm_env
 import numpy as np
 
 from etmpc.systems.battery import task as battery_env
-from etmpc.systems.battery import market
 from etmpc.systems.battery.mpc import EconomicMPC
 from etmpc.systems.battery.parameters import Battery, Market
 from etmpc.systems.battery.reference import LinprogReference
@@ -116,22 +115,6 @@ class BatterySystem(SystemBase):
 
     def make_env(self, random=None):
         return battery_env.make_environment(random=random, battery=self.config.battery, market=self.config.market)
-
-    def draw_episode(self, rng: np.random.Generator) -> battery_env.Episode:
-        return battery_env.Episode.draw(rng, self.config.battery, self.config.market)
-
-    def episode_parameters(self) -> dict:
-        """What the episodes are drawn from (recorded in the test set)."""
-        return {"battery": asdict(self.config.battery), "market": asdict(self.config.market)}
-
-    def signals(self, episode: battery_env.Episode) -> dict[str, np.ndarray]:
-        """The episode's true prices and net production, per step, for recordings."""
-        return {"price_eur_kwh": episode.price_eur_kwh, "net_production_kw": episode.production_kw}
-
-    def sample_future(self, episode: battery_env.Episode, step: int, rng: np.random.Generator) -> battery_env.Episode:
-        """``episode`` with everything the controller has not seen at the decision of step ``step``
-        redrawn from the task's generators (rows ``step + 1..``; see ``market.sample_future``)."""
-        return market.sample_future(rng, episode, step + 1, self.config.battery, self.config.market)
 
     def truncation_value(self, x: np.ndarray) -> float:
         """The stored energy at the mean price, as the task values it at the episode's end (EUR)."""

@@ -35,13 +35,14 @@ from __future__ import annotations
 
 import collections
 import math
+from dataclasses import asdict
 
 import numpy as np
 from dm_control.rl import control
 from dm_control.utils import containers
 from dm_env import specs
 
-from etmpc.systems.battery.market import Episode
+from etmpc.systems.battery.market import Episode, sample_future
 from etmpc.systems.battery.parameters import Battery, Market
 from etmpc.systems.episodes import EpisodeTask, Random, add_task, build_environment
 
@@ -180,6 +181,19 @@ class Trading(EpisodeTask):
 
     def draw_episode(self, random: np.random.Generator) -> Episode:
         return Episode.draw(random, self.battery, self.market, self._steps)
+
+    def resample_episode(self, episode: Episode, step: int, random: np.random.Generator) -> Episode:
+        """``episode`` with everything the controller has not seen at the decision of step ``step``
+        redrawn from the task's generators (rows ``step + 1..``; see ``market.sample_future``)."""
+        return sample_future(random, episode, step + 1, self.battery, self.market)
+
+    def episode_parameters(self) -> dict:
+        """What the episodes are drawn from (recorded in the test set)."""
+        return {"battery": asdict(self.battery), "market": asdict(self.market)}
+
+    def signals(self, episode: Episode) -> dict[str, np.ndarray]:
+        """The episode's true prices and net production, per step, for recordings."""
+        return {"price_eur_kwh": episode.price_eur_kwh, "net_production_kw": episode.production_kw}
 
     def initialize_episode(self, physics: Physics) -> None:
         episode = self.next_episode()

@@ -81,26 +81,6 @@ class CartPendulumSystem(SystemBase):
     def make_env(self, random=None):
         return cp_env.make_environment(random=random, plant=self.config.plant)
 
-    def episode_parameters(self) -> dict:
-        """What the episodes are drawn from (recorded in the test set)."""
-        return {
-            "initial_state_low": cp_env.INITIAL_STATE_LOW.tolist(),
-            "initial_state_high": cp_env.INITIAL_STATE_HIGH.tolist(),
-            "disturbance_std_rad_s2": cp_env.DISTURBANCE_STD_RAD_S2,
-            "steps": cp_env.EPISODE_STEPS,
-        }
-
-    def signals(self, episode: cp_env.Episode) -> dict[str, np.ndarray]:
-        """The episode's exogenous inputs, per step, for recordings."""
-        return {"disturbance_rad_s2": episode.disturbance}
-
-    def sample_future(self, episode: cp_env.Episode, step: int, rng: np.random.Generator) -> cp_env.Episode:
-        """``episode`` with the disturbances of intervals ``step..`` redrawn: at the decision of step
-        ``step`` the controller has felt those of the earlier intervals only (they are i.i.d.)."""
-        disturbance = np.array(episode.disturbance)
-        disturbance[step:] = rng.normal(0.0, cp_env.DISTURBANCE_STD_RAD_S2, size=disturbance.size - step)
-        return cp_env.Episode(episode.initial_state, disturbance)
-
     def plan(self, x: np.ndarray, u_prev: np.ndarray, warm: Plan | None, age: int, timestep: dm_env.TimeStep) -> Plan:
         return self.mpc.solve(x, u_prev, warm, age)
 

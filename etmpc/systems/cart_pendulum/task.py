@@ -109,6 +109,22 @@ class Balance(CartPendulumTask):
     def draw_episode(self, random: np.random.Generator) -> Episode:
         return Episode.draw(random, self._steps)
 
+    def resample_episode(self, episode: Episode, step: int, random: np.random.Generator) -> Episode:
+        """``episode`` with the disturbances of intervals ``step..`` redrawn: at the decision of step
+        ``step`` the controller has felt those of the earlier intervals only (they are i.i.d.)."""
+        disturbance = np.array(episode.disturbance)
+        disturbance[step:] = random.normal(0.0, DISTURBANCE_STD_RAD_S2, size=disturbance.size - step)
+        return Episode(episode.initial_state, disturbance)
+
+    def episode_parameters(self) -> dict:
+        """What the episodes are drawn from (recorded in the test set)."""
+        return {"initial_state_low": INITIAL_STATE_LOW.tolist(), "initial_state_high": INITIAL_STATE_HIGH.tolist(),
+                "disturbance_std_rad_s2": DISTURBANCE_STD_RAD_S2, "steps": EPISODE_STEPS}
+
+    def signals(self, episode: Episode) -> dict[str, np.ndarray]:
+        """The episode's exogenous inputs, per step, for recordings."""
+        return {"disturbance_rad_s2": episode.disturbance}
+
     def initialize_episode(self, physics: Physics) -> None:
         episode = self.next_episode()
         self._step = 0
