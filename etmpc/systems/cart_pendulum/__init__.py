@@ -15,4 +15,4 @@ TEST_SET_SEEDS = {"balance": 20210601, "kicks": 20261126}
 
 __getattr__ = lazy(__name__, {"balance": "etmpc.systems.cart_pendulum.system:CartPendulumSystem",
                               "kicks": "etmpc.systems.cart_pendulum.kicks_system:KicksSystem"},
-                   "etmpc.systems.cart_pendulum.kicks:SUITE")
+                   "etmpc.systems.cart_pendulum.suite:SUITE")

@@ -44,8 +44,8 @@ from dm_control.rl import control
 
 from etmpc.systems.cart_pendulum.model import NX, STATE_NAMES
 from etmpc.systems.cart_pendulum.physics import Bumpers, Physics, load_model
-from etmpc.systems.cart_pendulum.task import SUITE, CartPendulumTask
-from etmpc.systems.episodes import Random, add_task, build_environment, jump_process
+from etmpc.systems.cart_pendulum.task import CartPendulumTask
+from etmpc.systems.episodes import Random, build_environment, jump_process
 
 CONTROL_DT_S = 0.1
 PHYSICS_DT_S = 0.01  # 10 RK4 steps per interval: the bumpers' spring (31 rad/s on the cart) needs them
@@ -192,6 +192,3 @@ def make_environment(random: Random = None, plant: str = "mismatched", steps: in
     physics.bumpers = BUMPERS
     return build_environment(physics, Kicks(random=random, steps=steps), steps, CONTROL_DT_S, environment_kwargs)
 
-
-add_task(SUITE, "kicks", make_environment, EPISODE_STEPS, CONTROL_DT_S,
-         "Keep the pole up on a 5 m rail through random kicks: 150 control intervals of 0.1 s by default (plant=...).")

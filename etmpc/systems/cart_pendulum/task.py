@@ -27,15 +27,14 @@ from dataclasses import dataclass
 
 import numpy as np
 from dm_control.rl import control
-from dm_control.utils import containers
 from dm_env import specs
 
 from etmpc.systems.cart_pendulum.model import NX, STATE_NAMES
 from etmpc.systems.cart_pendulum.physics import Physics, load_model
 from etmpc.systems.plants import PLANTS
-from etmpc.systems.episodes import EpisodeTask, Random, add_task, build_environment
+from etmpc.systems.episodes import EpisodeTask, Random, build_environment
 
-__all__ = ["PLANTS", "SUITE", "Episode", "Balance", "Physics", "load_model", "make_environment"]
+__all__ = ["PLANTS", "Episode", "Balance", "Physics", "load_model", "make_environment"]
 
 CONTROL_DT_S = 0.1
 EPISODE_STEPS = 100
@@ -45,7 +44,6 @@ INITIAL_STATE_HIGH = np.array([0.0, 1.0, 0.78, 1.0])
 
 _POLE_RGB = np.array([0.2, 0.45, 0.85])  # the MJCF's "pole" material
 _FALLEN_RGB = np.array([0.85, 0.1, 0.1])
-SUITE = containers.TaggedTasks()  # the domain's tasks: balance here, kicks in kicks.py
 
 @dataclass(frozen=True)
 class Episode:
@@ -164,6 +162,3 @@ def make_environment(
     physics = Physics.from_xml_string(root.to_xml_string(), assets=root.get_assets())
     return build_environment(physics, Balance(random=random, steps=steps), steps, CONTROL_DT_S, environment_kwargs)
 
-
-add_task(SUITE, "balance", make_environment, EPISODE_STEPS, CONTROL_DT_S,
-         "Balance the pole under the angular disturbance: 100 control intervals of 0.1 s by default (plant=...).")

@@ -1,0 +1,14 @@
+"""The cart pendulum's tasks as ``dm_control.suite`` names a domain's: ``SUITE``, their factories,
+tagged, each added here by name (``balance`` from ``task.py``, ``kicks`` from ``kicks.py``), so that
+importing one task's module registers nothing."""
+
+from dm_control.utils import containers
+
+from etmpc.systems.cart_pendulum import kicks, task
+from etmpc.systems.episodes import add_task
+
+SUITE = containers.TaggedTasks()
+add_task(SUITE, "balance", task.make_environment, task.EPISODE_STEPS, task.CONTROL_DT_S,
+         "Balance the pole under the angular disturbance: 100 control intervals of 0.1 s by default (plant=...).")
+add_task(SUITE, "kicks", kicks.make_environment, kicks.EPISODE_STEPS, kicks.CONTROL_DT_S,
+         "Keep the pole up on a 5 m rail through random kicks: 150 control intervals of 0.1 s by default (plant=...).")
