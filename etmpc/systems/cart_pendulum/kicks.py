@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import collections
 import math
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 
 import mujoco
 import numpy as np
@@ -145,6 +145,27 @@ class Kicks(CartPendulumTask):
 
     def draw_episode(self, random: np.random.Generator) -> KickEpisode:
         return KickEpisode.draw(random, self._steps)
+
+    def resample_episode(self, episode: KickEpisode, step: int, random: np.random.Generator) -> KickEpisode:
+        """``episode`` with the kicks of intervals ``step..`` and the references after ``step``
+        redrawn: at the decision of step ``step`` the controller has felt only the earlier kicks and
+        sees that interval's reference (kicks and jumps are memoryless)."""
+        kick, reference = np.array(episode.kick), np.array(episode.reference)
+        kick[step:] = draw_kicks(random, kick.size - step)
+        reference[step + 1:] = continue_references(random, reference[step], reference.size - step - 1)
+        return KickEpisode(episode.initial_state, kick, reference)
+
+    def episode_parameters(self) -> dict:
+        """What the episodes are drawn from (recorded in the test set)."""
+        return {"initial_state_low": INITIAL_STATE_LOW.tolist(), "initial_state_high": INITIAL_STATE_HIGH.tolist(),
+                "kicks_per_s": KICKS_PER_S, "kick_rad_s": list(KICK_RAD_S), "steps": EPISODE_STEPS,
+                "reference_m": REFERENCE_M, "reference_jump_probability": REFERENCE_JUMP_PROBABILITY,
+                "position_scale_m": POSITION_SCALE_M, "bumpers": asdict(BUMPERS), "fall_rad": FALL_RAD,
+                "fall_cost": FALL_COST}
+
+    def signals(self, episode: KickEpisode) -> dict[str, np.ndarray]:
+        """The episode's kicks and the cart's reference, per step, for recordings."""
+        return {"kick_rad_s": episode.kick, OBSERVATION_NAMES[-1]: episode.reference}
 
     def current_reference(self) -> float:
         """The reference of the interval about to be played (the last one's once the episode is over)."""

@@ -115,6 +115,23 @@ class Jumps(EpisodeTask):
     def draw_episode(self, random: np.random.Generator) -> Episode:
         return Episode.draw(random, self._steps)
 
+    def resample_episode(self, episode: Episode, step: int, random: np.random.Generator) -> Episode:
+        """``episode`` with the targets of intervals after ``step`` redrawn: at the decision of step
+        ``step`` the controller sees that interval's target, and jumps are memoryless."""
+        target = np.array(episode.target)
+        target[step + 1:] = continue_targets(random, target[step], target.shape[0] - step - 1)
+        return Episode(episode.initial_state, target)
+
+    def episode_parameters(self) -> dict:
+        """What the episodes are drawn from (recorded in the test set)."""
+        return {"initial_state_low": INITIAL_STATE_LOW.tolist(), "initial_state_high": INITIAL_STATE_HIGH.tolist(),
+                "jump_probability": JUMP_PROBABILITY, "target_radius_m": list(TARGET_RADIUS_M),
+                "steps": EPISODE_STEPS, "distance_scale_m": DISTANCE_SCALE_M}
+
+    def signals(self, episode: Episode) -> dict[str, np.ndarray]:
+        """The episode's target, per step, for recordings."""
+        return {"target_x_m": episode.target[:, 0], "target_y_m": episode.target[:, 1]}
+
     def current_target(self) -> np.ndarray:
         """The target of the interval about to be played (the last one's once the episode is over)."""
         return self._episode.target[min(self._step, self._episode.target.shape[0] - 1)]
