@@ -41,7 +41,7 @@ evaluate: setup
 	$(BIN)/etmpc evaluate battery --policy always --policy never \
 		--policy every:2 --policy every:5 --policy every:10 \
 		--policy threshold:0.01 --policy threshold:0.02 --json results/battery.json
-	$(BIN)/python scripts/figure_forecasts.py --policy every:20 --policy every:5 --out results/figure1_battery_forecasts.png
+	$(BIN)/etmpc figure forecasts --policy every:20 --policy every:5 --out results/figure1_battery_forecasts.png
 
 # A trigger of your own (examples/my_trigger.py) against the built-in ones, with the paired table.
 example: setup

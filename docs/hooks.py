@@ -16,13 +16,24 @@ def cli_reference() -> str:
     from etmpc.cli.options import build_parser
 
     parser = build_parser()
-    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
-    summaries = {choice.dest: choice.help for choice in sub._choices_actions}
     parts = ["```text", parser.format_help().rstrip(), "```", ""]
+    return "\n".join(parts + _commands(parser, "etmpc", "##"))
+
+
+def _commands(parser: argparse.ArgumentParser, prefix: str, level: str) -> list[str]:
+    """A section per command of ``parser`` (and one level down per kind of a command that has kinds, such
+    as ``etmpc figure``'s), each with its ``--help``."""
+    sub = next((a for a in parser._actions if isinstance(a, argparse._SubParsersAction)), None)
+    if sub is None:
+        return []
+    summaries = {choice.dest: choice.help for choice in sub._choices_actions}
+    parts = []
     for name, command in sub.choices.items():
-        parts += [f"## etmpc {name}", "", f"{summaries.get(name, '').capitalize()}.", "", "```text",
+        summary = summaries.get(name) or ""
+        parts += [f"{level} {prefix} {name}", "", f"{summary[:1].upper()}{summary[1:]}.", "", "```text",
                   command.format_help().rstrip(), "```", ""]
-    return "\n".join(parts)
+        parts += _commands(command, f"{prefix} {name}", level + "#")
+    return parts
 
 
 def on_page_markdown(markdown: str, page, config, files) -> str:

@@ -28,7 +28,7 @@ def test_constants_are_the_papers():
 
 
 def test_computing_drains_the_battery():
-    # SPEC.md corrects the paper's sign: 0.1 kW for 10 s out of 10 kWh.
+    # Computing consumes energy (the paper prints the opposite sign; docs/paper.md): 0.1 kW for 10 s out of 10 kWh.
     physics = stepped(0.5, 0.0, 0.0, computing=1.0)
     assert physics.state_of_charge() == pytest.approx(0.5 - 0.1 * DT_H / 10.0, abs=1e-15)
     assert stepped(0.5, 0.0, 0.0).state_of_charge() == 0.5

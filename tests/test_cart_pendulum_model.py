@@ -60,7 +60,7 @@ def test_matched_plant_follows_the_analytic_model(x0, pattern):
 @pytest.mark.parametrize("x0, pattern", CASES)
 def test_matched_plant_with_disturbance(x0, pattern):
     """The same with w ~ N(0, 1) per interval. The plant applies M(q) e_hinge w refreshed before each
-    0.025 s physics step (SPEC.md) and held over its RK4 stages, so the cart coupling m l cos(beta) w
+    0.025 s physics step (the MJCF's timestep) and held over its RK4 stages, so the cart coupling m l cos(beta) w
     lags by up to one physics step: an O(dt) effect of ~1e-3 over 2 s (seen: <= 1.2e-3). Tolerance
     5e-3; leaving w out of the plant, or giving it the wrong sign, is off by > 5e-2.
     """

@@ -1,12 +1,11 @@
 """The figures: what is drawn is the data, checked against the trajectories and evaluations it comes from.
 
 Figure 1 (battery forecasts), one episode's trajectory with every plan, and Figure 3 (objective per
-policy, the learned policy's seeds as one bar), with their scripts end to end.
+policy, the learned policy's seeds as one bar), with their command (``etmpc figure forecasts | trajectory |
+bars``) end to end.
 """
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import matplotlib.image
@@ -14,6 +13,7 @@ import matplotlib.pyplot
 import numpy as np
 import pytest
 
+from etmpc.cli import main
 from etmpc.views import figures
 from etmpc.common import outputs
 from etmpc.common.errors import EtmpcError
@@ -29,7 +29,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def test_forecast_figure_draws_truth_and_every_plans_forecast(battery_system, battery_testset):
     episode = battery_system.episode_from_arrays(battery_testset.episode_arrays(0))
-    traj = run_episode(battery_system, battery_system.make_env(), parse_policy("every:20", battery_system.error_weights),
+    traj = run_episode(battery_system, battery_system.make_env(), parse_policy("every:20", battery_system),
                        None, episode)
     fig = forecast_figure(episode, [("every:20", traj)], dt_s=10.0, mean_price=0.05)
     production_ax, price_ax = fig.axes
@@ -44,23 +44,50 @@ def test_forecast_figure_draws_truth_and_every_plans_forecast(battery_system, ba
             assert plan.forecasts[key][0] == true[k]  # the forecast starts at the true value
 
 
-def test_script_writes_a_png(tmp_path):
+def _figure(capsys, *args) -> tuple[int, str, str]:
+    """``etmpc figure ARGS`` in this process: (exit code, stdout, stderr)."""
+    code = main(["figure", *map(str, args)])
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+def test_forecasts_command_writes_the_figure_of_the_episode(tmp_path, capsys, battery_system, battery_testset):
     out = tmp_path / "fig1.png"
-    result = subprocess.run([sys.executable, str(ROOT / "scripts" / "figure_forecasts.py"), "--episode", "5", "--out", str(out)],
-                            capture_output=True, text=True)
-    assert result.returncode == 0, result.stderr
+    code, stdout, err = _figure(capsys, "forecasts", "--episode", 5, "--policy", "every:20", "--policy", "every:5",
+                                "--out", out)
+    assert code == 0 and stdout == f"wrote {out}\n", err
     image = matplotlib.image.imread(out)
     assert image.shape[0] > 400 and image.shape[1] > 400 and image.std() > 0.05
+    episode = battery_system.episode_from_arrays(battery_testset.episode_arrays(5))
+    env = battery_system.make_env()
+    runs = [(spec, run_episode(battery_system, env, parse_policy(spec, battery_system), None, episode))
+            for spec in ("every:20", "every:5")]
+    again = figures.save_png_atomically(figures.forecast_figure(episode, runs, 10.0, battery_system.terminal_price),
+                                        tmp_path / "again.png", dpi=120)
+    assert out.read_bytes() == again.read_bytes()  # episode 5 under both policies, drawn as forecast_figure draws it
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["again.png", "fig1.png"]
 
 
-def test_script_rejects_a_bad_episode(tmp_path):
-    result = subprocess.run([sys.executable, str(ROOT / "scripts" / "figure_forecasts.py"), "--episode", "100",
-                             "--out", str(tmp_path / "x.png")], capture_output=True, text=True)
-    assert result.returncode == 2 and "out of range" in result.stderr and "Traceback" not in result.stderr
-    assert not (tmp_path / "x.png").exists()
+def test_forecasts_command_default_path(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    code, stdout, err = _figure(capsys, "forecasts")
+    assert code == 0, err
+    assert matplotlib.image.imread(tmp_path / "results" / "figure1_battery_forecasts.png").shape[1] > 400
 
 
-# -- one episode: draw_trajectory and scripts/figure_trajectory.py ---------------------------------
+@pytest.mark.parametrize("args, message", [
+    (("--episode", "100"), "out of range"),
+    (("--episode", "-1"), "must be >= 0"),
+    (("--policy", "every:0"), "bad policy 'every:0'"),
+    (("--policy", "always", "--policy", "always"), "policy always is given twice"),
+])
+def test_forecasts_command_rejects_bad_input(tmp_path, capsys, args, message):
+    code, _, err = _figure(capsys, "forecasts", *args, "--out", tmp_path / "x.png")
+    assert code == 2 and message in err and err.count("\n") == 1 and "Traceback" not in err
+    assert not list(tmp_path.iterdir())
+
+
+# -- one episode: draw_trajectory and etmpc figure trajectory --------------------------------------
 
 
 def _by_gid(ax, gid):
@@ -69,7 +96,7 @@ def _by_gid(ax, gid):
 
 def _play(system, testset, spec, episode=0, seed=0):
     stored = system.episode_from_arrays(testset.episode_arrays(episode))
-    policy = parse_policy(spec, system.error_weights, system.domain)
+    policy = parse_policy(spec, system)
     return stored, run_episode(system, system.make_env(), policy, policy_rng(seed, 0, episode), stored)
 
 
@@ -150,45 +177,55 @@ def _learned_policies(root: Path, domain: str, nx: int, biases=(-1.0, 0.0, 1.0))
     return specs
 
 
-def _script(name, *args, cwd=None):
-    return subprocess.run([sys.executable, str(ROOT / "scripts" / name), *map(str, args)], capture_output=True, text=True,
-                          cwd=cwd)
-
-
-def test_trajectory_script_plays_the_episode_as_evaluate_does(tmp_path):
-    """A stochastic policy, seed 3, episode 2: the script's objective is evaluate's for that run."""
+def test_trajectory_command_plays_the_episode_as_evaluate_does(tmp_path, capsys):
+    """A stochastic policy, seed 3, episode 2: the command's objective is evaluate's for that run."""
     spec = _learned_policies(tmp_path / "run", "battery", 1, biases=(0.5,))[0]
-    result = _script("figure_trajectory.py", "battery", "--policy", spec, "--episode", 2, "--seed", 3,
-                     "--out", tmp_path / "out" / "traj.png")
-    assert result.returncode == 0, result.stderr
+    code, stdout, err = _figure(capsys, "trajectory", "battery", "--policy", spec, "--episode", 2, "--seed", 3,
+                                "--out", tmp_path / "out" / "traj.png")
+    assert code == 0, err
     run = evaluate("battery", [spec], episodes=3, workers=1, seed=3, progress=False).runs[2]
-    assert run.episode == 2 and f"objective {run.objective!r}, {run.recomputes} computations" in result.stdout
+    assert run.episode == 2 and f"objective {run.objective!r}, {run.recomputes} computations" in stdout
     image = matplotlib.image.imread(tmp_path / "out" / "traj.png")
     assert image.shape[0] > 500 and image.shape[1] > 800 and image.shape[2] == 4 and image.std() > 0.05
     assert [p.name for p in (tmp_path / "out").iterdir()] == ["traj.png"]  # no temporary file left
 
 
-def test_trajectory_script_default_path(tmp_path):
-    result = _script("figure_trajectory.py", "cart_pendulum", "--policy", "threshold:0.3", cwd=tmp_path)
-    assert result.returncode == 0, result.stderr
-    out = tmp_path / "results" / "trajectory_cart_pendulum_threshold-0.3_ep0.png"
-    assert matplotlib.image.imread(out).shape[1] > 800
+def test_trajectory_command_default_path(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    code, stdout, err = _figure(capsys, "trajectory", "cart_pendulum", "--policy", "threshold:0.3")
+    assert code == 0, err
+    out = Path("results") / "trajectory_cart_pendulum_threshold-0.3_ep0.png"
+    assert stdout.endswith(f"wrote {out}\n") and matplotlib.image.imread(tmp_path / out).shape[1] > 800
+
+
+def test_trajectory_command_plays_a_task_of_a_domain_with_its_shipped_policy(tmp_path, capsys, monkeypatch):
+    """The kicks task with its shipped policy (trained on cart_pendulum/kicks, not on the domain's default
+    task): the task's name, not its domain's, checks the policy; the default file is named by the task."""
+    spec = f"rl:{ROOT / 'policies' / 'cart_pendulum-kicks' / 'learned.json'}"
+    monkeypatch.chdir(tmp_path)
+    code, stdout, err = _figure(capsys, "trajectory", "cart_pendulum/kicks", "--policy", spec, "--episode", 1)
+    assert code == 0, err
+    run = evaluate("cart_pendulum/kicks", [spec], episodes=2, workers=1, progress=False).runs[1]
+    assert f"objective {run.objective!r}, {run.recomputes} computations" in stdout
+    (out,) = (tmp_path / "results").iterdir()
+    assert out.name.startswith("trajectory_cart_pendulum-kicks_rl-") and out.name.endswith("_ep1.png")
 
 
 @pytest.mark.parametrize("args, message", [
     (("pendulum", "--policy", "always"), "unknown task 'pendulum'"),
     (("cart_pendulum", "--policy", "every:0"), "bad policy 'every:0'"),
     (("battery", "--policy", "always", "--episode", "100"), "out of range"),
-    (("battery", "--policy", "always", "--episode", "one"), "invalid int value"),
+    (("battery", "--policy", "always", "--episode", "one"), "'one' is not a whole number"),
+    (("cart_pendulum", "--policy", f"rl:{ROOT / 'policies' / 'battery' / 'learned.json'}"), "was trained on 'battery'"),
 ])
-def test_trajectory_script_rejects_bad_input(tmp_path, args, message):
-    result = _script("figure_trajectory.py", *args, "--out", tmp_path / "x.png")
-    assert result.returncode == 2 and message in result.stderr
-    assert len(result.stderr.strip().splitlines()) == 1 and "Traceback" not in result.stderr
+def test_trajectory_command_rejects_bad_input(tmp_path, capsys, args, message):
+    code, _, err = _figure(capsys, "trajectory", *args, "--out", tmp_path / "x.png")
+    assert code == 2 and message in err, err
+    assert err.count("\n") == 1 and "Traceback" not in err
     assert not list(tmp_path.iterdir())
 
 
-# -- the paper's Figure 3: draw_policy_bars and scripts/figure_bars.py ----------------------------
+# -- the paper's Figure 3: draw_policy_bars and etmpc figure bars ---------------------------------
 @pytest.fixture(scope="module")
 def cart_evaluations(tmp_path_factory):
     """A fixed-policy evaluation and one of three learned seeds, 5 repeats (as the paper), on 2 episodes."""
@@ -290,19 +327,22 @@ def test_png_writers_are_atomic(tmp_path, cart_evaluations, battery_system, batt
     assert (tmp_path / "traj.png").read_bytes() == before
 
 
-def test_bars_script_end_to_end(tmp_path, cart_evaluations):
+def test_bars_command_end_to_end(tmp_path, capsys, monkeypatch, cart_evaluations):
     fixed, learned, _ = cart_evaluations
     (tmp_path / "fixed.json").write_text(json.dumps(fixed))
     (tmp_path / "learned.json").write_text(json.dumps(learned))
-    result = _script("figure_bars.py", "fixed.json", "learned.json", cwd=tmp_path)
-    assert result.returncode == 0, result.stderr
+    monkeypatch.chdir(tmp_path)
+    code, stdout, err = _figure(capsys, "bars", "fixed.json", "learned.json")
+    assert code == 0 and stdout == f"wrote {Path('results') / 'figure3_cart_pendulum.png'}\n", err
     out = tmp_path / "results" / "figure3_cart_pendulum.png"
     image = matplotlib.image.imread(out)
     assert image.shape[0] > 400 and image.shape[1] > 800 and image.std() > 0.05
     assert [p.name for p in out.parent.iterdir()] == ["figure3_cart_pendulum.png"]
+    again = figures.write_policy_bars_png(tmp_path / "again.png", [fixed, learned], sources=["fixed.json", "learned.json"])
+    assert out.read_bytes() == again.read_bytes()  # the evaluations' bars, drawn as draw_policy_bars draws them
 
 
-def test_bars_script_rejects_bad_input(tmp_path, cart_evaluations):
+def test_bars_command_rejects_bad_input(tmp_path, capsys, monkeypatch, cart_evaluations):
     fixed, _, _ = cart_evaluations
     (tmp_path / "fixed.json").write_text(json.dumps(fixed))
     (tmp_path / "battery.json").write_text(json.dumps(dict(fixed, domain="battery", task="trading")))
@@ -313,9 +353,16 @@ def test_bars_script_rejects_bad_input(tmp_path, cart_evaluations):
         (("broken.json",), "broken.json is not valid JSON"),
         (("other.json",), "other.json is not an `etmpc evaluate --json` document"),
         (("fixed.json", "battery.json"), "mismatched tasks: fixed.json evaluates cart_pendulum/balance, battery.json battery/trading"),
+        (("fixed.json", "--out", "x.json"), "argument --out: x.json does not end in .png"),
+        (("fixed.json", "named.png", "--out", "named.png"), "--out named.png would overwrite the evaluation named.png"),
     ]
+    (tmp_path / "named.png").write_text(json.dumps(fixed))
+    monkeypatch.chdir(tmp_path)
     for args, message in cases:
-        result = _script("figure_bars.py", *args, "--out", "x.png", cwd=tmp_path)
-        assert result.returncode == 2 and message in result.stderr, (args, result.stderr)
-        assert len(result.stderr.strip().splitlines()) == 1 and "Traceback" not in result.stderr
-        assert not (tmp_path / "x.png").exists()
+        code, _, err = _figure(capsys, "bars", *args, *(() if "--out" in args else ("--out", "x.png")))
+        assert code == 2 and message in err, (args, err)
+        assert err.count("\n") == 1 and "Traceback" not in err
+        assert not (tmp_path / "x.png").exists() and not (tmp_path / "results").exists()
+    for args in (("other.json",), ("broken.json",)):  # the default path is not guessed from a document that is not one
+        code, _, err = _figure(capsys, "bars", *args)
+        assert code == 2 and not (tmp_path / "results").exists()

@@ -1,10 +1,11 @@
-"""The ``etmpc`` command: ``reproduce``, ``evaluate``, ``score``, ``sweep``, ``train``, ``train-self``, ``render``,
-``replay`` and ``bench``.
+"""The ``etmpc`` command: ``reproduce``, ``evaluate``, ``score``, ``verify``, ``sweep``, ``train``, ``train-self``,
+``render``, ``replay``, ``bench``, ``testset``, ``discriminate`` and ``figure``.
 
 Bad input (unknown task or policy, bad numbers, missing or corrupt files) prints one line on
 stderr and exits with code 2, without a traceback. The options are :mod:`etmpc.cli.options`'s (their
-value types :mod:`etmpc.cli.types`'s), the commands :mod:`etmpc.cli.commands`'s, and ``score``'s both
-:mod:`etmpc.cli.scoring`'s. This package sits on top: it may import any floor of etmpc.
+value types :mod:`etmpc.cli.types`'s), the commands :mod:`etmpc.cli.commands`'s; ``score``'s both are
+:mod:`etmpc.cli.scoring`'s, ``discriminate``'s :mod:`etmpc.cli.discriminate`'s and ``figure``'s
+:mod:`etmpc.cli.figures`'s. This package sits on top: it may import any floor of etmpc.
 """
 
 from __future__ import annotations

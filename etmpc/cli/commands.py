@@ -7,7 +7,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from etmpc.cli import scoring
+from etmpc.cli import discriminate, figures, scoring
 from etmpc.cli.output import distinct_policies as _distinct_policies, say as _say
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import write_json
@@ -240,4 +240,5 @@ def _testset(args) -> None:
 
 
 COMMANDS = {"evaluate": _evaluate, "score": scoring.run, "train": _train, "train-self": _train_self, "reproduce": _reproduce, "sweep": _sweep,
-            "render": _render, "replay": _replay, "bench": _bench, "testset": _testset, "verify": _verify}
+            "render": _render, "replay": _replay, "bench": _bench, "testset": _testset, "verify": _verify,
+            "discriminate": discriminate.run, "figure": figures.run}

@@ -8,7 +8,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from etmpc.cli import scoring, types
+from etmpc.cli import discriminate, figures, scoring, types
 from etmpc.common.errors import EtmpcError
 from etmpc.evaluation.workers import BACKENDS
 from etmpc.learning.config import ALGORITHMS
@@ -173,6 +173,9 @@ def build_parser() -> argparse.ArgumentParser:
     be.add_argument("--json", type=types.json_path, default=None, metavar="PATH", help="write the figures as JSON")
     be.add_argument("--no-reference", action="store_true",
                     help="skip the reference solvers (do-mpc for cart_pendulum, scipy linprog for battery)")
+
+    discriminate.add_parser(sub, tasks)
+    figures.add_parser(sub, tasks)
     return parser
 
 

@@ -10,37 +10,30 @@ import numpy as np
 from etmpc.loop import AugmentedState
 
 
-@dataclass(frozen=True)
-class Always:
-    """Standard MPC: recompute at every step."""
+class _Schedule:
+    """A fixed schedule decides from the plan's age alone: it never reads the observation."""
 
-    spec: str = "always"
-    stochastic: bool = False
     observes: ClassVar[bool] = False
 
-    def decide(self, s: AugmentedState, rng: np.random.Generator) -> bool:
-        return True
-
 
 @dataclass(frozen=True)
-class Never:
-    """Follow each plan to its end (a forced recompute every N steps)."""
+class _Constant(_Schedule):
+    """The same answer at every step: :attr:`answer` (True: recompute)."""
 
-    spec: str = "never"
+    spec: str
     stochastic: bool = False
-    observes: ClassVar[bool] = False
+    answer: ClassVar[bool] = False
 
     def decide(self, s: AugmentedState, rng: np.random.Generator) -> bool:
-        return False
+        return self.answer
 
 
 @dataclass(frozen=True)
-class Every:
+class Every(_Schedule):
     """Static schedule: recompute when the plan is ``period`` steps old."""
 
     period: int
     stochastic: bool = False
-    observes: ClassVar[bool] = False
 
     @property
     def spec(self) -> str:
@@ -48,3 +41,18 @@ class Every:
 
     def decide(self, s: AugmentedState, rng: np.random.Generator) -> bool:
         return s.age >= self.period
+
+
+@dataclass(frozen=True)
+class Always(_Constant):
+    """Standard MPC: recompute at every step."""
+
+    spec: str = "always"
+    answer: ClassVar[bool] = True
+
+
+@dataclass(frozen=True)
+class Never(_Constant):
+    """Follow each plan to its end (a forced recompute every N steps)."""
+
+    spec: str = "never"

@@ -1,9 +1,10 @@
 """Every number of the battery-trading task, in one declarative place, with units.
 
-The plant constants are the paper's (SPEC.md). The paper gives no numbers for the generators of
-production and price; the ones below are chosen so that the trading problem is neither trivial
-nor hopeless, and the reasons are written next to them. Change them by building a new
-:class:`Market` (``dataclasses.replace``); a test set records the values it was drawn with.
+The plant constants are the paper's (docs/paper.md, "The paper's settings"). The paper gives no
+numbers for the generators of production and price; the ones below are chosen so that the trading
+problem is neither trivial nor hopeless, and the reasons are written next to them. Change them by
+building a new :class:`Market` (``dataclasses.replace``); a test set records the values it was drawn
+with.
 
 Scales, for orientation: a full-power trade (360 kW for 10 s) moves 1 kWh, 10 % of the capacity;
 a net production of 100 kW held for 10 s moves 2.8 %; the computer's 0.1 kW draw moves 0.003 %.
@@ -18,7 +19,7 @@ SECONDS_PER_HOUR = 3600.0
 
 @dataclass(frozen=True)
 class Battery:
-    """The storage and its market access (SPEC.md, paper eq. battery)."""
+    """The storage and its market access: the paper's numbers (its eq. battery; docs/paper.md)."""
 
     capacity_kwh: float = 10.0  # C
     interval_s: float = 10.0  # delta: one control interval
@@ -76,35 +77,21 @@ class Signal:
 # Net production minus consumption on the battery's grid, kW (> 0: surplus flows into the battery).
 # Events are loads and generators switching (+-100 kW, 28 % of a full-power trade) every 4 minutes on
 # average, so about one change falls inside each 200 s MPC horizon: plans go stale for a reason.
-PRODUCTION = Signal(
-    unit="kW",
-    hourly_low=0.0,
-    hourly_high=0.0,
-    event_low=-100.0,
-    event_high=100.0,
-    event_mean_duration_s=240.0,
-    ou_time_constant_s=60.0,
-    ou_std=15.0,
-    forecast_std_per_step=2.0,  # 38 kW at the last lead of a 20-step forecast
-    forecast_time_constant_s=60.0,
-)
+PRODUCTION = Signal(unit="kW",
+                    hourly_low=0.0, hourly_high=0.0,  # no hourly level: the events and the OU are the signal
+                    event_low=-100.0, event_high=100.0, event_mean_duration_s=240.0,
+                    ou_time_constant_s=60.0, ou_std=15.0,
+                    forecast_std_per_step=2.0, forecast_time_constant_s=60.0)  # 38 kW at a 20-step forecast's last lead
 
 # Balance-market price, EUR/kWh. The spot price (40-60 EUR/MWh) is fixed per clock hour; imbalance
 # events move the balance price by up to +-30 EUR/MWh for two minutes on average, and a fast OU
 # (30 s, 10 EUR/MWh) adds the noise of the balance market. Its mean, 0.05 EUR/kWh, is the terminal
 # value of stored energy.
-PRICE = Signal(
-    unit="EUR/kWh",
-    hourly_low=0.04,
-    hourly_high=0.06,
-    event_low=-0.03,
-    event_high=0.03,
-    event_mean_duration_s=120.0,
-    ou_time_constant_s=30.0,
-    ou_std=0.01,
-    forecast_std_per_step=0.001,  # 0.019 EUR/kWh at the last lead
-    forecast_time_constant_s=60.0,
-)
+PRICE = Signal(unit="EUR/kWh",
+               hourly_low=0.04, hourly_high=0.06,  # the spot price, fixed per clock hour
+               event_low=-0.03, event_high=0.03, event_mean_duration_s=120.0,
+               ou_time_constant_s=30.0, ou_std=0.01,
+               forecast_std_per_step=0.001, forecast_time_constant_s=60.0)  # 0.019 EUR/kWh at the last lead
 
 
 @dataclass(frozen=True)

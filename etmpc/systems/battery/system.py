@@ -61,7 +61,7 @@ def exogenous_features(s) -> np.ndarray:
 
 @dataclass(frozen=True)
 class Config:
-    """The paper's settings for the battery (SPEC.md)."""
+    """The paper's settings for the battery (docs/paper.md, "The paper's settings, and what it leaves open")."""
 
     horizon: int = 20  # N
     lqr_state_weight: float = 1.0  # Q on the state-of-charge error (dimensionless)
@@ -104,7 +104,7 @@ class BatterySystem(SystemBase):
         self.u_min = np.array([-battery.trade_limit_kw])
         self.u_max = np.array([battery.trade_limit_kw])
         self.error_weights = np.sqrt([config.lqr_state_weight])
-        # The SoC error: eps+ = eps - delta/C u_lqr (SPEC.md), a discrete system with its timebase.
+        # The SoC error: eps+ = eps - delta/C u_lqr (the paper's LQR, Q = 1, R = 0.1: docs/paper.md), a discrete system with its timebase.
         soc_error = ct.ss([[1.0]], [[-battery.soc_per_kw]], [[1.0]], [[0.0]], dt=battery.interval_s)
         gain = discrete_lqr_gain(soc_error, np.array([[config.lqr_state_weight]]), np.array([[config.lqr_input_weight]]))
         self.feedback = ErrorFeedback(gain)

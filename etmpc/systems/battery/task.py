@@ -14,15 +14,16 @@ beyond 360 kW is 360 kW; ``computing`` outside ``[0, 1]`` is 0 or 1, so no actio
 battery for free or draws more than the computer's power). A non-finite value or an action of
 another shape raises ``ValueError``.
 
-**Dynamics** ``x+ = x - delta/C (u - P + eta_c a)`` (delta in hours). The SPEC corrects the paper's
-sign of the computation's draw: computing consumes energy. The state of charge never leaves
+**Dynamics** ``x+ = x - delta/C (u - P + eta_c a)`` (delta in hours). The paper prints ``- eta_c a``
+inside the bracket, which would make computing charge the battery; computing consumes energy, so the
+sign here is ``+`` (docs/paper.md). The state of charge never leaves
 ``[0, 1]``: a trade that would empty or overfill the battery is **curtailed** to what it can deliver
 or absorb, and only the executed trade is paid. If even the largest trade cannot keep it in range
 (a net production beyond the trade limit), the surplus is spilled or the deficit is unserved
 (:meth:`Physics.unbalanced_energy_kwh`); with the default generators this does not happen.
 
 **Reward** ``lambda_k u_k delta`` (EUR) for the executed trade, plus the value of the stored energy
-``lambda_bar C x_T`` at the last step, with ``lambda_bar = E[lambda]`` (SPEC.md). Higher is better.
+``lambda_bar C x_T`` at the last step, with ``lambda_bar = E[lambda]`` (the paper's terminal value; docs/paper.md). Higher is better.
 
 **Observation**: the state of charge, the current net production and price, and the forecasts of
 both for the next 20 intervals (the first value of each is the current true value).

@@ -21,7 +21,7 @@ from etmpc.systems.base import Benchmark, SystemBase
 
 @dataclass(frozen=True)
 class Config:
-    """The paper's settings for the cart pendulum (SPEC.md)."""
+    """The paper's settings for the cart pendulum (docs/paper.md, "The paper's settings, and what it leaves open")."""
 
     horizon: int = 20  # N
     input_change_weight: float = 1e-4  # D on (u_k - u_{k-1})^2
