@@ -27,7 +27,7 @@ knows the rail, a feedback that follows the plan, and the price of a computation
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 
 import casadi as ca
 import dm_env
@@ -130,26 +130,7 @@ class KicksSystem(GaussNewtonSystem):
         """The cart's current reference (m), as observed, as the MPC's parameter vector."""
         return self.observed(timestep)
 
-    # -- test sets, recordings, rollouts ----------------------------------------------------------------
-    def episode_parameters(self) -> dict:
-        return {"initial_state_low": kicks.INITIAL_STATE_LOW.tolist(), "initial_state_high": kicks.INITIAL_STATE_HIGH.tolist(),
-                "kicks_per_s": kicks.KICKS_PER_S, "kick_rad_s": list(kicks.KICK_RAD_S), "steps": kicks.EPISODE_STEPS,
-                "reference_m": kicks.REFERENCE_M, "reference_jump_probability": kicks.REFERENCE_JUMP_PROBABILITY,
-                "position_scale_m": kicks.POSITION_SCALE_M,
-                "bumpers": asdict(kicks.BUMPERS), "fall_rad": kicks.FALL_RAD, "fall_cost": kicks.FALL_COST}
-
-    def signals(self, episode: kicks.KickEpisode) -> dict[str, np.ndarray]:
-        return {"kick_rad_s": episode.kick, REFERENCE: episode.reference}
-
-    def sample_future(self, episode: kicks.KickEpisode, step: int, rng: np.random.Generator) -> kicks.KickEpisode:
-        """``episode`` with the kicks of intervals ``step..`` and the references after ``step``
-        redrawn: at the decision of step ``step`` the controller has felt only the earlier kicks and
-        sees that interval's reference (kicks and jumps are memoryless)."""
-        kick, reference = np.array(episode.kick), np.array(episode.reference)
-        kick[step:] = kicks.draw_kicks(rng, kick.size - step)
-        reference[step + 1:] = kicks.continue_references(rng, reference[step], reference.size - step - 1)
-        return kicks.KickEpisode(episode.initial_state, kick, reference)
-
+    # -- failures (episodes are drawn, resampled and described by the task: kicks.Kicks) -----------------
     def failures(self, rewards: np.ndarray) -> int:
         """Falls in an episode."""
         return kicks.falls(rewards)

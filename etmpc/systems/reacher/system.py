@@ -144,23 +144,7 @@ class ReacherSystem(GaussNewtonSystem):
         """The current target ``(x, y)`` (m), as observed."""
         return self.observed(timestep)
 
-    # -- test sets, recordings, rollouts ----------------------------------------------------------------
-    def episode_parameters(self) -> dict:
-        return {"initial_state_low": reacher_task.INITIAL_STATE_LOW.tolist(),
-                "initial_state_high": reacher_task.INITIAL_STATE_HIGH.tolist(),
-                "jump_probability": reacher_task.JUMP_PROBABILITY, "target_radius_m": list(reacher_task.TARGET_RADIUS_M),
-                "steps": reacher_task.EPISODE_STEPS, "distance_scale_m": reacher_task.DISTANCE_SCALE_M}
-
-    def signals(self, episode: reacher_task.Episode) -> dict[str, np.ndarray]:
-        return {TARGET[0]: episode.target[:, 0], TARGET[1]: episode.target[:, 1]}
-
-    def sample_future(self, episode: reacher_task.Episode, step: int, rng: np.random.Generator) -> reacher_task.Episode:
-        """``episode`` with the targets of intervals after ``step`` redrawn: at the decision of step
-        ``step`` the controller sees that interval's target, and jumps are memoryless."""
-        target = np.array(episode.target)
-        target[step + 1:] = reacher_task.continue_targets(rng, target[step], target.shape[0] - step - 1)
-        return reacher_task.Episode(episode.initial_state, target)
-
+    # -- failures (episodes are drawn, resampled and described by the task: task.Jumps) -----------------
     def failures(self, rewards: np.ndarray) -> int:
         """Steps ending farther than 0.1 m from the target."""
         return reacher_task.far_steps(rewards)
