@@ -120,21 +120,3 @@ class SliderSystem(GaussNewtonSystem):
 
     def make_env(self, random=None):
         return slider_task.make_environment(random=random, plant=self.config.plant)
-
-    # -- test sets, recordings, rollouts ----------------------------------------------------------------
-    def episode_parameters(self) -> dict:
-        return {"initial_state_low": slider_task.INITIAL_STATE_LOW.tolist(),
-                "initial_state_high": slider_task.INITIAL_STATE_HIGH.tolist(),
-                "jump_probability": slider_task.JUMP_PROBABILITY,
-                "reference_range_m": list(slider_task.REFERENCE_RANGE_M),
-                "steps": slider_task.EPISODE_STEPS, "error_scale_m": slider_task.ERROR_SCALE_M}
-
-    def signals(self, episode: slider_task.Episode) -> dict[str, np.ndarray]:
-        return {REFERENCE: episode.reference}
-
-    def sample_future(self, episode: slider_task.Episode, step: int, rng: np.random.Generator) -> slider_task.Episode:
-        """``episode`` with the references of intervals after ``step`` redrawn: at the decision of step
-        ``step`` the controller sees that interval's reference, and jumps are memoryless."""
-        reference = np.array(episode.reference)
-        reference[step + 1:] = slider_task.continue_references(rng, reference[step], reference.shape[0] - step - 1)
-        return slider_task.Episode(episode.initial_state, reference)

@@ -107,6 +107,25 @@ class Track(EpisodeTask):
     def draw_episode(self, random: np.random.Generator) -> Episode:
         return Episode.draw(random, self._steps)
 
+    # What rollouts, test sets and recordings read of the world: a task that offers resample_episode
+    # can be rolled out (rollout:, DPI, the self-trigger); the other two are optional.
+    def resample_episode(self, episode: Episode, step: int, random: np.random.Generator) -> Episode:
+        """``episode`` with the references of intervals after ``step`` redrawn: at the decision of step
+        ``step`` the controller sees that interval's reference, and jumps are memoryless."""
+        reference = np.array(episode.reference)
+        reference[step + 1:] = continue_references(random, reference[step], reference.shape[0] - step - 1)
+        return Episode(episode.initial_state, reference)
+
+    def episode_parameters(self) -> dict:
+        """What the episodes are drawn from (recorded in the test set)."""
+        return {"initial_state_low": INITIAL_STATE_LOW.tolist(), "initial_state_high": INITIAL_STATE_HIGH.tolist(),
+                "jump_probability": JUMP_PROBABILITY, "reference_range_m": list(REFERENCE_RANGE_M),
+                "steps": EPISODE_STEPS, "error_scale_m": ERROR_SCALE_M}
+
+    def signals(self, episode: Episode) -> dict[str, np.ndarray]:
+        """The reference, per step, for recordings."""
+        return {REFERENCE: episode.reference}
+
     def current_reference(self) -> float:
         """The reference of the interval about to be played (the last one's once the episode is over)."""
         return float(self._episode.reference[min(self._step, self._episode.reference.shape[0] - 1)])
