@@ -13,8 +13,11 @@ This module may import ``etmpc.common`` and ``etmpc.control``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import json
+import math
+from dataclasses import dataclass, fields
 from functools import cache, cached_property
+from pathlib import Path
 from typing import Any, Protocol
 
 import dm_env
@@ -87,6 +90,44 @@ CAPABILITIES: dict[str, tuple[str, ...]] = {
 }
 
 
+class _StoredBenchmark:
+    """The task's :class:`Benchmark`, on the class and its instances: data beside its test set,
+    ``<task>_benchmark.json`` in its domain's data folder (None where there is none), read once."""
+
+    def __get__(self, system, cls) -> Benchmark | None:
+        return _benchmark(cls.domain, cls.task)
+
+
+@cache
+def _benchmark(domain: str, task: str) -> Benchmark | None:
+    from etmpc.systems.registry import data_dir
+
+    path = data_dir(domain) / f"{task}_benchmark.json"
+    if not path.is_file():
+        return None
+    return read_benchmark(path)
+
+
+def read_benchmark(path: Path) -> Benchmark:
+    """A :class:`Benchmark` from its JSON file (its fields, and an optional ``notes`` object that says
+    why a value is what it is); a file that is not one raises :class:`EtmpcError` in one line."""
+    try:
+        data = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise EtmpcError(f"{path}: not a task's benchmark file ({exc})") from None
+    names = {f.name: f for f in fields(Benchmark)}
+    if not isinstance(data, dict) or not set(data) <= set(names) | {"notes"} or not {"prices", "sweep_thresholds",
+                                                                                     "report_thresholds"} <= set(data):
+        raise EtmpcError(f"{path}: a task's benchmark holds prices, sweep_thresholds, report_thresholds and optionally "
+                         f"{', '.join(n for n in names if n not in ('prices', 'sweep_thresholds', 'report_thresholds'))}, notes")
+    values = {k: tuple(v) if isinstance(v, list) else v for k, v in data.items() if k != "notes"}
+    numbers = all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+                  for k, v in values.items() if isinstance(v, tuple) for x in v)
+    if not numbers:
+        raise EtmpcError(f"{path}: prices, thresholds and periods must be lists of finite numbers")
+    return Benchmark(**values)
+
+
 class _Name:
     """``DOMAIN`` for a domain's default task, else ``DOMAIN/TASK``, on the class and its instances (asked
     of the registry once per task: the trigger environment reads it at every step)."""
@@ -111,7 +152,7 @@ class SystemBase:
     config: Any
 
     # -- optional capabilities (CAPABILITIES): None where the task offers none -----------------------
-    benchmark: Benchmark | None = None
+    benchmark = _StoredBenchmark()  # <task>_benchmark.json beside its test set
     exogenous_feature_names: tuple[str, ...] = ()
     exogenous_features: Any = None  # (s) -> array: the values of exogenous_feature_names
     camera: str | None = None  # the MJCF camera that films the scene

@@ -16,7 +16,7 @@ from etmpc.systems.battery.reference import LinprogReference
 from etmpc.common.errors import EtmpcError
 from etmpc.control.lqr import ErrorFeedback, discrete_lqr_gain
 from etmpc.control.plan import Plan
-from etmpc.systems.base import Benchmark, SystemBase
+from etmpc.systems.base import SystemBase
 
 
 # What the learned policy's default ("error") feature set adds for the battery (etmpc.policies.learned).
@@ -73,15 +73,6 @@ class Config:
 
 class BatterySystem(SystemBase):
     Config = Config  # the settings it is built from (etmpc.systems.make_system)
-    benchmark = Benchmark(
-        # EUR per computation on top of the energy its computer already draws (eta_c), from the paper's
-        # 0 up to where `never` wins.
-        prices=(0.0, 3e-4, 1e-3, 3e-3, 1e-2),
-        # The prediction error is mostly the computer's own draw (2.8e-5 of charge per interval): dense there.
-        sweep_thresholds=(1e-5, 2.6e-5, 2.75e-5, 2.9e-5, 1e-4, 1e-3, 3e-3, 1e-2, 3e-2, 0.1),
-        report_thresholds=(0.005, 0.01, 0.02, 0.05),
-        objective_unit="EUR",
-    )
     exogenous_feature_names = EXOGENOUS_FEATURES  # what the learned policy's "error" features add
     exogenous_features = staticmethod(exogenous_features)
     domain = "battery"

@@ -34,7 +34,6 @@ import dm_env
 import numpy as np
 
 from etmpc.control.mpc import FeedbackWeights, SolverSettings
-from etmpc.systems.base import Benchmark
 from etmpc.systems.gauss_newton import GaussNewtonSystem
 from etmpc.systems.cart_pendulum import kicks
 from etmpc.systems.cart_pendulum.model import NU, NX, STATE_NAMES, AnalyticModel
@@ -89,13 +88,6 @@ class KicksSystem(GaussNewtonSystem):
     Episode = kicks.KickEpisode
     tracked = (REFERENCE,)  # the cart's current reference (m), as observed: the OCP's parameter
     mpc_name = "cart_pendulum_kicks_mpc"
-    benchmark = Benchmark(
-        prices=(0.01, 0.03, 0.1, 0.3, 1.0),
-        sweep_thresholds=(0.1, 0.2, 0.3, 0.45, 0.6, 1.0, 1.5, 2.0, 3.0, 4.0),
-        report_thresholds=(0.3, 0.6, 1.0, 2.0),
-        sweep_self_trigger=False,  # it kept its periodic base at every price (etmpc sweep, 5 prices, 20 episodes)
-        lookahead=10,  # 1 s: a reference jumps every 2.5 s on average, and a kick comes every 3.3 s
-    )
     exogenous_feature_names = EXOGENOUS_FEATURES  # what the learned policy's "error" features add
     exogenous_features = staticmethod(exogenous_features)
     failure_name = "falls"  # per episode, beside the mean objective

@@ -16,7 +16,7 @@ from etmpc.systems.cart_pendulum.model import NU, NX, STATE_NAMES, AnalyticModel
 from etmpc.control.lqr import ErrorFeedback, discrete_lqr_gain
 from etmpc.control.mpc import GaussNewtonMPC, SolverSettings
 from etmpc.control.plan import Plan
-from etmpc.systems.base import Benchmark, SystemBase
+from etmpc.systems.base import SystemBase
 
 
 @dataclass(frozen=True)
@@ -38,14 +38,6 @@ class CartPendulumSystem(SystemBase):
     Config = Config  # the settings it is built from (etmpc.systems.make_system)
     domain = "cart_pendulum"
     task = "balance"
-    benchmark = Benchmark(
-        # A log grid around the paper's 5e-5 (where 100 computations cost 1.3 % of the objective) up to
-        # where `never` wins.
-        prices=(5e-6, 1.6e-5, 5e-5, 1.6e-4, 5e-4, 1.6e-3),
-        sweep_thresholds=(0.05, 0.08, 0.13, 0.2, 0.3, 0.45, 0.7, 1.0, 1.5),
-        report_thresholds=(0.1, 0.2, 0.3, 0.5),
-        objective_unit="rad²",
-    )
     episode_steps = cp_env.EPISODE_STEPS
     control_interval_s = cp_env.CONTROL_DT_S
     state_names = STATE_NAMES

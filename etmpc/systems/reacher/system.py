@@ -42,7 +42,6 @@ import dm_env
 import numpy as np
 
 from etmpc.control.mpc import FeedbackWeights, SolverSettings
-from etmpc.systems.base import Benchmark
 from etmpc.systems.gauss_newton import GaussNewtonSystem
 from etmpc.systems.reacher import task as reacher_task
 from etmpc.systems.reacher.model import INPUT_NAMES, NU, NX, STATE_NAMES, AnalyticModel, fingertip
@@ -105,13 +104,6 @@ class ReacherSystem(GaussNewtonSystem):
     Episode = reacher_task.Episode
     tracked = TARGET  # the current target (m), as observed: the OCP's parameters
     mpc_name = "reacher_jumps_mpc"
-    benchmark = Benchmark(
-        prices=(0.02, 0.05, 0.1, 0.2, 0.5),
-        sweep_thresholds=(0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 3.0),
-        report_thresholds=(0.1, 0.3, 1.0, 2.0),
-        sweep_self_trigger=False,  # the suite's costliest steps: the sweep trains no self-trigger
-        lookahead=10,  # 1 s: a target jumps every 2.5 s on average (as the kicks task's reference does)
-    )
     exogenous_feature_names = EXOGENOUS_FEATURES  # what the learned policy's "error" features add
     exogenous_features = staticmethod(exogenous_features)
     failure_name = "far from target"  # steps ending > 0.1 m from the target, per episode

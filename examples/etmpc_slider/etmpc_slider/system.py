@@ -37,7 +37,6 @@ import casadi as ca
 import numpy as np
 
 from etmpc.control.mpc import FeedbackWeights, SolverSettings
-from etmpc.systems.base import Benchmark
 from etmpc.systems.gauss_newton import GaussNewtonSystem
 from etmpc_slider import task as slider_task
 from etmpc_slider.model import INPUT_NAMES, NU, NX, STATE_NAMES, AnalyticModel, holding_force
@@ -86,13 +85,6 @@ class SliderSystem(GaussNewtonSystem):
     Episode = slider_task.Episode
     tracked = (REFERENCE,)  # the current reference (m), as observed: the OCP's parameter
     mpc_name = "slider_track_mpc"
-    benchmark = Benchmark(
-        prices=(0.02, 0.05, 0.13, 0.2, 0.4),  # always, every:2, every:3, every:4, every:5 best (100 episodes)
-        sweep_thresholds=(0.005, 0.01, 0.02, 0.03, 0.05, 0.1, 0.2, 0.5),  # 0.02: 38 computations, 0.2: 6
-        report_thresholds=(0.02, 0.05, 0.1, 0.2),
-        periods=(2, 3, 4, 5, 7, 10),  # a plan is 10 steps long
-        lookahead=10,  # 0.5 s: a reference jumps every 1 s on average
-    )
     exogenous_feature_names = EXOGENOUS_FEATURES  # what the learned policy's "error" features add
     exogenous_features = staticmethod(exogenous_features)
     camera = "side"  # the scene shows the block; the reference marker stays where the physics has it
