@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -59,7 +60,7 @@ def test_a_score_is_the_formula_computed_by_hand(small_battery):
 def _row(task: str, scores) -> TaskScore:
     scores = list(map(float, scores))
     return TaskScore(task, "mine", len(scores), 0.0, "min", 0.0, None, 0, 0, float(np.mean(scores)), 0.0, scores,
-                     0.0, {}, "every:3")
+                     0.0, {"solve": 1.0, "feedback": 0.5, "decide": 0.25, "total": 1.75}, "every:3")
 
 
 def test_the_suites_interquartile_mean_is_the_mean_of_the_middle_half_of_every_episode_score():
@@ -88,6 +89,43 @@ def test_an_unscored_task_is_left_out_of_the_aggregate():
     unscored = TaskScore("c", "mine", 2, 0.0, "min", 0.0, None, 0, 1, math.nan, math.nan, [], math.nan, {}, "every:3")
     assert aggregate(rows + [unscored]).tasks == 2
     assert aggregate(rows + [unscored]).iqm == pytest.approx(25.0)  # the middle two of 10, 20, 30, 50
+
+
+def test_a_score_from_an_evaluation_is_the_score_from_its_json(small_battery, tmp_path):
+    """One way to a row: the played evaluation and its JSON (as ``etmpc evaluate --json`` writes it) give the
+    same row, but for the CPU times only the played one carries."""
+    from etmpc.common.outputs import write_json
+
+    path, refs = small_battery
+    played = evaluate("battery", ["every:5", "threshold:0.02"], workers=1, testset_path=str(path), progress=False)
+    data = json.loads(write_json(tmp_path / "evaluation.json", played.to_json()).read_text())
+    for spec in ("every:5", "threshold:0.02"):
+        row, again = task_score(refs, played, spec), task_score(refs, data, spec)
+        assert set(row.cpu_ms) == {"solve", "feedback", "decide", "total"} and again.cpu_ms == {}
+        assert replace(row, cpu_ms={}) == again
+    other = dict(data, test_set=dict(data["test_set"], sha256="0" * 64))
+    with pytest.raises(EtmpcError, match="another test set"):
+        task_score(refs, other, "every:5")
+
+
+def test_a_card_round_trips_through_its_json_missing_numbers_included(tmp_path):
+    from etmpc.common.outputs import write_json
+    from etmpc.evaluation.scorecard import Aggregate, Scorecard, failed_task
+    from etmpc.evaluation.scoretable import format_scorecard
+
+    rows = [_row("battery", [10.0, -20.0, 5.0]), _row("reacher", [1.0]), failed_task("reacher", "other", "it failed")]
+    rows[1] = replace(rows[1], score_ci95=math.nan)  # one episode: no interval
+    card = Scorecard(["battery", "reacher"], {"battery": {"best_periodic": "every:3", "oracle": "oracle:every:3"}}, rows,
+                     [aggregate(rows[:2]), aggregate(rows[2:])])
+    text = write_json(tmp_path / "card.json", card.to_json()).read_text()
+    assert "NaN" not in text  # strict JSON: null
+    again = Scorecard.from_json(json.loads(text))
+    assert format_scorecard(again) == format_scorecard(card)
+    assert json.dumps(again.to_json()["rows"]) == json.dumps(card.to_json()["rows"])  # NaN for NaN, null read as NaN
+    assert again.aggregates[0] == card.aggregates[0] and isinstance(again.aggregates[0].iqm_ci95, tuple)
+    assert all(map(math.isnan, again.aggregates[1].iqm_ci95)) and isinstance(again.aggregates[1], Aggregate)
+    unmeasured = format_scorecard(Scorecard(["battery"], {}, [replace(rows[0], cpu_ms={})], []))
+    assert unmeasured.splitlines()[3].split()[-4:] == ["-", "-", "-", "-"]  # CPU not measured: no numbers
 
 
 @pytest.mark.parametrize("task", names())

@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from etmpc.common.errors import EtmpcError
+from etmpc.evaluation import metrics
 
 
 def per_episode(evaluation: dict, policies=None) -> dict[int, float]:
@@ -25,17 +26,17 @@ def per_episode(evaluation: dict, policies=None) -> dict[int, float]:
 
 def paired(a: dict[int, float], b: dict[int, float], sense: str, episodes=None) -> dict:
     """``a`` against ``b`` on their common episodes (or ``episodes``): the mean difference ``a - b``
-    with its 95 % CI, and the same as a percentage of ``|mean b|``, signed so that > 0 is better."""
+    with its 95 % CI (:func:`~etmpc.evaluation.metrics.paired_differences`), and the same as a
+    percentage of ``|mean b|``, signed so that > 0 is better."""
     common = sorted(set(a) & set(b) if episodes is None else set(episodes) & set(a) & set(b))
-    diff = np.array([a[e] - b[e] for e in common])
-    sign = 1.0 if sense == "max" else -1.0
-    scale = abs(float(np.mean([b[e] for e in common]))) if common else float("nan")
-    ci = float(1.96 * diff.std(ddof=1) / np.sqrt(len(diff))) if len(diff) > 1 else float("nan")
-    mean = float(diff.mean()) if len(diff) else float("nan")
-    return {"episodes": len(common), "objective_mean": float(np.mean([a[e] for e in common])) if common else float("nan"),
-            "reference_mean": float(np.mean([b[e] for e in common])) if common else float("nan"),
-            "mean_difference": mean, "ci95": ci, "gain_percent": 100.0 * sign * mean / scale,
-            "gain_percent_ci95": 100.0 * ci / scale, "better_episodes": int((sign * diff > 0).sum())}
+    mine, theirs = [a[e] for e in common], [b[e] for e in common]
+    diff = metrics.paired_differences(mine, theirs, sense)
+    mean, ci = diff["mean_difference"], diff["ci95"]
+    scale = abs(float(np.mean(theirs))) if common else float("nan")
+    return {"episodes": len(common), "objective_mean": float(np.mean(mine)) if common else float("nan"),
+            "reference_mean": float(np.mean(theirs)) if common else float("nan"),
+            "mean_difference": mean, "ci95": ci, "gain_percent": 100.0 * metrics.oriented(mean, sense) / scale,
+            "gain_percent_ci95": 100.0 * ci / scale, "better_episodes": diff["better_episodes"]}
 
 
 def against(evaluation: dict, reference: str) -> dict[str, dict]:

@@ -31,6 +31,11 @@ sha256 and the software that computed them, so scoring a trigger plays only that
 **Compute.** Beside the count of computations, each episode's measured CPU time of the MPC's solves,
 the feedback (the LQR) and the trigger's own decisions (a rollout's simulations included), so that a
 saving is shown net of what the trigger itself costs. These are wall-clock figures of this machine.
+
+**Where.** The statistics are pure functions of score arrays in :mod:`etmpc.evaluation.metrics`; this
+module holds the results (a :class:`TaskScore` per task and trigger, an :class:`Aggregate` per trigger, the
+:class:`Scorecard`, each with its JSON) and plays the triggers; :mod:`etmpc.evaluation.scoretable`
+writes the card as text.
 """
 
 from __future__ import annotations
@@ -42,34 +47,38 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy import stats
 
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import write_json
+from etmpc.evaluation import metrics
 from etmpc.evaluation import testsets as ts_mod
 from etmpc.common import checks
 from etmpc.evaluation.evaluate import Evaluation, check_policies, evaluate, parse_policies
 from etmpc.evaluation.inputs import check_run_outputs, run_inputs
-from etmpc.evaluation.references import (SUITE_VERSION, References, build_references, mean, references_path,
-                                         software, stored)
+from etmpc.evaluation.metrics import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED  # noqa: F401  (the card's statistics)
+from etmpc.evaluation.references import (SUITE_VERSION, References, build_references, references_path, software,
+                                         stored)
 from etmpc.evaluation.mainscript import UnguardedScript
+from etmpc.evaluation.scoretable import format_scorecard  # noqa: F401  (the card as text)
 from etmpc.evaluation.workers import shared_pools
 from etmpc.systems import distinct, make_system, names, task_version
 
-BOOTSTRAP_RESAMPLES = 2000
-BOOTSTRAP_SEED = 0
+
+def _nan(value):
+    """A number as strict JSON kept it: ``null`` (not scored) is NaN."""
+    return math.nan if value is None else value
 
 
 # -- scores ----------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class TaskScore:
-    """One trigger on one task."""
+    """One trigger on one task. Its JSON (:meth:`to_json`, :meth:`from_json`) is a card's row."""
 
     task: str
     policy: str
     episodes: int
     objective_mean: float
-    objective_sense: str
+    objective_sense: str  # the objective's, for display: the scores are higher-is-better whatever it is
     recomputes_mean: float
     failures_mean: float | None  # the task's own failures (falls, ...), if it counts them
     solver_failures: int
@@ -78,48 +87,54 @@ class TaskScore:
     score_ci95: float
     episode_scores: list[float]  # s_e
     better_share: float  # share of episodes with a lower cost than the best periodic schedule (ties: half)
-    cpu_ms: dict[str, float]  # mean per episode: solve, feedback, decide, total
+    cpu_ms: dict[str, float]  # mean per episode: solve, feedback, decide, total ({}: not measured)
     reference: str  # the best periodic schedule
     error: str | None = None
     task_version: int = 0  # the task's version it was scored on (docs/versioning.md)
 
+    @property
+    def scores(self) -> np.ndarray:
+        """The episode scores as an array, for :mod:`etmpc.evaluation.metrics`."""
+        return np.asarray(self.episode_scores, dtype=float)
+
+    @property
+    def scored(self) -> bool:
+        return math.isfinite(self.score)
+
+    def to_json(self) -> dict:
+        """The row as a card stores it (a number not scored is NaN here, ``null`` once written)."""
+        return asdict(self)
+
     @classmethod
     def from_json(cls, data: dict) -> TaskScore:
-        """A row as :func:`dataclasses.asdict` gave it and strict JSON kept it (a number not scored is
-        ``null`` there, NaN here)."""
-        nan = lambda v: math.nan if v is None else v  # noqa: E731
+        """A row as :meth:`to_json` gave it and strict JSON kept it (a number not scored is ``null``
+        there, NaN here)."""
         fields = dict(data)
         for name in ("objective_mean", "recomputes_mean", "score", "score_ci95", "better_share"):
-            fields[name] = nan(fields[name])
-        fields["episode_scores"] = [nan(v) for v in fields["episode_scores"]]
-        fields["cpu_ms"] = {k: nan(v) for k, v in dict(fields["cpu_ms"]).items()}
+            fields[name] = _nan(fields[name])
+        fields["episode_scores"] = [_nan(v) for v in fields["episode_scores"]]
+        fields["cpu_ms"] = {k: _nan(v) for k, v in dict(fields["cpu_ms"]).items()}
         return cls(**fields)
 
 
-def task_score(refs: References, evaluation: Evaluation, spec: str) -> TaskScore:
-    """``spec``'s score on ``refs``' task from ``evaluation`` (one run per episode, the references' test set)."""
-    runs = sorted((r for r in evaluation.runs if r.policy == spec), key=lambda r: r.episode)
-    cpu = [c for r, c in zip(evaluation.runs, evaluation.cpu or []) if r.policy == spec]
-    summary = next(s for s in evaluation.summaries if s.policy == spec)
-    parts = {k: 1e3 * float(np.mean([c[k] for c in cpu])) if cpu else math.nan for k in ("solve", "feedback", "decide")}
-    return _scored(refs, spec, [r.episode for r in runs], [r.objective for r in runs], sum(not r.finite for r in runs),
-                   asdict(summary), parts | {"total": sum(parts.values())})
-
-
-def task_score_from_json(refs: References, evaluation: dict, spec: str) -> TaskScore:
-    """The same from an evaluation's JSON (``etmpc evaluate --json``, reproduce's files), whose runs carry
-    no CPU time; a stochastic policy's passes are averaged per episode."""
+def task_score(refs: References, evaluation: Evaluation | dict, spec: str) -> TaskScore:
+    """``spec``'s score on ``refs``' task from ``evaluation`` on the references' test set: as played (an
+    :class:`Evaluation`, whose runs carry their CPU time) or its JSON (``etmpc evaluate --json``,
+    reproduce's files: no CPU time). A stochastic policy's passes are averaged per episode."""
+    data = evaluation.to_json(cpu=True) if isinstance(evaluation, Evaluation) else evaluation
     by_episode: dict[int, list[float]] = {}
     nonfinite = 0
-    for r in evaluation["runs"]:
-        if r["policy"] == spec:  # a non-finite episode's objective is null in strict JSON
-            by_episode.setdefault(r["episode"], []).append(math.nan if r["objective"] is None else r["objective"])
-            nonfinite += not r["finite"]
-    if evaluation["test_set"]["sha256"] != refs.test_set_sha256:
+    runs = [r for r in data["runs"] if r["policy"] == spec]
+    for r in runs:  # a non-finite episode's objective is null in strict JSON
+        by_episode.setdefault(r["episode"], []).append(_nan(r["objective"]))
+        nonfinite += not r["finite"]
+    if data["test_set"]["sha256"] != refs.test_set_sha256:
         raise EtmpcError(f"{refs.task}: {spec} was evaluated on another test set than the references'")
+    cpu = [c for r, c in zip(data["runs"], data.get("cpu_seconds") or []) if r["policy"] == spec]
+    parts = {k: 1e3 * float(np.mean([c[k] for c in cpu])) for k in ("solve", "feedback", "decide")} if cpu else {}
     episodes = sorted(by_episode)
     return _scored(refs, spec, episodes, [float(np.mean(by_episode[e])) for e in episodes], nonfinite,
-                   evaluation["policies"][spec], {})
+                   data["policies"][spec], parts | {"total": sum(parts.values())} if parts else {})
 
 
 def _scored(refs: References, spec: str, episodes: list[int], objectives: list[float], nonfinite: int, summary: dict,
@@ -131,10 +146,10 @@ def _scored(refs: References, spec: str, episodes: list[int], objectives: list[f
         score = ci = better = math.nan
         per_episode: list[float] = []
     else:
-        score = 100.0 * mean(best - costs) / gap
-        per_episode = list(100.0 * (best - costs) / gap)
-        ci = float(1.96 * np.std(per_episode, ddof=1) / math.sqrt(len(per_episode))) if len(per_episode) > 1 else math.nan
-        better = float(np.mean((costs < best) + 0.5 * (costs == best)))
+        score = metrics.normalized_score(costs, best, gap)
+        per_episode = list(metrics.normalized_scores(costs, best, gap))
+        ci = metrics.mean_ci95(per_episode)
+        better = metrics.improvement_share(best - costs)
     return TaskScore(refs.task, spec, len(episodes), summary["objective_mean"], refs.objective_sense,
                      summary["recomputes_mean"], summary.get("failures_mean"), summary["solver_failures"], nonfinite,
                      score, ci, per_episode, better, cpu_ms, refs.best, task_version=task_version(refs.task))
@@ -156,58 +171,51 @@ class Aggregate:
     probability_of_improvement: float
     probability_of_improvement_ci95: tuple[float, float]
 
+    def to_json(self) -> dict:
+        return asdict(self)
 
-def _iqm(*samples, axis=-1):
-    """rliable's IQM: the 25 %-trimmed mean of every task's episode scores together."""
-    return stats.trim_mean(np.concatenate(samples, axis=axis), 0.25, axis=axis)
-
-
-def _mean_of_means(*samples, axis=-1):
-    return np.mean(np.stack([np.mean(s, axis=axis) for s in samples], axis=-1), axis=-1)
-
-
-def _interval(samples: list[np.ndarray], statistic) -> tuple[float, float]:
-    if any(len(s) < 2 for s in samples):
-        return (math.nan, math.nan)
-    result = stats.bootstrap(tuple(samples), statistic, n_resamples=BOOTSTRAP_RESAMPLES, method="percentile",
-                             vectorized=True, paired=False, rng=np.random.default_rng(BOOTSTRAP_SEED))
-    return float(result.confidence_interval.low), float(result.confidence_interval.high)
+    @classmethod
+    def from_json(cls, data: dict) -> Aggregate:
+        pair = lambda v: tuple(_nan(x) for x in v)  # noqa: E731
+        return cls(data["policy"], data["tasks"], _nan(data["iqm"]), pair(data["iqm_ci95"]),
+                   _nan(data["probability_of_improvement"]), pair(data["probability_of_improvement_ci95"]))
 
 
 def aggregate(rows: list[TaskScore]) -> Aggregate:
     """The IQM and the probability of improvement over the tasks of ``rows`` that were scored."""
-    scored = [r for r in rows if math.isfinite(r.score)]
+    scored = [r.scores for r in rows if r.scored]
     policy = rows[0].policy if rows else ""
     if not scored:
         return Aggregate(policy, 0, math.nan, (math.nan, math.nan), math.nan, (math.nan, math.nan))
-    scores = [np.asarray(r.episode_scores) for r in scored]
-    improved = [(np.asarray(r.episode_scores) > 0) + 0.5 * (np.asarray(r.episode_scores) == 0) for r in scored]
-    iqm = float(_iqm(*scores))
-    improvement = float(np.mean([np.mean(x) for x in improved]))
-    return Aggregate(policy, len(scored), iqm, _interval(scores, _iqm), improvement,
-                     _interval([x.astype(float) for x in improved], _mean_of_means))
+    return Aggregate(policy, len(scored), metrics.iqm(scored), metrics.iqm_ci95(scored),
+                     metrics.probability_of_improvement(scored), metrics.probability_of_improvement_ci95(scored))
 
 
 def profile(rows: list[TaskScore], thresholds: np.ndarray) -> np.ndarray:
-    """The performance profile (rliable's): at each threshold ``tau``, the share of episodes whose
-    score exceeds ``tau``, averaged over the tasks scored (each task weighs the same)."""
-    scored = [np.asarray(r.episode_scores) for r in rows if math.isfinite(r.score)]
-    if not scored:
-        return np.full(len(thresholds), math.nan)
-    return np.mean([(s[None, :] > np.asarray(thresholds)[:, None]).mean(axis=1) for s in scored], axis=0)
+    """The performance profile (:func:`~etmpc.evaluation.metrics.performance_profile`) over the tasks
+    of ``rows`` that were scored."""
+    return metrics.performance_profile([r.scores for r in rows if r.scored], thresholds)
+
+
+def by_policy(rows: list[TaskScore]) -> dict[str, list[TaskScore]]:
+    """``rows`` grouped by trigger, in the order the triggers first appear."""
+    groups: dict[str, list[TaskScore]] = {}
+    for row in rows:
+        groups.setdefault(row.policy, []).append(row)
+    return groups
 
 
 def profiles(card: Scorecard, thresholds: np.ndarray) -> dict[str, np.ndarray]:
     """Each trigger's :func:`profile` over the tasks it was scored on."""
-    by_policy: dict[str, list[TaskScore]] = {}
-    for row in card.rows:
-        by_policy.setdefault(row.policy, []).append(row)
-    return {policy: profile(rows, thresholds) for policy, rows in by_policy.items()}
+    return {policy: profile(rows, thresholds) for policy, rows in by_policy(card.rows).items()}
 
 
 # -- the command ------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class Scorecard:
+    """The card: its rows and aggregates, and what each task was scored against. Its JSON
+    (:meth:`to_json`, :meth:`from_json`) is what ``etmpc score --json`` writes."""
+
     tasks: list[str]
     references: dict[str, dict]  # task -> what it was scored against (best schedule, sha256, stored or computed)
     rows: list[TaskScore]
@@ -221,9 +229,15 @@ class Scorecard:
     def to_json(self) -> dict:
         return {"format": "etmpc-scorecard", "suite_version": SUITE_VERSION, "tasks": self.tasks,
                 "task_versions": {task: task_version(task) for task in self.tasks},
-                "references": self.references, "rows": [asdict(r) for r in self.rows],
-                "aggregates": [asdict(a) for a in self.aggregates], "software": software(),
+                "references": self.references, "rows": [r.to_json() for r in self.rows],
+                "aggregates": [a.to_json() for a in self.aggregates], "software": software(),
                 "machine": {"processor": platform.processor() or platform.machine(), "system": platform.platform()}}
+
+    @classmethod
+    def from_json(cls, data: dict) -> Scorecard:
+        """A card as :meth:`to_json` wrote it (its versions, software and machine are the JSON's to check)."""
+        return cls(list(data["tasks"]), dict(data["references"]), [TaskScore.from_json(r) for r in data["rows"]],
+                   [Aggregate.from_json(a) for a in data["aggregates"]])
 
 
 def score(policies: list, tasks: list[str] | None = None, test_set: str | None = None, workers: int | None = None,
@@ -279,10 +293,7 @@ def score(policies: list, tasks: list[str] | None = None, test_set: str | None =
     with shared_pools():  # each trigger played on its own (a failing one fails its row only), one pool for all
         rows = [play_and_score(task, references[task], policy, test_set, workers, progress)
                 for task in tasks for policy in policies]
-    by_policy: dict[str, list[TaskScore]] = {}
-    for row in rows:
-        by_policy.setdefault(row.policy, []).append(row)
-    card = Scorecard(tasks, shown, rows, [aggregate(r) for r in by_policy.values()])
+    card = Scorecard(tasks, shown, rows, [aggregate(r) for r in by_policy(rows).values()])
     if json_path is not None and card.complete:
         write_json(Path(json_path), card.to_json())
     return card
@@ -303,35 +314,3 @@ def play_and_score(task: str, refs: References, policy, test_set: str | None = N
     except EtmpcError as exc:  # the row says so (the table shows it): the command's own line says which rows failed
         return failed_task(task, _name(policy), str(exc))
     return task_score(refs, evaluation, evaluation.summaries[0].policy)
-
-
-def format_scorecard(card: Scorecard) -> str:
-    """The scorecard as text: per task and trigger, then the suite's aggregate per trigger."""
-    width = max([18] + [len(r.policy) + 2 for r in card.rows])
-    task_width = max([14] + [len(t) + 2 for t in card.tasks])
-    head = (f"{'task':<{task_width}}{'policy':<{width}}{'objective':>11}{'computations':>14}{'failures':>10}"
-            f"{'score':>9}{'± 95 % CI':>11}{'CPU ms/ep':>11}{'(solve':>9}{'feedback':>10}{'trigger)':>10}")
-    lines = ["normalized score per task: 0 = its best periodic schedule, 100 = the oracle over it (a one-step "
-             "lookahead: above 100 is possible); CPU: measured on this machine, per episode", head, "-" * len(head)]
-    for r in card.rows:
-        if r.error is not None:
-            lines.append(f"{r.task:<{task_width}}{r.policy:<{width}}failed: {r.error}")
-            continue
-        failures = f"{r.failures_mean:.2f}" if r.failures_mean is not None else "-"
-        score = f"{r.score:>9.1f}{r.score_ci95:>11.1f}" if math.isfinite(r.score) else \
-            f"{'-':>9}{f'{r.nonfinite_episodes} non-finite':>11}"
-        cpu = r.cpu_ms
-        lines.append(f"{r.task:<{task_width}}{r.policy:<{width}}{r.objective_mean:>11.4f}{r.recomputes_mean:>14.2f}"
-                     f"{failures:>10}{score}{cpu['total']:>11.1f}{cpu['solve']:>9.1f}{cpu['feedback']:>10.1f}"
-                     f"{cpu['decide']:>10.1f}")
-    lines += ["", "the suite: interquartile mean of every task's episode scores and probability of improvement over the best "
-                  "periodic schedule, 95 % stratified bootstrap CIs",
-              f"{'policy':<{width}}{'tasks':>6}{'IQM':>9}{'95 % CI':>18}{'P(improve)':>12}{'95 % CI':>16}"]
-    for a in card.aggregates:
-        lines.append(f"{a.policy:<{width}}{a.tasks:>6}{a.iqm:>9.1f}{f'[{a.iqm_ci95[0]:.1f}, {a.iqm_ci95[1]:.1f}]':>18}"
-                     f"{a.probability_of_improvement:>12.2f}"
-                     f"{f'[{a.probability_of_improvement_ci95[0]:.2f}, {a.probability_of_improvement_ci95[1]:.2f}]':>16}")
-    refs = "; ".join(f"{t}: {r['best_periodic']} and {r['oracle']}" + ("" if r.get("stored") else " (computed)")
-                     for t, r in card.references.items())
-    lines.append(f"references: {refs}")
-    return "\n".join(lines)

@@ -9,7 +9,7 @@ against the task's stored references. Anyone with the trigger can check it:
 2. **It holds together**: per row, the episode count, the score (the mean of the episode scores),
    the confidence interval and the share of better episodes follow from its episode scores, and the
    suite's aggregates (IQM, probability of improvement, their bootstrap intervals) follow from the rows,
-   as :mod:`etmpc.evaluation.scorecard` computes them.
+   as :mod:`etmpc.evaluation.scorecard` computes them (with :mod:`etmpc.evaluation.metrics`).
 3. **It replays**: a seeded sample of each row's episodes is played again with the trigger the row
    names (its spec: the handed-in ``py:MODULE:NAME``, ``rl:PATH``, ``sb3:PATH`` must be importable or
    readable here), and each episode's score must be the card's bit for bit (the loop's numbers do not
@@ -21,7 +21,7 @@ Every mismatch is one line; :func:`verify` returns them (an empty list: the card
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -29,9 +29,10 @@ import numpy as np
 from etmpc.common.documents import read_document
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import strict
+from etmpc.evaluation import metrics
 from etmpc.evaluation.evaluate import parse_policies, run_jobs
 from etmpc.evaluation.references import SUITE_VERSION, References, stored
-from etmpc.evaluation.scorecard import TaskScore, aggregate
+from etmpc.evaluation.scorecard import TaskScore, aggregate, by_policy
 from etmpc.evaluation.workers import workers_for
 from etmpc.systems import system_key, task_version
 
@@ -114,7 +115,7 @@ def _complete(row: TaskScore, refs: References) -> bool:
 def _consistency(row: TaskScore, refs: References) -> list[str]:
     """What in a complete ``row`` does not follow from its own episode scores."""
     name = f"{row.task} {row.policy}"
-    s = np.asarray(row.episode_scores, dtype=float)
+    s = row.scores
     if row.reference != refs.best:
         return [f"{name}: scored against {row.reference}, the references' best schedule is {refs.best}"]
     if not np.all(np.isfinite(s)):
@@ -122,10 +123,10 @@ def _consistency(row: TaskScore, refs: References) -> list[str]:
     found = []
     if not math.isclose(row.score, float(np.mean(s)), rel_tol=TOLERANCE, abs_tol=TOLERANCE):
         found.append(f"{name}: score {row.score!r} in the card, the mean of its episode scores is {float(np.mean(s))!r}")
-    ci = float(1.96 * np.std(s, ddof=1) / math.sqrt(s.size)) if s.size > 1 else math.nan
+    ci = metrics.mean_ci95(s)
     if not _same(row.score_ci95, ci):
         found.append(f"{name}: 95 % CI {row.score_ci95!r} in the card, {ci!r} from its episode scores")
-    better = float(np.mean((s > 0) + 0.5 * (s == 0)))
+    better = metrics.improvement_share(s)
     if not _same(row.better_share, better):
         found.append(f"{name}: better in {row.better_share!r} of the episodes in the card, {better!r} from its episode scores")
     return found
@@ -134,17 +135,14 @@ def _consistency(row: TaskScore, refs: References) -> list[str]:
 def _aggregates(card: dict, rows: list[TaskScore]) -> list[str]:
     """Which of the card's aggregates do not follow from its rows: each computed again and compared as the
     card stores it (strict JSON: a tuple a list, NaN null), where equal floats are equal bits."""
-    by_policy: dict[str, list[TaskScore]] = {}
-    for row in rows:
-        by_policy.setdefault(row.policy, []).append(row)
     given = {a.get("policy"): a for a in card.get("aggregates", []) if isinstance(a, dict)}
     found = []
-    for policy, mine in by_policy.items():
+    for policy, mine in by_policy(rows).items():
         stated = given.get(policy)
         if stated is None:
             found.append(f"{policy}: no aggregate in the card")
             continue
-        for key, value in strict(asdict(aggregate(mine))).items():
+        for key, value in strict(aggregate(mine).to_json()).items():
             if stated.get(key) != value:
                 found.append(f"{policy}: aggregate {key} {stated.get(key)!r} in the card, {value!r} from its rows")
     return found
@@ -192,7 +190,7 @@ def verify(path: str | Path, size: int = SAMPLE, seed: int = 0, workers: int | N
     outcomes = run_jobs(jobs, workers or workers_for(len(jobs)), progress) if jobs else []
     for (result, _, _), (row, refs, episode) in zip(outcomes, expected):
         best, cost = refs.costs(refs.periodic[refs.best][episode]), refs.costs(result.objective)
-        replayed = float(100.0 * (best - cost) / refs.gap) if result.finite else math.nan
+        replayed = float(metrics.normalized_scores(cost, best, refs.gap)) if result.finite else math.nan
         if not _same(replayed, row.episode_scores[episode]):
             mismatches.append(f"{path}: {row.task} {row.policy} episode {episode}: score {row.episode_scores[episode]!r} "
                               f"in the card, {replayed!r} replayed")

@@ -21,10 +21,12 @@ from __future__ import annotations
 import numpy as np
 
 from etmpc.evaluation.compare import per_episode
+from etmpc.evaluation.metrics import oriented
 
 
 def _gain(objective: float, reference: float, sense: str) -> float:
-    return 100.0 * (objective - reference if sense == "max" else reference - objective) / abs(reference)
+    """The gain over ``reference`` in percent of ``|reference|``, > 0: better."""
+    return 100.0 * (oriented(objective, sense) - oriented(reference, sense)) / abs(reference)
 
 
 def _reference(baselines: dict, best: str, episodes: int | None) -> float:

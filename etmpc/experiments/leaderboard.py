@@ -31,7 +31,7 @@ import os
 import platform
 import re
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -41,6 +41,7 @@ from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import write_json, write_text
 from etmpc.common.provenance import commit_and_date
 from etmpc.common.resources import data_root
+from etmpc.evaluation import metrics
 from etmpc.evaluation.references import SUITE_VERSION, References, software, stored
 from etmpc.evaluation.evaluate import parse_policies
 from etmpc.evaluation.inputs import policy_files
@@ -110,8 +111,7 @@ def best_threshold(task: str, workers: int, say: Callable[[str], None]) -> str:
     specs = [f"threshold:{x:g}" for x in system.benchmark.sweep_thresholds]
     with make_backend("local", workers) as pool:
         means = mean_scores(pool, system.name, specs, VALIDATION_ENTROPY, VALIDATION_EPISODES)
-    sign = 1.0 if system.objective_sense == "min" else -1.0
-    chosen = min(zip(specs, means), key=lambda pair: sign * pair[1])[0]
+    chosen = metrics.best(zip(specs, means), system.objective_sense, key=lambda pair: pair[1])[0]
     say(f"{task}: best threshold on {VALIDATION_EPISODES} training-distribution episodes: {chosen}")
     return chosen
 
@@ -159,7 +159,7 @@ def _row(entry: Entry, task: str, refs: References, work: Path, episodes: int, w
     say(f"{task}: {entry.name} ({spec})")
     row = play_and_score(task, refs, spec, workers=workers, progress=False)
     played_at = commit_and_date()
-    write_json(path, sealed({"key": key, "row": asdict(row), "played": played_at}))
+    write_json(path, sealed({"key": key, "row": row.to_json(), "played": played_at}))
     return row, played_at
 
 
@@ -241,10 +241,11 @@ def submitted(cards: list[Path], tasks: list[str], episodes: int, workers: int,
             raise EtmpcError(f"--card {card} does not verify ({verdict.mismatches[0]}; etmpc verify {card} lists all)")
         say(f"--card {card}: verified ({verdict.replayed} episodes replayed bit for bit)")
         data = read_card(card)
-        if set(data["tasks"]) != set(tasks) or any(r["episodes"] != episodes for r in data["rows"]):
-            raise EtmpcError(f"--card {card} scores {', '.join(data['tasks'])} on {data['rows'][0]['episodes']} episodes; "
+        card_rows = [TaskScore.from_json(r) for r in data["rows"]]  # verified: every row is a row
+        if set(data["tasks"]) != set(tasks) or any(r.episodes != episodes for r in card_rows):
+            raise EtmpcError(f"--card {card} scores {', '.join(data['tasks'])} on {card_rows[0].episodes} episodes; "
                              f"the leaderboard has {', '.join(tasks)} on {episodes}: score every task on its whole test set")
-        for row in map(TaskScore.from_json, data["rows"]):
+        for row in card_rows:
             name = f"{row.policy} (submitted)"
             if name not in [e.name for e in found]:
                 found.append(Entry(name, "submitted", {}, f"from {Path(card).name}, verified by replaying a seeded sample"))
@@ -278,10 +279,10 @@ def _build(docs: Path, work: Path, tasks: list[str], episodes: int | None, worke
             row, at = _row(entry, task, references[task], work, n, workers, say)
             rows.append(row)
             played[f"{at['commit']}{' (with uncommitted changes)' if at['uncommitted_changes'] else ''}"] = at
-        named = [TaskScore(**(asdict(r) | {"policy": entry.name})) for r in rows]
+        named = [replace(r, policy=entry.name) for r in rows]
         rows_all += named
         result.append({"name": entry.name, "kind": entry.kind, "note": entry.note, "specs": entry.specs,
-                       "rows": [asdict(r) for r in rows], "aggregate": asdict(aggregate(named))})
+                       "rows": [r.to_json() for r in rows], "aggregate": aggregate(named).to_json()})
     data = {"format": FORMAT, "suite_version": SUITE_VERSION, "tasks": tasks, "episodes": n,
             "task_versions": {t: task_version(t) for t in tasks},
             "references": {t: {"best_periodic": r.best, "oracle": r.oracle_spec, "gap": r.gap,

@@ -8,6 +8,8 @@ import math
 
 import numpy as np
 
+from etmpc.evaluation.metrics import higher_or_lower, oriented
+
 BEGIN, END = "<!-- leaderboard:begin -->", "<!-- leaderboard:end -->"
 ORACLE_NOTE = ("a one-step lookahead over the best periodic schedule with each episode's future known, not a policy; "
                "it bounds that lookahead, not every trigger")
@@ -63,7 +65,7 @@ def above_the_oracle(data: dict, task: str) -> list[str]:
     saves against the oracle's, what they are worth at the task's price, and what it gives up in control
     objective (the objective without that price). Every number is the JSON's."""
     ref = data["references"][task]
-    price, sign = ref["recompute_price"], 1.0 if ref["objective_sense"] == "min" else -1.0
+    price, sense = ref["recompute_price"], ref["objective_sense"]
     oracle = next((r for e in data["entries"] if e["kind"] == "bound" for r in e["rows"] if r["task"] == task), None)
     if oracle is None or not _finite(oracle["objective_mean"]):
         return []
@@ -75,7 +77,7 @@ def above_the_oracle(data: dict, task: str) -> list[str]:
             continue
         saved = oracle["recomputes_mean"] - row["recomputes_mean"]
         worth = saved * price
-        better = sign * (oracle["objective_mean"] - row["objective_mean"])  # > 0: its objective is the better
+        better = -oriented(oracle["objective_mean"] - row["objective_mean"], sense)  # > 0: its objective is the better
         control_loss = worth - better  # what it gives up in control objective, against the oracle's
         head = (f"* **{entry['name']}** scores {row['score']:.1f}: {row['recomputes_mean']:.2f} computations per episode "
                 f"against the oracle's {oracle['recomputes_mean']:.2f}")
@@ -136,7 +138,7 @@ def page(data: dict) -> str:
     lines += ["", "## Per task", ""]
     for task in data["tasks"]:
         ref = data["references"][task]
-        sense = "lower" if ref["objective_sense"] == "min" else "higher"
+        sense = higher_or_lower(ref["objective_sense"])
         lines += [f"### {task}", "",
                   f"References: `{ref['best_periodic']}` and `{ref['oracle']}` (mean gap {ref['gap']:.5g}); objective: "
                   f"{sense} is better, at {ref['recompute_price']:g} per computation.", "",

@@ -8,11 +8,11 @@ policy's. Against the *nearest periodic schedule*: the objective at the price, c
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import numpy as np
 
+from etmpc.evaluation import metrics
 from etmpc.policies.specs import find, kind_of
 
 
@@ -26,20 +26,21 @@ def episode_table(evaluation: dict) -> dict[str, dict[int, tuple[float, float]]]
 
 
 def objective(control: float, computations: float, price: float, sense: str) -> float:
-    """The objective at ``price``: the control objective and the price of the computations, sense-aware."""
-    return control + price * computations if sense == "min" else control - price * computations
+    """The objective at ``price``: the control objective and the price of the computations, which counts
+    against it whatever its sense (added to a cost, taken from a profit)."""
+    return control - metrics.oriented(price * computations, sense)
 
 
 def best_periodic(fixed: dict, periodic: list[str], price: float, sense: str) -> str:
     """The periodic schedule with the best mean objective at ``price`` on the evaluated episodes."""
     table = episode_table(fixed)
     means = {spec: np.mean([objective(c, n, price, sense) for c, n in table[spec].values()]) for spec in periodic}
-    return (max if sense == "max" else min)(means, key=lambda spec: (means[spec], spec))
+    return metrics.best(means, sense, key=lambda spec: (means[spec], spec))
 
 
 def _ci(diff: np.ndarray) -> float | None:
     """The half-width of the paired 95 % normal interval; ``None`` (JSON null) for one episode."""
-    return float(1.96 * diff.std(ddof=1) / math.sqrt(len(diff))) if len(diff) > 1 else None
+    return metrics.mean_ci95(diff) if len(diff) > 1 else None
 
 
 def _percent(value: float | None, scale: float) -> float | None:
@@ -50,9 +51,8 @@ def front(table: dict, periodic: list[str], episodes: list[int], sense: str) -> 
     """The periodic schedules no other beats on ``episodes``: none has a lower-or-equal mean rate and
     a better-or-equal mean control objective (one of them strictly), ordered by rate. Comparing with
     this front, never with a dominated schedule, keeps the comparison fair to the periodic side."""
-    sign = 1.0 if sense == "max" else -1.0
-    points = {p: (np.mean([table[p][e][1] for e in episodes]), sign * np.mean([table[p][e][0] for e in episodes]))
-              for p in periodic}
+    points = {p: (np.mean([table[p][e][1] for e in episodes]),
+                  metrics.oriented(np.mean([table[p][e][0] for e in episodes]), sense)) for p in periodic}
     efficient = [p for p, (rate, value) in points.items()
                  if not any(r <= rate and v >= value and (r, v) != (rate, value) for r, v in points.values())]
     return sorted(efficient, key=lambda p: (points[p][0], p))
@@ -81,8 +81,7 @@ def versus_front(table: dict, periodic: list[str], spec: str, sense: str) -> dic
     w = 0.0 if rates[hi] == rates[lo] else (rate - rates[lo]) / (rates[hi] - rates[lo])  # weight of the faster one
     front_values = np.array([(1 - w) * table[ordered[lo]][e][0] + w * table[ordered[hi]][e][0] for e in episodes])
     mine = np.array([table[spec][e][0] for e in episodes])
-    sign = 1.0 if sense == "max" else -1.0
-    gain = sign * (mine - front_values)
+    gain = metrics.oriented(mine - front_values, sense)
     scale = abs(float(front_values.mean()))
     ci = _ci(gain)
     return {"episodes": len(episodes), "computations": rate, "between": [ordered[lo], ordered[hi]], "weight": float(w),
@@ -98,7 +97,7 @@ def versus_nearest(table: dict, periodic: list[str], spec: str, price: float, se
     nearest = min(periodic, key=lambda p: (abs(np.mean([table[p][e][1] for e in episodes]) - rate), p))
     mine = np.array([objective(*table[spec][e], price, sense) for e in episodes])
     theirs = np.array([objective(*table[nearest][e], price, sense) for e in episodes])
-    gain = (1.0 if sense == "max" else -1.0) * (mine - theirs)
+    gain = metrics.oriented(mine - theirs, sense)
     scale, ci = abs(float(theirs.mean())), _ci(gain)
     return {"policy": nearest, "objective": float(theirs.mean()), "gain": float(gain.mean()), "gain_ci95": ci,
             "gain_percent": 100.0 * float(gain.mean()) / scale, "gain_percent_ci95": _percent(ci, scale)}
@@ -172,7 +171,7 @@ def _pct(row: dict | None) -> str:
 
 def report_section(pareto: dict) -> list[str]:
     """A Markdown section: at equal rates, each state-dependent policy against the periodic front."""
-    sense = "lower" if pareto["objective_sense"] == "min" else "higher"
+    sense = metrics.higher_or_lower(pareto["objective_sense"])
     lines = [f"## {pareto['domain']}: state-dependent against periodic at equal computation rates", "",
              f"First {pareto['episodes']} test-set episodes, paired per episode; the periodic front interpolated at "
              f"each policy's mean rate; gains in control objective ({sense} is better), > 0 = better than the front, "

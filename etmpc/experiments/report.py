@@ -7,9 +7,10 @@ import platform
 from importlib import metadata
 from pathlib import Path
 
+from etmpc.evaluation.metrics import higher_or_lower, oriented
 from etmpc.experiments.pareto import report_section
 
-# The paper's headline figures (SPEC.md), to set the results against.
+# The paper's headline figures (docs/paper.md, "The paper's headline results"), to set the results against.
 PAPER = {"cart_pendulum": {"margin_percent": 5.0}, "battery": {"margin_percent": 7.0}}
 
 
@@ -62,8 +63,8 @@ def report(results: dict) -> str:
         "",
     ]
     for domain, r in results["systems"].items():
-        sense = "higher" if r["objective_sense"] == "max" else "lower"
-        unit = "profit, EUR" if r["objective_sense"] == "max" else "cost"
+        sense = higher_or_lower(r["objective_sense"])
+        unit = "profit, EUR" if sense == "higher" else "cost"
         lines += [f"## {domain}", "", f"Objective: {unit}, {sense} is better, mean over {r['episodes']} test-set episodes.", "",
                   "| policy | objective | ± std over episodes | control | recomputes | solver failures |",
                   "|---|---|---|---|---|---|"]
@@ -118,9 +119,8 @@ def headroom_section(r: dict, smoke: bool) -> list[str]:
              "| | policies | recomputes | objective | gain over best fixed | gain % |", "|---|---|---|---|---|---|"]
     for key, row in h["rows"].items():
         specs = ", ".join(f"`{p}`" for p in row["policies"]) if len(row["policies"]) <= 2 else f"{len(row['policies'])} seeds"
-        sign = 1 if r["objective_sense"] == "max" else -1
         gain = ("reference", "reference") if key == "best_fixed" else \
-            (f"{sign * row['mean_difference']:+.5f} ± {row['ci95']:.5f}", _pct(row))
+            (f"{oriented(row['mean_difference'], r['objective_sense']):+.5f} ± {row['ci95']:.5f}", _pct(row))
         lines.append(f"| {names[key]} | {specs} | {row['recomputes_mean']:.1f} | {_f(row['objective_mean'])} | "
                      f"{gain[0]} | {gain[1]} |")
     if h["rollout_seconds_per_step"] is not None:
@@ -191,7 +191,7 @@ def learners_section(r: dict) -> list[str]:
 
 
 def against_the_paper(results: dict) -> list[str]:
-    """Each headline claim of SPEC.md, and whether it holds here, with the numbers."""
+    """Each headline claim of the paper (docs/paper.md), and whether it holds here, with the numbers."""
     out = []
     systems = results["systems"]
     for domain, r in systems.items():
@@ -257,7 +257,7 @@ def scorecard_section(results: dict) -> list[str]:
     for name in names:
         rows = [cards[t]["rows"].get(name) for t in tasks]
         cells = ["-" if r is None else f"{r['score']:.1f} ± {r['score_ci95']:.1f}" for r in rows]
-        a = aggregate([TaskScore(**r) for r in rows if r is not None])
+        a = aggregate([TaskScore.from_json(r) for r in rows if r is not None])
         lines.append(f"| {name} | " + " | ".join(cells) + f" | {a.iqm:.1f} [{a.iqm_ci95[0]:.1f}, {a.iqm_ci95[1]:.1f}] |")
     refs = "; ".join(f"{t}: `{cards[t]['references']['best_periodic']}`, `{cards[t]['references']['oracle']}`"
                      for t in tasks)

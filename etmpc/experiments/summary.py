@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from etmpc.evaluation.compare import paired, per_episode
+from etmpc.evaluation import metrics
 from etmpc.learning.train import curve_summary
 
 
@@ -17,12 +18,8 @@ def summarise_system(system, baselines: dict, learned: dict | None, curve: dict 
     """The numbers of the report for one system, from the evaluation JSONs and the learning curve of
     the paper's learner (``learned`` and ``curve`` are None for a task the paper did not study)."""
     sense = system.objective_sense
-    better = (lambda a, b: a > b) if sense == "max" else (lambda a, b: a < b)
     fixed = baselines["policies"]
-    best = None
-    for spec, s in fixed.items():
-        if best is None or better(s["objective_mean"], fixed[best]["objective_mean"]):
-            best = spec
+    best = _best_fixed(fixed, sense)
     head = {"domain": system.domain, "task": system.task, "name": system.name, "objective_sense": sense,
             "episodes": baselines["policies"][best]["episodes"], "fixed": {spec: _row(s) for spec, s in fixed.items()},
             "best_fixed": dict(_row(fixed[best]), policy=best)}
@@ -38,14 +35,13 @@ def summarise_system(system, baselines: dict, learned: dict | None, curve: dict 
         by_episode.setdefault(r["episode"], []).append(r["objective"])
     fixed_by_episode = {r["episode"]: r["objective"] for r in baselines["runs"] if r["policy"] == best and r["finite"]}
     episodes = sorted(set(by_episode) & set(fixed_by_episode))
-    diff = np.array([np.mean(by_episode[e]) - fixed_by_episode[e] for e in episodes])
-    gain = diff if sense == "max" else -diff  # > 0: the learned policy is better
+    paired_runs = metrics.paired_differences([np.mean(by_episode[e]) for e in episodes],
+                                             [fixed_by_episode[e] for e in episodes], sense)
     learned_mean = float(np.mean([r["objective"] for r in learned_runs]))
     best_value = fixed[best]["objective_mean"]
-    margin_percent = 100.0 * (learned_mean - best_value) / abs(best_value) * (1 if sense == "max" else -1)
+    margin_percent = metrics.oriented(100.0 * (learned_mean - best_value) / abs(best_value), sense)  # > 0: learned better
     points = curve["points"]
-    values = [p["objective_mean"] for p in points]
-    best_point = points[int(np.argmax(values) if sense == "max" else np.argmin(values))]
+    best_point = points[int(np.argmax(metrics.oriented([p["objective_mean"] for p in points], sense)))]
     return {
         **head,
         "learned": {
@@ -59,10 +55,10 @@ def summarise_system(system, baselines: dict, learned: dict | None, curve: dict 
             "repeats": next(iter(learned["policies"].values()))["repeats"],
         },
         "paired": {
-            "mean_difference": float(diff.mean()),
-            "ci95": float(1.96 * diff.std(ddof=1) / np.sqrt(len(diff))) if len(diff) > 1 else float("nan"),
-            "learned_better_episodes": int((gain > 0).sum()),
-            "episodes": len(diff),
+            "mean_difference": paired_runs["mean_difference"],
+            "ci95": paired_runs["ci95"],
+            "learned_better_episodes": paired_runs["better_episodes"],
+            "episodes": paired_runs["episodes"],
         },
         "margin_percent": margin_percent,
         "curve": {"start": points[0], "best": best_point, "final": points[-1], "points": points},
@@ -72,8 +68,7 @@ def summarise_system(system, baselines: dict, learned: dict | None, curve: dict 
 def summarise_default(system, baselines: dict, default: dict, state) -> dict:
     """The default learner's shipped policy on the test set, against the best fixed policy."""
     sense = system.objective_sense
-    fixed = baselines["policies"]
-    best = (max if sense == "max" else min)(fixed, key=lambda spec: fixed[spec]["objective_mean"])
+    best = _best_fixed(baselines["policies"], sense)
     (spec, row), = default["policies"].items()
     hyper = json.loads(Path(spec[3:]).read_text())["hyperparameters"]
     return {"policy": spec, "seed": hyper["seed"], "validation_objective": hyper["validation_objective"],
@@ -105,6 +100,11 @@ def summarise_headroom(system, best: str, baselines: dict, learned: dict, defaul
             "rollout_seconds_per_step": cost["wall_seconds"] * cost["workers"] / steps if cost and steps else None}
 
 
+def _best_fixed(fixed: dict, sense: str) -> str:
+    """The fixed policy with the best mean objective (the first of a tie)."""
+    return metrics.best(fixed, sense, key=lambda spec: fixed[spec]["objective_mean"])
+
+
 def _row(s: dict) -> dict:
     keys = ("objective_mean", "objective_std", "control_objective_mean", "recomputes_mean", "solver_failures")
     return {k: s[k] for k in keys}
@@ -118,8 +118,7 @@ def summarise_learners(system, baselines: dict, learned: dict, default: dict, pp
     sample-efficiency curves (:mod:`etmpc.experiments.efficiency`), whose last point gives the steps one
     run (one seed) simulated."""
     sense = system.objective_sense
-    fixed = baselines["policies"]
-    best = (max if sense == "max" else min)(fixed, key=lambda spec: fixed[spec]["objective_mean"])
+    best = _best_fixed(baselines["policies"], sense)
     reference = per_episode(baselines, {best})
     steps = system.episode_steps
     dpi_episodes = len(settings["dpi_seeds"]) * settings["dpi_episodes"]
@@ -151,20 +150,18 @@ def summarise_learners(system, baselines: dict, learned: dict, default: dict, pp
 def summarise_scorecard(system, evaluations: dict[str, tuple[dict | None, str]]) -> dict:
     """The scorecard of what a run trained (:mod:`etmpc.evaluation.scorecard`), from its evaluation JSONs:
     ``evaluations`` maps a row's name to ``(evaluation JSON, spec)`` (a None JSON: no such row). Returns
-    ``{"references": ..., "rows": {name: TaskScore as a dict}}``, or ``{"unavailable": why}`` when the
+    ``{"references": ..., "rows": {name: TaskScore as JSON}}``, or ``{"unavailable": why}`` when the
     stored references do not fit the run (another test set, or too few episodes)."""
-    from dataclasses import asdict
-
     from etmpc.common.errors import EtmpcError
     from etmpc.evaluation.references import load_references
-    from etmpc.evaluation.scorecard import task_score_from_json
+    from etmpc.evaluation.scorecard import task_score
 
     first = next(data for data, _ in evaluations.values() if data is not None)
     try:
         refs = load_references(system.name, first["test_set"]["sha256"])
         episodes = len({r["episode"] for r in first["runs"]})
         refs = refs.head(episodes) if episodes < refs.episodes else refs
-        rows = {name: asdict(task_score_from_json(refs, data, spec)) for name, (data, spec) in evaluations.items()
+        rows = {name: task_score(refs, data, spec).to_json() for name, (data, spec) in evaluations.items()
                 if data is not None and spec in data["policies"]}
     except EtmpcError as exc:
         return {"unavailable": str(exc)}

@@ -1,0 +1,161 @@
+"""The benchmark's statistics: pure functions of score and objective arrays, as rliable's ``metrics.py``.
+
+No playing, no files, no formatting: every function here takes numbers and gives numbers, and the same
+numbers give the same bits (the bootstrap is seeded). :mod:`etmpc.evaluation.scorecard` holds the
+results and plays the triggers; :mod:`etmpc.evaluation.compare` pairs evaluations episode by episode.
+
+**The sense.** An objective is a cost (``"min"``: lower is better) or a profit (``"max"``). Which way is
+better is decided here only: :func:`oriented` turns objectives into values where higher is better,
+:func:`best` picks the best of candidates, :func:`higher_or_lower` says it in words.
+
+**The normalized score** of a trigger with per-episode costs ``c_e`` (lower is better) between a
+baseline ``B_e`` (0) and a reference with the mean gap ``D = mean_e (B_e - O_e)`` (100):
+``s_e = 100 (B_e - c_e) / D`` per episode, and the task's score ``100 mean_e (B_e - c_e) / D`` (the
+mean summed exactly, :func:`exact_mean`).
+
+**The aggregates** over tasks, each a sample of episode scores (rliable's, Agarwal et al. 2021): the
+interquartile mean of every episode score together, the probability of improvement (per task the share
+of episodes with a score above 0, ties counting half; averaged over tasks), the performance profile, and
+95 % stratified bootstrap intervals (episodes resampled within each task).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy import stats
+
+from etmpc.common.numerics import fsum
+
+SENSES = ("min", "max")
+BOOTSTRAP_RESAMPLES = 2000
+BOOTSTRAP_SEED = 0
+
+
+# -- the sense --------------------------------------------------------------------------------------
+def _checked(sense: str) -> str:
+    if sense not in SENSES:
+        raise ValueError(f"an objective's sense is 'min' or 'max', got {sense!r}")
+    return sense
+
+
+def oriented(values, sense: str):
+    """``values`` (objectives of sense ``sense``) so that higher is better: themselves for a profit
+    (``"max"``), negated for a cost (``"min"``). A number stays a number; a list becomes an array.
+    Negation is exact, so ``oriented(a) - oriented(b)`` is ``a - b`` or ``b - a`` bit for bit."""
+    if isinstance(values, (list, tuple)):
+        values = np.asarray(values, dtype=float)
+    return values if _checked(sense) == "max" else -values
+
+
+def sign(sense: str) -> float:
+    """``1.0`` for a profit, ``-1.0`` for a cost: what multiplies an objective into higher-is-better."""
+    return 1.0 if _checked(sense) == "max" else -1.0
+
+
+def best(candidates, sense: str, key):
+    """The candidate whose ``key`` is best in ``sense`` (the largest for ``"max"``, the smallest for
+    ``"min"``; the first of a tie, as :func:`max` and :func:`min`)."""
+    return (max if _checked(sense) == "max" else min)(candidates, key=key)
+
+
+def higher_or_lower(sense: str) -> str:
+    """``"higher"`` or ``"lower"``: which is better, in words."""
+    return "higher" if _checked(sense) == "max" else "lower"
+
+
+# -- per task ---------------------------------------------------------------------------------------
+def exact_mean(values) -> float:
+    """The mean, summed exactly (``fsum``): the same on every machine, and ``mean(x) / mean(x)`` is 1."""
+    values = list(np.asarray(values, dtype=float))
+    return fsum(values) / len(values)
+
+
+def normalized_scores(costs, baseline, gap: float) -> np.ndarray:
+    """Per episode, ``100 (B_e - c_e) / D``: 0 is the baseline's cost ``B_e``, 100 is ``D`` better."""
+    return 100.0 * (baseline - costs) / gap
+
+
+def normalized_score(costs, baseline, gap: float) -> float:
+    """The task's score, ``100 mean_e (B_e - c_e) / D`` (the mean of :func:`normalized_scores`, summed exactly)."""
+    return 100.0 * exact_mean(baseline - costs) / gap
+
+
+def mean_ci95(values) -> float:
+    """The half-width of the 95 % normal interval of the mean, ``1.96 sd / sqrt(n)``; NaN below two values."""
+    values = np.asarray(values, dtype=float)
+    return float(1.96 * np.std(values, ddof=1) / math.sqrt(values.size)) if values.size > 1 else math.nan
+
+
+def episode_improvement(scores) -> np.ndarray:
+    """Per episode: 1 where the score is above 0 (better than the baseline), 0.5 on a tie, else 0."""
+    scores = np.asarray(scores, dtype=float)
+    return (scores > 0) + 0.5 * (scores == 0)
+
+
+def improvement_share(scores) -> float:
+    """The share of episodes better than the baseline (ties counting half): a task's P(improve)."""
+    return float(np.mean(episode_improvement(scores)))
+
+
+def paired_differences(values, reference, sense: str) -> dict:
+    """``values - reference``, paired per episode: the episodes, the mean difference, its 95 % CI
+    (:func:`mean_ci95`) and the episodes where ``values`` is the better (NaN means for none)."""
+    diff = np.asarray(values, dtype=float) - np.asarray(reference, dtype=float)
+    return {"episodes": len(diff), "mean_difference": float(diff.mean()) if len(diff) else math.nan,
+            "ci95": mean_ci95(diff), "better_episodes": int((oriented(diff, sense) > 0).sum())}
+
+
+# -- over tasks -------------------------------------------------------------------------------------
+def _iqm(*samples, axis=-1):
+    """The 25 %-trimmed mean of every sample together (vectorised, for the bootstrap)."""
+    return stats.trim_mean(np.concatenate(samples, axis=axis), 0.25, axis=axis)
+
+
+def _mean_of_means(*samples, axis=-1):
+    return np.mean(np.stack([np.mean(s, axis=axis) for s in samples], axis=-1), axis=-1)
+
+
+def stratified_interval(samples: list[np.ndarray], statistic, resamples: int = BOOTSTRAP_RESAMPLES,
+                        seed: int = BOOTSTRAP_SEED) -> tuple[float, float]:
+    """The 95 % percentile interval of ``statistic(*samples)``, each sample resampled on its own
+    (``scipy.stats.bootstrap``, seeded); NaNs when a sample has fewer than two values."""
+    if any(len(s) < 2 for s in samples):
+        return (math.nan, math.nan)
+    result = stats.bootstrap(tuple(samples), statistic, n_resamples=resamples, method="percentile",
+                             vectorized=True, paired=False, rng=np.random.default_rng(seed))
+    return float(result.confidence_interval.low), float(result.confidence_interval.high)
+
+
+def _samples(task_scores) -> list[np.ndarray]:
+    return [np.asarray(s, dtype=float) for s in task_scores]
+
+
+def iqm(task_scores) -> float:
+    """The interquartile mean of every task's episode scores together (rliable's ``aggregate_iqm``)."""
+    return float(_iqm(*_samples(task_scores)))
+
+
+def iqm_ci95(task_scores) -> tuple[float, float]:
+    """:func:`iqm`'s 95 % stratified bootstrap interval."""
+    return stratified_interval(_samples(task_scores), _iqm)
+
+
+def probability_of_improvement(task_scores) -> float:
+    """The mean over tasks of :func:`improvement_share`: each task weighs the same."""
+    return float(np.mean([improvement_share(s) for s in task_scores]))
+
+
+def probability_of_improvement_ci95(task_scores) -> tuple[float, float]:
+    """:func:`probability_of_improvement`'s 95 % stratified bootstrap interval."""
+    return stratified_interval([episode_improvement(s) for s in task_scores], _mean_of_means)
+
+
+def performance_profile(task_scores, thresholds) -> np.ndarray:
+    """rliable's performance profile: at each threshold ``tau``, the share of episodes whose score
+    exceeds ``tau``, averaged over the tasks (each weighs the same); NaNs without a task."""
+    samples = _samples(task_scores)
+    if not samples:
+        return np.full(len(thresholds), math.nan)
+    return np.mean([(s[None, :] > np.asarray(thresholds)[:, None]).mean(axis=1) for s in samples], axis=0)
