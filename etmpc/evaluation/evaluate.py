@@ -23,6 +23,7 @@ from etmpc.evaluation import testsets as ts_mod
 from etmpc.common import checks, interrupts
 from etmpc.common.errors import EtmpcError
 from etmpc.common.interrupts import described, genuine
+from etmpc.common.sense import higher_or_lower, oriented
 from etmpc.policies import parse_policy
 from etmpc.policies.specs import names_a_kind
 from etmpc.policies.user import checked
@@ -73,7 +74,7 @@ def scores(system, traj) -> tuple[float, float]:
     """``(objective, control objective)`` of an episode, sense-aware: a cost (min) or a profit (max)."""
     ret = traj.policy_return(system.recompute_price)
     rewards = float(traj.rewards[: traj.steps].sum())
-    return (ret, rewards) if system.objective_sense == "max" else (-ret, -rewards)
+    return oriented(ret, system.objective_sense), oriented(rewards, system.objective_sense)  # a cost: negated
 
 
 def _run(job: tuple) -> tuple[RunResult, EpisodeRecord | None, dict[str, float]]:
@@ -382,7 +383,7 @@ def format_table(evaluation: Evaluation) -> str:
     head = (f"{'policy':<{width}}{'objective':>12}{'± std':>10}{'control':>11}{'recomputes':>12}{extra}"
             f"{'solver failures':>17}{'non-finite':>12}")
     lines = [
-        f"{evaluation.domain}/{evaluation.task}: objective ({'lower' if sense == 'min' else 'higher'} is better), "
+        f"{evaluation.domain}/{evaluation.task}: objective ({higher_or_lower(sense)} is better), "
         f"test set {evaluation.testset_sha256[:12]}, {evaluation.recompute_price:g} per computation",
         head,
         "-" * len(head),

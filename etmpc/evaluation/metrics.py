@@ -5,8 +5,9 @@ numbers give the same bits (the bootstrap is seeded). :mod:`etmpc.evaluation.sco
 results and plays the triggers; :mod:`etmpc.evaluation.compare` pairs evaluations episode by episode.
 
 **The sense.** An objective is a cost (``"min"``: lower is better) or a profit (``"max"``). Which way is
-better is decided here only: :func:`oriented` turns objectives into values where higher is better,
-:func:`best` picks the best of candidates, :func:`higher_or_lower` says it in words.
+better is decided in one place, :mod:`etmpc.common.sense` (re-exported here, and usable by the views):
+:func:`oriented` turns objectives into values where higher is better, :func:`best` picks the best of
+candidates, :func:`higher_or_lower` says it in words.
 
 **The normalized score** of a trigger with per-episode costs ``c_e`` (lower is better) between a
 baseline ``B_e`` (0) and a reference with the mean gap ``D = mean_e (B_e - O_e)`` (100):
@@ -27,42 +28,10 @@ import numpy as np
 from scipy import stats
 
 from etmpc.common.numerics import fsum
+from etmpc.common.sense import SENSES, best, higher_or_lower, oriented, sign  # noqa: F401 (re-exported)
 
-SENSES = ("min", "max")
 BOOTSTRAP_RESAMPLES = 2000
 BOOTSTRAP_SEED = 0
-
-
-# -- the sense --------------------------------------------------------------------------------------
-def _checked(sense: str) -> str:
-    if sense not in SENSES:
-        raise ValueError(f"an objective's sense is 'min' or 'max', got {sense!r}")
-    return sense
-
-
-def oriented(values, sense: str):
-    """``values`` (objectives of sense ``sense``) so that higher is better: themselves for a profit
-    (``"max"``), negated for a cost (``"min"``). A number stays a number; a list becomes an array.
-    Negation is exact, so ``oriented(a) - oriented(b)`` is ``a - b`` or ``b - a`` bit for bit."""
-    if isinstance(values, (list, tuple)):
-        values = np.asarray(values, dtype=float)
-    return values if _checked(sense) == "max" else -values
-
-
-def sign(sense: str) -> float:
-    """``1.0`` for a profit, ``-1.0`` for a cost: what multiplies an objective into higher-is-better."""
-    return 1.0 if _checked(sense) == "max" else -1.0
-
-
-def best(candidates, sense: str, key):
-    """The candidate whose ``key`` is best in ``sense`` (the largest for ``"max"``, the smallest for
-    ``"min"``; the first of a tie, as :func:`max` and :func:`min`)."""
-    return (max if _checked(sense) == "max" else min)(candidates, key=key)
-
-
-def higher_or_lower(sense: str) -> str:
-    """``"higher"`` or ``"lower"``: which is better, in words."""
-    return "higher" if _checked(sense) == "max" else "lower"
 
 
 # -- per task ---------------------------------------------------------------------------------------

@@ -27,6 +27,7 @@ from etmpc.common.documents import check_seal, read_document, sealed
 from etmpc.common.errors import EtmpcError
 from etmpc.common.numerics import fsum
 from etmpc.common.outputs import write_json
+from etmpc.common.sense import best as best_of, oriented
 from etmpc.evaluation import testsets
 from etmpc.evaluation.evaluate import Evaluation, evaluate
 from etmpc.systems import data_dir, make_system
@@ -67,8 +68,7 @@ class References:
 
     def costs(self, objectives) -> np.ndarray:
         """Objectives as costs (lower is better), whatever the task's sense."""
-        values = np.asarray(objectives, dtype=float)
-        return values if self.objective_sense == "min" else -values
+        return -oriented(np.asarray(objectives, dtype=float), self.objective_sense)
 
     @property
     def gap(self) -> float:
@@ -96,9 +96,7 @@ def mean(values) -> float:
 
 def best_schedule(periodic: dict[str, list[float]], sense: str) -> str:
     """The schedule with the best mean objective (``sense``: ``min`` or ``max``), the first of a tie."""
-    sign = 1.0 if sense == "min" else -1.0
-    order = list(periodic)
-    return min(order, key=lambda spec: (sign * mean(periodic[spec]), order.index(spec)))
+    return best_of(list(periodic), sense, key=lambda spec: mean(periodic[spec]))
 
 
 def references_path(task: str) -> Path:
@@ -181,11 +179,10 @@ def _problem(data: dict, system) -> str | None:
     best = best_schedule(periodic, sense)
     if data.get("best") != best:
         return f"best names {data.get('best')!r}, but {best} has the best mean objective"
-    sign = 1.0 if sense == "min" else -1.0
-    worse = [e for e, (o, b) in enumerate(zip(data["oracle"], periodic[best])) if sign * (o - b) > 0]
+    worse = [e for e, (o, b) in enumerate(zip(data["oracle"], periodic[best])) if oriented(o - b, sense) < 0]
     if worse:
         return f"the oracle does worse than {best} on episode {worse[0]}, which the oracle over it cannot"
-    if not mean([sign * (b - o) for o, b in zip(data["oracle"], periodic[best])]) > 0:
+    if not mean([oriented(o, sense) - oriented(b, sense) for o, b in zip(data["oracle"], periodic[best])]) > 0:
         return f"the oracle does not improve on {best}: there is no scale to score against"
     return None
 

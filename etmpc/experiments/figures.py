@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from etmpc.common.errors import EtmpcError
+from etmpc.common.sense import cost_or_profit
 from etmpc.evaluation import testsets
 from etmpc.evaluation.evaluate import scores
 from etmpc.evaluation.inputs import check_shipped
@@ -82,7 +83,7 @@ def trajectory(out: str | Path, task: str, spec: str, episode: int = 0, seed: in
     played = play_test_episode(task, _policy(system, spec), seed, 0, episode)  # as evaluate plays it
     traj = played.trajectory
     objective, control = scores(system, traj)
-    what = "cost" if system.objective_sense == "min" else "profit"
+    what = cost_or_profit(system.objective_sense)
     title = (f"{system.name} test-set episode {episode}, policy {spec}: {what} {objective:.5g} "
              f"({control:.5g} without computations), {traj.recomputes} computations")
     path = figures.write_trajectory_png(out, system, traj, title, system.signals(played.episode))

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from etmpc.common.sense import higher_or_lower
 from etmpc.views.figures import save_png_atomically
 
 
@@ -20,7 +21,7 @@ def write_curve_png(path: Path, summary: dict, seeds: int) -> None:
     ax.plot(x, mean, marker="o", label=f"mean over {seeds} seeds")
     ax.fill_between(x, mean - std, mean + std, alpha=0.25, label="± 1 std")
     ax.set_xlabel("training episodes")
-    ax.set_ylabel(f"test-set objective ({'higher' if summary['objective_sense'] == 'max' else 'lower'} is better)")
+    ax.set_ylabel(f"test-set objective ({higher_or_lower(summary['objective_sense'])} is better)")
     learner = {"gpomdp": "GPOMDP", "dpi": "DPI"}.get(summary.get("algorithm", "gpomdp"), summary.get("algorithm"))
     ax.set_title(f"{summary['domain']}: {learner} learning curve ({summary.get('features', 'paper')} features)")
     ax.grid(alpha=0.3)
@@ -58,7 +59,7 @@ def draw_pareto(pareto: dict):
             ax.scatter([p["computations"] for p in rows], [p["control_objective"] for p in rows], marker=marker, s=60,
                        facecolors=face, edgecolors=colour, linewidths=1.5, label=label, gid=f"{kind}@{price!r}", zorder=3)
     ax.set_xlabel("computations per episode")
-    ax.set_ylabel(f"control objective ({'lower' if sense == 'min' else 'higher'} is better)")
+    ax.set_ylabel(f"control objective ({higher_or_lower(sense)} is better)")
     ax.set_title(f"{pareto['domain']}: the trade-off, {pareto['episodes']} test-set episodes (oracle: an upper bound)")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7, ncols=2, loc="best")

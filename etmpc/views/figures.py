@@ -33,6 +33,7 @@ from etmpc.common.errors import EtmpcError  # noqa: E402
 from etmpc.loop import Trajectory  # noqa: E402
 from etmpc.policies.specs import find  # noqa: E402
 from etmpc.common.outputs import atomic_path  # noqa: E402
+from etmpc.common.sense import cost_or_profit, higher_or_lower  # noqa: E402
 from etmpc.views.blueprint import objective_unit  # noqa: E402
 
 # (forecast name in Plan.forecasts, episode attribute of the true values, axis label)
@@ -330,8 +331,8 @@ def draw_policy_bars(evaluations: Sequence[dict], group_learned: bool = True, so
     long = any(len(b.label) > 12 for b in bars)
     ax.set_xticklabels([b.label for b in bars], rotation=20 if long else 0, ha="right" if long else "center", fontsize=9)
     unit = objective_unit(first["domain"], first["task"])
-    what = ("cost" if sense == "min" else "profit") + ("" if unit in ("-", "rad²") else f" ({unit})")
-    ax.set_ylabel(f"mean {what} per episode\n({'lower' if sense == 'min' else 'higher'} is better"
+    what = cost_or_profit(sense) + ("" if unit in ("-", "rad²") else f" ({unit})")
+    ax.set_ylabel(f"mean {what} per episode\n({higher_or_lower(sense)} is better"
                   f"{'; axis not from 0' if zoomed else ''})")
     ax.set_title(f"{first['domain']}/{first['task']}: objective per policy ({episodes} test-set episodes)", fontsize=11)
     ax.grid(axis="y", alpha=0.3)

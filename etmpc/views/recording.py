@@ -49,6 +49,7 @@ import numpy as np
 
 from etmpc.views import blueprint as look
 from etmpc.common.errors import EtmpcError
+from etmpc.common.sense import cost_or_profit, higher_or_lower, sign as sense_sign
 from etmpc.loop import computation_cost
 from etmpc.views.record import EpisodeRecord
 
@@ -264,7 +265,7 @@ class Recorder:
                    colors=[look.BOUND], widths=[1.0])
 
         # The objective.
-        sign = 1.0 if identity["objective_sense"] == "max" else -1.0
+        sign = sense_sign(identity["objective_sense"])
         running = sign * np.cumsum(record.rewards - computation_cost(record.recompute, identity["recompute_price"]))
         series("objective/reward", self._steps(n, dt), record.rewards, ["reward"], **realised)
         series("objective/running", self._steps(n, dt), running,
@@ -313,7 +314,7 @@ def _about(name: str, record: EpisodeRecord, objective: float) -> str:
     identity = record.identity
     spec = identity["policy"]
     bound = " (an upper bound, not a policy)" if identity.get("upper_bound") else ""
-    sense = "profit: higher" if identity["objective_sense"] == "max" else "cost: lower"
+    sense = f"{cost_or_profit(identity['objective_sense'])}: {higher_or_lower(identity['objective_sense'])}"
     forced = int(record.forced[1:].sum())
     task = look.task_part(identity["domain"], identity["task"])
     unit = look.objective_unit(identity["domain"], identity["task"])

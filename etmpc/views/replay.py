@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from etmpc.common.errors import EtmpcError
+from etmpc.common.sense import higher_or_lower, oriented
 from etmpc.loop import computation_cost
 from etmpc.views.recording import DECISION_SERIES, END_MARKER, OBJECTIVE_SERIES
 from etmpc.systems import canonical
@@ -111,7 +112,7 @@ def replay_summary(path: str | Path) -> list[ReplayedEpisode]:
         # The same expressions as Trajectory.policy_return and evaluate.scores, on the same floats.
         ret = float(rewards.sum() - computation_cost(recomputes, identity["recompute_price"]))
         control = float(rewards.sum())
-        objective, control = (ret, control) if identity["objective_sense"] == "max" else (-ret, -control)
+        objective, control = oriented(ret, identity["objective_sense"]), oriented(control, identity["objective_sense"])
         chosen = np.flatnonzero((recompute > 0) & (forced == 0))
         at_recompute = errors[np.isin(steps_err, chosen)]
         out.append(ReplayedEpisode(
@@ -161,7 +162,7 @@ def format_replay(episodes: list[ReplayedEpisode], per_episode: bool = False) ->
     current = None
     for (task, policy), group in groups.items():
         if task != current:
-            lines += [f"{task}: objective ({'higher' if _sense(group) == 'max' else 'lower'}"
+            lines += [f"{task}: objective ({higher_or_lower(_sense(group))}"
                       " is better); prediction error ‖W (x − x̂)‖ against the plan in force", head, "-" * len(head)]
             current = task
         for e in [None] + (group if per_episode else []):  # the policy's line, then its episodes
