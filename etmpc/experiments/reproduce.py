@@ -55,6 +55,8 @@ from etmpc.learning.dpi import Settings as DpiSettings
 from etmpc.experiments import efficiency
 from etmpc.learning import hyperparams
 from etmpc.learning.ppo import PpoSettings, train_ppo
+from etmpc.learning.base import BUILT_IN, learners
+from etmpc.learning.runner import cost_path, run, timed  # noqa: F401 (cost_path: reproduce's API)
 from etmpc.learning.train import TrainConfig, curve_summary, load_checkpoint, train
 from etmpc.policies import parse_policy
 from etmpc.policies.learned import write_json_atomically
@@ -231,6 +233,10 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
     scored = {"best periodic": (baselines, _stored_best(system)), "best fixed": (baselines, best),
               **{f"GPOMDP seed {s}": (learned, spec) for s, spec in zip(settings.seeds, learned_specs)},
               "DPI": (default, f"rl:{shipped}"), "PPO": (ppo, f"sb3:{folder / 'train_ppo' / 'selected.zip'}")}
+    others = _other_learners(folder, domain, settings, run, common)
+    if others:  # learners registered beyond the built-in ones: each trained, evaluated and scored
+        summary["other_learners"] = {name: {"policy": spec, "evaluation": data} for name, (data, spec) in others.items()}
+        scored.update(others)
     summary["scorecard"] = summarise_scorecard(system, scored)
 
     _say(f"{domain}: figures, recording, video")
@@ -302,25 +308,22 @@ def _ppo(folder: Path, domain: str, settings: Settings, run: dict, common: dict)
     return training, ppo, curve
 
 
-def cost_path(stage: Path) -> Path:
-    """Where the wall time of training stage ``stage`` (a folder) is kept: ``<stage>_cost.json`` beside it."""
-    return stage.with_name(f"{stage.name}_cost.json")
-
-
-class timed:
-    """Times a training stage into :func:`cost_path` (wall seconds, workers), unless an earlier invocation
-    finished it (the file is there): a resumed stage keeps its first, partial, count."""
-
-    def __init__(self, folder: Path, workers: int):
-        self.path, self.workers = cost_path(Path(folder)), workers
-
-    def __enter__(self):
-        self.started = time.perf_counter()
-
-    def __exit__(self, kind, *_):
-        if kind is None and not self.path.exists():
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-            write_json_atomically(self.path, {"wall_seconds": time.perf_counter() - self.started, "workers": self.workers})
+def _other_learners(folder: Path, domain: str, settings: Settings, run_options: dict, common: dict) -> dict:
+    """Every registered learner that is not built in (:data:`etmpc.learning.base.LEARNERS`), trained with
+    its settings (its ``quick_settings()`` in a smoke run) into ``train_<name>/`` by the runner, its policy
+    evaluated on the test set (``learned_<name>.json``): ``{name: (evaluation JSON, spec)}``."""
+    found = {}
+    for name, cls in learners().items():
+        if name in BUILT_IN:
+            continue
+        chosen = cls.quick_settings() if settings.smoke and hasattr(cls, "quick_settings") else cls.Settings()
+        stage = folder / f"train_{name}"
+        _say(f"{domain}: the learner {name}")
+        with timed(stage, run_options["workers"]):
+            trained = run(cls(chosen), domain, stage, None, run_options["workers"], resume=True, backend=run_options["backend"],
+                          address=run_options["address"], progress=common["progress"], say=_say)
+        found[name] = (evaluated_once(folder / f"learned_{name}.json", policies=[trained.policy], **common), trained.policy)
+    return found
 
 
 def _cost(folder: Path) -> dict | None:

@@ -1,9 +1,15 @@
-"""Learning recomputation policies: GPOMDP, the paper's policy gradient (:mod:`~etmpc.learning.gpomdp`),
-direct policy iteration (:mod:`~etmpc.learning.dpi`), a training run over seeds with checkpoints
-and resume (:mod:`~etmpc.learning.config`, :mod:`~etmpc.learning.jobs`,
-:mod:`~etmpc.learning.checkpoint`, :mod:`~etmpc.learning.train`), and the self-triggering policy's
-training (:mod:`~etmpc.learning.selftrigger`).
+"""Learning triggers. Every learner is a :class:`~etmpc.learning.base.Learner` (one interface: setup,
+learn with a budget and a callback, the policy, state for resume), registered by name in
+:data:`~etmpc.learning.base.LEARNERS` (``learners()``: gpomdp, dpi, self, ppo, then any other defined),
+and trained by one runner (:func:`etmpc.learning.runner.run`: seeds, checkpoints and resume,
+validation selection, cost). The learners: GPOMDP, the paper's policy gradient
+(:mod:`~etmpc.learning.gpomdp`), and direct policy iteration (:mod:`~etmpc.learning.dpi`), both run
+over seeds in phases with checkpoints and exact resume (:mod:`~etmpc.learning.phased`,
+:mod:`~etmpc.learning.config`, :mod:`~etmpc.learning.jobs`, :mod:`~etmpc.learning.checkpoint`,
+:mod:`~etmpc.learning.train`); the self-triggering policy (:mod:`~etmpc.learning.selftrigger`); PPO
+from Stable-Baselines3 (:mod:`~etmpc.learning.ppo`, :mod:`~etmpc.learning.ppo_settings`,
+:mod:`~etmpc.learning.hyperparams`).
 
 This package may import ``etmpc.common``, ``etmpc.control``, ``etmpc.systems``, ``etmpc.loop``,
-``etmpc.policies``, ``etmpc.views`` and ``etmpc.evaluation``.
+``etmpc.policies``, ``etmpc.views``, ``etmpc.evaluation`` and ``etmpc.envs``.
 """

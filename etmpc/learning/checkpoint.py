@@ -47,10 +47,18 @@ class RunState:
 def load_checkpoint(path: Path) -> RunState:
     try:
         data = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        raise PolicyFileError(f"checkpoint {path} is corrupt or unreadable ({exc}); move it away to start afresh") from None
+    return state_from_json(data, f"checkpoint {path}")
+
+
+def state_from_json(data: dict, where: str = "checkpoint") -> RunState:
+    """A :class:`RunState` from ``checkpoint.json``'s content, checked."""
+    try:
         if data.get("format") != CHECKPOINT_FORMAT or data.get("version") != 1:
             raise ValueError(f"format {data.get('format')!r} version {data.get('version')!r}")
         config = TrainConfig.from_json(data["config"])
-        LogisticPolicy.from_json(data["policy"], where=f"checkpoint {path}")
+        LogisticPolicy.from_json(data["policy"], where=where)
         state = RunState(config, data["policy"], data["learners"], data["curve"], data["best"], data["training"],
                          data.get("base"), data.get("validation", {}))
         if sorted(state.learners) != sorted(str(s) for s in config.seeds):
@@ -58,8 +66,8 @@ def load_checkpoint(path: Path) -> RunState:
         for learner in state.learners.values():
             if len(learner["theta"]) != len(data["policy"]["theta"]):
                 raise ValueError("feature size differs between learners and policy")
-    except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError) as exc:
-        raise PolicyFileError(f"checkpoint {path} is corrupt or unreadable ({exc}); move it away to start afresh") from None
+    except (AttributeError, ValueError, KeyError, TypeError) as exc:
+        raise PolicyFileError(f"{where} is corrupt or unreadable ({exc}); move it away to start afresh") from None
     return state
 
 

@@ -40,7 +40,7 @@ from typing import Any
 from etmpc.common.errors import EtmpcError
 from etmpc.common.resources import data_root
 from etmpc.envs.registration import env_id
-from etmpc.learning.ppo import PpoSettings, SettingError
+from etmpc.learning.ppo_settings import PpoSettings, SettingError
 from etmpc.systems import SystemKey, folder_name
 
 # rl-zoo3's key -> PpoSettings' field (the same name where not listed)

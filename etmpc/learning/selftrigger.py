@@ -28,9 +28,10 @@ from scipy.optimize import minimize
 
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import write_json
-from etmpc.evaluation.workers import context, make_backend
+from etmpc.evaluation.workers import context
 from etmpc.learning import dpi
-from etmpc.learning.config import SELECTION_ENTROPY, VALIDATION_ENTROPY
+from etmpc.learning.base import Learner
+from etmpc.learning.config import SELECTION_ENTROPY
 from etmpc.learning.jobs import mean_scores
 from etmpc.loop import Snapshot, play_on, run_episode
 from etmpc.policies import Always, Every, parse_policy
@@ -137,48 +138,109 @@ def fit(features: np.ndarray, returns: np.ndarray, ridge: float) -> np.ndarray:
     return result.x.reshape(c, 1 + p)
 
 
+class SelfLearner(Learner):
+    """The self-trigger's training behind the learner interface: :meth:`setup` chooses the base,
+    :meth:`learn` labels ``settings.episodes`` episodes and fits one model per ridge, the runner scores
+    them and the base on validation episodes and :meth:`choose` writes the best. One pass, no seed
+    (its draws are one fixed stream) and no checkpoint: a run that was stopped starts again."""
+
+    name = "self"
+    Settings = SelfSettings
+    policy_kind = "self"
+    seeding = "none"
+
+    def __init__(self, settings: SelfSettings | None = None, policy_file: Path | None = None):
+        super().__init__(settings)
+        self.policy_file = policy_file  # where the policy goes (default: OUT/selected.json)
+        self._standalone = policy_file is not None  # train_self: a file, written over as before
+        self.written: SelfTrigger | None = None
+
+    def owns(self, name: str) -> bool:
+        return name == "selected.json"
+
+    def check(self) -> None:
+        if self.policy_file is None:
+            super().check()
+            self.policy_file = self.out / "selected.json"
+        self.system = self.key.make()
+        self.better = np.argmax if self.system.objective_sense == "max" else np.argmin
+        self.candidate_lengths = tuple(c for c in self.settings.candidates if c <= self.system.horizon)
+        if not self.candidate_lengths:
+            raise EtmpcError(f"no candidate keep length fits the MPC horizon ({self.system.horizon} steps)")
+
+    def saved_state(self) -> dict | None:
+        return {"done": True} if not self._standalone and self.policy_file.exists() else None
+
+    def load_state(self, state: dict) -> None:
+        self.written = True  # the run had finished
+
+    @property
+    def chosen(self) -> bool:
+        return self.written is not None
+
+    @property
+    def done(self) -> int:
+        return self.settings.episodes if self.written is not None or hasattr(self, "fits") else 0
+
+    def milestones(self) -> list[int]:
+        return [self.settings.episodes]
+
+    def setup(self) -> None:
+        settings, pool = self.settings, self.pool
+        self.selection = mean_scores(pool, self.key, list(settings.bases), SELECTION_ENTROPY, settings.selection_episodes)
+        self.base = settings.bases[int(self.better(self.selection))]
+        self.say(f"self-trigger: base {self.base} (best of {len(settings.bases)} on {settings.selection_episodes} training episodes)")
+
+    def learn(self, budget: int, callback) -> None:
+        settings, system, candidates, out = self.settings, self.system, self.candidate_lengths, self.policy_file
+        labelled = self.pool.map(_label_job, [(self.key, self.base, candidates, settings, i) for i in range(budget)])
+        callback(budget)
+        self.rows = [row for episode in labelled for row in episode]
+        if not self.rows:
+            raise EtmpcError("no solves were labelled; give more episodes")
+        features = np.array([f for f, _ in self.rows])
+        self.returns = np.array([q for _, q in self.rows])
+        mean, scale = features.mean(axis=0), features.std(axis=0)
+        scale = np.where(scale > 1e-12, scale, 1.0)
+        self.fits = {}
+        period = _period(self.base, system)
+        if period in candidates:  # the base itself, as a self-trigger: what training must beat (first: it wins ties)
+            self.fits[f"constant {period} (the base)"] = SelfTrigger.constant(str(out), system.name, candidates, period, mean.size)
+        for r in settings.ridges:
+            self.fits[f"ridge {r:g}"] = SelfTrigger(str(out), system.name, candidates,
+                                                    fit((features - mean) / scale, self.returns, r), mean, scale)
+
+    def candidates(self) -> dict:
+        return {name: policy.to_json() for name, policy in self.fits.items()}
+
+    def choose(self, validation: list[float]) -> None:
+        settings, system, key, candidates = self.settings, self.system, self.key, self.candidate_lengths
+        chosen = list(self.fits)[int(self.better(validation))]
+        self.say(f"self-trigger: kept {chosen} ({', '.join(f'{n}: {v:.6g}' for n, v in zip(self.fits, validation))} on "
+                 f"{settings.validation_episodes} validation episodes)")
+        policy = self.fits[chosen]
+        best = np.array(candidates)[np.argmax(self.returns, axis=1)]
+        hyper = dict(settings.to_json(), system=str(key), recompute_price=system.recompute_price, base=self.base,
+                     base_selection=dict(zip(settings.bases, self.selection)), labelled_solves=len(self.rows),
+                     best_keep_counts={str(c): int(np.sum(best == c)) for c in candidates},
+                     validation=dict(zip(self.fits, validation)), chosen=chosen)
+        write_json(Path(self.policy_file), policy.to_json(hyper))
+        self.written = policy
+
+    def policy(self) -> str:
+        return f"self:{self.policy_file}"
+
+
 def train_self(key: str | SystemKey, out: Path, settings: SelfSettings = SelfSettings(), workers: int = 1,
                backend: str = "local", address: str | None = None, say=lambda line: None) -> SelfTrigger:
     """Choose the base, label, fit, validate and write ``out`` (the policy file); returns the
-    policy. ``key``: a :class:`~etmpc.systems.SystemKey` (a task at a price), or a task's name."""
-    key = system_key(key)
-    system = key.make()
-    better = np.argmax if system.objective_sense == "max" else np.argmin
-    candidates = tuple(c for c in settings.candidates if c <= system.horizon)
-    if not candidates:
-        raise EtmpcError(f"no candidate keep length fits the MPC horizon ({system.horizon} steps)")
-    with make_backend(backend, workers, address) as pool:
-        scores = mean_scores(pool, key, list(settings.bases), SELECTION_ENTROPY, settings.selection_episodes)
-        base = settings.bases[int(better(scores))]
-        say(f"self-trigger: base {base} (best of {len(settings.bases)} on {settings.selection_episodes} training episodes)")
-        labelled = pool.map(_label_job, [(key, base, candidates, settings, i) for i in range(settings.episodes)])
-        rows = [row for episode in labelled for row in episode]
-        if not rows:
-            raise EtmpcError("no solves were labelled; give more episodes")
-        features = np.array([f for f, _ in rows])
-        returns = np.array([q for _, q in rows])
-        mean, scale = features.mean(axis=0), features.std(axis=0)
-        scale = np.where(scale > 1e-12, scale, 1.0)
-        fits = {}
-        period = _period(base, system)
-        if period in candidates:  # the base itself, as a self-trigger: what training must beat (first: it wins ties)
-            fits[f"constant {period} (the base)"] = SelfTrigger.constant(str(out), system.name, candidates, period, mean.size)
-        for r in settings.ridges:
-            fits[f"ridge {r:g}"] = SelfTrigger(str(out), system.name, candidates, fit((features - mean) / scale, returns, r),
-                                               mean, scale)
-        jsons = [policy.to_json() for policy in fits.values()]
-        validation = mean_scores(pool, key, jsons, VALIDATION_ENTROPY, settings.validation_episodes)
-    chosen = list(fits)[int(better(validation))]
-    say(f"self-trigger: kept {chosen} ({', '.join(f'{n}: {v:.6g}' for n, v in zip(fits, validation))} on "
-        f"{settings.validation_episodes} validation episodes)")
-    policy = fits[chosen]
-    best = np.array(candidates)[np.argmax(returns, axis=1)]
-    hyper = dict(settings.to_json(), system=str(key), recompute_price=system.recompute_price, base=base,
-                 base_selection=dict(zip(settings.bases, scores)), labelled_solves=len(rows),
-                 best_keep_counts={str(c): int(np.sum(best == c)) for c in candidates},
-                 validation=dict(zip(fits, validation)), chosen=chosen)
-    write_json(Path(out), policy.to_json(hyper))
-    return policy
+    policy. ``key``: a :class:`~etmpc.systems.SystemKey` (a task at a price), or a task's name.
+    (:class:`SelfLearner` driven by :func:`etmpc.learning.runner.run`.)"""
+    from etmpc.learning.runner import run
+
+    learner = SelfLearner(settings, Path(out))
+    run(learner, system_key(key), Path(out).parent, None, workers, False, backend, address, progress=False, say=say)
+    return learner.written
 
 
 def _period(spec: str, system) -> int:

@@ -1,0 +1,345 @@
+"""GPOMDP and DPI as :class:`~etmpc.learning.base.Learner` s: the logistic recomputation policy trained
+over several seeds in lockstep, in phases of ``eval_every`` episodes, each ended by a test-set
+evaluation (the learning curve) and a checkpoint; resumed bit for bit (see :mod:`etmpc.learning.train`
+for the streams and the outputs)."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass, fields
+from typing import ClassVar
+
+import numpy as np
+
+from etmpc.common.errors import EtmpcError
+from etmpc.common.outputs import refuse_foreign
+from etmpc.evaluation.workers import context
+from etmpc.learning import dpi, gpomdp
+from etmpc.learning.base import Learner
+from etmpc.learning.checkpoint import RunState, load_checkpoint, ours, policy_at, save, state_from_json
+from etmpc.learning.config import SELECTION_ENTROPY, TrainConfig
+from etmpc.learning.jobs import _call, _learner_to_json, mean_scores
+from etmpc.policies.features import DEFAULT_FEATURES, check_features
+from etmpc.policies.learned import LogisticPolicy, Normalisation
+from etmpc.systems import SystemKey, make_system
+from etmpc.views.recording import Recorder
+
+
+@dataclass(frozen=True)
+class PhasedSettings:
+    """What GPOMDP and DPI runs share (``etmpc train``'s options of the same names)."""
+
+    episodes: int = 1500  # training episodes per seed
+    eval_every: int = 150  # evaluate on the test set after every this many episodes (and at 0)
+    eval_episodes: int | None = None  # first N test-set episodes (None: all)
+    eval_repeats: int = 1  # passes over the test set per evaluation
+    normalisation_episodes: int = 20
+    features: str = DEFAULT_FEATURES
+    validation_episodes: int = 50  # training-distribution episodes that choose selected.json
+    record_episodes: int = 0  # test-set episodes per seed recorded at each evaluation (changes no result)
+
+    def __post_init__(self):
+        for name in ("episodes", "eval_every", "eval_repeats", "normalisation_episodes", "validation_episodes"):
+            if not isinstance(getattr(self, name), int) or getattr(self, name) < 1:
+                raise EtmpcError(f"{name.replace('_', '-')} must be an integer >= 1, got {getattr(self, name)!r}")
+        if self.eval_episodes is not None and (not isinstance(self.eval_episodes, int) or self.eval_episodes < 1):
+            raise EtmpcError(f"eval-episodes must be an integer >= 1 or None, got {self.eval_episodes!r}")
+        if not isinstance(self.record_episodes, int) or self.record_episodes < 0:
+            raise EtmpcError(f"record episodes must be >= 0, got {self.record_episodes}")
+        check_features(self.features)
+
+
+@dataclass(frozen=True)
+class GpomdpSettings(PhasedSettings):
+    """A GPOMDP run: :class:`PhasedSettings` and :class:`etmpc.learning.gpomdp.Settings`' fields."""
+
+    discount: float = 0.975
+    learning_rate: float = 0.05
+    baseline: str = "none"
+
+    def __post_init__(self):
+        super().__post_init__()
+        try:
+            self.algorithm_settings
+        except ValueError as exc:
+            raise EtmpcError(str(exc)) from None
+
+    @property
+    def algorithm_settings(self) -> gpomdp.Settings:
+        return gpomdp.Settings(self.discount, self.learning_rate, self.baseline)
+
+
+@dataclass(frozen=True)
+class DpiSettings(PhasedSettings):
+    """A DPI run: :class:`PhasedSettings` and :class:`etmpc.learning.dpi.Settings`' fields."""
+
+    futures: int = 4
+    horizon: int = 20
+    states_per_episode: int = 25
+    ridge: float = 1e-2
+    bases: tuple[str, ...] = ("always", "every:2", "every:3", "every:4", "every:5")
+    selection_episodes: int = 30
+
+    def __post_init__(self):
+        super().__post_init__()
+        try:
+            self.algorithm_settings
+        except ValueError as exc:
+            raise EtmpcError(str(exc)) from None
+
+    @property
+    def algorithm_settings(self) -> dpi.Settings:
+        return dpi.Settings(**{f.name: getattr(self, f.name) for f in fields(dpi.Settings)})
+
+
+_SHARED = tuple(f.name for f in fields(PhasedSettings) if f.name != "record_episodes")
+
+
+class _Phased(Learner):
+    """The run of :func:`etmpc.learning.train.train`, behind the learner interface."""
+
+    seeding = "many"
+    resumes_exactly = True
+    policy_kind = "rl"
+    algorithm: ClassVar[str]
+
+    def __init__(self, settings=None, config: TrainConfig | None = None):
+        super().__init__(settings)
+        self._config = config  # kept as given (train(config) checkpoints it byte for byte)
+        self.run_state: RunState | None = None
+        self._summary = None
+
+    @classmethod
+    def from_config(cls, config: TrainConfig, record_episodes: int = 0) -> _Phased:
+        """The learner of a :class:`TrainConfig` (its algorithm's)."""
+        learner = LEARNER_OF[config.algorithm]
+        own = asdict(config.gpomdp) if config.algorithm == "gpomdp" else asdict(config.dpi)
+        settings = learner.Settings(**{n: getattr(config, n) for n in _SHARED}, **own, record_episodes=record_episodes)
+        return learner(settings, config)
+
+    def config(self) -> TrainConfig:
+        if self._config is not None:
+            return self._config
+        s = self.settings
+        own = {"gpomdp": s.algorithm_settings} if self.algorithm == "gpomdp" else {"dpi": s.algorithm_settings}
+        return TrainConfig(self.key.task, self.seeds, **{n: getattr(s, n) for n in _SHARED}, algorithm=self.algorithm,
+                           recompute_price=self.key.recompute_price, **own)
+
+    def default_seeds(self) -> tuple[int, ...]:
+        return TrainConfig.__dataclass_fields__["seeds"].default  # 0-4, as etmpc train's
+
+    # The run's directory and state.
+
+    def owns(self, name: str) -> bool:
+        return ours(name)
+
+    def check(self) -> None:
+        config = self.config()
+        if self._config is not None and (SystemKey(config.domain, config.recompute_price) != self.key
+                                         or config.seeds != self.seeds):
+            raise EtmpcError("the learner's configuration is for another task, price or seeds")
+        refuse_foreign(self.out, ours, "training run")
+        _, _, testset = context(config.domain)
+        n = testset.episodes if config.eval_episodes is None else config.eval_episodes
+        if not 1 <= n <= testset.episodes:
+            raise EtmpcError(f"eval episodes must be in 1..{testset.episodes}, got {n}")
+        self._testset = (n, testset.sha256)
+
+    def has_saved(self) -> bool:
+        return (self.out / "checkpoint.json").exists()
+
+    def saved_state(self) -> dict | None:
+        checkpoint = self.out / "checkpoint.json"
+        if not checkpoint.exists():
+            return None
+        state = load_checkpoint(checkpoint)
+        if state.config != self.config():
+            raise EtmpcError(f"{checkpoint} was made with different settings ({_difference(state.config, self.config())}); "
+                             "resume with the same ones, or choose another --out")
+        return state.to_json()
+
+    def state(self) -> dict:
+        return self.run_state.to_json()
+
+    def load_state(self, state: dict) -> None:
+        self.run_state = state_from_json(state)
+
+    @property
+    def done(self) -> int:
+        return 0 if self.run_state is None else self.run_state.done
+
+    def milestones(self) -> list[int]:
+        return self.config().milestones
+
+    def work(self) -> int:
+        config = self.config()
+        return len(config.seeds) * (config.episodes + len(config.milestones) * config.eval_repeats * self._testset[0]
+                                    + config.validation_episodes)
+
+    def work_done(self) -> int:
+        config, done = self.config(), self.done
+        return len(config.seeds) * (done + sum(1 for m in config.milestones if m <= done) * config.eval_repeats * self._testset[0])
+
+    def _tick(self, job) -> None:
+        self.tick(job[1][5] - job[1][4] if job[0] == "train" else 1 if job[0] != "score" else 0)
+
+    # Training.
+
+    def setup(self) -> None:
+        config, pool = self.config(), self.pool
+        states = pool.map(_call, [("normalisation", (config.system, i, config.features)) for i in range(config.normalisation_episodes)])
+        normalisation = Normalisation.fit(np.concatenate(states))
+        hyper = {"algorithm": config.algorithm, "features": config.features, "normalisation_episodes": config.normalisation_episodes}
+        if config.recompute_price is not None:  # trained for another price than the system's own
+            hyper["recompute_price"] = config.recompute_price
+        hyper.update(self._hyperparameters(config))
+        initial = LogisticPolicy.initial(normalisation, config.domain, hyper, config.features, greedy=config.algorithm == "dpi")
+        learner, base = self._start(config, initial)
+        # One learner per seed, sharing nothing (a DPI learner's labels grow in place).
+        self.run_state = RunState(config, initial.to_json(), {str(s): json.loads(json.dumps(learner)) for s in config.seeds}, base=base)
+        self._evaluate()
+
+    def learn(self, budget: int, callback) -> None:
+        self._advance(self.run_state.done, budget)
+        self._evaluate()
+
+    def save(self) -> None:
+        self._summary = save(self.out, self.run_state)
+
+    def report(self) -> str:
+        point, state = self._summary["points"][-1], self.run_state
+        return (f"{state.config.domain}: {state.done}/{state.config.episodes} episodes per seed, test objective "
+                f"{point['objective_mean']:.5f} ± {point['objective_std']:.5f}, {point['recomputes_mean']:.1f} recomputes")
+
+    # Validation: every seed's final policy; the best becomes selected.json (written by save).
+
+    @property
+    def chosen(self) -> bool:
+        return bool(self.run_state.validation)
+
+    def validation_episodes(self) -> int:
+        return self.config().validation_episodes
+
+    def candidates(self) -> dict:
+        state = self.run_state
+        return {str(s): policy_at(state, state.learners[str(s)]["theta"]) for s in state.config.seeds}
+
+    def choose(self, scores: list[float]) -> None:
+        self.run_state.validation = {str(s): mean for s, mean in zip(self.run_state.config.seeds, scores)}
+
+    def policy(self) -> str:
+        return f"rl:{self.out / 'selected.json'}"
+
+    def simulated_steps(self) -> int | None:
+        config = self.config()
+        steps = context(config.system)[0].episode_steps
+        return None if self.run_state is None else (config.normalisation_episodes + self.done * len(config.seeds)) * steps
+
+    # The test-set curve.
+
+    def _evaluate(self) -> None:
+        """Evaluate every seed's policy; with ``record_episodes``, also write the first that many test-set
+        episodes of each seed into ``out/recordings/eval_<episodes>.rrd``."""
+        state, record_episodes = self.run_state, self.settings.record_episodes
+        config, done = state.config, state.done
+        testset_n, sha256 = self._testset
+
+        def identity(seed: int, e: int) -> dict | None:
+            if e >= record_episodes:
+                return None
+            return {"policy": f"seed{seed}/episodes{done:05d}", "training_seed": seed, "training_episodes": done}
+
+        jobs = [("evaluate", (config.system, sha256, policy_at(state, state.learners[str(s)]["theta"]), r, e, identity(s, e)))
+                for s in config.seeds for r in range(config.eval_repeats) for e in range(testset_n)]
+        results = once_each(self.pool, _call, jobs, self._tick)
+        records = [c[3] for c in results if c[3] is not None]
+        if records:
+            with Recorder(self.out / "recordings" / f"eval_{done:05d}.rrd") as recorder:
+                for record in records:
+                    recorder.log_episode(record)
+        per_seed = config.eval_repeats * testset_n
+        sense = state.objective_sense
+        for i, seed in enumerate(config.seeds):
+            chunk = results[i * per_seed:(i + 1) * per_seed]
+            row = {"episodes": done, "seed": seed, "objective": float(np.mean([c[0] for c in chunk])),
+                   "control": float(np.mean([c[1] for c in chunk])), "recomputes": float(np.mean([c[2] for c in chunk]))}
+            state.curve.append(row)
+            best = state.best.get(str(seed))
+            better = best is None or (row["objective"] > best["objective"] if sense == "max" else row["objective"] < best["objective"])
+            if better:
+                state.best[str(seed)] = {"episodes": done, "objective": row["objective"], "theta": state.learners[str(seed)]["theta"]}
+
+
+class GpomdpLearner(_Phased):
+    """GPOMDP (:mod:`etmpc.learning.gpomdp`), the paper's policy gradient, one update per episode."""
+
+    name = "gpomdp"
+    algorithm = "gpomdp"
+    Settings = GpomdpSettings
+    shipped = ("GPOMDP (shipped)", "gpomdp.json",
+               "the paper's learner on its features (5 seeds x 1500 episodes), the seed chosen on validation episodes")
+
+    def _hyperparameters(self, config: TrainConfig) -> dict:
+        return dict(discount=config.gpomdp.discount, learning_rate=config.gpomdp.learning_rate, baseline=config.gpomdp.baseline)
+
+    def _start(self, config: TrainConfig, initial: LogisticPolicy) -> tuple[dict, None]:
+        steps = context(config.system)[0].episode_steps
+        return _learner_to_json(gpomdp.Learner.start(initial.theta, config.gpomdp, steps)), None
+
+    def _advance(self, start: int, stop: int) -> None:
+        state, config = self.run_state, self.run_state.config
+        jobs = [("train", (config.system, state.policy, state.learners[str(s)], s, start, stop)) for s in config.seeds]
+        for seed, (learner, stats) in zip(config.seeds, self.pool.map(_call, jobs, self._tick)):
+            state.learners[str(seed)] = learner
+            state.training += [dict(s, seed=seed) for s in stats]
+
+
+class DpiLearner(_Phased):
+    """Direct policy iteration (:mod:`etmpc.learning.dpi`): rollout-labelled classification, one
+    iteration per phase."""
+
+    name = "dpi"
+    algorithm = "dpi"
+    Settings = DpiSettings
+    shipped = ("DPI (shipped)", "learned.json", "the default learner, chosen on validation episodes")
+
+    def _hyperparameters(self, config: TrainConfig) -> dict:
+        return dict(asdict(config.dpi), bases=list(config.dpi.bases))
+
+    def _start(self, config: TrainConfig, initial: LogisticPolicy) -> tuple[dict, str]:
+        learner = {"theta": initial.theta.tolist(), "episodes": 0, "iterations": 0, "data": []}
+        base = dpi.choose_base(config.dpi, make_system(config.system).objective_sense,
+                               lambda bases, n: mean_scores(self.pool, config.system, bases, SELECTION_ENTROPY, n))
+        return learner, base
+
+    def _advance(self, start: int, stop: int) -> None:
+        dpi.iteration(self.run_state, self.pool, self._tick, start, stop)
+
+    def simulated_steps(self) -> int | None:
+        return None  # the rollouts' steps are counted from the labels (etmpc.experiments.efficiency)
+
+
+LEARNER_OF = {"gpomdp": GpomdpLearner, "dpi": DpiLearner}
+
+
+def once_each(backend, fn, jobs: list, progress) -> list:
+    """``backend.map(fn, jobs, progress)``, with each distinct job played once: an evaluation's
+    result is a function of its arguments alone, and every seed starts from the same policy, so the
+    first evaluation would otherwise play each episode once per seed."""
+    keys = [json.dumps(job, sort_keys=True, default=str) for job in jobs]
+    distinct, repeats = {}, []
+    for key, job in zip(keys, jobs):
+        if key in distinct:
+            repeats.append(job)
+        else:
+            distinct[key] = job
+    played = dict(zip(distinct, backend.map(fn, list(distinct.values()), progress)))
+    if progress is not None:
+        for job in repeats:  # counted on the progress bar as played
+            progress(job)
+    return [played[key] for key in keys]
+
+
+def _difference(a: TrainConfig, b: TrainConfig) -> str:
+    da, db = a.to_json(), b.to_json()
+    return ", ".join(f"{k}: {da[k]} vs {db[k]}" for k in da if da[k] != db[k])

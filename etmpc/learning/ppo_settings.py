@@ -1,0 +1,166 @@
+"""PPO's settings (:class:`PpoSettings`, range-checked) and what its run needs from Stable-Baselines3:
+the environments (:func:`_make_env`) and a save without what differs between runs (:func:`save_model`).
+The run itself is :mod:`etmpc.learning.ppo`."""
+
+from __future__ import annotations
+
+import math
+import numbers
+import platform
+import re
+import zipfile
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+
+
+from etmpc.common.errors import EtmpcError
+from etmpc.systems import SystemKey
+
+
+class SettingError(EtmpcError):
+    """A PPO setting out of its range. ``rule`` names the settings as ``{field}``: ``str`` spells them as
+    :class:`PpoSettings` does, :meth:`naming` as another reader does (a hyperparameter file, rl-zoo3's keys)."""
+
+    def __init__(self, rule: str, got: str, why: str = ""):
+        self.rule, self.got, self.why = rule, got, why
+        super().__init__(self.naming({}))
+
+    def naming(self, names: dict[str, str]) -> str:
+        rule = self.rule.format_map({f.name: names.get(f.name, f.name) for f in fields(PpoSettings)})
+        return f"{rule}, got {self.got}" + (f" ({self.why})" if self.why else "")
+
+
+def _integer(least: int, most: float = math.inf):
+    return lambda v: isinstance(v, numbers.Integral) and not isinstance(v, bool) and least <= v <= most  # 8.0 is not
+
+
+def _real(holds):
+    return lambda v: isinstance(v, numbers.Real) and not isinstance(v, bool) and holds(v)  # NaN holds nothing
+
+
+# field -> (what it must be, the test); the first out of range is the one reported
+RANGES = {
+    "timesteps": ("an integer >= 1", _integer(1)),
+    "seed": (f"an integer in [0, {2**32 - 1}]", _integer(0, 2**32 - 1)),  # NumPy's seeds (SB3 seeds it with this)
+    **{name: ("an integer >= 1", _integer(1)) for name in ("n_envs", "checkpoints", "validation_episodes", "n_steps")},
+    "batch_size": ("an integer >= 2 (Stable-Baselines3 asserts > 1)", _integer(2)),
+    "n_epochs": ("an integer >= 1", _integer(1)),
+    "learning_rate": ("a finite number > 0", _real(lambda x: 0 < x < math.inf)),
+    "gamma": ("in (0, 1]", _real(lambda x: 0 < x <= 1)),
+    "gae_lambda": ("in [0, 1]", _real(lambda x: 0 <= x <= 1)),
+    "clip_range": ("a finite number > 0", _real(lambda x: 0 < x < math.inf)),
+    "ent_coef": ("a finite number >= 0", _real(lambda x: 0 <= x < math.inf)),
+    "hidden": ("a non-empty tuple of positive layer sizes",
+               lambda v: isinstance(v, tuple) and bool(v) and all(type(n) is int and n > 0 for n in v)),
+    "reward_baseline": ("None or a fixed schedule's spec (always, never or every:T)", lambda v: v is None or isinstance(v, str)),
+}
+
+
+@dataclass(frozen=True)
+class PpoSettings:
+    """PPO's settings (Stable-Baselines3's names); the defaults are its own but for the sizes. Each is
+    checked when made (:class:`SettingError`), so that a file, an option or ``replace`` that sets one
+    out of its range is one line, never a traceback from deep inside Stable-Baselines3 or a silent run."""
+
+    timesteps: int = 200_000  # environment steps in all (the agent's: a reward baseline simulates as many again)
+    seed: int = 0
+    n_envs: int = 2  # environments stepped together (a hyperparameter: the processes are train_ppo's workers)
+    checkpoints: int = 4  # slices of the budget; each ends with a save and a validation score
+    validation_episodes: int = 30  # training-distribution episodes that choose selected.zip
+    n_steps: int = 512  # steps per environment between updates
+    batch_size: int = 256
+    n_epochs: int = 10
+    learning_rate: float = 3e-4
+    gamma: float = 0.99
+    gae_lambda: float = 0.95
+    clip_range: float = 0.2
+    ent_coef: float = 0.0
+    hidden: tuple[int, ...] = (64, 64)
+    reward_baseline: str | None = None  # the environment's reward relative to this fixed schedule (TriggerEnvironment)
+
+    def __post_init__(self):
+        for name, (allowed, holds) in RANGES.items():
+            value = getattr(self, name)
+            if not holds(value):
+                raise SettingError(f"{{{name}}} must be {allowed}", repr(value))
+            if isinstance(value, numbers.Integral):  # a NumPy integer too: JSON writes it as a number
+                object.__setattr__(self, name, int(value))
+        # What train_ppo makes of them: a rollout (n_steps per environment, fewer for a small budget) must
+        # hold 2 steps (Stable-Baselines3 asserts it), and each checkpoint's slice of the budget at least one
+        # rollout of every environment, or the slices together would run more steps than the budget.
+        if self.n_steps * self.n_envs < 2:
+            raise SettingError("{n_steps} * {n_envs} must be >= 2 (Stable-Baselines3 asserts > 1)",
+                               f"{self.n_steps} * {self.n_envs}")
+        most = self.timesteps // max(2, self.n_envs)
+        if self.checkpoints > most:
+            raise SettingError(f"{{checkpoints}} must be at most {{timesteps}} // max(2, {{n_envs}}) = {most}",
+                               repr(self.checkpoints), "each slice of the budget holds a rollout of every environment, "
+                               "of 2 steps at least")
+
+
+def _libraries():
+    try:
+        import stable_baselines3
+        import torch
+    except ImportError:
+        raise EtmpcError("--algorithm ppo needs Stable-Baselines3 and PyTorch: pip install 'etmpc[rl]'") from None
+    return stable_baselines3, torch
+
+
+def _make_env(key: SystemKey, seed: int, reward_baseline: str | None):
+    def make():
+        from stable_baselines3.common.monitor import Monitor
+
+        from etmpc.envs.gym import TriggerEnv
+
+        env = Monitor(TriggerEnv(key, reward_baseline=reward_baseline))
+        env.reset(seed=seed)
+        return env
+    return make
+
+
+def save_model(model, path: Path) -> None:
+    """``model.save(path)`` without what differs between two runs of the same training: the wall-clock
+    start, the episode times the Monitor kept, and the spaces' histories (a space pickles its generator
+    and whether it came from another process; they are made afresh, equal, and PPO never samples from
+    them); the memory addresses in the descriptions Stable-Baselines3 writes beside each pickled object
+    (``<function f at 0x7f...>``: a description only, loading reads the pickle) and the kernel's build in
+    ``system_info.txt`` (the OS line keeps the system and the machine). The zip's entries are dated
+    1980-01-01. The same training gives the same bytes in any process on machines of a kind, so a
+    regenerated shipped policy can be compared byte for byte."""
+    from etmpc.envs.gym import trigger_spaces
+
+    fresh = trigger_spaces(model.observation_space.shape[0])
+    if fresh != (model.observation_space, model.action_space):
+        raise EtmpcError(f"a trigger model's spaces are {fresh}, not {(model.observation_space, model.action_space)}")
+    model.observation_space, model.action_space = fresh
+    raw = path.with_name(path.stem + ".unpacked.zip")
+    model.save(str(raw), exclude=["start_time", "ep_info_buffer", "ep_success_buffer"])
+    with zipfile.ZipFile(raw) as source, zipfile.ZipFile(path, "w") as target:
+        for info in source.infolist():
+            entry = zipfile.ZipInfo(info.filename, date_time=(1980, 1, 1, 0, 0, 0))
+            entry.compress_type, entry.external_attr = info.compress_type, info.external_attr
+            target.writestr(entry, _without_run_details(info.filename, source.read(info.filename)))
+    raw.unlink()
+
+
+_ADDRESS = re.compile(rb" at 0x[0-9a-f]+>")
+
+
+def _without_run_details(name: str, data: bytes) -> bytes:
+    """An entry of a saved model without the addresses of this process and the kernel of this machine."""
+    if name == "data":
+        return _ADDRESS.sub(b">", data)
+    if name == "system_info.txt":
+        return re.sub(rb"^- OS: .*$", f"- OS: {platform.system()} {platform.machine()}".encode(), data, count=1, flags=re.M)
+    return data
+
+
+def _ours(name: str) -> bool:
+    return name in ("checkpoints", "selected.zip", "selected.json", "training.json")
+
+
+def _json(settings: PpoSettings) -> dict:
+    data = asdict(settings)
+    data["hidden"] = list(settings.hidden)
+    return data

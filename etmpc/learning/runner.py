@@ -1,0 +1,159 @@
+"""One runner for every :class:`~etmpc.learning.base.Learner`: ``etmpc train --algorithm NAME``.
+
+:func:`run` checks the seeds and the run's directory, resumes from the learner's saved state (or sets
+it up afresh), advances it milestone by milestone (saving after each: a killed run resumed with
+``resume=True`` continues from the last one, bit for bit where the learner says so,
+:attr:`~etmpc.learning.base.Learner.resumes_exactly`), then scores the learner's candidates on
+validation episodes of the training distribution (:func:`validate`: never the test set) and lets it
+keep the best (:func:`best`). It returns a :class:`Run`: the learner, its policy spec and the cost
+(wall time, simulated steps). :class:`timed` keeps a stage's wall time in a file beside it.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from etmpc.common.errors import EtmpcError
+from etmpc.evaluation.workers import make_backend
+from etmpc.learning.base import Learner, learner_class
+from etmpc.learning.config import VALIDATION_ENTROPY
+from etmpc.learning.jobs import mean_scores
+from etmpc.policies.learned import write_json_atomically
+from etmpc.systems import SystemKey, system_key
+
+
+@dataclass
+class Run:
+    """What :func:`run` returns: the trained learner, its answer and what it cost."""
+
+    learner: Learner
+    policy: str  # the spec etmpc evaluate scores
+    wall_seconds: float  # this invocation's
+    simulated_steps: int | None
+
+
+def run(learner: Learner | str, task: str | SystemKey, out: Path, seeds: tuple[int, ...] | None = None, workers: int = 1,
+        resume: bool = False, backend: str = "local", address: str | None = None, progress: bool = True,
+        say: Callable[[str], None] = lambda line: None, settings=None) -> Run:
+    """Train ``learner`` (an instance, or a registered name with ``settings``) on ``task`` into ``out``."""
+    if isinstance(learner, str):
+        learner = learner_class(learner)(settings)
+    started = time.perf_counter()
+    learner.key, learner.seeds, learner.out, learner.say = system_key(task), _seeds(learner, seeds), Path(out), say
+    learner.workers = workers
+    learner.check()
+    if learner.has_saved() and not resume:
+        raise EtmpcError(f"{out} already holds a training run; pass --resume to continue it, or choose another --out")
+    saved = learner.saved_state()
+    total = learner.work()
+    with make_backend(backend, workers, address) as pool, Progress(total, f"train {learner.key.task}", progress) as bar:
+        learner.pool, learner.tick = pool, bar.update
+        try:
+            if saved is None:
+                learner.out.mkdir(parents=True, exist_ok=True)
+                learner.setup()
+                learner.save()
+            else:
+                learner.load_state(saved)
+                bar.update(learner.work_done())
+            resumed_from = bar.n
+            for milestone in learner.milestones():
+                if milestone <= learner.done:
+                    continue
+                learner.learn(milestone, bar.update)
+                learner.save()
+                line = learner.report()
+                if line is not None:
+                    bar.write(f"{line}; {_eta(started, bar, resumed_from)}")
+            if not learner.chosen:
+                scores = learner.scores(lambda policies: validate(pool, learner.key, policies, learner.validation_episodes(),
+                                                                  lambda job: bar.update(1)))
+                learner.choose(scores)
+                learner.save()
+        finally:
+            learner.close()
+            learner.pool = learner.tick = None
+    return Run(learner, learner.policy(), time.perf_counter() - started, learner.simulated_steps())
+
+
+def _seeds(learner: Learner, seeds) -> tuple[int, ...]:
+    if learner.seeding == "none":
+        if seeds not in (None, ()):
+            raise EtmpcError(f"{learner.name} takes no seed (its draws are one fixed stream), got {seeds}")
+        return ()
+    seeds = learner.default_seeds() if seeds is None else tuple(int(s) for s in seeds)
+    if learner.seeding == "one" and len(seeds) != 1:
+        raise EtmpcError(f"{learner.name} trains one seed at a time: give one seed, got {','.join(map(str, seeds))}")
+    if not seeds or len(set(seeds)) != len(seeds) or min(seeds) < 0:
+        raise EtmpcError(f"seeds must be distinct, non-negative and at least one, got {seeds}")
+    return seeds
+
+
+def validate(pool, key: SystemKey, policies: list, episodes: int, on_result=None) -> list[float]:
+    """Each policy's (a spec or a policy's JSON) mean objective on the first ``episodes`` episodes of the
+    validation stream: training-distribution episodes, the same for every learner, never the test set."""
+    return mean_scores(pool, key, policies, VALIDATION_ENTROPY, episodes, on_result)
+
+
+def best(scores: list[float], sense: str) -> int:
+    """The index of the best score (``sense``: ``"max"`` or ``"min"``); the first wins a tie."""
+    return int(np.argmax(scores) if sense == "max" else np.argmin(scores))
+
+
+class Progress:
+    """A tqdm bar (on a terminal) with its own count, so the ETA line works when the bar is off."""
+
+    def __init__(self, total: int, desc: str, enabled: bool):
+        from tqdm import tqdm
+
+        self.n, self.total = 0, total
+        self._bar = tqdm(total=total, unit="ep", desc=desc, disable=None if enabled else True)
+        self._quiet = not enabled
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self._bar.close()
+
+    def update(self, n: int) -> None:
+        self.n += n
+        self._bar.update(n)
+
+    def write(self, line: str) -> None:
+        if not self._quiet:
+            self._bar.write(line, file=sys.stderr)
+
+
+def _eta(started: float, bar: Progress, resumed_from: int) -> str:
+    elapsed = time.perf_counter() - started
+    done_here, left = bar.n - resumed_from, bar.total - bar.n
+    eta = elapsed * left / done_here if done_here > 0 else float("nan")
+    return f"elapsed {elapsed:.0f} s, ETA {eta:.0f} s"
+
+
+def cost_path(stage: Path) -> Path:
+    """Where the wall time of training stage ``stage`` (a folder) is kept: ``<stage>_cost.json`` beside it."""
+    return stage.with_name(f"{stage.name}_cost.json")
+
+
+class timed:
+    """Times a training stage into :func:`cost_path` (wall seconds, workers), unless an earlier invocation
+    finished it (the file is there): a resumed stage keeps its first, partial, count."""
+
+    def __init__(self, folder: Path, workers: int):
+        self.path, self.workers = cost_path(Path(folder)), workers
+
+    def __enter__(self):
+        self.started = time.perf_counter()
+
+    def __exit__(self, kind, *_):
+        if kind is None and not self.path.exists():
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            write_json_atomically(self.path, {"wall_seconds": time.perf_counter() - self.started, "workers": self.workers})
