@@ -28,7 +28,7 @@ def _episodes(system, count: int) -> list:
 
 
 def loop_rate(system, env, episodes) -> float:
-    policy, steps = parse_policy("every:3", system.error_weights), 0
+    policy, steps = parse_policy("every:3", system), 0
     start = time.perf_counter()
     for episode in episodes:
         steps += run_episode(system, env, policy, None, episode).steps

@@ -34,7 +34,7 @@ def main() -> None:
     args.out.mkdir(parents=True, exist_ok=True)
     for task in names():
         system = make_system(task)
-        played = play_test_episode(task, parse_policy("every:3", system.error_weights, task, system.episode_steps), 0, 0, 0)
+        played = play_test_episode(task, parse_policy("every:3", system), 0, 0, 0)
         path = args.out / f"{PICTURE.get(task, folder_name(task))}.png"
         if system.camera is not None:
             frame = render_frames(system, system.make_env(), played.trajectory.states[args.step: args.step + 1], 480, 360)[0]

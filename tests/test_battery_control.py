@@ -100,7 +100,7 @@ def test_with_perfect_forecasts_and_free_computing_the_plant_follows_the_plan(ba
     LQR never acts, and the profit is the plans' trades at the true prices plus the stored energy."""
     system = BatterySystem(Config(battery=dataclasses.replace(Battery(), compute_power_kw=0.0)))
     episode = perfect_forecasts(system.episode_from_arrays(battery_testset.episode_arrays(2)))
-    traj = run_episode(system, system.make_env(), parse_policy("never", system.error_weights), None, episode)
+    traj = run_episode(system, system.make_env(), parse_policy("never", system), None, episode)
     assert traj.steps == 100 and traj.recomputes == 5
     np.testing.assert_allclose(traj.states[:100, 0], traj.predicted[:, 0], atol=1e-12)
     np.testing.assert_allclose(traj.correction, 0.0, atol=1e-9)
@@ -133,7 +133,7 @@ def test_evaluate_reports_profit_with_sense_max(battery_system, battery_testset)
         profits = []
         for e in range(2):
             episode = battery_system.episode_from_arrays(battery_testset.episode_arrays(e))
-            traj = run_episode(battery_system, env, parse_policy(summary.policy, battery_system.error_weights), None, episode)
+            traj = run_episode(battery_system, env, parse_policy(summary.policy, battery_system), None, episode)
             profits.append(traj.rewards.sum())
         assert summary.objective_mean == pytest.approx(np.mean(profits), rel=1e-12)
         assert summary.control_objective_mean == summary.objective_mean  # no price per computation

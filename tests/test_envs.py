@@ -60,7 +60,7 @@ def test_an_agent_answering_like_a_fixed_policy_gets_what_evaluate_reports_bit_f
     objectives = {r["episode"]: r["objective"] for r in result["runs"]}
     for e in episodes:
         rewards, control, recompute, forced = _play(env, RULES[spec], e)
-        played = play_test_episode(system.name, parse_policy(spec, system.error_weights), 0, 0, e).trajectory
+        played = play_test_episode(system.name, parse_policy(spec, system), 0, 0, e).trajectory
         # The loop is the same: the same rewards, computations and forced steps, to the last bit.
         np.testing.assert_array_equal(control, played.rewards[: played.steps])
         np.testing.assert_array_equal(recompute, played.recompute[: played.steps])
@@ -78,8 +78,8 @@ def test_a_reward_against_a_baseline_is_the_agents_reward_minus_the_baselines_on
     system = make_system(task)
     env = TriggerEnv(task, reward_baseline="every:4")
     rewards, control, recompute, _ = _play(env, RULES["every:3"], 2)
-    baseline = play_test_episode(system.name, parse_policy("every:4", system.error_weights), 0, 0, 2).trajectory
-    own = play_test_episode(system.name, parse_policy("every:3", system.error_weights), 0, 0, 2).trajectory
+    baseline = play_test_episode(system.name, parse_policy("every:4", system), 0, 0, 2).trajectory
+    own = play_test_episode(system.name, parse_policy("every:3", system), 0, 0, 2).trajectory
     np.testing.assert_array_equal(control, own.rewards[: own.steps])
     paid = baseline.rewards[: baseline.steps] - system.recompute_price * baseline.recompute[: baseline.steps]
     np.testing.assert_array_equal(rewards, (control - system.recompute_price * recompute) - paid)

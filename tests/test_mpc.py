@@ -94,7 +94,7 @@ def test_solver_failure_keeps_the_previous_plan_and_is_counted(cart_system, cart
     episode = cart_system.episode_from_arrays(cart_testset.episode_arrays(0))
     env = cart_system.make_env()
     flaky = FlakySolver(cart_system, fail_at={3, 4, 10})
-    traj = run_episode(flaky, env, parse_policy("always", cart_system.error_weights), None, episode)
+    traj = run_episode(flaky, env, parse_policy("always", cart_system), None, episode)
     assert traj.steps == 100 and not traj.nonfinite
     assert traj.solver_failures == 3 and traj.recomputes == 100
     # After the failed solve at step 2 (the 3rd call), steps 2 and 3 follow the plan made at step 1.
@@ -106,7 +106,7 @@ def test_solver_failure_keeps_the_previous_plan_and_is_counted(cart_system, cart
 def test_failed_first_solve_still_controls(cart_system, cart_testset):
     episode = cart_system.episode_from_arrays(cart_testset.episode_arrays(1))
     flaky = FlakySolver(cart_system, fail_at={1})
-    traj = run_episode(flaky, cart_system.make_env(), parse_policy("every:5", cart_system.error_weights), None, episode)
+    traj = run_episode(flaky, cart_system.make_env(), parse_policy("every:5", cart_system), None, episode)
     assert traj.solver_failures == 1 and traj.steps == 100
 
 

@@ -39,7 +39,7 @@ def test_the_policy_decides_as_the_network_does_on_the_environments_normalised_o
     from stable_baselines3 import PPO
 
     out, _ = run
-    policy = parse_policy(f"sb3:{out / 'selected.zip'}", np.ones(1), "battery")
+    policy = parse_policy(f"sb3:{out / 'selected.zip'}", "battery")
     model = PPO.load(str(out / "selected.zip"), device="cpu")
     meta = json.loads((out / "selected.json").read_text())
     mean, scale = np.array(meta["observation_mean"]), np.sqrt(np.array(meta["observation_var"]) + 1e-8)

@@ -290,7 +290,7 @@ def test_sample_future_keeps_what_is_known_and_redraws_the_rest_from_the_law(sys
 def test_a_stored_episode_replays_exactly(system, stored):
     episode = system.episode_from_arrays(stored.episode_arrays(2))
     np.testing.assert_array_equal(rt.Episode.from_arrays(episode.arrays()).target, episode.target)
-    policy = parse_policy("every:3", system.error_weights)
+    policy = parse_policy("every:3", system)
     first = run_episode(system, system.make_env(), policy, None, episode)
     again = run_episode(system, system.make_env(), policy, None, episode)
     assert first.steps == 100 and not first.nonfinite
@@ -303,7 +303,7 @@ def test_an_episode_is_recorded_with_both_torques_bounds(system, stored):
     from etmpc.views.record import EpisodeRecord
 
     episode = system.episode_from_arrays(stored.episode_arrays(1))
-    traj = run_episode(system, system.make_env(), parse_policy("every:4", system.error_weights), None, episode)
+    traj = run_episode(system, system.make_env(), parse_policy("every:4", system), None, episode)
     record = EpisodeRecord.from_trajectory(system, traj, {"policy": "every:4"}, episode)
     np.testing.assert_array_equal(record.input_bounds[0], [-2.0, -2.0])
     np.testing.assert_array_equal(record.input_bounds[1], [2.0, 2.0])
@@ -327,7 +327,7 @@ def test_failures_are_the_steps_farther_than_a_tenth_of_a_metre(system, stored):
     assert rt.distance_reward(0.1) == -0.5 and rt.distance_reward(0.0) == 0.0
     assert system.failures(np.array([-0.49, -0.5, -0.51, -0.9, 0.0])) == 2
     episode = system.episode_from_arrays(stored.episode_arrays(0))
-    traj = run_episode(system, system.make_env(), parse_policy("every:5", system.error_weights), None, episode)
+    traj = run_episode(system, system.make_env(), parse_policy("every:5", system), None, episode)
     tips = np.array([system.model.fingertip(x) for x in traj.states[1:]])  # the model's arm has the plant's lengths
     far = np.linalg.norm(tips - episode.target, axis=1) > 0.1
     assert system.failures(traj.rewards) == int(far.sum()) > 0

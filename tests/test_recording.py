@@ -65,7 +65,7 @@ def test_prediction_error_is_what_the_threshold_trigger_compares(tmp_path):
 
 def test_prediction_errors_against_a_direct_computation(cart_system, cart_testset):
     _, env, _ = context("cart_pendulum")
-    traj = run_episode(cart_system, env, parse_policy("every:4", cart_system.error_weights), policy_rng(0, 0, 1),
+    traj = run_episode(cart_system, env, parse_policy("every:4", cart_system), policy_rng(0, 0, 1),
                        cart_system.episode_from_arrays(cart_testset.episode_arrays(1)))
     errors = prediction_errors(traj, cart_system.error_weights)
     w = cart_system.error_weights
@@ -120,7 +120,7 @@ def test_the_recording_holds_what_happened_and_identity(cart_recording, cart_sys
     assert identity["test_set_sha256"] == [[cart_testset.sha256]]
 
     _, env, _ = context("cart_pendulum")
-    traj = run_episode(cart_system, env, parse_policy("every:5", cart_system.error_weights), policy_rng(7, 0, 1),
+    traj = run_episode(cart_system, env, parse_policy("every:5", cart_system), policy_rng(7, 0, 1),
                        cart_system.episode_from_arrays(cart_testset.episode_arrays(1)))
     for j, name in enumerate(cart_system.state_names):
         steps, values = series(entities, f"{CART}/realised/state/{name}")
@@ -159,7 +159,7 @@ def test_every_plan_is_a_time_series_from_the_step_it_was_made(cart_recording, c
     as the one made 21 steps earlier ends); each point takes its plan's colour, and plans made
     later are coloured otherwise."""
     _, env, _ = context("cart_pendulum")
-    traj = run_episode(cart_system, env, parse_policy(spec, cart_system.error_weights), policy_rng(7, 0, episode),
+    traj = run_episode(cart_system, env, parse_policy(spec, cart_system), policy_rng(7, 0, episode),
                        cart_system.episode_from_arrays(cart_testset.episode_arrays(episode)))
     entities = chunks_by_entity(cart_recording)
     root = f"/cart_pendulum/{spec.replace(':', chr(92) + ':')}/episode_{episode:03d}/repeat_0"
@@ -436,7 +436,7 @@ def test_a_self_trigger_records_what_it_announced_at_each_solve(tmp_path, cart_s
     announcement recorded at a solve is the gap to the next recompute in the file's own decisions."""
     from etmpc.policies import selftrigger as st
 
-    played = evaluate_mod.play_test_episode("cart_pendulum", parse_policy("always", cart_system.error_weights), 0, 0, 0)
+    played = evaluate_mod.play_test_episode("cart_pendulum", parse_policy("always", cart_system), 0, 0, 0)
     env = cart_system.make_env()
     env.task.use_episode(played.episode)
     timestep = env.reset()

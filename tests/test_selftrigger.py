@@ -23,7 +23,7 @@ def _constant(domain: str, n: int, p: int) -> st.SelfTrigger:
 
 def _features(system) -> int:
     """The number of plan features of ``system``, from its first plan on test-set episode 0."""
-    played = play_test_episode(system.domain, parse_policy("always", system.error_weights), 0, 0, 0)
+    played = play_test_episode(system.domain, parse_policy("always", system), 0, 0, 0)
     env = system.make_env()
     env.task.use_episode(played.episode)
     timestep = env.reset()
@@ -47,7 +47,7 @@ def test_a_constant_announcement_is_the_periodic_schedule_bit_for_bit(domain, n,
     system, testset = (cart_system, cart_testset) if domain == "cart_pendulum" else (battery_system, battery_testset)
     policy = _constant(domain, n, _features(system))
     own = play_test_episode(domain, policy, 0, 0, 1).trajectory
-    periodic = play_test_episode(domain, parse_policy(f"every:{n}", system.error_weights), 0, 0, 1).trajectory
+    periodic = play_test_episode(domain, parse_policy(f"every:{n}", system), 0, 0, 1).trajectory
     np.testing.assert_array_equal(own.recompute, periodic.recompute)
     np.testing.assert_array_equal(own.states, periodic.states)
     np.testing.assert_array_equal(own.rewards, periodic.rewards)
@@ -115,12 +115,12 @@ def _write(tmp_path, **change):
 def test_bad_files_are_one_clear_error(tmp_path, change, message):
     path = _write(tmp_path, **change)
     with pytest.raises(EtmpcError, match=message):
-        parse_policy(f"self:{path}", np.ones(4), "cart_pendulum")
+        parse_policy(f"self:{path}", "cart_pendulum")
 
 
 def test_a_file_round_trips_and_a_policy_pickles_without_its_episode_memory(tmp_path, cart_system):
     path = _write(tmp_path)
-    policy = parse_policy(f"self:{path}", cart_system.error_weights, "cart_pendulum")
+    policy = parse_policy(f"self:{path}", cart_system)
     assert policy.spec == f"self:{path}" and policy.candidates == st.CANDIDATES
     np.testing.assert_array_equal(policy.theta, _constant("cart_pendulum", 3, 3).theta)
     policy._plan, policy._keep = object(), 7

@@ -349,7 +349,7 @@ def _efficiency(folder: Path, system, baselines: dict, best: str, state, ppo_run
 def _trajectory_png(path: Path, system, spec: str) -> None:
     if path.exists():
         return
-    played = play_test_episode(system.name, parse_policy(spec, system.error_weights, system.name), 0, 0, 0)
+    played = play_test_episode(system.name, parse_policy(spec, system), 0, 0, 0)
     figures.write_trajectory_png(path, system, played.trajectory, title=f"{system.name}: test-set episode 0 under {spec}",
                                  signals=system.signals(played.episode))
 
@@ -357,7 +357,7 @@ def _trajectory_png(path: Path, system, spec: str) -> None:
 def _forecasts_png(path: Path, system) -> None:
     if path.exists():
         return
-    runs = [(spec, play_test_episode(system.name, parse_policy(spec, system.error_weights), 0, 0, 0)) for spec in ("every:20", "every:5")]
+    runs = [(spec, play_test_episode(system.name, parse_policy(spec, system), 0, 0, 0)) for spec in ("every:20", "every:5")]
     fig = figures.forecast_figure(runs[0][1].episode, [(spec, played.trajectory) for spec, played in runs],
                                   system.control_interval_s, system.terminal_price)
     figures.save_png_atomically(fig, path, dpi=110)

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from etmpc.common.sense import best as best_of
 from etmpc.learning.config import CHECKPOINT_FORMAT, TrainConfig
 from etmpc.policies.learned import LogisticPolicy, PolicyFileError, write_json_atomically
 from etmpc.systems import make_system
@@ -88,7 +89,7 @@ def save(out: Path, state: RunState) -> dict:
                               dict(policy_at(state, best["theta"]), hyperparameters=dict(hyper, episodes=best["episodes"])))
     if state.validation:
         sense = state.objective_sense
-        pick = (max if sense == "max" else min)(state.config.seeds, key=lambda seed: state.validation[str(seed)])
+        pick = best_of(state.config.seeds, sense, key=lambda seed: state.validation[str(seed)])
         hyper = dict(state.policy["hyperparameters"], seed=pick, episodes=state.done,
                      validation_objective=state.validation[str(pick)], validation_episodes=state.config.validation_episodes)
         write_json_atomically(out / "selected.json", dict(policy_at(state, state.learners[str(pick)]["theta"]), hyperparameters=hyper))

@@ -36,6 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import minimize
 
+from etmpc.common.sense import oriented
 from etmpc.evaluation.workers import context
 from etmpc.loop import run_episode
 from etmpc.policies import parse_policy
@@ -71,7 +72,7 @@ def choose_base(settings: Settings, sense: str, mean_scores) -> str:
     policy's mean objective on the first ``episodes`` of a stream of training-distribution episodes
     (never the test set); ``sense`` (``"max"`` or ``"min"``) says which is best."""
     means = mean_scores(list(settings.bases), settings.selection_episodes)
-    pick = int(np.argmax(means) if sense == "max" else np.argmin(means))
+    pick = int(np.argmax(oriented(np.asarray(means, dtype=float), sense)))
     return settings.bases[pick]
 
 
@@ -111,7 +112,7 @@ def label_episode(domain: str, base, settings: Settings, policy_json: dict, seed
     """DPI's training episode ``e`` of ``seed`` under ``base`` (``pi_t``: a fixed spec or a policy's
     JSON): ``[(phi, q_keep, q_recompute, step), ...]`` at its picked decisions."""
     system, env, _ = context(domain)
-    base = parse_policy(base, system.error_weights, system.name) if isinstance(base, str) else LogisticPolicy.from_json(base)
+    base = parse_policy(base, system) if isinstance(base, str) else LogisticPolicy.from_json(base)
     featurise = LogisticPolicy.from_json(policy_json).phi
     episode_rng, pick_rng, future_rng, policy_rng = episode_rngs(seed, e)
     picked = set(pick_rng.choice(system.episode_steps, size=min(settings.states_per_episode, system.episode_steps),

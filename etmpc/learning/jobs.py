@@ -105,7 +105,7 @@ def _policy(system, policy):
     """A policy from its spec (a fixed policy) or its JSON (a logistic policy being trained, or a
     self-trigger being chosen)."""
     if isinstance(policy, str):
-        return parse_policy(policy, system.error_weights, system.name)
+        return parse_policy(policy, system)
     if policy.get("format") == selftrigger.FORMAT:
         return selftrigger.from_json(policy, "candidate", system.name)
     return LogisticPolicy.from_json(policy)

@@ -11,6 +11,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from etmpc.common.sense import oriented
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import refuse_foreign
 from etmpc.evaluation.workers import context
@@ -265,7 +266,7 @@ class _Phased(Learner):
                    "control": float(np.mean([c[1] for c in chunk])), "recomputes": float(np.mean([c[2] for c in chunk]))}
             state.curve.append(row)
             best = state.best.get(str(seed))
-            better = best is None or (row["objective"] > best["objective"] if sense == "max" else row["objective"] < best["objective"])
+            better = best is None or oriented(row["objective"], sense) > oriented(best["objective"], sense)
             if better:
                 state.best[str(seed)] = {"episodes": done, "objective": row["objective"], "theta": state.learners[str(seed)]["theta"]}
 

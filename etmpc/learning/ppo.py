@@ -35,6 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
+from etmpc.common.sense import best as best_of
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import refuse_foreign, write_json
 from etmpc.envs.normalization import save_normalization
@@ -205,7 +206,7 @@ class PpoLearner(Learner):
 
     def choose(self, scores: list[float]) -> None:
         out, s, system = self.out, self.settings, self.system
-        pick = (max if system.objective_sense == "max" else min)(self.checkpoints, key=lambda c: c["validation_objective"])
+        pick = best_of(self.checkpoints, system.objective_sense, key=lambda c: c["validation_objective"])
         shutil.copyfile(out / pick["file"], out / "selected.zip")
         meta = json.loads(metadata_path(out / pick["file"]).read_text())
         write_json(out / "selected.json", dict(meta, validation_objective=pick["validation_objective"],

@@ -19,6 +19,7 @@ from typing import Callable
 
 import numpy as np
 
+from etmpc.common.sense import oriented
 from etmpc.common.errors import EtmpcError
 from etmpc.evaluation.workers import make_backend
 from etmpc.learning.base import Learner, learner_class
@@ -103,7 +104,7 @@ def validate(pool, key: SystemKey, policies: list, episodes: int, on_result=None
 
 def best(scores: list[float], sense: str) -> int:
     """The index of the best score (``sense``: ``"max"`` or ``"min"``); the first wins a tie."""
-    return int(np.argmax(scores) if sense == "max" else np.argmin(scores))
+    return int(np.argmax(oriented(np.asarray(scores, dtype=float), sense)))
 
 
 class Progress:

@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import minimize
 
+from etmpc.common.sense import oriented
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import write_json
 from etmpc.evaluation.workers import context
@@ -104,7 +105,7 @@ def label_episode(key: str, base: str, candidates: tuple[int, ...], settings: Se
     rngs = [np.random.default_rng(np.random.SeedSequence(SELF_ENTROPY, spawn_key=(index, k))) for k in range(3)]
     steps = set(rngs[1].choice(np.arange(1, system.episode_steps), size=min(settings.solves_per_episode,
                                                                             system.episode_steps - 1), replace=False).tolist())
-    policy = parse_policy(base, system.error_weights, system.name)
+    policy = parse_policy(base, system)
     label = _candidate_returns(policy, candidates, settings.futures, max(candidates) + settings.horizon, rngs[2])
     labeller = dpi.Labeller(policy, steps, label, "label-self")
     run_episode(system, env, labeller, None, system.draw_episode(rngs[0]))
@@ -163,7 +164,8 @@ class SelfLearner(Learner):
             super().check()
             self.policy_file = self.out / "selected.json"
         self.system = self.key.make()
-        self.better = np.argmax if self.system.objective_sense == "max" else np.argmin
+        sense = self.system.objective_sense
+        self.better = lambda values: int(np.argmax(oriented(np.asarray(values, dtype=float), sense)))  # first of a tie
         self.candidate_lengths = tuple(c for c in self.settings.candidates if c <= self.system.horizon)
         if not self.candidate_lengths:
             raise EtmpcError(f"no candidate keep length fits the MPC horizon ({self.system.horizon} steps)")
@@ -245,7 +247,7 @@ def train_self(key: str | SystemKey, out: Path, settings: SelfSettings = SelfSet
 
 def _period(spec: str, system) -> int:
     """``T`` of a periodic base (``always``: 1, ``every:T``: T); 0 for anything else."""
-    policy = parse_policy(spec, system.error_weights, system.name)
+    policy = parse_policy(spec, system)
     if isinstance(policy, Always):
         return 1
     return policy.period if isinstance(policy, Every) else 0

@@ -35,6 +35,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from etmpc.common.sense import higher_or_lower
 from etmpc.learning.checkpoint import RunState, curve_summary, load_checkpoint
 from etmpc.learning.config import ALGORITHMS, TrainConfig, parse_seeds
 from etmpc.learning.phased import _Phased, once_each
@@ -59,7 +60,7 @@ def train(config: TrainConfig, out: Path, workers: int = 1, resume: bool = False
 
 def format_summary(state: RunState) -> str:
     summary = curve_summary(state)
-    lines = [f"{state.config.domain}: objective ({'higher' if summary['objective_sense'] == 'max' else 'lower'} is better) on the test set",
+    lines = [f"{state.config.domain}: objective ({higher_or_lower(summary['objective_sense'])} is better) on the test set",
              f"{'episodes':>9}{'mean':>12}{'std':>10}{'recomputes':>12}"]
     lines += [f"{p['episodes']:>9}{p['objective_mean']:>12.5f}{p['objective_std']:>10.5f}{p['recomputes_mean']:>12.2f}" for p in summary["points"]]
     return "\n".join(lines)
