@@ -50,6 +50,7 @@ from etmpc.evaluation.verify import read_card, verify
 from etmpc.evaluation.workers import make_backend, shared_pools
 from etmpc.experiments.leaderboard_page import (BEGIN, END, ORACLE_NOTE, headline, page, table_in,  # noqa: F401
                                                with_table)
+from etmpc.learning.base import shipped
 from etmpc.learning.config import VALIDATION_ENTROPY
 from etmpc.learning.jobs import mean_scores
 from etmpc.systems import distinct, folder_name, make_system, names, task_version
@@ -77,20 +78,16 @@ class Entry:
 FIRST = ("always", "best periodic", "best threshold")
 LAST = ("rollout meter", "oracle")
 
-# The learners whose policies the project ships in policies/<task>/: (entry, file, spec prefix, what it is).
-SHIPPED = (
-    ("GPOMDP (shipped)", "gpomdp.json", "rl:",
-     "the paper's learner on its features (5 seeds x 1500 episodes), the seed chosen on validation episodes"),
-    ("DPI (shipped)", "learned.json", "rl:", "the default learner, chosen on validation episodes"),
-    ("PPO (shipped)", "ppo.zip", "sb3:",
-     "Stable-Baselines3 PPO on the trigger environment with the task's policies/<task>/ppo.yml (its reward against "
-     "a fixed schedule), chosen on validation episodes"),
-)
+def shipped_learners() -> list[tuple[str, str, str, str]]:
+    """The learners whose policies the project ships in policies/<task>/: ``(entry, file, spec prefix, what
+    it is)``, from each registered learner's ``shipped`` (:func:`etmpc.learning.base.shipped`): a new
+    learner that ships its policies joins the leaderboard with no edit here."""
+    return shipped()
 
 
 def row_names() -> list[str]:
     """The leaderboard's rows, in order (a shipped learner's only where its policies are shipped)."""
-    return [*FIRST, *(name for name, *_ in SHIPPED), *LAST]
+    return [*FIRST, *(name for name, *_ in shipped_learners()), *LAST]
 
 
 def shipped_policy(task: str, file: str = "learned.json") -> Path | None:
@@ -125,7 +122,7 @@ def entries(tasks: list[str], references: dict[str, References], workers: int,
         Entry(FIRST[2], "baseline", {t: best_threshold(t, workers, say) for t in tasks},
               f"threshold:X chosen on {VALIDATION_EPISODES} training-distribution episodes"),
     ]
-    for name, file, prefix, note in SHIPPED:
+    for name, file, prefix, note in shipped_learners():
         shipped = {t: shipped_policy(t, file) for t in tasks}
         if any(path is not None for path in shipped.values()):
             found.append(Entry(name, "learned", {t: f"{prefix}{p}" for t, p in shipped.items() if p is not None},
@@ -263,7 +260,7 @@ def _build(docs: Path, work: Path, tasks: list[str], episodes: int | None, worke
     extra, given = submitted(cards, tasks, episodes or min(r.episodes for r in references.values()), workers, say)
     for task in tasks:  # the shipped policies parse (and are the files shipped) before any row is played
         system = make_system(task)
-        parse_policies(system, [f"{prefix}{path}" for _, file, prefix, _ in SHIPPED
+        parse_policies(system, [f"{prefix}{path}" for _, file, prefix, _ in shipped_learners()
                                 if (path := shipped_policy(task, file)) is not None])
     board = entries(tasks, references, workers, say) + extra
     n = episodes or min(r.episodes for r in references.values())
