@@ -48,6 +48,15 @@ class PhasedSettings:
         if not isinstance(self.record_episodes, int) or self.record_episodes < 0:
             raise EtmpcError(f"record episodes must be >= 0, got {self.record_episodes}")
         check_features(self.features)
+        try:
+            self.algorithm_settings  # the algorithm's own checks, as one line
+        except ValueError as exc:
+            raise EtmpcError(str(exc)) from None
+
+    @property
+    def algorithm_settings(self):
+        """The algorithm's own settings (:class:`etmpc.learning.gpomdp.Settings`, ...), built from these."""
+        return None
 
 
 @dataclass(frozen=True)
@@ -57,13 +66,6 @@ class GpomdpSettings(PhasedSettings):
     discount: float = 0.975
     learning_rate: float = 0.05
     baseline: str = "none"
-
-    def __post_init__(self):
-        super().__post_init__()
-        try:
-            self.algorithm_settings
-        except ValueError as exc:
-            raise EtmpcError(str(exc)) from None
 
     @property
     def algorithm_settings(self) -> gpomdp.Settings:
@@ -80,13 +82,6 @@ class DpiSettings(PhasedSettings):
     ridge: float = 1e-2
     bases: tuple[str, ...] = ("always", "every:2", "every:3", "every:4", "every:5")
     selection_episodes: int = 30
-
-    def __post_init__(self):
-        super().__post_init__()
-        try:
-            self.algorithm_settings
-        except ValueError as exc:
-            raise EtmpcError(str(exc)) from None
 
     @property
     def algorithm_settings(self) -> dpi.Settings:

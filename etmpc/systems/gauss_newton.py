@@ -29,12 +29,20 @@ from etmpc.systems.base import SystemBase
 class GaussNewtonSystem(SystemBase):
     """A tracking task: a subclass sets :attr:`tracked` and :attr:`mpc_name`, builds ``self.model``
     (``model.discrete``, the predictor over one interval) and ``self.u_min``/``self.u_max`` in its
-    ``__init__``, and writes :meth:`residuals` and :meth:`feedback_weights`. Its ``Config`` has a
-    ``solver`` (:class:`~etmpc.control.mpc.SolverSettings`)."""
+    ``__init__``, names its task module's ``make_environment``, and writes :meth:`residuals` and
+    :meth:`feedback_weights`. Its ``Config`` has a ``solver`` (:class:`~etmpc.control.mpc.SolverSettings`)
+    and a ``plant``."""
 
     tracked: tuple[str, ...] = ()  # observation entries that are the OCP's parameters, in order
     mpc_name: str = "mpc"  # the compiled solver's name (its cache file)
     feedback = PlanFeedback()
+    # The task module's make_environment(random=, plant=, ...), as a staticmethod: make_env builds it at the
+    # Config's plant setting.
+    make_environment = None
+
+    def make_env(self, random=None):
+        """The dm-control environment: the task's ``make_environment`` at this Config's ``plant``."""
+        return self.make_environment(random=random, plant=self.config.plant)
 
     def residuals(self) -> tuple[ca.Function, ca.Function]:
         """``stage_residual(x, u, du, p)`` and ``terminal_residual(x, p)``, ``p`` the tracked values."""

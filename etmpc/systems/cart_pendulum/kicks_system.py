@@ -88,6 +88,7 @@ class KicksSystem(GaussNewtonSystem):
     Episode = kicks.KickEpisode
     tracked = (REFERENCE,)  # the cart's current reference (m), as observed: the OCP's parameter
     mpc_name = "cart_pendulum_kicks_mpc"
+    make_environment = staticmethod(kicks.make_environment)
     exogenous_feature_names = EXOGENOUS_FEATURES  # what the learned policy's "error" features add
     exogenous_features = staticmethod(exogenous_features)
     failure_name = "falls"  # per episode, beside the mean objective
@@ -114,9 +115,6 @@ class KicksSystem(GaussNewtonSystem):
 
     def feedback_weights(self) -> FeedbackWeights:
         return FeedbackWeights(self.config.feedback_state_weights, (self.config.feedback_input_weight,))
-
-    def make_env(self, random=None):
-        return kicks.make_environment(random=random, plant=self.config.plant)
 
     def reference(self, timestep: dm_env.TimeStep) -> np.ndarray:
         """The cart's current reference (m), as observed, as the MPC's parameter vector."""

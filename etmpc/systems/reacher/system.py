@@ -104,6 +104,7 @@ class ReacherSystem(GaussNewtonSystem):
     Episode = reacher_task.Episode
     tracked = TARGET  # the current target (m), as observed: the OCP's parameters
     mpc_name = "reacher_jumps_mpc"
+    make_environment = staticmethod(reacher_task.make_environment)
     exogenous_feature_names = EXOGENOUS_FEATURES  # what the learned policy's "error" features add
     exogenous_features = staticmethod(exogenous_features)
     failure_name = "far from target"  # steps ending > 0.1 m from the target, per episode
@@ -128,9 +129,6 @@ class ReacherSystem(GaussNewtonSystem):
 
     def feedback_weights(self) -> FeedbackWeights:
         return FeedbackWeights(self.config.feedback_state_weights, self.config.feedback_input_weights)
-
-    def make_env(self, random=None):
-        return reacher_task.make_environment(random=random, plant=self.config.plant)
 
     def target(self, timestep: dm_env.TimeStep) -> np.ndarray:
         """The current target ``(x, y)`` (m), as observed."""

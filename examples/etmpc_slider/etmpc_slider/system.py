@@ -85,6 +85,7 @@ class SliderSystem(GaussNewtonSystem):
     Episode = slider_task.Episode
     tracked = (REFERENCE,)  # the current reference (m), as observed: the OCP's parameter
     mpc_name = "slider_track_mpc"
+    make_environment = staticmethod(slider_task.make_environment)
     exogenous_feature_names = EXOGENOUS_FEATURES  # what the learned policy's "error" features add
     exogenous_features = staticmethod(exogenous_features)
     camera = "side"  # the scene shows the block; the reference marker stays where the physics has it
@@ -109,6 +110,3 @@ class SliderSystem(GaussNewtonSystem):
 
     def feedback_weights(self) -> FeedbackWeights:
         return FeedbackWeights(self.config.feedback_state_weights, self.config.feedback_input_weights)
-
-    def make_env(self, random=None):
-        return slider_task.make_environment(random=random, plant=self.config.plant)
