@@ -10,13 +10,10 @@ from __future__ import annotations
 
 import contextlib
 import io
-import math
 import os
 import pickle
-from dataclasses import asdict, dataclass
 from pathlib import Path
 
-import numpy as np
 from tqdm import tqdm
 
 from etmpc.evaluation import testsets as ts_mod
@@ -33,40 +30,7 @@ from etmpc.systems import SystemKey, system_key
 from etmpc.evaluation.inputs import check_run_outputs, check_shipped, run_inputs
 from etmpc.evaluation.mainscript import refuse_in_rerun_main, unimportable_main
 from etmpc.evaluation.workers import BACKENDS, make_backend, play_test_episode, workers_for
-
-
-@dataclass(frozen=True)
-class RunResult:
-    """One episode under one policy."""
-
-    policy: str
-    repeat: int
-    episode: int
-    objective: float  # sense-aware: cost (min) or profit (max), computations included
-    control_objective: float  # the objective without the price of computations (sense-aware)
-    recomputes: int
-    solver_failures: int
-    steps: int
-    finite: bool  # False: the episode ended early on a non-finite state
-    failures: int | None = None  # the task's own failures in the episode (falls, ...), if it counts them
-
-
-@dataclass(frozen=True)
-class PolicySummary:
-    policy: str
-    objective_mean: float
-    objective_std: float  # over test-set episodes (each averaged over repeats)
-    objective_std_repeats: float  # over the repeats' means: the spread due to the policy's randomness
-    objective_sense: str
-    control_objective_mean: float
-    recomputes_mean: float
-    solver_failures: int  # total over all runs
-    nonfinite_episodes: int  # runs that ended on a non-finite state; excluded from the means
-    episodes: int
-    repeats: int
-    upper_bound: bool = False  # an oracle: it knows the episode's future; a bound, not a policy
-    failures_mean: float | None = None  # the task's failures per episode (failure_name), if it counts them
-    failure_name: str | None = None
+from etmpc.evaluation.results import Evaluation, PolicySummary, RunResult, summarise  # noqa: F401 (re-exported)
 
 
 # -- worker side ---------------------------------------------------------------------------------
@@ -105,76 +69,6 @@ def run_jobs(jobs: list, workers: int, progress: bool, backend: str = "local", a
     with tqdm(total=len(jobs), desc="episodes", unit="ep", disable=None if progress else True, leave=False) as bar, \
             make_backend(backend, workers, address) as backend:
         return backend.map(_run, jobs, on_result=lambda job: bar.update(), chunksize=chunk)
-
-
-def summarise(spec: str, runs: list[RunResult], sense: str, episodes: int, repeats: int,
-              failure_name: str | None = None, upper_bound: bool = False) -> PolicySummary:
-    """Means over the runs that stayed finite; the others are counted, never averaged in. ``upper_bound``:
-    the policy knows each episode's future (an oracle's ``upper_bound``)."""
-    finite = [r for r in runs if r.finite]
-    by_episode: dict[int, list[float]] = {}
-    by_repeat: dict[int, list[float]] = {}
-    for r in finite:
-        by_episode.setdefault(r.episode, []).append(r.objective)
-        by_repeat.setdefault(r.repeat, []).append(r.objective)
-    mean = lambda values: float(np.mean(values)) if len(values) else math.nan  # noqa: E731
-    std = lambda values: float(np.std(values, ddof=1)) if len(values) > 1 else 0.0  # noqa: E731
-    return PolicySummary(
-        policy=spec,
-        objective_mean=mean([r.objective for r in finite]),
-        objective_std=std([mean(v) for v in by_episode.values()]),
-        objective_std_repeats=std([mean(v) for v in by_repeat.values()]),
-        objective_sense=sense,
-        control_objective_mean=mean([r.control_objective for r in finite]),
-        recomputes_mean=mean([r.recomputes for r in finite]),
-        solver_failures=sum(r.solver_failures for r in runs),
-        nonfinite_episodes=len(runs) - len(finite),
-        episodes=episodes,
-        repeats=repeats,
-        upper_bound=upper_bound,
-        failures_mean=mean([r.failures for r in finite]) if failure_name is not None else None,
-        failure_name=failure_name,
-    )
-
-
-@dataclass(frozen=True)
-class Evaluation:
-    domain: str
-    task: str
-    testset_path: str
-    testset_sha256: str
-    seed: int
-    summaries: list[PolicySummary]
-    runs: list[RunResult]
-    recompute_price: float = math.nan  # the price of a computation in every objective here
-    # Per run, in the order of ``runs``: the controller's CPU seconds (solve, feedback, decide). Measured
-    # wall time, so it depends on the machine and its load: kept out of ``to_json`` unless asked for.
-    cpu: list[dict[str, float]] | None = None
-
-    def to_json(self, cpu: bool = False) -> dict:
-        """The evaluation as JSON; with ``cpu``, also each run's CPU seconds (machine-dependent)."""
-        extra = {"cpu_seconds": self.cpu} if cpu and self.cpu is not None else {}
-        return {
-            "domain": self.domain,
-            "task": self.task,
-            "test_set": {"path": self.testset_path, "sha256": self.testset_sha256},
-            "seed": self.seed,
-            "recompute_price": self.recompute_price,
-            "policies": {s.policy: _fields(s) for s in self.summaries},
-            "runs": [_fields(r) for r in self.runs],
-        } | extra
-
-
-_TASK_FAILURES = ("failures", "failures_mean", "failure_name")
-
-
-def _fields(row) -> dict:
-    """A run or summary as JSON; the task's failure counts only for a task that counts them."""
-    data = asdict(row)
-    if data.get("failure_name", data.get("failures")) is None:
-        for name in _TASK_FAILURES:
-            data.pop(name, None)
-    return data
 
 
 def evaluate(
