@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 
+from etmpc.loop import computation_cost
 from etmpc.evaluation.metrics import higher_or_lower, oriented
 
 BEGIN, END = "<!-- leaderboard:begin -->", "<!-- leaderboard:end -->"
@@ -76,7 +77,7 @@ def above_the_oracle(data: dict, task: str) -> list[str]:
                 or row["score"] <= 100 or not _finite(row["objective_mean"]):
             continue
         saved = oracle["recomputes_mean"] - row["recomputes_mean"]
-        worth = saved * price
+        worth = computation_cost(saved, price)
         better = -oriented(oracle["objective_mean"] - row["objective_mean"], sense)  # > 0: its objective is the better
         control_loss = worth - better  # what it gives up in control objective, against the oracle's
         head = (f"* **{entry['name']}** scores {row['score']:.1f}: {row['recomputes_mean']:.2f} computations per episode "

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from etmpc.loop import computation_cost
 from etmpc.evaluation import metrics
 from etmpc.policies.specs import find, kind_of
 
@@ -28,7 +29,7 @@ def episode_table(evaluation: dict) -> dict[str, dict[int, tuple[float, float]]]
 def objective(control: float, computations: float, price: float, sense: str) -> float:
     """The objective at ``price``: the control objective and the price of the computations, which counts
     against it whatever its sense (added to a cost, taken from a profit)."""
-    return control - metrics.oriented(price * computations, sense)
+    return control - metrics.oriented(computation_cost(computations, price), sense)
 
 
 def best_periodic(fixed: dict, periodic: list[str], price: float, sense: str) -> str:
