@@ -4,8 +4,9 @@
 Bad input (unknown task or policy, bad numbers, missing or corrupt files) prints one line on
 stderr and exits with code 2, without a traceback. The options are :mod:`etmpc.cli.options`'s (their
 value types :mod:`etmpc.cli.types`'s), the commands :mod:`etmpc.cli.commands`'s; ``score``'s both are
-:mod:`etmpc.cli.scoring`'s, ``discriminate``'s :mod:`etmpc.cli.discriminate`'s and ``figure``'s
-:mod:`etmpc.cli.figures`'s. This package sits on top: it may import any floor of etmpc.
+:mod:`etmpc.cli.scoring`'s, ``train``'s :mod:`etmpc.cli.training`'s (its deprecated flags and
+``train-self`` :mod:`etmpc.cli.legacy`'s), ``discriminate``'s :mod:`etmpc.cli.discriminate`'s and
+``figure``'s :mod:`etmpc.cli.figures`'s. This package sits on top: it may import any floor of etmpc.
 """
 
 from __future__ import annotations

@@ -7,8 +7,8 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from etmpc.cli import discriminate, figures, scoring
-from etmpc.cli.output import distinct_policies as _distinct_policies, say as _say
+from etmpc.cli import discriminate, figures, legacy, scoring, training
+from etmpc.cli.output import check_backend as _check_backend, distinct_policies as _distinct_policies, say as _say
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import write_json
 
@@ -24,11 +24,6 @@ def run_inputs(policies, test_set=None) -> dict:
     from etmpc.evaluation.inputs import run_inputs as inputs
 
     return inputs(policies, test_set)
-
-
-def _check_backend(args) -> None:
-    if args.address is not None and args.backend != "ray":
-        raise EtmpcError("--address needs --backend ray")
 
 
 def _evaluate(args) -> None:
@@ -58,79 +53,6 @@ def _evaluate(args) -> None:
     nonfinite = sum(s.nonfinite_episodes for s in result.summaries)
     if nonfinite:
         print(f"warning: {nonfinite} run(s) ended on a non-finite state and are excluded from the means", file=sys.stderr)
-
-
-def _train(args) -> None:
-    from etmpc.learning.dpi import Settings as DpiSettings
-    from etmpc.learning.gpomdp import Settings
-    from etmpc.learning.train import TrainConfig, format_summary, parse_seeds, train
-    from etmpc.systems import check_name
-    from etmpc.evaluation.workers import default_workers
-
-    check_name(args.task)
-    _check_backend(args)
-    check_run_outputs({}, {"--out": args.out}, {"--hyperparams": args.hyperparams})
-    if args.algorithm == "ppo":
-        return _train_ppo(args)
-    if args.timesteps is not None or args.hyperparams is not None:
-        raise EtmpcError("--timesteps and --hyperparams are PPO's settings: add --algorithm ppo")
-    dpi_options = {"futures": args.futures, "horizon": args.horizon, "states_per_episode": args.labels}
-    if args.algorithm != "dpi" and any(v is not None for v in dpi_options.values()):
-        raise EtmpcError("--futures, --horizon and --labels are DPI's settings: add --algorithm dpi")
-    try:
-        settings = Settings(args.discount, args.learning_rate, args.baseline)
-        dpi_settings = DpiSettings(**{k: v for k, v in dpi_options.items() if v is not None})
-    except ValueError as exc:
-        raise EtmpcError(str(exc)) from None
-    config = TrainConfig(args.task, parse_seeds(args.seeds), args.episodes, args.eval_every, args.eval_episodes, gpomdp=settings,
-                         features=args.features, algorithm=args.algorithm, dpi=dpi_settings,
-                         validation_episodes=args.validation_episodes, recompute_price=args.price)
-    state = train(config, args.out, args.workers or default_workers(), args.resume, args.backend, args.address,
-                  record_episodes=args.record)
-    print(format_summary(state))
-    print(f"wrote {args.out}/selected.json, curve.json, curve.png, checkpoint.json and seed*/best.json, last.json")
-
-
-def _train_ppo(args) -> None:
-    from etmpc.evaluation.workers import default_workers
-    from dataclasses import replace
-
-    from etmpc.learning import hyperparams
-    from etmpc.learning.ppo import train_ppo
-    from etmpc.learning.train import parse_seeds
-    from etmpc.systems import system_key
-
-    seeds = None if args.seeds == "0-4" else parse_seeds(args.seeds)  # 0-4 is the other learners' default
-    if seeds is not None and len(seeds) != 1:
-        raise EtmpcError(f"PPO trains one seed at a time: give --seeds S, got {args.seeds}")
-    if args.backend != "local" or args.resume or args.record:
-        raise EtmpcError("--algorithm ppo runs locally from the start: no --backend ray, --resume or --record")
-    key = system_key(args.task, args.price)
-    settings = (hyperparams.load(args.hyperparams, key.task) if args.hyperparams else hyperparams.shipped(key))
-    overrides = {"timesteps": args.timesteps, "seed": None if seeds is None else seeds[0]}
-    settings = replace(settings, validation_episodes=args.validation_episodes, **{k: v for k, v in overrides.items() if v is not None})
-    result = train_ppo(key, args.out, settings, args.workers or default_workers(), say=_say)
-    print(f"PPO on {result['task']}: {result['environment_steps']} environment steps in {result['wall_seconds']:.0f} s; "
-          f"kept {result['selected']} (best of {len(result['checkpoints'])} on {settings.validation_episodes} "
-          "validation episodes)")
-    print(f"wrote {args.out}/selected.zip and selected.json (evaluate it with: etmpc evaluate {args.task} "
-          f"--policy sb3:{args.out}/selected.zip), training.json")
-
-
-def _train_self(args) -> None:
-    from etmpc.learning.selftrigger import SelfSettings, train_self
-    from etmpc.systems import check_name, system_key
-    from etmpc.evaluation.workers import default_workers
-
-    check_name(args.task)
-    _check_backend(args)
-    check_run_outputs({"--out": args.out})
-    settings = SelfSettings(episodes=args.episodes, solves_per_episode=args.solves, futures=args.futures,
-                            validation_episodes=args.validation_episodes)
-    train_self(system_key(args.task, args.price), args.out, settings, args.workers or default_workers(), args.backend,
-               args.address, say=_say)
-    print(f"wrote {args.out} (evaluate it with: etmpc evaluate {args.task} --policy self:{args.out}"
-          f"{'' if args.price is None else f' --price {args.price:g}'})")
 
 
 def _reproduce(args) -> None:
@@ -239,6 +161,6 @@ def _testset(args) -> None:
           f"sha256 {digest}); use it with --test-set {args.out}")
 
 
-COMMANDS = {"evaluate": _evaluate, "score": scoring.run, "train": _train, "train-self": _train_self, "reproduce": _reproduce, "sweep": _sweep,
+COMMANDS = {"evaluate": _evaluate, "score": scoring.run, "train": training.run, "train-self": legacy.run_self, "reproduce": _reproduce, "sweep": _sweep,
             "render": _render, "replay": _replay, "bench": _bench, "testset": _testset, "verify": _verify,
             "discriminate": discriminate.run, "figure": figures.run}

@@ -8,12 +8,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from etmpc.cli import discriminate, figures, scoring, types
+from etmpc.cli import discriminate, figures, scoring, training, types
+from etmpc.cli.output import backend_arguments
 from etmpc.common.errors import EtmpcError
-from etmpc.evaluation.workers import BACKENDS
-from etmpc.learning.config import ALGORITHMS
-from etmpc.learning.gpomdp import BASELINES
-from etmpc.policies.features import DEFAULT_FEATURES, FEATURE_SETS
 from etmpc.policies.specs import syntax
 from etmpc.systems import names
 
@@ -56,60 +53,11 @@ def build_parser() -> argparse.ArgumentParser:
                     help="also print every policy against this one (one of --policy), paired per episode with 95 %% CIs")
     ev.add_argument("--record", type=types.rrd_path, default=None, metavar="PATH.rrd",
                     help="write every episode into a Rerun recording (open it with `rerun PATH.rrd`)")
-    _backend_arguments(ev)
+    backend_arguments(ev)
 
     scoring.add_parser(sub, tasks)
 
-    tr = sub.add_parser("train", help="train a recomputation policy: DPI (default) or GPOMDP (the paper's) over seeds, "
-                                      "or PPO (Stable-Baselines3, the 'rl' extra) on the trigger environment")
-    tr.add_argument("task", help=f"system to train on: {tasks}")
-    tr.add_argument("--seeds", default="0-4", help="seeds: a range 0-4 or a list 0,2,5 (default 0-4)")
-    tr.add_argument("--episodes", type=types.positive_int, default=1500, help="training episodes per seed (default 1500)")
-    tr.add_argument("--eval-every", type=types.positive_int, default=150, help="evaluate on the test set every N episodes (default 150)")
-    tr.add_argument("--eval-episodes", type=types.positive_int, default=None, help="first N test-set episodes per evaluation (default: all)")
-    tr.add_argument("--out", type=Path, required=True, metavar="DIR", help="run directory: checkpoint, policies, curve")
-    tr.add_argument("--workers", type=types.workers, default=None, help="worker processes (default: one per core)")
-    _backend_arguments(tr)
-    tr.add_argument("--resume", action="store_true", help="continue the run in DIR from its last checkpoint")
-    tr.add_argument("--record", type=types.index, default=0, metavar="N",
-                    help="record the first N test-set episodes of each seed at every evaluation, "
-                         "into DIR/recordings/eval_<episodes>.rrd (default 0: none)")
-    tr.add_argument("--baseline", choices=BASELINES, default="none",
-                    help="GPOMDP baseline: none (the paper, default), mean (per step index), state (linear value function)")
-    tr.add_argument("--learning-rate", type=float, default=0.05, help="GPOMDP's alpha (default 0.05)")
-    tr.add_argument("--discount", type=float, default=0.975, help="GPOMDP's gamma (default 0.975)")
-    tr.add_argument("--algorithm", choices=(*ALGORITHMS, "ppo"), default="dpi",
-                    help="dpi (direct policy iteration: rollout-labelled classification, --eval-every episodes per "
-                         "iteration; default), gpomdp (the paper's policy gradient), or ppo (Stable-Baselines3 on the "
-                         "trigger environment: --timesteps, one seed)")
-    tr.add_argument("--timesteps", type=types.positive_int, default=None, metavar="N",
-                    help="PPO: environment steps in all (default: the hyperparameter file's n_timesteps)")
-    tr.add_argument("--hyperparams", type=Path, default=None, metavar="FILE",
-                    help="PPO: an rl-zoo3-style YAML file of hyperparameters, keyed by the task's gymnasium id "
-                         "(default: the task's shipped policies/<task>/ppo.yml)")
-    tr.add_argument("--features", choices=FEATURE_SETS, default=DEFAULT_FEATURES,
-                    help="the policy's features: error (prediction error, its square, the plan's age and, for the "
-                         "battery, prices and production now and as planned; default) or paper ([x_i, x_k, i-k] and squares)")
-    tr.add_argument("--futures", type=types.positive_int, default=None, metavar="K", help="DPI: sampled futures per labelled decision (default 4)")
-    tr.add_argument("--horizon", type=types.positive_int, default=None, metavar="H", help="DPI: steps simulated ahead (default 20)")
-    tr.add_argument("--labels", type=types.positive_int, default=None, metavar="D", help="DPI: decisions labelled per episode (default 25)")
-    tr.add_argument("--price", type=types.price, default=None, metavar="P",
-                    help="train for this price of a computation (default: the system's; see evaluate --price)")
-    tr.add_argument("--validation-episodes", type=types.positive_int, default=50,
-                    help="training-distribution episodes that choose selected.json among the seeds (default 50)")
-
-    ts = sub.add_parser("train-self", help="train a self-triggering policy (self:PATH): at each solve, how long to keep the plan")
-    ts.add_argument("task", help=f"system to train on: {tasks}")
-    ts.add_argument("--out", type=types.json_path, required=True, metavar="FILE", help="the policy file to write (use it as self:FILE)")
-    ts.add_argument("--price", type=types.price, default=None, metavar="P",
-                    help="train for this price of a computation (default: the system's; see evaluate --price)")
-    ts.add_argument("--episodes", type=types.positive_int, default=40, help="labelled training episodes (default 40)")
-    ts.add_argument("--solves", type=types.positive_int, default=8, help="labelled solves per episode (default 8)")
-    ts.add_argument("--futures", type=types.positive_int, default=2, metavar="K", help="sampled futures per labelled solve (default 2)")
-    ts.add_argument("--validation-episodes", type=types.positive_int, default=20,
-                    help="training-distribution episodes that choose among the fits and the base (default 20)")
-    ts.add_argument("--workers", type=types.workers, default=None, help="worker processes (default: one per core)")
-    _backend_arguments(ts)
+    training.add_parser(sub, tasks)
 
     re_ = sub.add_parser("reproduce", help="the paper's experiments on every task, with REPORT.md and results.json")
     re_.add_argument("--quick", action="store_true", help="the same steps at small sizes (a few minutes)")
@@ -121,7 +69,7 @@ def build_parser() -> argparse.ArgumentParser:
     re_.add_argument("--out", type=Path, default=None, metavar="DIR",
                      help="run directory (default results/reproduce, or results/reproduce-quick with --quick)")
     re_.add_argument("--workers", type=types.workers, default=None, help="worker processes (default: one per core)")
-    _backend_arguments(re_)
+    backend_arguments(re_)
 
     sw = sub.add_parser("sweep", help="the trade-off curve over prices of a computation: pareto.json, pareto.png, SWEEP.md")
     sw.add_argument("task", nargs="*", help=f"systems to sweep: {tasks} (default: every system)")
@@ -133,7 +81,7 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--out", type=Path, default=None, metavar="DIR",
                     help="run directory, a folder per system (default results/sweep, or results/sweep-quick with --quick)")
     sw.add_argument("--workers", type=types.workers, default=None, help="worker processes (default: one per core)")
-    _backend_arguments(sw)
+    backend_arguments(sw)
 
     rn = sub.add_parser("render", help="render one test-set episode headless to an MP4 video (a task with a 3-D scene)")
     rn.add_argument("task", help=f"task to render: {tasks} (one with a 3-D scene: a task without one, such as the "
@@ -177,11 +125,3 @@ def build_parser() -> argparse.ArgumentParser:
     discriminate.add_parser(sub, tasks)
     figures.add_parser(sub, tasks)
     return parser
-
-
-def _backend_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--backend", choices=BACKENDS, default="local",
-                        help="where the work runs: local processes, or Ray (the 'ray' extra); results are the same")
-    parser.add_argument("--address", default=None, metavar="ADDR",
-                        help="Ray cluster to join, e.g. auto or ray://HOST:10001 (with --backend ray; "
-                             "default: start a local Ray instance of --workers CPUs)")

@@ -1,5 +1,5 @@
-"""What every command of the ``etmpc`` command line shares: progress lines on stderr, and the check
-that a policy is named once."""
+"""What the commands of the ``etmpc`` command line share: progress lines and warnings on stderr, the
+check that a policy is named once, and the ``--backend`` and ``--address`` options with their check."""
 
 from __future__ import annotations
 
@@ -11,6 +11,26 @@ from etmpc.common.errors import EtmpcError
 def say(line: str) -> None:
     """Progress of a long stage, on stderr (stdout keeps the results)."""
     print(line, file=sys.stderr, flush=True)
+
+
+def warn(line: str) -> None:
+    """A warning (a deprecated option), one line on stderr."""
+    print(f"etmpc: warning: {line}", file=sys.stderr, flush=True)
+
+
+def backend_arguments(parser) -> None:
+    from etmpc.evaluation.workers import BACKENDS
+
+    parser.add_argument("--backend", choices=BACKENDS, default="local",
+                        help="where the work runs: local processes, or Ray (the 'ray' extra); results are the same")
+    parser.add_argument("--address", default=None, metavar="ADDR",
+                        help="Ray cluster to join, e.g. auto or ray://HOST:10001 (with --backend ray; "
+                             "default: start a local Ray instance of --workers CPUs)")
+
+
+def check_backend(args) -> None:
+    if args.address is not None and args.backend != "ray":
+        raise EtmpcError("--address needs --backend ray")
 
 
 def distinct_policies(specs: list[str]) -> None:

@@ -92,3 +92,18 @@ def rrd_path(text: str) -> Path:
     if path.suffix != ".rrd":
         raise argparse.ArgumentTypeError(f"{text} does not end in .rrd")
     return path
+
+
+def setting(text: str) -> tuple[str, object]:
+    """``KEY=VALUE`` (``--set``): the key, and the value read as YAML (``yaml.safe_load``: numbers, words,
+    ``[a, b]`` lists, ``null``; never evaluated as code)."""
+    import yaml
+
+    key, sep, value = text.partition("=")
+    key = key.strip()
+    if not sep or not key.isidentifier():
+        raise argparse.ArgumentTypeError(f"{text!r} is not KEY=VALUE (a setting's name, =, its value)")
+    try:
+        return key, yaml.safe_load(value)
+    except yaml.YAMLError as exc:
+        raise argparse.ArgumentTypeError(f"{key}: cannot read {value!r} ({' '.join(str(exc).split())})") from None

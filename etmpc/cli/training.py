@@ -1,0 +1,169 @@
+"""``etmpc train``: its options and its command. Any learner registered in :mod:`etmpc.learning.base`
+(``--algorithm``: gpomdp, dpi, self, ppo and any other :class:`~etmpc.learning.base.Learner` with a name),
+its settings from a file (``--settings``, :func:`~etmpc.learning.base.load_settings`) and the command line
+(``--set KEY=VALUE``), trained by :func:`etmpc.learning.runner.run`. The old flags and ``etmpc train-self``
+are :mod:`etmpc.cli.legacy`'s. This module sits with the command line, on top: it may import any floor.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import typing
+from pathlib import Path
+
+from etmpc.cli import legacy, types
+from etmpc.cli.output import backend_arguments, check_backend, say, warn
+from etmpc.common.errors import EtmpcError
+
+DEFAULT = "dpi"
+# What the command line gives a learner that its settings do not say (as etmpc train did before --set, as
+# the shipped PPO and etmpc reproduce were chosen), where its Settings' own default differs.
+COMMAND_LINE = {"ppo": {"validation_episodes": 50}}
+
+
+def _learners() -> dict:
+    from etmpc.learning.base import learners
+
+    return learners()
+
+
+class _Registered:
+    """``--algorithm``'s choices: the registry's names, read when first needed (importing every learner
+    loads matplotlib, which another command's ``--help`` should not)."""
+
+    def __contains__(self, name) -> bool:
+        return name in _learners()
+
+    def __iter__(self):
+        return iter(_learners())
+
+
+def _names(names: list[str]) -> str:
+    return " and ".join([", ".join(names[:-1]), names[-1]] if len(names) > 1 else names)
+
+
+class _AlgorithmHelp(str):
+    def __mod__(self, params):
+        found = _learners()
+        kinds = {"many": "several (in lockstep)", "one": "one", "none": "none"}
+        seeds = ", ".join(f"{_names([n for n, c in found.items() if c.seeding == kind])} {what}" for kind, what in kinds.items()
+                          if any(c.seeding == kind for c in found.values()))
+        return (f"{self}: {', '.join(found)} (default {DEFAULT}; every Learner registered in etmpc.learning.base is "
+                f"one, see docs/learning.md); --seeds: {seeds}").replace("%", "%%") % params
+
+
+class _SetHelp(str):
+    def __mod__(self, params):
+        known = "; ".join(f"{name}'s: {', '.join(f.name for f in dataclasses.fields(cls.Settings))}"
+                          for name, cls in _learners().items())
+        return (f"{self} Settings by learner: {known}.").replace("%", "%%") % params
+
+
+def add_parser(sub, tasks: str) -> None:
+    """The ``train`` subcommand's options (and ``train-self``'s), on the command line's subparsers ``sub``."""
+    tr = sub.add_parser("train", help="train a recomputation policy with any registered learner: DPI (default), "
+                                      "GPOMDP (the paper's), the self-trigger or PPO (Stable-Baselines3, the 'rl' extra)")
+    tr.add_argument("task", help=f"system to train on: {tasks}")
+    tr.add_argument("--algorithm", choices=_Registered(), default=DEFAULT, metavar="NAME", help=_AlgorithmHelp("the learner"))
+    tr.add_argument("--settings", type=Path, default=None, metavar="FILE",
+                    help="the learner's settings, a YAML or JSON file of its settings' names (PPO: an rl-zoo3 "
+                         "hyperparameter file, default the task's policies/<task>/ppo.yml); default: its defaults")
+    tr.add_argument("--set", type=types.setting, action="append", default=None, metavar="KEY=VALUE",
+                    help=_SetHelp("one setting, over --settings' or the defaults (repeatable): VALUE is read as YAML "
+                                  "(4, 0.05, paper, [always, every:3], null); an unknown KEY says which are known."))
+    tr.add_argument("--out", type=Path, required=True, metavar="DIR", help="run directory: its files, checkpoints, the policy")
+    tr.add_argument("--seeds", default=None, metavar="SEEDS",
+                    help="seeds: a range 0-4 or a list 0,2,5 (default: the learner's own, 0-4 for gpomdp and dpi, the "
+                         "settings' seed for ppo; how many each takes: --algorithm)")
+    tr.add_argument("--price", type=types.price, default=None, metavar="P",
+                    help="train for this price of a computation (default: the system's; see evaluate --price)")
+    tr.add_argument("--workers", type=types.workers, default=None, help="worker processes (default: one per core)")
+    backend_arguments(tr)
+    tr.add_argument("--resume", action="store_true", help="continue the run in DIR from its last checkpoint")
+    legacy.add_arguments(tr)
+    legacy.add_self_parser(sub, tasks)
+
+
+def configure(cls, path: Path | None, task: str, values: dict):
+    """``cls``'s settings: its settings file's (or its defaults), then :data:`COMMAND_LINE`'s, then
+    ``values`` (name -> value): an unknown name is refused listing the known ones, a value out of range
+    with the settings' own message."""
+    from etmpc.learning.base import load_settings
+
+    settings = load_settings(cls, path, task)
+    defaults = cls.Settings()
+    hints = typing.get_type_hints(cls.Settings)
+    known = [f.name for f in dataclasses.fields(cls.Settings)]
+    unknown = [name for name in values if name not in known]
+    if unknown:
+        raise EtmpcError(f"unknown setting {unknown[0]!r} for {cls.name}; known: {', '.join(known)}")
+    own = {k: v for k, v in COMMAND_LINE.get(cls.name, {}).items() if getattr(settings, k) == getattr(defaults, k)}
+    converted = {}
+    for name, value in values.items():
+        hint = str(hints.get(name))
+        if isinstance(value, list) and "tuple" in hint:
+            value = tuple(value)
+        elif isinstance(value, str) and ("float" in hint or "int" in hint) and "str" not in hint and _numeral(value):
+            value = float(value)  # YAML 1.1 reads 3e-4 as text
+        converted[name] = value
+    try:
+        return dataclasses.replace(settings, **{**own, **converted})
+    except (ValueError, TypeError) as exc:
+        raise EtmpcError(" ".join(str(exc).split())) from None
+
+
+def _numeral(text: str) -> bool:
+    try:
+        return math.isfinite(float(text))
+    except ValueError:
+        return False
+
+
+def _seeds(text: str | None, cls) -> tuple[int, ...] | None:
+    from etmpc.learning.config import parse_seeds
+
+    if text is None:
+        return None
+    if cls.seeding == "none":
+        raise EtmpcError(f"--algorithm {cls.name} takes no --seeds (its draws are one fixed stream)")
+    seeds = parse_seeds(text)
+    if cls.seeding == "one" and len(seeds) != 1:
+        raise EtmpcError(f"--algorithm {cls.name} trains one seed at a time: give --seeds S, got {text}")
+    return seeds
+
+
+def run(args) -> None:
+    """``etmpc train``: check everything, train, say what was written and how to evaluate it."""
+    from etmpc.evaluation.inputs import check_run_outputs
+    from etmpc.evaluation.workers import default_workers
+    from etmpc.learning.base import learner_class
+    from etmpc.learning.runner import run as train
+    from etmpc.systems import check_name, system_key
+
+    check_name(args.task)
+    check_backend(args)
+    cls = learner_class(args.algorithm)
+    values, notes = legacy.given(args, cls.name, {f.name for f in dataclasses.fields(cls.Settings)})
+    path = args.settings if args.settings is not None else args.hyperparams
+    check_run_outputs({}, {"--out": args.out}, {"--settings": path})
+    key = system_key(args.task, args.price)
+    seeds = _seeds(args.seeds, cls)
+    settings = configure(cls, path, key.task, {**values, **dict(args.set or [])})
+    done = train(cls(settings), key, args.out, seeds, args.workers or default_workers(), args.resume, args.backend,
+                 args.address, say=say)
+    for note in notes:
+        warn(note)
+    learner = done.learner
+    if getattr(learner, "run_state", None) is not None:  # gpomdp, dpi: the test-set curve
+        from etmpc.learning.train import format_summary
+
+        print(format_summary(learner.run_state))
+    result = getattr(learner, "result", None)
+    if isinstance(result, dict) and "checkpoints" in result:  # ppo
+        print(f"PPO on {result['task']}: {result['environment_steps']} environment steps in {result['wall_seconds']:.0f} s; "
+              f"kept {result['selected']} (best of {len(result['checkpoints'])} on {learner.settings.validation_episodes} "
+              "validation episodes)")
+    written = sorted(f"{p.name}/" if p.is_dir() else p.name for p in Path(args.out).iterdir())
+    price = "" if args.price is None else f" --price {args.price:g}"
+    print(f"wrote {args.out}: {', '.join(written)} (evaluate it with: etmpc evaluate {args.task} --policy {done.policy}{price})")
