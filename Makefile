@@ -51,12 +51,12 @@ test: setup
 	$(BIN)/python -m pytest -q
 
 # The documentation site into site/ (mkdocs.yml; strict: a broken link or anchor fails it). `make test`
-# builds it too (tests/test_docs.py); `$(BIN)/mkdocs serve` shows it while you write.
+# builds it too (tests/end_to_end/test_docs.py); `$(BIN)/mkdocs serve` shows it while you write.
 docs: setup
 	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict
 
 # The release artifacts: the sdist and the wheel (built from the sdist) into dist/, then `twine check`
-# (the metadata, and the README as PyPI renders it). tests/test_packaging.py builds and checks them too.
+# (the metadata, and the README as PyPI renders it). tests/end_to_end/test_packaging.py builds and checks them too.
 dist: setup
 	rm -rf dist
 	$(BIN)/python -m build --outdir dist .

@@ -14,7 +14,7 @@
     python scripts/doc_numbers.py            # check: one line per number that disagrees with its source
     python scripts/doc_numbers.py --write    # rewrite every marked number from its source
 
-``tests/test_docs_numbers.py`` runs the check.
+``tests/end_to_end/test_docs_numbers.py`` runs the check.
 """
 
 from __future__ import annotations

@@ -3,7 +3,7 @@ action says whether to keep the plan (0) or to recompute it now (1).
 
 It is the loop of ``etmpc evaluate``, not a copy: each step is one :meth:`etmpc.loop.ClosedLoop.step`.
 An agent that answers as ``always`` or ``every:3`` gets exactly the rewards, computations and
-trajectory that ``evaluate`` reports for them (``tests/test_envs.py``).
+trajectory that ``evaluate`` reports for them (``tests/envs/test_trigger_env.py``).
 
 * **Observation**: a float32 vector, :data:`TriggerEnvironment.observation_names`: the ``error``
   features ``r`` of :mod:`etmpc.policies.features` (the prediction error ``x_i - x_hat_i`` per state,

@@ -31,7 +31,7 @@ _ZIP_EPOCH = (1980, 1, 1, 0, 0, 0)
 def default_path(domain: str, task: str) -> Path:
     """The stored test set of ``domain/task``, in its domain's data folder (:func:`etmpc.systems.data_dir`):
     ``etmpc testset TASK --seed SEED --episodes 100``, SEED its domain's ``TEST_SET_SEEDS[task]``
-    (tests/test_testset.py regenerates each bit for bit)."""
+    (tests/evaluation/test_testset.py regenerates each bit for bit)."""
     return data_dir(domain) / f"{task}_testset.npz"
 
 

@@ -28,7 +28,7 @@ from etmpc.views.recording import Recorder
 
 @dataclass(frozen=True)
 class PhasedSettings:
-    """What GPOMDP and DPI runs share (``etmpc train``'s options of the same names)."""
+    """What GPOMDP and DPI runs share (``etmpc train --set NAME=VALUE``)."""
 
     episodes: int = 1500  # training episodes per seed
     eval_every: int = 150  # evaluate on the test set after every this many episodes (and at 0)

@@ -2,7 +2,7 @@
 
 ``etmpc train TASK --algorithm ppo --out DIR`` trains PPO (an MLP policy) on ``etmpc.envs.gym.TriggerEnv``
 with the task's hyperparameters (``policies/<task>/ppo.yml``, rl-zoo3's layout, see
-:mod:`etmpc.learning.hyperparams`; ``--hyperparams FILE`` for others, ``--timesteps N`` to change the
+:mod:`etmpc.learning.hyperparams`; ``--settings FILE`` for others, ``--set timesteps=N`` to change the
 budget): ``n_envs`` environments, stepped in ``--workers`` processes (the numbers do not depend on
 how many), observations and rewards normalised by ``VecNormalize``, and the reward taken against a
 fixed schedule when ``env_kwargs`` names one (``reward_baseline``: see :mod:`etmpc.envs.trigger`).

@@ -1,4 +1,4 @@
-"""Training of the self-triggering policy (``etmpc train-self``, see :mod:`etmpc.policies.selftrigger`).
+"""Training of the self-triggering policy (``etmpc train --algorithm self``, see :mod:`etmpc.policies.selftrigger`).
 
 **Training** (:func:`train_self`) is one step of rollout policy improvement over a base schedule,
 as :mod:`etmpc.learning.dpi` does for event triggering:

@@ -266,7 +266,7 @@ def play_on(
     is filled step by step.
 
     Plays :class:`ClosedLoop` in its light mode (a policy that never reads the observation sets
-    ``observes = False``): the same numbers as :func:`run_episode`, bit for bit (tests/test_rollout.py).
+    ``observes = False``): the same numbers as :func:`run_episode`, bit for bit (tests/loop/test_rollout.py).
     """
     loop = ClosedLoop(system, env, records=False).resume(snapshot, episode)
     end = system.episode_steps if stop is None else min(stop, system.episode_steps)

@@ -79,7 +79,7 @@ class OracleMemo:
     so at step ``i + 1`` one answer, the one ``BASE`` gave there, was played already: its return is
     the rest of that play, summed as a new play would sum it. The memo is used only where the loop's
     state is exactly the play's (``x``, the plan, its age, ``u_prev``); anywhere else both answers are
-    played, as without it (tests/test_rollout.py checks the decisions are the same).
+    played, as without it (tests/loop/test_rollout.py checks the decisions are the same).
     """
 
     episode: Any = None  # the episode the kept play belongs to

@@ -102,7 +102,7 @@ class Network:
     decision hinges on the kernel, the vector width or the threads the CPU selects.
 
     SB3 computes the same network in float32 and takes the argmax of the softmax: the two agree
-    unless the logits are within float32 noise of each other; ``tests/test_sb3_safe.py`` compares them
+    unless the logits are within float32 noise of each other; ``tests/policies/test_sb3_safe.py`` compares them
     at every decision of the shipped models on test-set episodes."""
 
     def __init__(self, hidden: list[tuple[np.ndarray, np.ndarray]], head: tuple[np.ndarray, np.ndarray]):

@@ -124,7 +124,7 @@ BUILT_IN: tuple[Kind, ...] = (
          family="event"),
     Kind("rl", "rl:PATH", "a learned policy (etmpc train)",
          _file(lambda path, c: load_policy(path, c.task, nx=len(c.error_weights)), "policy"), family="learned", path=True),
-    Kind("self", "self:PATH", "a self-triggering policy (etmpc train-self)",
+    Kind("self", "self:PATH", "a self-triggering policy (etmpc train --algorithm self)",
          _file(lambda path, c: load_self(path, c.task), "policy"), family="self", path=True),
     Kind("py", "py:MODULE:NAME", "your own trigger (a class or factory)", lambda arg, spec, c: load_user(spec),
          family="users"),

@@ -3,7 +3,7 @@
 State ``x = [eta, v, beta, omega]`` (cart position m, cart velocity m/s, pole angle from upright rad,
 angular velocity rad/s); input ``u`` = horizontal force on the cart (N). A positive angle tips the
 pole towards +x and a positive force pushes the cart towards +x (the MJCF in ``models/`` shares
-these conventions; ``tests/test_cart_pendulum_model.py`` pins them against MuJoCo).
+these conventions; ``tests/tasks/cart_pendulum/test_cart_pendulum_model.py`` pins them against MuJoCo).
 
 One symbolic definition (CasADi SX) serves the predictor, the plant comparison and the
 linearisation; callers that want numbers evaluate the CasADi functions.

@@ -9,7 +9,7 @@ Two plant settings (see the MJCF header for the numbers):
   * ``"mismatched"`` (default): the MJCF as written: hinge damping, cart damping and drive armature,
     a pole inertia that is not the ideal rod's; the analytic model does not know these.
   * ``"matched"``: those differences removed by name, so MuJoCo integrates the same ODE as the
-    MPC's analytic model (``tests/test_cart_pendulum_model.py`` shows they agree).
+    MPC's analytic model (``tests/tasks/cart_pendulum/test_cart_pendulum_model.py`` shows they agree).
 """
 
 from __future__ import annotations

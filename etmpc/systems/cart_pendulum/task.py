@@ -5,7 +5,7 @@ interval. Each interval draws an unmeasured angular disturbance ``w ~ N(0, 1)`` 
 as the generalised force ``M(q) e_hinge w``, refreshed before every physics step, so it produces
 the angular acceleration ``w`` the paper adds to ``omega_dot`` (exactly at the start of each
 physics step; MuJoCo holds the force over the step's RK4 stages, so the cart coupling lags by up
-to one 0.025 s step: ~1e-3 over 2 s, see tests/test_cart_pendulum_model.py).
+to one 0.025 s step: ~1e-3 over 2 s, see tests/tasks/cart_pendulum/test_cart_pendulum_model.py).
 
 Two plant settings, ``mismatched`` (the default) and ``matched``: see ``physics.py``.
 

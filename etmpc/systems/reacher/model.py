@@ -13,7 +13,7 @@ about it), viscous damping ``b`` at each joint:
 
 ``models/reacher.xml`` shares these conventions; its default plant is heavier, stiffer to turn and
 more damped than this model (see its header), and its ``matched`` setting is this model
-(``tests/test_reacher.py`` shows MuJoCo and this ODE agree there).
+(``tests/tasks/reacher/test_reacher.py`` shows MuJoCo and this ODE agree there).
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@ Two plant settings (see the MJCF header for the numbers):
   * ``"mismatched"`` (default): the MJCF as written: heavier links, 1.2 times the rods' rotational
     inertia and more joint damping than the analytic model knows;
   * ``"matched"``: those differences removed by name, so MuJoCo integrates the MPC's analytic model
-    (``tests/test_reacher.py`` shows they agree).
+    (``tests/tasks/reacher/test_reacher.py`` shows they agree).
 
 The target is a mocap body: the task moves it (``set_target``) to show where the fingertip should
 go; it does not act on the arm.

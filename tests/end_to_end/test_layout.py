@@ -1,0 +1,105 @@
+"""The package's shape: floors that import only downwards (import-linter's contracts in pyproject.toml),
+no import circle at all, rooms of one job (no module over 400 lines), packages that say what they hold,
+and tests that mirror the package."""
+
+import importlib
+import pkgutil
+import subprocess
+import sys
+from pathlib import Path
+
+import grimp
+
+import etmpc
+
+from tests.conftest import REPO
+
+PACKAGE = REPO / "etmpc"
+TESTS = REPO / "tests"
+
+
+def test_the_import_contracts_hold():
+    """Floors (cli > experiments > learning > envs > evaluation > views > policies > loop | suite > systems >
+    control > common: pyproject.toml's [tool.importlinter]), no cycles among siblings at any depth, the spec
+    registry above the policies, domains apart."""
+    lint = Path(sys.executable).with_name("lint-imports")
+    result = subprocess.run([str(lint), "--config", str(REPO / "pyproject.toml")], cwd=REPO, capture_output=True, text=True)
+    assert result.returncode == 0, result.stdout[-3000:]
+    assert "BROKEN" not in result.stdout and result.stdout.count("KEPT") >= 4
+
+
+def _strongly_connected(graph: grimp.ImportGraph) -> list[set[str]]:
+    """Tarjan's components of the module graph, function-level imports included."""
+    modules = sorted(graph.modules)
+    edges = {m: sorted(graph.find_modules_directly_imported_by(m)) for m in modules}
+    index, low, stack, on_stack, components = {}, {}, [], set(), []
+
+    def visit(v):
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in edges[v]:
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = set()
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.add(w)
+                if w == v:
+                    break
+            components.append(component)
+
+    sys.setrecursionlimit(max(sys.getrecursionlimit(), 10 * len(modules)))
+    for m in modules:
+        if m not in index:
+            visit(m)
+    return components
+
+
+def test_no_module_is_on_an_import_circle():
+    graph = grimp.build_graph("etmpc")
+    assert len(graph.modules) > 40
+    circles = [sorted(c) for c in _strongly_connected(graph) if len(c) > 1]
+    assert circles == []
+
+
+def test_rooms_of_one_job():
+    sizes = {p.relative_to(REPO).as_posix(): len(p.read_text().splitlines()) for p in PACKAGE.rglob("*.py")}
+    assert {name: n for name, n in sizes.items() if n > 400} == {}
+    assert {name: n for name, n in sizes.items() if name.startswith("etmpc/cli/") and n > 250} == {}
+
+
+def test_every_package_says_what_it_holds_and_what_it_may_import():
+    for info in pkgutil.walk_packages(etmpc.__path__, "etmpc."):
+        if not info.ispkg or info.name.startswith("etmpc._data"):
+            continue
+        doc = importlib.import_module(info.name).__doc__ or ""
+        assert len(doc.split()) >= 15, info.name
+        top = info.name.split(".")[1]
+        if info.name.count(".") == 1 and top not in ("cli",):  # the floors
+            assert "may import" in doc, info.name
+
+
+def test_the_tests_mirror_the_package():
+    """Every test file sits in a folder named for what it tests: a floor (tests/evaluation/ for
+    etmpc/evaluation/), a built-in domain (tests/tasks/battery/), or tests/end_to_end/ for what checks
+    the whole product; none is left flat in tests/ but conftest.py. Each folder is a package, so that two
+    files in different folders may share a name."""
+    from etmpc.systems.registry import BUILT_IN
+
+    floors = {info.name for info in pkgutil.iter_modules(etmpc.__path__) if info.ispkg and not info.name.startswith("_")}
+    assert {"common", "systems", "evaluation", "cli"} <= floors
+    allowed = {*floors, "end_to_end", "tasks", *(f"tasks/{domain}" for domain in BUILT_IN)}
+    folders = {p.relative_to(TESTS).as_posix() for p in TESTS.rglob("*")
+               if p.is_dir() and "__pycache__" not in p.parts and not p.name.startswith(".")}
+    assert folders - allowed == set()
+    assert [f for f in sorted(folders | {"."}) if not (TESTS / f / "__init__.py").is_file()] == []
+    flat = {p.name for p in TESTS.glob("*.py")} - {"__init__.py", "conftest.py"}
+    assert flat == set()
+    assert [p.name for p in (TESTS / "tasks").glob("*.py") if p.name != "__init__.py"] == []  # a task's tests in its domain
+    assert len(list(TESTS.rglob("test_*.py"))) > 50

@@ -1,0 +1,106 @@
+"""The generated leaderboard: its references score 0 and 100, every row says what it cost, an interrupted
+run continues without playing again, and the README's table is the page's, generated from its JSON."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from etmpc.experiments import leaderboard
+from etmpc.experiments.leaderboard import BEGIN, END, build, headline, table_in
+
+from tests.conftest import REPO
+
+
+
+@pytest.fixture(scope="module")
+def board(tmp_path_factory):
+    out = tmp_path_factory.mktemp("board")
+    readme = out / "README.md"
+    readme.write_text(f"# etmpc\n\n{BEGIN}\n(the table goes here)\n{END}\n\nthe rest\n")
+    data = build(out / "docs", out / "work", ["battery"], episodes=2, workers=1, readme=readme)
+    return out, data
+
+
+def test_the_references_score_0_and_100_and_every_row_says_what_it_cost(board):
+    _, data = board
+    rows = {e["name"]: e["rows"][0] for e in data["entries"]}
+    shipped = {name for name, file, _, _ in leaderboard.shipped_learners() if leaderboard.shipped_policy("battery", file)}
+    assert "DPI (shipped)" in shipped
+    assert set(rows) == {"always", "best periodic", "best threshold", "rollout meter", "oracle"} | shipped
+    assert rows["best periodic"]["score"] == 0.0 and rows["oracle"]["score"] == 100.0
+    assert all(r["error"] is None and r["cpu_ms"]["total"] > 0 for r in rows.values())
+    assert rows["rollout meter"]["cpu_ms"]["decide"] > rows["best periodic"]["cpu_ms"]["decide"]  # its net cost shows
+    assert data["generated"]["commit"] and data["generated"]["software"]["etmpc"]
+
+
+def test_the_page_and_the_readme_hold_the_table_made_from_the_json(board):
+    out, data = board
+    table = headline(json.loads((out / "docs" / "leaderboard.json").read_text()))
+    assert table == headline(data)
+    assert table_in((out / "docs" / "leaderboard.md").read_text()) == table
+    text = (out / "README.md").read_text()
+    assert table_in(text) == table and text.endswith("the rest\n")
+    assert (out / "docs" / "leaderboard_profile.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_an_interrupted_run_continues_without_playing_a_finished_row_again(board, monkeypatch):
+    out, data = board
+
+    def no_play(*args, **kwargs):
+        raise AssertionError("played again")
+
+    monkeypatch.setattr(leaderboard, "play_and_score", no_play)
+    monkeypatch.setattr(leaderboard, "best_threshold", lambda task, workers, say: data["entries"][2]["specs"][task])
+    again = build(out / "again", out / "work", ["battery"], episodes=2, workers=1)
+    assert headline(again) == headline(data)
+
+
+def test_the_readmes_headline_table_is_the_generated_leaderboards():
+    generated = json.loads((REPO / "docs" / "leaderboard.json").read_text())
+    table = headline(generated)
+    assert table_in((REPO / "README.md").read_text()) == table
+    assert table_in((REPO / "docs" / "leaderboard.md").read_text()) == table
+    names = [e["name"] for e in generated["entries"]]
+    assert generated["episodes"] == 100 and len(generated["tasks"]) == 4 and "DPI (shipped)" in names
+
+
+def test_a_row_is_played_again_when_the_policy_file_behind_its_spec_changed(tmp_path, monkeypatch):
+    # A shipped policy retrained in place keeps its path, so its spec; its finished row must not stand.
+    policy = tmp_path / "policies" / "cart_pendulum" / "learned.json"
+    policy.parent.mkdir(parents=True)
+    policy.write_bytes((REPO / "policies" / "cart_pendulum" / "learned.json").read_bytes())
+    entry = leaderboard.Entry("DPI (shipped)", "learned", {"cart_pendulum": f"rl:{policy}"})
+    refs = leaderboard.stored("cart_pendulum")
+    played = []
+    real = leaderboard.play_and_score
+    monkeypatch.setattr(leaderboard, "play_and_score", lambda *a, **k: played.append(a[2]) or real(*a, **k))
+    first, _ = leaderboard._row(entry, "cart_pendulum", refs, tmp_path / "work", 1, 1, lambda line: None)
+    again, _ = leaderboard._row(entry, "cart_pendulum", refs, tmp_path / "work", 1, 1, lambda line: None)
+    assert len(played) == 1 and again == first  # unchanged: kept
+    data = json.loads(policy.read_text())
+    data["theta"] = [0.0] * (len(data["theta"]) - 1) + [5.0]  # keeps every plan it may
+    policy.write_text(json.dumps(data))
+    changed, _ = leaderboard._row(entry, "cart_pendulum", refs, tmp_path / "work", 1, 1, lambda line: None)
+    assert len(played) == 2 and changed.episode_scores != first.episode_scores
+
+
+def test_a_verified_card_joins_as_a_row_and_a_forged_one_is_refused_before_any_row(board, monkeypatch, tmp_path):
+    from etmpc.cli import main
+    from etmpc.common.errors import EtmpcError
+
+    out, data = board
+    card = tmp_path / "card.json"
+    assert main(["score", "every:2", "--task", "battery", "--episodes", "2", "--workers", "1", "--json", str(card)]) == 0
+    monkeypatch.setattr(leaderboard, "play_and_score", lambda *a, **k: pytest.fail("a row was played"))
+    monkeypatch.setattr(leaderboard, "best_threshold", lambda task, workers, say: data["entries"][2]["specs"][task])
+    joined = build(tmp_path / "docs", out / "work", ["battery"], episodes=2, workers=1, cards=[card])
+    entry = next(e for e in joined["entries"] if e["name"] == "every:2 (submitted)")
+    assert entry["kind"] == "submitted" and entry["specs"] == {"battery": "every:2"}
+    assert entry["rows"][0]["episode_scores"] == json.loads(card.read_text())["rows"][0]["episode_scores"]
+    forged = json.loads(card.read_text())
+    forged["rows"][0]["score"] += 10.0
+    (tmp_path / "forged.json").write_text(json.dumps(forged))
+    with pytest.raises(EtmpcError, match="does not verify"):
+        build(tmp_path / "docs", out / "work", ["battery"], episodes=2, workers=1, cards=[tmp_path / "forged.json"])

@@ -1,0 +1,234 @@
+"""`etmpc reproduce` end to end at a tiny size: the report's numbers are the JSON's, the JSON's are a
+direct evaluation's, and a second run continues rather than redoes."""
+
+import json
+
+import numpy as np
+import pytest
+
+import etmpc
+from etmpc.common.errors import EtmpcError
+from etmpc.evaluation.evaluate import evaluate
+from etmpc.views.replay import replay_summary
+from etmpc.experiments import sweep as sweeps
+from etmpc.experiments.reproduce import Settings, reproduce
+from etmpc.experiments.report import PAPER
+from etmpc.systems import folder_name, make_system, names
+
+from tests.conftest import REPO
+
+TINY = Settings(seeds=(0, 1), episodes=2, eval_every=1, eval_episodes=2, test_episodes=3, repeats=2, record_episodes=1,
+                video_size=(64, 48), dpi_seeds=(0, 1), dpi_episodes=2, dpi_eval_every=1, dpi_labels=3, dpi_futures=2,
+                dpi_horizon=5, validation_episodes=2, rollout_episodes=2, rollout_futures=2, rollout_horizon=5,
+                ppo_timesteps=512)
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("reproduce")
+    return out, reproduce(out, TINY, workers=1, progress=False)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("domain", ["cart_pendulum", "battery"])
+def test_json_equals_a_direct_evaluation(run, domain):
+    out, results = run
+    r = results["systems"][domain]
+    fixed = evaluate(domain, make_system(domain).benchmark.baselines(), episodes=3, workers=1, progress=False)
+    for s in fixed.summaries:
+        assert r["fixed"][s.policy]["objective_mean"] == s.objective_mean
+        assert r["fixed"][s.policy]["recomputes_mean"] == s.recomputes_mean
+    sign = 1 if r["objective_sense"] == "max" else -1
+    best = max(fixed.summaries, key=lambda s: sign * s.objective_mean)
+    assert r["best_fixed"]["policy"] == best.policy
+
+    specs = [f"rl:{out / domain / 'train' / f'seed{s}' / 'last.json'}" for s in TINY.seeds]
+    learned = evaluate(domain, specs, episodes=3, repeats=2, workers=1, progress=False)
+    assert r["learned"]["objective_mean"] == pytest.approx(np.mean([x.objective for x in learned.runs]), rel=1e-12)
+    assert r["learned"]["per_seed"] == [s.objective_mean for s in learned.summaries]
+    # The paired comparison, recomputed here from the two direct evaluations.
+    diff = [np.mean([x.objective for x in learned.runs if x.episode == e])
+            - next(x.objective for x in fixed.runs if x.policy == best.policy and x.episode == e) for e in range(3)]
+    assert r["paired"]["mean_difference"] == pytest.approx(np.mean(diff), rel=1e-12)
+    assert r["paired"]["ci95"] == pytest.approx(1.96 * np.std(diff, ddof=1) / np.sqrt(3), rel=1e-12)
+
+
+@pytest.mark.slow
+def test_the_report_scores_what_the_run_trained_against_the_suites_references(run):
+    out, results = run
+    report = (out / "REPORT.md").read_text().split("## The scorecard")[1]
+    for name, r in results["systems"].items():
+        card = r["scorecard"]
+        assert card["references"]["episodes"] == 3  # the run's test-set episodes: the references of those
+        rows = card["rows"]
+        assert rows["best periodic"]["score"] == 0.0  # the reference, played by the run, scores exactly 0
+        assert {"best periodic", "best fixed", "DPI", "PPO"} <= set(rows) and (("GPOMDP seed 0" in rows) == (name in PAPER))
+        dpi = rows["DPI"]
+        direct = etmpc.score([dpi["policy"]], tasks=[name], workers=1, progress=False, episodes=3).rows[0]
+        assert dpi["score"] == direct.score and dpi["episode_scores"] == direct.episode_scores
+        assert f"{dpi['score']:.1f} ± {dpi['score_ci95']:.1f}" in report
+
+
+@pytest.mark.slow
+def test_report_states_the_json_numbers_and_the_files_exist(run):
+    out, results = run
+    report = (out / "REPORT.md").read_text()
+    assert json.loads((out / "results.json").read_text())["systems"] == results["systems"]
+    assert set(results["systems"]) == set(names())  # every registered task, the paper's and the others
+    for name, r in results["systems"].items():
+        folder, best = folder_name(name), r["best_fixed"]
+        assert f"| `{best['policy']}` **(best fixed)** | {best['objective_mean']:.5f} |" in report
+        default = r["default_learner"]["paired"]
+        assert f"gain {default['gain_percent']:+.2f} % ± {default['gain_percent_ci95']:.2f} %" in report
+        learned = {f"rl:{out / 'policies' / folder / 'learned.json'}"}
+        if name in PAPER:  # the paper's learner (GPOMDP) runs on the paper's tasks only
+            assert f"{r['paired']['mean_difference']:+.5f} ± {r['paired']['ci95']:.5f}" in report
+            assert f"| learned (2 seeds x 2 passes) | {r['learned']['objective_mean']:.5f} |" in report
+            learned.add(f"rl:{out / folder / 'train' / 'seed0' / 'last.json'}")
+        else:
+            assert "paired" not in r and "learned" not in r["files"]
+        for file in r["files"].values():
+            assert (out / file).is_file() and (out / file).stat().st_size > 0, file
+        replayed = replay_summary(out / folder / "episodes.rrd")
+        assert {e.policy for e in replayed} == {best["policy"], *learned}
+    against = report.split("## Against the paper")[1]
+    for domain, r in results["systems"].items():
+        if domain not in PAPER:
+            continue
+        (claim,) = [line for line in against.splitlines() if f"best on {domain}," in line]
+        verdict = "Holds" if r["margin_percent"] > 0 and r["paired"]["ci95"] < abs(r["paired"]["mean_difference"]) else "Does not hold"
+        assert verdict in claim and f"{r['margin_percent']:+.2f} %" in claim
+    assert results["software"]["mujoco"] == "3.17.0" and results["machine"]["cores"] >= 1
+
+
+@pytest.mark.slow
+def test_a_second_run_continues_and_other_settings_are_refused(run):
+    out, results = run
+    mtimes = {p: p.stat().st_mtime_ns for p in out.rglob("*") if p.is_file() and p.name not in ("results.json", "REPORT.md")}
+    again = reproduce(out, TINY, workers=1, progress=False)
+    assert again["systems"] == results["systems"]
+    assert {p: p.stat().st_mtime_ns for p in mtimes} == mtimes  # nothing was redone
+    with pytest.raises(EtmpcError, match="other settings"):
+        reproduce(out, Settings(seeds=(0,), episodes=2, eval_every=1, test_episodes=3), workers=1, progress=False)
+
+
+@pytest.mark.slow
+def test_make_sweep_adds_the_trade_off_curves_to_a_finished_run(tmp_path, monkeypatch):
+    """`make reproduce`, then `make sweep` on the same directory: the second redoes no stage of the
+    first, and adds each task's sweep (exactly its pareto.json) and its section to the report."""
+    tiny = sweeps.SweepSettings(prices=(0.0, 1e-3), episodes=1, thresholds=(0.01,), futures=1, horizon=2, learner=None,
+                                self_trigger=None)
+    monkeypatch.setattr(sweeps.SweepSettings, "default", classmethod(lambda cls, domain, quick=False: tiny))
+    first = reproduce(tmp_path, TINY, workers=1, domains=["battery"], progress=False)
+    mtimes = {p: p.stat().st_mtime_ns for p in tmp_path.rglob("*") if p.is_file() and p.name not in ("results.json", "REPORT.md")}
+    second = reproduce(tmp_path, TINY, workers=1, domains=["battery"], progress=False, sweep=True)
+    assert {p: p.stat().st_mtime_ns for p in mtimes} == mtimes  # nothing was redone
+    assert "sweep" not in first and second["systems"] == first["systems"]
+    pareto = json.loads((tmp_path / "sweep" / "battery" / "pareto.json").read_text())
+    assert second["sweep"]["battery"]["points"] == pareto["points"]
+    assert "![trade-off](sweep/battery/pareto.png)" in (tmp_path / "REPORT.md").read_text()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("domain", ["cart_pendulum", "battery"])
+def test_headroom_and_the_default_learner_are_direct_evaluations(run, domain):
+    out, results = run
+    r = results["systems"][domain]
+    best, sense = r["best_fixed"]["policy"], r["objective_sense"]
+    sign = 1 if sense == "max" else -1
+    # The shipped policy is the validation-chosen seed's final DPI policy, byte for byte in content.
+    selected = json.loads((out / domain / "train_dpi" / "selected.json").read_text())
+    assert json.loads((out / "policies" / domain / "learned.json").read_text()) == selected
+    validation = r["default_learner"]["validation"]
+    assert selected["hyperparameters"]["seed"] == int((max if sense == "max" else min)(validation, key=validation.get))
+    # Each headroom row is that policy's evaluation, paired with the best fixed one on the same episodes.
+    direct = evaluate(domain, [f"rollout:{best}:2:5", f"oracle:{best}", best], episodes=2, workers=1, progress=False)
+    by = {(x.policy, x.episode): x.objective for x in direct.runs}
+    for key, spec in (("rollout", f"rollout:{best}:2:5"), ("oracle", f"oracle:{best}")):
+        row = r["headroom"]["rows"][key]
+        diff = [by[spec, e] - by[best, e] for e in range(2)]
+        assert row["policies"] == [spec] and row["mean_difference"] == pytest.approx(np.mean(diff), rel=1e-12, abs=1e-15)
+        assert row["gain_percent"] == pytest.approx(100 * sign * np.mean(diff) / abs(np.mean([by[best, e] for e in range(2)])))
+    report = (out / "REPORT.md").read_text()
+    assert f"`oracle:{best}`" in report and "**not a policy**" in report
+
+
+@pytest.mark.slow
+def test_a_smoke_report_says_so_at_its_top_and_gives_no_verdicts(run):
+    from etmpc.experiments.report import report
+
+    _, results = run
+    smoke = dict(results, settings=dict(results["settings"], smoke=True))
+    text = report(smoke)
+    assert "smoke run" in text.split("## ")[0]
+    assert "Holds" not in text and "Does not hold" not in text and "exclude 0" not in text
+    assert "No verdicts in a smoke run." in text
+
+
+@pytest.mark.slow
+def test_the_learners_row_of_ppo_is_its_network_evaluated_against_the_best_fixed_policy(run):
+    pytest.importorskip("stable_baselines3")
+    out, results = run
+    r = results["systems"]["battery"]
+    row, best = r["learners"]["ppo"], r["learners"]["reference"]
+    spec = f"sb3:{out / 'battery' / 'train_ppo' / 'selected.zip'}"
+    direct = evaluate("battery", [spec, best], episodes=3, workers=1, progress=False)
+    by = {(x.policy, x.episode): x.objective for x in direct.runs}
+    assert row["policies"] == [spec] and row["episodes"] == 3
+    assert row["mean_difference"] == pytest.approx(np.mean([by[spec, e] - by[best, e] for e in range(3)]), rel=1e-12, abs=1e-15)
+    assert row["training"]["environment_steps"] == 512 and row["training"]["wall_seconds"] > 0
+    assert "PPO (Stable-Baselines3, `sb3:`)" in (out / "REPORT.md").read_text()
+
+
+def test_the_docs_results_page_is_the_runs_report_with_its_provenance_and_figures(run, tmp_path):
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("results_pages", REPO / "scripts" / "results_pages.py")
+    pages = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(pages)
+    out, _ = run
+    page = pages.write_pages(out, tmp_path / "results").read_text()
+    # the run's directory as it is now: another test continues the run, which writes results.json again
+    results = json.loads((out / "results.json").read_text())
+    assert f"commit {results['provenance']['commit']}" in page and results["provenance"]["date"] in page
+    report = (out / "REPORT.md").read_text()
+    lines = page.splitlines()
+    assert all(line in lines for line in report.splitlines()[1:] if "![" not in line)  # the run's report, whole
+    shown = pages.IMAGE.findall(page)
+    assert shown and all((tmp_path / "results" / target).is_file() for _, target in shown)
+
+
+@pytest.mark.slow
+def test_the_run_ships_ppo_with_its_hyperparameters_and_draws_every_learners_sample_efficiency(run):
+    pytest.importorskip("stable_baselines3")
+    out, results = run
+    for name, r in results["systems"].items():
+        folder = folder_name(name)
+        ppo_dir, shipped = out / folder / "train_ppo", out / "policies" / folder
+        training = json.loads((ppo_dir / "training.json").read_text())
+        # The chosen network and its description, copied as they are, with the hyperparameters it used.
+        assert (shipped / "ppo.zip").read_bytes() == (ppo_dir / "selected.zip").read_bytes()
+        assert (shipped / "ppo.json").read_bytes() == (ppo_dir / "selected.json").read_bytes()
+        from etmpc.learning import hyperparams
+        used = hyperparams.load(shipped / "ppo.yml", name)
+        assert used.timesteps == 512 and used.reward_baseline == hyperparams.shipped(name).reward_baseline
+        # PPO's curve is its checkpoints on the test set; its last point is what the run simulated, the
+        # baseline's lockstep simulation included (no task's episode fails here: twice the agent's steps).
+        curves = r["efficiency"]
+        assert [p["timesteps"] for p in curves["ppo"]] == [c["timesteps"] for c in training["checkpoints"]]
+        assert curves["ppo"][-1]["simulated_steps"] == training["simulated_steps"] == 2 * training["environment_steps"]
+        assert ("gpomdp" in curves) == (name in PAPER) and len(curves["dpi"]) == TINY.dpi_episodes // TINY.dpi_eval_every + 1
+        row = r["learners"]["dpi"]["training"]
+        assert row["simulated_steps_per_seed"] == curves["dpi"][-1]["simulated_steps"] and row["wall_seconds"] > 0
+        assert (out / r["files"]["efficiency"]).read_bytes()[:4] == b"\x89PNG"
+    report = (out / "REPORT.md").read_text()
+    assert "simulated steps per run" in report and "![sample efficiency](battery/efficiency.png)" in report
+
+
+@pytest.mark.slow
+def test_the_papers_learner_trains_on_the_papers_features_as_the_report_says(run):
+    out, _ = run
+    for name in PAPER:
+        config = json.loads((out / folder_name(name) / "train" / "checkpoint.json").read_text())["config"]
+        assert config["algorithm"] == "gpomdp" and config["features"] == "paper"
+    assert "GPOMDP, paper features" in (out / "REPORT.md").read_text()
