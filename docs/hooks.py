@@ -30,8 +30,16 @@ def _commands(parser: argparse.ArgumentParser, prefix: str, level: str) -> list[
     parts = []
     for name, command in sub.choices.items():
         summary = summaries.get(name) or ""
-        parts += [f"{level} {prefix} {name}", "", f"{summary[:1].upper()}{summary[1:]}.", "", "```text",
-                  command.format_help().rstrip(), "```", ""]
+        parts += [
+            f"{level} {prefix} {name}",
+            "",
+            f"{summary[:1].upper()}{summary[1:]}.",
+            "",
+            "```text",
+            command.format_help().rstrip(),
+            "```",
+            "",
+        ]
         parts += _commands(command, f"{prefix} {name}", level + "#")
     return parts
 

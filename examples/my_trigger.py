@@ -61,8 +61,9 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=None, help="first N test-set episodes (default: all 100)")
     parser.add_argument("--workers", type=int, default=None, help="worker processes (default: one per core)")
     args = parser.parse_args()
-    result = etmpc.evaluate("cart_pendulum", ["every:3", "threshold:0.3", AngleOrAge()], episodes=args.episodes,
-                            workers=args.workers, progress=False)
+    result = etmpc.evaluate(
+        "cart_pendulum", ["every:3", "threshold:0.3", AngleOrAge()], episodes=args.episodes, workers=args.workers, progress=False
+    )
     print(format_table(result))
     print(format_against(result.to_json(), "every:3"))
 

@@ -63,9 +63,11 @@ def main() -> None:
         for _ in range(args.rounds):
             loop_best = max(loop_best, loop_rate(system, env, episodes))
             env_best = max(env_best, env_rate(gym_env, episodes))
-        print(f"{task}: loop {loop_best:,.0f} steps/s, environment {env_best:,.0f} steps/s, "
-              f"loop / environment {loop_best / env_best:.2f} (best of {args.rounds} alternating rounds, "
-              f"{args.episodes} episodes each, every:3)")
+        print(
+            f"{task}: loop {loop_best:,.0f} steps/s, environment {env_best:,.0f} steps/s, "
+            f"loop / environment {loop_best / env_best:.2f} (best of {args.rounds} alternating rounds, "
+            f"{args.episodes} episodes each, every:3)"
+        )
 
 
 if __name__ == "__main__":

@@ -50,8 +50,10 @@ def compare(old_path: str, new_path: str) -> None:
     print(f"{'row':56s} {'old s/ep':>9s} {'new s/ep':>9s} {'speed-up':>9s}  same numbers")
     for row, a in old["rows"].items():
         b = new["rows"][row]
-        print(f"{row:56s} {a['cpu_s_per_episode']:9.3f} {b['cpu_s_per_episode']:9.3f} "
-              f"{a['cpu_s_per_episode'] / b['cpu_s_per_episode']:8.2f}x  {a['objectives_sha256'] == b['objectives_sha256']}")
+        print(
+            f"{row:56s} {a['cpu_s_per_episode']:9.3f} {b['cpu_s_per_episode']:9.3f} "
+            f"{a['cpu_s_per_episode'] / b['cpu_s_per_episode']:8.2f}x  {a['objectives_sha256'] == b['objectives_sha256']}"
+        )
 
 
 def main() -> None:

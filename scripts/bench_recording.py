@@ -42,8 +42,10 @@ def main(argv=None) -> int:
                     recorded.append(time.perf_counter() - started)
                 episodes = len(result.runs)
                 size = path.stat().st_size
-                print(f"{task:<15}{spec:<12}{min(plain):>9.2f}{min(recorded):>12.2f}{min(recorded) / min(plain):>8.2f}"
-                      f"{size / 1e6:>10.1f}{size / 1e3 / episodes:>12.0f}")
+                print(
+                    f"{task:<15}{spec:<12}{min(plain):>9.2f}{min(recorded):>12.2f}{min(recorded) / min(plain):>8.2f}"
+                    f"{size / 1e6:>10.1f}{size / 1e3 / episodes:>12.0f}"
+                )
     return 0
 
 

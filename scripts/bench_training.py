@@ -59,8 +59,15 @@ def _job(job: tuple) -> dict:
         results = [evaluate_theta(domain, testset.sha256, policy_json, 0, e % testset.episodes) for e in range(episodes)]
         recomputes = float(np.mean([r[2] for r in results]))
     elapsed = time.perf_counter() - started
-    return {"kind": kind, "seed": seed, "episodes": episodes, "seconds": elapsed, "recomputes": recomputes,
-            "pid": os.getpid(), "maxrss_mib": peak_rss_mib()}
+    return {
+        "kind": kind,
+        "seed": seed,
+        "episodes": episodes,
+        "seconds": elapsed,
+        "recomputes": recomputes,
+        "pid": os.getpid(),
+        "maxrss_mib": peak_rss_mib(),
+    }
 
 
 def main(argv=None) -> int:
@@ -85,21 +92,29 @@ def main(argv=None) -> int:
         policies["mostly keeps (bias +3)"] = keeper.to_json()
 
     # Two measurements per policy and kind, so each worker does both kinds of work.
-    jobs = [(kind, args.task, policy, seed, args.episodes)
-            for policy in policies.values() for kind in ("train", "evaluate") for seed in range(args.workers)]
+    jobs = [
+        (kind, args.task, policy, seed, args.episodes)
+        for policy in policies.values()
+        for kind in ("train", "evaluate")
+        for seed in range(args.workers)
+    ]
     started = time.perf_counter()
     with make_backend(args.backend, args.workers) as backend:
         results = backend.map(_job, jobs)
     wall = time.perf_counter() - started
 
     rates = {}
-    print(f"{args.task}: {args.episodes} episodes per measurement, {args.workers} workers ({args.backend}), "
-          f"measured together in {wall:.1f} s")
+    print(
+        f"{args.task}: {args.episodes} episodes per measurement, {args.workers} workers ({args.backend}), "
+        f"measured together in {wall:.1f} s"
+    )
     print(f"{'policy':<44}{'train ep/s':>12}{'eval ep/s':>12}{'recomputes':>12}   (per worker)")
     for i, name in enumerate(policies):
-        mine = results[i * 2 * args.workers:(i + 1) * 2 * args.workers]
-        rate = {kind: sum(r["episodes"] for r in mine if r["kind"] == kind) / sum(r["seconds"] for r in mine if r["kind"] == kind)
-                for kind in ("train", "evaluate")}
+        mine = results[i * 2 * args.workers : (i + 1) * 2 * args.workers]
+        rate = {
+            kind: sum(r["episodes"] for r in mine if r["kind"] == kind) / sum(r["seconds"] for r in mine if r["kind"] == kind)
+            for kind in ("train", "evaluate")
+        }
         recomputes = np.mean([r["recomputes"] for r in mine if r["kind"] == "train"])
         rates[name] = dict(rate, recomputes=float(recomputes))
         print(f"{name:<44}{rate['train']:>12.2f}{rate['evaluate']:>12.2f}{recomputes:>12.1f}")
@@ -116,17 +131,31 @@ def main(argv=None) -> int:
     for name, rate in rates.items():
         projections[name] = (train_episodes / rate["train"] + eval_episodes / rate["evaluate"]) / args.workers
     start_name = next(iter(rates))
-    print(f"paper protocol ({seeds} seeds x {episodes} episodes, {eval_episodes} evaluation episodes), "
-          f"projected on {args.workers} workers:")
+    print(
+        f"paper protocol ({seeds} seeds x {episodes} episodes, {eval_episodes} evaluation episodes), "
+        f"projected on {args.workers} workers:"
+    )
     for name, seconds in projections.items():
         print(f"  at the rates of {name}: {seconds / 60:.1f} min (target <= 15 min)")
     print(f"  the real run lies between these: it starts at the rates of '{start_name}'")
 
     if args.json:
         with open(args.json, "w") as f:
-            json.dump({"task": args.task, "episodes": args.episodes, "workers": args.workers, "backend": args.backend,
-                       "wall_seconds": wall, "rates": rates, "peak_rss_mib": list(peak.values()),
-                       "protocol_projection_seconds": projections, "results": results}, f, indent=2)
+            json.dump(
+                {
+                    "task": args.task,
+                    "episodes": args.episodes,
+                    "workers": args.workers,
+                    "backend": args.backend,
+                    "wall_seconds": wall,
+                    "rates": rates,
+                    "peak_rss_mib": list(peak.values()),
+                    "protocol_projection_seconds": projections,
+                    "results": results,
+                },
+                f,
+                indent=2,
+            )
         print(f"wrote {args.json}")
     return 0
 

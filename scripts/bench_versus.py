@@ -24,15 +24,22 @@ REPO = Path(__file__).resolve().parents[1]
 
 def _bench(tree: Path, tasks: list[str], episodes: int, out: Path) -> dict:
     env = dict(os.environ, PYTHONPATH=str(tree), MUJOCO_GL=os.environ.get("MUJOCO_GL", "egl"))
-    subprocess.run([sys.executable, "-m", "etmpc.cli", "bench", *tasks, "--episodes", str(episodes), "--no-reference",
-                    "--json", str(out)], cwd=tree, env=env, check=True, stdout=subprocess.DEVNULL)
+    subprocess.run(
+        [sys.executable, "-m", "etmpc.cli", "bench", *tasks, "--episodes", str(episodes), "--no-reference", "--json", str(out)],
+        cwd=tree,
+        env=env,
+        check=True,
+        stdout=subprocess.DEVNULL,
+    )
     return json.loads(out.read_text())
 
 
 def _metrics(figures: dict) -> dict[str, tuple[float, bool]]:
     """name -> (value, higher is better)."""
-    m = {"MPC solve median (ms)": (figures["mpc_solve"]["median_ms"], False),
-         "rest of a step, dm_env path (us)": (figures["rest_of_step"]["median_us"], False)}
+    m = {
+        "MPC solve median (ms)": (figures["mpc_solve"]["median_ms"], False),
+        "rest of a step, dm_env path (us)": (figures["rest_of_step"]["median_us"], False),
+    }
     if "rollout_step" in figures:
         m["rollout step, no solve (us)"] = (figures["rollout_step"]["median_us"], False)
     for spec, rate in figures["episodes_per_second"].items():
@@ -50,8 +57,12 @@ def main(argv=None) -> int:
 
     with tempfile.TemporaryDirectory(prefix="etmpc-versus-") as tmp:
         old = Path(tmp) / "old"
-        subprocess.run(["git", "-C", str(REPO), "worktree", "add", "--detach", str(old), args.rev], check=True,
-                       stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        subprocess.run(
+            ["git", "-C", str(REPO), "worktree", "add", "--detach", str(old), args.rev],
+            check=True,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
         try:
             rounds = {"old": [], "new": []}
             for r in range(args.rounds):
@@ -61,7 +72,9 @@ def main(argv=None) -> int:
         finally:
             subprocess.run(["git", "-C", str(REPO), "worktree", "remove", "--force", str(old)], check=False)
 
-    rev = subprocess.run(["git", "-C", str(REPO), "rev-parse", "--short", args.rev], capture_output=True, text=True).stdout.strip()
+    rev = subprocess.run(
+        ["git", "-C", str(REPO), "rev-parse", "--short", args.rev], capture_output=True, text=True
+    ).stdout.strip()
     print(f"best of {args.rounds} rounds each, {args.episodes} test-set episodes; old = {rev}, new = this tree")
     for task in args.tasks:
         print(f"\n{task}\n{'':38}{'old':>10}{'new':>10}{'new better by':>15}")

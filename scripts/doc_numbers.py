@@ -111,8 +111,9 @@ def numbers(page: Path, text: str | None = None) -> list[Number]:
     found = []
     for match in MARKER.finditer(text):
         source, key, options = parse(match.group("spec"))
-        found.append(Number(page, text.count("\n", 0, match.start()) + 1, source, key, options, match.group("shown"),
-                            match.span("shown")))
+        found.append(
+            Number(page, text.count("\n", 0, match.start()) + 1, source, key, options, match.group("shown"), match.span("shown"))
+        )
     return found
 
 
@@ -149,7 +150,7 @@ def write(paths: list[Path], root: Path = ROOT) -> list[Path]:
         text = page.read_text()
         out, at = [], 0
         for n in numbers(page, text):
-            out += [text[at:n.span[0]], render(source_value(n, root, cache), n.options)]
+            out += [text[at : n.span[0]], render(source_value(n, root, cache), n.options)]
             at = n.span[1]
         new = "".join(out) + text[at:]
         if new != text:

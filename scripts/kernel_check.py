@@ -60,14 +60,20 @@ def settings() -> dict[str, dict[str, str]]:
     wide = [t for t in dispatch if t.startswith(("X86_V4", "AVX512"))]
     chosen = {"default": {}}
     chosen["SSE: OpenBLAS Prescott, numpy baseline loops"] = {
-        "OPENBLAS_CORETYPE": "Prescott", "NPY_DISABLE_CPU_FEATURES": " ".join(dispatch)}
+        "OPENBLAS_CORETYPE": "Prescott",
+        "NPY_DISABLE_CPU_FEATURES": " ".join(dispatch),
+    }
     if {"avx2", "fma"} <= flags:
         chosen["AVX2 machine: OpenBLAS Haswell, numpy and libm without AVX-512"] = {
-            "OPENBLAS_CORETYPE": "Haswell", "NPY_DISABLE_CPU_FEATURES": " ".join(wide),
-            "GLIBC_TUNABLES": "glibc.cpu.hwcaps=-AVX512F,-AVX512DQ,-AVX512BW,-AVX512VL,-AVX512CD"}
+            "OPENBLAS_CORETYPE": "Haswell",
+            "NPY_DISABLE_CPU_FEATURES": " ".join(wide),
+            "GLIBC_TUNABLES": "glibc.cpu.hwcaps=-AVX512F,-AVX512DQ,-AVX512BW,-AVX512VL,-AVX512CD",
+        }
         chosen["no FMA: OpenBLAS Prescott, numpy baseline, libm without AVX2/FMA"] = {
-            "OPENBLAS_CORETYPE": "Prescott", "NPY_DISABLE_CPU_FEATURES": " ".join(dispatch),
-            "GLIBC_TUNABLES": "glibc.cpu.hwcaps=-AVX2,-FMA,-AVX512F,-AVX"}
+            "OPENBLAS_CORETYPE": "Prescott",
+            "NPY_DISABLE_CPU_FEATURES": " ".join(dispatch),
+            "GLIBC_TUNABLES": "glibc.cpu.hwcaps=-AVX2,-FMA,-AVX512F,-AVX",
+        }
     if {"avx512f", "avx512dq", "avx512bw", "avx512vl", "avx512cd"} <= flags:
         chosen["AVX-512 machine: OpenBLAS SkylakeX"] = {"OPENBLAS_CORETYPE": "SkylakeX"}
     return chosen
@@ -90,8 +96,13 @@ def digests(episodes: int) -> dict[str, str]:
     from etmpc.evaluation.evaluate import evaluate
 
     policies = {
-        "cart_pendulum": ["always", "every:3", "threshold:0.3", f"rl:{ROOT / 'policies/cart_pendulum/learned.json'}",
-                          "rollout:every:3:2:5"],
+        "cart_pendulum": [
+            "always",
+            "every:3",
+            "threshold:0.3",
+            f"rl:{ROOT / 'policies/cart_pendulum/learned.json'}",
+            "rollout:every:3:2:5",
+        ],
         "battery": ["every:3", "threshold:0.01", f"rl:{ROOT / 'policies/battery/learned.json'}", "rollout:always:2:5"],
     }
     out = {}
@@ -107,8 +118,13 @@ def compare(episodes: int = 4) -> dict[str, dict[str, str]]:
     """Each setting's digests, computed in a fresh interpreter under that setting's environment."""
     found = {}
     for name, env in settings().items():
-        result = subprocess.run([sys.executable, __file__, "--digest", "--episodes", str(episodes)],
-                                env={**os.environ, **env}, capture_output=True, text=True, check=True)
+        result = subprocess.run(
+            [sys.executable, __file__, "--digest", "--episodes", str(episodes)],
+            env={**os.environ, **env},
+            capture_output=True,
+            text=True,
+            check=True,
+        )
         found[name] = json.loads(result.stdout.strip().splitlines()[-1])
     return found
 

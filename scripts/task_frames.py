@@ -37,7 +37,7 @@ def main() -> None:
         played = play_test_episode(task, parse_policy("every:3", system), 0, 0, 0)
         path = args.out / f"{PICTURE.get(task, folder_name(task))}.png"
         if system.camera is not None:
-            frame = render_frames(system, system.make_env(), played.trajectory.states[args.step: args.step + 1], 480, 360)[0]
+            frame = render_frames(system, system.make_env(), played.trajectory.states[args.step : args.step + 1], 480, 360)[0]
             plt.imsave(path, frame)
         else:
             signals = system.signals(played.episode)

@@ -65,9 +65,14 @@ def features_while_kept():
 _RUNS_WHOLE = re.compile(r"""scope\s*=\s*["']module["']|\bxdist_group\b""")
 # The longest units (measured with two workers on 2 cores: about 150, 70, 45, 25, 20 and 15 s), started
 # first so that no worker is left with one of them at the end. Only the order: a file missing here is fine.
-_FIRST = ("tests/experiments/test_reproduce.py", "tests/end_to_end/test_packaging.py", "tests/end_to_end/test_ray.py",
-          "tests/end_to_end/test_kernels.py", "tests/experiments/test_leaderboard.py",
-          "tests/end_to_end/test_plugin_package.py")
+_FIRST = (
+    "tests/experiments/test_reproduce.py",
+    "tests/end_to_end/test_packaging.py",
+    "tests/end_to_end/test_ray.py",
+    "tests/end_to_end/test_kernels.py",
+    "tests/experiments/test_leaderboard.py",
+    "tests/end_to_end/test_plugin_package.py",
+)
 
 
 @pytest.hookimpl(optionalhook=True)

@@ -22,15 +22,32 @@ from etmpc.common.errors import EtmpcError, Terminated
 
 # MuJoCo's OpenGL backends on Linux (mujoco/rendering/classic/gl_context.py): anything else makes
 # importing dm-control fail, so the command checks it before importing anything that renders.
-GL_BACKENDS = ("egl", "osmesa", "glfw", "glx", "enable", "enabled", "on", "true", "1", "",
-               "disable", "disabled", "off", "false", "0")
+GL_BACKENDS = (
+    "egl",
+    "osmesa",
+    "glfw",
+    "glx",
+    "enable",
+    "enabled",
+    "on",
+    "true",
+    "1",
+    "",
+    "disable",
+    "disabled",
+    "off",
+    "false",
+    "0",
+)
 
 
 def _check_gl() -> None:
     backend = os.environ.get("MUJOCO_GL", "")
     if backend.lower().strip() not in GL_BACKENDS:
-        raise EtmpcError(f"MUJOCO_GL={backend} is not an OpenGL backend MuJoCo knows: use egl (headless, the default), "
-                         "osmesa (software) or glfw (with a display)")
+        raise EtmpcError(
+            f"MUJOCO_GL={backend} is not an OpenGL backend MuJoCo knows: use egl (headless, the default), "
+            "osmesa (software) or glfw (with a display)"
+        )
 
 
 def _terminate(signum, frame):
@@ -52,7 +69,9 @@ def main(argv: list[str] | None = None) -> int:
     plain = warnings.formatwarning  # etmpc's own warnings (a broken plugin's) as one line each: etmpc: warning: ...
     warnings.formatwarning = lambda message, category, *where: (
         f"etmpc: warning: {' '.join(str(message).removeprefix('etmpc: ').split())}\n"
-        if issubclass(category, RuntimeWarning) and str(message).startswith("etmpc: ") else plain(message, category, *where))
+        if issubclass(category, RuntimeWarning) and str(message).startswith("etmpc: ")
+        else plain(message, category, *where)
+    )
     try:
         _check_gl()
         from etmpc.cli import commands, options  # after the OpenGL check: importing dm-control picks the backend

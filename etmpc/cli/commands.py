@@ -38,8 +38,18 @@ def _evaluate(args) -> None:
         raise EtmpcError(f"test set {args.test_set} not found")
     check_run_outputs({"--json": args.json, "--record": args.record}, inputs=run_inputs(args.policy, args.test_set))
     key = system_key(args.task, args.price)  # the task at its price: one value from here to the objective
-    result = evaluate(key, args.policy, args.episodes, args.repeats, args.workers, args.seed, args.test_set,
-                      backend=args.backend, address=args.address, record=args.record)
+    result = evaluate(
+        key,
+        args.policy,
+        args.episodes,
+        args.repeats,
+        args.workers,
+        args.seed,
+        args.test_set,
+        backend=args.backend,
+        address=args.address,
+        record=args.record,
+    )
     print(format_table(result))
     if args.against is not None:
         from etmpc.evaluation.compare import format_against
@@ -65,8 +75,15 @@ def _reproduce(args) -> None:
     _check_backend(args)
     out = args.out or Path("results") / ("reproduce-quick" if args.quick else "reproduce")
     check_run_outputs({}, {"--out": out})
-    reproduce(out, QUICK if args.quick else FULL, args.workers or default_workers(), args.backend, args.address,
-              domains=tasks, sweep=args.sweep)
+    reproduce(
+        out,
+        QUICK if args.quick else FULL,
+        args.workers or default_workers(),
+        args.backend,
+        args.address,
+        domains=tasks,
+        sweep=args.sweep,
+    )
     print(f"wrote {out}/REPORT.md and {out}/results.json")
 
 
@@ -83,8 +100,9 @@ def _sweep(args) -> None:
     for task, chosen in settings.items():  # every directory checked before any work
         check_directory(out / folder_name(task), task, chosen)
     for task, chosen in settings.items():
-        pareto = sweep(task, out / folder_name(task), chosen, args.workers or default_workers(), args.backend, args.address,
-                       say=_say)
+        pareto = sweep(
+            task, out / folder_name(task), chosen, args.workers or default_workers(), args.backend, args.address, say=_say
+        )
         print("\n".join(report_section(pareto)))
         print(f"wrote {out / folder_name(task)}/pareto.json, pareto.png and SWEEP.md")
 
@@ -100,8 +118,9 @@ def _render(args) -> None:
         raise EtmpcError(f"--out {args.out} does not end in .mp4")
     check_run_outputs({"--out": args.out, "--record": args.record}, inputs=run_inputs([args.policy]))
     try:
-        result = render_rollout(args.task, args.policy, args.episode, args.out, args.seed, args.width, args.height,
-                                args.fps, record=args.record)
+        result = render_rollout(
+            args.task, args.policy, args.episode, args.out, args.seed, args.width, args.height, args.fps, record=args.record
+        )
     except ValueError as exc:
         raise EtmpcError(" ".join(str(exc).split())) from None
     print(f"wrote {result.path}: {result.frames} frames at {result.fps:g} fps, {result.trajectory.recomputes} recomputes")
@@ -147,8 +166,10 @@ def _verify(args) -> None:
         print(line)
     if not verdict.verified:
         raise EtmpcError(f"card {args.card} does not verify: {len(verdict.mismatches)} mismatch(es), listed above")
-    print(f"verified: card {args.card}: {verdict.rows} rows; their scores and the aggregates follow from the episodes, "
-          f"and {verdict.replayed} episodes replayed give the card's scores bit for bit")
+    print(
+        f"verified: card {args.card}: {verdict.rows} rows; their scores and the aggregates follow from the episodes, "
+        f"and {verdict.replayed} episodes replayed give the card's scores bit for bit"
+    )
 
 
 def _testset(args) -> None:
@@ -157,10 +178,24 @@ def _testset(args) -> None:
 
     check_run_outputs({"--out": args.out})
     digest = draw(make_system(args.task), args.seed, args.episodes, args.out)
-    print(f"wrote {args.out} and {args.out}.sha256 ({args.episodes} episodes of {args.task}, seed {args.seed}, "
-          f"sha256 {digest}); use it with --test-set {args.out}")
+    print(
+        f"wrote {args.out} and {args.out}.sha256 ({args.episodes} episodes of {args.task}, seed {args.seed}, "
+        f"sha256 {digest}); use it with --test-set {args.out}"
+    )
 
 
-COMMANDS = {"evaluate": _evaluate, "score": scoring.run, "train": training.run, "train-self": legacy.run_self, "reproduce": _reproduce, "sweep": _sweep,
-            "render": _render, "replay": _replay, "bench": _bench, "testset": _testset, "verify": _verify,
-            "discriminate": discriminate.run, "figure": figures.run}
+COMMANDS = {
+    "evaluate": _evaluate,
+    "score": scoring.run,
+    "train": training.run,
+    "train-self": legacy.run_self,
+    "reproduce": _reproduce,
+    "sweep": _sweep,
+    "render": _render,
+    "replay": _replay,
+    "bench": _bench,
+    "testset": _testset,
+    "verify": _verify,
+    "discriminate": discriminate.run,
+    "figure": figures.run,
+}

@@ -10,17 +10,34 @@ from etmpc.cli import types
 
 def add_parser(sub, tasks: str) -> None:
     """The ``discriminate`` subcommand's options, on the command line's subparsers ``sub``."""
-    di = sub.add_parser("discriminate", help="can triggers be told apart on a task? The event triggers, the clairvoyant "
-                                             "reference and the rollout policy against the periodic front at their rate")
+    di = sub.add_parser(
+        "discriminate",
+        help="can triggers be told apart on a task? The event triggers, the clairvoyant "
+        "reference and the rollout policy against the periodic front at their rate",
+    )
     di.add_argument("task", help=f"task: {tasks}")
-    di.add_argument("--price", type=types.price, default=None, metavar="P",
-                    help="price of a computation that chooses the best periodic schedule and prices the oracle and the "
-                         "rollout (default: the task's)")
+    di.add_argument(
+        "--price",
+        type=types.price,
+        default=None,
+        metavar="P",
+        help="price of a computation that chooses the best periodic schedule and prices the oracle and the "
+        "rollout (default: the task's)",
+    )
     di.add_argument("--episodes", type=types.positive_int, default=30, help="first N test-set episodes (default 30)")
-    di.add_argument("--workers", type=types.workers, default=None,
-                    help="worker processes (default: one for fewer than 32 episode runs, else one per core)")
-    di.add_argument("--json", type=types.json_path, default=None, metavar="PATH",
-                    help="write the price, the best periodic schedule, both evaluations and every row as JSON")
+    di.add_argument(
+        "--workers",
+        type=types.workers,
+        default=None,
+        help="worker processes (default: one for fewer than 32 episode runs, else one per core)",
+    )
+    di.add_argument(
+        "--json",
+        type=types.json_path,
+        default=None,
+        metavar="PATH",
+        help="write the price, the best periodic schedule, both evaluations and every row as JSON",
+    )
 
 
 def run(args) -> None:

@@ -14,31 +14,45 @@ KINDS = ("forecasts", "trajectory", "bars")
 
 def add_parser(sub, tasks: str) -> None:
     """The ``figure`` subcommand and its three kinds, on the command line's subparsers ``sub``."""
-    fg = sub.add_parser("figure", help="draw the paper's figures: Figure 1 (forecasts), one episode (trajectory), "
-                                       "Figure 3 (bars)")
+    fg = sub.add_parser(
+        "figure", help="draw the paper's figures: Figure 1 (forecasts), one episode (trajectory), Figure 3 (bars)"
+    )
     kinds = fg.add_subparsers(dest="figure", required=True, parser_class=type(fg), metavar="{" + ",".join(KINDS) + "}")
 
-    fc = kinds.add_parser("forecasts", help="the paper's Figure 1: a battery test-set episode's true production and price "
-                                            "with the forecasts each MPC computation was given, one column per policy")
-    fc.add_argument("--policy", action="append", default=None, metavar="SPEC",
-                    help=f"{syntax()} (repeatable; default every:20)")
+    fc = kinds.add_parser(
+        "forecasts",
+        help="the paper's Figure 1: a battery test-set episode's true production and price "
+        "with the forecasts each MPC computation was given, one column per policy",
+    )
+    fc.add_argument("--policy", action="append", default=None, metavar="SPEC", help=f"{syntax()} (repeatable; default every:20)")
     fc.add_argument("--episode", type=types.index, default=0, help="test-set episode (default 0)")
     fc.add_argument("--seed", type=types.seed, default=0, help="seed of a stochastic policy's draws (default 0)")
-    fc.add_argument("--out", type=types.png_path, default=None, metavar="PATH.png",
-                    help="default results/figure1_battery_forecasts.png")
+    fc.add_argument(
+        "--out", type=types.png_path, default=None, metavar="PATH.png", help="default results/figure1_battery_forecasts.png"
+    )
 
-    tj = kinds.add_parser("trajectory", help="one test-set episode played as evaluate plays it: every state with every "
-                                             "plan's prediction, the recomputes, the inputs and the exogenous signals")
+    tj = kinds.add_parser(
+        "trajectory",
+        help="one test-set episode played as evaluate plays it: every state with every "
+        "plan's prediction, the recomputes, the inputs and the exogenous signals",
+    )
     tj.add_argument("task", help=f"task: {tasks}")
     tj.add_argument("--policy", required=True, metavar="SPEC", help=f"the policy that plays it: {syntax()}")
     tj.add_argument("--episode", type=types.index, default=0, help="test-set episode (default 0)")
-    tj.add_argument("--seed", type=types.seed, default=0,
-                    help="seed of a stochastic policy's draws, as in evaluate (default 0)")
-    tj.add_argument("--out", type=types.png_path, default=None, metavar="PATH.png",
-                    help="default results/trajectory_<task>_<policy>_ep<I>.png")
+    tj.add_argument("--seed", type=types.seed, default=0, help="seed of a stochastic policy's draws, as in evaluate (default 0)")
+    tj.add_argument(
+        "--out",
+        type=types.png_path,
+        default=None,
+        metavar="PATH.png",
+        help="default results/trajectory_<task>_<policy>_ep<I>.png",
+    )
 
-    br = kinds.add_parser("bars", help="the paper's Figure 3: the mean objective per policy from evaluate --json documents "
-                                       "of one task (error bars: std over repeats; a training run's seeds as one bar)")
+    br = kinds.add_parser(
+        "bars",
+        help="the paper's Figure 3: the mean objective per policy from evaluate --json documents "
+        "of one task (error bars: std over repeats; a training run's seeds as one bar)",
+    )
     br.add_argument("evaluations", nargs="+", type=Path, metavar="EVAL.json", help="etmpc evaluate --json output")
     br.add_argument("--out", type=types.png_path, default=None, metavar="PATH.png", help="default results/figure3_<task>.png")
     br.add_argument("--no-group", action="store_true", help="one bar per learned policy file, not one per training run")
@@ -75,8 +89,10 @@ def _trajectory(args) -> None:
     out = args.out or figures.trajectory_path(args.task, args.policy, args.episode)
     _check({"--out": out}, run_inputs([args.policy]))
     drawn = figures.trajectory(out, args.task, args.policy, args.episode, args.seed)
-    print(f"episode {args.episode} under {args.policy}: objective {drawn.objective!r}, {drawn.recomputes} computations, "
-          f"{drawn.solver_failures} solver failures")
+    print(
+        f"episode {args.episode} under {args.policy}: objective {drawn.objective!r}, {drawn.recomputes} computations, "
+        f"{drawn.solver_failures} solver failures"
+    )
     print(f"wrote {out}")
 
 

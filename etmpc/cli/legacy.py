@@ -36,8 +36,12 @@ FLAGS = {
     "--timesteps": ("timesteps", ("ppo",), _N),
 }
 # etmpc train-self's options -> the self learner's settings
-SELF_FLAGS = {"--episodes": "episodes", "--solves": "solves_per_episode", "--futures": "futures",
-              "--validation-episodes": "validation_episodes"}
+SELF_FLAGS = {
+    "--episodes": "episodes",
+    "--solves": "solves_per_episode",
+    "--futures": "futures",
+    "--validation-episodes": "validation_episodes",
+}
 
 
 def _dest(flag: str) -> str:
@@ -46,8 +50,10 @@ def _dest(flag: str) -> str:
 
 def add_arguments(parser) -> None:
     """The old flags, on ``etmpc train``'s parser, in a group of their own."""
-    group = parser.add_argument_group("deprecated options", "kept for one release: each is the --set shown "
-                                      "(for the learners named), and a run that uses one says so at its end")
+    group = parser.add_argument_group(
+        "deprecated options",
+        "kept for one release: each is the --set shown (for the learners named), and a run that uses one says so at its end",
+    )
     for flag, (name, owners, keywords) in FLAGS.items():
         group.add_argument(flag, dest=_dest(flag), default=None, help=f"--set {name}=… ({', '.join(owners)})", **keywords)
     group.add_argument("--hyperparams", type=Path, default=None, metavar="FILE", help="--settings FILE")
@@ -63,8 +69,9 @@ def given(args, learner: str, known) -> tuple[dict, list[str]]:
             continue
         if learner not in owners:
             own = f" (or {learner}'s own {name}: --set {name}=…)" if name in known else ""
-            raise EtmpcError(f"{flag} is a setting of {' and '.join(owners)} only, not of {learner}: add --algorithm "
-                             f"{owners[0]}{own}")
+            raise EtmpcError(
+                f"{flag} is a setting of {' and '.join(owners)} only, not of {learner}: add --algorithm {owners[0]}{own}"
+            )
         values[name] = value
         notes.append(f"{flag} is deprecated: use --set {name}={value}")
     if args.hyperparams is not None:
@@ -75,17 +82,33 @@ def given(args, learner: str, known) -> tuple[dict, list[str]]:
 
 
 def add_self_parser(sub, tasks: str) -> None:
-    ts = sub.add_parser("train-self", help="deprecated: etmpc train TASK --algorithm self (a self-triggering policy, "
-                                           "self:PATH: at each solve, how long to keep the plan)")
+    ts = sub.add_parser(
+        "train-self",
+        help="deprecated: etmpc train TASK --algorithm self (a self-triggering policy, "
+        "self:PATH: at each solve, how long to keep the plan)",
+    )
     ts.add_argument("task", help=f"system to train on: {tasks}")
-    ts.add_argument("--out", type=types.json_path, required=True, metavar="FILE", help="the policy file to write (use it as self:FILE)")
-    ts.add_argument("--price", type=types.price, default=None, metavar="P",
-                    help="train for this price of a computation (default: the system's; see evaluate --price)")
+    ts.add_argument(
+        "--out", type=types.json_path, required=True, metavar="FILE", help="the policy file to write (use it as self:FILE)"
+    )
+    ts.add_argument(
+        "--price",
+        type=types.price,
+        default=None,
+        metavar="P",
+        help="train for this price of a computation (default: the system's; see evaluate --price)",
+    )
     ts.add_argument("--episodes", type=types.positive_int, default=None, help="labelled training episodes (default 40)")
     ts.add_argument("--solves", type=types.positive_int, default=None, help="labelled solves per episode (default 8)")
-    ts.add_argument("--futures", type=types.positive_int, default=None, metavar="K", help="sampled futures per labelled solve (default 2)")
-    ts.add_argument("--validation-episodes", type=types.positive_int, default=None,
-                    help="training-distribution episodes that choose among the fits and the base (default 20)")
+    ts.add_argument(
+        "--futures", type=types.positive_int, default=None, metavar="K", help="sampled futures per labelled solve (default 2)"
+    )
+    ts.add_argument(
+        "--validation-episodes",
+        type=types.positive_int,
+        default=None,
+        help="training-distribution episodes that choose among the fits and the base (default 20)",
+    )
     ts.add_argument("--workers", type=types.workers, default=None, help="worker processes (default: one per core)")
     backend_arguments(ts)
 
@@ -104,10 +127,19 @@ def run_self(args) -> None:
     check_run_outputs({"--out": args.out})
     values = {name: getattr(args, flag[2:].replace("-", "_")) for flag, name in SELF_FLAGS.items()}
     values = {name: value for name, value in values.items() if value is not None}
-    train_self(system_key(args.task, args.price), args.out, replace(SelfSettings(), **values), args.workers or default_workers(),
-               args.backend, args.address, say=say)
+    train_self(
+        system_key(args.task, args.price),
+        args.out,
+        replace(SelfSettings(), **values),
+        args.workers or default_workers(),
+        args.backend,
+        args.address,
+        say=say,
+    )
     price = "" if args.price is None else f" --price {args.price:g}"
     sets = "".join(f" --set {name}={value}" for name, value in values.items())
-    warn(f"etmpc train-self is deprecated: use etmpc train {args.task} --algorithm self --out DIR{price}{sets} "
-         "(it writes DIR/selected.json)")
+    warn(
+        f"etmpc train-self is deprecated: use etmpc train {args.task} --algorithm self --out DIR{price}{sets} "
+        "(it writes DIR/selected.json)"
+    )
     print(f"wrote {args.out} (evaluate it with: etmpc evaluate {args.task} --policy self:{args.out}{price})")

@@ -37,22 +37,45 @@ def build_parser() -> argparse.ArgumentParser:
 
     ev = sub.add_parser("evaluate", help="compare recomputation policies on a stored test set")
     ev.add_argument("task", help=f"system to evaluate: {tasks}")
-    ev.add_argument("--policy", action="append", required=True, metavar="SPEC",
-                    help=f"{syntax()} (repeatable; oracle:BASE is an upper bound, not a policy)")
+    ev.add_argument(
+        "--policy",
+        action="append",
+        required=True,
+        metavar="SPEC",
+        help=f"{syntax()} (repeatable; oracle:BASE is an upper bound, not a policy)",
+    )
     ev.add_argument("--episodes", type=types.positive_int, default=None, help="first N test-set episodes (default: all)")
     ev.add_argument("--repeats", type=types.positive_int, default=1, help="passes over the test set (for stochastic policies)")
-    ev.add_argument("--workers", type=types.workers, default=None,
-                    help="worker processes (default: one for fewer than 32 episode runs, else one per core)")
+    ev.add_argument(
+        "--workers",
+        type=types.workers,
+        default=None,
+        help="worker processes (default: one for fewer than 32 episode runs, else one per core)",
+    )
     ev.add_argument("--seed", type=types.seed, default=0, help="seed of the policies' own randomness")
-    ev.add_argument("--price", type=types.price, default=None, metavar="P",
-                    help="price of a computation in the objective (default: the system's, 5e-5 for the cart "
-                         "pendulum, 0 for the battery, whose computer draws eta_c from the battery)")
+    ev.add_argument(
+        "--price",
+        type=types.price,
+        default=None,
+        metavar="P",
+        help="price of a computation in the objective (default: the system's, 5e-5 for the cart "
+        "pendulum, 0 for the battery, whose computer draws eta_c from the battery)",
+    )
     ev.add_argument("--test-set", default=None, metavar="PATH", help="test set file (default: the stored one)")
     ev.add_argument("--json", type=types.json_path, default=None, metavar="PATH", help="write the results as JSON")
-    ev.add_argument("--against", default=None, metavar="SPEC",
-                    help="also print every policy against this one (one of --policy), paired per episode with 95 %% CIs")
-    ev.add_argument("--record", type=types.rrd_path, default=None, metavar="PATH.rrd",
-                    help="write every episode into a Rerun recording (open it with `rerun PATH.rrd`)")
+    ev.add_argument(
+        "--against",
+        default=None,
+        metavar="SPEC",
+        help="also print every policy against this one (one of --policy), paired per episode with 95 %% CIs",
+    )
+    ev.add_argument(
+        "--record",
+        type=types.rrd_path,
+        default=None,
+        metavar="PATH.rrd",
+        help="write every episode into a Rerun recording (open it with `rerun PATH.rrd`)",
+    )
     backend_arguments(ev)
 
     scoring.add_parser(sub, tasks)
@@ -61,31 +84,55 @@ def build_parser() -> argparse.ArgumentParser:
 
     re_ = sub.add_parser("reproduce", help="the paper's experiments on every task, with REPORT.md and results.json")
     re_.add_argument("--quick", action="store_true", help="the same steps at small sizes (a few minutes)")
-    re_.add_argument("--task", action="append", default=None, metavar="TASK",
-                     help=f"only this task ({tasks}; repeatable; default: every task)")
-    re_.add_argument("--sweep", action="store_true",
-                     help="also sweep the price of a computation (etmpc sweep) and answer the equal-rate question in the "
-                          "report; on a finished run's directory only the sweeps run (make sweep)")
-    re_.add_argument("--out", type=Path, default=None, metavar="DIR",
-                     help="run directory (default results/reproduce, or results/reproduce-quick with --quick)")
+    re_.add_argument(
+        "--task", action="append", default=None, metavar="TASK", help=f"only this task ({tasks}; repeatable; default: every task)"
+    )
+    re_.add_argument(
+        "--sweep",
+        action="store_true",
+        help="also sweep the price of a computation (etmpc sweep) and answer the equal-rate question in the "
+        "report; on a finished run's directory only the sweeps run (make sweep)",
+    )
+    re_.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="run directory (default results/reproduce, or results/reproduce-quick with --quick)",
+    )
     re_.add_argument("--workers", type=types.workers, default=None, help="worker processes (default: one per core)")
     backend_arguments(re_)
 
     sw = sub.add_parser("sweep", help="the trade-off curve over prices of a computation: pareto.json, pareto.png, SWEEP.md")
     sw.add_argument("task", nargs="*", help=f"systems to sweep: {tasks} (default: every system)")
-    sw.add_argument("--prices", type=types.prices, default=None, metavar="P1,P2,...",
-                    help="prices of a computation (default: a log grid per system, up to where `never` wins)")
-    sw.add_argument("--episodes", type=types.positive_int, default=None,
-                    help="first N test-set episodes for every policy (default 20, 3 with --quick)")
+    sw.add_argument(
+        "--prices",
+        type=types.prices,
+        default=None,
+        metavar="P1,P2,...",
+        help="prices of a computation (default: a log grid per system, up to where `never` wins)",
+    )
+    sw.add_argument(
+        "--episodes",
+        type=types.positive_int,
+        default=None,
+        help="first N test-set episodes for every policy (default 20, 3 with --quick)",
+    )
     sw.add_argument("--quick", action="store_true", help="a smoke run: 3 episodes, half the thresholds, rollouts K=2 H=10")
-    sw.add_argument("--out", type=Path, default=None, metavar="DIR",
-                    help="run directory, a folder per system (default results/sweep, or results/sweep-quick with --quick)")
+    sw.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="run directory, a folder per system (default results/sweep, or results/sweep-quick with --quick)",
+    )
     sw.add_argument("--workers", type=types.workers, default=None, help="worker processes (default: one per core)")
     backend_arguments(sw)
 
     rn = sub.add_parser("render", help="render one test-set episode headless to an MP4 video (a task with a 3-D scene)")
-    rn.add_argument("task", help=f"task to render: {tasks} (one with a 3-D scene: a task without one, such as the "
-                                 "battery, says so)")
+    rn.add_argument(
+        "task", help=f"task to render: {tasks} (one with a 3-D scene: a task without one, such as the battery, says so)"
+    )
     rn.add_argument("--policy", required=True, metavar="SPEC", help=f"the policy that plays it: {syntax()}")
     rn.add_argument("--episode", type=types.index, default=0, help="test-set episode (default 0)")
     rn.add_argument("--out", type=Path, required=True, metavar="FILE.mp4")
@@ -93,16 +140,34 @@ def build_parser() -> argparse.ArgumentParser:
     rn.add_argument("--width", type=types.positive_int, default=640)
     rn.add_argument("--height", type=types.positive_int, default=480)
     rn.add_argument("--fps", type=types.fps, default=None, help="frames per second (default: one frame per control interval)")
-    rn.add_argument("--record", type=types.rrd_path, default=None, metavar="PATH.rrd",
-                    help="also write the episode, frames included, into a Rerun recording")
+    rn.add_argument(
+        "--record",
+        type=types.rrd_path,
+        default=None,
+        metavar="PATH.rrd",
+        help="also write the episode, frames included, into a Rerun recording",
+    )
 
-    vf = sub.add_parser("verify", help="check a scorecard (etmpc score --json) by replaying a seeded sample of its "
-                                       "episodes bit for bit: one line per mismatch")
+    vf = sub.add_parser(
+        "verify",
+        help="check a scorecard (etmpc score --json) by replaying a seeded sample of its "
+        "episodes bit for bit: one line per mismatch",
+    )
     vf.add_argument("card", type=Path, metavar="CARD.json")
-    vf.add_argument("--sample", type=types.non_negative_int, default=5, metavar="N",
-                    help="episodes replayed per row (default 5; 0: every episode)")
+    vf.add_argument(
+        "--sample",
+        type=types.non_negative_int,
+        default=5,
+        metavar="N",
+        help="episodes replayed per row (default 5; 0: every episode)",
+    )
     vf.add_argument("--seed", type=types.seed, default=0, help="the seed the sample is drawn from")
-    vf.add_argument("--workers", type=types.workers, default=None, help="worker processes (default: one for fewer than 32 episodes to replay, else one per core)")
+    vf.add_argument(
+        "--workers",
+        type=types.workers,
+        default=None,
+        help="worker processes (default: one for fewer than 32 episodes to replay, else one per core)",
+    )
 
     tst = sub.add_parser("testset", help="draw a test set: N episodes of a task from a seed, with its sha256 (for --test-set)")
     tst.add_argument("task", help=f"task to draw episodes of: {tasks}")
@@ -119,8 +184,11 @@ def build_parser() -> argparse.ArgumentParser:
     be.add_argument("tasks", nargs="*", metavar="TASK", help=f"systems to bench (default: all: {tasks})")
     be.add_argument("--episodes", type=types.positive_int, default=10, help="test-set episodes per measurement")
     be.add_argument("--json", type=types.json_path, default=None, metavar="PATH", help="write the figures as JSON")
-    be.add_argument("--no-reference", action="store_true",
-                    help="skip the reference solvers (do-mpc for cart_pendulum, scipy linprog for battery)")
+    be.add_argument(
+        "--no-reference",
+        action="store_true",
+        help="skip the reference solvers (do-mpc for cart_pendulum, scipy linprog for battery)",
+    )
 
     discriminate.add_parser(sub, tasks)
     figures.add_parser(sub, tasks)

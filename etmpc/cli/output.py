@@ -21,11 +21,19 @@ def warn(line: str) -> None:
 def backend_arguments(parser) -> None:
     from etmpc.evaluation.workers import BACKENDS
 
-    parser.add_argument("--backend", choices=BACKENDS, default="local",
-                        help="where the work runs: local processes, or Ray (the 'ray' extra); results are the same")
-    parser.add_argument("--address", default=None, metavar="ADDR",
-                        help="Ray cluster to join, e.g. auto or ray://HOST:10001 (with --backend ray; "
-                             "default: start a local Ray instance of --workers CPUs)")
+    parser.add_argument(
+        "--backend",
+        choices=BACKENDS,
+        default="local",
+        help="where the work runs: local processes, or Ray (the 'ray' extra); results are the same",
+    )
+    parser.add_argument(
+        "--address",
+        default=None,
+        metavar="ADDR",
+        help="Ray cluster to join, e.g. auto or ray://HOST:10001 (with --backend ray; "
+        "default: start a local Ray instance of --workers CPUs)",
+    )
 
 
 def check_backend(args) -> None:

@@ -24,43 +24,90 @@ class _LeaderboardHelp(str):
         from etmpc.experiments.leaderboard import row_names
 
         rows = ", ".join(row_names()).replace("%", "%%")
-        return (f"score every built-in trigger ({rows}; a shipped learner where policies/<task>/ holds it; the oracle "
-                "is the clairvoyant reference, 100) and write DIR/leaderboard.md, .json and the profile figure (make "
-                "leaderboard)") % params
+        return (
+            f"score every built-in trigger ({rows}; a shipped learner where policies/<task>/ holds it; the oracle "
+            "is the clairvoyant reference, 100) and write DIR/leaderboard.md, .json and the profile figure (make "
+            "leaderboard)"
+        ) % params
 
 
 def add_parser(sub, tasks: str) -> None:
     """The ``score`` subcommand's options, on the command line's subparsers ``sub``."""
     sc = sub.add_parser("score", help="score triggers on every task against the suite's fixed references: the scorecard")
-    sc.add_argument("policy", nargs="*", metavar="SPEC",
-                    help="triggers to score: any --policy spec of evaluate (py:MODULE:NAME for your own, sb3:PATH, ...)")
-    sc.add_argument("--task", action="append", default=None, metavar="TASK",
-                    help=f"only this task ({tasks}; repeatable; default: every task)")
-    sc.add_argument("--test-set", default=None, metavar="PATH",
-                    help="another test set, for one --task: its references are computed for the run")
-    sc.add_argument("--episodes", type=types.positive_int, default=None,
-                    help="first N test-set episodes (default: all); the references are then those episodes'")
+    sc.add_argument(
+        "policy",
+        nargs="*",
+        metavar="SPEC",
+        help="triggers to score: any --policy spec of evaluate (py:MODULE:NAME for your own, sb3:PATH, ...)",
+    )
+    sc.add_argument(
+        "--task", action="append", default=None, metavar="TASK", help=f"only this task ({tasks}; repeatable; default: every task)"
+    )
+    sc.add_argument(
+        "--test-set",
+        default=None,
+        metavar="PATH",
+        help="another test set, for one --task: its references are computed for the run",
+    )
+    sc.add_argument(
+        "--episodes",
+        type=types.positive_int,
+        default=None,
+        help="first N test-set episodes (default: all); the references are then those episodes'",
+    )
     sc.add_argument("--json", type=types.json_path, default=None, metavar="PATH", help="write the scorecard as JSON")
-    sc.add_argument("--figure", type=types.png_path, default=None, metavar="PATH.png",
-                    help="also draw the triggers' performance profiles (share of episodes above each score)")
-    sc.add_argument("--workers", type=types.workers, default=None,
-                    help="worker processes (default: one per task for fewer than 32 episodes, else one per core)")
-    sc.add_argument("--leaderboard", action="store_true",
-                    help=_LeaderboardHelp("score every built-in trigger and write DIR/leaderboard.md, .json and the "
-                                          "profile figure (make leaderboard)"))
-    sc.add_argument("--out", type=Path, default=None, metavar="DIR",
-                    help=f"with --leaderboard: where the page goes (default {LEADERBOARD_OUT}); finished rows are kept in "
-                         f"results/leaderboard, so an interrupted run continues. With --references: where the rebuilt "
-                         f"files go (default {REFERENCES_OUT}; DIR/DOMAIN/TASK_references.json: copy one over the stored "
-                         "file to ship it)")
-    sc.add_argument("--card", type=Path, action="append", default=None, metavar="CARD.json",
-                    help="with --leaderboard: add the triggers of a scorecard made elsewhere (etmpc score --json, every "
-                         "task on its whole test set) as rows, once it verifies (etmpc verify; repeatable)")
-    sc.add_argument("--readme", type=Path, default=None, metavar="PATH",
-                    help="with --leaderboard: also rewrite this README's table between its leaderboard markers")
-    sc.add_argument("--references", action="store_true",
-                    help="rebuild the references of the tasks (every periodic schedule and the oracle on the stored "
-                         "test set; a maintainer's step after a task changes), into --out: never over the stored ones")
+    sc.add_argument(
+        "--figure",
+        type=types.png_path,
+        default=None,
+        metavar="PATH.png",
+        help="also draw the triggers' performance profiles (share of episodes above each score)",
+    )
+    sc.add_argument(
+        "--workers",
+        type=types.workers,
+        default=None,
+        help="worker processes (default: one per task for fewer than 32 episodes, else one per core)",
+    )
+    sc.add_argument(
+        "--leaderboard",
+        action="store_true",
+        help=_LeaderboardHelp(
+            "score every built-in trigger and write DIR/leaderboard.md, .json and the profile figure (make leaderboard)"
+        ),
+    )
+    sc.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help=f"with --leaderboard: where the page goes (default {LEADERBOARD_OUT}); finished rows are kept in "
+        f"results/leaderboard, so an interrupted run continues. With --references: where the rebuilt "
+        f"files go (default {REFERENCES_OUT}; DIR/DOMAIN/TASK_references.json: copy one over the stored "
+        "file to ship it)",
+    )
+    sc.add_argument(
+        "--card",
+        type=Path,
+        action="append",
+        default=None,
+        metavar="CARD.json",
+        help="with --leaderboard: add the triggers of a scorecard made elsewhere (etmpc score --json, every "
+        "task on its whole test set) as rows, once it verifies (etmpc verify; repeatable)",
+    )
+    sc.add_argument(
+        "--readme",
+        type=Path,
+        default=None,
+        metavar="PATH",
+        help="with --leaderboard: also rewrite this README's table between its leaderboard markers",
+    )
+    sc.add_argument(
+        "--references",
+        action="store_true",
+        help="rebuild the references of the tasks (every periodic schedule and the oracle on the stored "
+        "test set; a maintainer's step after a task changes), into --out: never over the stored ones",
+    )
 
 
 def run(args) -> None:
@@ -77,14 +124,14 @@ def run(args) -> None:
         raise EtmpcError("--readme and --card are --leaderboard's")
     if args.references:
         if args.policy or args.test_set is not None or args.json is not None or args.figure is not None:
-            raise EtmpcError("--references rebuilds the stored references only: no SPEC, --test-set, --json or --figure "
-                             "with it")
+            raise EtmpcError("--references rebuilds the stored references only: no SPEC, --test-set, --json or --figure with it")
         out = args.out or REFERENCES_OUT
         check_run_outputs({}, {"--out": out})
         for task in tasks:
             system = make_system(task)
-            path = write_references(build_references(task, workers=args.workers, say=_say),
-                                    out / system.domain / f"{system.task}_references.json")
+            path = write_references(
+                build_references(task, workers=args.workers, say=_say), out / system.domain / f"{system.task}_references.json"
+            )
             print(f"wrote {path} (to ship it: copy it over {references_path(task)})")
         return
     if args.out is not None:
@@ -120,8 +167,10 @@ def _leaderboard(args, tasks: list[str]) -> None:
     from etmpc.experiments.leaderboard import WORK, build, check_readme, headline
 
     if args.policy or args.references or args.test_set is not None or args.json is not None or args.figure is not None:
-        raise EtmpcError("--leaderboard scores the built-in triggers on the stored test sets: no SPEC, --references, "
-                         "--test-set, --json or --figure with it")
+        raise EtmpcError(
+            "--leaderboard scores the built-in triggers on the stored test sets: no SPEC, --references, "
+            "--test-set, --json or --figure with it"
+        )
     out = args.out or LEADERBOARD_OUT
     if args.readme is not None:
         check_readme(args.readme)
@@ -132,5 +181,7 @@ def _leaderboard(args, tasks: list[str]) -> None:
     check_run_outputs({}, {"--out": out, "the kept rows' directory": WORK}, {f"--card {c}": c for c in cards})
     data = build(out, WORK, tasks, args.episodes, args.workers or default_workers(), args.readme, say=_say, cards=cards)
     print(headline(data))
-    print(f"wrote {out}/leaderboard.md, leaderboard.json and leaderboard_profile.png"
-          + (f"; the table in {args.readme}" if args.readme is not None else ""))
+    print(
+        f"wrote {out}/leaderboard.md, leaderboard.json and leaderboard_profile.png"
+        + (f"; the table in {args.readme}" if args.readme is not None else "")
+    )

@@ -47,37 +47,68 @@ class _AlgorithmHelp(str):
     def __mod__(self, params):
         found = _learners()
         kinds = {"many": "several (in lockstep)", "one": "one", "none": "none"}
-        seeds = ", ".join(f"{_names([n for n, c in found.items() if c.seeding == kind])} {what}" for kind, what in kinds.items()
-                          if any(c.seeding == kind for c in found.values()))
-        return (f"{self}: {', '.join(found)} (default {DEFAULT}; every Learner registered in etmpc.learning.base is "
-                f"one, see docs/learning.md); --seeds: {seeds}").replace("%", "%%") % params
+        seeds = ", ".join(
+            f"{_names([n for n, c in found.items() if c.seeding == kind])} {what}"
+            for kind, what in kinds.items()
+            if any(c.seeding == kind for c in found.values())
+        )
+        return (
+            f"{self}: {', '.join(found)} (default {DEFAULT}; every Learner registered in etmpc.learning.base is "
+            f"one, see docs/learning.md); --seeds: {seeds}"
+        ).replace("%", "%%") % params
 
 
 class _SetHelp(str):
     def __mod__(self, params):
-        known = "; ".join(f"{name}'s: {', '.join(f.name for f in dataclasses.fields(cls.Settings))}"
-                          for name, cls in _learners().items())
+        known = "; ".join(
+            f"{name}'s: {', '.join(f.name for f in dataclasses.fields(cls.Settings))}" for name, cls in _learners().items()
+        )
         return (f"{self} Settings by learner: {known}.").replace("%", "%%") % params
 
 
 def add_parser(sub, tasks: str) -> None:
     """The ``train`` subcommand's options (and ``train-self``'s), on the command line's subparsers ``sub``."""
-    tr = sub.add_parser("train", help="train a recomputation policy with any registered learner: DPI (default), "
-                                      "GPOMDP (the paper's), the self-trigger or PPO (Stable-Baselines3, the 'rl' extra)")
+    tr = sub.add_parser(
+        "train",
+        help="train a recomputation policy with any registered learner: DPI (default), "
+        "GPOMDP (the paper's), the self-trigger or PPO (Stable-Baselines3, the 'rl' extra)",
+    )
     tr.add_argument("task", help=f"system to train on: {tasks}")
     tr.add_argument("--algorithm", choices=_Registered(), default=DEFAULT, metavar="NAME", help=_AlgorithmHelp("the learner"))
-    tr.add_argument("--settings", type=Path, default=None, metavar="FILE",
-                    help="the learner's settings, a YAML or JSON file of its settings' names (PPO: an rl-zoo3 "
-                         "hyperparameter file, default the task's policies/<task>/ppo.yml); default: its defaults")
-    tr.add_argument("--set", type=types.setting, action="append", default=None, metavar="KEY=VALUE",
-                    help=_SetHelp("one setting, over --settings' or the defaults (repeatable): VALUE is read as YAML "
-                                  "(4, 0.05, paper, [always, every:3], null); an unknown KEY says which are known."))
+    tr.add_argument(
+        "--settings",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="the learner's settings, a YAML or JSON file of its settings' names (PPO: an rl-zoo3 "
+        "hyperparameter file, default the task's policies/<task>/ppo.yml); default: its defaults",
+    )
+    tr.add_argument(
+        "--set",
+        type=types.setting,
+        action="append",
+        default=None,
+        metavar="KEY=VALUE",
+        help=_SetHelp(
+            "one setting, over --settings' or the defaults (repeatable): VALUE is read as YAML "
+            "(4, 0.05, paper, [always, every:3], null); an unknown KEY says which are known."
+        ),
+    )
     tr.add_argument("--out", type=Path, required=True, metavar="DIR", help="run directory: its files, checkpoints, the policy")
-    tr.add_argument("--seeds", default=None, metavar="SEEDS",
-                    help="seeds: a range 0-4 or a list 0,2,5 (default: the learner's own, 0-4 for gpomdp and dpi, the "
-                         "settings' seed for ppo; how many each takes: --algorithm)")
-    tr.add_argument("--price", type=types.price, default=None, metavar="P",
-                    help="train for this price of a computation (default: the system's; see evaluate --price)")
+    tr.add_argument(
+        "--seeds",
+        default=None,
+        metavar="SEEDS",
+        help="seeds: a range 0-4 or a list 0,2,5 (default: the learner's own, 0-4 for gpomdp and dpi, the "
+        "settings' seed for ppo; how many each takes: --algorithm)",
+    )
+    tr.add_argument(
+        "--price",
+        type=types.price,
+        default=None,
+        metavar="P",
+        help="train for this price of a computation (default: the system's; see evaluate --price)",
+    )
     tr.add_argument("--workers", type=types.workers, default=None, help="worker processes (default: one per core)")
     backend_arguments(tr)
     tr.add_argument("--resume", action="store_true", help="continue the run in DIR from its last checkpoint")
@@ -150,8 +181,9 @@ def run(args) -> None:
     key = system_key(args.task, args.price)
     seeds = _seeds(args.seeds, cls)
     settings = configure(cls, path, key.task, {**values, **dict(args.set or [])})
-    done = train(cls(settings), key, args.out, seeds, args.workers or default_workers(), args.resume, args.backend,
-                 args.address, say=say)
+    done = train(
+        cls(settings), key, args.out, seeds, args.workers or default_workers(), args.resume, args.backend, args.address, say=say
+    )
     for note in notes:
         warn(note)
     learner = done.learner
@@ -161,9 +193,11 @@ def run(args) -> None:
         print(format_summary(learner.run_state))
     result = getattr(learner, "result", None)
     if isinstance(result, dict) and "checkpoints" in result:  # ppo
-        print(f"PPO on {result['task']}: {result['environment_steps']} environment steps in {result['wall_seconds']:.0f} s; "
-              f"kept {result['selected']} (best of {len(result['checkpoints'])} on {learner.settings.validation_episodes} "
-              "validation episodes)")
+        print(
+            f"PPO on {result['task']}: {result['environment_steps']} environment steps in {result['wall_seconds']:.0f} s; "
+            f"kept {result['selected']} (best of {len(result['checkpoints'])} on {learner.settings.validation_episodes} "
+            "validation episodes)"
+        )
     written = sorted(f"{p.name}/" if p.is_dir() else p.name for p in Path(args.out).iterdir())
     price = "" if args.price is None else f" --price {args.price:g}"
     print(f"wrote {args.out}: {', '.join(written)} (evaluate it with: etmpc evaluate {args.task} --policy {done.policy}{price})")

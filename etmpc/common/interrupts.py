@@ -28,7 +28,10 @@ def _on_sigint(signum, frame):
 def watching():
     """Note every Ctrl-C while inside (it still raises ``KeyboardInterrupt``). Only in the main thread,
     and only where SIGINT has Python's default handler; elsewhere it changes nothing."""
-    if threading.current_thread() is not threading.main_thread() or signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+    if (
+        threading.current_thread() is not threading.main_thread()
+        or signal.getsignal(signal.SIGINT) is not signal.default_int_handler
+    ):
         yield
         return
     signal.signal(signal.SIGINT, _on_sigint)
@@ -77,7 +80,8 @@ def failed(what: str, exc: BaseException) -> EtmpcError:
     when it wrote into a read-only value it was shown."""
     hint = ""
     if (isinstance(exc, ValueError) and "read-only" in str(exc)) or (
-            isinstance(exc, TypeError) and "does not support item assignment" in str(exc)):
+        isinstance(exc, TypeError) and "does not support item assignment" in str(exc)
+    ):
         hint = f" ({READ_ONLY_HINT})"
     return EtmpcError(f"{what} raised {described(exc)}{hint}")
 

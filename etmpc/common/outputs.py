@@ -72,8 +72,11 @@ def check_writable(path: Path, option: str, directory: bool = False) -> None:
             os.unlink(probe)
 
 
-def check_outputs(outputs: Mapping[str, Path | None], directories: Mapping[str, Path | None] | None = None,
-                  inputs: Mapping[str, Path | str | None] | None = None) -> None:
+def check_outputs(
+    outputs: Mapping[str, Path | None],
+    directories: Mapping[str, Path | None] | None = None,
+    inputs: Mapping[str, Path | str | None] | None = None,
+) -> None:
     """Check every output of one command before it runs: ``outputs`` maps an option (``--json``)
     to the file it names (``None``: not asked for), ``directories`` an option to a directory the
     command writes into, ``inputs`` a name to a file the command reads. Two options naming the same
@@ -172,8 +175,7 @@ def refuse_foreign(directory: Path, ours, kind: str, option: str = "--out") -> N
     foreign = foreign_entries(directory, ours)
     if foreign:
         shown = ", ".join(foreign[:3]) + (f" and {len(foreign) - 3} more" if len(foreign) > 3 else "")
-        raise EtmpcError(f"{option} {directory} holds files that are not a {kind}'s ({shown}): "
-                         "choose a new or empty directory")
+        raise EtmpcError(f"{option} {directory} holds files that are not a {kind}'s ({shown}): choose a new or empty directory")
 
 
 def what_differs(stored, wanted, limit: int = 3) -> str:

@@ -78,7 +78,9 @@ def _build(source: str, library: Path, digest_file: Path, cc: str) -> None:
         c_file, built = Path(tmp) / "generated.c", Path(tmp) / "generated.so"
         c_file.write_text(source)
         try:
-            result = subprocess.run([cc, *FLAGS, str(c_file), "-o", str(built), "-lm"], capture_output=True, text=True, timeout=900)
+            result = subprocess.run(
+                [cc, *FLAGS, str(c_file), "-o", str(built), "-lm"], capture_output=True, text=True, timeout=900
+            )
         except (OSError, subprocess.SubprocessError) as exc:
             raise CompileError(f"building {library.name} with {cc!r} failed: {exc}") from None
         if result.returncode != 0:
@@ -122,8 +124,11 @@ def library_for(function: ca.Function, cache: Path | None = None) -> Path:
                 digest_file.unlink()  # the library is about to change: its old digest must not vouch for it
             # Said by the one process that builds (under the lock: another that waited finds it built), so a
             # first run is not silent for the half minute a build takes.
-            print(f"etmpc: compiling the {_described(function.name())} to C once (about 20-30 s; cached in {cache})",
-                  file=sys.stderr, flush=True)
+            print(
+                f"etmpc: compiling the {_described(function.name())} to C once (about 20-30 s; cached in {cache})",
+                file=sys.stderr,
+                flush=True,
+            )
             _build(source, library, digest_file, cc)
     return library
 
@@ -168,8 +173,13 @@ class CompiledFunction:
         symbol("_incref")()
         self._mem = symbol("_checkout")()
         self._release = (symbol("_release"), symbol("_decref"))
-        self._call_args = (self._arg, self._res, self._iw.ctypes.data_as(ctypes.POINTER(_CASADI_INT)),
-                           self._w.ctypes.data_as(_DOUBLE_P), self._mem)
+        self._call_args = (
+            self._arg,
+            self._res,
+            self._iw.ctypes.data_as(ctypes.POINTER(_CASADI_INT)),
+            self._w.ctypes.data_as(_DOUBLE_P),
+            self._mem,
+        )
 
     def call(self, *inputs) -> tuple[list[np.ndarray], int]:
         for buffer, value in zip(self._inputs, inputs, strict=True):

@@ -78,7 +78,7 @@ def _exact_gain(a: tuple, b: tuple, q: tuple, r: tuple, hold: float | None) -> n
                     M[i, j] = (A[i, j] if j < n else B[i, j - n]) * mpmath.mpf(hold)
             E = mpmath.expm(M)
             A = E[0:n, 0:n]
-            B = E[0:n, n:n + m]
+            B = E[0:n, n : n + m]
         # Structure-preserving doubling: A_k -> 0, H_k -> P (H_k is the Riccati recursion's 2^k-th step).
         I = mpmath.eye(n)
         Ak, G, H = A, B * mpmath.inverse(R) * B.T, Q

@@ -145,27 +145,32 @@ class GaussNewtonMPC:
         if settings.regularisation:
             gauss_newton = gauss_newton + settings.regularisation * ca.SX.eye(w.shape[0])
         hess = ca.Function(
-            "gauss_newton_hessian", [w, params, lam_f, lam_g], [gauss_newton],
-            ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"],
+            "gauss_newton_hessian", [w, params, lam_f, lam_g], [gauss_newton], ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"]
         )
         self._dual_tolerance = settings.tolerance if settings.dual_tolerance is None else settings.dual_tolerance
         quiet = {"error_on_fail": False}
         if settings.qpsol == "qrqp":
             quiet |= {"print_iter": False, "print_header": False, "print_info": False}
         self.nlp = {"x": w, "p": params, "f": f, "g": g}
-        nlpsol = ca.nlpsol(f"{name}_sqp", "sqpmethod", self.nlp, {
-            "qpsol": settings.qpsol,
-            "qpsol_options": quiet | dict(settings.qpsol_options),
-            "hess_lag": hess,
-            "tol_pr": settings.tolerance,
-            "tol_du": self._dual_tolerance,
-            "max_iter": settings.max_iterations,
-            "print_time": False,
-            "print_header": False,
-            "print_iteration": False,
-            "print_status": False,
-            "error_on_fail": False,
-        } | dict(settings.sqp_options))
+        nlpsol = ca.nlpsol(
+            f"{name}_sqp",
+            "sqpmethod",
+            self.nlp,
+            {
+                "qpsol": settings.qpsol,
+                "qpsol_options": quiet | dict(settings.qpsol_options),
+                "hess_lag": hess,
+                "tol_pr": settings.tolerance,
+                "tol_du": self._dual_tolerance,
+                "max_iter": settings.max_iterations,
+                "print_time": False,
+                "print_header": False,
+                "print_iteration": False,
+                "print_status": False,
+                "error_on_fail": False,
+            }
+            | dict(settings.sqp_options),
+        )
         nw = w.shape[0]
         self._lbw, self._ubw = np.full(nw, -np.inf), np.full(nw, np.inf)
         self._lbw[self._u_index], self._ubw[self._u_index] = self.u_min, self.u_max
@@ -193,8 +198,11 @@ class GaussNewtonMPC:
             try:
                 self._compiled = CompiledFunction(self.function)
             except CompileError as exc:
-                warnings.warn(f"{exc}; the MPC runs in CasADi's virtual machine instead (slower, same optimum)",
-                              RuntimeWarning, stacklevel=2)
+                warnings.warn(
+                    f"{exc}; the MPC runs in CasADi's virtual machine instead (slower, same optimum)",
+                    RuntimeWarning,
+                    stacklevel=2,
+                )
 
     def objective(self, x: np.ndarray, u_prev: np.ndarray, inputs: np.ndarray, parameters: np.ndarray | None = None) -> float:
         """The OCP's objective of an input sequence ``(N, nu)``, rolled out through the predictor
@@ -267,8 +275,9 @@ class GaussNewtonMPC:
             return self.pack(inputs, self.rollout(x, inputs))
         return self.pack(*warm.shifted(age))
 
-    def solve(self, x: np.ndarray, u_prev: np.ndarray, warm: Plan | None = None, age: int = 0,
-              parameters: np.ndarray | None = None) -> Plan:
+    def solve(
+        self, x: np.ndarray, u_prev: np.ndarray, warm: Plan | None = None, age: int = 0, parameters: np.ndarray | None = None
+    ) -> Plan:
         """Plan from the measured state ``x``; the first input change is against ``u_prev``;
         ``parameters``: the OCP's other parameters (as many as the constructor was told).
 
@@ -301,8 +310,9 @@ class GaussNewtonMPC:
         finite = math.isfinite(cost) and math.isfinite(inputs.sum() + states.sum())
         if gains is not None:
             finite = finite and bool(np.all(np.isfinite(gains)))
-        success = bool(code == 0 and finite and violation <= 10 * self.settings.tolerance
-                       and stationarity <= 10 * self._dual_tolerance)
+        success = bool(
+            code == 0 and finite and violation <= 10 * self.settings.tolerance and stationarity <= 10 * self._dual_tolerance
+        )
         if success:
             status = "converged"
         elif code != 0 or not finite:

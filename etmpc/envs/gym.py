@@ -43,11 +43,16 @@ class TriggerEnv(gymnasium.Env):
 
     metadata = {"render_modes": []}
 
-    def __init__(self, task: str | SystemKey = "cart_pendulum", recompute_price: float | None = None, test_set: str | None = None,
-                 reward_baseline: str | None = None, normalize: str | os.PathLike | None = None):
+    def __init__(
+        self,
+        task: str | SystemKey = "cart_pendulum",
+        recompute_price: float | None = None,
+        test_set: str | None = None,
+        reward_baseline: str | None = None,
+        normalize: str | os.PathLike | None = None,
+    ):
         self.normalization = None if normalize is None else Normalization.read(normalize, task)  # before the MPC is built
-        self.core = TriggerEnvironment(task, recompute_price=recompute_price, test_set=test_set,
-                                       reward_baseline=reward_baseline)
+        self.core = TriggerEnvironment(task, recompute_price=recompute_price, test_set=test_set, reward_baseline=reward_baseline)
         self.observation_names = self.core.observation_names
         self.observation_space, self.action_space = trigger_spaces(len(self.observation_names))
 

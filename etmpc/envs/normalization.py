@@ -44,8 +44,9 @@ class Normalization:
         if path.suffix == ".zip":
             raise EtmpcError(f"normalize={path} is a model; give its description, normalize={path.with_suffix('.json')}")
         key = system_key(task)
-        trained_on, mean, var, _ = read_description(path, key.task, f"normalize={path}: its policy",
-                                                    f"normalize={path}: no such file")
+        trained_on, mean, var, _ = read_description(
+            path, key.task, f"normalize={path}: its policy", f"normalize={path}: no such file"
+        )
         return cls(path, trained_on, mean, var)
 
     @property
@@ -68,15 +69,30 @@ def save_normalization(vec_normalize, task: str | SystemKey, path: str | os.Path
     mean = np.asarray(getattr(rms, "mean", np.nan), float)
     var = np.asarray(getattr(rms, "var", np.nan), float)
     if not getattr(vec_normalize, "norm_obs", False) or mean.shape != (len(names),) or var.shape != mean.shape:
-        raise EtmpcError(f"save_normalization: a VecNormalize with norm_obs=True on {key.task}'s {len(names)} "
-                         f"observations is needed, got {type(vec_normalize).__name__}")
+        raise EtmpcError(
+            f"save_normalization: a VecNormalize with norm_obs=True on {key.task}'s {len(names)} "
+            f"observations is needed, got {type(vec_normalize).__name__}"
+        )
     clip, epsilon = getattr(vec_normalize, "clip_obs", None), getattr(vec_normalize, "epsilon", None)
     if (clip, epsilon) != (CLIP, EPSILON):
-        raise EtmpcError(f"save_normalization: sb3: normalises with VecNormalize's defaults, clip_obs={CLIP:g} and "
-                         f"epsilon={EPSILON:g}; this one has clip_obs={clip!r}, epsilon={epsilon!r}")
+        raise EtmpcError(
+            f"save_normalization: sb3: normalises with VecNormalize's defaults, clip_obs={CLIP:g} and "
+            f"epsilon={EPSILON:g}; this one has clip_obs={clip!r}, epsilon={epsilon!r}"
+        )
     if not (np.all(np.isfinite(mean)) and np.all(np.isfinite(var)) and np.all(var >= 0)):
         raise EtmpcError("save_normalization: its statistics are non-finite or negative")
     path = Path(path)
-    write_json(path, {"format": FORMAT, "version": 1, "task": key.task, "algorithm": "ppo", "observation_names": names,
-                      "observation_mean": mean.tolist(), "observation_var": var.tolist(), **extra})
+    write_json(
+        path,
+        {
+            "format": FORMAT,
+            "version": 1,
+            "task": key.task,
+            "algorithm": "ppo",
+            "observation_names": names,
+            "observation_mean": mean.tolist(),
+            "observation_var": var.tolist(),
+            **extra,
+        },
+    )
     return path

@@ -59,15 +59,18 @@ def check_action(action: Any) -> int:
     Stable-Baselines3's ``predict`` returns for one observation): the forms ``gymnasium.spaces.
     Discrete(2).contains`` accepts. Anything else (a float, a list, an array of another shape, a
     numpy bool, a string) raises :class:`InvalidAction`."""
-    if isinstance(action, int) or (isinstance(action, (np.integer, np.ndarray)) and action.shape == ()
-                                   and np.issubdtype(action.dtype, np.integer)):
+    if isinstance(action, int) or (
+        isinstance(action, (np.integer, np.ndarray)) and action.shape == () and np.issubdtype(action.dtype, np.integer)
+    ):
         value = int(action)
         if value in (KEEP, RECOMPUTE):
             return value
         raise InvalidAction(f"an action is 0 (keep the plan) or 1 (recompute), got {value}")
     shape = f" of shape {action.shape}" if isinstance(action, np.ndarray) else ""
-    raise InvalidAction(f"an action is 0 (keep the plan) or 1 (recompute): an int, a numpy integer or a 0-d integer "
-                        f"array, got {type(action).__name__}{shape} {action!r}")
+    raise InvalidAction(
+        f"an action is 0 (keep the plan) or 1 (recompute): an int, a numpy integer or a 0-d integer "
+        f"array, got {type(action).__name__}{shape} {action!r}"
+    )
 
 
 def check_index(index: Any, what: str = "test_episode") -> int:
@@ -94,9 +97,11 @@ class InvalidAction(EtmpcError, ValueError):
 
 def not_picklable(env) -> TypeError:
     """What pickling a trigger environment raises: it holds a compiled MPC and a simulation."""
-    return NotPicklable(f"{type(env).__name__} of {env.key} cannot be pickled (it holds a compiled MPC and a MuJoCo "
-                        "or battery simulation): make one in each process instead, e.g. with "
-                        f"gymnasium.make({env.gym_id!r}), or a function that makes it (SubprocVecEnv takes those)")
+    return NotPicklable(
+        f"{type(env).__name__} of {env.key} cannot be pickled (it holds a compiled MPC and a MuJoCo "
+        "or battery simulation): make one in each process instead, e.g. with "
+        f"gymnasium.make({env.gym_id!r}), or a function that makes it (SubprocVecEnv takes those)"
+    )
 
 
 class NotPicklable(EtmpcError, TypeError):
@@ -108,9 +113,14 @@ class TriggerEnvironment(dm_env.Environment):
     :class:`~etmpc.systems.SystemKey`), at ``recompute_price`` per computation (default: the task's own).
     See the module's docstring."""
 
-    def __init__(self, task: str | SystemKey = "cart_pendulum", seed: int | None = None,
-                 recompute_price: float | None = None, test_set: str | None = None,
-                 reward_baseline: str | None = None):
+    def __init__(
+        self,
+        task: str | SystemKey = "cart_pendulum",
+        seed: int | None = None,
+        recompute_price: float | None = None,
+        test_set: str | None = None,
+        reward_baseline: str | None = None,
+    ):
         if not isinstance(task, (str, SystemKey)):
             raise EtmpcError(f"task: a task name (str) is needed, got {type(task).__name__} {task!r}")
         if seed is not None:
@@ -158,8 +168,14 @@ class TriggerEnvironment(dm_env.Environment):
         forced = loop.forced
         recompute = forced or asked == RECOMPUTE
         reward = loop.step(recompute)  # the task's reward, net of the computation's price
-        self.info = {"step": loop.step_index, "recompute": recompute, "forced": forced, "control_reward": loop.reward,
-                     "computation_cost": loop.cost, "nonfinite": loop.trajectory.nonfinite}
+        self.info = {
+            "step": loop.step_index,
+            "recompute": recompute,
+            "forced": forced,
+            "control_reward": loop.reward,
+            "computation_cost": loop.cost,
+            "nonfinite": loop.trajectory.nonfinite,
+        }
         self.simulated_steps += 1
         if self._shadow is not None:
             baseline = self._baseline_step()

@@ -51,7 +51,9 @@ def _episode(system, testset, index: int):
 def _play(system, env, testset, spec: str, episodes: int):
     policy = parse_policy(spec, system)
     start = time.perf_counter()
-    trajectories = [run_episode(system, env, policy, np.random.default_rng(e), _episode(system, testset, e)) for e in range(episodes)]
+    trajectories = [
+        run_episode(system, env, policy, np.random.default_rng(e), _episode(system, testset, e)) for e in range(episodes)
+    ]
     return trajectories, time.perf_counter() - start
 
 
@@ -182,12 +184,15 @@ def _rollout_steps(system, env, testset, episodes: int, repeats: int = 5) -> dic
             steps = system.episode_steps - snapshot.step
             per_step.append((time.perf_counter() - start - solve_s[0]) / steps)
     median_s = float(np.median(per_step))
-    return {"median_us": median_s * 1e6, "p90_us": float(np.percentile(per_step, 90) * 1e6),
-            "steps_per_second": 1.0 / median_s, "samples": len(per_step)}
+    return {
+        "median_us": median_s * 1e6,
+        "p90_us": float(np.percentile(per_step, 90) * 1e6),
+        "steps_per_second": 1.0 / median_s,
+        "samples": len(per_step),
+    }
 
 
-def run_bench(domain: str = "cart_pendulum", episodes: int = 10, references: bool = True,
-              reference_solves: int = 200) -> dict:
+def run_bench(domain: str = "cart_pendulum", episodes: int = 10, references: bool = True, reference_solves: int = 200) -> dict:
     system = make_system(domain)
     testset = ts_mod.load(ts_mod.default_path(system.domain, system.task), system.domain, system.task)
     if episodes > testset.episodes:
@@ -225,7 +230,8 @@ def run_bench(domain: str = "cart_pendulum", episodes: int = 10, references: boo
 def format_bench(f: dict) -> str:
     lines = [
         f"{f['domain']}: {f['episodes']} test-set episodes per policy, single process",
-        f"MPC solve          median {f['mpc_solve']['median_ms']:.3f} ms   p90 {f['mpc_solve']['p90_ms']:.3f} ms   ({f['mpc_solve']['samples']} solves)",
+        f"MPC solve          median {f['mpc_solve']['median_ms']:.3f} ms   p90 {f['mpc_solve']['p90_ms']:.3f} ms   "
+        f"({f['mpc_solve']['samples']} solves)",
         f"rest of a step     median {f['rest_of_step']['median_us']:.1f} us   p90 {f['rest_of_step']['p90_ms'] * 1e3:.1f} us"
         "   (dm_env path: run_episode, evaluate)",
         f"rollout step       median {f['rollout_step']['median_us']:.1f} us   p90 {f['rollout_step']['p90_us']:.1f} us"
@@ -241,8 +247,10 @@ def format_bench(f: dict) -> str:
             f"max |.| {r['objective_gap_relative']['max_abs']:.1e}; reference failures {r['reference_failures']}",
         ]
     if not f["references"]:
-        lines.append("reference solvers  none run" + (" (--no-reference)" if f.get("references_skipped") else
-                     " (do-mpc is not installed: pip install 'etmpc[bench]')"))
+        lines.append(
+            "reference solvers  none run"
+            + (" (--no-reference)" if f.get("references_skipped") else " (do-mpc is not installed: pip install 'etmpc[bench]')")
+        )
     i = f.get("interpreted")
     if i is not None:
         lines += [

@@ -33,10 +33,16 @@ def paired(a: dict[int, float], b: dict[int, float], sense: str, episodes=None) 
     diff = metrics.paired_differences(mine, theirs, sense)
     mean, ci = diff["mean_difference"], diff["ci95"]
     scale = abs(float(np.mean(theirs))) if common else float("nan")
-    return {"episodes": len(common), "objective_mean": float(np.mean(mine)) if common else float("nan"),
-            "reference_mean": float(np.mean(theirs)) if common else float("nan"),
-            "mean_difference": mean, "ci95": ci, "gain_percent": 100.0 * metrics.oriented(mean, sense) / scale,
-            "gain_percent_ci95": 100.0 * ci / scale, "better_episodes": diff["better_episodes"]}
+    return {
+        "episodes": len(common),
+        "objective_mean": float(np.mean(mine)) if common else float("nan"),
+        "reference_mean": float(np.mean(theirs)) if common else float("nan"),
+        "mean_difference": mean,
+        "ci95": ci,
+        "gain_percent": 100.0 * metrics.oriented(mean, sense) / scale,
+        "gain_percent_ci95": 100.0 * ci / scale,
+        "better_episodes": diff["better_episodes"],
+    }
 
 
 def against(evaluation: dict, reference: str) -> dict[str, dict]:
@@ -47,9 +53,15 @@ def against(evaluation: dict, reference: str) -> dict[str, dict]:
         raise EtmpcError(f"--against {reference}: not one of the evaluated policies ({', '.join(policies)})")
     sense = policies[reference]["objective_sense"]
     base = per_episode(evaluation, {reference})
-    return {spec: dict(paired(per_episode(evaluation, {spec}), base, sense), recomputes_mean=row["recomputes_mean"],
-                       upper_bound=row.get("upper_bound", False))
-            for spec, row in policies.items() if spec != reference}
+    return {
+        spec: dict(
+            paired(per_episode(evaluation, {spec}), base, sense),
+            recomputes_mean=row["recomputes_mean"],
+            upper_bound=row.get("upper_bound", False),
+        )
+        for spec, row in policies.items()
+        if spec != reference
+    }
 
 
 def format_against(evaluation: dict, reference: str) -> str:
@@ -57,12 +69,21 @@ def format_against(evaluation: dict, reference: str) -> str:
     rows = against(evaluation, reference)
     ref = evaluation["policies"][reference]
     width = max([16] + [len(spec) + 2 for spec in rows])
-    head = f"{'policy':<{width}}{'objective':>12}{'difference':>13}{'± 95 % CI':>11}{'gain %':>9}{'± CI':>7}{'better':>9}{'recomputes':>12}"
-    lines = [f"paired over the same test-set episodes against {reference} ({ref['objective_mean']:.5f}, "
-             f"{ref['recomputes_mean']:.2f} recomputes); gain > 0 is better", head, "-" * len(head)]
+    head = (
+        f"{'policy':<{width}}{'objective':>12}{'difference':>13}{'± 95 % CI':>11}{'gain %':>9}{'± CI':>7}{'better':>9}"
+        f"{'recomputes':>12}"
+    )
+    lines = [
+        f"paired over the same test-set episodes against {reference} ({ref['objective_mean']:.5f}, "
+        f"{ref['recomputes_mean']:.2f} recomputes); gain > 0 is better",
+        head,
+        "-" * len(head),
+    ]
     for spec, r in rows.items():
         name = spec + (" (bound)" if r["upper_bound"] else "")
-        lines.append(f"{name:<{width}}{r['objective_mean']:>12.5f}{r['mean_difference']:>+13.5f}{r['ci95']:>11.5f}"
-                     f"{r['gain_percent']:>+9.2f}{r['gain_percent_ci95']:>7.2f}{r['better_episodes']:>5d}/{r['episodes']:<3d}"
-                     f"{r['recomputes_mean']:>12.2f}")
+        lines.append(
+            f"{name:<{width}}{r['objective_mean']:>12.5f}{r['mean_difference']:>+13.5f}{r['ci95']:>11.5f}"
+            f"{r['gain_percent']:>+9.2f}{r['gain_percent_ci95']:>7.2f}{r['better_episodes']:>5d}/{r['episodes']:<3d}"
+            f"{r['recomputes_mean']:>12.2f}"
+        )
     return "\n".join(lines)

@@ -48,26 +48,35 @@ def _run(job: tuple) -> tuple[RunResult, EpisodeRecord | None, dict[str, float]]
     played = play_test_episode(domain, policy, seed, repeat, episode, testset_path, sha256)
     traj = played.trajectory
     objective, control_objective = scores(played.system, traj)
-    return RunResult(
-        policy=spec,
-        repeat=repeat,
-        episode=episode,
-        objective=objective,
-        control_objective=control_objective,
-        recomputes=traj.recomputes,
-        solver_failures=traj.solver_failures,
-        steps=traj.steps,
-        finite=not traj.nonfinite,
-        failures=None if played.system.failures is None else played.system.failures(traj.rewards[: traj.steps]),
-    ), (played.record(spec, getattr(policy, "announce", None), upper_bound=bool(getattr(policy, "upper_bound", False))) if record
-        else None), traj.cpu_seconds()
+    return (
+        RunResult(
+            policy=spec,
+            repeat=repeat,
+            episode=episode,
+            objective=objective,
+            control_objective=control_objective,
+            recomputes=traj.recomputes,
+            solver_failures=traj.solver_failures,
+            steps=traj.steps,
+            finite=not traj.nonfinite,
+            failures=None if played.system.failures is None else played.system.failures(traj.rewards[: traj.steps]),
+        ),
+        (
+            played.record(spec, getattr(policy, "announce", None), upper_bound=bool(getattr(policy, "upper_bound", False)))
+            if record
+            else None
+        ),
+        traj.cpu_seconds(),
+    )
 
 
 # -- driver side ---------------------------------------------------------------------------------
 def run_jobs(jobs: list, workers: int, progress: bool, backend: str = "local", address: str | None = None) -> list[tuple]:
     chunk = max(1, min(8, len(jobs) // (4 * workers)))
-    with tqdm(total=len(jobs), desc="episodes", unit="ep", disable=None if progress else True, leave=False) as bar, \
-            make_backend(backend, workers, address) as backend:
+    with (
+        tqdm(total=len(jobs), desc="episodes", unit="ep", disable=None if progress else True, leave=False) as bar,
+        make_backend(backend, workers, address) as backend,
+    ):
         return backend.map(_run, jobs, on_result=lambda job: bar.update(), chunksize=chunk)
 
 
@@ -103,12 +112,14 @@ def evaluate(
     (:func:`check_arguments`), before any work; so does a policy's own failure, naming it."""
     task = checks.renamed("task", task, "domain", domain)
     with interrupts.watching():  # a trigger that raises KeyboardInterrupt is its failure, not a Ctrl-C
-        return _evaluate(task, policies, episodes, repeats, workers, seed, testset_path, progress, backend, address,
-                         record, recompute_price)
+        return _evaluate(
+            task, policies, episodes, repeats, workers, seed, testset_path, progress, backend, address, record, recompute_price
+        )
 
 
-def check_arguments(domain, policies, episodes, repeats, workers, seed, testset_path, progress, backend, address,
-                    record, recompute_price) -> None:
+def check_arguments(
+    domain, policies, episodes, repeats, workers, seed, testset_path, progress, backend, address, record, recompute_price
+) -> None:
     """What the command line's parser checks, checked for a call from Python, with the same messages
     (raises :class:`EtmpcError`)."""
     if not isinstance(domain, (str, SystemKey)):
@@ -183,14 +194,18 @@ def check_picklable(spec: str, policy, backend: str = "local") -> None:
     except BaseException as exc:
         if genuine(exc):
             raise
-        raise EtmpcError(f"policy {spec} cannot be sent to worker processes ({described(exc)}): use --workers 1 "
-                         "(workers=1 in Python), or make it picklable (its class at the top level of a module, "
-                         "no lambdas, open files or locks in it)") from None
+        raise EtmpcError(
+            f"policy {spec} cannot be sent to worker processes ({described(exc)}): use --workers 1 "
+            "(workers=1 in Python), or make it picklable (its class at the top level of a module, "
+            "no lambdas, open files or locks in it)"
+        ) from None
     where = unimportable_main() if pickler is not None and pickler.found else None
     if where is not None:
-        raise MainOnlyError(f"policy {spec}: {pickler.found[0]} is defined in __main__ ({where}), which worker "
-                            'processes cannot import: define it in a module (or a script run under `if __name__ == '
-                            '"__main__":`), or use workers=1')
+        raise MainOnlyError(
+            f"policy {spec}: {pickler.found[0]} is defined in __main__ ({where}), which worker "
+            "processes cannot import: define it in a module (or a script run under `if __name__ == "
+            '"__main__":`), or use workers=1'
+        )
 
 
 def parse_policies(system, policies: list) -> dict:
@@ -205,19 +220,23 @@ def parse_policies(system, policies: list) -> dict:
             policy = checked(policy)
             spec = policy.spec
             if names_a_kind(spec) and not type(policy.policy).__module__.startswith("etmpc."):
-                raise EtmpcError(f"policy object {type(policy.policy).__name__} has the spec {spec!r}, a built-in policy's: "
-                                 "give it a name of its own, or the results would show its numbers as that policy's")
+                raise EtmpcError(
+                    f"policy object {type(policy.policy).__name__} has the spec {spec!r}, a built-in policy's: "
+                    "give it a name of its own, or the results would show its numbers as that policy's"
+                )
         if spec in parsed:
             raise EtmpcError(f"policy {spec} is given twice")
         parsed[spec] = policy
     return parsed
 
 
-def _evaluate(domain, policies, episodes, repeats, workers, seed, testset_path, progress, backend, address, record,
-              recompute_price) -> Evaluation:
+def _evaluate(
+    domain, policies, episodes, repeats, workers, seed, testset_path, progress, backend, address, record, recompute_price
+) -> Evaluation:
     refuse_in_rerun_main()  # a worker spawned from a script without a __main__ guard, re-running it: not again
-    check_arguments(domain, policies, episodes, repeats, workers, seed, testset_path, progress, backend, address,
-                    record, recompute_price)
+    check_arguments(
+        domain, policies, episodes, repeats, workers, seed, testset_path, progress, backend, address, record, recompute_price
+    )
     key = system_key(domain, recompute_price)  # the task and the price, checked once: every worker builds from it
     system = key.make()
     # Parsed (or checked) once here, so a bad policy fails before any work starts, then sent with each job.
@@ -246,8 +265,12 @@ def _evaluate(domain, policies, episodes, repeats, workers, seed, testset_path, 
     # Workers find the stored test set themselves (a cluster node's install may live elsewhere) and
     # check that its digest is the one verified here.
     recorder = Recorder(record) if record is not None else None  # a bad path fails before any work
-    jobs = [(key, testset_path, testset.sha256, spec, parsed[spec], r, e, seed, recorder is not None)
-            for spec in policies for r in range(repeats) for e in range(episodes)]
+    jobs = [
+        (key, testset_path, testset.sha256, spec, parsed[spec], r, e, seed, recorder is not None)
+        for spec in policies
+        for r in range(repeats)
+        for e in range(episodes)
+    ]
     try:
         outcomes = run_jobs(jobs, workers, progress, backend, address)
         if recorder is not None:
@@ -261,11 +284,28 @@ def _evaluate(domain, policies, episodes, repeats, workers, seed, testset_path, 
         recorder.close()
     runs = [result for result, _, _ in outcomes]
     summaries = [
-        summarise(spec, [r for r in runs if r.policy == spec], system.objective_sense, episodes, repeats,
-                  system.failure_name, bool(getattr(parsed[spec], "upper_bound", False))) for spec in policies
+        summarise(
+            spec,
+            [r for r in runs if r.policy == spec],
+            system.objective_sense,
+            episodes,
+            repeats,
+            system.failure_name,
+            bool(getattr(parsed[spec], "upper_bound", False)),
+        )
+        for spec in policies
     ]
-    return Evaluation(system.domain, system.task, str(testset.path.resolve()), testset.sha256, seed, summaries, runs,
-                      system.recompute_price, [cpu for _, _, cpu in outcomes])
+    return Evaluation(
+        system.domain,
+        system.task,
+        str(testset.path.resolve()),
+        testset.sha256,
+        seed,
+        summaries,
+        runs,
+        system.recompute_price,
+        [cpu for _, _, cpu in outcomes],
+    )
 
 
 def format_table(evaluation: Evaluation) -> str:
@@ -274,8 +314,10 @@ def format_table(evaluation: Evaluation) -> str:
     width = max([16] + [len(name) + 2 for name in names.values()])  # long rl:PATH specs stay aligned
     task_failures = next((s.failure_name for s in evaluation.summaries if s.failure_name), None)
     extra = f"{task_failures + '/episode':>{len(task_failures) + 10}}" if task_failures else ""
-    head = (f"{'policy':<{width}}{'objective':>12}{'± std':>10}{'control':>11}{'recomputes':>12}{extra}"
-            f"{'solver failures':>17}{'non-finite':>12}")
+    head = (
+        f"{'policy':<{width}}{'objective':>12}{'± std':>10}{'control':>11}{'recomputes':>12}{extra}"
+        f"{'solver failures':>17}{'non-finite':>12}"
+    )
     lines = [
         f"{evaluation.domain}/{evaluation.task}: objective ({higher_or_lower(sense)} is better), "
         f"test set {evaluation.testset_sha256[:12]}, {evaluation.recompute_price:g} per computation",
@@ -288,7 +330,13 @@ def format_table(evaluation: Evaluation) -> str:
             f"{names[s.policy]:<{width}}{s.objective_mean:>12.5f}{s.objective_std:>10.5f}{s.control_objective_mean:>11.5f}"
             f"{s.recomputes_mean:>12.2f}{column}{s.solver_failures:>17d}{s.nonfinite_episodes:>12d}"
         )
-    lines.append(f"{evaluation.summaries[0].episodes} episodes x {evaluation.summaries[0].repeats} repeats per policy" if evaluation.summaries else "")
+    lines.append(
+        f"{evaluation.summaries[0].episodes} episodes x {evaluation.summaries[0].repeats} repeats per policy"
+        if evaluation.summaries
+        else ""
+    )
     if any(s.upper_bound for s in evaluation.summaries):
-        lines.append("(upper bound): an oracle knows each episode's future; it bounds what a trigger can gain and is not a policy")
+        lines.append(
+            "(upper bound): an oracle knows each episode's future; it bounds what a trigger can gain and is not a policy"
+        )
     return "\n".join(lines)

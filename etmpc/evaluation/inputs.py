@@ -67,8 +67,11 @@ def run_inputs(policies: Iterable, test_set: str | Path | None = None) -> dict[s
     return found
 
 
-def check_run_outputs(outputs: Mapping[str, Path | str | None], directories: Mapping[str, Path | str | None] | None = None,
-                      inputs: Mapping[str, Path | str | None] | None = None) -> None:
+def check_run_outputs(
+    outputs: Mapping[str, Path | str | None],
+    directories: Mapping[str, Path | str | None] | None = None,
+    inputs: Mapping[str, Path | str | None] | None = None,
+) -> None:
     """:func:`~etmpc.common.outputs.check_outputs` (an output that is an input, two outputs on one file,
     an output that cannot be written), and no output inside a :func:`data_folders` folder, nor an
     output directory that holds one."""
@@ -78,12 +81,15 @@ def check_run_outputs(outputs: Mapping[str, Path | str | None], directories: Map
         data = data_folders()
         for option, path in [*files.items(), *folders.items()]:
             resolved = path.resolve()
-            hit = next((d for d in data if resolved == d or d in resolved.parents
-                        or (option in folders and resolved in d.parents)), None)
+            hit = next(
+                (d for d in data if resolved == d or d in resolved.parents or (option in folders and resolved in d.parents)), None
+            )
             if hit is not None:
                 where = "holds" if resolved in hit.parents else "lies in"
-                raise EtmpcError(f"{option} {path} {where} etmpc's data folder {hit} (stored test sets, references, "
-                                 "models, policies), which a run never writes: write it elsewhere")
+                raise EtmpcError(
+                    f"{option} {path} {where} etmpc's data folder {hit} (stored test sets, references, "
+                    "models, policies), which a run never writes: write it elsewhere"
+                )
     check_outputs(files, folders, inputs)
 
 
@@ -119,8 +125,12 @@ def check_shipped(spec: str) -> None:
     for path in shipped:
         expected = digests.get(path)
         if expected is None:
-            raise EtmpcError(f"{path} lies among the shipped policies but is not one of them ({folder / MANIFEST}): "
-                             "keep your own policies elsewhere")
+            raise EtmpcError(
+                f"{path} lies among the shipped policies but is not one of them ({folder / MANIFEST}): "
+                "keep your own policies elsewhere"
+            )
         if hashlib.sha256(path.read_bytes()).hexdigest() != expected:
-            raise EtmpcError(f"{path} is not the policy etmpc ships (its SHA-256 differs from {folder / MANIFEST}'s): "
-                             "a changed policy is scored from a file of its own, elsewhere")
+            raise EtmpcError(
+                f"{path} is not the policy etmpc ships (its SHA-256 differs from {folder / MANIFEST}'s): "
+                "a changed policy is scored from a file of its own, elsewhere"
+            )

@@ -40,8 +40,10 @@ def missing_main_script() -> str | None:
 
 # The exit code of a spawned worker that found itself re-running a script without a __main__ guard.
 UNGUARDED_EXIT = 86
-UNGUARDED = ('etmpc.evaluate started worker processes from a script without `if __name__ == "__main__":`: '
-             "put your calls under it, or pass workers=1")
+UNGUARDED = (
+    'etmpc.evaluate started worker processes from a script without `if __name__ == "__main__":`: '
+    "put your calls under it, or pass workers=1"
+)
 
 
 class UnguardedScript(EtmpcError):

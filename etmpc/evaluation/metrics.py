@@ -72,8 +72,12 @@ def paired_differences(values, reference, sense: str) -> dict:
     """``values - reference``, paired per episode: the episodes, the mean difference, its 95 % CI
     (:func:`mean_ci95`) and the episodes where ``values`` is the better (NaN means for none)."""
     diff = np.asarray(values, dtype=float) - np.asarray(reference, dtype=float)
-    return {"episodes": len(diff), "mean_difference": float(diff.mean()) if len(diff) else math.nan,
-            "ci95": mean_ci95(diff), "better_episodes": int((oriented(diff, sense) > 0).sum())}
+    return {
+        "episodes": len(diff),
+        "mean_difference": float(diff.mean()) if len(diff) else math.nan,
+        "ci95": mean_ci95(diff),
+        "better_episodes": int((oriented(diff, sense) > 0).sum()),
+    }
 
 
 # -- over tasks -------------------------------------------------------------------------------------
@@ -86,14 +90,22 @@ def _mean_of_means(*samples, axis=-1):
     return np.mean(np.stack([np.mean(s, axis=axis) for s in samples], axis=-1), axis=-1)
 
 
-def stratified_interval(samples: list[np.ndarray], statistic, resamples: int = BOOTSTRAP_RESAMPLES,
-                        seed: int = BOOTSTRAP_SEED) -> tuple[float, float]:
+def stratified_interval(
+    samples: list[np.ndarray], statistic, resamples: int = BOOTSTRAP_RESAMPLES, seed: int = BOOTSTRAP_SEED
+) -> tuple[float, float]:
     """The 95 % percentile interval of ``statistic(*samples)``, each sample resampled on its own
     (``scipy.stats.bootstrap``, seeded); NaNs when a sample has fewer than two values."""
     if any(len(s) < 2 for s in samples):
         return (math.nan, math.nan)
-    result = stats.bootstrap(tuple(samples), statistic, n_resamples=resamples, method="percentile",
-                             vectorized=True, paired=False, rng=np.random.default_rng(seed))
+    result = stats.bootstrap(
+        tuple(samples),
+        statistic,
+        n_resamples=resamples,
+        method="percentile",
+        vectorized=True,
+        paired=False,
+        rng=np.random.default_rng(seed),
+    )
     return float(result.confidence_interval.low), float(result.confidence_interval.high)
 
 

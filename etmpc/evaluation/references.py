@@ -80,8 +80,9 @@ class References:
         on the whole test set; the gap is that of these episodes)."""
         if not 1 <= episodes <= self.episodes:
             raise EtmpcError(f"--episodes must be in 1..{self.episodes} for these references, got {episodes}")
-        return replace(self, episodes=episodes, periodic={k: v[:episodes] for k, v in self.periodic.items()},
-                       oracle=self.oracle[:episodes])
+        return replace(
+            self, episodes=episodes, periodic={k: v[:episodes] for k, v in self.periodic.items()}, oracle=self.oracle[:episodes]
+        )
 
     def to_json(self) -> dict:
         """The file's content, sealed with the SHA-256 of the rest."""
@@ -107,13 +108,19 @@ def references_path(task: str) -> Path:
 def _objectives(evaluation: Evaluation, spec: str) -> list[float]:
     runs = sorted((r for r in evaluation.runs if r.policy == spec), key=lambda r: r.episode)
     if not all(r.finite for r in runs):
-        raise EtmpcError(f"{evaluation.domain}/{evaluation.task}: {spec} ended an episode on a non-finite state; "
-                         "it cannot be a reference")
+        raise EtmpcError(
+            f"{evaluation.domain}/{evaluation.task}: {spec} ended an episode on a non-finite state; it cannot be a reference"
+        )
     return [r.objective for r in runs]
 
 
-def build_references(task: str, testset_path: str | None = None, workers: int | None = None, progress: bool = True,
-                     say: Callable[[str], None] = lambda line: None) -> References:
+def build_references(
+    task: str,
+    testset_path: str | None = None,
+    workers: int | None = None,
+    progress: bool = True,
+    say: Callable[[str], None] = lambda line: None,
+) -> References:
     """Play every periodic schedule and the oracle over the best of them on ``task``'s test set (the
     stored one by default)."""
     system = make_system(task)
@@ -123,11 +130,22 @@ def build_references(task: str, testset_path: str | None = None, workers: int | 
     table = {spec: _objectives(fixed, spec) for spec in periodic}
     best = best_schedule(table, system.objective_sense)
     oracle = evaluate(system.name, [f"oracle:{best}"], workers=workers, testset_path=testset_path, progress=progress)
-    refs = References(system.name, fixed.testset_sha256, len(table[best]), system.recompute_price,
-                      system.objective_sense, table, best, _objectives(oracle, f"oracle:{best}"), software=software())
+    refs = References(
+        system.name,
+        fixed.testset_sha256,
+        len(table[best]),
+        system.recompute_price,
+        system.objective_sense,
+        table,
+        best,
+        _objectives(oracle, f"oracle:{best}"),
+        software=software(),
+    )
     if not refs.gap > 0:
-        raise EtmpcError(f"{system.name}: the oracle over {best} does not improve on it on this test set "
-                         f"(gap {refs.gap:g}): there is no scale to score against")
+        raise EtmpcError(
+            f"{system.name}: the oracle over {best} does not improve on it on this test set "
+            f"(gap {refs.gap:g}): there is no scale to score against"
+        )
     return refs
 
 
@@ -136,30 +154,58 @@ def load_references(task: str, test_set_sha256: str, path: Path | None = None) -
     and the task's price; a mismatch is one line that says how to rebuild them."""
     path = references_path(task) if path is None else Path(path)
     rebuild = f"rebuild them with: etmpc score --references --task {task}"
-    data = read_document(path, FORMAT, missing=f"{task}: no stored references ({path}); {rebuild}",
-                         unreadable=f"{task}: references {path} cannot be read ({{error}}); {rebuild}",
-                         foreign=f"{task}: {path} is not an etmpc references file; {rebuild}")
+    data = read_document(
+        path,
+        FORMAT,
+        missing=f"{task}: no stored references ({path}); {rebuild}",
+        unreadable=f"{task}: references {path} cannot be read ({{error}}); {rebuild}",
+        foreign=f"{task}: {path} is not an etmpc references file; {rebuild}",
+    )
     if data.get("suite_version") != SUITE_VERSION:
-        raise EtmpcError(f"{task}: references {path} are of suite version {data.get('suite_version')!r}, this etmpc's is "
-                         f"{SUITE_VERSION}; {rebuild}")
+        raise EtmpcError(
+            f"{task}: references {path} are of suite version {data.get('suite_version')!r}, this etmpc's is "
+            f"{SUITE_VERSION}; {rebuild}"
+        )
     if data.get("test_set_sha256") != test_set_sha256:
-        raise EtmpcError(f"{task}: references {path} were made on test set {str(data.get('test_set_sha256'))[:12]}…, not "
-                         f"{test_set_sha256[:12]}…; {rebuild}")
+        raise EtmpcError(
+            f"{task}: references {path} were made on test set {str(data.get('test_set_sha256'))[:12]}…, not "
+            f"{test_set_sha256[:12]}…; {rebuild}"
+        )
     system = make_system(task)
     if data.get("recompute_price") != system.recompute_price:
-        raise EtmpcError(f"{task}: references {path} are at price {data.get('recompute_price')!r}, the task's is "
-                         f"{system.recompute_price!r}; {rebuild}")
+        raise EtmpcError(
+            f"{task}: references {path} are at price {data.get('recompute_price')!r}, the task's is "
+            f"{system.recompute_price!r}; {rebuild}"
+        )
     check_seal(data, f"{task}: references {path}", rebuild)
     problem = _problem(data, system)
     if problem is not None:
         raise EtmpcError(f"{task}: references {path} are inconsistent ({problem}); {rebuild}")
-    return References(**{k: data[k] for k in ("task", "test_set_sha256", "episodes", "recompute_price", "objective_sense",
-                                              "periodic", "best", "oracle", "suite_version", "software")})
+    return References(
+        **{
+            k: data[k]
+            for k in (
+                "task",
+                "test_set_sha256",
+                "episodes",
+                "recompute_price",
+                "objective_sense",
+                "periodic",
+                "best",
+                "oracle",
+                "suite_version",
+                "software",
+            )
+        }
+    )
 
 
 def _numbers(values, episodes: int) -> bool:
-    return (isinstance(values, list) and len(values) == episodes
-            and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in values))
+    return (
+        isinstance(values, list)
+        and len(values) == episodes
+        and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in values)
+    )
 
 
 def _problem(data: dict, system) -> str | None:

@@ -13,8 +13,7 @@ from etmpc.policies import parse_policy
 from etmpc.evaluation.inputs import check_shipped
 from etmpc.systems import check_name, system_class
 from etmpc.views.recording import Recorder
-from etmpc.views.video import (check_display, check_framebuffer, check_scene, check_size, iter_frames, render_frames,
-                               write_video)
+from etmpc.views.video import check_display, check_framebuffer, check_scene, check_size, iter_frames, render_frames, write_video
 
 
 @dataclass(frozen=True)
@@ -25,9 +24,18 @@ class RenderResult:
     trajectory: Trajectory
 
 
-def render_rollout(domain: str, policy_spec: str, episode: int, out: str | Path, seed: int = 0,
-                   width: int = 640, height: int = 480, fps: float | None = None,
-                   testset_path: str | None = None, record: str | Path | None = None) -> RenderResult:
+def render_rollout(
+    domain: str,
+    policy_spec: str,
+    episode: int,
+    out: str | Path,
+    seed: int = 0,
+    width: int = 640,
+    height: int = 480,
+    fps: float | None = None,
+    testset_path: str | None = None,
+    record: str | Path | None = None,
+) -> RenderResult:
     """Play test-set ``episode`` under ``policy_spec`` exactly as ``etmpc evaluate`` does (repeat 0
     of ``seed``) and write its video to ``out``, at one frame per control interval by default.
     With ``record``, also write the episode, its frames included, into that Rerun recording."""

@@ -52,8 +52,15 @@ class PolicySummary:
     failure_name: str | None = None
 
 
-def summarise(spec: str, runs: list[RunResult], sense: str, episodes: int, repeats: int,
-              failure_name: str | None = None, upper_bound: bool = False) -> PolicySummary:
+def summarise(
+    spec: str,
+    runs: list[RunResult],
+    sense: str,
+    episodes: int,
+    repeats: int,
+    failure_name: str | None = None,
+    upper_bound: bool = False,
+) -> PolicySummary:
     """Means over the runs that stayed finite; the others are counted, never averaged in. ``upper_bound``:
     the policy knows each episode's future (an oracle's ``upper_bound``)."""
     finite = [r for r in runs if r.finite]
@@ -116,8 +123,17 @@ class Evaluation:
         try:
             summaries = [_row(PolicySummary, s) for s in data["policies"].values()]
             runs = [_row(RunResult, r) for r in data["runs"]]
-            return cls(data["domain"], data["task"], data["test_set"]["path"], data["test_set"]["sha256"], data["seed"],
-                       summaries, runs, _number(data.get("recompute_price")), data.get("cpu_seconds"))
+            return cls(
+                data["domain"],
+                data["task"],
+                data["test_set"]["path"],
+                data["test_set"]["sha256"],
+                data["seed"],
+                summaries,
+                runs,
+                _number(data.get("recompute_price")),
+                data.get("cpu_seconds"),
+            )
         except (KeyError, TypeError, AttributeError) as exc:
             raise EtmpcError(f"not an etmpc evaluation (missing or wrong {exc})") from None
 

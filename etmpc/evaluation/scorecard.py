@@ -56,8 +56,7 @@ from etmpc.common import checks
 from etmpc.evaluation.evaluate import Evaluation, check_policies, evaluate, parse_policies
 from etmpc.evaluation.inputs import check_run_outputs, run_inputs
 from etmpc.evaluation.metrics import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED  # noqa: F401  (the card's statistics)
-from etmpc.evaluation.references import (SUITE_VERSION, References, build_references, references_path, software,
-                                         stored)
+from etmpc.evaluation.references import SUITE_VERSION, References, build_references, references_path, software, stored
 from etmpc.evaluation.mainscript import UnguardedScript
 from etmpc.evaluation.scoretable import format_scorecard  # noqa: F401  (the card as text)
 from etmpc.evaluation.workers import shared_pools
@@ -133,12 +132,20 @@ def task_score(refs: References, evaluation: Evaluation | dict, spec: str) -> Ta
     cpu = [c for r, c in zip(data["runs"], data.get("cpu_seconds") or []) if r["policy"] == spec]
     parts = {k: 1e3 * float(np.mean([c[k] for c in cpu])) for k in ("solve", "feedback", "decide")} if cpu else {}
     episodes = sorted(by_episode)
-    return _scored(refs, spec, episodes, [float(np.mean(by_episode[e])) for e in episodes], nonfinite,
-                   data["policies"][spec], parts | {"total": sum(parts.values())} if parts else {})
+    return _scored(
+        refs,
+        spec,
+        episodes,
+        [float(np.mean(by_episode[e])) for e in episodes],
+        nonfinite,
+        data["policies"][spec],
+        parts | {"total": sum(parts.values())} if parts else {},
+    )
 
 
-def _scored(refs: References, spec: str, episodes: list[int], objectives: list[float], nonfinite: int, summary: dict,
-            cpu_ms: dict) -> TaskScore:
+def _scored(
+    refs: References, spec: str, episodes: list[int], objectives: list[float], nonfinite: int, summary: dict, cpu_ms: dict
+) -> TaskScore:
     if episodes != list(range(refs.episodes)):
         raise EtmpcError(f"{refs.task}: {spec} was not played on each of the references' {refs.episodes} episodes")
     best, costs, gap = refs.costs(refs.periodic[refs.best]), refs.costs(objectives), refs.gap
@@ -150,9 +157,24 @@ def _scored(refs: References, spec: str, episodes: list[int], objectives: list[f
         per_episode = list(metrics.normalized_scores(costs, best, gap))
         ci = metrics.mean_ci95(per_episode)
         better = metrics.improvement_share(best - costs)
-    return TaskScore(refs.task, spec, len(episodes), summary["objective_mean"], refs.objective_sense,
-                     summary["recomputes_mean"], summary.get("failures_mean"), summary["solver_failures"], nonfinite,
-                     score, ci, per_episode, better, cpu_ms, refs.best, task_version=task_version(refs.task))
+    return TaskScore(
+        refs.task,
+        spec,
+        len(episodes),
+        summary["objective_mean"],
+        refs.objective_sense,
+        summary["recomputes_mean"],
+        summary.get("failures_mean"),
+        summary["solver_failures"],
+        nonfinite,
+        score,
+        ci,
+        per_episode,
+        better,
+        cpu_ms,
+        refs.best,
+        task_version=task_version(refs.task),
+    )
 
 
 def failed_task(task: str, spec: str, error: str) -> TaskScore:
@@ -177,8 +199,14 @@ class Aggregate:
     @classmethod
     def from_json(cls, data: dict) -> Aggregate:
         pair = lambda v: tuple(_nan(x) for x in v)  # noqa: E731
-        return cls(data["policy"], data["tasks"], _nan(data["iqm"]), pair(data["iqm_ci95"]),
-                   _nan(data["probability_of_improvement"]), pair(data["probability_of_improvement_ci95"]))
+        return cls(
+            data["policy"],
+            data["tasks"],
+            _nan(data["iqm"]),
+            pair(data["iqm_ci95"]),
+            _nan(data["probability_of_improvement"]),
+            pair(data["probability_of_improvement_ci95"]),
+        )
 
 
 def aggregate(rows: list[TaskScore]) -> Aggregate:
@@ -187,8 +215,14 @@ def aggregate(rows: list[TaskScore]) -> Aggregate:
     policy = rows[0].policy if rows else ""
     if not scored:
         return Aggregate(policy, 0, math.nan, (math.nan, math.nan), math.nan, (math.nan, math.nan))
-    return Aggregate(policy, len(scored), metrics.iqm(scored), metrics.iqm_ci95(scored),
-                     metrics.probability_of_improvement(scored), metrics.probability_of_improvement_ci95(scored))
+    return Aggregate(
+        policy,
+        len(scored),
+        metrics.iqm(scored),
+        metrics.iqm_ci95(scored),
+        metrics.probability_of_improvement(scored),
+        metrics.probability_of_improvement_ci95(scored),
+    )
 
 
 def profile(rows: list[TaskScore], thresholds: np.ndarray) -> np.ndarray:
@@ -227,22 +261,39 @@ class Scorecard:
         return all(r.error is None for r in self.rows)
 
     def to_json(self) -> dict:
-        return {"format": "etmpc-scorecard", "suite_version": SUITE_VERSION, "tasks": self.tasks,
-                "task_versions": {task: task_version(task) for task in self.tasks},
-                "references": self.references, "rows": [r.to_json() for r in self.rows],
-                "aggregates": [a.to_json() for a in self.aggregates], "software": software(),
-                "machine": {"processor": platform.processor() or platform.machine(), "system": platform.platform()}}
+        return {
+            "format": "etmpc-scorecard",
+            "suite_version": SUITE_VERSION,
+            "tasks": self.tasks,
+            "task_versions": {task: task_version(task) for task in self.tasks},
+            "references": self.references,
+            "rows": [r.to_json() for r in self.rows],
+            "aggregates": [a.to_json() for a in self.aggregates],
+            "software": software(),
+            "machine": {"processor": platform.processor() or platform.machine(), "system": platform.platform()},
+        }
 
     @classmethod
     def from_json(cls, data: dict) -> Scorecard:
         """A card as :meth:`to_json` wrote it (its versions, software and machine are the JSON's to check)."""
-        return cls(list(data["tasks"]), dict(data["references"]), [TaskScore.from_json(r) for r in data["rows"]],
-                   [Aggregate.from_json(a) for a in data["aggregates"]])
+        return cls(
+            list(data["tasks"]),
+            dict(data["references"]),
+            [TaskScore.from_json(r) for r in data["rows"]],
+            [Aggregate.from_json(a) for a in data["aggregates"]],
+        )
 
 
-def score(policies: list, tasks: list[str] | None = None, test_set: str | None = None, workers: int | None = None,
-          progress: bool = True, json_path: str | Path | None = None,
-          say: Callable[[str], None] = lambda line: None, episodes: int | None = None) -> Scorecard:
+def score(
+    policies: list,
+    tasks: list[str] | None = None,
+    test_set: str | None = None,
+    workers: int | None = None,
+    progress: bool = True,
+    json_path: str | Path | None = None,
+    say: Callable[[str], None] = lambda line: None,
+    episodes: int | None = None,
+) -> Scorecard:
     """Score every trigger of ``policies`` (spec strings or policy objects, as :func:`etmpc.evaluate`
     takes) on every task of ``tasks`` (default: the whole suite), each on its stored test set at its
     own price, against the stored references (see the module's docstring). ``test_set``: another test
@@ -288,11 +339,18 @@ def score(policies: list, tasks: list[str] | None = None, test_set: str | None =
         references = {task: refs if episodes is None else refs.head(episodes)}
         shown = {task: {"stored": None}}
     for task, refs in references.items():
-        shown[task] |= {"best_periodic": refs.best, "oracle": refs.oracle_spec, "test_set_sha256": refs.test_set_sha256,
-                        "episodes": refs.episodes, "recompute_price": refs.recompute_price, "gap": refs.gap}
+        shown[task] |= {
+            "best_periodic": refs.best,
+            "oracle": refs.oracle_spec,
+            "test_set_sha256": refs.test_set_sha256,
+            "episodes": refs.episodes,
+            "recompute_price": refs.recompute_price,
+            "gap": refs.gap,
+        }
     with shared_pools():  # each trigger played on its own (a failing one fails its row only), one pool for all
-        rows = [play_and_score(task, references[task], policy, test_set, workers, progress)
-                for task in tasks for policy in policies]
+        rows = [
+            play_and_score(task, references[task], policy, test_set, workers, progress) for task in tasks for policy in policies
+        ]
     card = Scorecard(tasks, shown, rows, [aggregate(r) for r in by_policy(rows).values()])
     if json_path is not None and card.complete:
         write_json(Path(json_path), card.to_json())
@@ -303,8 +361,9 @@ def _name(policy) -> str:
     return policy if isinstance(policy, str) else str(getattr(policy, "spec", type(policy).__name__))
 
 
-def play_and_score(task: str, refs: References, policy, test_set: str | None = None, workers: int | None = None,
-                   progress: bool = True) -> TaskScore:
+def play_and_score(
+    task: str, refs: References, policy, test_set: str | None = None, workers: int | None = None, progress: bool = True
+) -> TaskScore:
     """``policy`` (a spec or an object) played on ``refs``' episodes of ``task`` and scored; a policy that
     fails (bad spec, its own error) gives a row that says so."""
     try:

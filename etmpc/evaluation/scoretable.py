@@ -13,28 +13,46 @@ def format_scorecard(card) -> str:
     :class:`~etmpc.evaluation.scorecard.Scorecard` (which imports this module, so it is not imported here)."""
     width = max([18] + [len(r.policy) + 2 for r in card.rows])
     task_width = max([14] + [len(t) + 2 for t in card.tasks])
-    head = (f"{'task':<{task_width}}{'policy':<{width}}{'objective':>11}{'computations':>14}{'failures':>10}"
-            f"{'score':>9}{'± 95 % CI':>11}{'CPU ms/ep':>11}{'(solve':>9}{'feedback':>10}{'trigger)':>10}")
-    lines = ["normalized score per task: 0 = its best periodic schedule, 100 = the oracle over it (a one-step "
-             "lookahead: above 100 is possible); CPU: measured on this machine, per episode", head, "-" * len(head)]
+    head = (
+        f"{'task':<{task_width}}{'policy':<{width}}{'objective':>11}{'computations':>14}{'failures':>10}"
+        f"{'score':>9}{'± 95 % CI':>11}{'CPU ms/ep':>11}{'(solve':>9}{'feedback':>10}{'trigger)':>10}"
+    )
+    lines = [
+        "normalized score per task: 0 = its best periodic schedule, 100 = the oracle over it (a one-step "
+        "lookahead: above 100 is possible); CPU: measured on this machine, per episode",
+        head,
+        "-" * len(head),
+    ]
     for r in card.rows:
         if r.error is not None:
             lines.append(f"{r.task:<{task_width}}{r.policy:<{width}}failed: {r.error}")
             continue
         failures = f"{r.failures_mean:.2f}" if r.failures_mean is not None else "-"
-        score = f"{r.score:>9.1f}{r.score_ci95:>11.1f}" if math.isfinite(r.score) else \
-            f"{'-':>9}{f'{r.nonfinite_episodes} non-finite':>11}"
+        score = (
+            f"{r.score:>9.1f}{r.score_ci95:>11.1f}"
+            if math.isfinite(r.score)
+            else f"{'-':>9}{f'{r.nonfinite_episodes} non-finite':>11}"
+        )
         cpu = "".join(f"{r.cpu_ms[k]:>{w}.1f}" if k in r.cpu_ms else f"{'-':>{w}}" for k, w in _CPU)  # -: not measured
-        lines.append(f"{r.task:<{task_width}}{r.policy:<{width}}{r.objective_mean:>11.4f}{r.recomputes_mean:>14.2f}"
-                     f"{failures:>10}{score}{cpu}")
-    lines += ["", "the suite: interquartile mean of every task's episode scores and probability of improvement over the best "
-                  "periodic schedule, 95 % stratified bootstrap CIs",
-              f"{'policy':<{width}}{'tasks':>6}{'IQM':>9}{'95 % CI':>18}{'P(improve)':>12}{'95 % CI':>16}"]
+        lines.append(
+            f"{r.task:<{task_width}}{r.policy:<{width}}{r.objective_mean:>11.4f}{r.recomputes_mean:>14.2f}"
+            f"{failures:>10}{score}{cpu}"
+        )
+    lines += [
+        "",
+        "the suite: interquartile mean of every task's episode scores and probability of improvement over the best "
+        "periodic schedule, 95 % stratified bootstrap CIs",
+        f"{'policy':<{width}}{'tasks':>6}{'IQM':>9}{'95 % CI':>18}{'P(improve)':>12}{'95 % CI':>16}",
+    ]
     for a in card.aggregates:
-        lines.append(f"{a.policy:<{width}}{a.tasks:>6}{a.iqm:>9.1f}{f'[{a.iqm_ci95[0]:.1f}, {a.iqm_ci95[1]:.1f}]':>18}"
-                     f"{a.probability_of_improvement:>12.2f}"
-                     f"{f'[{a.probability_of_improvement_ci95[0]:.2f}, {a.probability_of_improvement_ci95[1]:.2f}]':>16}")
-    refs = "; ".join(f"{t}: {r['best_periodic']} and {r['oracle']}" + ("" if r.get("stored") else " (computed)")
-                     for t, r in card.references.items())
+        lines.append(
+            f"{a.policy:<{width}}{a.tasks:>6}{a.iqm:>9.1f}{f'[{a.iqm_ci95[0]:.1f}, {a.iqm_ci95[1]:.1f}]':>18}"
+            f"{a.probability_of_improvement:>12.2f}"
+            f"{f'[{a.probability_of_improvement_ci95[0]:.2f}, {a.probability_of_improvement_ci95[1]:.2f}]':>16}"
+        )
+    refs = "; ".join(
+        f"{t}: {r['best_periodic']} and {r['oracle']}" + ("" if r.get("stored") else " (computed)")
+        for t, r in card.references.items()
+    )
     lines.append(f"references: {refs}")
     return "\n".join(lines)

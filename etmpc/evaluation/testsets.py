@@ -113,18 +113,24 @@ def load(path: Path, domain: str, task: str) -> TestSet:
     stored = path.resolve() == default_path(domain, task).resolve()
     # Only the stored test set is regenerated from its seed; someone else's file is theirs to fix.
     name = canonical(f"{domain}/{task}")
-    advice = (f"regenerate it with: etmpc testset {name} --seed {stored_seed(name) or 'SEED'} --out {path}" if stored else
-              "use the stored test set (drop --test-set) or a complete one")
+    advice = (
+        f"regenerate it with: etmpc testset {name} --seed {stored_seed(name) or 'SEED'} --out {path}"
+        if stored
+        else "use the stored test set (drop --test-set) or a complete one"
+    )
     if not path.is_file():
         raise TestSetError(f"test set {path} not found; {advice}")
     expected_file = checksum_path(path)
     if not expected_file.is_file():
-        raise TestSetError(f"checksum file {expected_file} not found: a test set comes with the sha256 of its .npz "
-                           f"beside it; {advice}")
+        raise TestSetError(
+            f"checksum file {expected_file} not found: a test set comes with the sha256 of its .npz beside it; {advice}"
+        )
     expected = (expected_file.read_text(errors="replace").split() or [""])[0]
     actual = sha256_of(path)
     if actual != expected:
-        raise TestSetError(f"test set {path} is corrupted: sha256 {actual[:12]}... != {expected[:12]}... in {expected_file.name}; {advice}")
+        raise TestSetError(
+            f"test set {path} is corrupted: sha256 {actual[:12]}... != {expected[:12]}... in {expected_file.name}; {advice}"
+        )
     try:
         with np.load(path, allow_pickle=False) as data:
             # Read-only: every policy meets the same episodes, and nothing that plays one can change it.
@@ -143,8 +149,10 @@ def load(path: Path, domain: str, task: str) -> TestSet:
         raise TestSetError(f"test set {path} holds no episode arrays; {advice}")
     for name, values in arrays.items():
         if values.ndim < 1 or values.shape[0] != episodes:
-            raise TestSetError(f"test set {path}: array {name!r} has shape {values.shape}, not one row per each of its "
-                               f"{episodes} episodes; {advice}")
+            raise TestSetError(
+                f"test set {path}: array {name!r} has shape {values.shape}, not one row per each of its "
+                f"{episodes} episodes; {advice}"
+            )
         if values.dtype.kind not in "fiu" or not np.all(np.isfinite(values)):
             raise TestSetError(f"test set {path}: array {name!r} is not all finite numbers; {advice}")
     return TestSet(path=path, sha256=actual, meta=meta, arrays=arrays)

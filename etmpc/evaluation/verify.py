@@ -56,24 +56,30 @@ class Verdict:
 
 
 def read_card(path: str | Path) -> dict:
-    return read_document(path, FORMAT, missing=f"card {path} not found", unreadable=f"card {path} cannot be read ({{error}})",
-                         foreign=f"{path} is not an etmpc scorecard (format {FORMAT!r}): make one with etmpc score --json")
+    return read_document(
+        path,
+        FORMAT,
+        missing=f"card {path} not found",
+        unreadable=f"card {path} cannot be read ({{error}})",
+        foreign=f"{path} is not an etmpc scorecard (format {FORMAT!r}): make one with etmpc score --json",
+    )
 
 
 def _suite(card: dict, where: str) -> dict[str, References]:
     """The references each task of ``card`` was scored against (raises :class:`EtmpcError`, one line, for a
     card of another suite, task version or test set)."""
     if card.get("suite_version") != SUITE_VERSION:
-        raise EtmpcError(f"{where} was made under suite version {card.get('suite_version')!r}; this etmpc's is "
-                         f"{SUITE_VERSION}: verify it with the etmpc it was made with")
+        raise EtmpcError(
+            f"{where} was made under suite version {card.get('suite_version')!r}; this etmpc's is "
+            f"{SUITE_VERSION}: verify it with the etmpc it was made with"
+        )
     tasks, versions, shown = card.get("tasks"), card.get("task_versions"), card.get("references")
     if not (isinstance(tasks, list) and tasks and isinstance(versions, dict) and isinstance(shown, dict)):
         raise EtmpcError(f"{where} names no tasks, task versions or references (made by an older etmpc?)")
     references = {}
     for task in tasks:
         if versions.get(task) != task_version(task):
-            raise EtmpcError(f"{where} scored {task} at version {versions.get(task)!r}; this etmpc's is "
-                             f"{task_version(task)}")
+            raise EtmpcError(f"{where} scored {task} at version {versions.get(task)!r}; this etmpc's is {task_version(task)}")
         ref = shown.get(task)
         if not isinstance(ref, dict) or not ref.get("stored"):
             raise EtmpcError(f"{where} scored {task} on another test set than the stored one: it is not a suite result")
@@ -82,8 +88,10 @@ def _suite(card: dict, where: str) -> dict[str, References]:
             raise EtmpcError(f"{where} gives {task} {episodes!r} episodes, not a count")
         refs = stored(task, episodes)
         if ref.get("test_set_sha256") != refs.test_set_sha256:
-            raise EtmpcError(f"{where} scored {task} on test set {str(ref.get('test_set_sha256'))[:12]}…, not the "
-                             f"stored {refs.test_set_sha256[:12]}…")
+            raise EtmpcError(
+                f"{where} scored {task} on test set {str(ref.get('test_set_sha256'))[:12]}…, not the "
+                f"stored {refs.test_set_sha256[:12]}…"
+            )
         references[task] = refs
     return references
 
@@ -156,8 +164,7 @@ def sample(episodes: int, size: int, seed: int, row: int) -> list[int]:
     return sorted(int(e) for e in rng.choice(episodes, size=size, replace=False))
 
 
-def verify(path: str | Path, size: int = SAMPLE, seed: int = 0, workers: int | None = None,
-           progress: bool = False) -> Verdict:
+def verify(path: str | Path, size: int = SAMPLE, seed: int = 0, workers: int | None = None, progress: bool = False) -> Verdict:
     """Check the card at ``path`` (see the module's docstring), replaying ``size`` episodes of each row
     (0: all of them) drawn from ``seed`` on ``workers`` processes (default: by the work,
     :func:`~etmpc.evaluation.workers.workers_for`). A card that is not a suite result raises
@@ -172,8 +179,10 @@ def verify(path: str | Path, size: int = SAMPLE, seed: int = 0, workers: int | N
             mismatches += [f"{path}: {line}" for line in _consistency(row, references[row.task])]
             replayable.append(index)
         else:
-            mismatches.append(f"{path}: {row.task} {row.policy}: {len(row.episode_scores)} episode scores for "
-                              f"{row.episodes} episodes; the references have {references[row.task].episodes}")
+            mismatches.append(
+                f"{path}: {row.task} {row.policy}: {len(row.episode_scores)} episode scores for "
+                f"{row.episodes} episodes; the references have {references[row.task].episodes}"
+            )
     mismatches += [f"{path}: {line}" for line in _aggregates(card, rows)]
     jobs, expected = [], []
     for index in replayable:
@@ -192,6 +201,8 @@ def verify(path: str | Path, size: int = SAMPLE, seed: int = 0, workers: int | N
         best, cost = refs.costs(refs.periodic[refs.best][episode]), refs.costs(result.objective)
         replayed = float(metrics.normalized_scores(cost, best, refs.gap)) if result.finite else math.nan
         if not _same(replayed, row.episode_scores[episode]):
-            mismatches.append(f"{path}: {row.task} {row.policy} episode {episode}: score {row.episode_scores[episode]!r} "
-                              f"in the card, {replayed!r} replayed")
+            mismatches.append(
+                f"{path}: {row.task} {row.policy} episode {episode}: score {row.episode_scores[episode]!r} "
+                f"in the card, {replayed!r} replayed"
+            )
     return Verdict(str(path), len(rows), len(jobs), mismatches)

@@ -55,8 +55,10 @@ def context(domain: str, testset_path: str | None = None, sha256: str | None = N
         path = testset_path or ts_mod.default_path(system.domain, system.task)
         testset = ts_mod.load(path, system.domain, system.task)
         if sha256 is not None and testset.sha256 != sha256:
-            raise EtmpcError(f"test set {path} on this worker has sha256 {testset.sha256[:12]}…, the run uses "
-                             f"{sha256[:12]}…: install the same etmpc on every worker")
+            raise EtmpcError(
+                f"test set {path} on this worker has sha256 {testset.sha256[:12]}…, the run uses "
+                f"{sha256[:12]}…: install the same etmpc on every worker"
+            )
         env = system.make_env()
         testset.check_playable(system, env.task)
         # The MPC is made when first asked for, and with it its compiled code (built, or loaded from the cache):
@@ -82,13 +84,20 @@ class Played:
     def record(self, policy: str, announce=None, **extra) -> EpisodeRecord:
         """What a recording keeps of this episode, under the policy's name (``extra``: more identity;
         ``announce``: a self-trigger's, to record what it announced at each solve)."""
-        identity = {"policy": policy, "episode": self.index, "repeat": self.repeat, "seed": self.seed,
-                    "test_set_sha256": self.test_set_sha256, **extra}
+        identity = {
+            "policy": policy,
+            "episode": self.index,
+            "repeat": self.repeat,
+            "seed": self.seed,
+            "test_set_sha256": self.test_set_sha256,
+            **extra,
+        }
         return EpisodeRecord.from_trajectory(self.system, self.trajectory, identity, self.episode, announce)
 
 
-def play_test_episode(domain: str, policy, seed: int, repeat: int, episode: int, testset_path: str | None = None,
-                      sha256: str | None = None) -> Played:
+def play_test_episode(
+    domain: str, policy, seed: int, repeat: int, episode: int, testset_path: str | None = None, sha256: str | None = None
+) -> Played:
     """Test-set ``episode`` under ``policy`` with the policy's draws of pass ``repeat`` of ``seed``: how
     ``evaluate``, the evaluations during ``train``, ``render`` and the figures all play an episode."""
     system, env, testset = context(domain, testset_path, sha256)
@@ -221,8 +230,10 @@ class LocalBackend:
 
     def __enter__(self):
         if self.workers > 1 and (script := missing_main_script()) is not None:
-            raise EtmpcError(f"worker processes cannot start from {script}: each re-runs the main script, which is "
-                             "not a file: save it as one, or use workers=1")
+            raise EtmpcError(
+                f"worker processes cannot start from {script}: each re-runs the main script, which is "
+                "not a file: save it as one, or use workers=1"
+            )
         if self.workers > 1:
             if _SHARED_POOLS is None:
                 self._pool = _new_pool(self.workers)
@@ -249,8 +260,9 @@ class LocalBackend:
         if self._pool is None:
             iterator = map(fn, jobs)
         else:  # each job pickled here and unpickled by _call_pickled: a job a worker cannot load fails in one line
-            iterator = self._pool.map(functools.partial(_call_pickled, fn), [pickle.dumps(job) for job in jobs],
-                                      chunksize=chunksize)
+            iterator = self._pool.map(
+                functools.partial(_call_pickled, fn), [pickle.dumps(job) for job in jobs], chunksize=chunksize
+            )
         try:
             for job, result in zip(jobs, iterator):
                 results.append(result)
@@ -263,8 +275,10 @@ class LocalBackend:
         except BrokenProcessPool:  # a worker was killed or exited (os._exit in someone's code, out of memory)
             if self._ended_with(UNGUARDED_EXIT):
                 raise UnguardedScript(UNGUARDED) from None
-            raise EtmpcError("a worker process ended abruptly (killed, out of memory, or code in it called os._exit): "
-                             "run with --workers 1 (workers=1 in Python) to see where") from None
+            raise EtmpcError(
+                "a worker process ended abruptly (killed, out of memory, or code in it called os._exit): "
+                "run with --workers 1 (workers=1 in Python) to see where"
+            ) from None
         return results
 
     def _ended_with(self, code: int) -> bool:
@@ -304,8 +318,10 @@ class RayBackend:
             try:
                 ray.init(address=self.address, **options)
             except ConnectionError as exc:
-                raise EtmpcError(f"cannot join the Ray cluster at {self.address}: {exc} (a cluster with token "
-                                 "authentication also needs RAY_AUTH_MODE=token and its token in etmpc's environment)") from None
+                raise EtmpcError(
+                    f"cannot join the Ray cluster at {self.address}: {exc} (a cluster with token "
+                    "authentication also needs RAY_AUTH_MODE=token and its token in etmpc's environment)"
+                ) from None
             self._started = True
         self._remote = ray.remote(num_cpus=1, max_retries=0)(_run_chunk)
         return self
@@ -319,7 +335,7 @@ class RayBackend:
     def map(self, fn, jobs: list, on_result=None, chunksize: int = 1) -> list:
         import ray
 
-        chunks = [jobs[i:i + chunksize] for i in range(0, len(jobs), chunksize)]
+        chunks = [jobs[i : i + chunksize] for i in range(0, len(jobs), chunksize)]
         window = 2 * self.workers
         pending = [self._remote.remote(fn, chunk) for chunk in chunks[:window]]
         results = []
@@ -359,9 +375,11 @@ def _call_pickled(fn, job: bytes):
     try:
         job = pickle.loads(job)
     except Exception as exc:
-        raise EtmpcError(f"a worker process cannot load its job ({described(exc)}): define your policy's "
-                         'class in a module (or at the top level of a script run under `if __name__ == "__main__":`), '
-                         "or use workers=1") from None
+        raise EtmpcError(
+            f"a worker process cannot load its job ({described(exc)}): define your policy's "
+            'class in a module (or at the top level of a script run under `if __name__ == "__main__":`), '
+            "or use workers=1"
+        ) from None
     return fn(job)
 
 

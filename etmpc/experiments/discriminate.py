@@ -43,15 +43,19 @@ def discriminate(task: str, price: float | None = None, episodes: int = EPISODES
 
 def format_discrimination(task: str, found: dict, episodes: int, seconds: float) -> str:
     """The table ``etmpc discriminate`` prints: one line per state-dependent policy."""
-    lines = [f"{task}: best periodic schedule at price {found['price']:g}: {found['best_periodic']}; {episodes} episodes, "
-             f"{seconds:.0f} s",
-             f"{'policy':28s} {'computations':>12s}  {'gain over the front at its rate':>31s}  better in"]
+    lines = [
+        f"{task}: best periodic schedule at price {found['price']:g}: {found['best_periodic']}; {episodes} episodes, "
+        f"{seconds:.0f} s",
+        f"{'policy':28s} {'computations':>12s}  {'gain over the front at its rate':>31s}  better in",
+    ]
     for spec, row in found["rows"].items():
         if row is None:
             lines.append(f"{spec:28s} outside the periodic schedules' range of rates")
             continue
         ci = row["gain_percent_ci95"]
         ci = f"{ci:.2f} %" if ci is not None else "(one episode)"
-        lines.append(f"{spec:28s} {row['computations']:12.1f}  {row['gain_percent']:+18.2f} % ± {ci:>8s}  "
-                     f"{row['better_episodes']}/{row['episodes']}")
+        lines.append(
+            f"{spec:28s} {row['computations']:12.1f}  {row['gain_percent']:+18.2f} % ± {ci:>8s}  "
+            f"{row['better_episodes']}/{row['episodes']}"
+        )
     return "\n".join(lines)

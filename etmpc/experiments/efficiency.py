@@ -43,8 +43,14 @@ def gpomdp_points(checkpoint: dict, curve: dict, baselines: dict, best: str, sen
     """GPOMDP's curve: ``{"simulated_steps", "gain_percent", "episodes"}`` per evaluation (seeds' mean)."""
     config = checkpoint["config"]
     reference = _reference(baselines, best, config.get("eval_episodes"))
-    return [{"episodes": p["episodes"], "simulated_steps": _normalisation(config, steps) + p["episodes"] * steps,
-             "gain_percent": _gain(p["objective_mean"], reference, sense)} for p in curve["points"]]
+    return [
+        {
+            "episodes": p["episodes"],
+            "simulated_steps": _normalisation(config, steps) + p["episodes"] * steps,
+            "gain_percent": _gain(p["objective_mean"], reference, sense),
+        }
+        for p in curve["points"]
+    ]
 
 
 def dpi_points(checkpoint: dict, curve: dict, baselines: dict, best: str, sense: str, steps: int) -> list[dict]:
@@ -64,8 +70,13 @@ def dpi_points(checkpoint: dict, curve: dict, baselines: dict, best: str, sense:
     for p in curve["points"]:
         e = p["episodes"]
         rollouts = np.mean([sum(v for k, v in cost.items() if k < e) for cost in per_seed]) if e else 0.0
-        points.append({"episodes": e, "simulated_steps": int(round(start + e * steps + rollouts)),
-                       "gain_percent": _gain(p["objective_mean"], reference, sense)})
+        points.append(
+            {
+                "episodes": e,
+                "simulated_steps": int(round(start + e * steps + rollouts)),
+                "gain_percent": _gain(p["objective_mean"], reference, sense),
+            }
+        )
     return points
 
 
@@ -79,6 +90,12 @@ def ppo_points(training: dict, evaluations: dict, baselines: dict, best: str, se
         reference = per_episode(baselines, {best})
         common = sorted(set(values) & set(reference))
         objective, ref = np.mean([values[e] for e in common]), np.mean([reference[e] for e in common])
-        points.append({"timesteps": c["timesteps"], "simulated_steps": c.get("simulated_steps", c["timesteps"]),
-                       "wall_seconds": c["wall_seconds"], "gain_percent": _gain(float(objective), float(ref), sense)})
+        points.append(
+            {
+                "timesteps": c["timesteps"],
+                "simulated_steps": c.get("simulated_steps", c["timesteps"]),
+                "wall_seconds": c["wall_seconds"],
+                "gain_percent": _gain(float(objective), float(ref), sense),
+            }
+        )
     return points

@@ -84,8 +84,10 @@ def trajectory(out: str | Path, task: str, spec: str, episode: int = 0, seed: in
     traj = played.trajectory
     objective, control = scores(system, traj)
     what = cost_or_profit(system.objective_sense)
-    title = (f"{system.name} test-set episode {episode}, policy {spec}: {what} {objective:.5g} "
-             f"({control:.5g} without computations), {traj.recomputes} computations")
+    title = (
+        f"{system.name} test-set episode {episode}, policy {spec}: {what} {objective:.5g} "
+        f"({control:.5g} without computations), {traj.recomputes} computations"
+    )
     path = figures.write_trajectory_png(out, system, traj, title, system.signals(played.episode))
     return Drawn(path, objective, control, traj.recomputes, traj.solver_failures)
 

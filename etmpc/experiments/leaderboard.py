@@ -48,8 +48,15 @@ from etmpc.evaluation.inputs import policy_files
 from etmpc.evaluation.scorecard import Scorecard, TaskScore, aggregate, play_and_score, profiles
 from etmpc.evaluation.verify import read_card, verify
 from etmpc.evaluation.workers import make_backend, shared_pools
-from etmpc.experiments.leaderboard_page import (BEGIN, END, ORACLE_NOTE, headline, page, table_in,  # noqa: F401
-                                               with_table)
+from etmpc.experiments.leaderboard_page import (
+    BEGIN,
+    END,
+    ORACLE_NOTE,
+    headline,
+    page,
+    table_in,  # noqa: F401
+    with_table,
+)
 from etmpc.learning.base import shipped
 from etmpc.learning.config import VALIDATION_ENTROPY
 from etmpc.learning.jobs import mean_scores
@@ -77,6 +84,7 @@ class Entry:
 # The rows, in order (``etmpc score --help`` lists them from here): the fixed entries around the shipped learners.
 FIRST = ("always", "best periodic", "best threshold")
 LAST = ("rollout meter", "oracle")
+
 
 def shipped_learners() -> list[tuple[str, str, str, str]]:
     """The learners whose policies the project ships in policies/<task>/: ``(entry, file, spec prefix, what
@@ -113,23 +121,36 @@ def best_threshold(task: str, workers: int, say: Callable[[str], None]) -> str:
     return chosen
 
 
-def entries(tasks: list[str], references: dict[str, References], workers: int,
-            say: Callable[[str], None]) -> list[Entry]:
+def entries(tasks: list[str], references: dict[str, References], workers: int, say: Callable[[str], None]) -> list[Entry]:
     best = {t: references[t].best for t in tasks}
     found = [
         Entry(FIRST[0], "baseline", {t: "always" for t in tasks}, "standard MPC: a new plan every step"),
         Entry(FIRST[1], "reference", {t: best[t] for t in tasks}, "each task's best every:T on its test set"),
-        Entry(FIRST[2], "baseline", {t: best_threshold(t, workers, say) for t in tasks},
-              f"threshold:X chosen on {VALIDATION_EPISODES} training-distribution episodes"),
+        Entry(
+            FIRST[2],
+            "baseline",
+            {t: best_threshold(t, workers, say) for t in tasks},
+            f"threshold:X chosen on {VALIDATION_EPISODES} training-distribution episodes",
+        ),
     ]
     for name, file, prefix, note in shipped_learners():
         shipped = {t: shipped_policy(t, file) for t in tasks}
         if any(path is not None for path in shipped.values()):
-            found.append(Entry(name, "learned", {t: f"{prefix}{p}" for t, p in shipped.items() if p is not None},
-                               f"{note}; policies/<task>/{file}"))
+            found.append(
+                Entry(
+                    name,
+                    "learned",
+                    {t: f"{prefix}{p}" for t, p in shipped.items() if p is not None},
+                    f"{note}; policies/<task>/{file}",
+                )
+            )
     found += [
-        Entry(LAST[0], "meter", {t: f"rollout:{best[t]}:{ROLLOUT_FUTURES}:{make_system(t).benchmark.lookahead}"
-                                         for t in tasks}, "one-step lookahead over sampled futures: a real policy"),
+        Entry(
+            LAST[0],
+            "meter",
+            {t: f"rollout:{best[t]}:{ROLLOUT_FUTURES}:{make_system(t).benchmark.lookahead}" for t in tasks},
+            "one-step lookahead over sampled futures: a real policy",
+        ),
         Entry(LAST[1], "bound", {t: references[t].oracle_spec for t in tasks}, ORACLE_NOTE),
     ]
     return found
@@ -139,14 +160,20 @@ def _slug(name: str) -> str:
     return re.sub(r"[^a-z0-9]+", "-", name.lower()).strip("-")
 
 
-def _row(entry: Entry, task: str, refs: References, work: Path, episodes: int, workers: int,
-         say: Callable[[str], None]) -> tuple[TaskScore, dict]:
+def _row(
+    entry: Entry, task: str, refs: References, work: Path, episodes: int, workers: int, say: Callable[[str], None]
+) -> tuple[TaskScore, dict]:
     """The entry's score on ``task``, from the work directory if an earlier run finished it, and when and
     at which commit it was played."""
     spec = entry.specs[task]
     path = work / _slug(entry.name) / f"{folder_name(task)}.json"
-    key = {"spec": spec, "episodes": episodes, "test_set_sha256": refs.test_set_sha256, "suite_version": SUITE_VERSION,
-           "task_version": task_version(task)}
+    key = {
+        "spec": spec,
+        "episodes": episodes,
+        "test_set_sha256": refs.test_set_sha256,
+        "suite_version": SUITE_VERSION,
+        "task_version": task_version(task),
+    }
     files = policy_files(spec)
     if files:  # a policy read from files (rl:, sb3:): a row played with other files is played again
         key["files_sha256"] = {str(f): hashlib.sha256(f.read_bytes()).hexdigest() for f in files}
@@ -206,19 +233,34 @@ def check_readme(readme: Path) -> None:
     except (OSError, UnicodeDecodeError) as exc:
         raise EtmpcError(f"--readme {readme} cannot be read ({exc})") from None
     if text.count(BEGIN) != 1 or text.count(END) != 1 or text.index(BEGIN) > text.index(END):
-        raise EtmpcError(f"--readme {readme} needs one {BEGIN} ... {END} block for the leaderboard's table "
-                         f"(found {text.count(BEGIN)} begin and {text.count(END)} end markers)")
+        raise EtmpcError(
+            f"--readme {readme} needs one {BEGIN} ... {END} block for the leaderboard's table "
+            f"(found {text.count(BEGIN)} begin and {text.count(END)} end markers)"
+        )
 
 
 def _provenance() -> dict:
     """:func:`~etmpc.common.provenance.commit_and_date`, with the machine and the software: what made the page."""
-    return commit_and_date() | {"machine": {"processor": platform.processor() or platform.machine(), "system": platform.platform(),
-                                    "cores": len(os.sched_getaffinity(0))},
-                        "software": software()}
+    return commit_and_date() | {
+        "machine": {
+            "processor": platform.processor() or platform.machine(),
+            "system": platform.platform(),
+            "cores": len(os.sched_getaffinity(0)),
+        },
+        "software": software(),
+    }
 
 
-def build(docs: Path, work: Path, tasks: list[str] | None = None, episodes: int | None = None, workers: int = 1,
-          readme: Path | None = None, say: Callable[[str], None] = lambda line: None, cards: list[Path] = ()) -> dict:
+def build(
+    docs: Path,
+    work: Path,
+    tasks: list[str] | None = None,
+    episodes: int | None = None,
+    workers: int = 1,
+    readme: Path | None = None,
+    say: Callable[[str], None] = lambda line: None,
+    cards: list[Path] = (),
+) -> dict:
     """Score every entry on every task and write ``docs/leaderboard.{md,json}`` and the profile figure;
     with ``readme``, rewrite its headline table between the markers. Each of ``cards`` (an external
     scorecard, ``etmpc score --json``) is verified first (:mod:`etmpc.evaluation.verify`) and its triggers
@@ -227,8 +269,9 @@ def build(docs: Path, work: Path, tasks: list[str] | None = None, episodes: int 
         return _build(docs, work, distinct(tasks or names()), episodes, workers, readme, say, list(cards))
 
 
-def submitted(cards: list[Path], tasks: list[str], episodes: int, workers: int,
-              say: Callable[[str], None]) -> tuple[list[Entry], dict[tuple[str, str], TaskScore]]:
+def submitted(
+    cards: list[Path], tasks: list[str], episodes: int, workers: int, say: Callable[[str], None]
+) -> tuple[list[Entry], dict[tuple[str, str], TaskScore]]:
     """Each card's triggers as entries, and their rows by (entry, task): a card must verify (a seeded
     sample of each row replayed bit for bit) and be scored on the leaderboard's tasks and episodes."""
     found, rows = [], {}
@@ -240,8 +283,10 @@ def submitted(cards: list[Path], tasks: list[str], episodes: int, workers: int,
         data = read_card(card)
         card_rows = [TaskScore.from_json(r) for r in data["rows"]]  # verified: every row is a row
         if set(data["tasks"]) != set(tasks) or any(r.episodes != episodes for r in card_rows):
-            raise EtmpcError(f"--card {card} scores {', '.join(data['tasks'])} on {card_rows[0].episodes} episodes; "
-                             f"the leaderboard has {', '.join(tasks)} on {episodes}: score every task on its whole test set")
+            raise EtmpcError(
+                f"--card {card} scores {', '.join(data['tasks'])} on {card_rows[0].episodes} episodes; "
+                f"the leaderboard has {', '.join(tasks)} on {episodes}: score every task on its whole test set"
+            )
         for row in card_rows:
             name = f"{row.policy} (submitted)"
             if name not in [e.name for e in found]:
@@ -251,8 +296,16 @@ def submitted(cards: list[Path], tasks: list[str], episodes: int, workers: int,
     return found, rows
 
 
-def _build(docs: Path, work: Path, tasks: list[str], episodes: int | None, workers: int, readme: Path | None,
-           say: Callable[[str], None], cards: list[Path]) -> dict:
+def _build(
+    docs: Path,
+    work: Path,
+    tasks: list[str],
+    episodes: int | None,
+    workers: int,
+    readme: Path | None,
+    say: Callable[[str], None],
+    cards: list[Path],
+) -> dict:
     if readme is not None:
         check_readme(readme)
     check_kept(work)
@@ -260,8 +313,10 @@ def _build(docs: Path, work: Path, tasks: list[str], episodes: int | None, worke
     extra, given = submitted(cards, tasks, episodes or min(r.episodes for r in references.values()), workers, say)
     for task in tasks:  # the shipped policies parse (and are the files shipped) before any row is played
         system = make_system(task)
-        parse_policies(system, [f"{prefix}{path}" for _, file, prefix, _ in shipped_learners()
-                                if (path := shipped_policy(task, file)) is not None])
+        parse_policies(
+            system,
+            [f"{prefix}{path}" for _, file, prefix, _ in shipped_learners() if (path := shipped_policy(task, file)) is not None],
+        )
     board = entries(tasks, references, workers, say) + extra
     n = episodes or min(r.episodes for r in references.values())
     result = []
@@ -278,14 +333,36 @@ def _build(docs: Path, work: Path, tasks: list[str], episodes: int | None, worke
             played[f"{at['commit']}{' (with uncommitted changes)' if at['uncommitted_changes'] else ''}"] = at
         named = [replace(r, policy=entry.name) for r in rows]
         rows_all += named
-        result.append({"name": entry.name, "kind": entry.kind, "note": entry.note, "specs": entry.specs,
-                       "rows": [r.to_json() for r in rows], "aggregate": aggregate(named).to_json()})
-    data = {"format": FORMAT, "suite_version": SUITE_VERSION, "tasks": tasks, "episodes": n,
-            "task_versions": {t: task_version(t) for t in tasks},
-            "references": {t: {"best_periodic": r.best, "oracle": r.oracle_spec, "gap": r.gap,
-                               "test_set_sha256": r.test_set_sha256, "recompute_price": r.recompute_price,
-                               "objective_sense": r.objective_sense} for t, r in references.items()},
-            "generated": _provenance() | {"rows_played_at": sorted(played)}, "entries": result}
+        result.append(
+            {
+                "name": entry.name,
+                "kind": entry.kind,
+                "note": entry.note,
+                "specs": entry.specs,
+                "rows": [r.to_json() for r in rows],
+                "aggregate": aggregate(named).to_json(),
+            }
+        )
+    data = {
+        "format": FORMAT,
+        "suite_version": SUITE_VERSION,
+        "tasks": tasks,
+        "episodes": n,
+        "task_versions": {t: task_version(t) for t in tasks},
+        "references": {
+            t: {
+                "best_periodic": r.best,
+                "oracle": r.oracle_spec,
+                "gap": r.gap,
+                "test_set_sha256": r.test_set_sha256,
+                "recompute_price": r.recompute_price,
+                "objective_sense": r.objective_sense,
+            }
+            for t, r in references.items()
+        },
+        "generated": _provenance() | {"rows_played_at": sorted(played)},
+        "entries": result,
+    }
     docs.mkdir(parents=True, exist_ok=True)
     card = Scorecard(tasks, {}, rows_all, [])
     write_performance_profile_png(docs / "leaderboard_profile.png", profiles(card, THRESHOLDS), THRESHOLDS, tasks)

@@ -12,8 +12,10 @@ from etmpc.loop import computation_cost
 from etmpc.evaluation.metrics import higher_or_lower, oriented
 
 BEGIN, END = "<!-- leaderboard:begin -->", "<!-- leaderboard:end -->"
-ORACLE_NOTE = ("a one-step lookahead over the best periodic schedule with each episode's future known, not a policy; "
-               "it bounds that lookahead, not every trigger")
+ORACLE_NOTE = (
+    "a one-step lookahead over the best periodic schedule with each episode's future known, not a policy; "
+    "it bounds that lookahead, not every trigger"
+)
 
 
 def _finite(value) -> bool:
@@ -36,14 +38,19 @@ def _number(value, spec: str) -> str:
 def headline(data: dict) -> str:
     """The headline table (markdown): each entry's normalized score per task and the suite's aggregate."""
     tasks = data["tasks"]
-    lines = ["| trigger | " + " | ".join(tasks) + " | IQM [95 % CI] | P(improve) | CPU ms/episode |",
-             "|---|" + "---:|" * len(tasks) + "---:|---:|---:|"]
+    lines = [
+        "| trigger | " + " | ".join(tasks) + " | IQM [95 % CI] | P(improve) | CPU ms/episode |",
+        "|---|" + "---:|" * len(tasks) + "---:|---:|---:|",
+    ]
     for entry in data["entries"]:
         rows = {r["task"]: r for r in entry["rows"]}
         a = entry["aggregate"]
         cpu = [rows[t]["cpu_ms"]["total"] for t in tasks if t in rows and rows[t].get("cpu_ms")]
-        iqm = (f"{a['iqm']:.1f} [{a['iqm_ci95'][0]:.1f}, {a['iqm_ci95'][1]:.1f}]"
-               if _finite(a["iqm"]) and all(map(_finite, a["iqm_ci95"])) else "-")
+        iqm = (
+            f"{a['iqm']:.1f} [{a['iqm_ci95'][0]:.1f}, {a['iqm_ci95'][1]:.1f}]"
+            if _finite(a["iqm"]) and all(map(_finite, a["iqm_ci95"]))
+            else "-"
+        )
         improve = f"{a['probability_of_improvement']:.2f}" if _finite(a["probability_of_improvement"]) else "-"
         cells = [_cell(rows[t]) if t in rows else "-" for t in tasks] + [iqm, improve, f"{np.mean(cpu):.1f}" if cpu else "-"]
         lines.append(f"| {entry['name']} | " + " | ".join(cells) + " |")
@@ -58,7 +65,7 @@ def with_table(text: str, table: str) -> str:
 
 def table_in(text: str) -> str:
     """The table between the leaderboard's markers of ``text``."""
-    return text[text.index(BEGIN) + len(BEGIN):text.index(END)].strip("\n")
+    return text[text.index(BEGIN) + len(BEGIN) : text.index(END)].strip("\n")
 
 
 def above_the_oracle(data: dict, task: str) -> list[str]:
@@ -73,25 +80,42 @@ def above_the_oracle(data: dict, task: str) -> list[str]:
     lines = []
     for entry in data["entries"]:
         row = next((r for r in entry["rows"] if r["task"] == task), None)
-        if entry["kind"] not in ("learned", "meter") or row is None or row.get("error") or not _finite(row["score"]) \
-                or row["score"] <= 100 or not _finite(row["objective_mean"]):
+        if (
+            entry["kind"] not in ("learned", "meter")
+            or row is None
+            or row.get("error")
+            or not _finite(row["score"])
+            or row["score"] <= 100
+            or not _finite(row["objective_mean"])
+        ):
             continue
         saved = oracle["recomputes_mean"] - row["recomputes_mean"]
         worth = computation_cost(saved, price)
         better = -oriented(oracle["objective_mean"] - row["objective_mean"], sense)  # > 0: its objective is the better
         control_loss = worth - better  # what it gives up in control objective, against the oracle's
-        head = (f"* **{entry['name']}** scores {row['score']:.1f}: {row['recomputes_mean']:.2f} computations per episode "
-                f"against the oracle's {oracle['recomputes_mean']:.2f}")
+        head = (
+            f"* **{entry['name']}** scores {row['score']:.1f}: {row['recomputes_mean']:.2f} computations per episode "
+            f"against the oracle's {oracle['recomputes_mean']:.2f}"
+        )
         if saved > 0 and price > 0:
-            lines.append(f"{head}. The {saved:.2f} it saves are worth {worth:.4g} at {price:g} per computation; it gives "
-                         f"up {control_loss:.4g} in control objective to the oracle, so its objective is {better:.4g} "
-                         "better than the oracle's.")
+            lines.append(
+                f"{head}. The {saved:.2f} it saves are worth {worth:.4g} at {price:g} per computation; it gives "
+                f"up {control_loss:.4g} in control objective to the oracle, so its objective is {better:.4g} "
+                "better than the oracle's."
+            )
         else:
-            lines.append(f"{head}, saving none the price counts ({price:g} per computation): its control objective "
-                         f"itself is {better:.4g} better than the oracle's.")
+            lines.append(
+                f"{head}, saving none the price counts ({price:g} per computation): its control objective "
+                f"itself is {better:.4g} better than the oracle's."
+            )
     if lines:
-        lines = [f"Above 100 on {task}: the oracle is a one-step lookahead over `{ref['best_periodic']}` and spends about "
-                 "as many computations as that schedule; these save some of them:", "", *lines, ""]
+        lines = [
+            f"Above 100 on {task}: the oracle is a one-step lookahead over `{ref['best_periodic']}` and spends about "
+            "as many computations as that schedule; these save some of them:",
+            "",
+            *lines,
+            "",
+        ]
     return lines
 
 
@@ -131,8 +155,11 @@ def page(data: dict) -> str:
     ]
     for entry in data["entries"]:
         distinct_specs = set(entry["specs"].values())
-        specs = (f"`{distinct_specs.pop()}`" if len(distinct_specs) == 1
-                 else ", ".join(f"{t}: `{spec}`" for t, spec in entry["specs"].items()))
+        specs = (
+            f"`{distinct_specs.pop()}`"
+            if len(distinct_specs) == 1
+            else ", ".join(f"{t}: `{spec}`" for t, spec in entry["specs"].items())
+        )
         note = ORACLE_NOTE if entry["kind"] == "bound" else entry["note"]  # a page from an older JSON says it too
         kind = "clairvoyant reference" if entry["kind"] == "bound" else entry["kind"]
         lines.append(f"* **{entry['name']}** ({kind}): {note}; {specs}.")
@@ -140,11 +167,15 @@ def page(data: dict) -> str:
     for task in data["tasks"]:
         ref = data["references"][task]
         sense = higher_or_lower(ref["objective_sense"])
-        lines += [f"### {task}", "",
-                  f"References: `{ref['best_periodic']}` and `{ref['oracle']}` (mean gap {ref['gap']:.5g}); objective: "
-                  f"{sense} is better, at {ref['recompute_price']:g} per computation.", "",
-                  "| trigger | spec | objective | computations | failures | score | CPU ms/ep (solve / feedback / trigger) |",
-                  "|---|---|---:|---:|---:|---:|---:|"]
+        lines += [
+            f"### {task}",
+            "",
+            f"References: `{ref['best_periodic']}` and `{ref['oracle']}` (mean gap {ref['gap']:.5g}); objective: "
+            f"{sense} is better, at {ref['recompute_price']:g} per computation.",
+            "",
+            "| trigger | spec | objective | computations | failures | score | CPU ms/ep (solve / feedback / trigger) |",
+            "|---|---|---:|---:|---:|---:|---:|",
+        ]
         for entry in data["entries"]:
             row = next((r for r in entry["rows"] if r["task"] == task), None)
             if row is None:
@@ -154,10 +185,12 @@ def page(data: dict) -> str:
                 continue
             failures = "-" if row["failures_mean"] is None else f"{row['failures_mean']:.2f}"
             cpu = row["cpu_ms"]
-            lines.append(f"| {entry['name']} | `{row['policy']}` | {_number(row['objective_mean'], '.5g')} | "
-                         f"{_number(row['recomputes_mean'], '.2f')} | {failures} | {_cell(row)} | "
-                         f"{_number(cpu['total'], '.1f')} ({_number(cpu['solve'], '.1f')} / {_number(cpu['feedback'], '.1f')} / "
-                         f"{_number(cpu['decide'], '.1f')}) |")
+            lines.append(
+                f"| {entry['name']} | `{row['policy']}` | {_number(row['objective_mean'], '.5g')} | "
+                f"{_number(row['recomputes_mean'], '.2f')} | {failures} | {_cell(row)} | "
+                f"{_number(cpu['total'], '.1f')} ({_number(cpu['solve'], '.1f')} / {_number(cpu['feedback'], '.1f')} / "
+                f"{_number(cpu['decide'], '.1f')}) |"
+            )
         lines.append("")
         lines += above_the_oracle(data, task)
     return "\n".join(lines)

@@ -52,10 +52,15 @@ def front(table: dict, periodic: list[str], episodes: list[int], sense: str) -> 
     """The periodic schedules no other beats on ``episodes``: none has a lower-or-equal mean rate and
     a better-or-equal mean control objective (one of them strictly), ordered by rate. Comparing with
     this front, never with a dominated schedule, keeps the comparison fair to the periodic side."""
-    points = {p: (np.mean([table[p][e][1] for e in episodes]),
-                  metrics.oriented(np.mean([table[p][e][0] for e in episodes]), sense)) for p in periodic}
-    efficient = [p for p, (rate, value) in points.items()
-                 if not any(r <= rate and v >= value and (r, v) != (rate, value) for r, v in points.values())]
+    points = {
+        p: (np.mean([table[p][e][1] for e in episodes]), metrics.oriented(np.mean([table[p][e][0] for e in episodes]), sense))
+        for p in periodic
+    }
+    efficient = [
+        p
+        for p, (rate, value) in points.items()
+        if not any(r <= rate and v >= value and (r, v) != (rate, value) for r, v in points.values())
+    ]
     return sorted(efficient, key=lambda p: (points[p][0], p))
 
 
@@ -85,10 +90,19 @@ def versus_front(table: dict, periodic: list[str], spec: str, sense: str) -> dic
     gain = metrics.oriented(mine - front_values, sense)
     scale = abs(float(front_values.mean()))
     ci = _ci(gain)
-    return {"episodes": len(episodes), "computations": rate, "between": [ordered[lo], ordered[hi]], "weight": float(w),
-            "front_control_objective": float(front_values.mean()), "control_objective": float(mine.mean()),
-            "gain": float(gain.mean()), "gain_ci95": ci, "gain_percent": 100.0 * float(gain.mean()) / scale,
-            "gain_percent_ci95": _percent(ci, scale), "better_episodes": int((gain > 0).sum())}
+    return {
+        "episodes": len(episodes),
+        "computations": rate,
+        "between": [ordered[lo], ordered[hi]],
+        "weight": float(w),
+        "front_control_objective": float(front_values.mean()),
+        "control_objective": float(mine.mean()),
+        "gain": float(gain.mean()),
+        "gain_ci95": ci,
+        "gain_percent": 100.0 * float(gain.mean()) / scale,
+        "gain_percent_ci95": _percent(ci, scale),
+        "better_episodes": int((gain > 0).sum()),
+    }
 
 
 def versus_nearest(table: dict, periodic: list[str], spec: str, price: float, sense: str) -> dict:
@@ -100,12 +114,19 @@ def versus_nearest(table: dict, periodic: list[str], spec: str, price: float, se
     theirs = np.array([objective(*table[nearest][e], price, sense) for e in episodes])
     gain = metrics.oriented(mine - theirs, sense)
     scale, ci = abs(float(theirs.mean())), _ci(gain)
-    return {"policy": nearest, "objective": float(theirs.mean()), "gain": float(gain.mean()), "gain_ci95": ci,
-            "gain_percent": 100.0 * float(gain.mean()) / scale, "gain_percent_ci95": _percent(ci, scale)}
+    return {
+        "policy": nearest,
+        "objective": float(theirs.mean()),
+        "gain": float(gain.mean()),
+        "gain_ci95": ci,
+        "gain_percent": 100.0 * float(gain.mean()) / scale,
+        "gain_percent_ci95": _percent(ci, scale),
+    }
 
 
-def build_pareto(domain: str, sense: str, settings, fixed: dict, periodic: list[str], events: list[str],
-                 priced: list[dict]) -> dict:
+def build_pareto(
+    domain: str, sense: str, settings, fixed: dict, periodic: list[str], events: list[str], priced: list[dict]
+) -> dict:
     """``pareto.json``: a point per (policy, price) and, per price, the equal-rate answer."""
     fixed_table = episode_table(fixed)
     on_front = front(fixed_table, periodic, sorted(fixed_table[periodic[0]]), sense)
@@ -123,7 +144,11 @@ def build_pareto(domain: str, sense: str, settings, fixed: dict, periodic: list[
                 continue
             cells = list(by.values())
             rows[spec] = {
-                "policy": spec, "kind": kind, "price": price, "upper_bound": kind == "oracle", "episodes": len(cells),
+                "policy": spec,
+                "kind": kind,
+                "price": price,
+                "upper_bound": kind == "oracle",
+                "episodes": len(cells),
                 "computations": float(np.mean([n for _, n in cells])),
                 "control_objective": float(np.mean([c for c, _ in cells])),
                 "objective": float(np.mean([objective(c, n, price, sense) for c, n in cells])),
@@ -134,22 +159,39 @@ def build_pareto(domain: str, sense: str, settings, fixed: dict, periodic: list[
                 rows[spec]["on_front"] = spec in on_front
         points += rows.values()
         answers.append(_answer(price, rows, best_periodic(fixed, periodic, price, sense)))
-    return {"format": "etmpc-pareto", "version": 1, "domain": domain, "objective_sense": sense,
-            "settings": settings.to_json(), "test_set": fixed["test_set"], "episodes": settings.episodes,
-            "points": points, "answers": answers}
+    return {
+        "format": "etmpc-pareto",
+        "version": 1,
+        "domain": domain,
+        "objective_sense": sense,
+        "settings": settings.to_json(),
+        "test_set": fixed["test_set"],
+        "episodes": settings.episodes,
+        "points": points,
+        "answers": answers,
+    }
 
 
 def _answer(price: float, rows: dict, best: str) -> dict:
     """At ``price``: the gain over the periodic front at equal rates of the rollout, learned and
     self-triggering policies, of the best event trigger, and of the oracle (the bound)."""
+
     def best_of(kind):
         candidates = [r for r in rows.values() if r["kind"] == kind and r["versus_periodic_front"] is not None]
         if not candidates:
             return None
         row = max(candidates, key=lambda r: r["versus_periodic_front"]["gain"])
         return {"policy": row["policy"], **row["versus_periodic_front"]}
-    return {"price": price, "best_periodic": best, "rollout": best_of("rollout"), "learned": best_of("learned"),
-            "self": best_of("self"), "best_event": best_of("event"), "oracle": best_of("oracle")}
+
+    return {
+        "price": price,
+        "best_periodic": best,
+        "rollout": best_of("rollout"),
+        "learned": best_of("learned"),
+        "self": best_of("self"),
+        "best_event": best_of("event"),
+        "oracle": best_of("oracle"),
+    }
 
 
 def short_name(spec: str) -> str:
@@ -173,18 +215,24 @@ def _pct(row: dict | None) -> str:
 def report_section(pareto: dict) -> list[str]:
     """A Markdown section: at equal rates, each state-dependent policy against the periodic front."""
     sense = metrics.higher_or_lower(pareto["objective_sense"])
-    lines = [f"## {pareto['domain']}: state-dependent against periodic at equal computation rates", "",
-             f"First {pareto['episodes']} test-set episodes, paired per episode; the periodic front interpolated at "
-             f"each policy's mean rate; gains in control objective ({sense} is better), > 0 = better than the front, "
-             "95 % CI. The oracle is an upper bound, not a policy. The best event trigger is the best of "
-             f"{len(pareto['settings']['thresholds'])} levels, so its gain is biased upwards (a maximum over noisy "
-             "estimates).", "",
-             "| price | best periodic | rollout | learned (DPI, trained at the price) | self-trigger (trained at the price) "
-             "| best event trigger | oracle bound |",
-             "|---|---|---|---|---|---|---|"]
+    lines = [
+        f"## {pareto['domain']}: state-dependent against periodic at equal computation rates",
+        "",
+        f"First {pareto['episodes']} test-set episodes, paired per episode; the periodic front interpolated at "
+        f"each policy's mean rate; gains in control objective ({sense} is better), > 0 = better than the front, "
+        "95 % CI. The oracle is an upper bound, not a policy. The best event trigger is the best of "
+        f"{len(pareto['settings']['thresholds'])} levels, so its gain is biased upwards (a maximum over noisy "
+        "estimates).",
+        "",
+        "| price | best periodic | rollout | learned (DPI, trained at the price) | self-trigger (trained at the price) "
+        "| best event trigger | oracle bound |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for a in pareto["answers"]:
         learned = "not trained" if pareto["settings"].get("learner") is None else _pct(a["learned"])
         own = "not trained" if pareto["settings"].get("self_trigger") is None else _pct(a.get("self"))
-        lines.append(f"| {a['price']:g} | `{a['best_periodic']}` | {_pct(a['rollout'])} | {learned} | {own} | "
-                     f"{_pct(a['best_event'])} | {_pct(a['oracle'])} |")
+        lines.append(
+            f"| {a['price']:g} | `{a['best_periodic']}` | {_pct(a['rollout'])} | {learned} | {own} | "
+            f"{_pct(a['best_event'])} | {_pct(a['oracle'])} |"
+        )
     return lines

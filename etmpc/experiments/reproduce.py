@@ -49,8 +49,13 @@ from etmpc.evaluation.workers import play_test_episode, shared_pools
 from etmpc.experiments import sweep as sweeps
 from etmpc.experiments.report import PAPER, machine, report, software_versions
 from etmpc.evaluation.references import stored
-from etmpc.experiments.summary import (summarise_default, summarise_headroom, summarise_learners, summarise_scorecard,
-                                       summarise_system)
+from etmpc.experiments.summary import (
+    summarise_default,
+    summarise_headroom,
+    summarise_learners,
+    summarise_scorecard,
+    summarise_system,
+)
 from etmpc.learning.dpi import Settings as DpiSettings
 from etmpc.experiments import efficiency
 from etmpc.learning import hyperparams
@@ -64,6 +69,7 @@ from etmpc.systems import folder_name, make_system, names
 from etmpc.systems.base import provides, require
 from etmpc.views import figures
 from etmpc.views.curves import write_efficiency_png
+
 
 @dataclass(frozen=True)
 class Settings:
@@ -98,14 +104,39 @@ class Settings:
 
 
 FULL = Settings()
-QUICK = Settings(episodes=30, eval_every=15, eval_episodes=10, test_episodes=20, repeats=2, record_episodes=2,
-                 video_size=(320, 240), dpi_seeds=(0, 1), dpi_episodes=4, dpi_eval_every=2, dpi_labels=5, dpi_futures=2,
-                 dpi_horizon=10, validation_episodes=5, rollout_episodes=3, rollout_futures=2, rollout_horizon=10,
-                 ppo_timesteps=2048, smoke=True)
+QUICK = Settings(
+    episodes=30,
+    eval_every=15,
+    eval_episodes=10,
+    test_episodes=20,
+    repeats=2,
+    record_episodes=2,
+    video_size=(320, 240),
+    dpi_seeds=(0, 1),
+    dpi_episodes=4,
+    dpi_eval_every=2,
+    dpi_labels=5,
+    dpi_futures=2,
+    dpi_horizon=10,
+    validation_episodes=5,
+    rollout_episodes=3,
+    rollout_futures=2,
+    rollout_horizon=10,
+    ppo_timesteps=2048,
+    smoke=True,
+)
 
 
-def reproduce(out: Path, settings: Settings = FULL, workers: int = 1, backend: str = "local",
-              address: str | None = None, domains=None, progress: bool = True, sweep: bool = False) -> dict:
+def reproduce(
+    out: Path,
+    settings: Settings = FULL,
+    workers: int = 1,
+    backend: str = "local",
+    address: str | None = None,
+    domains=None,
+    progress: bool = True,
+    sweep: bool = False,
+) -> dict:
     """Run (or continue) every stage into ``out``; returns ``results.json``'s content. With
     ``sweep``, also the price sweep of each system (``out/sweep/<task>``, see
     :mod:`etmpc.experiments.sweep`) and its equal-rate answer in the report."""
@@ -113,8 +144,9 @@ def reproduce(out: Path, settings: Settings = FULL, workers: int = 1, backend: s
         return _reproduce(Path(out), settings, workers, backend, address, domains, progress, sweep)
 
 
-def _reproduce(out: Path, settings: Settings, workers: int, backend: str, address: str | None, domains, progress: bool,
-               sweep: bool) -> dict:
+def _reproduce(
+    out: Path, settings: Settings, workers: int, backend: str, address: str | None, domains, progress: bool, sweep: bool
+) -> dict:
     domains = list(names()) if domains is None else list(domains)  # every task (its name: DOMAIN or DOMAIN/TASK)
     started = time.perf_counter()
     sweep_settings = {d: sweeps.SweepSettings.default(d, quick=settings.smoke) for d in domains} if sweep else {}
@@ -127,11 +159,17 @@ def _reproduce(out: Path, settings: Settings, workers: int, backend: str, addres
         systems[domain] = _system(out / folder_name(domain), domain, settings, run, progress)
     paretos = {}
     for domain, chosen in sweep_settings.items():
-        paretos[domain] = sweeps.sweep(domain, out / "sweep" / folder_name(domain), chosen, workers, backend, address, progress,
-                                       say=_say)
+        paretos[domain] = sweeps.sweep(
+            domain, out / "sweep" / folder_name(domain), chosen, workers, backend, address, progress, say=_say
+        )
     results = {
-        "format": "etmpc-reproduce", "version": 1, "settings": settings.to_json(), "systems": systems,
-        "software": software_versions(), "machine": machine(), "provenance": commit_and_date(),
+        "format": "etmpc-reproduce",
+        "version": 1,
+        "settings": settings.to_json(),
+        "systems": systems,
+        "software": software_versions(),
+        "machine": machine(),
+        "provenance": commit_and_date(),
         "wall_seconds_this_invocation": time.perf_counter() - started,
     }
     if paretos:
@@ -177,20 +215,34 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
     system = make_system(domain)
     require(system, "experiments", "etmpc reproduce")
     folder.mkdir(parents=True, exist_ok=True)
-    common = dict(domain=domain, episodes=settings.test_episodes, workers=run["workers"], backend=run["backend"],
-                  address=run["address"], progress=progress)
+    common = dict(
+        domain=domain,
+        episodes=settings.test_episodes,
+        workers=run["workers"],
+        backend=run["backend"],
+        address=run["address"],
+        progress=progress,
+    )
     _say(f"{domain}: fixed policies")
     baselines = evaluated_once(folder / "baselines.json", policies=system.benchmark.baselines(), **common)
 
     learned, state, learned_specs = None, None, []
     if system.name in PAPER:
         _say(f"{domain}: training {len(settings.seeds)} seeds x {settings.episodes} episodes")
-        config = TrainConfig(domain, settings.seeds, settings.episodes, settings.eval_every, settings.eval_episodes,
-                             features="paper")  # the paper's learner on the paper's features, as the report says
+        config = TrainConfig(
+            domain, settings.seeds, settings.episodes, settings.eval_every, settings.eval_episodes, features="paper"
+        )  # the paper's learner on the paper's features, as the report says
         train_dir = folder / "train"
         with timed(train_dir, run["workers"]):
-            train(config, train_dir, run["workers"], resume=(train_dir / "checkpoint.json").exists(), backend=run["backend"],
-                  address=run["address"], progress=progress)
+            train(
+                config,
+                train_dir,
+                run["workers"],
+                resume=(train_dir / "checkpoint.json").exists(),
+                backend=run["backend"],
+                address=run["address"],
+                progress=progress,
+            )
         state = load_checkpoint(train_dir / "checkpoint.json")
 
         _say(f"{domain}: the learned policies, {settings.repeats} passes")
@@ -198,14 +250,32 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
         learned = evaluated_once(folder / "learned.json", policies=learned_specs, repeats=settings.repeats, **common)
 
     _say(f"{domain}: the default learner (DPI), {len(settings.dpi_seeds)} seeds x {settings.dpi_episodes} episodes")
-    dpi_config = TrainConfig(domain, settings.dpi_seeds, settings.dpi_episodes, settings.dpi_eval_every, settings.eval_episodes,
-                             features="error", algorithm="dpi", validation_episodes=settings.validation_episodes,
-                             dpi=DpiSettings(futures=settings.dpi_futures, horizon=system.benchmark.capped(settings.dpi_horizon),
-                                             states_per_episode=settings.dpi_labels))
+    dpi_config = TrainConfig(
+        domain,
+        settings.dpi_seeds,
+        settings.dpi_episodes,
+        settings.dpi_eval_every,
+        settings.eval_episodes,
+        features="error",
+        algorithm="dpi",
+        validation_episodes=settings.validation_episodes,
+        dpi=DpiSettings(
+            futures=settings.dpi_futures,
+            horizon=system.benchmark.capped(settings.dpi_horizon),
+            states_per_episode=settings.dpi_labels,
+        ),
+    )
     dpi_dir = folder / "train_dpi"
     with timed(dpi_dir, run["workers"]):
-        train(dpi_config, dpi_dir, run["workers"], resume=(dpi_dir / "checkpoint.json").exists(), backend=run["backend"],
-              address=run["address"], progress=progress)
+        train(
+            dpi_config,
+            dpi_dir,
+            run["workers"],
+            resume=(dpi_dir / "checkpoint.json").exists(),
+            backend=run["backend"],
+            address=run["address"],
+            progress=progress,
+        )
     shipped = folder.parent / "policies" / folder_name(system.name) / "learned.json"
     if not shipped.exists():
         write_json_atomically(shipped, json.loads((dpi_dir / "selected.json").read_text()))
@@ -227,12 +297,19 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
     summary["learners"] = summarise_learners(system, baselines, learned, default, ppo, ppo_run, settings.to_json(), costs, curves)
     summary["efficiency"] = curves
     if not (folder / "efficiency.png").exists():
-        chosen = {name: dict(summary["learners"][name], simulated_steps=points[-1]["simulated_steps"])
-                  for name, points in curves.items() if name in summary["learners"]}
+        chosen = {
+            name: dict(summary["learners"][name], simulated_steps=points[-1]["simulated_steps"])
+            for name, points in curves.items()
+            if name in summary["learners"]
+        }
         write_efficiency_png(folder / "efficiency.png", system.name, best, curves, chosen)
-    scored = {"best periodic": (baselines, _stored_best(system)), "best fixed": (baselines, best),
-              **{f"GPOMDP seed {s}": (learned, spec) for s, spec in zip(settings.seeds, learned_specs)},
-              "DPI": (default, f"rl:{shipped}"), "PPO": (ppo, f"sb3:{folder / 'train_ppo' / 'selected.zip'}")}
+    scored = {
+        "best periodic": (baselines, _stored_best(system)),
+        "best fixed": (baselines, best),
+        **{f"GPOMDP seed {s}": (learned, spec) for s, spec in zip(settings.seeds, learned_specs)},
+        "DPI": (default, f"rl:{shipped}"),
+        "PPO": (ppo, f"sb3:{folder / 'train_ppo' / 'selected.zip'}"),
+    }
     others = _other_learners(folder, domain, settings, run, common)
     if others:  # learners registered beyond the built-in ones: each trained, evaluated and scored
         summary["other_learners"] = {name: {"policy": spec, "evaluation": data} for name, (data, spec) in others.items()}
@@ -243,13 +320,27 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
     if not (folder / "figure3.png").exists():
         figures.write_policy_bars_png(folder / "figure3.png", [baselines, learned if learned is not None else default])
     if not (folder / "episodes.rrd").exists():
-        evaluate(domain, [best, *learned_specs[:1], f"rl:{shipped}"], episodes=settings.record_episodes, workers=run["workers"],
-                 progress=False, record=folder / "episodes.rrd")
-    files = {"baselines": "baselines.json", "learned": "learned.json", "curve": "train/curve.png",
-             "figure3": "figure3.png", "recording": "episodes.rrd", "trajectory": "trajectory.png",
-             "default_learner": "learned_default.json", "curve_dpi": "train_dpi/curve.png",
-             "headroom_rollout": "headroom_rollout.json", "headroom_oracle": "headroom_oracle.json",
-             "efficiency": "efficiency.png"}
+        evaluate(
+            domain,
+            [best, *learned_specs[:1], f"rl:{shipped}"],
+            episodes=settings.record_episodes,
+            workers=run["workers"],
+            progress=False,
+            record=folder / "episodes.rrd",
+        )
+    files = {
+        "baselines": "baselines.json",
+        "learned": "learned.json",
+        "curve": "train/curve.png",
+        "figure3": "figure3.png",
+        "recording": "episodes.rrd",
+        "trajectory": "trajectory.png",
+        "default_learner": "learned_default.json",
+        "curve_dpi": "train_dpi/curve.png",
+        "headroom_rollout": "headroom_rollout.json",
+        "headroom_oracle": "headroom_oracle.json",
+        "efficiency": "efficiency.png",
+    }
     if learned is None:
         del files["learned"], files["curve"]
     _trajectory_png(folder / "trajectory.png", system, best)
@@ -303,8 +394,11 @@ def _ppo(folder: Path, domain: str, settings: Settings, run: dict, common: dict)
         shutil.copyfile(ppo_dir / "selected.json", shipped / "ppo.json")
         shutil.copyfile(ppo_dir / "selected.zip", shipped / "ppo.zip")
     ppo = evaluated_once(folder / "learned_ppo.json", policies=[f"sb3:{ppo_dir / 'selected.zip'}"], **common)
-    curve = evaluated_once(folder / "learned_ppo_checkpoints.json",
-                           policies=[f"sb3:{ppo_dir / c['file']}" for c in training["checkpoints"]], **common)
+    curve = evaluated_once(
+        folder / "learned_ppo_checkpoints.json",
+        policies=[f"sb3:{ppo_dir / c['file']}" for c in training["checkpoints"]],
+        **common,
+    )
     return training, ppo, curve
 
 
@@ -320,8 +414,18 @@ def _other_learners(folder: Path, domain: str, settings: Settings, run_options: 
         stage = folder / f"train_{name}"
         _say(f"{domain}: the learner {name}")
         with timed(stage, run_options["workers"]):
-            trained = run(cls(chosen), domain, stage, None, run_options["workers"], resume=True, backend=run_options["backend"],
-                          address=run_options["address"], progress=common["progress"], say=_say)
+            trained = run(
+                cls(chosen),
+                domain,
+                stage,
+                None,
+                run_options["workers"],
+                resume=True,
+                backend=run_options["backend"],
+                address=run_options["address"],
+                progress=common["progress"],
+                say=_say,
+            )
         found[name] = (evaluated_once(folder / f"learned_{name}.json", policies=[trained.policy], **common), trained.policy)
     return found
 
@@ -334,13 +438,25 @@ def _cost(folder: Path) -> dict | None:
 def _efficiency(folder: Path, system, baselines: dict, best: str, state, ppo_run: dict | None, ppo_curve: dict | None) -> dict:
     """Each learner's curve of test-set gain against the steps one run (one seed) simulated."""
     sense, steps = system.objective_sense, system.episode_steps
-    curves = {"dpi": efficiency.dpi_points(json.loads((folder / "train_dpi" / "checkpoint.json").read_text()),
-                                           json.loads((folder / "train_dpi" / "curve.json").read_text()),
-                                           baselines, best, sense, steps)}
+    curves = {
+        "dpi": efficiency.dpi_points(
+            json.loads((folder / "train_dpi" / "checkpoint.json").read_text()),
+            json.loads((folder / "train_dpi" / "curve.json").read_text()),
+            baselines,
+            best,
+            sense,
+            steps,
+        )
+    }
     if state is not None:
-        curves["gpomdp"] = efficiency.gpomdp_points(json.loads((folder / "train" / "checkpoint.json").read_text()),
-                                                    json.loads((folder / "train" / "curve.json").read_text()),
-                                                    baselines, best, sense, steps)
+        curves["gpomdp"] = efficiency.gpomdp_points(
+            json.loads((folder / "train" / "checkpoint.json").read_text()),
+            json.loads((folder / "train" / "curve.json").read_text()),
+            baselines,
+            best,
+            sense,
+            steps,
+        )
     if ppo_run is not None:
         curves["ppo"] = efficiency.ppo_points(ppo_run, ppo_curve, baselines, best, sense)
     return curves
@@ -350,16 +466,22 @@ def _trajectory_png(path: Path, system, spec: str) -> None:
     if path.exists():
         return
     played = play_test_episode(system.name, parse_policy(spec, system), 0, 0, 0)
-    figures.write_trajectory_png(path, system, played.trajectory, title=f"{system.name}: test-set episode 0 under {spec}",
-                                 signals=system.signals(played.episode))
+    figures.write_trajectory_png(
+        path,
+        system,
+        played.trajectory,
+        title=f"{system.name}: test-set episode 0 under {spec}",
+        signals=system.signals(played.episode),
+    )
 
 
 def _forecasts_png(path: Path, system) -> None:
     if path.exists():
         return
     runs = [(spec, play_test_episode(system.name, parse_policy(spec, system), 0, 0, 0)) for spec in ("every:20", "every:5")]
-    fig = figures.forecast_figure(runs[0][1].episode, [(spec, played.trajectory) for spec, played in runs],
-                                  system.control_interval_s, system.terminal_price)
+    fig = figures.forecast_figure(
+        runs[0][1].episode, [(spec, played.trajectory) for spec, played in runs], system.control_interval_s, system.terminal_price
+    )
     figures.save_png_atomically(fig, path, dpi=110)
 
 

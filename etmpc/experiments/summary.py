@@ -20,9 +20,15 @@ def summarise_system(system, baselines: dict, learned: dict | None, curve: dict 
     sense = system.objective_sense
     fixed = baselines["policies"]
     best = _best_fixed(fixed, sense)
-    head = {"domain": system.domain, "task": system.task, "name": system.name, "objective_sense": sense,
-            "episodes": baselines["policies"][best]["episodes"], "fixed": {spec: _row(s) for spec, s in fixed.items()},
-            "best_fixed": dict(_row(fixed[best]), policy=best)}
+    head = {
+        "domain": system.domain,
+        "task": system.task,
+        "name": system.name,
+        "objective_sense": sense,
+        "episodes": baselines["policies"][best]["episodes"],
+        "fixed": {spec: _row(s) for spec, s in fixed.items()},
+        "best_fixed": dict(_row(fixed[best]), policy=best),
+    }
     if learned is None:
         return head
     per_seed = [s["objective_mean"] for s in learned["policies"].values()]
@@ -35,8 +41,9 @@ def summarise_system(system, baselines: dict, learned: dict | None, curve: dict 
         by_episode.setdefault(r["episode"], []).append(r["objective"])
     fixed_by_episode = {r["episode"]: r["objective"] for r in baselines["runs"] if r["policy"] == best and r["finite"]}
     episodes = sorted(set(by_episode) & set(fixed_by_episode))
-    paired_runs = metrics.paired_differences([np.mean(by_episode[e]) for e in episodes],
-                                             [fixed_by_episode[e] for e in episodes], sense)
+    paired_runs = metrics.paired_differences(
+        [np.mean(by_episode[e]) for e in episodes], [fixed_by_episode[e] for e in episodes], sense
+    )
     learned_mean = float(np.mean([r["objective"] for r in learned_runs]))
     best_value = fixed[best]["objective_mean"]
     margin_percent = metrics.oriented(100.0 * (learned_mean - best_value) / abs(best_value), sense)  # > 0: learned better
@@ -69,12 +76,18 @@ def summarise_default(system, baselines: dict, default: dict, state) -> dict:
     """The default learner's shipped policy on the test set, against the best fixed policy."""
     sense = system.objective_sense
     best = _best_fixed(baselines["policies"], sense)
-    (spec, row), = default["policies"].items()
+    ((spec, row),) = default["policies"].items()
     hyper = json.loads(Path(spec[3:]).read_text())["hyperparameters"]
-    return {"policy": spec, "seed": hyper["seed"], "validation_objective": hyper["validation_objective"],
-            "validation": state.validation, "base": state.base, **_row(row),
-            "paired": paired(per_episode(default), per_episode(baselines, {best}), sense),
-            "curve": curve_summary(state)["points"]}
+    return {
+        "policy": spec,
+        "seed": hyper["seed"],
+        "validation_objective": hyper["validation_objective"],
+        "validation": state.validation,
+        "base": state.base,
+        **_row(row),
+        "paired": paired(per_episode(default), per_episode(baselines, {best}), sense),
+        "curve": curve_summary(state)["points"],
+    }
 
 
 def summarise_headroom(system, best: str, baselines: dict, learned: dict, default: dict, rollout: dict, oracle: dict) -> dict:
@@ -85,19 +98,32 @@ def summarise_headroom(system, best: str, baselines: dict, learned: dict, defaul
     reference = per_episode(baselines, {best})
     episodes = sorted(per_episode(rollout))
     rows = {}
-    for name, evaluation in (("oracle", oracle), ("rollout", rollout), ("learned_default", default), ("learned_paper", learned),
-                             ("best_fixed", None)):
+    for name, evaluation in (
+        ("oracle", oracle),
+        ("rollout", rollout),
+        ("learned_default", default),
+        ("learned_paper", learned),
+        ("best_fixed", None),
+    ):
         if name == "learned_paper" and learned is None:  # a task the paper did not study
             continue
         evaluation = evaluation or {"policies": {best: None}, "runs": [r for r in baselines["runs"] if r["policy"] == best]}
         runs = [r for r in evaluation["runs"] if r["episode"] in episodes and r["finite"]]
-        rows[name] = dict(paired(per_episode(evaluation), reference, sense, episodes), policies=list(evaluation["policies"]),
-                          recomputes_mean=float(np.mean([r["recomputes"] for r in runs])) if runs else float("nan"))
+        rows[name] = dict(
+            paired(per_episode(evaluation), reference, sense, episodes),
+            policies=list(evaluation["policies"]),
+            recomputes_mean=float(np.mean([r["recomputes"] for r in runs])) if runs else float("nan"),
+        )
     cost = rollout.get("cost", {})
     steps = sum(r["steps"] for r in rollout["runs"])
-    return {"reference": best, "episodes": len(episodes), "rows": rows, "rollout_cost": cost,
-            # CPU seconds per step of the rollout policy (its decision and the step itself; the solve is a small part).
-            "rollout_seconds_per_step": cost["wall_seconds"] * cost["workers"] / steps if cost and steps else None}
+    return {
+        "reference": best,
+        "episodes": len(episodes),
+        "rows": rows,
+        "rollout_cost": cost,
+        # CPU seconds per step of the rollout policy (its decision and the step itself; the solve is a small part).
+        "rollout_seconds_per_step": cost["wall_seconds"] * cost["workers"] / steps if cost and steps else None,
+    }
 
 
 def _best_fixed(fixed: dict, sense: str) -> str:
@@ -110,8 +136,17 @@ def _row(s: dict) -> dict:
     return {k: s[k] for k in keys}
 
 
-def summarise_learners(system, baselines: dict, learned: dict, default: dict, ppo: dict | None, ppo_run: dict | None,
-                       settings: dict, costs: dict | None = None, curves: dict | None = None) -> dict:
+def summarise_learners(
+    system,
+    baselines: dict,
+    learned: dict,
+    default: dict,
+    ppo: dict | None,
+    ppo_run: dict | None,
+    settings: dict,
+    costs: dict | None = None,
+    curves: dict | None = None,
+) -> dict:
     """Each learner's policy on every test-set episode against the best fixed policy (paired, 95 % CI),
     with what its training cost: the default learner (DPI), the paper's (GPOMDP) and, if it ran, PPO.
     ``costs``: each training stage's ``cost.json`` (wall seconds, workers); ``curves``: the learners'
@@ -123,16 +158,39 @@ def summarise_learners(system, baselines: dict, learned: dict, default: dict, pp
     steps = system.episode_steps
     dpi_episodes = len(settings["dpi_seeds"]) * settings["dpi_episodes"]
     rows = {
-        "dpi": (default, {"seeds": len(settings["dpi_seeds"]), "episodes": dpi_episodes, "environment_steps": dpi_episodes * steps,
-                          "simulated_steps_at_most": dpi_episodes * settings["dpi_labels"] * settings["dpi_futures"] * 2
-                          * settings["dpi_horizon"]}),
+        "dpi": (
+            default,
+            {
+                "seeds": len(settings["dpi_seeds"]),
+                "episodes": dpi_episodes,
+                "environment_steps": dpi_episodes * steps,
+                "simulated_steps_at_most": dpi_episodes
+                * settings["dpi_labels"]
+                * settings["dpi_futures"]
+                * 2
+                * settings["dpi_horizon"],
+            },
+        )
     }
     if learned is not None:
-        rows["gpomdp"] = (learned, {"seeds": len(settings["seeds"]), "episodes": len(settings["seeds"]) * settings["episodes"],
-                                    "environment_steps": len(settings["seeds"]) * settings["episodes"] * steps})
+        rows["gpomdp"] = (
+            learned,
+            {
+                "seeds": len(settings["seeds"]),
+                "episodes": len(settings["seeds"]) * settings["episodes"],
+                "environment_steps": len(settings["seeds"]) * settings["episodes"] * steps,
+            },
+        )
     if ppo is not None:
-        rows["ppo"] = (ppo, {"seeds": 1, "environment_steps": ppo_run["environment_steps"], "wall_seconds": ppo_run["wall_seconds"],
-                             "workers": ppo_run["workers"]})
+        rows["ppo"] = (
+            ppo,
+            {
+                "seeds": 1,
+                "environment_steps": ppo_run["environment_steps"],
+                "wall_seconds": ppo_run["wall_seconds"],
+                "workers": ppo_run["workers"],
+            },
+        )
     out = {"reference": best}
     for name, (evaluation, cost) in rows.items():
         runs = [r for r in evaluation["runs"] if r["finite"]]
@@ -141,9 +199,12 @@ def summarise_learners(system, baselines: dict, learned: dict, default: dict, pp
             cost = dict(cost, wall_seconds=stage["wall_seconds"], workers=stage["workers"])
         if (curves or {}).get(name):
             cost = dict(cost, simulated_steps_per_seed=curves[name][-1]["simulated_steps"])
-        out[name] = dict(paired(per_episode(evaluation), reference, sense), policies=list(evaluation["policies"]),
-                         recomputes_mean=float(np.mean([r["recomputes"] for r in runs])) if runs else float("nan"),
-                         training=cost)
+        out[name] = dict(
+            paired(per_episode(evaluation), reference, sense),
+            policies=list(evaluation["policies"]),
+            recomputes_mean=float(np.mean([r["recomputes"] for r in runs])) if runs else float("nan"),
+            training=cost,
+        )
     return out
 
 
@@ -161,9 +222,11 @@ def summarise_scorecard(system, evaluations: dict[str, tuple[dict | None, str]])
         refs = load_references(system.name, first["test_set"]["sha256"])
         episodes = len({r["episode"] for r in first["runs"]})
         refs = refs.head(episodes) if episodes < refs.episodes else refs
-        rows = {name: task_score(refs, data, spec).to_json() for name, (data, spec) in evaluations.items()
-                if data is not None and spec in data["policies"]}
+        rows = {
+            name: task_score(refs, data, spec).to_json()
+            for name, (data, spec) in evaluations.items()
+            if data is not None and spec in data["policies"]
+        }
     except EtmpcError as exc:
         return {"unavailable": str(exc)}
-    return {"references": {"best_periodic": refs.best, "oracle": refs.oracle_spec, "episodes": refs.episodes},
-            "rows": rows}
+    return {"references": {"best_periodic": refs.best, "oracle": refs.oracle_spec, "episodes": refs.episodes}, "rows": rows}

@@ -75,14 +75,28 @@ class LearnerSettings:
     selection_episodes: int = 20
 
     def config(self, domain: str, price: float) -> TrainConfig:
-        return TrainConfig(domain, self.seeds, self.episodes, self.eval_every, self.eval_episodes, algorithm="dpi",
-                           dpi=dpi.Settings(self.futures, make_system(domain).benchmark.capped(self.horizon), self.labels, bases=self.bases,
-                                            selection_episodes=self.selection_episodes),
-                           validation_episodes=self.validation_episodes, recompute_price=price)
+        return TrainConfig(
+            domain,
+            self.seeds,
+            self.episodes,
+            self.eval_every,
+            self.eval_episodes,
+            algorithm="dpi",
+            dpi=dpi.Settings(
+                self.futures,
+                make_system(domain).benchmark.capped(self.horizon),
+                self.labels,
+                bases=self.bases,
+                selection_episodes=self.selection_episodes,
+            ),
+            validation_episodes=self.validation_episodes,
+            recompute_price=price,
+        )
 
 
-QUICK_LEARNER = LearnerSettings(seeds=(0,), episodes=4, eval_every=2, labels=5, futures=2, horizon=10, validation_episodes=3,
-                                selection_episodes=2)
+QUICK_LEARNER = LearnerSettings(
+    seeds=(0,), episodes=4, eval_every=2, labels=5, futures=2, horizon=10, validation_episodes=3, selection_episodes=2
+)
 
 
 QUICK_SELF = SelfSettings(selection_episodes=2, episodes=3, solves_per_episode=3, validation_episodes=2)
@@ -111,11 +125,24 @@ class SweepSettings:
         if len(set(prices)) != len(prices):
             raise EtmpcError(f"a price is given twice: {', '.join(f'{p:g}' for p in prices)}")
         if quick:
-            return cls(prices, episodes or 3, benchmark.sweep_thresholds[::2], futures=2, horizon=benchmark.capped(10), quick=True,
-                       learner=QUICK_LEARNER, self_trigger=QUICK_SELF)
-        return cls(prices, episodes or benchmark.sweep_episodes, benchmark.sweep_thresholds, futures=benchmark.sweep_futures,
-                   horizon=benchmark.capped(cls.horizon),
-                   self_trigger=SelfSettings() if benchmark.sweep_self_trigger else None)
+            return cls(
+                prices,
+                episodes or 3,
+                benchmark.sweep_thresholds[::2],
+                futures=2,
+                horizon=benchmark.capped(10),
+                quick=True,
+                learner=QUICK_LEARNER,
+                self_trigger=QUICK_SELF,
+            )
+        return cls(
+            prices,
+            episodes or benchmark.sweep_episodes,
+            benchmark.sweep_thresholds,
+            futures=benchmark.sweep_futures,
+            horizon=benchmark.capped(cls.horizon),
+            self_trigger=SelfSettings() if benchmark.sweep_self_trigger else None,
+        )
 
     def to_json(self) -> dict:
         return _lists(asdict(self))
@@ -142,8 +169,11 @@ def _lists(value):
 
 
 def _ours(name: str) -> bool:
-    return name in ("settings.json", "fixed.json", "pareto.json", "pareto.png", "SWEEP.md") or (
-        name.startswith(("price_", "learned_", "self_")) and name.endswith(".json")) or name.startswith("train_")
+    return (
+        name in ("settings.json", "fixed.json", "pareto.json", "pareto.png", "SWEEP.md")
+        or (name.startswith(("price_", "learned_", "self_")) and name.endswith(".json"))
+        or name.startswith("train_")
+    )
 
 
 def check_directory(out: Path, domain: str, settings: SweepSettings) -> bool:
@@ -158,8 +188,10 @@ def check_directory(out: Path, domain: str, settings: SweepSettings) -> bool:
     except (OSError, ValueError) as exc:
         raise EtmpcError(f"{path} is unreadable ({exc}); move it away to start afresh") from None
     if stored != _settings_json(domain, settings):
-        raise EtmpcError(f"{out} holds a sweep with other settings ({what_differs(stored, _settings_json(domain, settings))}); "
-                         "use another --out")
+        raise EtmpcError(
+            f"{out} holds a sweep with other settings ({what_differs(stored, _settings_json(domain, settings))}); "
+            "use another --out"
+        )
     refuse_foreign(out, _ours, "sweep")
     return True
 
@@ -187,20 +219,28 @@ def _stage(path: Path, **kwargs) -> dict:
     return data
 
 
-def sweep(domain: str, out: Path, settings: SweepSettings, workers: int = 1, backend: str = "local",
-          address: str | None = None, progress: bool = True, say=lambda line: None) -> dict:
+def sweep(
+    domain: str,
+    out: Path,
+    settings: SweepSettings,
+    workers: int = 1,
+    backend: str = "local",
+    address: str | None = None,
+    progress: bool = True,
+    say=lambda line: None,
+) -> dict:
     """Run (or continue) the sweep of ``domain`` into ``out``; returns ``pareto.json``'s content."""
     with shared_pools():  # one pool of workers for every stage
         return _sweep(domain, Path(out), settings, workers, backend, address, progress, say)
 
 
-def _sweep(domain: str, out: Path, settings: SweepSettings, workers: int, backend: str, address: str | None, progress: bool,
-           say) -> dict:
+def _sweep(
+    domain: str, out: Path, settings: SweepSettings, workers: int, backend: str, address: str | None, progress: bool, say
+) -> dict:
     system = make_system(domain)
     _start(out, domain, settings)
     started = time.perf_counter()
-    run = dict(task=domain, episodes=settings.episodes, workers=workers, backend=backend, address=address,
-               progress=progress)
+    run = dict(task=domain, episodes=settings.episodes, workers=workers, backend=backend, address=address, progress=progress)
     periodic = [f"every:{t}" for t in range(1, system.horizon + 1)]
     events = [f"threshold:{x:g}" for x in settings.thresholds]
     say(f"{domain}: {len(periodic)} periodic schedules and {len(events)} event triggers")
@@ -218,8 +258,7 @@ def _sweep(domain: str, out: Path, settings: SweepSettings, workers: int, backen
         priced.append(evaluation)
     pareto = build_pareto(domain, system.objective_sense, settings, fixed, periodic, events, priced)
     pareto["wall_seconds_this_invocation"] = time.perf_counter() - started
-    pareto["cpu_seconds_of_evaluations"] = sum(
-        e["cost"]["wall_seconds"] * (e["cost"]["workers"] or 1) for e in [fixed, *priced])
+    pareto["cpu_seconds_of_evaluations"] = sum(e["cost"]["wall_seconds"] * (e["cost"]["workers"] or 1) for e in [fixed, *priced])
     write_json(out / "pareto.json", pareto)
     save_png_atomically(draw_pareto(pareto), out / "pareto.png")
     write_text(out / "SWEEP.md", "\n".join(report_section(pareto)) + "\n")
@@ -232,8 +271,15 @@ def _learned(out: Path, i: int, domain: str, price: float, learner: LearnerSetti
     path, train_dir = out / f"learned_{i}.json", out / f"train_{i}"
     if path.exists():
         return json.loads(path.read_text())
-    train(learner.config(domain, price), train_dir, run["workers"], resume=(train_dir / "checkpoint.json").exists(),
-          backend=run["backend"], address=run["address"], progress=run["progress"])
+    train(
+        learner.config(domain, price),
+        train_dir,
+        run["workers"],
+        resume=(train_dir / "checkpoint.json").exists(),
+        backend=run["backend"],
+        address=run["address"],
+        progress=run["progress"],
+    )
     return _stage(path, policies=[f"rl:{train_dir / 'selected.json'}"], recompute_price=price, **run)
 
 
@@ -250,5 +296,9 @@ def _self(out: Path, i: int, domain: str, price: float, settings: SelfSettings, 
 
 def _merge(a: dict, b: dict) -> dict:
     """Two evaluations of the same episodes as one (their policies and runs side by side)."""
-    return {**a, "policies": {**a["policies"], **b["policies"]}, "runs": a["runs"] + b["runs"],
-            "cost": {"wall_seconds": a["cost"]["wall_seconds"] + b["cost"]["wall_seconds"], "workers": a["cost"]["workers"]}}
+    return {
+        **a,
+        "policies": {**a["policies"], **b["policies"]},
+        "runs": a["runs"] + b["runs"],
+        "cost": {"wall_seconds": a["cost"]["wall_seconds"] + b["cost"]["wall_seconds"], "workers": a["cost"]["workers"]},
+    }

@@ -37,8 +37,12 @@ from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import refuse_foreign
 
 LEARNERS: dict[str, type[Learner]] = {}  # name -> class, filled as classes are defined
-BUILT_IN = {"gpomdp": "etmpc.learning.phased", "dpi": "etmpc.learning.phased", "self": "etmpc.learning.selftrigger",
-            "ppo": "etmpc.learning.ppo"}  # the modules that define the built-in learners
+BUILT_IN = {
+    "gpomdp": "etmpc.learning.phased",
+    "dpi": "etmpc.learning.phased",
+    "self": "etmpc.learning.selftrigger",
+    "ppo": "etmpc.learning.ppo",
+}  # the modules that define the built-in learners
 
 
 class Learner(ABC):

@@ -40,9 +40,18 @@ class RunState:
         return min(int(data["episodes"]) for data in self.learners.values())
 
     def to_json(self) -> dict:
-        return {"format": CHECKPOINT_FORMAT, "version": 1, "config": self.config.to_json(), "policy": self.policy,
-                "learners": self.learners, "curve": self.curve, "best": self.best, "training": self.training,
-                "base": self.base, "validation": self.validation}
+        return {
+            "format": CHECKPOINT_FORMAT,
+            "version": 1,
+            "config": self.config.to_json(),
+            "policy": self.policy,
+            "learners": self.learners,
+            "curve": self.curve,
+            "best": self.best,
+            "training": self.training,
+            "base": self.base,
+            "validation": self.validation,
+        }
 
 
 def load_checkpoint(path: Path) -> RunState:
@@ -60,8 +69,16 @@ def state_from_json(data: dict, where: str = "checkpoint") -> RunState:
             raise ValueError(f"format {data.get('format')!r} version {data.get('version')!r}")
         config = TrainConfig.from_json(data["config"])
         LogisticPolicy.from_json(data["policy"], where=where)
-        state = RunState(config, data["policy"], data["learners"], data["curve"], data["best"], data["training"],
-                         data.get("base"), data.get("validation", {}))
+        state = RunState(
+            config,
+            data["policy"],
+            data["learners"],
+            data["curve"],
+            data["best"],
+            data["training"],
+            data.get("base"),
+            data.get("validation", {}),
+        )
         if sorted(state.learners) != sorted(str(s) for s in config.seeds):
             raise ValueError("learners do not match the seeds")
         for learner in state.learners.values():
@@ -82,17 +99,28 @@ def save(out: Path, state: RunState) -> dict:
     for seed in state.config.seeds:
         key = str(seed)
         hyper = dict(state.policy["hyperparameters"], seed=seed)
-        write_json_atomically(out / f"seed{seed}" / "last.json",
-                              dict(policy_at(state, state.learners[key]["theta"]), hyperparameters=dict(hyper, episodes=state.done)))
+        write_json_atomically(
+            out / f"seed{seed}" / "last.json",
+            dict(policy_at(state, state.learners[key]["theta"]), hyperparameters=dict(hyper, episodes=state.done)),
+        )
         best = state.best[key]
-        write_json_atomically(out / f"seed{seed}" / "best.json",
-                              dict(policy_at(state, best["theta"]), hyperparameters=dict(hyper, episodes=best["episodes"])))
+        write_json_atomically(
+            out / f"seed{seed}" / "best.json",
+            dict(policy_at(state, best["theta"]), hyperparameters=dict(hyper, episodes=best["episodes"])),
+        )
     if state.validation:
         sense = state.objective_sense
         pick = best_of(state.config.seeds, sense, key=lambda seed: state.validation[str(seed)])
-        hyper = dict(state.policy["hyperparameters"], seed=pick, episodes=state.done,
-                     validation_objective=state.validation[str(pick)], validation_episodes=state.config.validation_episodes)
-        write_json_atomically(out / "selected.json", dict(policy_at(state, state.learners[str(pick)]["theta"]), hyperparameters=hyper))
+        hyper = dict(
+            state.policy["hyperparameters"],
+            seed=pick,
+            episodes=state.done,
+            validation_objective=state.validation[str(pick)],
+            validation_episodes=state.config.validation_episodes,
+        )
+        write_json_atomically(
+            out / "selected.json", dict(policy_at(state, state.learners[str(pick)]["theta"]), hyperparameters=hyper)
+        )
     summary = curve_summary(state)
     write_json_atomically(out / "curve.json", summary)
     write_curve_png(out / "curve.png", summary, len(state.config.seeds))
@@ -107,11 +135,23 @@ def curve_summary(state: RunState) -> dict:
     points = []
     for episodes, group in sorted(rows.items()):
         values = np.array([r["objective"] for r in group])
-        points.append({"episodes": episodes, "objective_mean": float(values.mean()),
-                       "objective_std": float(values.std(ddof=1)) if len(values) > 1 else 0.0,
-                       "recomputes_mean": float(np.mean([r["recomputes"] for r in group])), "seeds": len(group)})
-    return {"domain": state.config.domain, "objective_sense": state.objective_sense, "algorithm": state.config.algorithm,
-            "features": state.config.features, "points": points, "per_seed": state.curve}
+        points.append(
+            {
+                "episodes": episodes,
+                "objective_mean": float(values.mean()),
+                "objective_std": float(values.std(ddof=1)) if len(values) > 1 else 0.0,
+                "recomputes_mean": float(np.mean([r["recomputes"] for r in group])),
+                "seeds": len(group),
+            }
+        )
+    return {
+        "domain": state.config.domain,
+        "objective_sense": state.objective_sense,
+        "algorithm": state.config.algorithm,
+        "features": state.config.features,
+        "points": points,
+        "per_seed": state.curve,
+    }
 
 
 _OUTPUTS = {"checkpoint.json", "curve.json", "curve.png", "selected.json", "recordings"}

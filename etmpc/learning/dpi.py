@@ -67,6 +67,7 @@ class Settings:
 
 # 0. The first policy.
 
+
 def choose_base(settings: Settings, sense: str, mean_scores) -> str:
     """``pi_0``: the best of ``settings.bases``. ``mean_scores(policies, episodes)`` gives each
     policy's mean objective on the first ``episodes`` of a stream of training-distribution episodes
@@ -77,6 +78,7 @@ def choose_base(settings: Settings, sense: str, mean_scores) -> str:
 
 
 # 1-2. Labels by rollouts.
+
 
 def episode_rngs(seed: int, episode: int) -> list[np.random.Generator]:
     """The draws of DPI's training ``episode`` of ``seed``: the episode, the picked steps, the
@@ -115,8 +117,9 @@ def label_episode(domain: str, base, settings: Settings, policy_json: dict, seed
     base = parse_policy(base, system) if isinstance(base, str) else LogisticPolicy.from_json(base)
     featurise = LogisticPolicy.from_json(policy_json).phi
     episode_rng, pick_rng, future_rng, policy_rng = episode_rngs(seed, e)
-    picked = set(pick_rng.choice(system.episode_steps, size=min(settings.states_per_episode, system.episode_steps),
-                                 replace=False).tolist())
+    picked = set(
+        pick_rng.choice(system.episode_steps, size=min(settings.states_per_episode, system.episode_steps), replace=False).tolist()
+    )
 
     def label(s, twin):  # both answers over the same sampled futures, then phi(s)
         keep, recompute = q_values(s.context, base, settings.futures, future_rng, twin, settings.horizon)
@@ -133,6 +136,7 @@ def _label_job(job) -> list:
 
 
 # 3. Classification.
+
 
 def fit(features: np.ndarray, keep_advantage: np.ndarray, ridge: float, theta0: np.ndarray | None = None) -> np.ndarray:
     """``theta`` minimising the weighted logistic loss of labels ``keep = advantage >= 0`` with
@@ -167,6 +171,7 @@ def fit_labels(rows: list, ridge: float, theta0: np.ndarray | None = None) -> np
 
 # 4. The next policy.
 
+
 def iteration(state, pool, tick, start: int, stop: int) -> None:
     """One DPI iteration per seed of ``state`` (the run's :class:`etmpc.learning.checkpoint.RunState`,
     updated in place): label episodes ``start..stop-1`` by rollouts over the current policy (over the
@@ -177,15 +182,18 @@ def iteration(state, pool, tick, start: int, stop: int) -> None:
     def base(seed):  # pi_t: the schedule, then the policy at the learner's theta (checkpoint.policy_at)
         learner = state.learners[str(seed)]
         return state.base if learner["iterations"] == 0 else dict(state.policy, theta=list(learner["theta"]))
+
     jobs = [("label", (config.system, base(s), config.dpi, state.policy, s, e)) for s in config.seeds for e in range(start, stop)]
     results = pool.map(_label_job, jobs, tick)
     per_seed = stop - start
     for k, seed in enumerate(config.seeds):
         learner = state.learners[str(seed)]
-        for rows in results[k * per_seed:(k + 1) * per_seed]:
+        for rows in results[k * per_seed : (k + 1) * per_seed]:
             learner["data"] += [list(row) for row in rows]
         learner["theta"] = fit_labels(learner["data"], config.dpi.ridge).tolist()
         learner["iterations"] += 1
         learner["episodes"] = stop
-        state.training += [{"episode": e, "seed": seed, "labels": len(rows)}
-                           for e, rows in zip(range(start, stop), results[k * per_seed:(k + 1) * per_seed])]
+        state.training += [
+            {"episode": e, "seed": seed, "labels": len(rows)}
+            for e, rows in zip(range(start, stop), results[k * per_seed : (k + 1) * per_seed])
+        ]

@@ -61,8 +61,14 @@ def rewards_to_go(rewards: np.ndarray, discount: float) -> np.ndarray:
     return returns
 
 
-def gradient(features: np.ndarray, recompute: np.ndarray, keep_probability: np.ndarray, steps: np.ndarray,
-             returns: np.ndarray, baseline: np.ndarray | None = None) -> np.ndarray:
+def gradient(
+    features: np.ndarray,
+    recompute: np.ndarray,
+    keep_probability: np.ndarray,
+    steps: np.ndarray,
+    returns: np.ndarray,
+    baseline: np.ndarray | None = None,
+) -> np.ndarray:
     """GPOMDP's estimate from one episode.
 
     ``features (d, p)``, ``recompute (d,)``, ``keep_probability (d,)``: the policy's ``d`` decisions,

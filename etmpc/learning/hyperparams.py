@@ -98,12 +98,16 @@ def parse(document: Any, task: str, where: str, base: PpoSettings = PpoSettings(
             values.update(_env_kwargs(value, where))
         elif RENAMED.get(name, name) in known:
             if isinstance(value, str) and _numeral(value):  # PyYAML's YAML 1.1 reads 3e-4 and 1e6 as text
-                raise HyperparameterError(f"{where}: {name} must be a number, got {value!r} (YAML reads it as text: "
-                                          "write it out, 0.0003, or with a dot and a signed exponent, 3.0e-4)")
+                raise HyperparameterError(
+                    f"{where}: {name} must be a number, got {value!r} (YAML reads it as text: "
+                    "write it out, 0.0003, or with a dot and a signed exponent, 3.0e-4)"
+                )
             values[RENAMED.get(name, name)] = value  # checked by PpoSettings, below
         else:
-            raise HyperparameterError(f"{where}: unknown hyperparameter {name!r}; known: "
-                                      f"{', '.join(sorted({*known - set(RENAMED.values()), *RENAMED, *IGNORED, 'policy_kwargs', 'env_kwargs'}))}")
+            raise HyperparameterError(
+                f"{where}: unknown hyperparameter {name!r}; known: "
+                f"{', '.join(sorted({*known - set(RENAMED.values()), *RENAMED, *IGNORED, 'policy_kwargs', 'env_kwargs'}))}"
+            )
     try:
         return replace(base, **values)
     except SettingError as exc:  # named as the file names it

@@ -37,8 +37,13 @@ def normalisation_states(domain: str, index: int, features: str = "paper") -> np
     system, env, _ = context(domain)
     rng = np.random.default_rng(np.random.SeedSequence(NORMALISATION_ENTROPY, spawn_key=(index, 0)))
     coin = _Coin(features, system.name)
-    run_episode(system, env, coin, np.random.default_rng(np.random.SeedSequence(NORMALISATION_ENTROPY, spawn_key=(index, 1))),
-                system.draw_episode(rng))
+    run_episode(
+        system,
+        env,
+        coin,
+        np.random.default_rng(np.random.SeedSequence(NORMALISATION_ENTROPY, spawn_key=(index, 1))),
+        system.draw_episode(rng),
+    )
     return np.array(coin.states)
 
 
@@ -75,13 +80,19 @@ def play(system, env, acting: LogisticPolicy, rng: np.random.Generator, episode)
     steps = np.flatnonzero(~traj.forced[: traj.steps])
     if len(steps) != len(acting.decisions):
         raise RuntimeError("decisions and unforced steps disagree")  # a control-loop invariant
-    return Sample(np.array([d[0] for d in acting.decisions]).reshape(len(steps), -1),
-                  np.array([d[1] for d in acting.decisions], dtype=bool), np.array([d[2] for d in acting.decisions]),
-                  steps, traj.policy_rewards(system.recompute_price), traj.recomputes)
+    return Sample(
+        np.array([d[0] for d in acting.decisions]).reshape(len(steps), -1),
+        np.array([d[1] for d in acting.decisions], dtype=bool),
+        np.array([d[2] for d in acting.decisions]),
+        steps,
+        traj.policy_rewards(system.recompute_price),
+        traj.recomputes,
+    )
 
 
-def evaluate_theta(domain: str, sha256: str, policy_json: dict, repeat: int, episode: int,
-                   identity: dict | None = None) -> tuple[float, float, int, EpisodeRecord | None]:
+def evaluate_theta(
+    domain: str, sha256: str, policy_json: dict, repeat: int, episode: int, identity: dict | None = None
+) -> tuple[float, float, int, EpisodeRecord | None]:
     """(objective, control objective, recomputes, record) of one episode of the stored test set (whose
     digest must be ``sha256``), sense-aware as in evaluate. With ``identity``, ``record`` is what a
     recording keeps of the episode (else None)."""
@@ -113,26 +124,38 @@ def _policy(system, policy):
 
 def _call(job):
     name, args = job
-    return {"normalisation": normalisation_states, "train": train_block, "evaluate": evaluate_theta,
-            "score": training_return}[name](*args)
+    return {"normalisation": normalisation_states, "train": train_block, "evaluate": evaluate_theta, "score": training_return}[
+        name
+    ](*args)
 
 
 def _learner_to_json(learner: Learner) -> dict:
-    return {"theta": learner.theta.tolist(), "baseline_mean": learner.baseline_mean.tolist(), "episodes": learner.episodes,
-            "settings": asdict(learner.settings), "value_gram": learner.value_gram.tolist(),
-            "value_target": learner.value_target.tolist()}
+    return {
+        "theta": learner.theta.tolist(),
+        "baseline_mean": learner.baseline_mean.tolist(),
+        "episodes": learner.episodes,
+        "settings": asdict(learner.settings),
+        "value_gram": learner.value_gram.tolist(),
+        "value_target": learner.value_target.tolist(),
+    }
 
 
 def _learner_from_json(data: dict) -> Learner:
-    return Learner(np.asarray(data["theta"], float), Settings(**data["settings"]), np.asarray(data["baseline_mean"], float),
-                   int(data["episodes"]), np.asarray(data["value_gram"], float), np.asarray(data["value_target"], float))
+    return Learner(
+        np.asarray(data["theta"], float),
+        Settings(**data["settings"]),
+        np.asarray(data["baseline_mean"], float),
+        int(data["episodes"]),
+        np.asarray(data["value_gram"], float),
+        np.asarray(data["value_target"], float),
+    )
 
 
 def episode_scores(pool, domain: str, policies: list, entropy: int, episodes: int, on_result=None) -> list[np.ndarray]:
     """Each policy's objective on each of the first ``episodes`` episodes of ``entropy``'s stream."""
     jobs = [("score", (domain, policy, entropy, i)) for policy in policies for i in range(episodes)]
     values = pool.map(_call, jobs, on_result)
-    return [np.array(values[k * episodes:(k + 1) * episodes]) for k in range(len(policies))]
+    return [np.array(values[k * episodes : (k + 1) * episodes]) for k in range(len(policies))]
 
 
 def mean_scores(pool, domain: str, policies: list, entropy: int, episodes: int, on_result=None) -> list[float]:

@@ -118,8 +118,14 @@ class _Phased(Learner):
             return self._config
         s = self.settings
         own = {"gpomdp": s.algorithm_settings} if self.algorithm == "gpomdp" else {"dpi": s.algorithm_settings}
-        return TrainConfig(self.key.task, self.seeds, **{n: getattr(s, n) for n in _SHARED}, algorithm=self.algorithm,
-                           recompute_price=self.key.recompute_price, **own)
+        return TrainConfig(
+            self.key.task,
+            self.seeds,
+            **{n: getattr(s, n) for n in _SHARED},
+            algorithm=self.algorithm,
+            recompute_price=self.key.recompute_price,
+            **own,
+        )
 
     def default_seeds(self) -> tuple[int, ...]:
         return TrainConfig.__dataclass_fields__["seeds"].default  # 0-4, as etmpc train's
@@ -131,8 +137,9 @@ class _Phased(Learner):
 
     def check(self) -> None:
         config = self.config()
-        if self._config is not None and (SystemKey(config.domain, config.recompute_price) != self.key
-                                         or config.seeds != self.seeds):
+        if self._config is not None and (
+            SystemKey(config.domain, config.recompute_price) != self.key or config.seeds != self.seeds
+        ):
             raise EtmpcError("the learner's configuration is for another task, price or seeds")
         refuse_foreign(self.out, ours, "training run")
         _, _, testset = context(config.domain)
@@ -150,8 +157,10 @@ class _Phased(Learner):
             return None
         state = load_checkpoint(checkpoint)
         if state.config != self.config():
-            raise EtmpcError(f"{checkpoint} was made with different settings ({_difference(state.config, self.config())}); "
-                             "resume with the same ones, or choose another --out")
+            raise EtmpcError(
+                f"{checkpoint} was made with different settings ({_difference(state.config, self.config())}); "
+                "resume with the same ones, or choose another --out"
+            )
         return state.to_json()
 
     def state(self) -> dict:
@@ -169,12 +178,15 @@ class _Phased(Learner):
 
     def work(self) -> int:
         config = self.config()
-        return len(config.seeds) * (config.episodes + len(config.milestones) * config.eval_repeats * self._testset[0]
-                                    + config.validation_episodes)
+        return len(config.seeds) * (
+            config.episodes + len(config.milestones) * config.eval_repeats * self._testset[0] + config.validation_episodes
+        )
 
     def work_done(self) -> int:
         config, done = self.config(), self.done
-        return len(config.seeds) * (done + sum(1 for m in config.milestones if m <= done) * config.eval_repeats * self._testset[0])
+        return len(config.seeds) * (
+            done + sum(1 for m in config.milestones if m <= done) * config.eval_repeats * self._testset[0]
+        )
 
     def _tick(self, job) -> None:
         self.tick(job[1][5] - job[1][4] if job[0] == "train" else 1 if job[0] != "score" else 0)
@@ -183,16 +195,24 @@ class _Phased(Learner):
 
     def setup(self) -> None:
         config, pool = self.config(), self.pool
-        states = pool.map(_call, [("normalisation", (config.system, i, config.features)) for i in range(config.normalisation_episodes)])
+        states = pool.map(
+            _call, [("normalisation", (config.system, i, config.features)) for i in range(config.normalisation_episodes)]
+        )
         normalisation = Normalisation.fit(np.concatenate(states))
-        hyper = {"algorithm": config.algorithm, "features": config.features, "normalisation_episodes": config.normalisation_episodes}
+        hyper = {
+            "algorithm": config.algorithm,
+            "features": config.features,
+            "normalisation_episodes": config.normalisation_episodes,
+        }
         if config.recompute_price is not None:  # trained for another price than the system's own
             hyper["recompute_price"] = config.recompute_price
         hyper.update(self._hyperparameters(config))
         initial = LogisticPolicy.initial(normalisation, config.domain, hyper, config.features, greedy=config.algorithm == "dpi")
         learner, base = self._start(config, initial)
         # One learner per seed, sharing nothing (a DPI learner's labels grow in place).
-        self.run_state = RunState(config, initial.to_json(), {str(s): json.loads(json.dumps(learner)) for s in config.seeds}, base=base)
+        self.run_state = RunState(
+            config, initial.to_json(), {str(s): json.loads(json.dumps(learner)) for s in config.seeds}, base=base
+        )
         self._evaluate()
 
     def learn(self, budget: int, callback) -> None:
@@ -204,8 +224,10 @@ class _Phased(Learner):
 
     def report(self) -> str:
         point, state = self._summary["points"][-1], self.run_state
-        return (f"{state.config.domain}: {state.done}/{state.config.episodes} episodes per seed, test objective "
-                f"{point['objective_mean']:.5f} ± {point['objective_std']:.5f}, {point['recomputes_mean']:.1f} recomputes")
+        return (
+            f"{state.config.domain}: {state.done}/{state.config.episodes} episodes per seed, test objective "
+            f"{point['objective_mean']:.5f} ± {point['objective_std']:.5f}, {point['recomputes_mean']:.1f} recomputes"
+        )
 
     # Validation: every seed's final policy; the best becomes selected.json (written by save).
 
@@ -245,8 +267,12 @@ class _Phased(Learner):
                 return None
             return {"policy": f"seed{seed}/episodes{done:05d}", "training_seed": seed, "training_episodes": done}
 
-        jobs = [("evaluate", (config.system, sha256, policy_at(state, state.learners[str(s)]["theta"]), r, e, identity(s, e)))
-                for s in config.seeds for r in range(config.eval_repeats) for e in range(testset_n)]
+        jobs = [
+            ("evaluate", (config.system, sha256, policy_at(state, state.learners[str(s)]["theta"]), r, e, identity(s, e)))
+            for s in config.seeds
+            for r in range(config.eval_repeats)
+            for e in range(testset_n)
+        ]
         results = once_each(self.pool, _call, jobs, self._tick)
         records = [c[3] for c in results if c[3] is not None]
         if records:
@@ -256,14 +282,23 @@ class _Phased(Learner):
         per_seed = config.eval_repeats * testset_n
         sense = state.objective_sense
         for i, seed in enumerate(config.seeds):
-            chunk = results[i * per_seed:(i + 1) * per_seed]
-            row = {"episodes": done, "seed": seed, "objective": float(np.mean([c[0] for c in chunk])),
-                   "control": float(np.mean([c[1] for c in chunk])), "recomputes": float(np.mean([c[2] for c in chunk]))}
+            chunk = results[i * per_seed : (i + 1) * per_seed]
+            row = {
+                "episodes": done,
+                "seed": seed,
+                "objective": float(np.mean([c[0] for c in chunk])),
+                "control": float(np.mean([c[1] for c in chunk])),
+                "recomputes": float(np.mean([c[2] for c in chunk])),
+            }
             state.curve.append(row)
             best = state.best.get(str(seed))
             better = best is None or oriented(row["objective"], sense) > oriented(best["objective"], sense)
             if better:
-                state.best[str(seed)] = {"episodes": done, "objective": row["objective"], "theta": state.learners[str(seed)]["theta"]}
+                state.best[str(seed)] = {
+                    "episodes": done,
+                    "objective": row["objective"],
+                    "theta": state.learners[str(seed)]["theta"],
+                }
 
 
 class GpomdpLearner(_Phased):
@@ -272,8 +307,11 @@ class GpomdpLearner(_Phased):
     name = "gpomdp"
     algorithm = "gpomdp"
     Settings = GpomdpSettings
-    shipped = ("GPOMDP (shipped)", "gpomdp.json",
-               "the paper's learner on its features (5 seeds x 1500 episodes), the seed chosen on validation episodes")
+    shipped = (
+        "GPOMDP (shipped)",
+        "gpomdp.json",
+        "the paper's learner on its features (5 seeds x 1500 episodes), the seed chosen on validation episodes",
+    )
 
     def _hyperparameters(self, config: TrainConfig) -> dict:
         return dict(discount=config.gpomdp.discount, learning_rate=config.gpomdp.learning_rate, baseline=config.gpomdp.baseline)
@@ -304,8 +342,11 @@ class DpiLearner(_Phased):
 
     def _start(self, config: TrainConfig, initial: LogisticPolicy) -> tuple[dict, str]:
         learner = {"theta": initial.theta.tolist(), "episodes": 0, "iterations": 0, "data": []}
-        base = dpi.choose_base(config.dpi, make_system(config.system).objective_sense,
-                               lambda bases, n: mean_scores(self.pool, config.system, bases, SELECTION_ENTROPY, n))
+        base = dpi.choose_base(
+            config.dpi,
+            make_system(config.system).objective_sense,
+            lambda bases, n: mean_scores(self.pool, config.system, bases, SELECTION_ENTROPY, n),
+        )
         return learner, base
 
     def _advance(self, start: int, stop: int) -> None:

@@ -40,8 +40,15 @@ from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import refuse_foreign, write_json
 from etmpc.envs.normalization import save_normalization
 from etmpc.learning.base import Learner
-from etmpc.learning.ppo_settings import (PpoSettings, SettingError, _json, _libraries, _make_env, _ours,  # noqa: F401
-                                         save_model)
+from etmpc.learning.ppo_settings import (  # noqa: F401 (SettingError and the rest re-exported, as before the split)
+    PpoSettings,
+    SettingError,
+    _json,
+    _libraries,
+    _make_env,
+    _ours,
+    save_model,
+)
 from etmpc.policies.features import observation_names
 from etmpc.policies.learned import write_json_atomically
 from etmpc.policies.sb3 import metadata_path
@@ -58,9 +65,12 @@ class PpoLearner(Learner):
     policy_kind = "sb3"
     seeding = "one"
     unit = "environment steps"
-    shipped = ("PPO (shipped)", "ppo.zip",
-               "Stable-Baselines3 PPO on the trigger environment with the task's policies/<task>/ppo.yml (its reward against "
-               "a fixed schedule), chosen on validation episodes")
+    shipped = (
+        "PPO (shipped)",
+        "ppo.zip",
+        "Stable-Baselines3 PPO on the trigger environment with the task's policies/<task>/ppo.yml (its reward against "
+        "a fixed schedule), chosen on validation episodes",
+    )
 
     def __init__(self, settings: PpoSettings | None = None, workers: int = 1):
         super().__init__(settings)
@@ -141,10 +151,22 @@ class PpoLearner(Learner):
         self.torch.set_num_threads(1)
         self.vec = VecNormalize(self._environments(), norm_obs=True, norm_reward=True, gamma=s.gamma)
         rollout = self.n_steps * s.n_envs
-        self.model = self.sb3.PPO("MlpPolicy", self.vec, seed=s.seed, device="cpu", n_steps=self.n_steps,
-                                  batch_size=min(s.batch_size, rollout), n_epochs=s.n_epochs, learning_rate=s.learning_rate,
-                                  gamma=s.gamma, gae_lambda=s.gae_lambda, clip_range=s.clip_range, ent_coef=s.ent_coef,
-                                  policy_kwargs={"net_arch": list(s.hidden)}, verbose=0)
+        self.model = self.sb3.PPO(
+            "MlpPolicy",
+            self.vec,
+            seed=s.seed,
+            device="cpu",
+            n_steps=self.n_steps,
+            batch_size=min(s.batch_size, rollout),
+            n_epochs=s.n_epochs,
+            learning_rate=s.learning_rate,
+            gamma=s.gamma,
+            gae_lambda=s.gae_lambda,
+            clip_range=s.clip_range,
+            ent_coef=s.ent_coef,
+            policy_kwargs={"net_arch": list(s.hidden)},
+            verbose=0,
+        )
         if list(self.vec.get_attr("observation_names")[0]) != list(observation_names(system.name, system.state_names)):
             raise EtmpcError(f"{self.key.task}: the environment's observation is not the one sb3: computes")
         self.started = time.perf_counter()
@@ -156,7 +178,9 @@ class PpoLearner(Learner):
             self._timesteps = int(self.result["environment_steps"])
             return
         if state.get("settings") != _json(self.settings):
-            raise EtmpcError(f"{self.out} holds a PPO run with other settings; resume with the same ones, or choose another --out")
+            raise EtmpcError(
+                f"{self.out} holds a PPO run with other settings; resume with the same ones, or choose another --out"
+            )
         from stable_baselines3.common.vec_env import VecNormalize
 
         self.torch.set_num_threads(1)
@@ -179,15 +203,29 @@ class PpoLearner(Learner):
         self._timesteps = int(model.num_timesteps)
         path = out / "checkpoints" / f"step_{model.num_timesteps:08d}.zip"
         save_model(model, path)
-        save_normalization(vec, self.key, metadata_path(path), recompute_price=self.system.recompute_price,
-                           timesteps=int(model.num_timesteps), settings=_json(s))
+        save_normalization(
+            vec,
+            self.key,
+            metadata_path(path),
+            recompute_price=self.system.recompute_price,
+            timesteps=int(model.num_timesteps),
+            settings=_json(s),
+        )
         score = validate(self.pool, self.key, [f"sb3:{path}"], s.validation_episodes)[0]
         simulated = self._simulated_before + int(sum(vec.get_attr("simulated_steps")))  # the baseline's steps too
-        self.checkpoints.append({"timesteps": int(model.num_timesteps), "simulated_steps": simulated,
-                                 "file": str(path.relative_to(out)),
-                                 "validation_objective": score, "wall_seconds": time.perf_counter() - self.started})
-        self.say(f"{self.key.task}: PPO {model.num_timesteps} steps, validation objective {score:.5f} "
-                 f"({time.perf_counter() - self.started:.0f} s)")
+        self.checkpoints.append(
+            {
+                "timesteps": int(model.num_timesteps),
+                "simulated_steps": simulated,
+                "file": str(path.relative_to(out)),
+                "validation_objective": score,
+                "wall_seconds": time.perf_counter() - self.started,
+            }
+        )
+        self.say(
+            f"{self.key.task}: PPO {model.num_timesteps} steps, validation objective {score:.5f} "
+            f"({time.perf_counter() - self.started:.0f} s)"
+        )
 
     def save(self) -> None:
         if self.result is None and self.checkpoints:  # under way: what resume needs
@@ -209,13 +247,25 @@ class PpoLearner(Learner):
         pick = best_of(self.checkpoints, system.objective_sense, key=lambda c: c["validation_objective"])
         shutil.copyfile(out / pick["file"], out / "selected.zip")
         meta = json.loads(metadata_path(out / pick["file"]).read_text())
-        write_json(out / "selected.json", dict(meta, validation_objective=pick["validation_objective"],
-                                               validation_episodes=s.validation_episodes))
-        result = {"format": "etmpc-ppo-run", "version": 1, "task": str(self.key), "settings": _json(s), "workers": self.workers,
-                  "environment_steps": int(self.model.num_timesteps), "simulated_steps": self.checkpoints[-1]["simulated_steps"],
-                  "wall_seconds": time.perf_counter() - self.started,
-                  "checkpoints": self.checkpoints, "selected": pick["file"], "objective_sense": system.objective_sense,
-                  "stable_baselines3": self.sb3.__version__, "torch": self.torch.__version__}
+        write_json(
+            out / "selected.json",
+            dict(meta, validation_objective=pick["validation_objective"], validation_episodes=s.validation_episodes),
+        )
+        result = {
+            "format": "etmpc-ppo-run",
+            "version": 1,
+            "task": str(self.key),
+            "settings": _json(s),
+            "workers": self.workers,
+            "environment_steps": int(self.model.num_timesteps),
+            "simulated_steps": self.checkpoints[-1]["simulated_steps"],
+            "wall_seconds": time.perf_counter() - self.started,
+            "checkpoints": self.checkpoints,
+            "selected": pick["file"],
+            "objective_sense": system.objective_sense,
+            "stable_baselines3": self.sb3.__version__,
+            "torch": self.torch.__version__,
+        }
         write_json(out / "training.json", result)
         for name in (RESUME, NORMALIZE):
             (out / "checkpoints" / name).unlink(missing_ok=True)
@@ -233,8 +283,15 @@ class PpoLearner(Learner):
         return self.checkpoints[-1]["simulated_steps"] if self.checkpoints else None
 
 
-def train_ppo(task: str | SystemKey, out: Path, settings: PpoSettings = PpoSettings(), workers: int = 1,
-              recompute_price: float | None = None, say=lambda line: None, resume: bool = False) -> dict:
+def train_ppo(
+    task: str | SystemKey,
+    out: Path,
+    settings: PpoSettings = PpoSettings(),
+    workers: int = 1,
+    recompute_price: float | None = None,
+    say=lambda line: None,
+    resume: bool = False,
+) -> dict:
     """Train on ``task`` (a name, at ``recompute_price`` if given, or a :class:`SystemKey`), checkpoint,
     choose on validation episodes; returns ``training.json``'s content. A stopped run in ``out`` starts
     again, or with ``resume`` continues from its last checkpoint (not bit for bit: see

@@ -50,8 +50,10 @@ RANGES = {
     "gae_lambda": ("in [0, 1]", _real(lambda x: 0 <= x <= 1)),
     "clip_range": ("a finite number > 0", _real(lambda x: 0 < x < math.inf)),
     "ent_coef": ("a finite number >= 0", _real(lambda x: 0 <= x < math.inf)),
-    "hidden": ("a non-empty tuple of positive layer sizes",
-               lambda v: isinstance(v, tuple) and bool(v) and all(type(n) is int and n > 0 for n in v)),
+    "hidden": (
+        "a non-empty tuple of positive layer sizes",
+        lambda v: isinstance(v, tuple) and bool(v) and all(type(n) is int and n > 0 for n in v),
+    ),
     "reward_baseline": ("None or a fixed schedule's spec (always, never or every:T)", lambda v: v is None or isinstance(v, str)),
 }
 
@@ -89,13 +91,16 @@ class PpoSettings:
         # hold 2 steps (Stable-Baselines3 asserts it), and each checkpoint's slice of the budget at least one
         # rollout of every environment, or the slices together would run more steps than the budget.
         if self.n_steps * self.n_envs < 2:
-            raise SettingError("{n_steps} * {n_envs} must be >= 2 (Stable-Baselines3 asserts > 1)",
-                               f"{self.n_steps} * {self.n_envs}")
+            raise SettingError(
+                "{n_steps} * {n_envs} must be >= 2 (Stable-Baselines3 asserts > 1)", f"{self.n_steps} * {self.n_envs}"
+            )
         most = self.timesteps // max(2, self.n_envs)
         if self.checkpoints > most:
-            raise SettingError(f"{{checkpoints}} must be at most {{timesteps}} // max(2, {{n_envs}}) = {most}",
-                               repr(self.checkpoints), "each slice of the budget holds a rollout of every environment, "
-                               "of 2 steps at least")
+            raise SettingError(
+                f"{{checkpoints}} must be at most {{timesteps}} // max(2, {{n_envs}}) = {most}",
+                repr(self.checkpoints),
+                "each slice of the budget holds a rollout of every environment, of 2 steps at least",
+            )
 
 
 def _libraries():
@@ -116,6 +121,7 @@ def _make_env(key: SystemKey, seed: int, reward_baseline: str | None):
         env = Monitor(TriggerEnv(key, reward_baseline=reward_baseline))
         env.reset(seed=seed)
         return env
+
     return make
 
 

@@ -39,9 +39,19 @@ class Run:
     simulated_steps: int | None
 
 
-def run(learner: Learner | str, task: str | SystemKey, out: Path, seeds: tuple[int, ...] | None = None, workers: int = 1,
-        resume: bool = False, backend: str = "local", address: str | None = None, progress: bool = True,
-        say: Callable[[str], None] = lambda line: None, settings=None) -> Run:
+def run(
+    learner: Learner | str,
+    task: str | SystemKey,
+    out: Path,
+    seeds: tuple[int, ...] | None = None,
+    workers: int = 1,
+    resume: bool = False,
+    backend: str = "local",
+    address: str | None = None,
+    progress: bool = True,
+    say: Callable[[str], None] = lambda line: None,
+    settings=None,
+) -> Run:
     """Train ``learner`` (an instance, or a registered name with ``settings``) on ``task`` into ``out``."""
     if isinstance(learner, str):
         learner = learner_class(learner)(settings)
@@ -73,8 +83,11 @@ def run(learner: Learner | str, task: str | SystemKey, out: Path, seeds: tuple[i
                 if line is not None:
                     bar.write(f"{line}; {_eta(started, bar, resumed_from)}")
             if not learner.chosen:
-                scores = learner.scores(lambda policies: validate(pool, learner.key, policies, learner.validation_episodes(),
-                                                                  lambda job: bar.update(1)))
+                scores = learner.scores(
+                    lambda policies: validate(
+                        pool, learner.key, policies, learner.validation_episodes(), lambda job: bar.update(1)
+                    )
+                )
                 learner.choose(scores)
                 learner.save()
         finally:

@@ -92,9 +92,17 @@ def _candidate_returns(base, candidates: tuple[int, ...], futures: int, horizon:
         sampled = [system.sample_future(snapshot.episode, ctx.step, rng) for _ in range(futures)]
         solved = system.plan(snapshot.x, snapshot.u_prev, snapshot.plan, snapshot.age, ctx.timestep)
         stop = ctx.step + horizon
-        returns = [np.mean([play_on(system, twin, snapshot, _KeepFor(solved, n, base), None, True, future, solved, stop)
-                            for future in sampled]) for n in candidates]
+        returns = [
+            np.mean(
+                [
+                    play_on(system, twin, snapshot, _KeepFor(solved, n, base), None, True, future, solved, stop)
+                    for future in sampled
+                ]
+            )
+            for n in candidates
+        ]
         return plan_features(solved).tolist(), [float(q) for q in returns]
+
     return label
 
 
@@ -103,8 +111,13 @@ def label_episode(key: str, base: str, candidates: tuple[int, ...], settings: Se
     at its picked steps (those where the loop asks the policy: a plan is in force)."""
     system, env, _ = context(key)
     rngs = [np.random.default_rng(np.random.SeedSequence(SELF_ENTROPY, spawn_key=(index, k))) for k in range(3)]
-    steps = set(rngs[1].choice(np.arange(1, system.episode_steps), size=min(settings.solves_per_episode,
-                                                                            system.episode_steps - 1), replace=False).tolist())
+    steps = set(
+        rngs[1]
+        .choice(
+            np.arange(1, system.episode_steps), size=min(settings.solves_per_episode, system.episode_steps - 1), replace=False
+        )
+        .tolist()
+    )
     policy = parse_policy(base, system)
     label = _candidate_returns(policy, candidates, settings.futures, max(candidates) + settings.horizon, rngs[2])
     labeller = dpi.Labeller(policy, steps, label, "label-self")
@@ -191,7 +204,9 @@ class SelfLearner(Learner):
         settings, pool = self.settings, self.pool
         self.selection = mean_scores(pool, self.key, list(settings.bases), SELECTION_ENTROPY, settings.selection_episodes)
         self.base = settings.bases[int(self.better(self.selection))]
-        self.say(f"self-trigger: base {self.base} (best of {len(settings.bases)} on {settings.selection_episodes} training episodes)")
+        self.say(
+            f"self-trigger: base {self.base} (best of {len(settings.bases)} on {settings.selection_episodes} training episodes)"
+        )
 
     def learn(self, budget: int, callback) -> None:
         settings, system, candidates, out = self.settings, self.system, self.candidate_lengths, self.policy_file
@@ -207,10 +222,13 @@ class SelfLearner(Learner):
         self.fits = {}
         period = _period(self.base, system)
         if period in candidates:  # the base itself, as a self-trigger: what training must beat (first: it wins ties)
-            self.fits[f"constant {period} (the base)"] = SelfTrigger.constant(str(out), system.name, candidates, period, mean.size)
+            self.fits[f"constant {period} (the base)"] = SelfTrigger.constant(
+                str(out), system.name, candidates, period, mean.size
+            )
         for r in settings.ridges:
-            self.fits[f"ridge {r:g}"] = SelfTrigger(str(out), system.name, candidates,
-                                                    fit((features - mean) / scale, self.returns, r), mean, scale)
+            self.fits[f"ridge {r:g}"] = SelfTrigger(
+                str(out), system.name, candidates, fit((features - mean) / scale, self.returns, r), mean, scale
+            )
 
     def candidates(self) -> dict:
         return {name: policy.to_json() for name, policy in self.fits.items()}
@@ -218,14 +236,23 @@ class SelfLearner(Learner):
     def choose(self, validation: list[float]) -> None:
         settings, system, key, candidates = self.settings, self.system, self.key, self.candidate_lengths
         chosen = list(self.fits)[int(self.better(validation))]
-        self.say(f"self-trigger: kept {chosen} ({', '.join(f'{n}: {v:.6g}' for n, v in zip(self.fits, validation))} on "
-                 f"{settings.validation_episodes} validation episodes)")
+        self.say(
+            f"self-trigger: kept {chosen} ({', '.join(f'{n}: {v:.6g}' for n, v in zip(self.fits, validation))} on "
+            f"{settings.validation_episodes} validation episodes)"
+        )
         policy = self.fits[chosen]
         best = np.array(candidates)[np.argmax(self.returns, axis=1)]
-        hyper = dict(settings.to_json(), system=str(key), recompute_price=system.recompute_price, base=self.base,
-                     base_selection=dict(zip(settings.bases, self.selection)), labelled_solves=len(self.rows),
-                     best_keep_counts={str(c): int(np.sum(best == c)) for c in candidates},
-                     validation=dict(zip(self.fits, validation)), chosen=chosen)
+        hyper = dict(
+            settings.to_json(),
+            system=str(key),
+            recompute_price=system.recompute_price,
+            base=self.base,
+            base_selection=dict(zip(settings.bases, self.selection)),
+            labelled_solves=len(self.rows),
+            best_keep_counts={str(c): int(np.sum(best == c)) for c in candidates},
+            validation=dict(zip(self.fits, validation)),
+            chosen=chosen,
+        )
         write_json(Path(self.policy_file), policy.to_json(hyper))
         self.written = policy
 
@@ -233,8 +260,15 @@ class SelfLearner(Learner):
         return f"self:{self.policy_file}"
 
 
-def train_self(key: str | SystemKey, out: Path, settings: SelfSettings = SelfSettings(), workers: int = 1,
-               backend: str = "local", address: str | None = None, say=lambda line: None) -> SelfTrigger:
+def train_self(
+    key: str | SystemKey,
+    out: Path,
+    settings: SelfSettings = SelfSettings(),
+    workers: int = 1,
+    backend: str = "local",
+    address: str | None = None,
+    say=lambda line: None,
+) -> SelfTrigger:
     """Choose the base, label, fit, validate and write ``out`` (the policy file); returns the
     policy. ``key``: a :class:`~etmpc.systems.SystemKey` (a task at a price), or a task's name.
     (:class:`SelfLearner` driven by :func:`etmpc.learning.runner.run`.)"""

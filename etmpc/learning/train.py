@@ -41,12 +41,19 @@ from etmpc.learning.config import ALGORITHMS, TrainConfig, parse_seeds
 from etmpc.learning.phased import _Phased, once_each
 from etmpc.learning.runner import run
 
-__all__ = ["ALGORITHMS", "TrainConfig", "curve_summary", "format_summary", "load_checkpoint", "once_each", "parse_seeds",
-           "train"]
+__all__ = ["ALGORITHMS", "TrainConfig", "curve_summary", "format_summary", "load_checkpoint", "once_each", "parse_seeds", "train"]
 
 
-def train(config: TrainConfig, out: Path, workers: int = 1, resume: bool = False, backend: str = "local",
-          address: str | None = None, progress: bool = True, record_episodes: int = 0) -> RunState:
+def train(
+    config: TrainConfig,
+    out: Path,
+    workers: int = 1,
+    resume: bool = False,
+    backend: str = "local",
+    address: str | None = None,
+    progress: bool = True,
+    record_episodes: int = 0,
+) -> RunState:
     """Train ``config`` into ``out`` (see the module docstring). With ``record_episodes``, each
     evaluation also writes that many test-set episodes per seed into a Rerun recording,
     ``out/recordings/eval_<episodes>.rrd`` (not part of the config: it changes no result).
@@ -60,7 +67,12 @@ def train(config: TrainConfig, out: Path, workers: int = 1, resume: bool = False
 
 def format_summary(state: RunState) -> str:
     summary = curve_summary(state)
-    lines = [f"{state.config.domain}: objective ({higher_or_lower(summary['objective_sense'])} is better) on the test set",
-             f"{'episodes':>9}{'mean':>12}{'std':>10}{'recomputes':>12}"]
-    lines += [f"{p['episodes']:>9}{p['objective_mean']:>12.5f}{p['objective_std']:>10.5f}{p['recomputes_mean']:>12.2f}" for p in summary["points"]]
+    lines = [
+        f"{state.config.domain}: objective ({higher_or_lower(summary['objective_sense'])} is better) on the test set",
+        f"{'episodes':>9}{'mean':>12}{'std':>10}{'recomputes':>12}",
+    ]
+    lines += [
+        f"{p['episodes']:>9}{p['objective_mean']:>12.5f}{p['objective_std']:>10.5f}{p['recomputes_mean']:>12.2f}"
+        for p in summary["points"]
+    ]
     return "\n".join(lines)

@@ -27,5 +27,15 @@ from etmpc.loop.closed import ClosedLoop, play_on, run_episode
 from etmpc.loop.records import Continuation, Trajectory, computation_cost
 from etmpc.loop.state import AugmentedState, DecisionContext, Policy, Snapshot
 
-__all__ = ["AugmentedState", "ClosedLoop", "Continuation", "DecisionContext", "Policy", "Snapshot", "Trajectory",
-           "computation_cost", "play_on", "run_episode"]
+__all__ = [
+    "AugmentedState",
+    "ClosedLoop",
+    "Continuation",
+    "DecisionContext",
+    "Policy",
+    "Snapshot",
+    "Trajectory",
+    "computation_cost",
+    "play_on",
+    "run_episode",
+]

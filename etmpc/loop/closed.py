@@ -179,8 +179,9 @@ class ClosedLoop:
             observation = self._observation
             if observation is None:
                 observation = self.env.task.get_observation(self.env.physics)
-            return self.system.plan(self.x, self.u_prev, self.plan, self.age,
-                                    dm_env.TimeStep(dm_env.StepType.MID, None, None, observation))
+            return self.system.plan(
+                self.x, self.u_prev, self.plan, self.age, dm_env.TimeStep(dm_env.StepType.MID, None, None, observation)
+            )
         solve_start = time.perf_counter()
         new = self.system.plan(self.x, self.u_prev, self.plan, self.age, self.timestep)
         self.trajectory.solve_time_s[i] = time.perf_counter() - solve_start
@@ -222,11 +223,7 @@ class ClosedLoop:
 
 
 def run_episode(
-    system: System,
-    env: dm_env.Environment,
-    policy: Policy,
-    rng: np.random.Generator | None = None,
-    episode: Any = None,
+    system: System, env: dm_env.Environment, policy: Policy, rng: np.random.Generator | None = None, episode: Any = None
 ) -> Trajectory:
     """Play one episode (a stored one if given, else one drawn by the task) under ``policy``."""
     loop = ClosedLoop(system, env).reset(episode)

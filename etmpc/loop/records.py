@@ -42,10 +42,19 @@ class Trajectory:
     def empty(cls, steps: int, nx: int, nu: int) -> Trajectory:
         nan = lambda *shape: np.full(shape, np.nan)  # noqa: E731
         return cls(
-            states=nan(steps + 1, nx), applied=nan(steps, nu), planned=nan(steps, nu), correction=nan(steps, nu),
-            predicted=nan(steps, nx), plan_age=np.zeros(steps, int), recompute=np.zeros(steps, bool),
-            forced=np.zeros(steps, bool), rewards=np.zeros(steps), solve_time_s=nan(steps), step_time_s=nan(steps),
-            feedback_time_s=np.zeros(steps), decide_time_s=np.zeros(steps),
+            states=nan(steps + 1, nx),
+            applied=nan(steps, nu),
+            planned=nan(steps, nu),
+            correction=nan(steps, nu),
+            predicted=nan(steps, nx),
+            plan_age=np.zeros(steps, int),
+            recompute=np.zeros(steps, bool),
+            forced=np.zeros(steps, bool),
+            rewards=np.zeros(steps),
+            solve_time_s=nan(steps),
+            step_time_s=nan(steps),
+            feedback_time_s=np.zeros(steps),
+            decide_time_s=np.zeros(steps),
         )
 
     def cpu_seconds(self) -> dict[str, float]:
@@ -53,8 +62,11 @@ class Trajectory:
         machine-dependent figure): the MPC's ``solve``s, the ``feedback`` (the LQR), the trigger's
         ``decide``s (a rollout's simulations included)."""
         n = self.steps
-        return {"solve": float(np.nansum(self.solve_time_s[:n])), "feedback": float(self.feedback_time_s[:n].sum()),
-                "decide": float(self.decide_time_s[:n].sum())}
+        return {
+            "solve": float(np.nansum(self.solve_time_s[:n])),
+            "feedback": float(self.feedback_time_s[:n].sum()),
+            "decide": float(self.decide_time_s[:n].sum()),
+        }
 
     @property
     def recomputes(self) -> int:

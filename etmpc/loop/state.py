@@ -56,7 +56,6 @@ class DecisionContext:
     timestep: dm_env.TimeStep
 
 
-
 @dataclass(frozen=True, eq=False)
 class Snapshot:
     """A running episode, frozen at a decision: the plant, the task's position in its episode and the
@@ -75,5 +74,13 @@ class Snapshot:
     def take(cls, context: DecisionContext) -> Snapshot:
         env = context.env
         x = context.system.state(context.timestep)
-        return cls(env.physics.snapshot(), context.step, env.task.episode, context.plan, context.age,
-                   np.array(context.u_prev), x, context.timestep.observation)
+        return cls(
+            env.physics.snapshot(),
+            context.step,
+            env.task.episode,
+            context.plan,
+            context.age,
+            np.array(context.u_prev),
+            x,
+            context.timestep.observation,
+        )

@@ -105,15 +105,28 @@ class LogisticPolicy:
         return f"rl:{self.hyperparameters.get('name', self.domain)}"
 
     @classmethod
-    def initial(cls, normalisation: Normalisation, domain: str, hyperparameters: dict | None = None,
-                features: str = "paper", greedy: bool = False) -> LogisticPolicy:
+    def initial(
+        cls,
+        normalisation: Normalisation,
+        domain: str,
+        hyperparameters: dict | None = None,
+        features: str = "paper",
+        greedy: bool = False,
+    ) -> LogisticPolicy:
         theta = np.zeros(normalisation.mean.size * 2 + 1)
         theta[-1] = INITIAL_KEEP_LOGIT
         return cls(theta, normalisation, domain, dict(hyperparameters or {}), features=features, greedy=greedy)
 
     def with_theta(self, theta: np.ndarray, record: bool = False) -> LogisticPolicy:
-        return LogisticPolicy(np.array(theta, dtype=float), self.normalisation, self.domain, self.hyperparameters, record,
-                              features=self.features, greedy=self.greedy)
+        return LogisticPolicy(
+            np.array(theta, dtype=float),
+            self.normalisation,
+            self.domain,
+            self.hyperparameters,
+            record,
+            features=self.features,
+            greedy=self.greedy,
+        )
 
     def phi(self, s: AugmentedState) -> np.ndarray:
         return self.normalisation.features(raw_features(self.features, self.domain, s))
@@ -132,8 +145,10 @@ class LogisticPolicy:
         with np.errstate(over="ignore", invalid="ignore"):
             logit = dot(self.theta, phi)
         if math.isnan(logit):
-            raise PolicyFileError(f"the {self.domain} policy's decision value is not a number at this state "
-                                  "(its parameters overflow against the features): retrain it or check its file")
+            raise PolicyFileError(
+                f"the {self.domain} policy's decision value is not a number at this state "
+                "(its parameters overflow against the features): retrain it or check its file"
+            )
         return logit
 
     def decide(self, s: AugmentedState, rng: np.random.Generator) -> bool:
@@ -167,7 +182,9 @@ class LogisticPolicy:
     @classmethod
     def from_json(cls, data: dict, where: str = "policy") -> LogisticPolicy:
         if not isinstance(data, dict) or data.get("format") != FORMAT:
-            raise PolicyFileError(f"{where} is not an etmpc logistic policy (format {data.get('format') if isinstance(data, dict) else None!r})")
+            raise PolicyFileError(
+                f"{where} is not an etmpc logistic policy (format {data.get('format') if isinstance(data, dict) else None!r})"
+            )
         if data.get("version") not in (1, VERSION):
             raise PolicyFileError(f"{where} has format version {data.get('version')!r}; this etmpc reads 1 and {VERSION}")
         features = data.get("features", "paper") if data.get("version") == VERSION else "paper"
@@ -179,8 +196,14 @@ class LogisticPolicy:
         try:
             normalisation = Normalisation.from_json(data["normalisation"])
             theta = np.asarray(data["theta"], dtype=float)
-            policy = cls(theta, normalisation, str(data["domain"]), dict(data.get("hyperparameters", {})), features=features,
-                         greedy=decision == "greedy")
+            policy = cls(
+                theta,
+                normalisation,
+                str(data["domain"]),
+                dict(data.get("hyperparameters", {})),
+                features=features,
+                greedy=decision == "greedy",
+            )
         except (KeyError, TypeError, ValueError) as exc:
             raise PolicyFileError(f"{where} is corrupt ({exc!r})") from None
         n = normalisation.mean.size
@@ -204,8 +227,10 @@ def load_policy(path: str | Path, domain: str | None = None, nx: int | None = No
     if domain is not None and policy.domain != domain:
         raise PolicyFileError(f"policy file {path} was trained on {policy.domain!r}, not {domain!r}")
     if nx is not None and policy.theta.size != feature_size(nx, policy.features, policy.domain):
-        raise PolicyFileError(f"policy file {path} has {policy.theta.size} features; {domain or 'this task'} needs "
-                              f"{feature_size(nx, policy.features, policy.domain)} ({policy.features} features)")
+        raise PolicyFileError(
+            f"policy file {path} has {policy.theta.size} features; {domain or 'this task'} needs "
+            f"{feature_size(nx, policy.features, policy.domain)} ({policy.features} features)"
+        )
     return policy
 
 

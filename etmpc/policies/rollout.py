@@ -35,8 +35,16 @@ DEFAULT_FUTURES = 8
 MAX_FUTURES = 1000
 
 
-def q_values(context: DecisionContext, base: Policy, futures: int, rng: np.random.Generator | None, twin,
-             horizon: int | None = None, oracle: bool = False, memo: OracleMemo | None = None) -> tuple[np.ndarray, np.ndarray]:
+def q_values(
+    context: DecisionContext,
+    base: Policy,
+    futures: int,
+    rng: np.random.Generator | None,
+    twin,
+    horizon: int | None = None,
+    oracle: bool = False,
+    memo: OracleMemo | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
     """Returns of keeping and of recomputing at ``context``'s decision, one per future (paired).
 
     ``twin`` is an environment of the same task to simulate in (``context.env`` is left untouched).
@@ -95,9 +103,15 @@ class OracleMemo:
         if trace.start + k != snapshot.step or k >= len(trace.added):
             return None
         x, plan, age, u_prev = trace.after[k - 1]
-        same = (age == snapshot.age and np.array_equal(x, snapshot.x) and np.array_equal(u_prev, snapshot.u_prev)
-                and (plan is snapshot.plan or (np.array_equal(plan.inputs, snapshot.plan.inputs)
-                                               and np.array_equal(plan.states, snapshot.plan.states))))
+        same = (
+            age == snapshot.age
+            and np.array_equal(x, snapshot.x)
+            and np.array_equal(u_prev, snapshot.u_prev)
+            and (
+                plan is snapshot.plan
+                or (np.array_equal(plan.inputs, snapshot.plan.inputs) and np.array_equal(plan.states, snapshot.plan.states))
+            )
+        )
         if not same:
             return None
         answer = int(trace.recomputed[k])
@@ -155,8 +169,9 @@ class Rollout:
         memo = None
         if self.oracle and not self.base.stochastic and self.horizon is None:
             memo = self._memo = self._memo or OracleMemo()
-        keep, recompute = q_values(s.context, self.base, self.futures, rng, self.twin(s.context.system), self.horizon,
-                                   self.oracle, memo)
+        keep, recompute = q_values(
+            s.context, self.base, self.futures, rng, self.twin(s.context.system), self.horizon, self.oracle, memo
+        )
         answer = fsum(recompute.tolist()) > fsum(keep.tolist())  # the better mean over the same futures
         if memo is not None:
             memo.take(answer, s.context.env.task.episode)
@@ -188,7 +203,7 @@ def parse_rollout(spec: str, parse_base, steps: int, simulating) -> Rollout:
     extra_allowed = 2 if name == "rollout" else 0
     error = None
     for extra in range(0, min(extra_allowed, len(tokens) - 1) + 1):
-        head, tail = ":".join(tokens[: len(tokens) - extra]), tokens[len(tokens) - extra:]
+        head, tail = ":".join(tokens[: len(tokens) - extra]), tokens[len(tokens) - extra :]
         try:
             base = parse_base(head)
         except EtmpcError as exc:
@@ -200,4 +215,3 @@ def parse_rollout(spec: str, parse_base, steps: int, simulating) -> Rollout:
         horizon = _split_count(spec, tail[1], "H (steps ahead)", 1, steps) if len(tail) > 1 else None
         return Rollout(base, futures, horizon)
     raise EtmpcError(f"bad policy {spec!r}: {error} (use {usage})") from None
-

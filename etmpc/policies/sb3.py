@@ -207,8 +207,9 @@ def _entries(path: Path) -> tuple[bytes, bytes]:
             raise EtmpcError(f"{not_a_model} (its zip has no 'data' and 'policy.pth'; save one with model.save(PATH))")
         for name in ("data", "policy.pth"):
             if members[name].file_size > MAX_ENTRY:
-                raise EtmpcError(f"{not_a_model} (its {name} holds {members[name].file_size} bytes, more than "
-                                 f"{MAX_ENTRY >> 20} MiB)")
+                raise EtmpcError(
+                    f"{not_a_model} (its {name} holds {members[name].file_size} bytes, more than {MAX_ENTRY >> 20} MiB)"
+                )
         try:
             return archive.read("data"), archive.read("policy.pth")
         except BaseException as exc:  # a damaged member: bad CRC, zlib's error, an unknown compression
@@ -239,19 +240,25 @@ def _architecture(path: Path, data: bytes, size: int) -> list[int]:
     except Exception:  # pickletools' errors on a damaged pickle are of several kinds, all of a parser
         named, only, what = [], False, "an unreadable pickle" if isinstance(policy_class, dict) else "none given"
     if named != [POLICY_CLASS] or not only:
-        raise EtmpcError(f"sb3:{path} needs a policy class etmpc does not read ({what}); etmpc reads only PPO's "
-                         f"MlpPolicy ({POLICY_CLASS}) and runs no pickled code")
+        raise EtmpcError(
+            f"sb3:{path} needs a policy class etmpc does not read ({what}); etmpc reads only PPO's "
+            f"MlpPolicy ({POLICY_CLASS}) and runs no pickled code"
+        )
     spaces = {"observation": fields.get("observation_space"), "action": fields.get("action_space")}
     for (kind, space), wanted in zip(spaces.items(), (BOX, DISCRETE)):
         if not isinstance(space, dict) or space.get(":type:") != wanted:
             found = space.get(":type:") if isinstance(space, dict) else space
-            raise EtmpcError(f"sb3:{path} needs an {kind} space of type {_short(found)}; etmpc reads a Box of "
-                             "observations and a Discrete of actions")
+            raise EtmpcError(
+                f"sb3:{path} needs an {kind} space of type {_short(found)}; etmpc reads a Box of "
+                "observations and a Discrete of actions"
+            )
     shape, actions = spaces["observation"].get("_shape"), spaces["action"].get("n")
     if shape != [size] or type(shape[0]) is not int or actions != "2" or spaces["action"].get("start", "0") != "0":
         shape = tuple(shape) if isinstance(shape, list) else shape
-        raise EtmpcError(f"sb3:{path} takes observations of shape {_short(shape)} and {_short(actions)} actions; "
-                         f"the trigger environment has ({size},) and 2 (keep, recompute)")
+        raise EtmpcError(
+            f"sb3:{path} takes observations of shape {_short(shape)} and {_short(actions)} actions; "
+            f"the trigger environment has ({size},) and 2 (keep, recompute)"
+        )
     return _net_arch(path, fields.get("policy_kwargs", {}))
 
 
@@ -263,8 +270,9 @@ def _net_arch(path: Path, kwargs) -> list[int]:
             named = ", ".join(pickled_globals(kwargs[":serialized:"])[0]) or "nothing"
         except Exception:
             named = "an unreadable pickle"
-        raise EtmpcError(f"sb3:{path} needs policy_kwargs that only unpickling reads ({keys}; naming {named}); "
-                         "etmpc reads net_arch alone")
+        raise EtmpcError(
+            f"sb3:{path} needs policy_kwargs that only unpickling reads ({keys}; naming {named}); etmpc reads net_arch alone"
+        )
     if not isinstance(kwargs, dict) or set(kwargs) - {"net_arch"}:
         extra = ", ".join(sorted(set(kwargs) - {"net_arch"})) if isinstance(kwargs, dict) else _short(kwargs)
         raise EtmpcError(f"sb3:{path} needs policy_kwargs etmpc does not read ({extra}); it reads net_arch alone")
@@ -272,8 +280,9 @@ def _net_arch(path: Path, kwargs) -> list[int]:
     arch = DEFAULT_NET_ARCH if arch is None else arch
     lists = [arch.get("pi", []), arch.get("vf", [])] if isinstance(arch, dict) and set(arch) <= {"pi", "vf"} else [arch]
     if not all(isinstance(w, list) and all(type(n) is int and n > 0 for n in w) for w in lists):
-        raise EtmpcError(f"sb3:{path} needs net_arch {_short(arch)}; etmpc reads a list of layer widths "
-                         "or a dict of 'pi' and 'vf' lists")
+        raise EtmpcError(
+            f"sb3:{path} needs net_arch {_short(arch)}; etmpc reads a list of layer widths or a dict of 'pi' and 'vf' lists"
+        )
     return lists[0]
 
 
@@ -292,10 +301,12 @@ def _state_dict(path: Path, blob: bytes) -> dict:
         if genuine(exc):
             raise
         lines = [line.strip() for line in str(exc).splitlines() if line.strip()]
-        detail = next((line for line in lines[1:] if not line.startswith(("Please file", "Check the documentation"))),
-                      described(exc))
-        raise EtmpcError(f"sb3:{path}: its policy.pth is not plain weights, torch's weights-only reader refuses it "
-                         f"({detail[:200]})") from None
+        detail = next(
+            (line for line in lines[1:] if not line.startswith(("Please file", "Check the documentation"))), described(exc)
+        )
+        raise EtmpcError(
+            f"sb3:{path}: its policy.pth is not plain weights, torch's weights-only reader refuses it ({detail[:200]})"
+        ) from None
     if not (isinstance(state, dict) and all(isinstance(k, str) and isinstance(v, torch.Tensor) for k, v in state.items())):
         raise EtmpcError(f"sb3:{path}: its policy.pth is not a state dict of tensors")
     return state
@@ -322,8 +333,9 @@ def _network(path: Path, state: dict, widths: list[int], size: int) -> Network:
         raise EtmpcError(f"{fits}: it has {_short(extra[0])}, which the architecture has not")
     for key, shape in shapes.items():
         if tuple(state[key].shape) != shape or state[key].dtype != torch.float32:
-            raise EtmpcError(f"{fits}: {key} is {state[key].dtype} of shape {tuple(state[key].shape)}, "
-                             f"not torch.float32 of shape {shape}")
+            raise EtmpcError(
+                f"{fits}: {key} is {state[key].dtype} of shape {tuple(state[key].shape)}, not torch.float32 of shape {shape}"
+            )
     nonfinite = [k for k, v in state.items() if v.is_floating_point() and not bool(torch.isfinite(v).all())]
     if nonfinite:
         raise EtmpcError(f"sb3:{path}: its policy.pth has non-finite weights ({_short(nonfinite[0])})")
@@ -337,8 +349,11 @@ def open_network(path: Path, algorithm: str, size: int) -> Network:
     docstring); :class:`EtmpcError` (one line) unless it is PPO's ``MlpPolicy`` with ``size`` observations
     and two actions."""
     if algorithm.lower() != "ppo":
-        known = "; etmpc reads PPO's networks (ppo) alone" if algorithm.lower() in ALGORITHMS else \
-            ", which Stable-Baselines3 does not have; etmpc reads PPO's networks (ppo)"
+        known = (
+            "; etmpc reads PPO's networks (ppo) alone"
+            if algorithm.lower() in ALGORITHMS
+            else ", which Stable-Baselines3 does not have; etmpc reads PPO's networks (ppo)"
+        )
         raise EtmpcError(f"sb3:{path}: {metadata_path(path).name} names the algorithm {algorithm!r}{known}")
     data, blob = _entries(path)
     widths = _architecture(path, data, size)
@@ -349,8 +364,13 @@ def read_description(meta_file: Path, task: str | None, trained: str, missing: s
     """The task, the observation's mean and variance and the whole of an etmpc description (``sb3:``'s
     ``.json`` beside a model, what ``normalize=`` reads), checked against ``task`` if given (``trained``
     names what was trained in that message, ``missing`` is the message of a missing file)."""
-    meta = read_document(meta_file, FORMAT, missing=missing, unreadable=f"{meta_file} cannot be read ({{error}})",
-                         foreign=f"{meta_file} is not an etmpc Stable-Baselines3 policy (format {FORMAT!r})")
+    meta = read_document(
+        meta_file,
+        FORMAT,
+        missing=missing,
+        unreadable=f"{meta_file} cannot be read ({{error}})",
+        foreign=f"{meta_file} is not an etmpc Stable-Baselines3 policy (format {FORMAT!r})",
+    )
     try:
         trained_on = canonical(str(meta["task"]))
         cls = system_class(trained_on)
@@ -390,8 +410,10 @@ def load_sb3(path: str, task: str | None) -> SB3Policy:
 def _raw(model: Path, task: str, missing: str) -> SB3Policy:
     """A model with no description, on ``task``'s raw observation; refused if it was trained behind ``VecNormalize``."""
     if _fields(model, _entries(model)[0]).get("_last_original_obs") is not None:
-        raise EtmpcError(f"{missing}, and it was trained behind VecNormalize, whose statistics its zip does not keep: "
-                         f"write them with etmpc.envs.save_normalization(vec_normalize, {task!r}, "
-                         f"{str(metadata_path(model))!r})")
+        raise EtmpcError(
+            f"{missing}, and it was trained behind VecNormalize, whose statistics its zip does not keep: "
+            f"write them with etmpc.envs.save_normalization(vec_normalize, {task!r}, "
+            f"{str(metadata_path(model))!r})"
+        )
     cls = system_class(task)
     return SB3Policy(model, task, None, None, open_network(model, "ppo", len(observation_names(cls.name, cls.state_names))))

@@ -79,9 +79,16 @@ class SelfTrigger:
         return {k: v for k, v in self.__dict__.items() if k not in ("_plan", "_keep")} | {"_plan": None, "_keep": 0}
 
     def to_json(self, hyperparameters: dict | None = None) -> dict:
-        return {"format": FORMAT, "version": 1, "domain": self.domain, "candidates": list(self.candidates),
-                "theta": self.theta.tolist(), "mean": self.mean.tolist(), "scale": self.scale.tolist(),
-                "hyperparameters": hyperparameters or {}}
+        return {
+            "format": FORMAT,
+            "version": 1,
+            "domain": self.domain,
+            "candidates": list(self.candidates),
+            "theta": self.theta.tolist(),
+            "mean": self.mean.tolist(),
+            "scale": self.scale.tolist(),
+            "hyperparameters": hyperparameters or {},
+        }
 
     @classmethod
     def constant(cls, path: str, domain: str, candidates: tuple[int, ...], n: int, p: int) -> SelfTrigger:
@@ -113,7 +120,13 @@ def from_json(data: Any, path: str, domain: str | None) -> SelfTrigger:
         theta, mean, scale = (np.asarray(data[k], dtype=float) for k in ("theta", "mean", "scale"))
     except (KeyError, TypeError, ValueError) as exc:
         raise EtmpcError(f"self-trigger policy {path} is incomplete or malformed ({exc})") from None
-    if (not candidates or min(candidates) < 1 or len(set(candidates)) != len(candidates) or theta.shape != (len(candidates), mean.size + 1)
-            or scale.shape != mean.shape or not (np.all(np.isfinite(theta)) and np.all(scale > 0))):
+    if (
+        not candidates
+        or min(candidates) < 1
+        or len(set(candidates)) != len(candidates)
+        or theta.shape != (len(candidates), mean.size + 1)
+        or scale.shape != mean.shape
+        or not (np.all(np.isfinite(theta)) and np.all(scale > 0))
+    ):
         raise EtmpcError(f"self-trigger policy {path} has inconsistent or non-finite parameters")
     return SelfTrigger(str(path), data["domain"], candidates, theta, mean, scale)

@@ -82,6 +82,7 @@ def _no_argument(policy: type) -> Callable[[str, str, Context], Policy]:
         if arg:
             raise EtmpcError(f"bad policy {spec!r}: {spec.partition(':')[0]!r} takes no argument")
         return policy()
+
     return build
 
 
@@ -104,6 +105,7 @@ def _file(load: Callable[[str, Context], Policy], what: str) -> Callable[[str, s
         if not arg:
             raise EtmpcError(f"bad policy {spec!r}: give the {what} file, {spec.partition(':')[0]}:PATH")
         return load(arg, context)
+
     return build
 
 
@@ -120,20 +122,49 @@ BUILT_IN: tuple[Kind, ...] = (
     Kind("always", "always", "recompute at every step (standard MPC)", _no_argument(Always), family="periodic"),
     Kind("never", "never", "keep each plan to its end", _no_argument(Never), family="periodic"),
     Kind("every", "every:T", "recompute when the plan is T steps old", _every, family="periodic"),
-    Kind("threshold", "threshold:X", "recompute when the weighted prediction error exceeds X", _threshold,
-         family="event"),
-    Kind("rl", "rl:PATH", "a learned policy (etmpc train)",
-         _file(lambda path, c: load_policy(path, c.task, nx=len(c.error_weights)), "policy"), family="learned", path=True),
-    Kind("self", "self:PATH", "a self-triggering policy (etmpc train --algorithm self)",
-         _file(lambda path, c: load_self(path, c.task), "policy"), family="self", path=True),
-    Kind("py", "py:MODULE:NAME", "your own trigger (a class or factory)", lambda arg, spec, c: load_user(spec),
-         family="users"),
-    Kind("sb3", "sb3:PATH", "a network trained on the trigger environment",
-         _file(lambda path, c: load_sb3(path, c.task), "model"), family="learned", path=True),
-    Kind("rollout", "rollout:BASE[:K[:H]]", "simulate both answers over K sampled futures, H steps ahead", _rollout,
-         family="rollout", simulates=True),
-    Kind("oracle", "oracle:BASE", "the same with the episode's own future: an upper bound, not a policy", _rollout,
-         upper_bound=True, family="oracle", simulates=True),
+    Kind("threshold", "threshold:X", "recompute when the weighted prediction error exceeds X", _threshold, family="event"),
+    Kind(
+        "rl",
+        "rl:PATH",
+        "a learned policy (etmpc train)",
+        _file(lambda path, c: load_policy(path, c.task, nx=len(c.error_weights)), "policy"),
+        family="learned",
+        path=True,
+    ),
+    Kind(
+        "self",
+        "self:PATH",
+        "a self-triggering policy (etmpc train --algorithm self)",
+        _file(lambda path, c: load_self(path, c.task), "policy"),
+        family="self",
+        path=True,
+    ),
+    Kind("py", "py:MODULE:NAME", "your own trigger (a class or factory)", lambda arg, spec, c: load_user(spec), family="users"),
+    Kind(
+        "sb3",
+        "sb3:PATH",
+        "a network trained on the trigger environment",
+        _file(lambda path, c: load_sb3(path, c.task), "model"),
+        family="learned",
+        path=True,
+    ),
+    Kind(
+        "rollout",
+        "rollout:BASE[:K[:H]]",
+        "simulate both answers over K sampled futures, H steps ahead",
+        _rollout,
+        family="rollout",
+        simulates=True,
+    ),
+    Kind(
+        "oracle",
+        "oracle:BASE",
+        "the same with the episode's own future: an upper bound, not a policy",
+        _rollout,
+        upper_bound=True,
+        family="oracle",
+        simulates=True,
+    ),
 )
 
 
@@ -205,9 +236,12 @@ def parse_policy(spec: str, system, *legacy) -> Policy:
     if isinstance(system, (str, SystemKey)):
         system = make_system(system)
     if isinstance(system, np.ndarray) or legacy:
-        warnings.warn("parse_policy(spec, error_weights, task, steps) is deprecated: pass the system, "
-                      "parse_policy(spec, system)", DeprecationWarning, stacklevel=2)
-        return _parse(spec, Context(np.asarray(system), *(legacy + (None, 100)[len(legacy):]), None))
+        warnings.warn(
+            "parse_policy(spec, error_weights, task, steps) is deprecated: pass the system, parse_policy(spec, system)",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        return _parse(spec, Context(np.asarray(system), *(legacy + (None, 100)[len(legacy) :]), None))
     return _parse(spec, Context(system.error_weights, system.name, system.episode_steps, None))
 
 
@@ -226,5 +260,6 @@ def _parse(spec: str, context: Context) -> Policy:
             if interrupts.genuine(exc):
                 raise
             origin = next((point.value for point in entry_points(group=ENTRY_POINTS) if point.name == kind.name), "?")
-            raise EtmpcError(f"bad policy {spec!r}: the {kind.name!r} plugin ({origin}) failed: "
-                             f"{interrupts.described(exc)}") from None
+            raise EtmpcError(
+                f"bad policy {spec!r}: the {kind.name!r} plugin ({origin}) failed: {interrupts.described(exc)}"
+            ) from None

@@ -98,8 +98,9 @@ class Checked:
                 raise
             raise failed(f"policy {self.name}: decide", exc) from None
         if not isinstance(answer, (bool, np.bool_)):
-            raise EtmpcError(f"policy {self.name}: decide must return a bool (True: recompute), "
-                             f"it returned {type(answer).__name__} {answer!r}")
+            raise EtmpcError(
+                f"policy {self.name}: decide must return a bool (True: recompute), it returned {type(answer).__name__} {answer!r}"
+            )
         return bool(answer)
 
 
@@ -120,7 +121,7 @@ _MISSING = object()
 def load_user(spec: str) -> Policy:
     """``py:MODULE:NAME``: ``NAME`` from ``MODULE`` (importable from the working directory or
     ``sys.path``), called with no arguments if it is a class or a factory, checked."""
-    target = spec[len("py:"):]
+    target = spec[len("py:") :]
     module_name, _, name = target.rpartition(":")
     if not module_name or not name:
         raise EtmpcError(f"bad policy {spec!r}: use py:MODULE:NAME (a class or factory of a policy)")

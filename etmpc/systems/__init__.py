@@ -8,8 +8,38 @@ One folder per domain (``cart_pendulum/``, ``battery/``, ``reacher/``), register
 This package may import ``etmpc.common`` and ``etmpc.control``.
 """
 
-from etmpc.systems.registry import (SystemKey, canonical, check_name, data_dir, distinct, domain, domains, folder_name,
-                                    make_system, names, parse, system_class, system_key, stored_seed, task_version)
+from etmpc.systems.registry import (
+    SystemKey,
+    canonical,
+    check_name,
+    data_dir,
+    distinct,
+    domain,
+    domains,
+    folder_name,
+    make_system,
+    names,
+    parse,
+    system_class,
+    system_key,
+    stored_seed,
+    task_version,
+)
 
-__all__ = ["SystemKey", "canonical", "check_name", "data_dir", "distinct", "domain", "domains", "folder_name",
-           "make_system", "names", "parse", "system_class", "system_key", "stored_seed", "task_version"]
+__all__ = [
+    "SystemKey",
+    "canonical",
+    "check_name",
+    "data_dir",
+    "distinct",
+    "domain",
+    "domains",
+    "folder_name",
+    "make_system",
+    "names",
+    "parse",
+    "system_class",
+    "system_key",
+    "stored_seed",
+    "task_version",
+]

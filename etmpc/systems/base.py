@@ -52,8 +52,7 @@ class Benchmark:
 
     def baselines(self) -> list[str]:
         """Reproduce's fixed policies: always, never, every:T and threshold:X."""
-        return (["always", "never"] + [f"every:{t}" for t in self.periods]
-                + [f"threshold:{x:g}" for x in self.report_thresholds])
+        return ["always", "never"] + [f"every:{t}" for t in self.periods] + [f"threshold:{x:g}" for x in self.report_thresholds]
 
 
 class System(Protocol):
@@ -74,11 +73,38 @@ class System(Protocol):
 
 
 #: The members every task writes (:class:`System`).
-REQUIRED = ("Config", "domain", "task", "episode_steps", "control_interval_s", "state_names", "input_names", "feedback",
-            "Episode", "make_env", "plan")
+REQUIRED = (
+    "Config",
+    "domain",
+    "task",
+    "episode_steps",
+    "control_interval_s",
+    "state_names",
+    "input_names",
+    "feedback",
+    "Episode",
+    "make_env",
+    "plan",
+)
 #: What :class:`SystemBase` derives from them, each a default a task may override.
-DERIVED = ("name", "horizon", "recompute_price", "objective_sense", "u_min", "u_max", "error_weights", "state", "measure",
-           "action", "draw_episode", "episode_from_arrays", "episode_parameters", "signals", "truncation_value", "show")
+DERIVED = (
+    "name",
+    "horizon",
+    "recompute_price",
+    "objective_sense",
+    "u_min",
+    "u_max",
+    "error_weights",
+    "state",
+    "measure",
+    "action",
+    "draw_episode",
+    "episode_from_arrays",
+    "episode_parameters",
+    "signals",
+    "truncation_value",
+    "show",
+)
 #: Optional capabilities, by the feature that needs them: ``None`` on a task that does not offer it.
 CAPABILITIES: dict[str, tuple[str, ...]] = {
     "experiments": ("benchmark",),  # etmpc reproduce, sweep and the leaderboard's rows: prices, thresholds, lookahead
@@ -116,13 +142,22 @@ def read_benchmark(path: Path) -> Benchmark:
     except (OSError, ValueError) as exc:
         raise EtmpcError(f"{path}: not a task's benchmark file ({exc})") from None
     names = {f.name: f for f in fields(Benchmark)}
-    if not isinstance(data, dict) or not set(data) <= set(names) | {"notes"} or not {"prices", "sweep_thresholds",
-                                                                                     "report_thresholds"} <= set(data):
-        raise EtmpcError(f"{path}: a task's benchmark holds prices, sweep_thresholds, report_thresholds and optionally "
-                         f"{', '.join(n for n in names if n not in ('prices', 'sweep_thresholds', 'report_thresholds'))}, notes")
+    if (
+        not isinstance(data, dict)
+        or not set(data) <= set(names) | {"notes"}
+        or not {"prices", "sweep_thresholds", "report_thresholds"} <= set(data)
+    ):
+        raise EtmpcError(
+            f"{path}: a task's benchmark holds prices, sweep_thresholds, report_thresholds and optionally "
+            f"{', '.join(n for n in names if n not in ('prices', 'sweep_thresholds', 'report_thresholds'))}, notes"
+        )
     values = {k: tuple(v) if isinstance(v, list) else v for k, v in data.items() if k != "notes"}
-    numbers = all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
-                  for k, v in values.items() if isinstance(v, tuple) for x in v)
+    numbers = all(
+        isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+        for k, v in values.items()
+        if isinstance(v, tuple)
+        for x in v
+    )
     if not numbers:
         raise EtmpcError(f"{path}: prices, thresholds and periods must be lists of finite numbers")
     return Benchmark(**values)

@@ -29,8 +29,7 @@ def generator(random: Random) -> np.random.Generator:
         if random is not None and random < 0:
             raise ValueError(f"random seed must be non-negative, got {random}")
         return np.random.default_rng(random)
-    raise TypeError("random must be an int seed, a numpy Generator or RandomState, or None; "
-                    f"got {type(random).__name__}")
+    raise TypeError(f"random must be an int seed, a numpy Generator or RandomState, or None; got {type(random).__name__}")
 
 
 def jump_process(rng: np.random.Generator, current: np.ndarray, steps: int, probability: float, draw) -> np.ndarray:
@@ -58,8 +57,7 @@ def steps_for(time_limit: float, interval_s: float) -> int:
         raise TypeError(f"time_limit must be a number of seconds, got {time_limit!r}") from None
     steps = round(seconds / interval_s) if math.isfinite(seconds) else 0
     if steps < 1 or not math.isclose(steps * interval_s, seconds, rel_tol=1e-9, abs_tol=1e-12):
-        raise ValueError(f"time_limit must be a positive whole number of {interval_s:g} s control intervals, "
-                         f"got {time_limit!r}")
+        raise ValueError(f"time_limit must be a positive whole number of {interval_s:g} s control intervals, got {time_limit!r}")
     return steps
 
 
@@ -83,16 +81,18 @@ def build_environment(physics, task, steps: int, interval_s: float, environment_
     return Environment(physics, task, **environment_kwargs_for(steps * interval_s, interval_s, environment_kwargs))
 
 
-def add_task(suite, name: str, make_environment, steps: int, interval_s: float, summary: str,
-             tags: tuple[str, ...] = ("benchmarking",)):
+def add_task(
+    suite, name: str, make_environment, steps: int, interval_s: float, summary: str, tags: tuple[str, ...] = ("benchmarking",)
+):
     """Add task ``name`` to ``suite`` (a ``containers.TaggedTasks``) as ``dm_control.suite``'s factories
     are: ``name(time_limit=steps * interval_s, random=None, environment_kwargs=None, **settings)`` returns
     ``make_environment(random=..., steps=..., environment_kwargs=..., **settings)``, ``settings`` being
     the task's own (the cart pendulum's ``plant``). ``summary`` is the factory's docstring."""
-    def factory(time_limit: float = steps * interval_s, random: Any = None, environment_kwargs: dict | None = None,
-                **settings):
-        return make_environment(random=random, steps=steps_for(time_limit, interval_s),
-                                environment_kwargs=environment_kwargs, **settings)
+
+    def factory(time_limit: float = steps * interval_s, random: Any = None, environment_kwargs: dict | None = None, **settings):
+        return make_environment(
+            random=random, steps=steps_for(time_limit, interval_s), environment_kwargs=environment_kwargs, **settings
+        )
 
     factory.__name__ = factory.__qualname__ = name
     factory.__doc__ = summary

@@ -55,9 +55,18 @@ class GaussNewtonSystem(SystemBase):
     @cached_property
     def mpc(self) -> GaussNewtonMPC:
         stage, terminal = self.residuals()
-        return GaussNewtonMPC(self.model.discrete, stage, terminal, self.config.horizon, self.u_min, self.u_max,
-                              self.config.solver, name=self.mpc_name, parameters=len(self.tracked),
-                              feedback=self.feedback_weights())
+        return GaussNewtonMPC(
+            self.model.discrete,
+            stage,
+            terminal,
+            self.config.horizon,
+            self.u_min,
+            self.u_max,
+            self.config.solver,
+            name=self.mpc_name,
+            parameters=len(self.tracked),
+            feedback=self.feedback_weights(),
+        )
 
     def observed(self, timestep: dm_env.TimeStep) -> np.ndarray:
         """The tracked values now, as observed: the OCP's parameter vector."""

@@ -15,8 +15,9 @@ from etmpc.common.resources import model_path
 PLANTS = ("mismatched", "matched")
 
 
-def load_plant(file: str | Path, plant: str, matched: Callable[[mjcf.RootElement], None],
-               timestep_s: float | None = None) -> mjcf.RootElement:
+def load_plant(
+    file: str | Path, plant: str, matched: Callable[[mjcf.RootElement], None], timestep_s: float | None = None
+) -> mjcf.RootElement:
     """The MJCF ``file`` (a name in etmpc's ``models/``, or a path: a plugin's own), edited by
     ``matched(root)`` under the ``matched`` setting; ``timestep_s`` replaces the physics step."""
     if plant not in PLANTS:

@@ -51,6 +51,7 @@ def lazy(module: str, systems: dict[str, str], suite: str):
     """A domain package's module ``__getattr__``: ``SYSTEMS`` (task -> ``"module:Class"``) and ``SUITE``
     (``"module:NAME"``) imported when first asked, so that naming the tasks loads neither MuJoCo nor
     dm-control (they pick their OpenGL backend on import)."""
+
     def load(target: str):
         name, _, attribute = target.partition(":")
         return getattr(importlib.import_module(name), attribute)
@@ -61,6 +62,7 @@ def lazy(module: str, systems: dict[str, str], suite: str):
         if name == "SUITE":  # the dm-control task factories, as a dm_control.suite domain has them
             return load(suite)
         raise AttributeError(f"module {module!r} has no attribute {name!r}")
+
     return __getattr__
 
 
@@ -192,8 +194,7 @@ class SystemKey:
     def __post_init__(self):
         object.__setattr__(self, "task", canonical(self.task))
         if self.recompute_price is not None:
-            object.__setattr__(self, "recompute_price", checks.argument("recompute_price", checks.price,
-                                                                        self.recompute_price))
+            object.__setattr__(self, "recompute_price", checks.argument("recompute_price", checks.price, self.recompute_price))
 
     def __str__(self) -> str:
         return self.task if self.recompute_price is None else f"{self.task}@{self.recompute_price!r}"

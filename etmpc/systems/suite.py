@@ -46,8 +46,13 @@ TASKS_BY_DOMAIN: dict[str, tuple[str, ...]] = {d: tasks(d) for d in _domains()}
 BENCHMARKING: tuple[tuple[str, str], ...] = _tagged("benchmarking")
 
 
-def load(domain_name: str, task_name: str, task_kwargs: dict | None = None, environment_kwargs: dict | None = None,
-         visualize_reward: bool = False):
+def load(
+    domain_name: str,
+    task_name: str,
+    task_kwargs: dict | None = None,
+    environment_kwargs: dict | None = None,
+    visualize_reward: bool = False,
+):
     """Build ``domain_name/task_name`` (a ``dm_control.rl.control.Environment``).
 
     ``task_kwargs`` go to the task factory (``random``, ``time_limit``, ...); ``environment_kwargs``

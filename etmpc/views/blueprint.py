@@ -44,9 +44,22 @@ LABELS = {
     "price_eur_kwh": "price [EUR/kWh]",
     "net_production_kw": "net production [kW]",
 }
-_SUFFIX_UNITS = (("_eur_kwh", "EUR/kWh"), ("_rad_s2", "rad/s²"), ("_rad_s", "rad/s"), ("_m_s", "m/s"), ("_kwh", "kWh"),
-                 ("_kw", "kW"), ("_rad", "rad"), ("_eur", "EUR"), ("_nm", "N m"), ("_n", "N"), ("_m", "m"),
-                 ("_s", "s"))
+_SUFFIX_UNITS = (
+    ("_eur_kwh", "EUR/kWh"),
+    ("_rad_s2", "rad/s²"),
+    ("_rad_s", "rad/s"),
+    ("_m_s", "m/s"),
+    ("_kwh", "kWh"),
+    ("_kw", "kW"),
+    ("_rad", "rad"),
+    ("_eur", "EUR"),
+    ("_nm", "N m"),
+    ("_n", "N"),
+    ("_m", "m"),
+    ("_s", "s"),
+)
+
+
 def objective_unit(domain: str, task: str) -> str:
     """The objective's unit of a task (its system's ``benchmark``; the cart pendulum's cost is a sum of
     squared pole angles, rad²)."""
@@ -153,7 +166,9 @@ def _time_series(name: str, layout: EpisodeLayout, parts: list[str], y_range=Non
     if not contents:
         return None
     return rrb.TimeSeriesView(
-        name=name, origin=layout.root, contents=contents,
+        name=name,
+        origin=layout.root,
+        contents=contents,
         # The whole episode (the viewer's default is a window around the time cursor, a minute wide
         # for the battery's 1000 s); zoom one panel in time and the others follow.
         axis_x=rrb.TimeAxis(view_range=TimeRange(start=WHOLE, end=WHOLE)),
@@ -177,17 +192,26 @@ def episode_container(layout: EpisodeLayout):
     view = lambda name, parts, **kw: _time_series(name, layout, parts, **kw)  # noqa: E731
     units = layout.objective_unit
     panels = [view(f"{label(s)} · thin: plans", [f"realised/state/{s}", f"plan/state/{s}"]) for s in layout.states]
-    panels += [view(f"{label(s)} · thin: forecasts", [f"realised/signal/{s}", f"forecast/{s}"],
-                    y_range=layout.y_ranges.get(s)) for s in layout.forecast_signals]
-    panels += [view(f"{label(u)} · thin: plans · grey: bounds", [f"realised/input/{u}", f"plan/input/{u}", f"bound/{u}"])
-               for u in layout.inputs]
+    panels += [
+        view(f"{label(s)} · thin: forecasts", [f"realised/signal/{s}", f"forecast/{s}"], y_range=layout.y_ranges.get(s))
+        for s in layout.forecast_signals
+    ]
+    panels += [
+        view(f"{label(u)} · thin: plans · grey: bounds", [f"realised/input/{u}", f"plan/input/{u}", f"bound/{u}"])
+        for u in layout.inputs
+    ]
     panels += [view(f"LQR correction added to the plan [{unit(u)}]", [f"correction/{u}"]) for u in layout.inputs]
     panels += [view(label(s), [f"realised/signal/{s}"]) for s in layout.signals]
     panels += [
-        view("prediction error ‖W (x − x̂)‖" + (" · grey: threshold" if "threshold" in layout.entities else ""),
-             ["prediction_error", "threshold"]),
-        view("recomputes (● chosen ✕ forced ◆ first): age of the plan replaced [steps]"
-             + (" · ▲ announced at the solve" if "announced" in layout.entities else ""), ["recompute", "announced"]),
+        view(
+            "prediction error ‖W (x − x̂)‖" + (" · grey: threshold" if "threshold" in layout.entities else ""),
+            ["prediction_error", "threshold"],
+        ),
+        view(
+            "recomputes (● chosen ✕ forced ◆ first): age of the plan replaced [steps]"
+            + (" · ▲ announced at the solve" if "announced" in layout.entities else ""),
+            ["recompute", "announced"],
+        ),
         view(f"reward per step [{units}]", ["objective/reward"]),
         view(f"running objective [{units}], computations included", ["objective/running"]),
     ]
@@ -198,11 +222,17 @@ def episode_container(layout: EpisodeLayout):
     shares = [3] * len(columns)
     if "events" in layout.entities:
         log = rrb.TextLogView(
-            name="recomputes", origin=f"{layout.root}/events",
+            name="recomputes",
+            origin=f"{layout.root}/events",
             columns=rrb.TextLogColumns(
                 timeline_columns=[TimelineColumn("step"), TimelineColumn("time")],
-                text_log_columns=[TextLogColumn("loglevel", visible=False), TextLogColumn("body"),
-                                  TextLogColumn("entitypath", visible=False)]))
+                text_log_columns=[
+                    TextLogColumn("loglevel", visible=False),
+                    TextLogColumn("body"),
+                    TextLogColumn("entitypath", visible=False),
+                ],
+            ),
+        )
         if len(columns[-1]) < ROWS:  # the last column has room
             columns[-1].append(log)
         else:

@@ -42,22 +42,45 @@ def draw_pareto(pareto: dict):
     first = [p for p in points if p["price"] == prices[0]]
     fig, ax = plt.subplots(figsize=(8, 5.2), layout="constrained")
     periodic = [p for p in first if p["kind"] == "periodic"]
-    ax.plot([p["computations"] for p in periodic], [p["control_objective"] for p in periodic], "o", color="0.55",
-            markersize=4, label="periodic every:T", gid="periodic-points")
-    for kind, style, label in (("periodic", dict(color="black", marker="o", linestyle="-"), "the periodic front"),
-                               ("event", dict(color="tab:blue", marker="x", linestyle="--"), "event trigger threshold:X")):
+    ax.plot(
+        [p["computations"] for p in periodic],
+        [p["control_objective"] for p in periodic],
+        "o",
+        color="0.55",
+        markersize=4,
+        label="periodic every:T",
+        gid="periodic-points",
+    )
+    for kind, style, label in (
+        ("periodic", dict(color="black", marker="o", linestyle="-"), "the periodic front"),
+        ("event", dict(color="tab:blue", marker="x", linestyle="--"), "event trigger threshold:X"),
+    ):
         rows = sorted((p for p in first if p["kind"] == kind and p.get("on_front", True)), key=lambda p: p["computations"])
         ax.plot([p["computations"] for p in rows], [p["control_objective"] for p in rows], label=label, gid=kind, **style)
     colours = plt.get_cmap("viridis")(np.linspace(0.0, 0.9, len(prices)))
     for colour, price in zip(colours, prices, strict=True):
-        for kind, marker, face, name in (("rollout", "D", colour, "rollout"), ("learned", "s", colour, "learned (DPI)"),
-                                         ("self", "^", colour, "self-trigger"), ("oracle", "o", "none", "oracle bound")):
+        for kind, marker, face, name in (
+            ("rollout", "D", colour, "rollout"),
+            ("learned", "s", colour, "learned (DPI)"),
+            ("self", "^", colour, "self-trigger"),
+            ("oracle", "o", "none", "oracle bound"),
+        ):
             rows = [p for p in points if p["price"] == price and p["kind"] == kind]
             if not rows:
                 continue
             label = f"{name}, price {price:g}"
-            ax.scatter([p["computations"] for p in rows], [p["control_objective"] for p in rows], marker=marker, s=60,
-                       facecolors=face, edgecolors=colour, linewidths=1.5, label=label, gid=f"{kind}@{price!r}", zorder=3)
+            ax.scatter(
+                [p["computations"] for p in rows],
+                [p["control_objective"] for p in rows],
+                marker=marker,
+                s=60,
+                facecolors=face,
+                edgecolors=colour,
+                linewidths=1.5,
+                label=label,
+                gid=f"{kind}@{price!r}",
+                zorder=3,
+            )
     ax.set_xlabel("computations per episode")
     ax.set_ylabel(f"control objective ({higher_or_lower(sense)} is better)")
     ax.set_title(f"{pareto['domain']}: the trade-off, {pareto['episodes']} test-set episodes (oracle: an upper bound)")
@@ -69,8 +92,9 @@ def draw_pareto(pareto: dict):
 LEARNER_STYLES = {"dpi": ("DPI", "o", "C0"), "gpomdp": ("GPOMDP", "s", "C1"), "ppo": ("PPO (SB3)", "^", "C2")}
 
 
-def write_efficiency_png(path: Path, task: str, reference: str, curves: dict[str, list[dict]],
-                         chosen: dict[str, dict] | None = None) -> None:
+def write_efficiency_png(
+    path: Path, task: str, reference: str, curves: dict[str, list[dict]], chosen: dict[str, dict] | None = None
+) -> None:
     """Each learner's test-set gain over ``reference`` (%) against simulated environment steps (log
     axis): ``curves`` maps ``dpi``/``gpomdp``/``ppo`` to points ``{"simulated_steps", "gain_percent"}``
     (see :mod:`etmpc.experiments.efficiency`); ``chosen`` marks the policy each learner ships with its
@@ -87,8 +111,16 @@ def write_efficiency_png(path: Path, task: str, reference: str, curves: dict[str
         ax.plot(x, [p["gain_percent"] for p in points], marker=marker, color=colour, label=label)
         pick = (chosen or {}).get(name)
         if pick is not None:
-            ax.errorbar([pick["simulated_steps"]], [pick["gain_percent"]], yerr=[pick["gain_percent_ci95"]], fmt="*",
-                        ms=13, color=colour, capsize=4, mec="k")
+            ax.errorbar(
+                [pick["simulated_steps"]],
+                [pick["gain_percent"]],
+                yerr=[pick["gain_percent_ci95"]],
+                fmt="*",
+                ms=13,
+                color=colour,
+                capsize=4,
+                mec="k",
+            )
     ax.set_xscale("log")
     ax.set_xlabel("simulated environment steps per learner run (loop and rollouts)")
     ax.set_ylabel("test-set gain over the best fixed schedule (%)")

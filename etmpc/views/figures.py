@@ -37,10 +37,7 @@ from etmpc.common.sense import cost_or_profit, higher_or_lower  # noqa: E402
 from etmpc.views.blueprint import objective_unit  # noqa: E402
 
 # (forecast name in Plan.forecasts, episode attribute of the true values, axis label)
-_SIGNALS = (
-    ("production_kw", "production_kw", "net production (kW)"),
-    ("price_eur_kwh", "price_eur_kwh", "price (EUR/kWh)"),
-)
+_SIGNALS = (("production_kw", "production_kw", "net production (kW)"), ("price_eur_kwh", "price_eur_kwh", "price (EUR/kWh)"))
 
 
 def forecast_figure(episode, runs: Sequence[tuple[str, Trajectory]], dt_s: float, mean_price: float | None = None):
@@ -56,8 +53,14 @@ def forecast_figure(episode, runs: Sequence[tuple[str, Trajectory]], dt_s: float
                 forecast = np.asarray(plan.forecasts[key])
                 lead = np.arange(forecast.size)
                 color = plt.cm.viridis(i / max(1, len(traj.plans) - 1))
-                ax.plot((k + lead) * dt_s, forecast, ls="--", lw=0.9, color=color,
-                        label="forecast at a computation" if i == 0 else None)
+                ax.plot(
+                    (k + lead) * dt_s,
+                    forecast,
+                    ls="--",
+                    lw=0.9,
+                    color=color,
+                    label="forecast at a computation" if i == 0 else None,
+                )
                 ax.plot(k * dt_s, forecast[0], marker="x", ms=6, color=color)
             if key == "price_eur_kwh" and mean_price is not None:
                 ax.axhline(mean_price, color="grey", lw=0.8, ls=":", label="mean price (value of storage)")
@@ -128,13 +131,40 @@ def draw_trajectory(system, traj: Trajectory, title: str | None = None, signals:
         ax.plot(t, traj.states[: steps + 1, i], color="black", lw=1.6, label="realised", gid="realised", zorder=3)
         for p, (k, plan) in enumerate(traj.plans):
             j = np.arange(min(plan.horizon, steps - k) + 1)
-            ax.plot((k + j) * dt, plan.states[j, i], ls="--", lw=0.8, color=colors[p], alpha=0.85, gid="plan",
-                    label="plan's prediction (one per computation)" if p == 0 else None)
+            ax.plot(
+                (k + j) * dt,
+                plan.states[j, i],
+                ls="--",
+                lw=0.8,
+                color=colors[p],
+                alpha=0.85,
+                gid="plan",
+                label="plan's prediction (one per computation)" if p == 0 else None,
+            )
         markers = [
-            *ax.plot(decided * dt, traj.states[decided, i], ls="none", marker="o", ms=4.5, mfc="none", mec="tab:blue",
-                     label="recompute (policy)" if decided.size else None, gid="recompute", zorder=4),
-            *ax.plot(forced * dt, traj.states[forced, i], ls="none", marker="s", ms=4.5, color="tab:red",
-                     label="recompute (forced: no plan left)" if forced.size else None, gid="forced", zorder=4),
+            *ax.plot(
+                decided * dt,
+                traj.states[decided, i],
+                ls="none",
+                marker="o",
+                ms=4.5,
+                mfc="none",
+                mec="tab:blue",
+                label="recompute (policy)" if decided.size else None,
+                gid="recompute",
+                zorder=4,
+            ),
+            *ax.plot(
+                forced * dt,
+                traj.states[forced, i],
+                ls="none",
+                marker="s",
+                ms=4.5,
+                color="tab:red",
+                label="recompute (forced: no plan left)" if forced.size else None,
+                gid="forced",
+                zorder=4,
+            ),
         ]
         for line in markers:  # whole at the axes' edges, and no part of the layout (an empty one would upset it)
             line.set_clip_on(False)
@@ -143,18 +173,32 @@ def draw_trajectory(system, traj: Trajectory, title: str | None = None, signals:
 
     for i, name in enumerate(system.input_names):
         ax = axes[nx + i]
-        ax.plot(*_held(traj.applied[:steps, i], dt), drawstyle="steps-post", color="black", lw=1.4, label="applied",
-                gid="applied")
-        ax.plot(*_held(traj.planned[:steps, i], dt), drawstyle="steps-post", ls="--", color="tab:orange", lw=1.1,
-                label="planned (before LQR correction)", gid="planned")
+        ax.plot(
+            *_held(traj.applied[:steps, i], dt), drawstyle="steps-post", color="black", lw=1.4, label="applied", gid="applied"
+        )
+        ax.plot(
+            *_held(traj.planned[:steps, i], dt),
+            drawstyle="steps-post",
+            ls="--",
+            color="tab:orange",
+            lw=1.1,
+            label="planned (before LQR correction)",
+            gid="planned",
+        )
         for bound, label in ((system.u_min[i], "bounds"), (system.u_max[i], None)):
             ax.axhline(bound, color="grey", ls=":", lw=1.0, label=label, gid="bound")
         ax.set_ylabel(axis_label(name))
 
     for i, (name, values) in enumerate(signals.items()):
         ax = axes[nx + nu + i]
-        ax.plot(*_held(np.asarray(values)[:steps], dt), drawstyle="steps-post", color="tab:green", lw=1.2,
-                label="true (episode)", gid="signal")
+        ax.plot(
+            *_held(np.asarray(values)[:steps], dt),
+            drawstyle="steps-post",
+            color="tab:green",
+            lw=1.2,
+            label="true (episode)",
+            gid="signal",
+        )
         ax.set_ylabel(axis_label(name))
 
     for ax in axes:
@@ -174,8 +218,9 @@ def draw_trajectory(system, traj: Trajectory, title: str | None = None, signals:
     return fig
 
 
-def write_trajectory_png(path, system, traj: Trajectory, title: str | None = None,
-                         signals: Mapping[str, np.ndarray] | None = None) -> Path:
+def write_trajectory_png(
+    path, system, traj: Trajectory, title: str | None = None, signals: Mapping[str, np.ndarray] | None = None
+) -> Path:
     """:func:`draw_trajectory` written atomically to ``path`` (PNG)."""
     return save_png_atomically(draw_trajectory(system, traj, title, signals), path)
 
@@ -204,12 +249,20 @@ def _check_evaluations(evaluations: Sequence[dict], sources: Sequence[str] | Non
         raise EtmpcError("no evaluation to draw")
     names = list(sources) if sources is not None else [f"evaluation {i + 1}" for i in range(len(evaluations))]
     for name, doc in zip(names, evaluations):
-        if not (isinstance(doc, dict) and isinstance(doc.get("policies"), dict) and doc["policies"]
-                and "domain" in doc and "task" in doc):
+        if not (
+            isinstance(doc, dict)
+            and isinstance(doc.get("policies"), dict)
+            and doc["policies"]
+            and "domain" in doc
+            and "task" in doc
+        ):
             raise EtmpcError(f"{name} is not an `etmpc evaluate --json` document (no domain, task or policies)")
         for spec, summary in doc["policies"].items():
-            missing = [key for key in ("objective_mean", "objective_std_repeats", "objective_sense", "recomputes_mean", "episodes")
-                       if not isinstance(summary, dict) or key not in summary]
+            missing = [
+                key
+                for key in ("objective_mean", "objective_std_repeats", "objective_sense", "recomputes_mean", "episodes")
+                if not isinstance(summary, dict) or key not in summary
+            ]
             if missing:
                 raise EtmpcError(f"{name}: policy {spec!r} has no {', '.join(missing)}")
     first, name0 = evaluations[0], names[0]
@@ -263,9 +316,17 @@ def policy_bars(evaluations: Sequence[dict], group_learned: bool = True, sources
             learned = kind is not None and kind.name == "rl"
             label = f"rl:{_short_path(spec.partition(':')[2])}" if learned else spec
             bound = is_upper_bound(spec)
-            bars.append(Bar(label + ("\n(upper bound)" if bound else ""), float(summary["objective_mean"]),
-                            float(summary["objective_std_repeats"]), float(summary["recomputes_mean"]), (spec,),
-                            learned, bound))
+            bars.append(
+                Bar(
+                    label + ("\n(upper bound)" if bound else ""),
+                    float(summary["objective_mean"]),
+                    float(summary["objective_std_repeats"]),
+                    float(summary["recomputes_mean"]),
+                    (spec,),
+                    learned,
+                    bound,
+                )
+            )
             drawn.add(spec)
     return bars
 
@@ -305,8 +366,9 @@ def draw_policy_bars(evaluations: Sequence[dict], group_learned: bool = True, so
         rect.set_gid(bar.label)
     spread = errors > 0  # error bars only where there is a spread (a deterministic policy's is 0)
     if spread.any():
-        ax.errorbar(x[spread], means[spread], yerr=errors[spread], fmt="none", ecolor="black", elinewidth=1.2,
-                    capsize=5, gid="spread")
+        ax.errorbar(
+            x[spread], means[spread], yerr=errors[spread], fmt="none", ecolor="black", elinewidth=1.2, capsize=5, gid="spread"
+        )
 
     finite = np.isfinite(means)
     low, high = (np.min((means - errors)[finite]), np.max((means + errors)[finite])) if finite.any() else (0.0, 1.0)
@@ -323,17 +385,23 @@ def draw_policy_bars(evaluations: Sequence[dict], group_learned: bool = True, so
             continue
         up = bar.mean >= 0 or zoomed
         y = bar.mean + bar.error if up else bar.mean - bar.error
-        ax.annotate(f"{bar.mean:.5g}\n{bar.recomputes:.1f} recomp./ep", (xi, y), xytext=(0, 4 if up else -4),
-                    textcoords="offset points", ha="center", va="bottom" if up else "top", fontsize=8,
-                    gid="recomputes")
+        ax.annotate(
+            f"{bar.mean:.5g}\n{bar.recomputes:.1f} recomp./ep",
+            (xi, y),
+            xytext=(0, 4 if up else -4),
+            textcoords="offset points",
+            ha="center",
+            va="bottom" if up else "top",
+            fontsize=8,
+            gid="recomputes",
+        )
 
     ax.set_xticks(x)
     long = any(len(b.label) > 12 for b in bars)
     ax.set_xticklabels([b.label for b in bars], rotation=20 if long else 0, ha="right" if long else "center", fontsize=9)
     unit = objective_unit(first["domain"], first["task"])
     what = cost_or_profit(sense) + ("" if unit in ("-", "rad²") else f" ({unit})")
-    ax.set_ylabel(f"mean {what} per episode\n({higher_or_lower(sense)} is better"
-                  f"{'; axis not from 0' if zoomed else ''})")
+    ax.set_ylabel(f"mean {what} per episode\n({higher_or_lower(sense)} is better{'; axis not from 0' if zoomed else ''})")
     ax.set_title(f"{first['domain']}/{first['task']}: objective per policy ({episodes} test-set episodes)", fontsize=11)
     ax.grid(axis="y", alpha=0.3)
     ax.set_axisbelow(True)
@@ -346,15 +414,25 @@ def draw_policy_bars(evaluations: Sequence[dict], group_learned: bool = True, so
         handles.append(Patch(color="tab:orange", alpha=0.85, label="learned (stochastic) policy"))
     if spread.any():
         grouped = any(len(b.policies) > 1 for b in bars)
-        handles.append(Line2D([], [], color="black", marker="_", ms=10, lw=1.2,
-                              label="± std over repeats' means" + ("\n(over seeds for a group)" if grouped else "")))
+        handles.append(
+            Line2D(
+                [],
+                [],
+                color="black",
+                marker="_",
+                ms=10,
+                lw=1.2,
+                label="± std over repeats' means" + ("\n(over seeds for a group)" if grouped else ""),
+            )
+        )
     ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
     fig.tight_layout()
     return fig
 
 
-def write_policy_bars_png(path, evaluations: Sequence[dict], group_learned: bool = True,
-                          sources: Sequence[str] | None = None) -> Path:
+def write_policy_bars_png(
+    path, evaluations: Sequence[dict], group_learned: bool = True, sources: Sequence[str] | None = None
+) -> Path:
     """:func:`draw_policy_bars` written atomically to ``path`` (PNG)."""
     return save_png_atomically(draw_policy_bars(evaluations, group_learned, sources), path)
 
@@ -377,8 +455,7 @@ def draw_performance_profile(curves: Mapping[str, np.ndarray], thresholds: np.nd
     return fig
 
 
-def write_performance_profile_png(path, curves: Mapping[str, np.ndarray], thresholds: np.ndarray,
-                                  tasks: Sequence[str]) -> Path:
+def write_performance_profile_png(path, curves: Mapping[str, np.ndarray], thresholds: np.ndarray, tasks: Sequence[str]) -> Path:
     """:func:`draw_performance_profile` written atomically to ``path`` (PNG)."""
     return save_png_atomically(draw_performance_profile(curves, thresholds, tasks), path)
 

@@ -43,8 +43,14 @@ class EpisodeRecord:
         n = traj.steps
         bounds = (np.asarray(system.u_min, float), np.asarray(system.u_max, float))
         return cls(
-            identity=dict(identity, domain=system.domain, task=system.task, objective_sense=system.objective_sense,
-                          recompute_price=float(system.recompute_price), control_interval_s=float(system.control_interval_s)),
+            identity=dict(
+                identity,
+                domain=system.domain,
+                task=system.task,
+                objective_sense=system.objective_sense,
+                recompute_price=float(system.recompute_price),
+                control_interval_s=float(system.control_interval_s),
+            ),
             state_names=tuple(system.state_names),
             input_names=tuple(system.input_names),
             error_weights=np.asarray(system.error_weights, float),

@@ -186,24 +186,39 @@ class Recorder:
         # ``realised/…`` comes over ``plan/…`` and ``forecast/…``.
         realised = dict(colors=[look.REALISED], widths=[look.REALISED_WIDTH])
         for j, s in enumerate(record.state_names):
-            series(f"realised/state/{s}", self._steps(n + 1, dt), record.states[:, j], [f"what happened [{look.unit(s)}]"],
-                   **realised)
+            series(
+                f"realised/state/{s}",
+                self._steps(n + 1, dt),
+                record.states[:, j],
+                [f"what happened [{look.unit(s)}]"],
+                **realised,
+            )
         for j, u in enumerate(record.input_names):
             what = f"[{look.unit(u)}]"
             if record.input_bounds:  # the bounds as two more series of the input, grey
                 lo, hi = (float(b[j]) for b in record.input_bounds)
                 values = np.column_stack([record.applied[:, j], np.full(n, lo), np.full(n, hi)])
-                series(f"realised/input/{u}", self._steps(n, dt), values, [f"applied {what}", f"lower bound {what}",
-                       f"upper bound {what}"], colors=[look.REALISED, look.BOUND, look.BOUND],
-                       widths=[look.REALISED_WIDTH, 1.0, 1.0])
+                series(
+                    f"realised/input/{u}",
+                    self._steps(n, dt),
+                    values,
+                    [f"applied {what}", f"lower bound {what}", f"upper bound {what}"],
+                    colors=[look.REALISED, look.BOUND, look.BOUND],
+                    widths=[look.REALISED_WIDTH, 1.0, 1.0],
+                )
             else:
                 series(f"realised/input/{u}", self._steps(n, dt), record.applied[:, j], [f"applied {what}"], **realised)
             series(f"correction/{u}", self._steps(n, dt), record.correction[:, j], [f"LQR correction {what}"], **realised)
         forecasts = {look.signal_of_forecast(f, record.signals): f for f in (record.plans[0][3] if record.plans else {})}
         forecasts.pop(None, None)
         for s, values in record.signals.items():
-            series(f"realised/signal/{s}", self._steps(n, dt), values[:n],
-                   [f"true [{look.unit(s)}]" if s in forecasts else look.label(s)], **realised)
+            series(
+                f"realised/signal/{s}",
+                self._steps(n, dt),
+                values[:n],
+                [f"true [{look.unit(s)}]" if s in forecasts else look.label(s)],
+                **realised,
+            )
 
         # The plans, as time series from the step each was made.
         if record.plans:
@@ -211,16 +226,28 @@ class Recorder:
             slots, n_slots = _slots(made, max(p[1].shape[0] for p in record.plans))
             colours = look.plan_colours(made, n)
             # Every slot drawn: the viewer shows only the first 20 series of an entity unless told.
-            plan_style = lambda what: self._style("SeriesLines", names=[what] * n_slots,  # noqa: E731
-                                                  widths=[look.PLAN_WIDTH] * n_slots, visible_series=[True] * n_slots)
-            fans = [(f"plan/state/{s}", np.stack([p[1][:, j] for p in record.plans]), n, f"each plan [{look.unit(s)}]")
-                    for j, s in enumerate(record.state_names)]
-            fans += [(f"plan/input/{u}", np.stack([p[2][:, j] for p in record.plans]), n - 1, f"each plan [{look.unit(u)}]")
-                     for j, u in enumerate(record.input_names)]
-            fans += [(f"forecast/{s}", np.stack([p[3][f] for p in record.plans]), n - 1, f"each forecast [{look.unit(s)}]")
-                     for s, f in forecasts.items()]
+            plan_style = lambda what: self._style(
+                "SeriesLines",
+                names=[what] * n_slots,  # noqa: E731
+                widths=[look.PLAN_WIDTH] * n_slots,
+                visible_series=[True] * n_slots,
+            )
+            fans = [
+                (f"plan/state/{s}", np.stack([p[1][:, j] for p in record.plans]), n, f"each plan [{look.unit(s)}]")
+                for j, s in enumerate(record.state_names)
+            ]
+            fans += [
+                (f"plan/input/{u}", np.stack([p[2][:, j] for p in record.plans]), n - 1, f"each plan [{look.unit(u)}]")
+                for j, u in enumerate(record.input_names)
+            ]
+            fans += [
+                (f"forecast/{s}", np.stack([p[3][f] for p in record.plans]), n - 1, f"each forecast [{look.unit(s)}]")
+                for s, f in forecasts.items()
+            ]
             for path, values, last, what in fans:
-                stream.send_columns(f"{root}/{path}", self._steps(last + 1, dt), _fan(made, slots, n_slots, values, last, colours))
+                stream.send_columns(
+                    f"{root}/{path}", self._steps(last + 1, dt), _fan(made, slots, n_slots, values, last, colours)
+                )
                 stream.log(f"{root}/{path}", plan_style(what), static=True)
                 written.append(path)
 
@@ -237,39 +264,73 @@ class Recorder:
             # A series per kind of recompute, at the recomputes only (NaN: another kind), at the age
             # of the plan each one replaced.
             kinds = np.stack([(events > 0) & ~forced, forced, events == 0], axis=1)
-            series("recompute", _timeline(events, dt), np.where(kinds, age[:, None], np.nan),
-                   ["chosen by the policy", "forced: the plan ran out", "first plan"], kind="SeriesPoints",
-                   colors=[look.CHOSEN, look.FORCED, look.FIRST], markers=["circle", "cross", "diamond"],
-                   marker_sizes=[3.0, 4.5, 4.0])
+            series(
+                "recompute",
+                _timeline(events, dt),
+                np.where(kinds, age[:, None], np.nan),
+                ["chosen by the policy", "forced: the plan ran out", "first plan"],
+                kind="SeriesPoints",
+                colors=[look.CHOSEN, look.FORCED, look.FIRST],
+                markers=["circle", "cross", "diamond"],
+                marker_sizes=[3.0, 4.5, 4.0],
+            )
             error = record.prediction_error[events]
-            text = ["first plan" if i == 0 else
-                    f"{'FORCED, the plan ran out' if f else 'chosen by the policy'}: plan age {a}, ‖W (x − x̂)‖ {e:.4g}"
-                    for i, f, a, e in zip(events, forced, age, error)]
+            text = [
+                "first plan"
+                if i == 0
+                else f"{'FORCED, the plan ran out' if f else 'chosen by the policy'}: plan age {a}, ‖W (x − x̂)‖ {e:.4g}"
+                for i, f, a, e in zip(events, forced, age, error)
+            ]
             if record.announced:  # a self-trigger: what it announced as it made each plan
                 announced = dict(record.announced)
-                text = [t + (f"; announced: keep {announced[i]} steps, next solve at step {i + announced[i]}"
-                             if i in announced else "") for t, i in zip(text, events)]
-            stream.send_columns(f"{root}/events", _timeline(events, dt),
-                                rr.TextLog.columns(text=text, level=["WARN" if f else "INFO" for f in forced]))
+                text = [
+                    t
+                    + (f"; announced: keep {announced[i]} steps, next solve at step {i + announced[i]}" if i in announced else "")
+                    for t, i in zip(text, events)
+                ]
+            stream.send_columns(
+                f"{root}/events",
+                _timeline(events, dt),
+                rr.TextLog.columns(text=text, level=["WARN" if f else "INFO" for f in forced]),
+            )
             written.append("events")
         if record.announced:
             made, keep = (np.array(v, dtype=np.int64) for v in zip(*record.announced))
-            series("announced", _timeline(made, dt), keep.astype(float), ["announced at the solve: steps the plan will be kept"],
-                   kind="SeriesPoints", colors=[look.ANNOUNCED], markers=["up"], marker_sizes=[4.0])
+            series(
+                "announced",
+                _timeline(made, dt),
+                keep.astype(float),
+                ["announced at the solve: steps the plan will be kept"],
+                kind="SeriesPoints",
+                colors=[look.ANNOUNCED],
+                markers=["up"],
+                marker_sizes=[4.0],
+            )
         known = np.flatnonzero(np.isfinite(record.prediction_error))
         series("prediction_error", _timeline(known, dt), record.prediction_error[known], ["‖W (x − x̂)‖"], **realised)
         threshold = re.fullmatch(r"threshold:(.+)", identity["policy"])
         if threshold:
             x = float(threshold.group(1))
-            series("threshold", _timeline(np.array([0, n - 1]), dt), np.array([x, x]), [f"threshold {x:g}"],
-                   colors=[look.BOUND], widths=[1.0])
+            series(
+                "threshold",
+                _timeline(np.array([0, n - 1]), dt),
+                np.array([x, x]),
+                [f"threshold {x:g}"],
+                colors=[look.BOUND],
+                widths=[1.0],
+            )
 
         # The objective.
         sign = sense_sign(identity["objective_sense"])
         running = sign * np.cumsum(record.rewards - computation_cost(record.recompute, identity["recompute_price"]))
         series("objective/reward", self._steps(n, dt), record.rewards, ["reward"], **realised)
-        series("objective/running", self._steps(n, dt), running,
-               [f"running {'profit (higher' if sign > 0 else 'cost (lower'} is better)"], **realised)
+        series(
+            "objective/running",
+            self._steps(n, dt),
+            running,
+            [f"running {'profit (higher' if sign > 0 else 'cost (lower'} is better)"],
+            **realised,
+        )
 
         if frames is not None:
             for i, frame in enumerate(frames):
@@ -278,19 +339,34 @@ class Recorder:
                 stream.log(f"{root}/camera", rr.Image(frame).compress(jpeg_quality=85))
             written.append("camera")
 
-        stream.log(f"{root}/about", rr.TextDocument(_about(name, record, running[-1] if n else 0.0), media_type="text/markdown"),
-                   static=True)
+        stream.log(
+            f"{root}/about",
+            rr.TextDocument(_about(name, record, running[-1] if n else 0.0), media_type="text/markdown"),
+            static=True,
+        )
         y_ranges = {}
         for s in forecasts:
             lo, hi = float(np.min(record.signals[s][:n])), float(np.max(record.signals[s][:n]))
             pad = 0.1 * (hi - lo) or 0.1 * abs(hi) or 1.0
             y_ranges[s] = (lo - pad, hi + pad)
-        self.layouts.append(look.EpisodeLayout(
-            root=root, domain=task, policy=name, episode=int(identity["episode"]),
-            repeat=int(identity["repeat"]), steps=n, control_interval_s=dt, states=record.state_names,
-            inputs=record.input_names, signals=tuple(s for s in record.signals if s not in forecasts),
-            forecast_signals=tuple(s for s in record.signals if s in forecasts), entities=frozenset(written), y_ranges=y_ranges,
-            objective_unit=look.objective_unit(identity["domain"], identity["task"])))
+        self.layouts.append(
+            look.EpisodeLayout(
+                root=root,
+                domain=task,
+                policy=name,
+                episode=int(identity["episode"]),
+                repeat=int(identity["repeat"]),
+                steps=n,
+                control_interval_s=dt,
+                states=record.state_names,
+                inputs=record.input_names,
+                signals=tuple(s for s in record.signals if s not in forecasts),
+                forecast_signals=tuple(s for s in record.signals if s in forecasts),
+                entities=frozenset(written),
+                y_ranges=y_ranges,
+                objective_unit=look.objective_unit(identity["domain"], identity["task"]),
+            )
+        )
         self.episodes += 1
         return root
 
@@ -318,13 +394,16 @@ def _about(name: str, record: EpisodeRecord, objective: float) -> str:
     forced = int(record.forced[1:].sum())
     task = look.task_part(identity["domain"], identity["task"])
     unit = look.objective_unit(identity["domain"], identity["task"])
-    return (f"**{name}**{bound} · {task} · **test-set episode {identity['episode']}**"
-            + (f", repeat {identity['repeat']}" if identity["repeat"] else "")
-            + f" · objective **{objective:.5g}** {unit if unit != '-' else ''} ({sense} is better)"
-            f" · {int(record.recompute.sum())} computations, {forced} forced · seed {identity['seed']}"
-            + (f" · policy `{spec}`" if spec != name else "") + "  \n"
-            "Orange: what happened. Thin lines: each plan's prediction from the step it was made, coloured by when: "
-            f"blue (early) → violet → teal → green (late). A step is {identity['control_interval_s']:g} s.")
+    return (
+        f"**{name}**{bound} · {task} · **test-set episode {identity['episode']}**"
+        + (f", repeat {identity['repeat']}" if identity["repeat"] else "")
+        + f" · objective **{objective:.5g}** {unit if unit != '-' else ''} ({sense} is better)"
+        f" · {int(record.recompute.sum())} computations, {forced} forced · seed {identity['seed']}"
+        + (f" · policy `{spec}`" if spec != name else "")
+        + "  \n"
+        "Orange: what happened. Thin lines: each plan's prediction from the step it was made, coloured by when: "
+        f"blue (early) → violet → teal → green (late). A step is {identity['control_interval_s']:g} s."
+    )
 
 
 def _slots(made: np.ndarray, length: int) -> tuple[np.ndarray, int]:
@@ -353,8 +432,10 @@ def _fan(made, slots, n_slots: int, values: np.ndarray, last: int, colours) -> l
     grid[rows[keep], cols] = values[keep]
     paint = np.zeros((last + 1, n_slots), dtype=np.uint32)
     paint[rows[keep], cols] = np.broadcast_to(colours[:, None], rows.shape)[keep]
-    return [*rr.Scalars.columns(scalars=grid),
-            *rr.SeriesLines.columns(colors=paint.ravel()).partition(np.full(last + 1, n_slots))]
+    return [
+        *rr.Scalars.columns(scalars=grid),
+        *rr.SeriesLines.columns(colors=paint.ravel()).partition(np.full(last + 1, n_slots)),
+    ]
 
 
 def _timeline(steps: np.ndarray, dt: float) -> list:
@@ -362,5 +443,7 @@ def _timeline(steps: np.ndarray, dt: float) -> list:
 
     steps = np.asarray(steps, dtype=np.int64)
     # Whole nanoseconds as timedelta64: exact, and Rerun's fast path (floats go element by element).
-    return [rr.TimeColumn("step", sequence=steps),
-            rr.TimeColumn("time", duration=(steps * round(dt * 1e9)).astype("timedelta64[ns]"))]
+    return [
+        rr.TimeColumn("step", sequence=steps),
+        rr.TimeColumn("time", duration=(steps * round(dt * 1e9)).astype("timedelta64[ns]")),
+    ]

@@ -24,8 +24,13 @@ _ROOT = re.compile(r"^(.*/episode_\d+/repeat_\d+)/(.+)$")
 
 # Entity (relative to its episode's root) -> the series it holds, in column order. ``objective``
 # with three columns is how files written before the objective's series were split hold them.
-READ = {"objective/reward": ("reward",), "objective/running": ("running",),
-        "objective": OBJECTIVE_SERIES, "decision": DECISION_SERIES, "prediction_error": ("prediction_error",)}
+READ = {
+    "objective/reward": ("reward",),
+    "objective/running": ("running",),
+    "objective": OBJECTIVE_SERIES,
+    "decision": DECISION_SERIES,
+    "prediction_error": ("prediction_error",),
+}
 
 
 def read_recording(path: str | Path) -> dict[str, dict]:
@@ -43,8 +48,11 @@ def read_recording(path: str | Path) -> dict[str, dict]:
             chunks = list(RrdReader(str(path)).stream())
         except Exception as exc:  # the reader raises its own types for a file that is not a recording
             short = any("no footer" in str(w.message) for w in caught)
-            raise EtmpcError(f"recording {path} is cut short (no footer; {exc})" if short else
-                             f"{path} is not a readable Rerun recording ({exc})") from None
+            raise EtmpcError(
+                f"recording {path} is cut short (no footer; {exc})"
+                if short
+                else f"{path} is not a readable Rerun recording ({exc})"
+            ) from None
     episodes: dict[str, dict] = {}
     pieces: dict[tuple[str, str], list] = {}
     end = None
@@ -61,7 +69,9 @@ def read_recording(path: str | Path) -> dict[str, dict]:
             continue
         batch = chunk.to_record_batch()
         if leaf == "identity" and chunk.is_static:
-            identity = {name: batch.column(name).to_pylist()[0][0] for name in batch.schema.names if not name.startswith("rerun.")}
+            identity = {
+                name: batch.column(name).to_pylist()[0][0] for name in batch.schema.names if not name.startswith("rerun.")
+            }
             episodes.setdefault(root, {})["identity"] = identity
         elif leaf in READ and "Scalars:scalars" in batch.schema.names:
             values = batch.column("Scalars:scalars").flatten().to_numpy().reshape(batch.num_rows, len(READ[leaf]))
@@ -74,8 +84,11 @@ def read_recording(path: str | Path) -> dict[str, dict]:
             episodes.setdefault(root, {})[name] = (steps[order], values[order, j])
     complete = {root: data for root, data in episodes.items() if "identity" in data and "reward" in data}
     if end is None:
-        raise EtmpcError(f"recording {path} is incomplete: it has no end marker (the file was cut short, or its "
-                         "run did not finish)" if complete else f"{path} holds no etmpc episodes")
+        raise EtmpcError(
+            f"recording {path} is incomplete: it has no end marker (the file was cut short, or its run did not finish)"
+            if complete
+            else f"{path} holds no etmpc episodes"
+        )
     if len(complete) != end:
         raise EtmpcError(f"recording {path} is incomplete: {len(complete)} of its {end} episodes can be read")
     return complete
@@ -115,15 +128,24 @@ def replay_summary(path: str | Path) -> list[ReplayedEpisode]:
         objective, control = oriented(ret, identity["objective_sense"]), oriented(control, identity["objective_sense"])
         chosen = np.flatnonzero((recompute > 0) & (forced == 0))
         at_recompute = errors[np.isin(steps_err, chosen)]
-        out.append(ReplayedEpisode(
-            domain=identity["domain"], task=_task_name(identity), policy=identity["policy"], episode=int(identity["episode"]),
-            repeat=int(identity["repeat"]), seed=int(identity["seed"]), objective_sense=identity["objective_sense"],
-            objective=objective, control_objective=control,
-            recomputes=recomputes, steps=len(rewards),
-            prediction_error_mean=_mean(errors),
-            prediction_error_max=float(errors.max()) if len(errors) else float("nan"),
-            prediction_error_at_recompute=_mean(at_recompute),
-        ))
+        out.append(
+            ReplayedEpisode(
+                domain=identity["domain"],
+                task=_task_name(identity),
+                policy=identity["policy"],
+                episode=int(identity["episode"]),
+                repeat=int(identity["repeat"]),
+                seed=int(identity["seed"]),
+                objective_sense=identity["objective_sense"],
+                objective=objective,
+                control_objective=control,
+                recomputes=recomputes,
+                steps=len(rewards),
+                prediction_error_mean=_mean(errors),
+                prediction_error_max=float(errors.max()) if len(errors) else float("nan"),
+                prediction_error_at_recompute=_mean(at_recompute),
+            )
+        )
     out.sort(key=lambda r: (r.task, r.policy, r.episode, r.repeat))
     return out
 
@@ -157,20 +179,28 @@ def format_replay(episodes: list[ReplayedEpisode], per_episode: bool = False) ->
         groups.setdefault((e.task, e.policy), []).append(e)
     labels = [f"  episode {e.episode} repeat {e.repeat}" for e in episodes] if per_episode else []
     width = max([16] + [len(p) + 2 for _, p in groups] + [len(label) + 2 for label in labels])
-    head = (f"{'policy':<{width}}{'episodes':>9}{'objective':>12}{'control':>11}{'recomputes':>12}"
-            f"{'pred.err mean':>15}{'max':>10}{'at recompute':>14}")
+    head = (
+        f"{'policy':<{width}}{'episodes':>9}{'objective':>12}{'control':>11}{'recomputes':>12}"
+        f"{'pred.err mean':>15}{'max':>10}{'at recompute':>14}"
+    )
     current = None
     for (task, policy), group in groups.items():
         if task != current:
-            lines += [f"{task}: objective ({higher_or_lower(_sense(group))}"
-                      " is better); prediction error ‖W (x − x̂)‖ against the plan in force", head, "-" * len(head)]
+            lines += [
+                f"{task}: objective ({higher_or_lower(_sense(group))}"
+                " is better); prediction error ‖W (x − x̂)‖ against the plan in force",
+                head,
+                "-" * len(head),
+            ]
             current = task
         for e in [None] + (group if per_episode else []):  # the policy's line, then its episodes
             chosen = group if e is None else [e]
             label = policy if e is None else f"  episode {e.episode} repeat {e.repeat}"
             mean = lambda attr: _mean([getattr(x, attr) for x in chosen])  # noqa: E731
             top = max((x.prediction_error_max for x in chosen if np.isfinite(x.prediction_error_max)), default=float("nan"))
-            lines.append(f"{label:<{width}}{len(chosen):>9}{mean('objective'):>12.5f}{mean('control_objective'):>11.5f}"
-                         f"{mean('recomputes'):>12.2f}{mean('prediction_error_mean'):>15.4f}{top:>10.4f}"
-                         f"{mean('prediction_error_at_recompute'):>14.4f}")
+            lines.append(
+                f"{label:<{width}}{len(chosen):>9}{mean('objective'):>12.5f}{mean('control_objective'):>11.5f}"
+                f"{mean('recomputes'):>12.2f}{mean('prediction_error_mean'):>15.4f}{top:>10.4f}"
+                f"{mean('prediction_error_at_recompute'):>14.4f}"
+            )
     return "\n".join(lines)

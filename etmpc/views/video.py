@@ -27,6 +27,7 @@ import numpy as np
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import atomic_path
 
+
 def check_scene(system) -> None:
     """A system has a scene when it names a ``camera`` (it can ``show(physics, x)`` a state)."""
     if system.camera is None:
@@ -44,9 +45,11 @@ def check_framebuffer(physics, width: int, height: int) -> None:
     its model file): said in one line, before any work (MuJoCo's own refusal is a paragraph)."""
     limits = physics.model.vis.global_
     if width > limits.offwidth or height > limits.offheight:
-        raise EtmpcError(f"--width {width} --height {height} is larger than this scene's offscreen framebuffer "
-                         f"({limits.offwidth}x{limits.offheight}, set by <global offwidth offheight> in its model file): "
-                         f"render at most {limits.offwidth}x{limits.offheight}")
+        raise EtmpcError(
+            f"--width {width} --height {height} is larger than this scene's offscreen framebuffer "
+            f"({limits.offwidth}x{limits.offheight}, set by <global offwidth offheight> in its model file): "
+            f"render at most {limits.offwidth}x{limits.offheight}"
+        )
 
 
 def check_display() -> None:
@@ -65,8 +68,10 @@ def _render(physics, height: int, width: int, camera: str) -> np.ndarray:
         # AttributeError: PyOpenGL without the platform library MUJOCO_GL asks for (osmesa, egl).
         backend = os.environ.get("MUJOCO_GL", "")
         reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise EtmpcError(f"cannot render with MUJOCO_GL={backend}: {reason} (headless machines need MUJOCO_GL=egl, "
-                         "or osmesa with libOSMesa installed)") from None
+        raise EtmpcError(
+            f"cannot render with MUJOCO_GL={backend}: {reason} (headless machines need MUJOCO_GL=egl, "
+            "or osmesa with libOSMesa installed)"
+        ) from None
 
 
 def iter_frames(system, env, states: np.ndarray, width: int, height: int) -> Iterator[np.ndarray]:

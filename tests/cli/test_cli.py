@@ -9,22 +9,25 @@ import pytest
 from etmpc.cli import main
 
 
-@pytest.mark.parametrize("argv, message", [
-    (["evaluate", "cartpole", "--policy", "always"], "unknown task 'cartpole'"),
-    (["evaluate", "cart_pendulum", "--policy", "sometimes"], "unknown policy 'sometimes'"),
-    (["evaluate", "cart_pendulum", "--policy", "every:0"], "period"),
-    (["evaluate", "cart_pendulum", "--policy", "threshold:-1"], "threshold"),
-    (["evaluate", "cart_pendulum", "--policy", "always", "--test-set", "/no/such.npz"], "not found"),
-    (["evaluate", "cart_pendulum", "--policy", "always", "--episodes", "0"], "--episodes"),
-    (["evaluate", "cart_pendulum", "--policy", "always", "--episodes", "101"], "1..100"),
-    (["evaluate", "cart_pendulum", "--policy", "always", "--json", "/"], "directory"),
-    (["evaluate", "cart_pendulum"], "--policy"),
-    (["frobnicate"], "invalid choice"),
-    (["evaluate", "battery", "--policy", "every:x"], "every"),
-    (["evaluate", "battery", "--policy", "always", "--episodes", "101"], "1..100"),
-    (["bench", "battery", "pendulum"], "unknown task 'pendulum'"),
-    (["bench", "--episodes", "0"], "--episodes"),
-])
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["evaluate", "cartpole", "--policy", "always"], "unknown task 'cartpole'"),
+        (["evaluate", "cart_pendulum", "--policy", "sometimes"], "unknown policy 'sometimes'"),
+        (["evaluate", "cart_pendulum", "--policy", "every:0"], "period"),
+        (["evaluate", "cart_pendulum", "--policy", "threshold:-1"], "threshold"),
+        (["evaluate", "cart_pendulum", "--policy", "always", "--test-set", "/no/such.npz"], "not found"),
+        (["evaluate", "cart_pendulum", "--policy", "always", "--episodes", "0"], "--episodes"),
+        (["evaluate", "cart_pendulum", "--policy", "always", "--episodes", "101"], "1..100"),
+        (["evaluate", "cart_pendulum", "--policy", "always", "--json", "/"], "directory"),
+        (["evaluate", "cart_pendulum"], "--policy"),
+        (["frobnicate"], "invalid choice"),
+        (["evaluate", "battery", "--policy", "every:x"], "every"),
+        (["evaluate", "battery", "--policy", "always", "--episodes", "101"], "1..100"),
+        (["bench", "battery", "pendulum"], "unknown task 'pendulum'"),
+        (["bench", "--episodes", "0"], "--episodes"),
+    ],
+)
 def test_bad_input_is_one_line_and_exit_2(capsys, argv, message):
     assert main(argv) == 2
     err = capsys.readouterr().err
@@ -34,8 +37,25 @@ def test_bad_input_is_one_line_and_exit_2(capsys, argv, message):
 
 def test_evaluate_writes_table_and_json(tmp_path, capsys):
     out = tmp_path / "sub" / "r.json"
-    assert main(["evaluate", "cart_pendulum", "--policy", "never", "--policy", "every:10", "--episodes", "2",
-                 "--workers", "1", "--json", str(out)]) == 0
+    assert (
+        main(
+            [
+                "evaluate",
+                "cart_pendulum",
+                "--policy",
+                "never",
+                "--policy",
+                "every:10",
+                "--episodes",
+                "2",
+                "--workers",
+                "1",
+                "--json",
+                str(out),
+            ]
+        )
+        == 0
+    )
     table = capsys.readouterr().out
     data = json.loads(out.read_text())
     assert set(data["policies"]) == {"never", "every:10"}
@@ -50,8 +70,9 @@ def test_evaluate_battery_reports_profit(capsys):
 
 
 def test_console_script_error_has_no_traceback():
-    result = subprocess.run([sys.executable, "-m", "etmpc.cli", "evaluate", "cart_pendulum", "--policy", "every:0"],
-                            capture_output=True, text=True)
+    result = subprocess.run(
+        [sys.executable, "-m", "etmpc.cli", "evaluate", "cart_pendulum", "--policy", "every:0"], capture_output=True, text=True
+    )
     assert result.returncode == 2 and "Traceback" not in result.stderr and result.stderr.count("\n") == 1
 
 

@@ -44,14 +44,17 @@ def test_matvec_and_norm_are_rows_of_dots():
     assert norm(x) == math.sqrt(_exact_sum_rounded([v * v for v in x.tolist()]))
 
 
-@pytest.mark.parametrize("terms, expected", [
-    ([INF, 1.0, -3.0], INF),
-    ([-INF, 1e308, 1e308], -INF),
-    ([1.5e308, 1.5e308], INF),  # finite terms whose exact sum is beyond the double range
-    ([-1.5e308, -1.5e308, 1.0], -INF),
-    ([1e308, 1e308, -1e308], 1e308),  # a partial overflows, the exact sum does not
-    ([1e308, -1e308, 5.0, 1e-300], 5.0),
-])
+@pytest.mark.parametrize(
+    "terms, expected",
+    [
+        ([INF, 1.0, -3.0], INF),
+        ([-INF, 1e308, 1e308], -INF),
+        ([1.5e308, 1.5e308], INF),  # finite terms whose exact sum is beyond the double range
+        ([-1.5e308, -1.5e308, 1.0], -INF),
+        ([1e308, 1e308, -1e308], 1e308),  # a partial overflows, the exact sum does not
+        ([1e308, -1e308, 5.0, 1e-300], 5.0),
+    ],
+)
 def test_special_and_overflowing_sums_follow_one_rule(terms, expected):
     assert fsum(terms) == expected
     assert fsum(terms[::-1]) == expected

@@ -66,6 +66,7 @@ print(len(builds), code, a[0] == np.sin(1.0), b[0] == 4.0)
 def test_damaged_cache_is_rebuilt_not_trusted(tmp_path, damage):
     """Each run in a fresh process, as the tool's next run would (a library loaded in a process
     stays mapped there; the damage is done as a disk would do it, to the file in place)."""
+
     def run():
         done = subprocess.run([sys.executable, "-c", BUILD, str(tmp_path)], capture_output=True, text=True, check=True)
         return done.stdout.split()

@@ -21,14 +21,28 @@ def ipopt_reference(system, x, u_prev):
         "f": ca.sumsqr(X[2, :]) + c.input_change_weight * ca.sumsqr(du),
         "g": ca.vertcat(X[:, 0] - x, *[model(X[:, k], U[:, k]) - X[:, k + 1] for k in range(n)]),
     }
-    solver = ca.nlpsol("reference", "ipopt", nlp, {
-        "print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes",
-        "ipopt.tol": 1e-12, "ipopt.acceptable_iter": 0, "ipopt.max_iter": 1000,
-    })
+    solver = ca.nlpsol(
+        "reference",
+        "ipopt",
+        nlp,
+        {
+            "print_time": False,
+            "ipopt.print_level": 0,
+            "ipopt.sb": "yes",
+            "ipopt.tol": 1e-12,
+            "ipopt.acceptable_iter": 0,
+            "ipopt.max_iter": 1000,
+        },
+    )
     states = system.mpc.rollout(x, np.zeros((n, 1)))
     lbu, ubu = np.full(n, -c.force_limit_n), np.full(n, c.force_limit_n)
-    sol = solver(x0=np.concatenate([states.ravel(), np.zeros(n)]), lbx=np.r_[np.full(nx * (n + 1), -np.inf), lbu],
-                 ubx=np.r_[np.full(nx * (n + 1), np.inf), ubu], lbg=0, ubg=0)
+    sol = solver(
+        x0=np.concatenate([states.ravel(), np.zeros(n)]),
+        lbx=np.r_[np.full(nx * (n + 1), -np.inf), lbu],
+        ubx=np.r_[np.full(nx * (n + 1), np.inf), ubu],
+        lbg=0,
+        ubg=0,
+    )
     assert solver.stats()["success"]
     return float(sol["f"])
 
@@ -120,8 +134,9 @@ def test_every_transcription_and_engine_reaches_the_same_optimum(cart_system):
     default = cart_system.mpc
     assert default.is_compiled and default.settings.block == 4
     variants = {
-        (block, compiled): CartPendulumSystem(replace(cart_system.config, solver=replace(
-            cart_system.config.solver, block=block, compiled=compiled))).mpc
+        (block, compiled): CartPendulumSystem(
+            replace(cart_system.config, solver=replace(cart_system.config.solver, block=block, compiled=compiled))
+        ).mpc
         for block, compiled in [(1, False), (4, False), (20, False)]
     }
     rng = np.random.default_rng(7)

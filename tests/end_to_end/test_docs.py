@@ -13,15 +13,20 @@ import pytest
 from tests.conftest import REPO
 
 
-
 def test_the_site_builds_strictly(tmp_path):
     pytest.importorskip("mkdocs")
     pytest.importorskip("material")
     mkdocs = Path(sys.executable).with_name("mkdocs")
     command = [str(mkdocs)] if mkdocs.is_file() else [sys.executable, "-m", "mkdocs"]
     env = dict(os.environ, NO_MKDOCS_2_WARNING="1")
-    done = subprocess.run([*command, "build", "--strict", "--site-dir", str(tmp_path / "site")], cwd=REPO,
-                          capture_output=True, text=True, env=env, timeout=600)
+    done = subprocess.run(
+        [*command, "build", "--strict", "--site-dir", str(tmp_path / "site")],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=600,
+    )
     assert done.returncode == 0, (done.stdout + done.stderr)[-4000:]
     assert "WARNING" not in done.stderr, done.stderr[-4000:]
     site = tmp_path / "site"

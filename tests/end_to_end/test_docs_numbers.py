@@ -26,9 +26,10 @@ def test_every_marked_number_in_the_readme_and_the_docs_is_its_sources():
 def test_the_docs_quote_numbers_from_the_results_files():
     found = [n for page in doc_numbers.pages() for n in doc_numbers.numbers(page)]
     assert len(found) > 20
-    assert {n.source for n in found} <= {str(p.relative_to(REPO)) for p in
-                                         [REPO / "docs" / "leaderboard.json", *REPO.glob("tasks/*/*_references.json"),
-                                          *REPO.glob("policies/*/*.json")]}
+    assert {n.source for n in found} <= {
+        str(p.relative_to(REPO))
+        for p in [REPO / "docs" / "leaderboard.json", *REPO.glob("tasks/*/*_references.json"), *REPO.glob("policies/*/*.json")]
+    }
 
 
 def test_no_page_calls_the_100_point_reference_a_bound_that_knows_the_future():
@@ -50,10 +51,19 @@ def test_score_help_names_the_leaderboards_rows(capsys):
 # -- the checker itself, on a small fake page --------------------------------------------------------
 @pytest.fixture
 def fake(tmp_path):
-    (tmp_path / "r.json").write_text(json.dumps({
-        "entries": [{"name": "DPI (shipped)", "rows": [{"task": "battery", "score": 32.0616, "objective": 0.89278,
-                                                        "share": 0.77}]},
-                    {"name": "best periodic", "rows": [{"task": "battery", "score": 0.0, "objective": 0.80173}]}]}))
+    (tmp_path / "r.json").write_text(
+        json.dumps(
+            {
+                "entries": [
+                    {
+                        "name": "DPI (shipped)",
+                        "rows": [{"task": "battery", "score": 32.0616, "objective": 0.89278, "share": 0.77}],
+                    },
+                    {"name": "best periodic", "rows": [{"task": "battery", "score": 0.0, "objective": 0.80173}]},
+                ]
+            }
+        )
+    )
     dpi = "r.json entries[name=DPI (shipped)].rows[task=battery]"
     page = tmp_path / "page.md"
     page.write_text(
@@ -61,7 +71,8 @@ def fake(tmp_path):
         f"DPI scores <!-- number: {dpi}.score | .1f -->32.1<!-- /number --> on the battery,\n"
         f"a gain of <!-- number: {dpi}.objective | +.2% | vs=entries[name=best periodic].rows[task=battery].objective -->"
         f"+11.36 %<!-- /number --> (wrongly: <!-- number: r.json entries[1].rows[0].objective | .5f -->0.80173"
-        f"<!-- /number -->), better in <!-- number: {dpi}.share | .0f | scale=100 -->77<!-- /number --> episodes.\n")
+        f"<!-- /number -->), better in <!-- number: {dpi}.share | .0f | scale=100 -->77<!-- /number --> episodes.\n"
+    )
     return tmp_path, page
 
 

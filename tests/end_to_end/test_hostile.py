@@ -173,16 +173,16 @@ TRIGGERS = {
     "py-exit-on-import": "raise SystemExit(4)\n",
     "py-exit-in-factory": "def T():\n    raise SystemExit(5)\n",
     "py-exit-in-a-member": "class T:\n    spec = 'mine'\n    @property\n    def stochastic(self):\n        raise SystemExit(6)\n"
-                           "    def decide(self, s, rng):\n        return False\n",
+    "    def decide(self, s, rng):\n        return False\n",
     "py-interrupt-in-decide": f"class T:\n{_RULE}    def decide(self, s, rng):\n        raise KeyboardInterrupt\n",
     "py-base-exception": f"class Boom(BaseException):\n    pass\nclass T:\n{_RULE}"
-                         "    def decide(self, s, rng):\n        raise Boom('out of here')\n",
+    "    def decide(self, s, rng):\n        raise Boom('out of here')\n",
     "py-import-fails": "import no_such_module_anywhere\n",
     "py-writes-into-state": f"class T:\n{_RULE}    def decide(self, s, rng):\n        s.x[1] = 0.0\n        return False\n",
     "py-writes-into-observation": f"class T:\n{_RULE}    def decide(self, s, rng):\n"
-                                  "        s.observation['soc'] = 1.0\n        return False\n",
+    "        s.observation['soc'] = 1.0\n        return False\n",
     "py-unpicklable": f"import threading\nclass T:\n{_RULE}    def __init__(self):\n        self.lock = threading.Lock()\n"
-                      "    def decide(self, s, rng):\n        return s.age >= 3\n",
+    "    def decide(self, s, rng):\n        return s.age >= 3\n",
 }
 
 
@@ -250,13 +250,25 @@ CASES = [
     ("train-resume-into-reproduce", "reproduce-dir", ["train", "battery", "--out", "run", "--resume"], "settings.json"),
     ("train-seeds-reversed", "none", ["train", "battery", "--out", "run", "--seeds", "4-1"], "--seeds"),
     ("train-seeds-absurd", "none", ["train", "battery", "--out", "run", "--seeds", "0-100000000000"], "--seeds"),
-    ("train-learning-rate-nan", "none", ["train", "battery", "--out", "run", "--algorithm", "gpomdp",
-                                         "--learning-rate", "nan"], "learning rate"),
-    ("train-dpi-option-with-gpomdp", "none", ["train", "battery", "--out", "run", "--algorithm", "gpomdp",
-                                              "--futures", "3"], "--futures"),
+    (
+        "train-learning-rate-nan",
+        "none",
+        ["train", "battery", "--out", "run", "--algorithm", "gpomdp", "--learning-rate", "nan"],
+        "learning rate",
+    ),
+    (
+        "train-dpi-option-with-gpomdp",
+        "none",
+        ["train", "battery", "--out", "run", "--algorithm", "gpomdp", "--futures", "3"],
+        "--futures",
+    ),
     ("train-record-negative", "none", ["train", "battery", "--out", "run", "--record", "-1"], "--record"),
-    ("train-eval-episodes-too-many", "none", ["train", "battery", "--out", "run", "--eval-episodes", "1000",
-                                              "--episodes", "2", "--seeds", "0"], "1000"),
+    (
+        "train-eval-episodes-too-many",
+        "none",
+        ["train", "battery", "--out", "run", "--eval-episodes", "1000", "--episodes", "2", "--seeds", "0"],
+        "1000",
+    ),
     # reproduce
     ("reproduce-out-is-file", "file-parent", ["reproduce", "--out", "afile"], "afile"),
     ("reproduce-into-training-run", "train-dir", ["reproduce", "--quick", "--out", "run"], "checkpoint.json"),
@@ -265,19 +277,33 @@ CASES = [
     # render
     ("render-battery", "none", ["render", "battery", "--policy", "always", "--out", "v.mp4"], "battery"),
     ("render-not-mp4", "none", ["render", "cart_pendulum", "--policy", "always", "--out", "v.avi"], ".mp4"),
-    ("render-episode-negative", "none", ["render", "cart_pendulum", "--policy", "always", "--out", "v.mp4",
-                                         "--episode", "-1"], "--episode"),
-    ("render-episode-out-of-range", "none", ["render", "cart_pendulum", "--policy", "always", "--out", "v.mp4",
-                                             "--episode", "100"], "100"),
-    ("render-odd-width", "none", ["render", "cart_pendulum", "--policy", "always", "--out", "v.mp4",
-                                  "--width", "641"], "641"),
-    ("render-fps-absurd", "none", ["render", "cart_pendulum", "--policy", "always", "--out", "v.mp4",
-                                   "--fps", "1e9"], "--fps"),
+    (
+        "render-episode-negative",
+        "none",
+        ["render", "cart_pendulum", "--policy", "always", "--out", "v.mp4", "--episode", "-1"],
+        "--episode",
+    ),
+    (
+        "render-episode-out-of-range",
+        "none",
+        ["render", "cart_pendulum", "--policy", "always", "--out", "v.mp4", "--episode", "100"],
+        "100",
+    ),
+    ("render-odd-width", "none", ["render", "cart_pendulum", "--policy", "always", "--out", "v.mp4", "--width", "641"], "641"),
+    ("render-fps-absurd", "none", ["render", "cart_pendulum", "--policy", "always", "--out", "v.mp4", "--fps", "1e9"], "--fps"),
     ("render-fps-zero", "none", ["render", "cart_pendulum", "--policy", "always", "--out", "v.mp4", "--fps", "0"], "--fps"),
-    ("render-seed-negative", "none", ["render", "cart_pendulum", "--policy", "always", "--out", "v.mp4",
-                                      "--seed", "-1"], "--seed"),
-    ("render-out-parent-is-file", "file-parent", ["render", "cart_pendulum", "--policy", "always",
-                                                  "--out", "afile/v.mp4"], "afile"),
+    (
+        "render-seed-negative",
+        "none",
+        ["render", "cart_pendulum", "--policy", "always", "--out", "v.mp4", "--seed", "-1"],
+        "--seed",
+    ),
+    (
+        "render-out-parent-is-file",
+        "file-parent",
+        ["render", "cart_pendulum", "--policy", "always", "--out", "afile/v.mp4"],
+        "afile",
+    ),
     # sweep, and prices
     ("price-negative", "none", [*EV, "--policy", "always", "--price", "-1"], "--price"),
     ("price-infinite", "none", [*EV, "--policy", "always", "--price", "inf"], "--price"),
@@ -306,30 +332,65 @@ CASES = [
     ("bench-unknown-task", "none", ["bench", "cartpole"], "cartpole"),
     ("bench-episodes-too-many", "none", ["bench", "battery", "--episodes", "1000", "--no-reference"], "1000"),
     # a trigger's own code cannot end the command, silently or otherwise, nor change its own run
-    ("py-exit-in-decide", "py-exit-in-decide", [*EV, "--policy", "py:py_exit_in_decide:T", "--episodes", "1",
-                                                "--workers", "1", "--json", "ev.json"], "SystemExit(3)"),
-    ("py-exit-in-decide-on-a-worker", "py-exit-in-decide", [*EV, "--policy", "py:py_exit_in_decide:T", "--episodes", "2",
-                                                            "--workers", "2", "--json", "ev.json"], "SystemExit(3)"),
+    (
+        "py-exit-in-decide",
+        "py-exit-in-decide",
+        [*EV, "--policy", "py:py_exit_in_decide:T", "--episodes", "1", "--workers", "1", "--json", "ev.json"],
+        "SystemExit(3)",
+    ),
+    (
+        "py-exit-in-decide-on-a-worker",
+        "py-exit-in-decide",
+        [*EV, "--policy", "py:py_exit_in_decide:T", "--episodes", "2", "--workers", "2", "--json", "ev.json"],
+        "SystemExit(3)",
+    ),
     ("py-exit-on-import", "py-exit-on-import", [*EV, "--policy", "py:py_exit_on_import:T"], "SystemExit(4)"),
     ("py-exit-in-factory", "py-exit-in-factory", [*EV, "--policy", "py:py_exit_in_factory:T"], "SystemExit(5)"),
     ("py-exit-in-a-member", "py-exit-in-a-member", [*EV, "--policy", "py:py_exit_in_a_member:T"], "SystemExit(6)"),
-    ("py-interrupt-in-decide", "py-interrupt-in-decide", [*EV, "--policy", "py:py_interrupt_in_decide:T", "--episodes", "1",
-                                                          "--workers", "1", "--record", "r.rrd"], "KeyboardInterrupt"),
-    ("py-base-exception", "py-base-exception", [*EV, "--policy", "py:py_base_exception:T", "--episodes", "1",
-                                                "--workers", "1"], "Boom: out of here"),
+    (
+        "py-interrupt-in-decide",
+        "py-interrupt-in-decide",
+        [*EV, "--policy", "py:py_interrupt_in_decide:T", "--episodes", "1", "--workers", "1", "--record", "r.rrd"],
+        "KeyboardInterrupt",
+    ),
+    (
+        "py-base-exception",
+        "py-base-exception",
+        [*EV, "--policy", "py:py_base_exception:T", "--episodes", "1", "--workers", "1"],
+        "Boom: out of here",
+    ),
     ("py-import-fails", "py-import-fails", [*EV, "--policy", "py:py_import_fails:T"], "no_such_module_anywhere"),
-    ("py-writes-into-state", "py-writes-into-state", [*EV, "--policy", "py:py_writes_into_state:T", "--episodes", "1",
-                                                      "--workers", "1"], "read-only"),
-    ("py-writes-into-observation", "py-writes-into-observation", ["evaluate", "battery", "--policy",
-                                                                  "py:py_writes_into_observation:T", "--episodes", "1",
-                                                                  "--workers", "1"], "read-only"),
-    ("py-unpicklable-on-workers", "py-unpicklable", [*EV, "--policy", "py:py_unpicklable:T", "--episodes", "2",
-                                                     "--workers", "2"], "--workers 1"),
+    (
+        "py-writes-into-state",
+        "py-writes-into-state",
+        [*EV, "--policy", "py:py_writes_into_state:T", "--episodes", "1", "--workers", "1"],
+        "read-only",
+    ),
+    (
+        "py-writes-into-observation",
+        "py-writes-into-observation",
+        ["evaluate", "battery", "--policy", "py:py_writes_into_observation:T", "--episodes", "1", "--workers", "1"],
+        "read-only",
+    ),
+    (
+        "py-unpicklable-on-workers",
+        "py-unpicklable",
+        [*EV, "--policy", "py:py_unpicklable:T", "--episodes", "2", "--workers", "2"],
+        "--workers 1",
+    ),
     # found on the way
-    ("render-beyond-the-framebuffer", "none", ["render", "reacher", "--policy", "always", "--out", "v.mp4",
-                                               "--width", "2560", "--height", "1440"], "framebuffer"),
-    ("reproduce-task-twice", "none", ["reproduce", "--quick", "--task", "battery", "--task", "battery/trading",
-                                      "--out", "run"], "twice"),
+    (
+        "render-beyond-the-framebuffer",
+        "none",
+        ["render", "reacher", "--policy", "always", "--out", "v.mp4", "--width", "2560", "--height", "1440"],
+        "framebuffer",
+    ),
+    (
+        "reproduce-task-twice",
+        "none",
+        ["reproduce", "--quick", "--task", "battery", "--task", "battery/trading", "--out", "run"],
+        "twice",
+    ),
     ("sweep-task-twice-by-two-names", "none", ["sweep", "battery", "battery/trading"], "twice"),
     ("sweep-other-settings-named", "other-sweep", ["sweep", "battery", "--out", "run", "--quick"], "settings.episodes"),
 ]
@@ -352,10 +413,10 @@ def test_a_hostile_input_is_one_line_and_touches_nothing(setup, argv, names, tmp
 
 
 # -- faults that need a real process -------------------------------------------------------------
-def _etmpc(args: list[str], cwd: Path, env: dict | None = None, file_size_limit: int | None = None,
-           **popen) -> subprocess.Popen:
+def _etmpc(args: list[str], cwd: Path, env: dict | None = None, file_size_limit: int | None = None, **popen) -> subprocess.Popen:
     """``etmpc ARGS`` in its own session; ``file_size_limit`` bytes per file (RLIMIT_FSIZE): the
     kernel refuses writes past it as it does on a full disk."""
+
     def limit():
         # Ctrl-C as a terminal delivers it: a command started in the background of a non-interactive
         # shell (`cmd &`, as a CI script may run the suite) inherits SIGINT ignored, and so would etmpc.
@@ -365,16 +426,54 @@ def _etmpc(args: list[str], cwd: Path, env: dict | None = None, file_size_limit:
             resource.setrlimit(resource.RLIMIT_FSIZE, (file_size_limit, file_size_limit))
 
     full_env = {**os.environ, "MUJOCO_GL": "egl", **(env or {})}
-    return subprocess.Popen([sys.executable, "-m", "etmpc.cli", *args], cwd=cwd, env=full_env, preexec_fn=limit,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True, **popen)
+    return subprocess.Popen(
+        [sys.executable, "-m", "etmpc.cli", *args],
+        cwd=cwd,
+        env=full_env,
+        preexec_fn=limit,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+        **popen,
+    )
 
 
-@pytest.mark.parametrize("args, names", [
-    (["evaluate", "battery", "--policy", "always", "--episodes", "2", "--workers", "1", "--json", "ev.json"], "ev.json"),
-    (["evaluate", "battery", "--policy", "always", "--episodes", "2", "--workers", "1", "--record", "new.rrd"], "new.rrd"),
-    (["train", "battery", "--out", "run", "--episodes", "2", "--eval-every", "2", "--eval-episodes", "1", "--seeds", "0",
-      "--validation-episodes", "1", "--labels", "1", "--futures", "1", "--horizon", "2", "--workers", "1"], "run"),
-], ids=["json", "record", "train"])
+@pytest.mark.parametrize(
+    "args, names",
+    [
+        (["evaluate", "battery", "--policy", "always", "--episodes", "2", "--workers", "1", "--json", "ev.json"], "ev.json"),
+        (["evaluate", "battery", "--policy", "always", "--episodes", "2", "--workers", "1", "--record", "new.rrd"], "new.rrd"),
+        (
+            [
+                "train",
+                "battery",
+                "--out",
+                "run",
+                "--episodes",
+                "2",
+                "--eval-every",
+                "2",
+                "--eval-episodes",
+                "1",
+                "--seeds",
+                "0",
+                "--validation-episodes",
+                "1",
+                "--labels",
+                "1",
+                "--futures",
+                "1",
+                "--horizon",
+                "2",
+                "--workers",
+                "1",
+            ],
+            "run",
+        ),
+    ],
+    ids=["json", "record", "train"],
+)
 def test_a_full_disk_is_one_line_and_leaves_the_old_files(args, names, tmp_path, request):
     kind = request.node.callspec.id
     _setup("existing-json", tmp_path)
@@ -404,8 +503,25 @@ def test_a_rendering_backend_that_cannot_work_is_one_line(backend, names, tmp_pa
 
 def test_a_truncated_recording_is_an_error(tmp_path):
     recording = tmp_path / "r.rrd"
-    assert main(["evaluate", "battery", "--policy", "always", "--policy", "every:5", "--episodes", "2",
-                 "--workers", "1", "--record", str(recording)]) == 0
+    assert (
+        main(
+            [
+                "evaluate",
+                "battery",
+                "--policy",
+                "always",
+                "--policy",
+                "every:5",
+                "--episodes",
+                "2",
+                "--workers",
+                "1",
+                "--record",
+                str(recording),
+            ]
+        )
+        == 0
+    )
     data = recording.read_bytes()
     for cut in (len(data) // 3, len(data) - 100):
         (tmp_path / "cut.rrd").write_bytes(data[:cut])
@@ -415,14 +531,15 @@ def test_a_truncated_recording_is_an_error(tmp_path):
         _assert_one_line(err, "cut.rrd")
 
 
-@pytest.mark.parametrize("how, code, line", [
-    ("SIGINT", 130, "interrupted"), ("SIGTERM", 143, "terminated"), ("SIGKILL", -9, None),
-])
+@pytest.mark.parametrize(
+    "how, code, line", [("SIGINT", 130, "interrupted"), ("SIGTERM", 143, "terminated"), ("SIGKILL", -9, None)]
+)
 def test_stopping_a_parallel_run_leaves_no_worker_and_no_file(how, code, line, tmp_path):
     _setup("existing-json", tmp_path)
     before = _files(tmp_path)
-    proc = _etmpc(["evaluate", "cart_pendulum", "--policy", "always", "--workers", "2", "--json", "ev.json",
-                   "--record", "r.rrd"], tmp_path)
+    proc = _etmpc(
+        ["evaluate", "cart_pendulum", "--policy", "always", "--workers", "2", "--json", "ev.json", "--record", "r.rrd"], tmp_path
+    )
     deadline = time.monotonic() + 120
     workers = []
     while time.monotonic() < deadline and len(workers) < 2:  # the pool is up and working
@@ -440,8 +557,9 @@ def test_stopping_a_parallel_run_leaves_no_worker_and_no_file(how, code, line, t
     deadline = time.monotonic() + 10
     while time.monotonic() < deadline and any(Path(f"/proc/{w}").exists() for w in workers):
         time.sleep(0.2)
-    assert not [w for w in workers if Path(f"/proc/{w}").exists() and
-                Path(f"/proc/{w}/stat").read_text().split(") ")[1][0] != "Z"]
+    assert not [
+        w for w in workers if Path(f"/proc/{w}").exists() and Path(f"/proc/{w}/stat").read_text().split(") ")[1][0] != "Z"
+    ]
     after = _files(tmp_path)
     assert {k: v for k, v in after.items() if k in before} == before
     if how != "SIGKILL":  # SIGKILL leaves the recording's partial file: nothing runs to remove it
@@ -451,7 +569,6 @@ def test_stopping_a_parallel_run_leaves_no_worker_and_no_file(how, code, line, t
 def test_version():
     proc = subprocess.run([sys.executable, "-m", "etmpc.cli", "--version"], capture_output=True, text=True)
     assert proc.returncode == 0 and proc.stdout.startswith("etmpc ")
-
 
 
 # -- the Python API: the same checks, the same messages, as EtmpcError -----------------------------
@@ -476,10 +593,19 @@ API_CASES = [  # (id, keyword arguments, what the message says, the command line
     ("seed-negative", {"seed": -1}, "seed: a seed is a whole number in 0..2**63-1, got -1", ["--seed", "-1"]),
     ("seed-huge", {"seed": 2**64}, "seed: a seed is a whole number in 0..2**63-1", ["--seed", str(2**64)]),
     ("seed-text", {"seed": "1"}, "seed: '1' is not a whole number", None),
-    ("price-nan", {"recompute_price": float("nan")}, "a price of a computation is a finite number >= 0, got nan",
-     ["--price", "nan"]),
+    (
+        "price-nan",
+        {"recompute_price": float("nan")},
+        "a price of a computation is a finite number >= 0, got nan",
+        ["--price", "nan"],
+    ),
     ("price-text", {"recompute_price": "0.1"}, "recompute_price: '0.1' is not a number", None),
-    ("policies-a-string", {"policies": "always"}, "a list of policy specs or objects is needed, got str (for one policy: ['always'])", None),
+    (
+        "policies-a-string",
+        {"policies": "always"},
+        "a list of policy specs or objects is needed, got str (for one policy: ['always'])",
+        None,
+    ),
     ("policies-empty", {"policies": []}, "policies: the list is empty", None),
     ("policies-a-dict", {"policies": {"always": 1}}, "a list of policy specs or objects is needed, got dict", None),
     ("task-not-a-name", {"domain": 3}, "task: a task name (str) is needed, got int 3", None),
@@ -490,8 +616,9 @@ API_CASES = [  # (id, keyword arguments, what the message says, the command line
 
 
 @pytest.mark.parametrize("kwargs, says, cli", [c[1:] for c in API_CASES], ids=[c[0] for c in API_CASES])
-def test_the_python_api_refuses_what_the_command_line_refuses_with_the_same_message(kwargs, says, cli, tmp_path,
-                                                                                   monkeypatch, capsys):
+def test_the_python_api_refuses_what_the_command_line_refuses_with_the_same_message(
+    kwargs, says, cli, tmp_path, monkeypatch, capsys
+):
     import etmpc
     from etmpc.common.errors import EtmpcError
 
@@ -513,7 +640,8 @@ def test_a_real_ctrl_c_inside_a_triggers_decide_still_stops_the_command(tmp_path
     trigger decides, is still the user's (exit 130, 'interrupted')."""
     (tmp_path / "slow_trigger.py").write_text(
         "import time\nclass T:\n    spec = 'slow'\n    stochastic = False\n"
-        "    def decide(self, s, rng):\n        time.sleep(0.2)\n        return s.age >= 3\n")
+        "    def decide(self, s, rng):\n        time.sleep(0.2)\n        return s.age >= 3\n"
+    )
     proc = _etmpc(["evaluate", "battery", "--policy", "py:slow_trigger:T", "--workers", "1", "--json", "ev.json"], tmp_path)
     time.sleep(8)  # imports, then deciding: a Ctrl-C now lands inside decide almost surely (it sleeps 0.2 s of each step)
     os.killpg(proc.pid, signal.SIGINT)
@@ -559,39 +687,85 @@ def _own_setup(kind: str, d: Path) -> None:
 
 
 OWN_CASES = [  # (id, setup, argv, what the one line must name)
-    ("score-json-on-the-stored-references", "none",
-     ["score", "every:3", "--task", "battery", "--json", str(STORED_REFERENCES)], "data folder"),
-    ("score-json-on-the-policy-it-scores", "none",
-     ["score", f"rl:{BATTERY_POLICY}", "--task", "battery", "--json", str(BATTERY_POLICY)], "data folder"),
-    ("score-json-on-a-users-policy-it-scores", "policy-copy",
-     ["score", "rl:p.json", "--task", "cart_pendulum", "--json", "p.json"], "policy"),
+    (
+        "score-json-on-the-stored-references",
+        "none",
+        ["score", "every:3", "--task", "battery", "--json", str(STORED_REFERENCES)],
+        "data folder",
+    ),
+    (
+        "score-json-on-the-policy-it-scores",
+        "none",
+        ["score", f"rl:{BATTERY_POLICY}", "--task", "battery", "--json", str(BATTERY_POLICY)],
+        "data folder",
+    ),
+    (
+        "score-json-on-a-users-policy-it-scores",
+        "policy-copy",
+        ["score", "rl:p.json", "--task", "cart_pendulum", "--json", "p.json"],
+        "policy",
+    ),
     ("evaluate-json-on-its-rl-file", "policy-copy", [*EV, "--policy", "rl:p.json", "--json", "p.json"], "p.json"),
-    ("evaluate-json-on-a-rollouts-base-file", "policy-copy",
-     [*EV, "--policy", "rollout:rl:p.json:2", "--json", "p.json"], "p.json"),
-    ("evaluate-json-on-the-stored-test-set", "none", [*EV, "--policy", "always", "--json", str(STORED_TESTSET)],
-     "data folder"),
+    (
+        "evaluate-json-on-a-rollouts-base-file",
+        "policy-copy",
+        [*EV, "--policy", "rollout:rl:p.json:2", "--json", "p.json"],
+        "p.json",
+    ),
+    ("evaluate-json-on-the-stored-test-set", "none", [*EV, "--policy", "always", "--json", str(STORED_TESTSET)], "data folder"),
     ("evaluate-json-on-an-sb3-sidecar", "sb3-copy", [*EV, "--policy", "sb3:m.zip", "--json", "m.json"], "m.json"),
-    ("render-out-into-the-data", "none", ["render", "cart_pendulum", "--policy", "always", "--out",
-                                          str(REPO / "tasks" / "cart_pendulum" / "v.mp4")], "data folder"),
-    ("train-into-the-shipped-policies", "none", ["train", "battery", "--out", str(REPO / "policies" / "battery")],
-     "data folder"),
+    (
+        "render-out-into-the-data",
+        "none",
+        ["render", "cart_pendulum", "--policy", "always", "--out", str(REPO / "tasks" / "cart_pendulum" / "v.mp4")],
+        "data folder",
+    ),
+    ("train-into-the-shipped-policies", "none", ["train", "battery", "--out", str(REPO / "policies" / "battery")], "data folder"),
     ("train-out-holds-the-data", "none", ["train", "battery", "--out", str(REPO)], "data folder"),
-    ("testset-into-the-data", "none", ["testset", "battery", "--seed", "1", "--out",
-                                       str(REPO / "tasks" / "battery" / "new.npz")], "data folder"),
-    ("references-into-the-data", "none", ["score", "--references", "--task", "battery", "--out", str(REPO / "tasks")],
-     "data folder"),
+    (
+        "testset-into-the-data",
+        "none",
+        ["testset", "battery", "--seed", "1", "--out", str(REPO / "tasks" / "battery" / "new.npz")],
+        "data folder",
+    ),
+    (
+        "references-into-the-data",
+        "none",
+        ["score", "--references", "--task", "battery", "--out", str(REPO / "tasks")],
+        "data folder",
+    ),
     ("score-misspelt-spec-keeps-the-old-card", "mine-json", ["score", "evry:3", "--json", "mine.json"], "evry:3"),
-    ("score-spec-for-another-task-before-any-episode", "mine-json",
-     ["score", f"rl:{CART_POLICY}", "--task", "cart_pendulum", "--task", "battery", "--json", "mine.json"], "battery"),
+    (
+        "score-spec-for-another-task-before-any-episode",
+        "mine-json",
+        ["score", f"rl:{CART_POLICY}", "--task", "cart_pendulum", "--task", "battery", "--json", "mine.json"],
+        "battery",
+    ),
     ("score-out-without-a-mode", "none", ["score", "every:3", "--out", "x"], "--out"),
-    ("score-overflowing-weights", "huge-theta", ["score", "rl:p.json", "--task", "cart_pendulum", "--episodes", "1",
-                                                 "--workers", "1", "--json", "card.json"], "card.json not written"),
-    ("leaderboard-readme-without-its-end-marker", "readme-no-end",
-     ["score", "--leaderboard", "--task", "battery", "--out", "docs", "--readme", "R.md"], "R.md"),
-    ("leaderboard-kept-row-a-list", "kept-row-a-list", ["score", "--leaderboard", "--task", "battery", "--out", "docs"],
-     "not a row"),
-    ("leaderboard-kept-row-edited", "kept-row-edited", ["score", "--leaderboard", "--task", "battery", "--out", "docs"],
-     "checksum"),
+    (
+        "score-overflowing-weights",
+        "huge-theta",
+        ["score", "rl:p.json", "--task", "cart_pendulum", "--episodes", "1", "--workers", "1", "--json", "card.json"],
+        "card.json not written",
+    ),
+    (
+        "leaderboard-readme-without-its-end-marker",
+        "readme-no-end",
+        ["score", "--leaderboard", "--task", "battery", "--out", "docs", "--readme", "R.md"],
+        "R.md",
+    ),
+    (
+        "leaderboard-kept-row-a-list",
+        "kept-row-a-list",
+        ["score", "--leaderboard", "--task", "battery", "--out", "docs"],
+        "not a row",
+    ),
+    (
+        "leaderboard-kept-row-edited",
+        "kept-row-edited",
+        ["score", "--leaderboard", "--task", "battery", "--out", "docs"],
+        "checksum",
+    ),
 ]
 
 
@@ -615,10 +789,12 @@ def test_a_card_with_a_failed_row_never_replaces_an_existing_card(tmp_path, monk
     monkeypatch.setattr(sys, "dont_write_bytecode", True)
     (tmp_path / "late_failure.py").write_text(
         "class T:\n    spec = 'late'\n    stochastic = False\n    def decide(self, s, rng):\n"
-        "        raise RuntimeError('fails while playing')\n")
+        "        raise RuntimeError('fails while playing')\n"
+    )
     (tmp_path / "card.json").write_text('{"mine": true}\n')
-    assert main(["score", "py:late_failure:T", "--task", "battery", "--episodes", "1", "--workers", "1",
-                 "--json", "card.json"]) == 2
+    assert (
+        main(["score", "py:late_failure:T", "--task", "battery", "--episodes", "1", "--workers", "1", "--json", "card.json"]) == 2
+    )
     _assert_one_line(capsys.readouterr().err, "card.json not written")
     assert (tmp_path / "card.json").read_text() == '{"mine": true}\n'
 
@@ -644,8 +820,9 @@ def test_a_shipped_policy_changed_in_place_is_never_scored_under_its_name(tmp_pa
     mine = tmp_path / "mine.json"
     mine.write_bytes(changed.read_bytes())
     assert main([*EV, "--policy", f"rl:{mine}", "--episodes", "1", "--workers", "1"]) == 0
-    assert main([*EV, "--policy", f"rl:{root / 'policies' / 'battery' / 'learned.json'}", "--episodes", "1",
-                 "--workers", "1"]) == 2  # untouched, but for another task: its own line, not the checksum's
+    assert (
+        main([*EV, "--policy", f"rl:{root / 'policies' / 'battery' / 'learned.json'}", "--episodes", "1", "--workers", "1"]) == 2
+    )  # untouched, but for another task: its own line, not the checksum's
     assert "not the policy etmpc ships" not in capsys.readouterr().err
 
 
@@ -695,7 +872,9 @@ def test_a_scorecard_is_strict_json_even_with_missing_numbers(tmp_path, monkeypa
     from etmpc.common.documents import loads
 
     monkeypatch.chdir(tmp_path)
-    assert main(["score", "every:1", "--task", "battery", "--episodes", "1", "--workers", "1", "--json", "c.json"]) == 0  # its best
+    assert (
+        main(["score", "every:1", "--task", "battery", "--episodes", "1", "--workers", "1", "--json", "c.json"]) == 0
+    )  # its best
     card = loads((tmp_path / "c.json").read_text())  # refuses NaN and Infinity
     (row,) = card["rows"]
     assert row["score_ci95"] is None and row["score"] == 0.0

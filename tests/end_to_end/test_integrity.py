@@ -25,8 +25,13 @@ from etmpc.systems import make_system, names
 
 def _arrays(s):
     """Every array the vandal is shown, by name."""
-    shown = {"x": s.x, "x_plan": s.x_plan, "x_predicted": s.x_predicted, "plan.inputs": s.plan.inputs,
-             "plan.states": s.plan.states}
+    shown = {
+        "x": s.x,
+        "x_plan": s.x_plan,
+        "x_predicted": s.x_predicted,
+        "plan.inputs": s.plan.inputs,
+        "plan.states": s.plan.states,
+    }
     if s.plan.gains is not None:
         shown["plan.gains"] = s.plan.gains
     shown |= {f"plan.forecasts[{k}]": v for k, v in s.plan.forecasts.items()}
@@ -109,10 +114,13 @@ def test_a_trigger_that_writes_into_everything_it_is_shown_plays_exactly_as_one_
 
 
 def test_the_vandal_scores_as_every_3_in_evaluate_on_workers():
-    result = etmpc.evaluate("cart_pendulum/kicks", ["every:3", Vandal(simulates=True)], episodes=2, workers=2,
-                            progress=False).to_json()
-    runs = {p: [(r["objective"], r["recomputes"], r["solver_failures"]) for r in result["runs"] if r["policy"] == p]
-            for p in ("every:3", "vandal")}
+    result = etmpc.evaluate(
+        "cart_pendulum/kicks", ["every:3", Vandal(simulates=True)], episodes=2, workers=2, progress=False
+    ).to_json()
+    runs = {
+        p: [(r["objective"], r["recomputes"], r["solver_failures"]) for r in result["runs"] if r["policy"] == p]
+        for p in ("every:3", "vandal")
+    }
     assert runs["vandal"] == runs["every:3"]
 
 
@@ -126,9 +134,22 @@ def test_on_the_command_line_too(tmp_path, monkeypatch, capsys):
     monkeypatch.setattr("sys.dont_write_bytecode", True)
     (tmp_path / "naive_vandal_module.py").write_text(
         "class Naive:\n    spec = 'naive'\n    stochastic = False\n"
-        "    def decide(self, s, rng):\n        s.plan.inputs[0] = 0.0\n        return False\n")
-    code = main(["evaluate", "reacher", "--policy", "py:naive_vandal_module:Naive", "--episodes", "1", "--workers", "1",
-                 "--json", "out.json"])
+        "    def decide(self, s, rng):\n        s.plan.inputs[0] = 0.0\n        return False\n"
+    )
+    code = main(
+        [
+            "evaluate",
+            "reacher",
+            "--policy",
+            "py:naive_vandal_module:Naive",
+            "--episodes",
+            "1",
+            "--workers",
+            "1",
+            "--json",
+            "out.json",
+        ]
+    )
     err = capsys.readouterr().err.strip()
     assert code == 2 and len(err.splitlines()) == 1 and "read-only" in err and "py:naive_vandal_module:Naive" in err
     assert not (tmp_path / "out.json").exists()

@@ -95,11 +95,36 @@ def test_the_tests_mirror_the_package():
     floors = {info.name for info in pkgutil.iter_modules(etmpc.__path__) if info.ispkg and not info.name.startswith("_")}
     assert {"common", "systems", "evaluation", "cli"} <= floors
     allowed = {*floors, "end_to_end", "tasks", *(f"tasks/{domain}" for domain in BUILT_IN)}
-    folders = {p.relative_to(TESTS).as_posix() for p in TESTS.rglob("*")
-               if p.is_dir() and "__pycache__" not in p.parts and not p.name.startswith(".")}
+    folders = {
+        p.relative_to(TESTS).as_posix()
+        for p in TESTS.rglob("*")
+        if p.is_dir() and "__pycache__" not in p.parts and not p.name.startswith(".")
+    }
     assert folders - allowed == set()
     assert [f for f in sorted(folders | {"."}) if not (TESTS / f / "__init__.py").is_file()] == []
     flat = {p.name for p in TESTS.glob("*.py")} - {"__init__.py", "conftest.py"}
     assert flat == set()
     assert [p.name for p in (TESTS / "tasks").glob("*.py") if p.name != "__init__.py"] == []  # a task's tests in its domain
     assert len(list(TESTS.rglob("test_*.py"))) > 50
+
+
+# What the formatter and the linter read: the package, its tests and scripts, the example plugin, the docs' hooks.
+SOURCES = ["etmpc", "tests", "scripts", "examples", "docs/hooks.py"]
+
+
+def _ruff(*args: str) -> subprocess.CompletedProcess:
+    ruff = Path(sys.executable).with_name("ruff")
+    command = [str(ruff)] if ruff.exists() else [sys.executable, "-m", "ruff"]
+    return subprocess.run([*command, *args, *SOURCES], cwd=REPO, capture_output=True, text=True, timeout=300)
+
+
+def test_the_code_is_formatted_and_holds_lines_to_130_characters():
+    """``ruff format`` (pyproject.toml's [tool.ruff]): one style; ``ruff format`` rewrites a file that is not."""
+    done = _ruff("format", "--check")
+    assert done.returncode == 0, done.stdout + done.stderr
+
+
+def test_the_linter_finds_nothing():
+    """Undefined names, unused imports, syntax errors and lines over 130 characters ([tool.ruff.lint])."""
+    done = _ruff("check")
+    assert done.returncode == 0, done.stdout + done.stderr

@@ -20,8 +20,19 @@ from tests.conftest import REPO
 
 COMMANDS = ("evaluate", "score", "train", "train-self", "reproduce", "sweep", "render", "replay", "bench")
 # The caches too: other tests (running beside this one) write into them while the tree is copied.
-_LEFT_OUT = shutil.ignore_patterns(".git", ".venv", "build", "dist", "results", "*.egg-info", "__pycache__", ".pytest_cache",
-                                   ".grimp_cache", ".import_linter_cache", ".ruff_cache")
+_LEFT_OUT = shutil.ignore_patterns(
+    ".git",
+    ".venv",
+    "build",
+    "dist",
+    "results",
+    "*.egg-info",
+    "__pycache__",
+    ".pytest_cache",
+    ".grimp_cache",
+    ".import_linter_cache",
+    ".ruff_cache",
+)
 
 
 PROJECT = tomllib.loads((REPO / "pyproject.toml").read_text())["project"]
@@ -35,8 +46,9 @@ def dist(tmp_path_factory) -> Path:
     tmp = tmp_path_factory.mktemp("dist")
     source = tmp / "source"
     shutil.copytree(REPO, source, ignore=_LEFT_OUT)
-    built = subprocess.run([sys.executable, "-m", "build", "--outdir", str(tmp / "dist"), str(source)],
-                           capture_output=True, text=True)
+    built = subprocess.run(
+        [sys.executable, "-m", "build", "--outdir", str(tmp / "dist"), str(source)], capture_output=True, text=True
+    )
     assert built.returncode == 0, built.stdout[-3000:] + built.stderr[-3000:]
     return tmp / "dist"
 
@@ -59,7 +71,9 @@ def test_the_wheel_holds_every_module_and_the_data_and_nothing_else(wheel):
     assert modules and modules <= names, sorted(modules - names)
     data = {f"etmpc/_data/models/{p.name}" for p in (REPO / "models").glob("*.xml")}
     data |= {f"etmpc/_data/tasks/{p.relative_to(REPO / 'tasks').as_posix()}" for p in (REPO / "tasks").glob("*/*_testset.npz*")}
-    data |= {f"etmpc/_data/tasks/{p.relative_to(REPO / 'tasks').as_posix()}" for p in (REPO / "tasks").glob("*/*_references.json")}
+    data |= {
+        f"etmpc/_data/tasks/{p.relative_to(REPO / 'tasks').as_posix()}" for p in (REPO / "tasks").glob("*/*_references.json")
+    }
     data |= {f"etmpc/_data/policies/{p.relative_to(REPO / 'policies').as_posix()}" for p in (REPO / "policies").glob("*/ppo.yml")}
     assert len(data) > 12 and data <= names, sorted(data - names)
     assert not {n for n in names if n.startswith("etmpc/_data/policies/") and not n.endswith("/ppo.yml")}  # no policy ships in it
@@ -70,8 +84,7 @@ def test_the_wheel_holds_every_module_and_the_data_and_nothing_else(wheel):
 def test_the_installed_commands_work_outside_the_checkout(wheel, tmp_path):
     venv = tmp_path / "venv"
     subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True)
-    subprocess.run([venv / "bin" / "python", "-m", "pip", "install", "--quiet", str(wheel)], check=True,
-                   capture_output=True)
+    subprocess.run([venv / "bin" / "python", "-m", "pip", "install", "--quiet", str(wheel)], check=True, capture_output=True)
     outside = tmp_path / "elsewhere"
     outside.mkdir()
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV")}
@@ -80,8 +93,14 @@ def test_the_installed_commands_work_outside_the_checkout(wheel, tmp_path):
     def run(*argv):
         return subprocess.run([etmpc, *argv], cwd=outside, env=env, capture_output=True, text=True, timeout=600)
 
-    where = subprocess.run([venv / "bin" / "python", "-c", "import etmpc; print(etmpc.__file__)"], cwd=outside, env=env,
-                           capture_output=True, text=True, check=True).stdout.strip()
+    where = subprocess.run(
+        [venv / "bin" / "python", "-c", "import etmpc; print(etmpc.__file__)"],
+        cwd=outside,
+        env=env,
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout.strip()
     assert Path(where).is_relative_to(venv), where  # the installed package, not the checkout
     assert run("--version").stdout.startswith("etmpc ")
     for command in COMMANDS:
@@ -89,8 +108,20 @@ def test_the_installed_commands_work_outside_the_checkout(wheel, tmp_path):
         assert result.returncode == 0 and "usage: etmpc " + command in result.stdout, (command, result.stderr)
 
     shipped = REPO / "policies" / "cart_pendulum" / "learned.json"
-    result = run("evaluate", "cart_pendulum", "--policy", f"rl:{shipped}", "--policy", "every:3", "--episodes", "3",
-                 "--workers", "2", "--json", "installed.json")
+    result = run(
+        "evaluate",
+        "cart_pendulum",
+        "--policy",
+        f"rl:{shipped}",
+        "--policy",
+        "every:3",
+        "--episodes",
+        "3",
+        "--workers",
+        "2",
+        "--json",
+        "installed.json",
+    )
     assert result.returncode == 0, result.stderr
     from etmpc.evaluation.evaluate import evaluate  # the same evaluation from the checkout: the same numbers
 
@@ -105,8 +136,14 @@ def test_the_installed_commands_work_outside_the_checkout(wheel, tmp_path):
     assert result.returncode == 0 and "references: battery: " in result.stdout, result.stderr
 
     # `pip show` as this pip prints it (the venv's own, from ensurepip, may be too old to print License-Expression)
-    shown = subprocess.run([sys.executable, "-m", "pip", "--python", str(venv / "bin" / "python"), "show", "etmpc"],
-                           cwd=outside, env=env, capture_output=True, text=True, check=True).stdout
+    shown = subprocess.run(
+        [sys.executable, "-m", "pip", "--python", str(venv / "bin" / "python"), "show", "etmpc"],
+        cwd=outside,
+        env=env,
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
     assert "License-Expression: Apache-2.0" in shown.splitlines(), shown
 
     result = run("sweep", "cart_pendulum", "--quick", "--prices", "5e-5", "--out", "sweep", "--workers", "2")
@@ -140,8 +177,9 @@ def test_the_sdist_holds_what_the_wheel_is_built_from_and_twine_check_passes(sdi
     needed |= {p.relative_to(REPO).as_posix() for p in (REPO / "policies").glob("*/ppo.yml")}
     assert not needed - names, sorted(needed - names)  # CITATION.cff: `include CITATION.cff` in MANIFEST.in
     assert not {n for n in names if n.startswith("policies/") and not n.endswith("/ppo.yml")}  # no policy ships
-    checked = subprocess.run([sys.executable, "-m", "twine", "check", "--strict", str(sdist), str(wheel)],
-                             capture_output=True, text=True)
+    checked = subprocess.run(
+        [sys.executable, "-m", "twine", "check", "--strict", str(sdist), str(wheel)], capture_output=True, text=True
+    )
     assert checked.returncode == 0 and checked.stdout.count("PASSED") == 2, checked.stdout + checked.stderr
 
 

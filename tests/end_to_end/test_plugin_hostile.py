@@ -18,10 +18,17 @@ def test_a_plugin_that_exits_on_import_is_one_warning_line_each_and_the_command_
     (info / "entry_points.txt").write_text("[etmpc.tasks]\nexits = fake_exits\n\n[etmpc.policies]\nexits = fake_exits:KIND\n")
     env = dict(os.environ, PYTHONPATH=str(tmp_path), MUJOCO_GL=os.environ.get("MUJOCO_GL", "egl"))
     env.pop("PYTHONWARNINGS", None)
-    result = subprocess.run([sys.executable, "-m", "etmpc.cli", "evaluate", "--help"], capture_output=True, text=True,
-                            cwd=tmp_path, env=env, timeout=300)
+    result = subprocess.run(
+        [sys.executable, "-m", "etmpc.cli", "evaluate", "--help"],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        env=env,
+        timeout=300,
+    )
     assert result.returncode == 0, result.stderr
     assert "--policy" in result.stdout and "exits" not in result.stdout
     assert sorted(result.stderr.splitlines()) == [
         "etmpc: warning: policy kind plugin 'exits' (fake_exits:KIND) failed to load (SystemExit(0)); left out",
-        "etmpc: warning: task plugin 'exits' (fake_exits) failed to import (SystemExit(0)); its tasks are left out"]
+        "etmpc: warning: task plugin 'exits' (fake_exits) failed to import (SystemExit(0)); its tasks are left out",
+    ]

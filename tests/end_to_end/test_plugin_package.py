@@ -25,8 +25,12 @@ def venv(tmp_path_factory):
     where = tmp_path_factory.mktemp("plugin")
     subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(where / "venv")], check=True)
     python = where / "venv" / "bin" / "python"
-    purelib = subprocess.run([str(python), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
-                             check=True, capture_output=True, text=True).stdout.strip()
+    purelib = subprocess.run(
+        [str(python), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
+        check=True,
+        capture_output=True,
+        text=True,
+    ).stdout.strip()
     parent = sysconfig.get_paths()["purelib"]  # this environment's: etmpc and its dependencies
     Path(purelib, "_parent.pth").write_text(f"import site; site.addsitedir({parent!r})\n")
     shutil.copytree(EXAMPLE, where / "source", ignore=shutil.ignore_patterns("__pycache__", "*.egg-info", "build"))
@@ -37,8 +41,13 @@ def venv(tmp_path_factory):
         return subprocess.run([str(python), *argv], capture_output=True, text=True, cwd=where, env=env, timeout=600)
 
     def pip(*argv: str) -> None:
-        subprocess.run([sys.executable, "-m", "pip", "--python", str(python), "--no-input", "-q", *argv], check=True,
-                       cwd=where, env=env, timeout=600)
+        subprocess.run(
+            [sys.executable, "-m", "pip", "--python", str(python), "--no-input", "-q", *argv],
+            check=True,
+            cwd=where,
+            env=env,
+            timeout=600,
+        )
 
     return run, pip, where / "source"
 
@@ -66,18 +75,35 @@ def test_an_installed_plugin_adds_its_task_and_kind_everywhere_and_uninstalling_
     run, pip, source = venv
     before = run("-c", SEES)
     assert before.returncode == 0, before.stderr
-    assert before.stdout.splitlines() == ["tasks cart_pendulum cart_pendulum/kicks battery reacher",
-                                          "kinds always never every threshold rl self py sb3 rollout oracle"]
+    assert before.stdout.splitlines() == [
+        "tasks cart_pendulum cart_pendulum/kicks battery reacher",
+        "kinds always never every threshold rl self py sb3 rollout oracle",
+    ]
 
     pip("install", "--no-deps", "--no-build-isolation", str(source))
     after = run("-c", SEES)
     assert after.returncode == 0, after.stderr
-    assert after.stdout.splitlines() == ["tasks cart_pendulum cart_pendulum/kicks battery reacher slider",
-                                         "kinds always never every threshold rl self py sb3 rollout oracle driftage",
-                                         "suite () (1,)", "gym (12,)"]
+    assert after.stdout.splitlines() == [
+        "tasks cart_pendulum cart_pendulum/kicks battery reacher slider",
+        "kinds always never every threshold rl self py sb3 rollout oracle driftage",
+        "suite () (1,)",
+        "gym (12,)",
+    ]
 
-    evaluated = run("-m", "etmpc.cli", "evaluate", "slider", "--policy", "every:3", "--policy", "driftage:0.05:4",
-                    "--episodes", "3", "--workers", "1")
+    evaluated = run(
+        "-m",
+        "etmpc.cli",
+        "evaluate",
+        "slider",
+        "--policy",
+        "every:3",
+        "--policy",
+        "driftage:0.05:4",
+        "--episodes",
+        "3",
+        "--workers",
+        "1",
+    )
     assert evaluated.returncode == 0, evaluated.stderr
     assert "slider/track: objective (lower is better)" in evaluated.stdout and "driftage:0.05:4" in evaluated.stdout
     scored = run("-m", "etmpc.cli", "score", "driftage:0.05:4", "--task", "slider", "--episodes", "3", "--workers", "1")
@@ -93,5 +119,6 @@ def test_an_installed_plugin_adds_its_task_and_kind_everywhere_and_uninstalling_
     assert gone.returncode == 0 and gone.stdout == before.stdout, gone.stderr
     refused = run("-m", "etmpc.cli", "evaluate", "slider", "--policy", "every:3", "--episodes", "1")
     assert refused.returncode == 2
-    assert refused.stderr.strip() == ("etmpc: error: unknown task 'slider'; "
-                                      "valid: cart_pendulum, cart_pendulum/kicks, battery, reacher")
+    assert refused.stderr.strip() == (
+        "etmpc: error: unknown task 'slider'; valid: cart_pendulum, cart_pendulum/kicks, battery, reacher"
+    )

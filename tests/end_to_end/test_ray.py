@@ -58,14 +58,37 @@ def test_joins_an_existing_cluster_by_address(tmp_path):
     assert ray_cli is not None, "the ray extra installs the ray command next to python"
     port = _free_port()
     env = dict(os.environ, RAY_AUTH_MODE="token", RAY_AUTH_TOKEN=secrets.token_hex(16), RAY_USAGE_STATS_ENABLED="0")
-    subprocess.run([ray_cli, "start", "--head", f"--port={port}", "--num-cpus=2", "--include-dashboard=false"],
-                   env=env, check=True, capture_output=True, timeout=120)
+    subprocess.run(
+        [ray_cli, "start", "--head", f"--port={port}", "--num-cpus=2", "--include-dashboard=false"],
+        env=env,
+        check=True,
+        capture_output=True,
+        timeout=120,
+    )
     try:
         argv = ["evaluate", "battery", *(a for p in POLICIES for a in ("--policy", p)), "--episodes", "3"]
-        done = subprocess.run([sys.executable, "-m", "etmpc.cli", *argv, "--backend", "ray", "--address", f"127.0.0.1:{port}",
-                               "--json", str(tmp_path / "joined.json")], env=env, capture_output=True, text=True, timeout=300)
+        done = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "etmpc.cli",
+                *argv,
+                "--backend",
+                "ray",
+                "--address",
+                f"127.0.0.1:{port}",
+                "--json",
+                str(tmp_path / "joined.json"),
+            ],
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=300,
+        )
         assert done.returncode == 0, done.stderr
-        status = subprocess.run([ray_cli, "status", f"--address=127.0.0.1:{port}"], env=env, capture_output=True, text=True, timeout=120)
+        status = subprocess.run(
+            [ray_cli, "status", f"--address=127.0.0.1:{port}"], env=env, capture_output=True, text=True, timeout=120
+        )
         assert status.returncode == 0, "the cluster it joined is still up"
     finally:
         subprocess.run([ray_cli, "stop", "--force"], env=env, capture_output=True, timeout=120)

@@ -47,8 +47,7 @@ def _blocks() -> list:
             code = textwrap.dedent(match.group(2))
             name = page.relative_to(REPO).as_posix()
             line = text.count("\n", 0, match.start()) + 1
-            known = next((why for (where, marker), why in KNOWN_FAILURES.items() if where == name and marker in code),
-                         None)
+            known = next((why for (where, marker), why in KNOWN_FAILURES.items() if where == name and marker in code), None)
             marks = [pytest.mark.xfail(reason=known, strict=True)] if known else []
             found.append(pytest.param(name, code, id=f"{name}:{line}", marks=marks))
     return found
@@ -57,15 +56,23 @@ def _blocks() -> list:
 BLOCKS = _blocks()
 
 
-def _run(script: str, tmp_path: Path, cwd: Path | None = None, env: dict | None = None, args: tuple = (),
-         stdin: str | None = None, timeout: float = 600) -> subprocess.CompletedProcess:
+def _run(
+    script: str,
+    tmp_path: Path,
+    cwd: Path | None = None,
+    env: dict | None = None,
+    args: tuple = (),
+    stdin: str | None = None,
+    timeout: float = 600,
+) -> subprocess.CompletedProcess:
     """``script`` saved as a file and run by this python (or given on stdin, or to ``-c``, by ``args``)."""
     path = tmp_path / "snippet.py"
     path.write_text(script)
     command = [sys.executable, *(args or (str(path),))]
     environment = dict(os.environ, MUJOCO_GL="egl", PYTHONDONTWRITEBYTECODE="1", **(env or {}))
-    return subprocess.run(command, cwd=cwd or tmp_path, env=environment, capture_output=True, text=True,
-                          input=stdin, timeout=timeout)
+    return subprocess.run(
+        command, cwd=cwd or tmp_path, env=environment, capture_output=True, text=True, input=stdin, timeout=timeout
+    )
 
 
 def test_the_blocks_are_found():
@@ -84,8 +91,7 @@ def test_the_python_block_runs_as_a_script(page, code, tmp_path):
     for name in set(re.findall(r"[\"']([\w.-]+)/", code)):  # "policies/...": the checkout's folder, linked
         if (REPO / name).is_dir() and not (tmp_path / name).exists():
             (tmp_path / name).symlink_to(REPO / name)
-    done = _run(code, tmp_path, cwd=EXAMPLES if examples else None,
-                env={"PYTHONPATH": str(EXAMPLES)} if examples else None)
+    done = _run(code, tmp_path, cwd=EXAMPLES if examples else None, env={"PYTHONPATH": str(EXAMPLES)} if examples else None)
     output = done.stdout + done.stderr
     assert done.returncode == 0, f"{page}: exit {done.returncode}\n{output[-3000:]}"
     assert "Traceback" not in done.stderr, done.stderr[-3000:]
@@ -134,8 +140,10 @@ class AngleOrAge:
 result = etmpc.evaluate("cart_pendulum", ["every:3", AngleOrAge()], episodes=EPISODES, workers=WORKERS, progress=False)
 print("done", result.summaries[1].episodes)
 """
-REFUSED = ("policy angle-or-age: AngleOrAge is defined in __main__ ({}), which worker processes cannot import: "
-           'define it in a module (or a script run under `if __name__ == "__main__":`), or use workers=1')
+REFUSED = (
+    "policy angle-or-age: AngleOrAge is defined in __main__ ({}), which worker processes cannot import: "
+    'define it in a module (or a script run under `if __name__ == "__main__":`), or use workers=1'
+)
 
 
 @pytest.mark.parametrize("source", ["-c", "stdin"])

@@ -32,8 +32,12 @@ from etmpc.policies.sb3 import load_sb3  # noqa: E402
 
 from tests.conftest import REPO
 
-SHIPPED = {"cart_pendulum": "cart_pendulum", "cart_pendulum-kicks": "cart_pendulum/kicks", "battery": "battery",
-           "reacher": "reacher"}  # policies/<directory>: its task
+SHIPPED = {
+    "cart_pendulum": "cart_pendulum",
+    "cart_pendulum-kicks": "cart_pendulum/kicks",
+    "battery": "battery",
+    "reacher": "reacher",
+}  # policies/<directory>: its task
 BATTERY = env_id("battery")  # its gymnasium id (a version that grows with its observation)
 EPISODES = int(os.environ.get("ETMPC_SB3_EPISODES", "5"))  # test-set episodes 0 .. EPISODES - 1
 
@@ -50,8 +54,11 @@ def sb3_plays(model, env, episode: int) -> dict:
         done = terminated or truncated
     core = env.unwrapped.core
     ret = core.episode_return
-    return {"recompute": np.array(recompute), "forced": np.array(forced),
-            "objective": ret if core.system.objective_sense == "max" else -ret}
+    return {
+        "recompute": np.array(recompute),
+        "forced": np.array(forced),
+        "objective": ret if core.system.objective_sense == "max" else -ret,
+    }
 
 
 def evaluate_plays(task: str, spec: str, episodes: int, tmp_path: Path, monkeypatch) -> dict[int, dict]:
@@ -67,8 +74,7 @@ def evaluate_plays(task: str, spec: str, episodes: int, tmp_path: Path, monkeypa
 
     monkeypatch.setattr(evaluate_module, "play_test_episode", catching)
     out = tmp_path / f"{task.replace('/', '-')}.json"
-    assert main(["evaluate", task, "--policy", spec, "--episodes", str(episodes), "--workers", "1",
-                 "--json", str(out)]) == 0
+    assert main(["evaluate", task, "--policy", spec, "--episodes", str(episodes), "--workers", "1", "--json", str(out)]) == 0
     monkeypatch.undo()
     for run in json.loads(out.read_text())["runs"]:
         caught[run["episode"]] |= {"objective": run["objective"], "recomputes": run["recomputes"]}
@@ -99,21 +105,31 @@ def test_ppo_load_on_the_documented_environment_decides_as_etmpc_evaluate(direct
         # The control: the same model, stepped the same way on the environment without the keyword.
         raw = sb3_plays(model, plain, e)
         n = min(len(raw["recompute"]), len(ours["recompute"]))
-        control.append((int(raw["recompute"].sum()), int(ours["recompute"].sum()),
-                        int((raw["recompute"][:n] != ours["recompute"][:n]).sum()), len(raw["recompute"])))
-    lines.append(f"{task}: {EPISODES} episodes, {steps} steps compared ({asked} decided by the network), 0 mismatches; "
-                 "without normalize= (recomputes, with it, steps that differ, steps): " + ", ".join(map(str, control)))
+        control.append(
+            (
+                int(raw["recompute"].sum()),
+                int(ours["recompute"].sum()),
+                int((raw["recompute"][:n] != ours["recompute"][:n]).sum()),
+                len(raw["recompute"]),
+            )
+        )
+    lines.append(
+        f"{task}: {EPISODES} episodes, {steps} steps compared ({asked} decided by the network), 0 mismatches; "
+        "without normalize= (recomputes, with it, steps that differ, steps): " + ", ".join(map(str, control))
+    )
     print("\n" + "\n".join(lines))  # shown with -s
     assert any(c[2] > 0 for c in control), "without its normalisation the policy should decide otherwise"
 
 
 def test_the_keyword_refuses_another_tasks_normalisation_in_one_line():
     kicks = REPO / "policies" / "cart_pendulum-kicks" / "ppo.json"
-    for given, says in [(kicks, "its policy was trained on 'cart_pendulum/kicks', not 'cart_pendulum'"),
-                        (kicks.with_suffix(".zip"), "is a model; give its description, normalize="),
-                        (kicks.with_name("nosuch.json"), "no such file"),
-                        (REPO / "policies" / "cart_pendulum" / "learned.json", "is not an etmpc Stable-Baselines3 policy"),
-                        (3, "the path of a policy's .json is needed")]:
+    for given, says in [
+        (kicks, "its policy was trained on 'cart_pendulum/kicks', not 'cart_pendulum'"),
+        (kicks.with_suffix(".zip"), "is a model; give its description, normalize="),
+        (kicks.with_name("nosuch.json"), "no such file"),
+        (REPO / "policies" / "cart_pendulum" / "learned.json", "is not an etmpc Stable-Baselines3 policy"),
+        (3, "the path of a policy's .json is needed"),
+    ]:
         with pytest.raises(EtmpcError) as refused:
             gym.make("etmpc/cart_pendulum-balance-v0", normalize=given)
         assert says in str(refused.value) and len(str(refused.value).splitlines()) == 1, str(refused.value)
@@ -157,8 +173,9 @@ def test_a_model_saved_by_plain_model_save_is_scored_on_the_raw_observation(tmp_
 
     torch.set_num_threads(1)
     env = gym.make(BATTERY)
-    model = PPO("MlpPolicy", env, seed=0, n_steps=128, batch_size=64, n_epochs=1, learning_rate=1e-3,
-                device="cpu").learn(total_timesteps=256)
+    model = PPO("MlpPolicy", env, seed=0, n_steps=128, batch_size=64, n_epochs=1, learning_rate=1e-3, device="cpu").learn(
+        total_timesteps=256
+    )
     model.save(tmp_path / "m.zip")
     assert not (tmp_path / "m.json").exists()
     policy = load_sb3(str(tmp_path / "m.zip"), "battery")
@@ -173,8 +190,7 @@ def test_a_model_saved_by_plain_model_save_is_scored_on_the_raw_observation(tmp_
         load_sb3(str(tmp_path / "m.zip"), None)
 
 
-def test_a_model_trained_behind_vecnormalize_needs_its_statistics_which_save_normalization_writes(tmp_path, monkeypatch,
-                                                                                                    capsys):
+def test_a_model_trained_behind_vecnormalize_needs_its_statistics_which_save_normalization_writes(tmp_path, monkeypatch, capsys):
     from stable_baselines3 import PPO
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.vec_env import VecNormalize
@@ -195,6 +211,5 @@ def test_a_model_trained_behind_vecnormalize_needs_its_statistics_which_save_nor
     normalised = gym.make(BATTERY, normalize=str(tmp_path / "n.json"))
     assert _decisions_match(tmp_path / "n.zip", normalised, 2, tmp_path, monkeypatch) > 100
     with pytest.raises(EtmpcError, match="clip_obs=10 and epsilon=1e-08; this one has clip_obs=5.0"):
-        save_normalization(VecNormalize(make_vec_env(BATTERY, n_envs=1), clip_obs=5.0), "battery",
-                           tmp_path / "other.json")
+        save_normalization(VecNormalize(make_vec_env(BATTERY, n_envs=1), clip_obs=5.0), "battery", tmp_path / "other.json")
     vec.close()

@@ -113,14 +113,34 @@ def test_the_observation_is_the_error_features_and_their_squares():
     error = loop.x - loop.plan.state_at(loop.age)
     expected = np.concatenate([error, [loop.age]])
     np.testing.assert_array_equal(obs, np.concatenate([expected, expected**2]).astype(np.float32))
-    assert env.observation_names[:5] == ("error_cart_position", "error_cart_velocity", "error_pole_angle",
-                                         "error_pole_angular_velocity", "plan_age")
+    assert env.observation_names[:5] == (
+        "error_cart_position",
+        "error_cart_velocity",
+        "error_pole_angle",
+        "error_pole_angular_velocity",
+        "plan_age",
+    )
     battery = gym.make("etmpc/battery-trading-v1").unwrapped
     assert "price_error_eur_kwh" in battery.observation_names and len(battery.observation_names) == 2 * (1 + 1 + 10)
 
 
-BAD_ACTIONS = [2, -1, 0.5, "1", [0, 1], [1], (1,), None, np.float64(1.0), np.array([1]), np.array([[0]]),
-               np.array(1.0), np.bool_(True), np.array(True), b"\x01"]
+BAD_ACTIONS = [
+    2,
+    -1,
+    0.5,
+    "1",
+    [0, 1],
+    [1],
+    (1,),
+    None,
+    np.float64(1.0),
+    np.array([1]),
+    np.array([[0]]),
+    np.array(1.0),
+    np.bool_(True),
+    np.array(True),
+    b"\x01",
+]
 GOOD_ACTIONS = [0, 1, True, False, np.int64(1), np.uint8(0), np.int32(1), np.array(0), np.array(1, dtype=np.int8)]
 
 
@@ -204,13 +224,18 @@ def test_vectorised_environments_work():
         envs.close()
 
 
-@pytest.mark.parametrize("kwargs, says", [
-    ({"task": 3}, "task: a task name"), ({"task": "cartpole"}, "unknown task 'cartpole'"),
-    ({"recompute_price": -1.0}, "recompute_price: a price of a computation is a finite number >= 0"),
-    ({"recompute_price": "0.1"}, "recompute_price: '0.1' is not a number"),
-    ({"seed": -1}, "seed: a seed is a whole number"), ({"seed": 1.5}, "seed: 1.5 is not a whole number"),
-    ({"test_set": 3}, "test_set: a file path is needed"),
-])
+@pytest.mark.parametrize(
+    "kwargs, says",
+    [
+        ({"task": 3}, "task: a task name"),
+        ({"task": "cartpole"}, "unknown task 'cartpole'"),
+        ({"recompute_price": -1.0}, "recompute_price: a price of a computation is a finite number >= 0"),
+        ({"recompute_price": "0.1"}, "recompute_price: '0.1' is not a number"),
+        ({"seed": -1}, "seed: a seed is a whole number"),
+        ({"seed": 1.5}, "seed: 1.5 is not a whole number"),
+        ({"test_set": 3}, "test_set: a file path is needed"),
+    ],
+)
 def test_a_bad_argument_to_an_environment_is_one_clear_error(kwargs, says):
     from etmpc.common.errors import EtmpcError
 

@@ -72,8 +72,17 @@ def test_json_has_the_documented_fields(serial, cart_testset):
     assert data["test_set"]["sha256"] == cart_testset.sha256
     for policy in POLICIES:
         entry = data["policies"][policy]
-        for key in ("objective_mean", "objective_std", "objective_sense", "control_objective_mean", "recomputes_mean",
-                    "solver_failures", "episodes", "repeats", "nonfinite_episodes"):
+        for key in (
+            "objective_mean",
+            "objective_std",
+            "objective_sense",
+            "control_objective_mean",
+            "recomputes_mean",
+            "solver_failures",
+            "episodes",
+            "repeats",
+            "nonfinite_episodes",
+        ):
             assert key in entry
     assert len(data["runs"]) == 3 * 4
 

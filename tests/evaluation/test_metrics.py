@@ -83,8 +83,12 @@ def test_paired_differences_by_hand_in_both_senses():
     diff = [a - b for a, b in zip(mine, theirs)]
     for sense, better in (("max", sum(d > 0 for d in diff)), ("min", sum(d < 0 for d in diff))):
         row = metrics.paired_differences(mine, theirs, sense)
-        assert row == {"episodes": 4, "mean_difference": pytest.approx(statistics.mean(diff)),
-                       "ci95": pytest.approx(1.96 * statistics.stdev(diff) / 2.0), "better_episodes": better}
+        assert row == {
+            "episodes": 4,
+            "mean_difference": pytest.approx(statistics.mean(diff)),
+            "ci95": pytest.approx(1.96 * statistics.stdev(diff) / 2.0),
+            "better_episodes": better,
+        }
     empty = metrics.paired_differences([], [], "min")
     assert empty["episodes"] == 0 and math.isnan(empty["mean_difference"]) and empty["better_episodes"] == 0
 

@@ -18,8 +18,9 @@ W, H = 160, 120
 
 @pytest.fixture(scope="module")
 def rollout(tmp_path_factory):
-    return render_rollout("cart_pendulum", "every:3", episode=0, out=tmp_path_factory.mktemp("video") / "x.mp4",
-                          width=W, height=H)
+    return render_rollout(
+        "cart_pendulum", "every:3", episode=0, out=tmp_path_factory.mktemp("video") / "x.mp4", width=W, height=H
+    )
 
 
 def decode(path) -> list[np.ndarray]:
@@ -51,7 +52,7 @@ def test_video_shows_the_trajectory(rollout, cart_system):
     traj = rollout.trajectory
     frames = decode(rollout.path)
     for i in (0, 50, traj.steps):
-        (expected,) = render_frames(cart_system, env, traj.states[i:i + 1], W, H)
+        (expected,) = render_frames(cart_system, env, traj.states[i : i + 1], W, H)
         assert expected.shape == (H, W, 3) and expected.dtype == np.uint8
         assert np.abs(expected.astype(int) - frames[i].astype(int)).mean() < 4
 
@@ -68,7 +69,9 @@ def test_state_to_physics_matches_the_geometry(cart_system):
         tip = physics.named.data.site_xpos["tip"]
         np.testing.assert_allclose(tip, [eta + length * np.sin(beta), 0.0, length * np.cos(beta)], atol=1e-9)
         np.testing.assert_allclose(physics.named.data.xpos["cart"], [eta, 0.0, 0.0], atol=1e-12)
-        np.testing.assert_allclose(physics.named.data.cam_xpos[cart_system.camera][0], eta, atol=1e-12)  # the camera follows the cart
+        np.testing.assert_allclose(
+            physics.named.data.cam_xpos[cart_system.camera][0], eta, atol=1e-12
+        )  # the camera follows the cart
         np.testing.assert_allclose(physics.named.data.qvel[["slider", "hinge"]], [v, omega])
 
 
@@ -122,7 +125,12 @@ def test_failed_encoding_leaves_no_partial_file(tmp_path):
 
 def test_rollout_is_the_evaluated_episode(rollout, cart_system, cart_testset):
     """The rendered episode is repeat 0 of seed 0 on test-set episode 0, as `etmpc evaluate` plays it."""
-    traj = run_episode(cart_system, cart_system.make_env(), parse_policy("every:3", cart_system),
-                       policy_rng(0, 0, 0), cart_system.episode_from_arrays(cart_testset.episode_arrays(0)))
+    traj = run_episode(
+        cart_system,
+        cart_system.make_env(),
+        parse_policy("every:3", cart_system),
+        policy_rng(0, 0, 0),
+        cart_system.episode_from_arrays(cart_testset.episode_arrays(0)),
+    )
     np.testing.assert_array_equal(traj.states, rollout.trajectory.states)
     assert traj.recomputes == rollout.trajectory.recomputes

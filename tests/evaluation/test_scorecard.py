@@ -22,8 +22,14 @@ from etmpc.common.documents import content_sha256, sealed
 from etmpc.common.errors import EtmpcError
 from etmpc.evaluation import testsets
 from etmpc.evaluation.evaluate import evaluate
-from etmpc.evaluation.references import (SUITE_VERSION, References, build_references, load_references,
-                                         references_path, write_references)
+from etmpc.evaluation.references import (
+    SUITE_VERSION,
+    References,
+    build_references,
+    load_references,
+    references_path,
+    write_references,
+)
 from etmpc.evaluation.scorecard import TaskScore, aggregate, task_score
 from etmpc.systems import make_system, names
 
@@ -59,8 +65,23 @@ def test_a_score_is_the_formula_computed_by_hand(small_battery):
 
 def _row(task: str, scores) -> TaskScore:
     scores = list(map(float, scores))
-    return TaskScore(task, "mine", len(scores), 0.0, "min", 0.0, None, 0, 0, float(np.mean(scores)), 0.0, scores,
-                     0.0, {"solve": 1.0, "feedback": 0.5, "decide": 0.25, "total": 1.75}, "every:3")
+    return TaskScore(
+        task,
+        "mine",
+        len(scores),
+        0.0,
+        "min",
+        0.0,
+        None,
+        0,
+        0,
+        float(np.mean(scores)),
+        0.0,
+        scores,
+        0.0,
+        {"solve": 1.0, "feedback": 0.5, "decide": 0.25, "total": 1.75},
+        "every:3",
+    )
 
 
 def test_the_suites_interquartile_mean_is_the_mean_of_the_middle_half_of_every_episode_score():
@@ -115,8 +136,12 @@ def test_a_card_round_trips_through_its_json_missing_numbers_included(tmp_path):
 
     rows = [_row("battery", [10.0, -20.0, 5.0]), _row("reacher", [1.0]), failed_task("reacher", "other", "it failed")]
     rows[1] = replace(rows[1], score_ci95=math.nan)  # one episode: no interval
-    card = Scorecard(["battery", "reacher"], {"battery": {"best_periodic": "every:3", "oracle": "oracle:every:3"}}, rows,
-                     [aggregate(rows[:2]), aggregate(rows[2:])])
+    card = Scorecard(
+        ["battery", "reacher"],
+        {"battery": {"best_periodic": "every:3", "oracle": "oracle:every:3"}},
+        rows,
+        [aggregate(rows[:2]), aggregate(rows[2:])],
+    )
     text = write_json(tmp_path / "card.json", card.to_json()).read_text()
     assert "NaN" not in text  # strict JSON: null
     again = Scorecard.from_json(json.loads(text))
@@ -143,8 +168,7 @@ def test_the_stored_references_are_what_playing_the_episodes_again_gives(task):
 
 def test_scoring_plays_only_the_trigger_and_says_what_it_costs(tmp_path):
     best = json.loads(references_path("battery").read_text())["best"]
-    card = etmpc.score([best, "threshold:0.01"], tasks=["battery"], workers=1, progress=False,
-                       json_path=tmp_path / "card.json")
+    card = etmpc.score([best, "threshold:0.01"], tasks=["battery"], workers=1, progress=False, json_path=tmp_path / "card.json")
     rows = {r.policy: r for r in card.rows}
     assert rows[best].score == 0.0 and card.references["battery"]["best_periodic"] == best
     assert all(r.cpu_ms["solve"] > 0 and r.cpu_ms["total"] >= r.cpu_ms["solve"] for r in card.rows)
@@ -158,8 +182,7 @@ def test_on_another_test_set_the_references_are_computed_and_said_so(small_batte
     assert f"battery: no stored references for test set {path}: computing them for this run" in err
     assert f"references: battery: {refs.best} and {refs.oracle_spec} (computed)" in out
     figure = path.with_name("profile.png")
-    assert main(["score", "always", "--task", "battery", "--test-set", str(path), "--workers", "1",
-                 "--figure", str(figure)]) == 0
+    assert main(["score", "always", "--task", "battery", "--test-set", str(path), "--workers", "1", "--figure", str(figure)]) == 0
     assert figure.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
@@ -168,15 +191,19 @@ def test_a_trigger_that_fails_on_one_task_has_that_row_say_so_and_the_others_sco
     monkeypatch.setattr("sys.dont_write_bytecode", True)
     (tmp_path / "picky_trigger.py").write_text(  # the battery's state has one component, the cart pendulum's four
         "class T:\n    spec = 'picky'\n    stochastic = False\n    def decide(self, s, rng):\n"
-        "        if len(s.x) == 1:\n            raise RuntimeError('not for batteries')\n        return s.age >= 3\n")
-    code = main(["score", "py:picky_trigger:T", "--task", "battery", "--task", "cart_pendulum", "--workers", "2",
-                 "--json", "card.json"])
+        "        if len(s.x) == 1:\n            raise RuntimeError('not for batteries')\n        return s.age >= 3\n"
+    )
+    code = main(
+        ["score", "py:picky_trigger:T", "--task", "battery", "--task", "cart_pendulum", "--workers", "2", "--json", "card.json"]
+    )
     out, err = capsys.readouterr()
     assert code == 2
     assert "failed: policy py:picky_trigger:T: decide raised RuntimeError: not for batteries" in out
-    assert err.strip().splitlines()[-1] == ("etmpc: error: not every trigger could be scored on every task: "
-                                            "py:picky_trigger:T on battery (see its row); card.json not written (a card "
-                                            "with a failed row never is)")
+    assert err.strip().splitlines()[-1] == (
+        "etmpc: error: not every trigger could be scored on every task: "
+        "py:picky_trigger:T on battery (see its row); card.json not written (a card "
+        "with a failed row never is)"
+    )
     assert not (tmp_path / "card.json").exists()
     card = etmpc.score(["py:picky_trigger:T"], tasks=["battery", "cart_pendulum"], workers=1, progress=False)
     rows = {r.task: r for r in card.rows}
@@ -185,13 +212,16 @@ def test_a_trigger_that_fails_on_one_task_has_that_row_say_so_and_the_others_sco
     assert rows["cart_pendulum"].score == 0.0  # it plays every:3, the cart pendulum's best periodic schedule
 
 
-@pytest.mark.parametrize("argv, says", [
-    (["score", "every:3", "--task", "cartpole"], "unknown task 'cartpole'"),
-    (["score", "--task", "battery"], "give at least one trigger"),
-    (["score", "every:3", "every:3"], "given twice"),
-    (["score", "every:3", "--task", "battery", "--task", "reacher", "--test-set", "x.npz"], "x.npz not found"),
-    (["score", "every:3", "--references"], "--references rebuilds the stored references only"),
-])
+@pytest.mark.parametrize(
+    "argv, says",
+    [
+        (["score", "every:3", "--task", "cartpole"], "unknown task 'cartpole'"),
+        (["score", "--task", "battery"], "give at least one trigger"),
+        (["score", "every:3", "every:3"], "given twice"),
+        (["score", "every:3", "--task", "battery", "--task", "reacher", "--test-set", "x.npz"], "x.npz not found"),
+        (["score", "every:3", "--references"], "--references rebuilds the stored references only"),
+    ],
+)
 def test_bad_input_is_one_line(argv, says, tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     assert main(argv) == 2
@@ -202,10 +232,12 @@ def test_bad_input_is_one_line(argv, says, tmp_path, monkeypatch, capsys):
 
 def test_references_made_for_another_test_set_or_suite_version_are_refused(tmp_path, small_battery):
     stored = json.loads(references_path("battery").read_text())
-    for change, says in ((dict(test_set_sha256="0" * 64), "were made on test set 000000000000"),
-                         (dict(suite_version=SUITE_VERSION + 1), f"suite version {SUITE_VERSION + 1}"),
-                         (dict(recompute_price=1.0), "at price 1.0"),
-                         (dict(oracle=stored["oracle"][:3]), "inconsistent")):
+    for change, says in (
+        (dict(test_set_sha256="0" * 64), "were made on test set 000000000000"),
+        (dict(suite_version=SUITE_VERSION + 1), f"suite version {SUITE_VERSION + 1}"),
+        (dict(recompute_price=1.0), "at price 1.0"),
+        (dict(oracle=stored["oracle"][:3]), "inconsistent"),
+    ):
         path = tmp_path / "refs.json"
         path.write_text(json.dumps(sealed(stored | change)))  # sealed: the check of the content itself is reached
         with pytest.raises(EtmpcError, match=f"{says}.*rebuild them with: etmpc score --references --task battery"):
@@ -248,15 +280,18 @@ def _nan_objective(data: dict) -> None:
     data["periodic"]["every:4"][0] = None
 
 
-@pytest.mark.parametrize("edit, says", [
-    (_swap_best, "best names 'every:2', but every:1 has the best mean objective"),
-    (_worse_oracle, "the oracle does worse than every:1 on episode 7"),
-    (_periodic_a_list, "periodic must hold every:1 .. every:20 in order"),
-    (_episodes_text, "episodes '100' is not a count"),
-    (_best_a_number, "best names 3"),
-    (_a_missing_schedule, "periodic must hold every:1 .. every:20"),
-    (_nan_objective, "need 100 finite objectives"),
-])
+@pytest.mark.parametrize(
+    "edit, says",
+    [
+        (_swap_best, "best names 'every:2', but every:1 has the best mean objective"),
+        (_worse_oracle, "the oracle does worse than every:1 on episode 7"),
+        (_periodic_a_list, "periodic must hold every:1 .. every:20 in order"),
+        (_episodes_text, "episodes '100' is not a count"),
+        (_best_a_number, "best names 3"),
+        (_a_missing_schedule, "periodic must hold every:1 .. every:20"),
+        (_nan_objective, "need 100 finite objectives"),
+    ],
+)
 def test_references_that_do_not_hold_together_are_refused_even_when_sealed(edit, says, tmp_path):
     """Each edit is sealed again, as a careful forger would: the content checks themselves refuse it."""
     stored = json.loads(references_path("battery").read_text())
@@ -287,8 +322,9 @@ def test_references_edited_by_hand_are_refused_by_their_checksum(tmp_path):
 def test_a_references_file_round_trips(small_battery, tmp_path):
     _, refs = small_battery
     path = write_references(refs, tmp_path / "refs.json")
-    assert load_references("battery", refs.test_set_sha256, path) == References(**{
-        k: v for k, v in json.loads(path.read_text()).items() if k not in ("format", "sha256")})
+    assert load_references("battery", refs.test_set_sha256, path) == References(
+        **{k: v for k, v in json.loads(path.read_text()).items() if k not in ("format", "sha256")}
+    )
 
 
 def test_a_worker_builds_its_mpc_before_any_episode_so_no_solve_time_holds_the_build():

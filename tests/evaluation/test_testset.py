@@ -15,8 +15,23 @@ from etmpc.systems import make_system, names, stored_seed
 @pytest.mark.parametrize("domain", [name for name in names() if stored_seed(name) is not None])
 def test_stored_test_set_is_etmpc_testset_with_its_documented_seed(domain, tmp_path):
     out = tmp_path / "set.npz"
-    result = subprocess.run([sys.executable, "-m", "etmpc.cli", "testset", domain, "--seed", str(stored_seed(domain)),
-                             "--episodes", str(testset.STORED_EPISODES), "--out", str(out)], capture_output=True, text=True)
+    result = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "etmpc.cli",
+            "testset",
+            domain,
+            "--seed",
+            str(stored_seed(domain)),
+            "--episodes",
+            str(testset.STORED_EPISODES),
+            "--out",
+            str(out),
+        ],
+        capture_output=True,
+        text=True,
+    )
     assert result.returncode == 0, result.stdout + result.stderr
     system = make_system(domain)
     stored = testset.default_path(system.domain, system.task)
@@ -80,12 +95,15 @@ def test_missing_checksum(copy):
     assert "etmpc testset" not in str(info.value)
 
 
-@pytest.mark.parametrize("change, message", [
-    (lambda a, m: ({**a, "disturbance": a["disturbance"][:2]}, m), "not one row per each"),
-    (lambda a, m: ({}, m), "no episode arrays"),
-    (lambda a, m: (a, dict(m, episodes=0)), "0 episodes"),
-    (lambda a, m: ({**a, "initial_state": np.full_like(a["initial_state"], np.inf)}, m), "not all finite"),
-])
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        (lambda a, m: ({**a, "disturbance": a["disturbance"][:2]}, m), "not one row per each"),
+        (lambda a, m: ({}, m), "no episode arrays"),
+        (lambda a, m: (a, dict(m, episodes=0)), "0 episodes"),
+        (lambda a, m: ({**a, "initial_state": np.full_like(a["initial_state"], np.inf)}, m), "not all finite"),
+    ],
+)
 def test_contents_are_checked_not_only_the_checksum(tmp_path, cart_testset, change, message):
     arrays = {k: np.array(v[:4]) for k, v in cart_testset.arrays.items()}
     arrays, meta = change(arrays, dict(cart_testset.meta, episodes=4))

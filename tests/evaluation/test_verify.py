@@ -17,8 +17,12 @@ from etmpc.evaluation.verify import sample, verify
 def card(tmp_path_factory):
     folder = tmp_path_factory.mktemp("card")
     path = folder / "card.json"
-    assert main(["score", "every:3", "threshold:0.02", "--task", "battery", "--episodes", "4", "--workers", "1",
-                 "--json", str(path)]) == 0
+    assert (
+        main(
+            ["score", "every:3", "threshold:0.02", "--task", "battery", "--episodes", "4", "--workers", "1", "--json", str(path)]
+        )
+        == 0
+    )
     return path
 
 
@@ -53,9 +57,11 @@ def test_one_edited_episode_kept_consistent_is_found_by_the_replay(card, tmp_pat
 
     forged = _edited(card, tmp_path, better)
     verdict = verify(forged, size=0)
-    assert verdict.mismatches == [f"{forged}: battery threshold:0.02 episode 2: score "
-                                  f"{json.loads(forged.read_text())['rows'][1]['episode_scores'][2]!r} in the card, "
-                                  f"{json.loads(card.read_text())['rows'][1]['episode_scores'][2]!r} replayed"]
+    assert verdict.mismatches == [
+        f"{forged}: battery threshold:0.02 episode 2: score "
+        f"{json.loads(forged.read_text())['rows'][1]['episode_scores'][2]!r} in the card, "
+        f"{json.loads(card.read_text())['rows'][1]['episode_scores'][2]!r} replayed"
+    ]
     assert main(["verify", str(forged), "--sample", "0", "--workers", "1"]) == 2
     out, err = capsys.readouterr()
     assert out.strip() == verdict.mismatches[0]
@@ -70,14 +76,17 @@ def test_an_edited_number_that_does_not_follow_from_the_episodes_is_named(card, 
     assert [line for line in verify(forged, size=1).mismatches if "aggregate iqm 99.0" in line]
 
 
-@pytest.mark.parametrize("edit, says", [
-    (lambda d: d.update(suite_version=d["suite_version"] + 1), "suite version"),
-    (lambda d: d["task_versions"].update(battery=0), "scored battery at version 0"),
-    (lambda d: d["references"]["battery"].update(stored=None), "another test set"),
-    (lambda d: d["references"]["battery"].update(test_set_sha256="0" * 64), "on test set 000000000000"),
-    (lambda d: d["rows"][0].update(policy="evry:3"), "cannot replay evry:3 on battery"),
-    (lambda d: d.update(format="something"), "is not an etmpc scorecard"),
-])
+@pytest.mark.parametrize(
+    "edit, says",
+    [
+        (lambda d: d.update(suite_version=d["suite_version"] + 1), "suite version"),
+        (lambda d: d["task_versions"].update(battery=0), "scored battery at version 0"),
+        (lambda d: d["references"]["battery"].update(stored=None), "another test set"),
+        (lambda d: d["references"]["battery"].update(test_set_sha256="0" * 64), "on test set 000000000000"),
+        (lambda d: d["rows"][0].update(policy="evry:3"), "cannot replay evry:3 on battery"),
+        (lambda d: d.update(format="something"), "is not an etmpc scorecard"),
+    ],
+)
 def test_a_card_that_is_not_this_suites_result_is_one_line(card, tmp_path, edit, says, capsys):
     forged = _edited(card, tmp_path, edit)
     with pytest.raises(EtmpcError, match=says):

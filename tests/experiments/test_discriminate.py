@@ -13,8 +13,10 @@ from etmpc.systems import make_system
 def test_discriminate_picks_the_best_periodic_schedule_and_compares_at_equal_rate(tmp_path, capsys):
     out = tmp_path / "sub" / "discriminate.json"
     price = 1e-3
-    assert main(["discriminate", "cart_pendulum", "--episodes", "2", "--price", str(price), "--workers", "1",
-                 "--json", str(out)]) == 0
+    assert (
+        main(["discriminate", "cart_pendulum", "--episodes", "2", "--price", str(price), "--workers", "1", "--json", str(out)])
+        == 0
+    )
     printed = capsys.readouterr().out
     found = json.loads(out.read_text())
     system = make_system("cart_pendulum")
@@ -30,7 +32,8 @@ def test_discriminate_picks_the_best_periodic_schedule_and_compares_at_equal_rat
     mean = {spec: np.mean([r["control_objective"] + price * r["recomputes"] for r in by_policy[spec]]) for spec in periodic}
     best = min(periodic, key=lambda spec: (mean[spec], spec))
     assert found["best_periodic"] == best and printed.startswith(
-        f"cart_pendulum: best periodic schedule at price {price:g}: {best}; 2 episodes, ")
+        f"cart_pendulum: best periodic schedule at price {price:g}: {best}; 2 episodes, "
+    )
     events = [f"threshold:{x:g}" for x in system.benchmark.sweep_thresholds]
     assert list(found["rows"]) == [*events, f"oracle:{best}", f"rollout:{best}:4:20"]
     assert set(by_policy) == {*periodic, *found["rows"]}

@@ -25,10 +25,18 @@ def test_dpis_count_is_every_interval_its_loop_and_rollouts_simulated(tmp_path, 
     monkeypatch.setattr(Balance, "after_step", counted)
     system = make_system("cart_pendulum")
     steps = system.episode_steps
-    config = TrainConfig("cart_pendulum", seeds=(0,), episodes=2, eval_every=2, eval_episodes=1, normalisation_episodes=1,
-                         algorithm="dpi", features="error", validation_episodes=1,
-                         dpi=dpi.Settings(futures=2, horizon=5, states_per_episode=3, bases=("always", "every:3"),
-                                          selection_episodes=1))
+    config = TrainConfig(
+        "cart_pendulum",
+        seeds=(0,),
+        episodes=2,
+        eval_every=2,
+        eval_episodes=1,
+        normalisation_episodes=1,
+        algorithm="dpi",
+        features="error",
+        validation_episodes=1,
+        dpi=dpi.Settings(futures=2, horizon=5, states_per_episode=3, bases=("always", "every:3"), selection_episodes=1),
+    )
     train(config, tmp_path, workers=1, progress=False)
     checkpoint = json.loads((tmp_path / "checkpoint.json").read_text())
     curve = json.loads((tmp_path / "curve.json").read_text())

@@ -27,14 +27,15 @@ from etmpc.evaluation.workers import policy_rng
 from tests.conftest import REPO
 
 
-
 def test_forecast_figure_draws_truth_and_every_plans_forecast(battery_system, battery_testset):
     episode = battery_system.episode_from_arrays(battery_testset.episode_arrays(0))
-    traj = run_episode(battery_system, battery_system.make_env(), parse_policy("every:20", battery_system),
-                       None, episode)
+    traj = run_episode(battery_system, battery_system.make_env(), parse_policy("every:20", battery_system), None, episode)
     fig = forecast_figure(episode, [("every:20", traj)], dt_s=10.0, mean_price=0.05)
     production_ax, price_ax = fig.axes
-    for ax, true, key in ((production_ax, episode.production_kw, "production_kw"), (price_ax, episode.price_eur_kwh, "price_eur_kwh")):
+    for ax, true, key in (
+        (production_ax, episode.production_kw, "production_kw"),
+        (price_ax, episode.price_eur_kwh, "price_eur_kwh"),
+    ):
         solid = [line for line in ax.get_lines() if line.get_linestyle() == "-" and line.get_marker() in ("None", "")]
         dashed = [line for line in ax.get_lines() if line.get_linestyle() == "--"]
         np.testing.assert_array_equal(solid[0].get_ydata(), true[:100])
@@ -54,17 +55,19 @@ def _figure(capsys, *args) -> tuple[int, str, str]:
 
 def test_forecasts_command_writes_the_figure_of_the_episode(tmp_path, capsys, battery_system, battery_testset):
     out = tmp_path / "fig1.png"
-    code, stdout, err = _figure(capsys, "forecasts", "--episode", 5, "--policy", "every:20", "--policy", "every:5",
-                                "--out", out)
+    code, stdout, err = _figure(capsys, "forecasts", "--episode", 5, "--policy", "every:20", "--policy", "every:5", "--out", out)
     assert code == 0 and stdout == f"wrote {out}\n", err
     image = matplotlib.image.imread(out)
     assert image.shape[0] > 400 and image.shape[1] > 400 and image.std() > 0.05
     episode = battery_system.episode_from_arrays(battery_testset.episode_arrays(5))
     env = battery_system.make_env()
-    runs = [(spec, run_episode(battery_system, env, parse_policy(spec, battery_system), None, episode))
-            for spec in ("every:20", "every:5")]
-    again = figures.save_png_atomically(figures.forecast_figure(episode, runs, 10.0, battery_system.terminal_price),
-                                        tmp_path / "again.png", dpi=120)
+    runs = [
+        (spec, run_episode(battery_system, env, parse_policy(spec, battery_system), None, episode))
+        for spec in ("every:20", "every:5")
+    ]
+    again = figures.save_png_atomically(
+        figures.forecast_figure(episode, runs, 10.0, battery_system.terminal_price), tmp_path / "again.png", dpi=120
+    )
     assert out.read_bytes() == again.read_bytes()  # episode 5 under both policies, drawn as forecast_figure draws it
     assert sorted(p.name for p in tmp_path.iterdir()) == ["again.png", "fig1.png"]
 
@@ -76,12 +79,15 @@ def test_forecasts_command_default_path(tmp_path, capsys, monkeypatch):
     assert matplotlib.image.imread(tmp_path / "results" / "figure1_battery_forecasts.png").shape[1] > 400
 
 
-@pytest.mark.parametrize("args, message", [
-    (("--episode", "100"), "out of range"),
-    (("--episode", "-1"), "must be >= 0"),
-    (("--policy", "every:0"), "bad policy 'every:0'"),
-    (("--policy", "always", "--policy", "always"), "policy always is given twice"),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (("--episode", "100"), "out of range"),
+        (("--episode", "-1"), "must be >= 0"),
+        (("--policy", "every:0"), "bad policy 'every:0'"),
+        (("--policy", "always", "--policy", "always"), "policy always is given twice"),
+    ],
+)
 def test_forecasts_command_rejects_bad_input(tmp_path, capsys, args, message):
     code, _, err = _figure(capsys, "forecasts", *args, "--out", tmp_path / "x.png")
     assert code == 2 and message in err and err.count("\n") == 1 and "Traceback" not in err
@@ -181,8 +187,9 @@ def _learned_policies(root: Path, domain: str, nx: int, biases=(-1.0, 0.0, 1.0))
 def test_trajectory_command_plays_the_episode_as_evaluate_does(tmp_path, capsys):
     """A stochastic policy, seed 3, episode 2: the command's objective is evaluate's for that run."""
     spec = _learned_policies(tmp_path / "run", "battery", 1, biases=(0.5,))[0]
-    code, stdout, err = _figure(capsys, "trajectory", "battery", "--policy", spec, "--episode", 2, "--seed", 3,
-                                "--out", tmp_path / "out" / "traj.png")
+    code, stdout, err = _figure(
+        capsys, "trajectory", "battery", "--policy", spec, "--episode", 2, "--seed", 3, "--out", tmp_path / "out" / "traj.png"
+    )
     assert code == 0, err
     run = evaluate("battery", [spec], episodes=3, workers=1, seed=3, progress=False).runs[2]
     assert run.episode == 2 and f"objective {run.objective!r}, {run.recomputes} computations" in stdout
@@ -212,13 +219,16 @@ def test_trajectory_command_plays_a_task_of_a_domain_with_its_shipped_policy(tmp
     assert out.name.startswith("trajectory_cart_pendulum-kicks_rl-") and out.name.endswith("_ep1.png")
 
 
-@pytest.mark.parametrize("args, message", [
-    (("pendulum", "--policy", "always"), "unknown task 'pendulum'"),
-    (("cart_pendulum", "--policy", "every:0"), "bad policy 'every:0'"),
-    (("battery", "--policy", "always", "--episode", "100"), "out of range"),
-    (("battery", "--policy", "always", "--episode", "one"), "'one' is not a whole number"),
-    (("cart_pendulum", "--policy", f"rl:{REPO / 'policies' / 'battery' / 'learned.json'}"), "was trained on 'battery'"),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (("pendulum", "--policy", "always"), "unknown task 'pendulum'"),
+        (("cart_pendulum", "--policy", "every:0"), "bad policy 'every:0'"),
+        (("battery", "--policy", "always", "--episode", "100"), "out of range"),
+        (("battery", "--policy", "always", "--episode", "one"), "'one' is not a whole number"),
+        (("cart_pendulum", "--policy", f"rl:{REPO / 'policies' / 'battery' / 'learned.json'}"), "was trained on 'battery'"),
+    ],
+)
 def test_trajectory_command_rejects_bad_input(tmp_path, capsys, args, message):
     code, _, err = _figure(capsys, "trajectory", *args, "--out", tmp_path / "x.png")
     assert code == 2 and message in err, err
@@ -353,7 +363,10 @@ def test_bars_command_rejects_bad_input(tmp_path, capsys, monkeypatch, cart_eval
         (("fixed.json", "missing.json"), "missing.json not found"),
         (("broken.json",), "broken.json is not valid JSON"),
         (("other.json",), "other.json is not an `etmpc evaluate --json` document"),
-        (("fixed.json", "battery.json"), "mismatched tasks: fixed.json evaluates cart_pendulum/balance, battery.json battery/trading"),
+        (
+            ("fixed.json", "battery.json"),
+            "mismatched tasks: fixed.json evaluates cart_pendulum/balance, battery.json battery/trading",
+        ),
         (("fixed.json", "--out", "x.json"), "argument --out: x.json does not end in .png"),
         (("fixed.json", "named.png", "--out", "named.png"), "--out named.png would overwrite the evaluation named.png"),
     ]

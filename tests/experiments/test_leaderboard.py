@@ -13,7 +13,6 @@ from etmpc.experiments.leaderboard import BEGIN, END, build, headline, table_in
 from tests.conftest import REPO
 
 
-
 @pytest.fixture(scope="module")
 def board(tmp_path_factory):
     out = tmp_path_factory.mktemp("board")

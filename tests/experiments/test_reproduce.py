@@ -17,10 +17,27 @@ from etmpc.systems import folder_name, make_system, names
 
 from tests.conftest import REPO
 
-TINY = Settings(seeds=(0, 1), episodes=2, eval_every=1, eval_episodes=2, test_episodes=3, repeats=2, record_episodes=1,
-                video_size=(64, 48), dpi_seeds=(0, 1), dpi_episodes=2, dpi_eval_every=1, dpi_labels=3, dpi_futures=2,
-                dpi_horizon=5, validation_episodes=2, rollout_episodes=2, rollout_futures=2, rollout_horizon=5,
-                ppo_timesteps=512)
+TINY = Settings(
+    seeds=(0, 1),
+    episodes=2,
+    eval_every=1,
+    eval_episodes=2,
+    test_episodes=3,
+    repeats=2,
+    record_episodes=1,
+    video_size=(64, 48),
+    dpi_seeds=(0, 1),
+    dpi_episodes=2,
+    dpi_eval_every=1,
+    dpi_labels=3,
+    dpi_futures=2,
+    dpi_horizon=5,
+    validation_episodes=2,
+    rollout_episodes=2,
+    rollout_futures=2,
+    rollout_horizon=5,
+    ppo_timesteps=512,
+)
 
 
 @pytest.fixture(scope="module")
@@ -47,8 +64,11 @@ def test_json_equals_a_direct_evaluation(run, domain):
     assert r["learned"]["objective_mean"] == pytest.approx(np.mean([x.objective for x in learned.runs]), rel=1e-12)
     assert r["learned"]["per_seed"] == [s.objective_mean for s in learned.summaries]
     # The paired comparison, recomputed here from the two direct evaluations.
-    diff = [np.mean([x.objective for x in learned.runs if x.episode == e])
-            - next(x.objective for x in fixed.runs if x.policy == best.policy and x.episode == e) for e in range(3)]
+    diff = [
+        np.mean([x.objective for x in learned.runs if x.episode == e])
+        - next(x.objective for x in fixed.runs if x.policy == best.policy and x.episode == e)
+        for e in range(3)
+    ]
     assert r["paired"]["mean_difference"] == pytest.approx(np.mean(diff), rel=1e-12)
     assert r["paired"]["ci95"] == pytest.approx(1.96 * np.std(diff, ddof=1) / np.sqrt(3), rel=1e-12)
 
@@ -96,7 +116,9 @@ def test_report_states_the_json_numbers_and_the_files_exist(run):
         if domain not in PAPER:
             continue
         (claim,) = [line for line in against.splitlines() if f"best on {domain}," in line]
-        verdict = "Holds" if r["margin_percent"] > 0 and r["paired"]["ci95"] < abs(r["paired"]["mean_difference"]) else "Does not hold"
+        verdict = (
+            "Holds" if r["margin_percent"] > 0 and r["paired"]["ci95"] < abs(r["paired"]["mean_difference"]) else "Does not hold"
+        )
         assert verdict in claim and f"{r['margin_percent']:+.2f} %" in claim
     assert results["software"]["mujoco"] == "3.17.0" and results["machine"]["cores"] >= 1
 
@@ -116,8 +138,9 @@ def test_a_second_run_continues_and_other_settings_are_refused(run):
 def test_make_sweep_adds_the_trade_off_curves_to_a_finished_run(tmp_path, monkeypatch):
     """`make reproduce`, then `make sweep` on the same directory: the second redoes no stage of the
     first, and adds each task's sweep (exactly its pareto.json) and its section to the report."""
-    tiny = sweeps.SweepSettings(prices=(0.0, 1e-3), episodes=1, thresholds=(0.01,), futures=1, horizon=2, learner=None,
-                                self_trigger=None)
+    tiny = sweeps.SweepSettings(
+        prices=(0.0, 1e-3), episodes=1, thresholds=(0.01,), futures=1, horizon=2, learner=None, self_trigger=None
+    )
     monkeypatch.setattr(sweeps.SweepSettings, "default", classmethod(lambda cls, domain, quick=False: tiny))
     first = reproduce(tmp_path, TINY, workers=1, domains=["battery"], progress=False)
     mtimes = {p: p.stat().st_mtime_ns for p in tmp_path.rglob("*") if p.is_file() and p.name not in ("results.json", "REPORT.md")}
@@ -210,6 +233,7 @@ def test_the_run_ships_ppo_with_its_hyperparameters_and_draws_every_learners_sam
         assert (shipped / "ppo.zip").read_bytes() == (ppo_dir / "selected.zip").read_bytes()
         assert (shipped / "ppo.json").read_bytes() == (ppo_dir / "selected.json").read_bytes()
         from etmpc.learning import hyperparams
+
         used = hyperparams.load(shipped / "ppo.yml", name)
         assert used.timesteps == 512 and used.reward_baseline == hyperparams.shipped(name).reward_baseline
         # PPO's curve is its checkpoints on the test set; its last point is what the run simulated, the

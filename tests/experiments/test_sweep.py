@@ -24,7 +24,9 @@ def test_re_pricing_an_evaluation_gives_what_evaluating_at_that_price_gives():
     assert priced["recompute_price"] == 1e-3 and free["recompute_price"] == 5e-5
     for a, b in zip(free["runs"], priced["runs"], strict=True):
         assert (a["control_objective"], a["recomputes"]) == (b["control_objective"], b["recomputes"])  # decisions: price-free
-        assert front_numbers.objective(a["control_objective"], a["recomputes"], 1e-3, "min") == pytest.approx(b["objective"], rel=1e-12)
+        assert front_numbers.objective(a["control_objective"], a["recomputes"], 1e-3, "min") == pytest.approx(
+            b["objective"], rel=1e-12
+        )
 
 
 def _table(rows: dict) -> dict:
@@ -71,15 +73,22 @@ def test_a_dominated_schedule_is_not_part_of_the_front():
 def test_the_ci_is_the_paired_normal_interval():
     gains = np.array([0.1, -0.2, 0.4, 0.3])
     cells = [(2.0 - g, 50) for g in gains]  # at every:2's rate: the front is every:2 itself
-    row = front_numbers.versus_front(_table({"every:1": [(1.0, 100)] * 4, "every:2": [(2.0, 50)] * 4, "every:4": [(4.0, 25)] * 4,
-                                  "event": cells}), PERIODIC, "event", "min")
+    row = front_numbers.versus_front(
+        _table({"every:1": [(1.0, 100)] * 4, "every:2": [(2.0, 50)] * 4, "every:4": [(4.0, 25)] * 4, "event": cells}),
+        PERIODIC,
+        "event",
+        "min",
+    )
     assert row["gain"] == pytest.approx(gains.mean())
     assert row["gain_ci95"] == pytest.approx(1.96 * gains.std(ddof=1) / 2.0)
 
 
 def test_the_best_periodic_schedule_and_the_nearest_one_match_brute_force():
-    runs = [{"policy": spec, "episode": e, "finite": True, "control_objective": c, "recomputes": n}
-            for spec, cells in BASE.items() for e, (c, n) in enumerate(cells)]
+    runs = [
+        {"policy": spec, "episode": e, "finite": True, "control_objective": c, "recomputes": n}
+        for spec, cells in BASE.items()
+        for e, (c, n) in enumerate(cells)
+    ]
     fixed = {"runs": runs}
     for price in (0.0, 0.01, 0.05, 1.0):
         brute = min(PERIODIC, key=lambda s: np.mean([c + price * n for c, n in BASE[s]]))
@@ -101,12 +110,30 @@ def test_settings_refuse_bad_prices():
         assert len(benchmark.prices) >= 5 and make_system(task).recompute_price in benchmark.prices
 
 
-TINY_LEARNER = sw.LearnerSettings(seeds=(0,), episodes=2, eval_every=2, labels=3, futures=1, horizon=2,
-                                  validation_episodes=2, bases=("every:3", "every:20"), selection_episodes=1)
-TINY_SELF = SelfSettings(bases=("every:3", "every:20"), selection_episodes=1, episodes=2, solves_per_episode=2, futures=1,
-                         horizon=2, ridges=(0.1,), validation_episodes=2)
-TINY = sw.SweepSettings(prices=(5e-5, 5e-3), episodes=1, thresholds=(0.3, 1.0), futures=1, horizon=2, learner=TINY_LEARNER,
-                        self_trigger=TINY_SELF)
+TINY_LEARNER = sw.LearnerSettings(
+    seeds=(0,),
+    episodes=2,
+    eval_every=2,
+    labels=3,
+    futures=1,
+    horizon=2,
+    validation_episodes=2,
+    bases=("every:3", "every:20"),
+    selection_episodes=1,
+)
+TINY_SELF = SelfSettings(
+    bases=("every:3", "every:20"),
+    selection_episodes=1,
+    episodes=2,
+    solves_per_episode=2,
+    futures=1,
+    horizon=2,
+    ridges=(0.1,),
+    validation_episodes=2,
+)
+TINY = sw.SweepSettings(
+    prices=(5e-5, 5e-3), episodes=1, thresholds=(0.3, 1.0), futures=1, horizon=2, learner=TINY_LEARNER, self_trigger=TINY_SELF
+)
 
 
 @pytest.fixture(scope="module")
@@ -117,10 +144,23 @@ def tiny_sweep(tmp_path_factory):
 
 def test_a_sweep_writes_every_point_and_continues_without_redoing_work(tiny_sweep):
     out, pareto = tiny_sweep
-    assert sorted(p.name for p in out.iterdir()) == ["SWEEP.md", "fixed.json", "learned_0.json", "learned_1.json", "pareto.json",
-                                                    "pareto.png", "price_0.json", "price_1.json", "self_0.json", "self_1.json",
-                                                    "self_policy_0.json", "self_policy_1.json", "settings.json",
-                                                    "train_0", "train_1"]
+    assert sorted(p.name for p in out.iterdir()) == [
+        "SWEEP.md",
+        "fixed.json",
+        "learned_0.json",
+        "learned_1.json",
+        "pareto.json",
+        "pareto.png",
+        "price_0.json",
+        "price_1.json",
+        "self_0.json",
+        "self_1.json",
+        "self_policy_0.json",
+        "self_policy_1.json",
+        "settings.json",
+        "train_0",
+        "train_1",
+    ]
     kinds = {}
     for point in pareto["points"]:
         kinds.setdefault((point["price"], point["kind"]), []).append(point["policy"])
@@ -165,8 +205,7 @@ def test_the_best_periodic_schedule_changes_with_the_price_as_the_evaluations_sa
         runs = [r for r in fixed["runs"] if r["policy"].startswith("every:")]
         brute = min(runs, key=lambda r: (r["control_objective"] + price * r["recomputes"], r["policy"]))["policy"]
         assert pareto["answers"][i]["best_periodic"] == brute
-        assert json.loads((out / f"price_{i}.json").read_text())["policies"].keys() == {
-            f"rollout:{brute}:1:2", f"oracle:{brute}"}
+        assert json.loads((out / f"price_{i}.json").read_text())["policies"].keys() == {f"rollout:{brute}:1:2", f"oracle:{brute}"}
 
 
 def test_the_figure_draws_the_points_of_the_json(tiny_sweep):
@@ -175,8 +214,9 @@ def test_the_figure_draws_the_points_of_the_json(tiny_sweep):
     ax = fig.axes[0]
     first = [p for p in pareto["points"] if p["price"] == TINY.prices[0]]
     (dots,) = [line for line in ax.get_lines() if line.get_gid() == "periodic-points"]
-    np.testing.assert_allclose(dots.get_xydata(), [[p["computations"], p["control_objective"]]
-                                                   for p in first if p["kind"] == "periodic"])
+    np.testing.assert_allclose(
+        dots.get_xydata(), [[p["computations"], p["control_objective"]] for p in first if p["kind"] == "periodic"]
+    )
     assert any(not p["on_front"] for p in first if p["kind"] == "periodic")  # a front, not every schedule
     for kind in ("periodic", "event"):
         (line,) = [line for line in ax.get_lines() if line.get_gid() == kind]
@@ -205,5 +245,11 @@ def test_the_report_section_gives_each_prices_answer(tiny_sweep):
         assert cells[0] == f"{answer['price']:g}" and cells[1] == f"`{answer['best_periodic']}`"
         for cell, kind in zip(cells[2:], ("rollout", "learned", "self", "best_event", "oracle"), strict=True):
             found = answer[kind]
-            assert cell == "outside the periodic range" if found is None else (
-                cell.startswith(f"`{front_numbers.short_name(found['policy'])}`") and f"{found['gain_percent']:+.2f} %" in cell)
+            assert (
+                cell == "outside the periodic range"
+                if found is None
+                else (
+                    cell.startswith(f"`{front_numbers.short_name(found['policy'])}`")
+                    and f"{found['gain_percent']:+.2f} %" in cell
+                )
+            )

@@ -44,22 +44,44 @@ def test_the_fit_follows_the_costly_mistakes():
 
 
 def _plan(inputs, states, price, production):
-    return Plan(np.array(inputs, float)[:, None], np.array(states, float)[:, None], 0.0, 0.0, True,
-                forecasts={"price_eur_kwh": np.array(price, float), "production_kw": np.array(production, float)})
+    return Plan(
+        np.array(inputs, float)[:, None],
+        np.array(states, float)[:, None],
+        0.0,
+        0.0,
+        True,
+        forecasts={"price_eur_kwh": np.array(price, float), "production_kw": np.array(production, float)},
+    )
 
 
 def test_error_features_of_the_battery_are_worked_by_hand():
     plan = _plan([100.0, -50.0, 0.0], [0.5, 0.49, 0.5, 0.5], [0.06, 0.04, 0.05], [10.0, 20.0, 30.0])
     # Today's forecasts (index 0: now) against the plan's over the two steps it has left: [0.04, 0.05], [20, 30].
-    observation = {"price_eur_kwh": 0.08, "net_production_kw": 5.0,
-                   "price_forecast_eur_kwh": [0.08, 0.02, 0.07], "production_forecast_kw": [5.0, 26.0, 40.0]}
+    observation = {
+        "price_eur_kwh": 0.08,
+        "net_production_kw": 5.0,
+        "price_forecast_eur_kwh": [0.08, 0.02, 0.07],
+        "production_forecast_kw": [5.0, 26.0, 40.0],
+    }
     s = AugmentedState(np.array([0.47]), np.array([0.5]), 1, plan.state_at(1), plan, observation)
     r = raw_features("error", "battery", s)
     # error, age, price, production, planned price, planned production, their differences, trade value,
     # RMS revision of the price forecast ([+0.04, -0.03]) and of the production's ([-15, -4]), and the
     # price revisions times the plan's remaining trades [-50, 0]
-    expected = [0.47 - 0.49, 1, 0.08, 5.0, 0.04, 20.0, 0.08 - 0.04, 5.0 - 20.0, (0.08 - 0.05) * -50.0 * 10 / 3600,
-                np.sqrt((0.04**2 + 0.03**2) / 2), np.sqrt((15.0**2 + 4.0**2) / 2), 0.04 * -50.0 * 10 / 3600]
+    expected = [
+        0.47 - 0.49,
+        1,
+        0.08,
+        5.0,
+        0.04,
+        20.0,
+        0.08 - 0.04,
+        5.0 - 20.0,
+        (0.08 - 0.05) * -50.0 * 10 / 3600,
+        np.sqrt((0.04**2 + 0.03**2) / 2),
+        np.sqrt((15.0**2 + 4.0**2) / 2),
+        0.04 * -50.0 * 10 / 3600,
+    ]
     np.testing.assert_allclose(r, expected, rtol=1e-12)
     assert feature_size(1, "error", "battery") == 2 * len(expected) + 1
     np.testing.assert_array_equal(raw_features("paper", "battery", s), [0.47, 0.5, 1])
@@ -83,16 +105,21 @@ def test_policy_files_keep_their_feature_set_and_old_files_read_as_paper(tmp_pat
     assert load_policy(tmp_path / "old.json", "cart_pendulum", nx=4).features == "paper"
     bad = dict(policy.to_json(), features="telepathy")
     (tmp_path / "bad.json").write_text(json.dumps(bad))
-    assert main(["evaluate", "cart_pendulum", "--policy", f"rl:{tmp_path / 'bad.json'}", "--episodes", "1", "--workers", "1"]) == 2
+    assert (
+        main(["evaluate", "cart_pendulum", "--policy", f"rl:{tmp_path / 'bad.json'}", "--episodes", "1", "--workers", "1"]) == 2
+    )
 
 
-@pytest.mark.parametrize("argv, message", [
-    (["--algorithm", "gpomdp", "--futures", "4"], "--algorithm dpi"),
-    (["--algorithm", "dpi", "--horizon", "0"], "must be >= 1"),
-    (["--algorithm", "reinforce"], "invalid choice"),
-    (["--features", "telepathy"], "invalid choice"),
-    (["--validation-episodes", "0"], "must be >= 1"),
-])
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["--algorithm", "gpomdp", "--futures", "4"], "--algorithm dpi"),
+        (["--algorithm", "dpi", "--horizon", "0"], "must be >= 1"),
+        (["--algorithm", "reinforce"], "invalid choice"),
+        (["--features", "telepathy"], "invalid choice"),
+        (["--validation-episodes", "0"], "must be >= 1"),
+    ],
+)
 def test_bad_learner_options_are_one_line_errors(capsys, tmp_path, argv, message):
     assert main(["train", "cart_pendulum", "--out", str(tmp_path / "run"), *argv]) == 2
     err = capsys.readouterr().err
@@ -104,9 +131,17 @@ def test_bad_learner_options_are_one_line_errors(capsys, tmp_path, argv, message
 def test_a_dpi_run_does_not_depend_on_the_number_of_workers_and_chooses_on_validation(tmp_path):
     from etmpc.learning.train import TrainConfig, train
 
-    config = TrainConfig("battery", seeds=(0, 1), episodes=2, eval_every=1, eval_episodes=2, normalisation_episodes=2,
-                         algorithm="dpi", validation_episodes=3,
-                         dpi=dpi.Settings(futures=2, horizon=4, states_per_episode=3, bases=("always", "every:3"), selection_episodes=2))
+    config = TrainConfig(
+        "battery",
+        seeds=(0, 1),
+        episodes=2,
+        eval_every=1,
+        eval_episodes=2,
+        normalisation_episodes=2,
+        algorithm="dpi",
+        validation_episodes=3,
+        dpi=dpi.Settings(futures=2, horizon=4, states_per_episode=3, bases=("always", "every:3"), selection_episodes=2),
+    )
     one = train(config, tmp_path / "one", workers=1, progress=False)
     train(config, tmp_path / "two", workers=2, progress=False)
     read = lambda out: {p.relative_to(out).as_posix(): p.read_bytes() for p in sorted(out.rglob("*.json"))}  # noqa: E731

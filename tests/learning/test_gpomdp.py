@@ -18,7 +18,7 @@ def phi(s):
 
 
 def step(s, recompute):
-    return 0.6 * s + (0.2 if recompute else 0.9), -(s - 0.5) ** 2 - 0.1 * recompute
+    return 0.6 * s + (0.2 if recompute else 0.9), -((s - 0.5) ** 2) - 0.1 * recompute
 
 
 def enumerate_episodes(theta):
@@ -70,10 +70,14 @@ def test_undiscounted_estimate_is_the_exact_gradient(theta):
 PER_STEP = np.array([-0.4, 1.3, -0.2, 0.7])
 
 
-@pytest.mark.parametrize("baseline", [
-    lambda steps, feats: PER_STEP[steps],  # "mean": a number per step index
-    lambda steps, feats: feats @ np.array([0.8, -1.1, 0.3]),  # "state": linear in phi(s_t)
-], ids=["per-step", "state"])
+@pytest.mark.parametrize(
+    "baseline",
+    [
+        lambda steps, feats: PER_STEP[steps],  # "mean": a number per step index
+        lambda steps, feats: feats @ np.array([0.8, -1.1, 0.3]),  # "state": linear in phi(s_t)
+    ],
+    ids=["per-step", "state"],
+)
 def test_a_baseline_does_not_change_the_expected_gradient(baseline):
     theta = np.array([0.5, 0.3, -0.2])
     np.testing.assert_allclose(expected_estimate(theta, 0.9, baseline), expected_estimate(theta, 0.9), atol=1e-12)
@@ -110,12 +114,16 @@ def test_reordered_sum_equals_baxter_bartletts_eligibility_trace():
 
 def test_learner_ascends_and_keeps_a_running_mean_baseline():
     learner = Learner.start(np.zeros(3), Settings(learning_rate=0.5, baseline="mean"), steps=4)
-    first = learner.update(np.array([[1.0, 0.0, 1.0]]), np.array([0]), np.array([0.5]), np.array([0]), np.array([1.0, 0.0, 0.0, 1.0]))
+    first = learner.update(
+        np.array([[1.0, 0.0, 1.0]]), np.array([0]), np.array([0.5]), np.array([0]), np.array([1.0, 0.0, 0.0, 1.0])
+    )
     # no baseline yet: G_0 = 1 + 0.975^3; score (1 - 0 - 0.5) = 0.5
     np.testing.assert_allclose(first, 0.5 * (1 + 0.975**3) * np.array([1.0, 0.0, 1.0]))
     np.testing.assert_allclose(learner.theta, 0.5 * first)
     np.testing.assert_allclose(learner.baseline_mean, rewards_to_go(np.array([1.0, 0.0, 0.0, 1.0]), 0.975))
-    second = learner.update(np.array([[1.0, 0.0, 1.0]]), np.array([0]), np.array([0.5]), np.array([0]), np.array([1.0, 0.0, 0.0, 1.0]))
+    second = learner.update(
+        np.array([[1.0, 0.0, 1.0]]), np.array([0]), np.array([0.5]), np.array([0]), np.array([1.0, 0.0, 0.0, 1.0])
+    )
     np.testing.assert_allclose(second, 0.0, atol=1e-15)  # the same return as the baseline: no push
 
 

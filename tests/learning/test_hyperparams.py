@@ -39,18 +39,21 @@ def test_settings_not_in_the_file_keep_the_given_defaults(tmp_path):
     assert hyperparams.load(path, "cart_pendulum", base) == dataclasses.replace(base, timesteps=4096, gamma=0.95)
 
 
-@pytest.mark.parametrize("text, message", [
-    ("etmpc/cart_pendulum-balance-v0:\n  n_timestep: 10\n", "unknown hyperparameter 'n_timestep'"),
-    ("etmpc/battery-trading-v0:\n  gamma: 0.9\n", "no entry for etmpc/cart_pendulum-balance-v0"),
-    ("etmpc/cart_pendulum-balance-v0:\n  policy: CnnPolicy\n", "not supported"),
-    ("etmpc/cart_pendulum-balance-v0:\n  policy_kwargs: 'dict(net_arch=[64])'\n", "net_arch only"),
-    ("etmpc/cart_pendulum-balance-v0:\n  policy_kwargs: {net_arch: [64, 0]}\n", "positive layer sizes"),
-    ("etmpc/cart_pendulum-balance-v0:\n  env_kwargs: {price: 3}\n", "env_kwargs takes reward_baseline"),
-    ("etmpc/cart_pendulum-balance-v0:\n  gamma: '0.9'\n", "gamma must be a number"),
-    ("etmpc/cart_pendulum-balance-v0:\n  n_steps: 0\n", "n_steps must be an integer >= 1, got 0"),
-    ("etmpc/cart_pendulum-balance-v0: [1, 2]\n", "must map hyperparameter names"),
-    ("etmpc/cart_pendulum-balance-v0: {gamma: [\n", "cannot read it"),
-])
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("etmpc/cart_pendulum-balance-v0:\n  n_timestep: 10\n", "unknown hyperparameter 'n_timestep'"),
+        ("etmpc/battery-trading-v0:\n  gamma: 0.9\n", "no entry for etmpc/cart_pendulum-balance-v0"),
+        ("etmpc/cart_pendulum-balance-v0:\n  policy: CnnPolicy\n", "not supported"),
+        ("etmpc/cart_pendulum-balance-v0:\n  policy_kwargs: 'dict(net_arch=[64])'\n", "net_arch only"),
+        ("etmpc/cart_pendulum-balance-v0:\n  policy_kwargs: {net_arch: [64, 0]}\n", "positive layer sizes"),
+        ("etmpc/cart_pendulum-balance-v0:\n  env_kwargs: {price: 3}\n", "env_kwargs takes reward_baseline"),
+        ("etmpc/cart_pendulum-balance-v0:\n  gamma: '0.9'\n", "gamma must be a number"),
+        ("etmpc/cart_pendulum-balance-v0:\n  n_steps: 0\n", "n_steps must be an integer >= 1, got 0"),
+        ("etmpc/cart_pendulum-balance-v0: [1, 2]\n", "must map hyperparameter names"),
+        ("etmpc/cart_pendulum-balance-v0: {gamma: [\n", "cannot read it"),
+    ],
+)
 def test_a_bad_file_is_one_line_naming_it(tmp_path, text, message):
     path = tmp_path / "bad.yml"
     path.write_text(text)
@@ -62,42 +65,45 @@ def test_a_bad_file_is_one_line_naming_it(tmp_path, text, message):
 HEAD = "etmpc/cart_pendulum-balance-v0:\n"
 
 
-@pytest.mark.parametrize("entry, message", [
-    ("gamma: 1.5", "gamma must be in (0, 1], got 1.5"),
-    ("gamma: 0", "gamma must be in (0, 1], got 0"),
-    ("gamma: [0.9]", "gamma must be in (0, 1], got [0.9]"),
-    ("gae_lambda: 1.01", "gae_lambda must be in [0, 1], got 1.01"),
-    ("gae_lambda: -0.1", "gae_lambda must be in [0, 1], got -0.1"),
-    ("learning_rate: -3.0e-4", "learning_rate must be a finite number > 0, got -0.0003"),
-    ("learning_rate: 0", "learning_rate must be a finite number > 0, got 0"),
-    ("learning_rate: .nan", "learning_rate must be a finite number > 0, got nan"),
-    ("learning_rate: .inf", "learning_rate must be a finite number > 0, got inf"),
-    ("learning_rate: 3e-4", "learning_rate must be a number, got '3e-4' (YAML reads it as text"),
-    ("clip_range: 0.0", "clip_range must be a finite number > 0, got 0.0"),
-    ("clip_range: .inf", "clip_range must be a finite number > 0, got inf"),
-    ("ent_coef: -0.01", "ent_coef must be a finite number >= 0, got -0.01"),
-    ("ent_coef: .nan", "ent_coef must be a finite number >= 0, got nan"),
-    ("n_timesteps: 0", "n_timesteps must be an integer >= 1, got 0"),
-    ("n_timesteps: 8.5", "n_timesteps must be an integer >= 1, got 8.5"),
-    ("n_timesteps: 1e6", "n_timesteps must be a number, got '1e6'"),
-    ("n_steps: 8.5", "n_steps must be an integer >= 1, got 8.5"),
-    ("n_steps: 8.0", "n_steps must be an integer >= 1, got 8.0"),
-    ("n_steps: true", "n_steps must be an integer >= 1, got True"),
-    ("n_epochs: 0", "n_epochs must be an integer >= 1, got 0"),
-    ("n_envs: 0", "n_envs must be an integer >= 1, got 0"),
-    ("n_envs: 2.0", "n_envs must be an integer >= 1, got 2.0"),
-    ("checkpoints: 0", "checkpoints must be an integer >= 1, got 0"),
-    ("checkpoints: yes", "checkpoints must be an integer >= 1, got True"),
-    ("batch_size: 1", "batch_size must be an integer >= 2 (Stable-Baselines3 asserts > 1), got 1"),
-    ("batch_size: 64.0", "batch_size must be an integer >= 2"),
-    ("seed: -1", "seed must be an integer in [0, 4294967295], got -1"),
-    ("seed: 4294967296", "seed must be an integer in [0, 4294967295], got 4294967296"),
-    ("seed: 0.5", "seed must be an integer in [0, 4294967295], got 0.5"),
-    ("policy_kwargs: {net_arch: [64, 0]}", "net_arch must be a list of positive layer sizes"),
-    ("n_steps: 1\n  n_envs: 1", "n_steps * n_envs must be >= 2 (Stable-Baselines3 asserts > 1), got 1 * 1"),
-    ("n_timesteps: 10\n  n_envs: 1\n  checkpoints: 6", "checkpoints must be at most n_timesteps // max(2, n_envs) = 5"),
-    ("n_timesteps: 10\n  n_envs: 4\n  checkpoints: 3", "checkpoints must be at most n_timesteps // max(2, n_envs) = 2"),
-])
+@pytest.mark.parametrize(
+    "entry, message",
+    [
+        ("gamma: 1.5", "gamma must be in (0, 1], got 1.5"),
+        ("gamma: 0", "gamma must be in (0, 1], got 0"),
+        ("gamma: [0.9]", "gamma must be in (0, 1], got [0.9]"),
+        ("gae_lambda: 1.01", "gae_lambda must be in [0, 1], got 1.01"),
+        ("gae_lambda: -0.1", "gae_lambda must be in [0, 1], got -0.1"),
+        ("learning_rate: -3.0e-4", "learning_rate must be a finite number > 0, got -0.0003"),
+        ("learning_rate: 0", "learning_rate must be a finite number > 0, got 0"),
+        ("learning_rate: .nan", "learning_rate must be a finite number > 0, got nan"),
+        ("learning_rate: .inf", "learning_rate must be a finite number > 0, got inf"),
+        ("learning_rate: 3e-4", "learning_rate must be a number, got '3e-4' (YAML reads it as text"),
+        ("clip_range: 0.0", "clip_range must be a finite number > 0, got 0.0"),
+        ("clip_range: .inf", "clip_range must be a finite number > 0, got inf"),
+        ("ent_coef: -0.01", "ent_coef must be a finite number >= 0, got -0.01"),
+        ("ent_coef: .nan", "ent_coef must be a finite number >= 0, got nan"),
+        ("n_timesteps: 0", "n_timesteps must be an integer >= 1, got 0"),
+        ("n_timesteps: 8.5", "n_timesteps must be an integer >= 1, got 8.5"),
+        ("n_timesteps: 1e6", "n_timesteps must be a number, got '1e6'"),
+        ("n_steps: 8.5", "n_steps must be an integer >= 1, got 8.5"),
+        ("n_steps: 8.0", "n_steps must be an integer >= 1, got 8.0"),
+        ("n_steps: true", "n_steps must be an integer >= 1, got True"),
+        ("n_epochs: 0", "n_epochs must be an integer >= 1, got 0"),
+        ("n_envs: 0", "n_envs must be an integer >= 1, got 0"),
+        ("n_envs: 2.0", "n_envs must be an integer >= 1, got 2.0"),
+        ("checkpoints: 0", "checkpoints must be an integer >= 1, got 0"),
+        ("checkpoints: yes", "checkpoints must be an integer >= 1, got True"),
+        ("batch_size: 1", "batch_size must be an integer >= 2 (Stable-Baselines3 asserts > 1), got 1"),
+        ("batch_size: 64.0", "batch_size must be an integer >= 2"),
+        ("seed: -1", "seed must be an integer in [0, 4294967295], got -1"),
+        ("seed: 4294967296", "seed must be an integer in [0, 4294967295], got 4294967296"),
+        ("seed: 0.5", "seed must be an integer in [0, 4294967295], got 0.5"),
+        ("policy_kwargs: {net_arch: [64, 0]}", "net_arch must be a list of positive layer sizes"),
+        ("n_steps: 1\n  n_envs: 1", "n_steps * n_envs must be >= 2 (Stable-Baselines3 asserts > 1), got 1 * 1"),
+        ("n_timesteps: 10\n  n_envs: 1\n  checkpoints: 6", "checkpoints must be at most n_timesteps // max(2, n_envs) = 5"),
+        ("n_timesteps: 10\n  n_envs: 4\n  checkpoints: 3", "checkpoints must be at most n_timesteps // max(2, n_envs) = 2"),
+    ],
+)
 def test_a_value_out_of_its_range_is_one_line_naming_the_file_the_key_and_the_range(tmp_path, capsys, entry, message):
     from etmpc.cli import main
 
@@ -113,12 +119,35 @@ def test_a_value_out_of_its_range_is_one_line_naming_the_file_the_key_and_the_ra
 
 def test_a_file_at_the_edges_of_every_range_is_accepted(tmp_path):
     path = tmp_path / "ppo.yml"
-    path.write_text(HEAD + "".join(f"  {line}\n" for line in (
-        "n_timesteps: 8", "n_envs: 1", "n_steps: 2", "batch_size: 2", "n_epochs: 1", "checkpoints: 4",
-        "learning_rate: 1.0e-6", "gamma: 1", "gae_lambda: 0", "clip_range: 10", "ent_coef: 0",
-        "seed: 4294967295", "policy_kwargs: {net_arch: [1]}")))
+    path.write_text(
+        HEAD
+        + "".join(
+            f"  {line}\n"
+            for line in (
+                "n_timesteps: 8",
+                "n_envs: 1",
+                "n_steps: 2",
+                "batch_size: 2",
+                "n_epochs: 1",
+                "checkpoints: 4",
+                "learning_rate: 1.0e-6",
+                "gamma: 1",
+                "gae_lambda: 0",
+                "clip_range: 10",
+                "ent_coef: 0",
+                "seed: 4294967295",
+                "policy_kwargs: {net_arch: [1]}",
+            )
+        )
+    )
     settings = hyperparams.load(path, "cart_pendulum")
-    assert (settings.timesteps, settings.checkpoints, settings.seed, settings.gamma, settings.hidden) == (8, 4, 2**32 - 1, 1, (1,))
+    assert (settings.timesteps, settings.checkpoints, settings.seed, settings.gamma, settings.hidden) == (
+        8,
+        4,
+        2**32 - 1,
+        1,
+        (1,),
+    )
 
 
 def test_the_checks_hold_for_the_python_api_and_the_command_lines_overrides_too(tmp_path, capsys):
@@ -129,8 +158,10 @@ def test_the_checks_hold_for_the_python_api_and_the_command_lines_overrides_too(
     assert PpoSettings(seed=np.int64(7)).seed.__class__ is int  # written to JSON as a number
     from etmpc.cli import main
 
-    for option, message in ((["--timesteps", "6"], "checkpoints must be at most timesteps // max(2, n_envs) = 3, got 4"),
-                            (["--seeds", "4294967296"], "seed must be an integer in [0, 4294967295], got 4294967296")):
+    for option, message in (
+        (["--timesteps", "6"], "checkpoints must be at most timesteps // max(2, n_envs) = 3, got 4"),
+        (["--seeds", "4294967296"], "seed must be an integer in [0, 4294967295], got 4294967296"),
+    ):
         assert main(["train", "cart_pendulum", "--algorithm", "ppo", *option, "--out", str(tmp_path / "run")]) == 2
         err = capsys.readouterr().err
         assert err.startswith(f"etmpc: error: {message}") and err.count("\n") == 1, err

@@ -16,10 +16,28 @@ from etmpc.learning.runner import run
 
 TINY = {
     "gpomdp": dict(episodes=4, eval_every=2, eval_episodes=2, normalisation_episodes=2, validation_episodes=2),
-    "dpi": dict(episodes=2, eval_every=1, eval_episodes=2, normalisation_episodes=2, validation_episodes=2, futures=1,
-                horizon=3, states_per_episode=2, bases=("always", "every:3"), selection_episodes=2),
-    "self": dict(bases=("every:3", "every:8"), selection_episodes=2, episodes=2, solves_per_episode=2, futures=1, horizon=2,
-                 ridges=(0.1,), validation_episodes=2),
+    "dpi": dict(
+        episodes=2,
+        eval_every=1,
+        eval_episodes=2,
+        normalisation_episodes=2,
+        validation_episodes=2,
+        futures=1,
+        horizon=3,
+        states_per_episode=2,
+        bases=("always", "every:3"),
+        selection_episodes=2,
+    ),
+    "self": dict(
+        bases=("every:3", "every:8"),
+        selection_episodes=2,
+        episodes=2,
+        solves_per_episode=2,
+        futures=1,
+        horizon=2,
+        ridges=(0.1,),
+        validation_episodes=2,
+    ),
     "ppo": dict(timesteps=512, checkpoints=2, validation_episodes=1, n_steps=128, batch_size=128, n_epochs=1),
 }
 SEEDS = {"gpomdp": (0, 1), "dpi": (0, 1), "self": None, "ppo": (3,)}
@@ -37,7 +55,11 @@ def tiny(name: str):
 def test_the_registry_holds_the_four_learners_in_order_and_the_leaderboards_shipped_ones():
     assert list(learners())[:4] == ["gpomdp", "dpi", "self", "ppo"]
     assert [entry for entry, *_ in shipped()] == ["GPOMDP (shipped)", "DPI (shipped)", "PPO (shipped)"]
-    assert [(file, prefix) for _, file, prefix, _ in shipped()] == [("gpomdp.json", "rl:"), ("learned.json", "rl:"), ("ppo.zip", "sb3:")]
+    assert [(file, prefix) for _, file, prefix, _ in shipped()] == [
+        ("gpomdp.json", "rl:"),
+        ("learned.json", "rl:"),
+        ("ppo.zip", "sb3:"),
+    ]
     with pytest.raises(EtmpcError, match="unknown algorithm"):
         learner_class("nonsense")
     # Given no seeds, a run takes the learner's own: etmpc train's 0-4, PPO's settings.seed.

@@ -97,24 +97,31 @@ def _foreign_zip() -> bytes:
     return buffer.getvalue()
 
 
-@pytest.mark.parametrize("case, says", [
-    ("foreign-zip", "is not a Stable-Baselines3 model (its zip has no 'data' and 'policy.pth'"),
-    ("empty-file", "is not a Stable-Baselines3 model (not a readable zip file"),
-    ("truncated-model", "is not a Stable-Baselines3 model"),
-    ("the-description-itself", "is the model's description; give the model itself"),
-    ("unknown-algorithm", "names the algorithm 'nosuch', which Stable-Baselines3 does not have"),
-    ("algorithm-not-a-name", "algorithm 3 is not a name"),
-])
+@pytest.mark.parametrize(
+    "case, says",
+    [
+        ("foreign-zip", "is not a Stable-Baselines3 model (its zip has no 'data' and 'policy.pth'"),
+        ("empty-file", "is not a Stable-Baselines3 model (not a readable zip file"),
+        ("truncated-model", "is not a Stable-Baselines3 model"),
+        ("the-description-itself", "is the model's description; give the model itself"),
+        ("unknown-algorithm", "names the algorithm 'nosuch', which Stable-Baselines3 does not have"),
+        ("algorithm-not-a-name", "algorithm 3 is not a name"),
+    ],
+)
 def test_a_file_that_is_not_a_model_is_one_line_before_any_work(run, case, says, tmp_path, capsys):
     out, _ = run
     model_bytes = (out / "selected.zip").read_bytes()
     data = {"foreign-zip": _foreign_zip(), "empty-file": b"", "truncated-model": model_bytes[: len(model_bytes) // 2]}
-    edit = {"unknown-algorithm": lambda m: m.update(algorithm="nosuch"),
-            "algorithm-not-a-name": lambda m: m.update(algorithm=3)}.get(case)
+    edit = {
+        "unknown-algorithm": lambda m: m.update(algorithm="nosuch"),
+        "algorithm-not-a-name": lambda m: m.update(algorithm=3),
+    }.get(case)
     model = _beside_a_valid_description(run, tmp_path, case, data.get(case, model_bytes), edit)
     spec = f"sb3:{model.with_suffix('.json') if case == 'the-description-itself' else model}"
-    assert main(["evaluate", "battery", "--policy", spec, "--episodes", "2", "--workers", "2",
-                 "--json", str(tmp_path / "ev.json")]) == 2
+    assert (
+        main(["evaluate", "battery", "--policy", spec, "--episodes", "2", "--workers", "2", "--json", str(tmp_path / "ev.json")])
+        == 2
+    )
     err = capsys.readouterr().err
     assert "Traceback" not in err and len(err.strip().splitlines()) == 1 and says in err, err
     assert not (tmp_path / "ev.json").exists()
@@ -124,8 +131,16 @@ def test_a_file_that_is_not_a_model_is_one_line_before_any_work(run, case, says,
 def test_the_numbers_do_not_depend_on_the_worker_processes_and_the_baselines_steps_are_counted(tmp_path):
     from stable_baselines3 import PPO
 
-    settings = PpoSettings(timesteps=512, checkpoints=1, validation_episodes=1, n_steps=128, batch_size=128, n_epochs=1,
-                           n_envs=2, reward_baseline="every:2")
+    settings = PpoSettings(
+        timesteps=512,
+        checkpoints=1,
+        validation_episodes=1,
+        n_steps=128,
+        batch_size=128,
+        n_epochs=1,
+        n_envs=2,
+        reward_baseline="every:2",
+    )
     runs = [train_ppo("battery", tmp_path / f"w{w}", settings, workers=w) for w in (1, 2)]
     weights = [PPO.load(str(tmp_path / f"w{w}" / "selected.zip"), device="cpu").policy.state_dict() for w in (1, 2)]
     assert weights[0].keys() == weights[1].keys()
@@ -148,9 +163,28 @@ def test_two_processes_save_the_same_training_byte_for_byte(tmp_path):
 
     def trained(name: str) -> bytes:
         out = tmp_path / name
-        done = subprocess.run([sys.executable, "-m", "etmpc.cli", "train", "cart_pendulum", "--algorithm", "ppo", "--timesteps", "256",
-                               "--validation-episodes", "1", "--workers", "1", "--out", str(out)],
-                              capture_output=True, text=True, timeout=600)
+        done = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "etmpc.cli",
+                "train",
+                "cart_pendulum",
+                "--algorithm",
+                "ppo",
+                "--timesteps",
+                "256",
+                "--validation-episodes",
+                "1",
+                "--workers",
+                "1",
+                "--out",
+                str(out),
+            ],
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
         assert done.returncode == 0, done.stderr
         return (out / "selected.zip").read_bytes()
 

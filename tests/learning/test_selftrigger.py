@@ -41,8 +41,9 @@ class _Spy(st.SelfTrigger):
 
 
 @pytest.mark.parametrize("domain,n", [("cart_pendulum", 4), ("battery", 3)])
-def test_a_constant_announcement_is_the_periodic_schedule_bit_for_bit(domain, n, cart_system, cart_testset, battery_system,
-                                                                        battery_testset):
+def test_a_constant_announcement_is_the_periodic_schedule_bit_for_bit(
+    domain, n, cart_system, cart_testset, battery_system, battery_testset
+):
     """Independent truth: ``every:n``, played by the loop's own periodic policy."""
     system, testset = (cart_system, cart_testset) if domain == "cart_pendulum" else (battery_system, battery_testset)
     policy = _constant(domain, n, _features(system))
@@ -103,15 +104,18 @@ def _write(tmp_path, **change):
     return str(path)
 
 
-@pytest.mark.parametrize("change,message", [
-    ({"format": "etmpc-logistic-policy"}, "not a self-trigger policy"),
-    ({"domain": "battery"}, "is for 'battery'"),
-    ({"theta": [[0.0] * 3] * 11}, "inconsistent"),
-    ({"scale": [1.0, 0.0, 1.0]}, "inconsistent"),
-    ({"candidates": [0] + list(st.CANDIDATES[1:])}, "inconsistent"),
-    ({"candidates": [1, 1] + list(st.CANDIDATES[2:])}, "inconsistent"),
-    ({"theta": "many"}, "malformed"),
-])
+@pytest.mark.parametrize(
+    "change,message",
+    [
+        ({"format": "etmpc-logistic-policy"}, "not a self-trigger policy"),
+        ({"domain": "battery"}, "is for 'battery'"),
+        ({"theta": [[0.0] * 3] * 11}, "inconsistent"),
+        ({"scale": [1.0, 0.0, 1.0]}, "inconsistent"),
+        ({"candidates": [0] + list(st.CANDIDATES[1:])}, "inconsistent"),
+        ({"candidates": [1, 1] + list(st.CANDIDATES[2:])}, "inconsistent"),
+        ({"theta": "many"}, "malformed"),
+    ],
+)
 def test_bad_files_are_one_clear_error(tmp_path, change, message):
     path = _write(tmp_path, **change)
     with pytest.raises(EtmpcError, match=message):
@@ -142,8 +146,16 @@ def test_a_non_finite_score_is_an_error_not_a_choice(cart_system):
         st.SelfTrigger("p", "cart_pendulum", st.CANDIDATES, theta, np.zeros(p), np.ones(p)).announce(Plan())
 
 
-TINY = self_training.SelfSettings(bases=("every:3", "every:8"), selection_episodes=2, episodes=2, solves_per_episode=3, futures=1,
-                       horizon=2, ridges=(0.1,), validation_episodes=2)
+TINY = self_training.SelfSettings(
+    bases=("every:3", "every:8"),
+    selection_episodes=2,
+    episodes=2,
+    solves_per_episode=3,
+    futures=1,
+    horizon=2,
+    ridges=(0.1,),
+    validation_episodes=2,
+)
 
 
 def test_training_is_the_same_on_one_or_two_workers_and_never_worse_than_its_base_on_validation(tmp_path):

@@ -86,8 +86,27 @@ def test_training_moves_theta_and_keeps_the_gradient_step(tmp_path):
     assert len(state.training) == 8
 
 
-CMD = [sys.executable, "-m", "etmpc.cli", "train", "cart_pendulum", "--seeds", "0-1", "--episodes", "12",
-       "--eval-every", "3", "--eval-episodes", "2", "--workers", "1", "--algorithm", "gpomdp", "--validation-episodes", "3"]
+CMD = [
+    sys.executable,
+    "-m",
+    "etmpc.cli",
+    "train",
+    "cart_pendulum",
+    "--seeds",
+    "0-1",
+    "--episodes",
+    "12",
+    "--eval-every",
+    "3",
+    "--eval-episodes",
+    "2",
+    "--workers",
+    "1",
+    "--algorithm",
+    "gpomdp",
+    "--validation-episodes",
+    "3",
+]
 
 
 @pytest.mark.slow
@@ -117,27 +136,40 @@ def test_an_existing_run_is_never_overwritten(tmp_path, capsys):
     before = files(tmp_path)
     assert main(["train", "battery", "--seeds", "0-1", "--episodes", "4", "--out", str(tmp_path), "--algorithm", "gpomdp"]) == 2
     assert "--resume" in capsys.readouterr().err
-    assert main(["train", "battery", "--seeds", "0-2", "--episodes", "4", "--out", str(tmp_path), "--resume", "--algorithm", "gpomdp"]) == 2
+    assert (
+        main(
+            ["train", "battery", "--seeds", "0-2", "--episodes", "4", "--out", str(tmp_path), "--resume", "--algorithm", "gpomdp"]
+        )
+        == 2
+    )
     assert "different settings" in capsys.readouterr().err
     (tmp_path / "checkpoint.json").write_text('{"format": "etmpc-train-checkpoint", "version": 1, "config": {')
     corrupt = files(tmp_path)
-    assert main(["train", "battery", "--seeds", "0-1", "--episodes", "4", "--eval-every", "2", "--out", str(tmp_path), "--resume"]) == 2
+    assert (
+        main(["train", "battery", "--seeds", "0-1", "--episodes", "4", "--eval-every", "2", "--out", str(tmp_path), "--resume"])
+        == 2
+    )
     assert "corrupt" in capsys.readouterr().err
     assert files(tmp_path) == corrupt
-    assert {k: v for k, v in before.items() if k != "checkpoint.json"} == {k: v for k, v in corrupt.items() if k != "checkpoint.json"}
+    assert {k: v for k, v in before.items() if k != "checkpoint.json"} == {
+        k: v for k, v in corrupt.items() if k != "checkpoint.json"
+    }
 
 
-@pytest.mark.parametrize("argv, message", [
-    (["train", "battery", "--seeds", "3-1", "--out", "x"], "--seeds"),
-    (["train", "battery", "--seeds", "a", "--out", "x"], "--seeds"),
-    (["train", "pendulum", "--out", "x"], "unknown task"),
-    (["train", "battery", "--baseline", "median", "--out", "x"], "invalid choice"),
-    (["train", "battery", "--algorithm", "gpomdp", "--learning-rate", "-1", "--out", "x"], "learning rate"),
-    (["train", "battery", "--learning-rate", "0.1", "--out", "x"], "--learning-rate is a setting of gpomdp only, not of dpi"),
-    (["train", "battery", "--address", "ray://h:10001", "--out", "x"], "--backend ray"),
-    (["train", "battery", "--backend", "ray", "--address", "nonsense", "--out", "x"], "bad --address"),
-    (["train", "battery", "--backend", "ray", "--address", "127.0.0.1:1", "--out", "x"], "cannot reach"),
-])
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["train", "battery", "--seeds", "3-1", "--out", "x"], "--seeds"),
+        (["train", "battery", "--seeds", "a", "--out", "x"], "--seeds"),
+        (["train", "pendulum", "--out", "x"], "unknown task"),
+        (["train", "battery", "--baseline", "median", "--out", "x"], "invalid choice"),
+        (["train", "battery", "--algorithm", "gpomdp", "--learning-rate", "-1", "--out", "x"], "learning rate"),
+        (["train", "battery", "--learning-rate", "0.1", "--out", "x"], "--learning-rate is a setting of gpomdp only, not of dpi"),
+        (["train", "battery", "--address", "ray://h:10001", "--out", "x"], "--backend ray"),
+        (["train", "battery", "--backend", "ray", "--address", "nonsense", "--out", "x"], "bad --address"),
+        (["train", "battery", "--backend", "ray", "--address", "127.0.0.1:1", "--out", "x"], "cannot reach"),
+    ],
+)
 def test_bad_train_input_is_one_line_and_exit_2(capsys, tmp_path, argv, message):
     argv = [a if a != "x" else str(tmp_path / "run") for a in argv]
     assert main(argv) == 2
@@ -165,12 +197,15 @@ def test_policy_file_round_trips_exactly_and_starts_by_recomputing(tmp_path):
     assert fresh.keep_probability(s) == pytest.approx(sigmoid(INITIAL_KEEP_LOGIT)) and sigmoid(INITIAL_KEEP_LOGIT) < 0.05
 
 
-@pytest.mark.parametrize("content, message", [
-    ("{", "cannot be read"),
-    ('{"format": "something-else"}', "not an etmpc logistic policy"),
-    ("WRONG_SIZE", "features"),
-    ("WRONG_TASK", "trained on 'battery'"),
-])
+@pytest.mark.parametrize(
+    "content, message",
+    [
+        ("{", "cannot be read"),
+        ('{"format": "something-else"}', "not an etmpc logistic policy"),
+        ("WRONG_SIZE", "features"),
+        ("WRONG_TASK", "trained on 'battery'"),
+    ],
+)
 def test_bad_policy_files_are_one_line_errors(tmp_path, capsys, content, message):
     path = tmp_path / "p.json"
     if content == "WRONG_SIZE":
@@ -192,14 +227,27 @@ def test_rl_spec_needs_a_path():
     assert Settings().discount == 0.975 and Settings().learning_rate == 0.05
 
 
-
 def test_training_benchmark_script_measures_both_ends(tmp_path):
     """`scripts/bench_training.py`: the policy that mostly keeps its plan recomputes less and runs
     faster than the initial one, every worker's memory is measured, and the projection is the
     protocol's episode counts over the measured rates."""
     out = tmp_path / "bench.json"
-    done = subprocess.run([sys.executable, str(ROOT / "scripts" / "bench_training.py"), "battery", "--episodes", "3",
-                           "--workers", "1", "--json", str(out)], capture_output=True, text=True, timeout=300)
+    done = subprocess.run(
+        [
+            sys.executable,
+            str(ROOT / "scripts" / "bench_training.py"),
+            "battery",
+            "--episodes",
+            "3",
+            "--workers",
+            "1",
+            "--json",
+            str(out),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert done.returncode == 0, done.stderr
     data = json.loads(out.read_text())
     start, keeper = data["rates"]["start (initial policy)"], data["rates"]["mostly keeps (bias +3)"]

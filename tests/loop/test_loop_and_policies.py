@@ -21,7 +21,10 @@ def env(cart_system):
     return cart_system.make_env()
 
 
-@pytest.mark.parametrize("spec, expected", [("always", 100), ("never", 5), ("every:1", 100), ("every:3", 34), ("every:7", 15), ("every:20", 5), ("every:50", 5)])
+@pytest.mark.parametrize(
+    "spec, expected",
+    [("always", 100), ("never", 5), ("every:1", 100), ("every:3", 34), ("every:7", 15), ("every:20", 5), ("every:50", 5)],
+)
 def test_recompute_counts(cart_system, env, episode, spec, expected):
     traj = run_episode(cart_system, env, parse_policy(spec, cart_system), None, episode)
     assert traj.recomputes == expected
@@ -62,8 +65,9 @@ def test_threshold_extremes(cart_system, env, episode):
 
 
 def test_threshold_uses_the_weighted_error_norm():
-    weighted = SimpleNamespace(error_weights=np.array([0, 1, math.sqrt(10), math.sqrt(10)]), name="cart_pendulum",
-                               episode_steps=100)
+    weighted = SimpleNamespace(
+        error_weights=np.array([0, 1, math.sqrt(10), math.sqrt(10)]), name="cart_pendulum", episode_steps=100
+    )
     policy = parse_policy("threshold:1", weighted)
     s = lambda dx: AugmentedState(np.array(dx, float), np.zeros(4), 1, np.zeros(4))  # noqa: E731
     rng = np.random.default_rng(0)
@@ -72,11 +76,22 @@ def test_threshold_uses_the_weighted_error_norm():
     assert policy.decide(s([0, 0, 0.32, 0]), rng)  # sqrt(10) * 0.32 > 1
 
 
-@pytest.mark.parametrize("spec, error", [
-    ("every:0", EtmpcError), ("every:-2", EtmpcError), ("every:x", EtmpcError), ("every:1.5", EtmpcError),
-    ("threshold:-0.1", EtmpcError), ("threshold:nan", EtmpcError), ("threshold:inf", EtmpcError),
-    ("threshold:", EtmpcError), ("always:3", EtmpcError), ("sometimes", UnknownNameError), ("rl:/nope.json", EtmpcError),
-])
+@pytest.mark.parametrize(
+    "spec, error",
+    [
+        ("every:0", EtmpcError),
+        ("every:-2", EtmpcError),
+        ("every:x", EtmpcError),
+        ("every:1.5", EtmpcError),
+        ("threshold:-0.1", EtmpcError),
+        ("threshold:nan", EtmpcError),
+        ("threshold:inf", EtmpcError),
+        ("threshold:", EtmpcError),
+        ("always:3", EtmpcError),
+        ("sometimes", UnknownNameError),
+        ("rl:/nope.json", EtmpcError),
+    ],
+)
 def test_bad_specs(spec, error):
     with pytest.raises(error):
         parse_policy(spec, "cart_pendulum")

@@ -15,7 +15,6 @@ from etmpc.evaluation.workers import play_test_episode
 from tests.conftest import REPO
 
 
-
 class SnapshotAt:
     """A policy that also freezes the running episode at one step (the loop hands it its context),
     with its generator as it is after that step's decision."""
@@ -35,21 +34,29 @@ class SnapshotAt:
 
 def _returns_from(traj, step: int, price: float) -> float:
     total = 0.0  # the same sum, in the same order, as play_on makes it
-    for reward, recompute in zip(traj.rewards[step:traj.steps], traj.recompute[step:traj.steps]):
+    for reward, recompute in zip(traj.rewards[step : traj.steps], traj.recompute[step : traj.steps]):
         total += reward - price * recompute
     return total
 
 
 # Every kind of base a rollout plays: fixed schedules, the event trigger (reads the state only,
 # ``observes = False``) and the shipped learned policies (read the observation, draw from the generator).
-@pytest.mark.parametrize("domain, spec, step", [
-    ("cart_pendulum", "every:3", 37), ("battery", "every:4", 58), ("cart_pendulum", "never", 5),
-    ("cart_pendulum", "threshold:0.3", 21), ("battery", "threshold:0.02", 40),
-    ("cart_pendulum", "rl:policies/cart_pendulum/learned.json", 12), ("battery", "rl:policies/battery/learned.json", 30),
-    ("battery", "rl:policies/battery/learned.json+sample", 30),
-])
-def test_the_fast_path_replays_the_dm_env_loop_bit_for_bit(domain, spec, step, cart_system, battery_system,
-                                                            cart_testset, battery_testset):
+@pytest.mark.parametrize(
+    "domain, spec, step",
+    [
+        ("cart_pendulum", "every:3", 37),
+        ("battery", "every:4", 58),
+        ("cart_pendulum", "never", 5),
+        ("cart_pendulum", "threshold:0.3", 21),
+        ("battery", "threshold:0.02", 40),
+        ("cart_pendulum", "rl:policies/cart_pendulum/learned.json", 12),
+        ("battery", "rl:policies/battery/learned.json", 30),
+        ("battery", "rl:policies/battery/learned.json+sample", 30),
+    ],
+)
+def test_the_fast_path_replays_the_dm_env_loop_bit_for_bit(
+    domain, spec, step, cart_system, battery_system, cart_testset, battery_testset
+):
     system, testset = {"cart_pendulum": (cart_system, cart_testset), "battery": (battery_system, battery_testset)}[domain]
     episode = system.episode_from_arrays(testset.episode_arrays(3))
     inner = parse_policy(spec.replace("rl:", "rl:" + str(REPO) + "/").removesuffix("+sample"), system)
@@ -102,8 +109,9 @@ def test_the_oracle_never_does_worse_than_its_base(cart_system, episode):
     oracle = play_test_episode("cart_pendulum", parse_policy("oracle:every:5", cart_system), 0, 0, episode)
     price = cart_system.recompute_price
     assert -oracle.trajectory.policy_return(price) <= -base.trajectory.policy_return(price)
-    assert oracle.trajectory.recomputes != base.trajectory.recomputes or \
-        not np.array_equal(oracle.trajectory.recompute, base.trajectory.recompute)  # it did decide something
+    assert oracle.trajectory.recomputes != base.trajectory.recomputes or not np.array_equal(
+        oracle.trajectory.recompute, base.trajectory.recompute
+    )  # it did decide something
 
 
 @pytest.mark.parametrize("task, base", [("cart_pendulum", "every:3"), ("battery", "every:5")])
@@ -151,23 +159,47 @@ def test_rollout_is_deterministic_given_its_generator(battery_system):
     assert not np.array_equal(a.recompute, c.recompute) or a.policy_return(0.0) != c.policy_return(0.0)
 
 
-@pytest.mark.parametrize("spec, canonical", [
-    ("rollout:always", "rollout:always:8"), ("rollout:every:3", "rollout:every:3:8"), ("rollout:every:3:4", "rollout:every:3:4"),
-    ("rollout:always:2:30", "rollout:always:2:30"), ("rollout:threshold:0.3:5", "rollout:threshold:0.3:5"),
-    ("oracle:every:3", "oracle:every:3"), ("oracle:never", "oracle:never"),
-])
+@pytest.mark.parametrize(
+    "spec, canonical",
+    [
+        ("rollout:always", "rollout:always:8"),
+        ("rollout:every:3", "rollout:every:3:8"),
+        ("rollout:every:3:4", "rollout:every:3:4"),
+        ("rollout:always:2:30", "rollout:always:2:30"),
+        ("rollout:threshold:0.3:5", "rollout:threshold:0.3:5"),
+        ("oracle:every:3", "oracle:every:3"),
+        ("oracle:never", "oracle:never"),
+    ],
+)
 def test_rollout_specs(cart_system, spec, canonical):
     policy = parse_policy(spec, cart_system)
     assert policy.spec == canonical
     assert policy.oracle == spec.startswith("oracle")
 
 
-@pytest.mark.parametrize("spec", [
-    "rollout", "rollout:", "oracle:", "rollout:bogus", "rollout:every:0", "rollout:every:3:0", "rollout:every:3:-2",
-    "rollout:always:x", "rollout:always:8:0", "rollout:always:8:101", "rollout:always:8:20:3", "rollout:always:1e3",
-    "rollout:rollout:always", "oracle:oracle:always", "oracle:rollout:always", "oracle:every:3:8", "rollout:rl:/no/such.json",
-    "rollout:always:100000",
-])
+@pytest.mark.parametrize(
+    "spec",
+    [
+        "rollout",
+        "rollout:",
+        "oracle:",
+        "rollout:bogus",
+        "rollout:every:0",
+        "rollout:every:3:0",
+        "rollout:every:3:-2",
+        "rollout:always:x",
+        "rollout:always:8:0",
+        "rollout:always:8:101",
+        "rollout:always:8:20:3",
+        "rollout:always:1e3",
+        "rollout:rollout:always",
+        "oracle:oracle:always",
+        "oracle:rollout:always",
+        "oracle:every:3:8",
+        "rollout:rl:/no/such.json",
+        "rollout:always:100000",
+    ],
+)
 def test_bad_rollout_specs_are_one_line_errors(cart_system, spec):
     with pytest.raises(EtmpcError) as info:
         parse_policy(spec, cart_system)
@@ -186,8 +218,25 @@ def test_the_oracle_is_labelled_an_upper_bound_in_the_table_json_and_figure(tmp_
     from etmpc.views.figures import policy_bars
 
     out = tmp_path / "ev.json"
-    assert main(["evaluate", "battery", "--policy", "every:10", "--policy", "oracle:every:10", "--episodes", "1",
-                 "--workers", "1", "--json", str(out)]) == 0
+    assert (
+        main(
+            [
+                "evaluate",
+                "battery",
+                "--policy",
+                "every:10",
+                "--policy",
+                "oracle:every:10",
+                "--episodes",
+                "1",
+                "--workers",
+                "1",
+                "--json",
+                str(out),
+            ]
+        )
+        == 0
+    )
     table = capsys.readouterr().out
     assert "oracle:every:10 (upper bound)" in table and "not a policy" in table
     data = json.loads(out.read_text())

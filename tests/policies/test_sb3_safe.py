@@ -34,8 +34,12 @@ from etmpc.policies.sb3 import TOLERANCE, Network, SB3Policy, load_sb3, pickled_
 
 from tests.conftest import REPO
 
-SHIPPED = {"cart_pendulum": "cart_pendulum", "cart_pendulum-kicks": "cart_pendulum/kicks", "battery": "battery",
-           "reacher": "reacher"}  # policies/<directory>: its task
+SHIPPED = {
+    "cart_pendulum": "cart_pendulum",
+    "cart_pendulum-kicks": "cart_pendulum/kicks",
+    "battery": "battery",
+    "reacher": "reacher",
+}  # policies/<directory>: its task
 CART = REPO / "policies" / "cart_pendulum" / "ppo.zip"
 EPISODES = int(os.environ.get("ETMPC_SB3_EPISODES", "3"))
 
@@ -87,16 +91,22 @@ def _poisoned(directory: Path, entry: str, marker: Path) -> Path:
     if entry == "policy.pth":
         return _model(directory, "policy_pth", state_edit=lambda state: state.update(action_net_extra=_Payload(marker)))
     if entry == "policy_kwargs":
-        kwargs = {":type:": "<class 'dict'>", ":serialized:": payload, "net_arch": "[64, 64]",
-                  "activation_fn": "<class 'torch.nn.modules.activation.ReLU'>"}
+        kwargs = {
+            ":type:": "<class 'dict'>",
+            ":serialized:": payload,
+            "net_arch": "[64, 64]",
+            "activation_fn": "<class 'torch.nn.modules.activation.ReLU'>",
+        }
         return _model(directory, entry, data_edit=lambda data: data.update(policy_kwargs=kwargs))
     return _model(directory, entry, data_edit=lambda data: data[entry].update({":serialized:": payload}))
 
 
 NEVER_READ = ["lr_schedule", "clip_range", "_last_obs", "observation_space", "action_space"]
-REFUSED = {"policy_class": "needs a policy class etmpc does not read (a pickle that calls ",
-           "policy_kwargs": "needs policy_kwargs that only unpickling reads (net_arch, activation_fn; naming ",
-           "policy.pth": "its policy.pth is not plain weights, torch's weights-only reader refuses it"}
+REFUSED = {
+    "policy_class": "needs a policy class etmpc does not read (a pickle that calls ",
+    "policy_kwargs": "needs policy_kwargs that only unpickling reads (net_arch, activation_fn; naming ",
+    "policy.pth": "its policy.pth is not plain weights, torch's weights-only reader refuses it",
+}
 
 
 def test_the_payload_is_live_and_stable_baselines3s_own_loader_runs_it(tmp_path):
@@ -123,7 +133,9 @@ def test_a_payload_in_a_policy_file_never_runs(entry, tmp_path, capsys):
         policy = parse_policy(f"sb3:{model}", "cart_pendulum")
         shipped = load_sb3(str(CART), "cart_pendulum")
         assert isinstance(policy, SB3Policy)
-        for (w, b), (w0, b0) in zip([*policy.network.hidden, policy.network.head], [*shipped.network.hidden, shipped.network.head]):
+        for (w, b), (w0, b0) in zip(
+            [*policy.network.hidden, policy.network.head], [*shipped.network.hidden, shipped.network.head]
+        ):
             np.testing.assert_array_equal(w, w0)
             np.testing.assert_array_equal(b, b0)
     else:
@@ -131,8 +143,9 @@ def test_a_payload_in_a_policy_file_never_runs(entry, tmp_path, capsys):
             parse_policy(f"sb3:{model}", "cart_pendulum")
         assert says in str(refused.value) and len(str(refused.value).splitlines()) == 1
     out = tmp_path / "ev.json"
-    code = main(["evaluate", "cart_pendulum", "--policy", f"sb3:{model}", "--episodes", "1", "--workers", "1",
-                 "--json", str(out)])
+    code = main(
+        ["evaluate", "cart_pendulum", "--policy", f"sb3:{model}", "--episodes", "1", "--workers", "1", "--json", str(out)]
+    )
     err = capsys.readouterr().err
     if says is None:
         assert code == 0 and out.exists(), err
@@ -152,16 +165,43 @@ def test_nor_in_worker_processes(entry, tmp_path, capsys):
     never reads plays on two workers as the shipped model does on one."""
     marker = tmp_path / "ran"
     model = _poisoned(tmp_path, entry, marker)
-    code = main(["evaluate", "cart_pendulum", "--policy", f"sb3:{model}", "--episodes", "3", "--workers", "2",
-                 "--json", str(tmp_path / "two.json")])
+    code = main(
+        [
+            "evaluate",
+            "cart_pendulum",
+            "--policy",
+            f"sb3:{model}",
+            "--episodes",
+            "3",
+            "--workers",
+            "2",
+            "--json",
+            str(tmp_path / "two.json"),
+        ]
+    )
     err = capsys.readouterr().err
     assert not marker.exists()
     if entry == "policy_class":
         assert code == 2 and len(err.strip().splitlines()) == 1, err
         return
     assert code == 0, err
-    assert main(["evaluate", "cart_pendulum", "--policy", f"sb3:{CART}", "--episodes", "3", "--workers", "1",
-                 "--json", str(tmp_path / "one.json")]) == 0
+    assert (
+        main(
+            [
+                "evaluate",
+                "cart_pendulum",
+                "--policy",
+                f"sb3:{CART}",
+                "--episodes",
+                "3",
+                "--workers",
+                "1",
+                "--json",
+                str(tmp_path / "one.json"),
+            ]
+        )
+        == 0
+    )
     assert _runs(tmp_path / "two.json") == _runs(tmp_path / "one.json")
 
 
@@ -173,33 +213,81 @@ def _nan_weight(state):
     state["mlp_extractor.policy_net.2.weight"][3, 5] = float("nan")
 
 
-@pytest.mark.parametrize("case, data_edit, state_edit, meta_edit, says", [
-    ("another-class", lambda d: d.update(policy_class=_class_reference(zipfile.ZipFile)), None, None,
-     "needs a policy class etmpc does not read (zipfile.ZipFile); etmpc reads only PPO's MlpPolicy"),
-    ("no-class", lambda d: d.pop("policy_class"), None, None, "needs a policy class etmpc does not read (none given)"),
-    ("not-a-pickle", lambda d: d["policy_class"].update({":serialized:": "bm90IGEgcGlja2xl"}), None, None,
-     "(an unreadable pickle)"),
-    ("data-not-json", lambda d: b"{not json", None, None, "is not a Stable-Baselines3 model (its data is not JSON"),
-    ("other-kwargs", lambda d: d.update(policy_kwargs={"net_arch": [64, 64], "ortho_init": False}), None, None,
-     "needs policy_kwargs etmpc does not read (ortho_init); it reads net_arch alone"),
-    ("bad-net-arch", lambda d: d.update(policy_kwargs={"net_arch": [64, "64"]}), None, None, "needs net_arch [64, '64']"),
-    ("shallower-net-arch", lambda d: d.update(policy_kwargs={"net_arch": {"pi": [64], "vf": [64, 64]}}), None, None,
-     "does not fit its architecture (10 inputs, tanh layers [64], 2 actions): it has 'mlp_extractor.policy_net.2.weight'"),
-    ("narrower-net-arch", lambda d: d.update(policy_kwargs={"net_arch": {"pi": [64, 32], "vf": [64, 64]}}), None, None,
-     "mlp_extractor.policy_net.2.weight is torch.float32 of shape (64, 64), not torch.float32 of shape (32, 64)"),
-    ("other-shape", lambda d: d["observation_space"].update(_shape=[11]), None, None,
-     "takes observations of shape (11,) and '2' actions; the trigger environment has (10,) and 2"),
-    ("three-actions", lambda d: d["action_space"].update(n="3"), None, None, "and '3' actions"),
-    ("continuous", lambda d: d["action_space"].update({":type:": "<class 'gymnasium.spaces.box.Box'>"}), None, None,
-     "needs an action space of type \"<class 'gymnasium.spaces.box.Box'>\""),
-    ("feature-weights", None, lambda s: s.update({"features_extractor.weight": torch.zeros(3)}), None,
-     "it has 'features_extractor.weight', which the architecture has not"),
-    ("missing-weights", None, lambda s: s.pop("action_net.bias"), None, "it has no action_net.bias"),
-    ("float64-weights", None, lambda s: s.update({"action_net.bias": torch.zeros(2, dtype=torch.float64)}), None,
-     "action_net.bias is torch.float64 of shape (2,), not torch.float32 of shape (2,)"),
-    ("nan-weight", None, _nan_weight, None, "has non-finite weights ('mlp_extractor.policy_net.2.weight')"),
-    ("dqn", None, None, lambda m: m.update(algorithm="dqn"), "names the algorithm 'dqn'; etmpc reads PPO's networks"),
-])
+@pytest.mark.parametrize(
+    "case, data_edit, state_edit, meta_edit, says",
+    [
+        (
+            "another-class",
+            lambda d: d.update(policy_class=_class_reference(zipfile.ZipFile)),
+            None,
+            None,
+            "needs a policy class etmpc does not read (zipfile.ZipFile); etmpc reads only PPO's MlpPolicy",
+        ),
+        ("no-class", lambda d: d.pop("policy_class"), None, None, "needs a policy class etmpc does not read (none given)"),
+        (
+            "not-a-pickle",
+            lambda d: d["policy_class"].update({":serialized:": "bm90IGEgcGlja2xl"}),
+            None,
+            None,
+            "(an unreadable pickle)",
+        ),
+        ("data-not-json", lambda d: b"{not json", None, None, "is not a Stable-Baselines3 model (its data is not JSON"),
+        (
+            "other-kwargs",
+            lambda d: d.update(policy_kwargs={"net_arch": [64, 64], "ortho_init": False}),
+            None,
+            None,
+            "needs policy_kwargs etmpc does not read (ortho_init); it reads net_arch alone",
+        ),
+        ("bad-net-arch", lambda d: d.update(policy_kwargs={"net_arch": [64, "64"]}), None, None, "needs net_arch [64, '64']"),
+        (
+            "shallower-net-arch",
+            lambda d: d.update(policy_kwargs={"net_arch": {"pi": [64], "vf": [64, 64]}}),
+            None,
+            None,
+            "does not fit its architecture (10 inputs, tanh layers [64], 2 actions): it has 'mlp_extractor.policy_net.2.weight'",
+        ),
+        (
+            "narrower-net-arch",
+            lambda d: d.update(policy_kwargs={"net_arch": {"pi": [64, 32], "vf": [64, 64]}}),
+            None,
+            None,
+            "mlp_extractor.policy_net.2.weight is torch.float32 of shape (64, 64), not torch.float32 of shape (32, 64)",
+        ),
+        (
+            "other-shape",
+            lambda d: d["observation_space"].update(_shape=[11]),
+            None,
+            None,
+            "takes observations of shape (11,) and '2' actions; the trigger environment has (10,) and 2",
+        ),
+        ("three-actions", lambda d: d["action_space"].update(n="3"), None, None, "and '3' actions"),
+        (
+            "continuous",
+            lambda d: d["action_space"].update({":type:": "<class 'gymnasium.spaces.box.Box'>"}),
+            None,
+            None,
+            "needs an action space of type \"<class 'gymnasium.spaces.box.Box'>\"",
+        ),
+        (
+            "feature-weights",
+            None,
+            lambda s: s.update({"features_extractor.weight": torch.zeros(3)}),
+            None,
+            "it has 'features_extractor.weight', which the architecture has not",
+        ),
+        ("missing-weights", None, lambda s: s.pop("action_net.bias"), None, "it has no action_net.bias"),
+        (
+            "float64-weights",
+            None,
+            lambda s: s.update({"action_net.bias": torch.zeros(2, dtype=torch.float64)}),
+            None,
+            "action_net.bias is torch.float64 of shape (2,), not torch.float32 of shape (2,)",
+        ),
+        ("nan-weight", None, _nan_weight, None, "has non-finite weights ('mlp_extractor.policy_net.2.weight')"),
+        ("dqn", None, None, lambda m: m.update(algorithm="dqn"), "names the algorithm 'dqn'; etmpc reads PPO's networks"),
+    ],
+)
 def test_anything_but_ppos_mlp_policy_is_refused_in_one_line(case, data_edit, state_edit, meta_edit, says, tmp_path):
     model = _model(tmp_path, case, data_edit, state_edit, meta_edit)
     with pytest.raises(EtmpcError) as refused:
@@ -246,9 +334,11 @@ def test_workers_receive_the_weights_and_decide_without_torch():
     """The policy pickles with its numpy weights: a worker unpickles it without torch or the file."""
     policy = load_sb3(str(CART), "cart_pendulum")
     x = np.linspace(-3, 3, 10).astype(np.float32)
-    script = ("import pickle, sys; policy = pickle.loads(sys.stdin.buffer.read()); "
-              "import numpy as np; print(policy.network.action(np.linspace(-3, 3, 10).astype(np.float32))); "
-              "assert 'torch' not in sys.modules and 'stable_baselines3' not in sys.modules")
+    script = (
+        "import pickle, sys; policy = pickle.loads(sys.stdin.buffer.read()); "
+        "import numpy as np; print(policy.network.action(np.linspace(-3, 3, 10).astype(np.float32))); "
+        "assert 'torch' not in sys.modules and 'stable_baselines3' not in sys.modules"
+    )
     done = subprocess.run([sys.executable, "-c", script], input=pickle.dumps(policy), capture_output=True, timeout=120)
     assert done.returncode == 0, done.stderr.decode()
     assert int(done.stdout) == policy.network.action(x)
@@ -285,11 +375,15 @@ def test_the_numpy_network_decides_as_sb3s_predict_on_test_set_episodes(director
     compared = _SB3Predict(load_sb3(str(path), task), PPO.load(str(path), device="cpu"))  # shipped files: trusted
     result = evaluate(task, [compared, f"sb3:{path}"], episodes=EPISODES, workers=1, progress=False)
     close = sum(m <= TOLERANCE for m in compared.margins)
-    print(f"\n{task}: {EPISODES} episodes, {len(compared.margins)} decisions compared, {compared.disagreements} "
-          f"disagreements, smallest |logit1 - logit0| {min(compared.margins):.3g}, {close} decided exactly")
+    print(
+        f"\n{task}: {EPISODES} episodes, {len(compared.margins)} decisions compared, {compared.disagreements} "
+        f"disagreements, smallest |logit1 - logit0| {min(compared.margins):.3g}, {close} decided exactly"
+    )
     assert compared.disagreements == 0 and len(compared.margins) > 10 * EPISODES
-    runs = {spec: [(r.episode, r.objective, r.recomputes) for r in result.runs if r.policy == spec]
-            for spec in (compared.spec, f"sb3:{path}")}
+    runs = {
+        spec: [(r.episode, r.objective, r.recomputes) for r in result.runs if r.policy == spec]
+        for spec in (compared.spec, f"sb3:{path}")
+    }
     assert runs[compared.spec] == runs[f"sb3:{path}"] and len(runs[compared.spec]) == EPISODES
 
 

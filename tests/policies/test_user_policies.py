@@ -15,7 +15,6 @@ from etmpc.common.errors import EtmpcError
 from tests.conftest import REPO
 
 
-
 @dataclass(frozen=True)
 class EveryThird:
     """The rule of every:3, written as a user would."""
@@ -42,8 +41,10 @@ def test_a_policy_object_plays_exactly_as_the_same_built_in_rule_on_any_number_o
     one = etmpc.evaluate("cart_pendulum", ["every:3", EveryThird()], episodes=6, workers=1, progress=False).to_json()
     two = etmpc.evaluate("cart_pendulum", ["every:3", EveryThird()], episodes=6, workers=2, progress=False).to_json()
     assert one == two
-    runs = {p: [(r["episode"], r["objective"], r["recomputes"]) for r in one["runs"] if r["policy"] == p]
-            for p in ("every:3", "mine:every-third")}
+    runs = {
+        p: [(r["episode"], r["objective"], r["recomputes"]) for r in one["runs"] if r["policy"] == p]
+        for p in ("every:3", "mine:every-third")
+    }
     assert runs["every:3"] == runs["mine:every-third"] and len(runs["every:3"]) == 6
 
 
@@ -63,7 +64,7 @@ def test_a_policy_object_is_checked_before_any_work():
         etmpc.evaluate("cart_pendulum", ["every:3", EveryThird(spec="every:3")], episodes=1, workers=1, progress=False)
 
 
-MODULE = '''
+MODULE = """
 from dataclasses import dataclass
 
 @dataclass(frozen=True)
@@ -94,7 +95,7 @@ class NotAPolicy:
     spec = "no"
 
 import_error = None
-'''
+"""
 
 
 @pytest.fixture
@@ -108,22 +109,42 @@ def here(tmp_path, monkeypatch):
 
 @pytest.mark.parametrize("target", ["py:mytriggers:Late", "py:mytriggers:factory"])
 def test_py_targets_evaluate_like_the_same_rule(here, target, capsys):
-    assert main(["evaluate", "battery", "--policy", "every:5", "--policy", target, "--episodes", "3", "--workers", "2",
-                 "--json", "out.json"]) == 0
+    assert (
+        main(
+            [
+                "evaluate",
+                "battery",
+                "--policy",
+                "every:5",
+                "--policy",
+                target,
+                "--episodes",
+                "3",
+                "--workers",
+                "2",
+                "--json",
+                "out.json",
+            ]
+        )
+        == 0
+    )
     data = json.loads((here / "out.json").read_text())
     runs = {p: [(r["episode"], r["objective"]) for r in data["runs"] if r["policy"] == p] for p in data["policies"]}
     assert runs["every:5"] == runs[target]
 
 
-@pytest.mark.parametrize("target, message", [
-    ("py:nosuchmodule:X", "cannot import nosuchmodule"),
-    ("py:mytriggers:Missing", "mytriggers has no Missing"),
-    ("py:mytriggers:NotAPolicy", "is not a policy"),
-    ("py:mytriggers:Broken", "Broken() raised RuntimeError: cannot build"),
-    ("py:mytriggers:Raises", "decide raised ZeroDivisionError: my bug"),
-    ("py:mytriggers:Answers", "decide must return a bool"),
-    ("py:mytriggers", "use py:MODULE:NAME"),
-])
+@pytest.mark.parametrize(
+    "target, message",
+    [
+        ("py:nosuchmodule:X", "cannot import nosuchmodule"),
+        ("py:mytriggers:Missing", "mytriggers has no Missing"),
+        ("py:mytriggers:NotAPolicy", "is not a policy"),
+        ("py:mytriggers:Broken", "Broken() raised RuntimeError: cannot build"),
+        ("py:mytriggers:Raises", "decide raised ZeroDivisionError: my bug"),
+        ("py:mytriggers:Answers", "decide must return a bool"),
+        ("py:mytriggers", "use py:MODULE:NAME"),
+    ],
+)
 def test_a_bad_py_target_is_one_line_exit_2_and_writes_nothing(here, target, message, capsys):
     code = main(["evaluate", "cart_pendulum", "--policy", target, "--episodes", "1", "--workers", "1", "--json", "out.json"])
     err = capsys.readouterr().err
@@ -133,12 +154,39 @@ def test_a_bad_py_target_is_one_line_exit_2_and_writes_nothing(here, target, mes
 
 def test_the_examples_trigger_runs_and_its_table_is_etmpc_evaluates(tmp_path):
     examples = REPO / "examples"
-    script = subprocess.run([sys.executable, "my_trigger.py", "--episodes", "4", "--workers", "2"], cwd=examples,
-                            capture_output=True, text=True, timeout=600)
+    script = subprocess.run(
+        [sys.executable, "my_trigger.py", "--episodes", "4", "--workers", "2"],
+        cwd=examples,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert script.returncode == 0, script.stderr
-    cli = subprocess.run([sys.executable, "-m", "etmpc.cli", "evaluate", "cart_pendulum", "--policy", "every:3",
-                          "--policy", "threshold:0.3", "--policy", "py:my_trigger:AngleOrAge", "--against", "every:3",
-                          "--episodes", "4", "--workers", "1"], cwd=examples, capture_output=True, text=True, timeout=600)
+    cli = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "etmpc.cli",
+            "evaluate",
+            "cart_pendulum",
+            "--policy",
+            "every:3",
+            "--policy",
+            "threshold:0.3",
+            "--policy",
+            "py:my_trigger:AngleOrAge",
+            "--against",
+            "every:3",
+            "--episodes",
+            "4",
+            "--workers",
+            "1",
+        ],
+        cwd=examples,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert cli.returncode == 0, cli.stderr
     rows = lambda text: [line for line in text.splitlines() if line.startswith(("every:3", "threshold:0.3", "py:"))]  # noqa: E731
     assert rows(script.stdout) == rows(cli.stdout) and len(rows(cli.stdout)) == 5

@@ -37,6 +37,7 @@ def _cart_force(physics, w: float):
         if physics.bumpers is not None:
             out[physics._slider[1]] += physics._bumper_force(d.qpos, d.qvel)
         return out
+
     return force
 
 

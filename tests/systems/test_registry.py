@@ -79,18 +79,20 @@ def test_a_task_plugin_joins_the_registry_the_suite_and_gymnasium(plugins):
         gymnasium.registry.pop("etmpc/twin-balance-v0", None)
 
 
-@pytest.mark.parametrize("source, problem", [
-    ("raise ImportError('no such plant')", "failed to import (ImportError: no such plant)"),
-    ("TASKS = []\nTEST_SET_SEEDS = {}", "its TASKS is not a non-empty tuple of task names"),
-    ("TASKS = ('a/b',)\nTEST_SET_SEEDS = {}", "its TASKS is not a non-empty tuple of task names"),
-    ("TASKS = ('track',)\nTEST_SET_SEEDS = {'other': 1}", "its TEST_SET_SEEDS is not a dict of its tasks' seeds"),
-])
+@pytest.mark.parametrize(
+    "source, problem",
+    [
+        ("raise ImportError('no such plant')", "failed to import (ImportError: no such plant)"),
+        ("TASKS = []\nTEST_SET_SEEDS = {}", "its TASKS is not a non-empty tuple of task names"),
+        ("TASKS = ('a/b',)\nTEST_SET_SEEDS = {}", "its TASKS is not a non-empty tuple of task names"),
+        ("TASKS = ('track',)\nTEST_SET_SEEDS = {'other': 1}", "its TEST_SET_SEEDS is not a dict of its tasks' seeds"),
+    ],
+)
 def test_a_broken_task_plugin_is_one_warning_naming_it_and_every_other_task_still_works(plugins, source, problem):
     plugins("etmpc.tasks", "broken", "fake_broken", source)
     with pytest.warns(RuntimeWarning) as caught:
         names = registry.names()
-    assert [str(w.message) for w in caught] == [
-        f"etmpc: task plugin 'broken' (fake_broken) {problem}; its tasks are left out"]
+    assert [str(w.message) for w in caught] == [f"etmpc: task plugin 'broken' (fake_broken) {problem}; its tasks are left out"]
     assert names == ("cart_pendulum", "cart_pendulum/kicks", "battery", "reacher")
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # read once: no second warning
@@ -138,12 +140,15 @@ def _evaluate_help(parser) -> str:
     return " ".join(sub.choices["evaluate"].format_help().split())
 
 
-@pytest.mark.parametrize("name, value, problem", [
-    ("twice", "fake_kind:NOT_A_KIND", "is not an etmpc.policies.specs.Kind"),
-    ("thrice", "fake_kind:KIND", "names its kind 'twice', not 'thrice'"),
-    ("every", "fake_kind:KIND", "names its kind 'twice', not 'every'"),
-    ("twice", "fake_kind:MISSING", "failed to load (AttributeError: module 'fake_kind' has no attribute 'MISSING')"),
-])
+@pytest.mark.parametrize(
+    "name, value, problem",
+    [
+        ("twice", "fake_kind:NOT_A_KIND", "is not an etmpc.policies.specs.Kind"),
+        ("thrice", "fake_kind:KIND", "names its kind 'twice', not 'thrice'"),
+        ("every", "fake_kind:KIND", "names its kind 'twice', not 'every'"),
+        ("twice", "fake_kind:MISSING", "failed to load (AttributeError: module 'fake_kind' has no attribute 'MISSING')"),
+    ],
+)
 def test_a_broken_policy_kind_plugin_is_one_warning_and_the_built_in_kinds_still_work(plugins, name, value, problem):
     plugins("etmpc.policies", name, value, KIND)
     with pytest.warns(RuntimeWarning) as caught:
@@ -174,10 +179,14 @@ def test_every_spec_reader_asks_the_registry():
 
 # Plugins that are hostile rather than broken: their code exits, or raises what is not an Exception.
 STOP = "class Stop(BaseException):\n    pass\n\nraise Stop('halt')"
-HOSTILE_IMPORTS = [("raise SystemExit(0)", "SystemExit(0)"), ("raise SystemExit('bye')", "SystemExit('bye')"),
-                   ("raise KeyboardInterrupt", "KeyboardInterrupt"), (STOP, "Stop: halt"),
-                   ("raise ValueError('two\\nlines')", "ValueError: two lines"),
-                   ("from etmpc.common.errors import EtmpcError\nraise EtmpcError('no licence')", "EtmpcError: no licence")]
+HOSTILE_IMPORTS = [
+    ("raise SystemExit(0)", "SystemExit(0)"),
+    ("raise SystemExit('bye')", "SystemExit('bye')"),
+    ("raise KeyboardInterrupt", "KeyboardInterrupt"),
+    (STOP, "Stop: halt"),
+    ("raise ValueError('two\\nlines')", "ValueError: two lines"),
+    ("from etmpc.common.errors import EtmpcError\nraise EtmpcError('no licence')", "EtmpcError: no licence"),
+]
 
 
 @pytest.fixture
@@ -194,7 +203,8 @@ def test_a_task_plugin_whose_import_exits_or_raises_anything_is_one_warning(plug
     with pytest.warns(RuntimeWarning) as caught:
         names = registry.names()
     assert [str(w.message) for w in caught] == [
-        f"etmpc: task plugin 'hostile' (fake_hostile) failed to import ({raised}); its tasks are left out"]
+        f"etmpc: task plugin 'hostile' (fake_hostile) failed to import ({raised}); its tasks are left out"
+    ]
     assert names == ("cart_pendulum", "cart_pendulum/kicks", "battery", "reacher")
     assert registry.make_system("battery").name == "battery"
 
@@ -205,7 +215,8 @@ def test_a_policy_kind_plugin_whose_import_exits_or_raises_anything_is_one_warni
     with pytest.warns(RuntimeWarning) as caught:
         kinds = specs.kinds()
     assert [str(w.message) for w in caught] == [
-        f"etmpc: policy kind plugin 'hostile' (fake_hostile:KIND) failed to load ({raised}); left out"]
+        f"etmpc: policy kind plugin 'hostile' (fake_hostile:KIND) failed to load ({raised}); left out"
+    ]
     assert list(kinds) == [kind.name for kind in specs.BUILT_IN]
     assert specs.parse_policy("every:3", TASK).period == 3
 
@@ -238,15 +249,21 @@ BOOM = """
 """
 
 
-@pytest.mark.parametrize("spec, message", [
-    ("boom:div", "bad policy 'boom:div': the 'boom' plugin (fake_boom:KIND) failed: ZeroDivisionError: division by zero"),
-    ("boom:exit", "bad policy 'boom:exit': the 'boom' plugin (fake_boom:KIND) failed: SystemExit(3)"),
-    ("boom:ctrl-c", "bad policy 'boom:ctrl-c': the 'boom' plugin (fake_boom:KIND) failed: KeyboardInterrupt"),
-    ("boom:stop", "bad policy 'boom:stop': the 'boom' plugin (fake_boom:KIND) failed: Stop: halt now"),
-    ("boom:etmpc", "bad policy 'boom:etmpc': the plugin's own message"),
-    ("rollout:boom:div", "bad policy 'rollout:boom:div': bad policy 'boom:div': the 'boom' plugin (fake_boom:KIND) failed: "
-                         "ZeroDivisionError: division by zero"),
-])
+@pytest.mark.parametrize(
+    "spec, message",
+    [
+        ("boom:div", "bad policy 'boom:div': the 'boom' plugin (fake_boom:KIND) failed: ZeroDivisionError: division by zero"),
+        ("boom:exit", "bad policy 'boom:exit': the 'boom' plugin (fake_boom:KIND) failed: SystemExit(3)"),
+        ("boom:ctrl-c", "bad policy 'boom:ctrl-c': the 'boom' plugin (fake_boom:KIND) failed: KeyboardInterrupt"),
+        ("boom:stop", "bad policy 'boom:stop': the 'boom' plugin (fake_boom:KIND) failed: Stop: halt now"),
+        ("boom:etmpc", "bad policy 'boom:etmpc': the plugin's own message"),
+        (
+            "rollout:boom:div",
+            "bad policy 'rollout:boom:div': bad policy 'boom:div': the 'boom' plugin (fake_boom:KIND) failed: "
+            "ZeroDivisionError: division by zero",
+        ),
+    ],
+)
 def test_a_policy_kind_plugin_whose_builder_fails_is_one_error_naming_it(plugins, no_ctrl_c, spec, message):
     plugins("etmpc.policies", "boom", "fake_boom:KIND", BOOM)
     with pytest.raises(EtmpcError) as caught:
@@ -269,6 +286,7 @@ def test_on_the_command_line_a_hostile_plugin_is_one_line_and_the_rest_works(plu
     with pytest.warns(RuntimeWarning, match="'hostile' .fake_hostile. failed to import .SystemExit.0.."):
         assert main(["evaluate", "battery", "--policy", "boom:div", "--episodes", "1", "--workers", "1"]) == 2
     assert capsys.readouterr().err.splitlines() == [
-        "etmpc: error: bad policy 'boom:div': the 'boom' plugin (fake_boom:KIND) failed: ZeroDivisionError: division by zero"]
+        "etmpc: error: bad policy 'boom:div': the 'boom' plugin (fake_boom:KIND) failed: ZeroDivisionError: division by zero"
+    ]
     assert main(["evaluate", "battery", "--policy", "every:3", "--episodes", "1", "--workers", "1"]) == 0
     assert "every:3" in capsys.readouterr().out

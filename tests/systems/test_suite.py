@@ -180,8 +180,7 @@ def test_a_battery_action_beyond_its_spec_acts_as_the_bound_and_a_bad_action_is_
     env = suite.load("battery", "trading", task_kwargs={"random": 6})
     env.reset()
     before = env.physics.state_of_charge()
-    for bad, message in (([math.nan, 0.0], "finite"), ([0.0, math.inf], "finite"), ([1.0], "shape"),
-                         ([[1.0, 0.0]], "shape")):
+    for bad, message in (([math.nan, 0.0], "finite"), ([0.0, math.inf], "finite"), ([1.0], "shape"), ([[1.0, 0.0]], "shape")):
         with pytest.raises(ValueError, match=message):
             env.step(bad)
     assert env.physics.state_of_charge() == before

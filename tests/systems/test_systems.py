@@ -60,6 +60,7 @@ def test_a_missing_capability_is_one_line_naming_the_task_and_what_needs_it():
 
     class Bare(SystemBase):
         domain, task = "cart_pendulum", "balance"
+
     with pytest.raises(EtmpcError, match="etmpc sweep needs rollouts .sample_future., which task cart_pendulum does not"):
         require(Bare(), "rollouts", "etmpc sweep")
 

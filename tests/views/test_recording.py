@@ -25,18 +25,22 @@ def live_and_replayed(tmp_path, domain, policies, episodes=3, repeats=1):
     return live, replay_summary(path), path
 
 
-@pytest.mark.parametrize("domain, policies, repeats", [
-    ("cart_pendulum", ["every:3", "threshold:0.3", "always"], 1),
-    ("battery", ["every:5", "threshold:0.01"], 2),
-])
+@pytest.mark.parametrize(
+    "domain, policies, repeats",
+    [("cart_pendulum", ["every:3", "threshold:0.3", "always"], 1), ("battery", ["every:5", "threshold:0.01"], 2)],
+)
 def test_replay_gives_exactly_the_figures_the_run_computed_live(tmp_path, domain, policies, repeats):
     live, replayed, _ = live_and_replayed(tmp_path, domain, policies, repeats=repeats)
     assert len(replayed) == len(live.runs) == len(policies) * 3 * repeats
     by_key = {(r.policy, r.episode, r.repeat): r for r in replayed}
     for run in live.runs:
         again = by_key[(run.policy, run.episode, run.repeat)]
-        assert (again.objective, again.control_objective, again.recomputes, again.steps) == \
-            (run.objective, run.control_objective, run.recomputes, run.steps)  # bit for bit
+        assert (again.objective, again.control_objective, again.recomputes, again.steps) == (
+            run.objective,
+            run.control_objective,
+            run.recomputes,
+            run.steps,
+        )  # bit for bit
 
 
 def test_replay_names_a_recording_by_its_task_not_its_domain(tmp_path, capsys):
@@ -65,8 +69,13 @@ def test_prediction_error_is_what_the_threshold_trigger_compares(tmp_path):
 
 def test_prediction_errors_against_a_direct_computation(cart_system, cart_testset):
     _, env, _ = context("cart_pendulum")
-    traj = run_episode(cart_system, env, parse_policy("every:4", cart_system), policy_rng(0, 0, 1),
-                       cart_system.episode_from_arrays(cart_testset.episode_arrays(1)))
+    traj = run_episode(
+        cart_system,
+        env,
+        parse_policy("every:4", cart_system),
+        policy_rng(0, 0, 1),
+        cart_system.episode_from_arrays(cart_testset.episode_arrays(1)),
+    )
     errors = prediction_errors(traj, cart_system.error_weights)
     w = cart_system.error_weights
     for i in range(1, traj.steps):
@@ -120,8 +129,13 @@ def test_the_recording_holds_what_happened_and_identity(cart_recording, cart_sys
     assert identity["test_set_sha256"] == [[cart_testset.sha256]]
 
     _, env, _ = context("cart_pendulum")
-    traj = run_episode(cart_system, env, parse_policy("every:5", cart_system), policy_rng(7, 0, 1),
-                       cart_system.episode_from_arrays(cart_testset.episode_arrays(1)))
+    traj = run_episode(
+        cart_system,
+        env,
+        parse_policy("every:5", cart_system),
+        policy_rng(7, 0, 1),
+        cart_system.episode_from_arrays(cart_testset.episode_arrays(1)),
+    )
     for j, name in enumerate(cart_system.state_names):
         steps, values = series(entities, f"{CART}/realised/state/{name}")
         np.testing.assert_array_equal(steps, np.arange(traj.steps + 1))
@@ -130,8 +144,9 @@ def test_the_recording_holds_what_happened_and_identity(cart_recording, cart_sys
     times = state.column("time").to_numpy().astype("timedelta64[ns]").astype(np.int64)
     np.testing.assert_array_equal(times, np.arange(traj.steps + 1) * 100_000_000)  # 0.1 s per step
     _, applied = series(entities, f"{CART}/realised/input/force_n")
-    np.testing.assert_array_equal(applied, np.column_stack([traj.applied[: traj.steps, 0], np.full(traj.steps, -25.0),
-                                                            np.full(traj.steps, 25.0)]))  # applied, then the bounds
+    np.testing.assert_array_equal(
+        applied, np.column_stack([traj.applied[: traj.steps, 0], np.full(traj.steps, -25.0), np.full(traj.steps, 25.0)])
+    )  # applied, then the bounds
     _, correction = series(entities, f"{CART}/correction/force_n")
     np.testing.assert_array_equal(correction[:, 0], traj.correction[: traj.steps, 0])
     assert any(e.startswith("/cart_pendulum/every\\:5/episode_000/") for e in entities)  # episodes stay apart
@@ -145,8 +160,11 @@ def plans_in_fan(steps, values, made, predicted):
     for p, (k, prediction) in enumerate(zip(made, predicted)):
         rows = k + np.arange(len(prediction))
         keep = rows <= steps[-1]
-        (slot,) = [m for m in range(values.shape[1]) if np.array_equal(values[rows[keep], m], prediction[keep])
-                   and (owner[rows[keep], m] == -1).all()]
+        (slot,) = [
+            m
+            for m in range(values.shape[1])
+            if np.array_equal(values[rows[keep], m], prediction[keep]) and (owner[rows[keep], m] == -1).all()
+        ]
         owner[rows[keep], slot] = p
         slots.append(slot)
     return slots, owner
@@ -159,8 +177,13 @@ def test_every_plan_is_a_time_series_from_the_step_it_was_made(cart_recording, c
     as the one made 21 steps earlier ends); each point takes its plan's colour, and plans made
     later are coloured otherwise."""
     _, env, _ = context("cart_pendulum")
-    traj = run_episode(cart_system, env, parse_policy(spec, cart_system), policy_rng(7, 0, episode),
-                       cart_system.episode_from_arrays(cart_testset.episode_arrays(episode)))
+    traj = run_episode(
+        cart_system,
+        env,
+        parse_policy(spec, cart_system),
+        policy_rng(7, 0, episode),
+        cart_system.episode_from_arrays(cart_testset.episode_arrays(episode)),
+    )
     entities = chunks_by_entity(cart_recording)
     root = f"/cart_pendulum/{spec.replace(':', chr(92) + ':')}/episode_{episode:03d}/repeat_0"
     assert [k for k, _ in traj.plans] == made
@@ -266,11 +289,19 @@ def read_blueprint(path):
         item = items[key]
         if "ContainerBlueprint:container_kind" in item:
             kind = {1: "tabs", 2: "horizontal", 3: "vertical", 4: "grid"}[item["ContainerBlueprint:container_kind"][0]]
-            return {"kind": kind, "name": (item.get("ContainerBlueprint:display_name") or [None])[0],
-                    "children": [node(c.split("/")[1]) for c in item["ContainerBlueprint:contents"]]}
+            return {
+                "kind": kind,
+                "name": (item.get("ContainerBlueprint:display_name") or [None])[0],
+                "children": [node(c.split("/")[1]) for c in item["ContainerBlueprint:contents"]],
+            }
         contents = item["properties"].get("ViewContents", {}).get("ViewContents:query", [])
-        return {"class": item["ViewBlueprint:class_identifier"][0], "name": item["ViewBlueprint:display_name"][0],
-                "origin": item["ViewBlueprint:space_origin"][0], "contents": contents, "properties": item["properties"]}
+        return {
+            "class": item["ViewBlueprint:class_identifier"][0],
+            "name": item["ViewBlueprint:display_name"][0],
+            "origin": item["ViewBlueprint:space_origin"][0],
+            "contents": contents,
+            "properties": item["properties"],
+        }
 
     return node(root), items["time_panel"]
 
@@ -317,8 +348,14 @@ def test_the_blueprint_has_a_tab_per_policy_and_episode_of_time_series_of_entiti
             assert force["contents"] == [f"{episode_root}/realised/input/force_n", f"{episode_root}/plan/input/force_n"]
             panels = [set(v["contents"]) for v in views if v["class"] == "TimeSeries"]
             # Series of different scales have panels of their own.
-            for alone in ("objective/reward", "objective/running", "correction/force_n", "realised/signal/disturbance_rad_s2",
-                          "recompute", "prediction_error"):
+            for alone in (
+                "objective/reward",
+                "objective/running",
+                "correction/force_n",
+                "realised/signal/disturbance_rad_s2",
+                "recompute",
+                "prediction_error",
+            ):
                 assert {f"{episode_root}/{alone}"} in panels
 
 
@@ -341,10 +378,23 @@ def test_the_battery_forecast_panels_show_the_signal_they_forecast(battery_recor
 
 
 def test_an_episode_tab_per_episode_up_to_the_limit(tmp_path):
-    layouts = [look.EpisodeLayout(root=f"/battery/always/episode_{e:03d}/repeat_0", domain="battery", policy="always",
-                                  episode=e, repeat=0, steps=100, control_interval_s=10.0, states=("state_of_charge",),
-                                  inputs=(), signals=(), forecast_signals=(), entities=frozenset({"realised/state/state_of_charge"}))
-               for e in range(look.MAX_EPISODE_TABS + 3)]
+    layouts = [
+        look.EpisodeLayout(
+            root=f"/battery/always/episode_{e:03d}/repeat_0",
+            domain="battery",
+            policy="always",
+            episode=e,
+            repeat=0,
+            steps=100,
+            control_interval_s=10.0,
+            states=("state_of_charge",),
+            inputs=(),
+            signals=(),
+            forecast_signals=(),
+            entities=frozenset({"realised/state/state_of_charge"}),
+        )
+        for e in range(look.MAX_EPISODE_TABS + 3)
+    ]
     tabs = look.blueprint(layouts).root_container
     assert [tab.name for tab in tabs.contents] == [f"episode {e}" for e in range(look.MAX_EPISODE_TABS)]
 
@@ -387,8 +437,11 @@ def test_replay_cli_prints_the_figures_and_refuses_bad_files(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "every:5" in out and "episode 1 repeat 0" in out
     (tmp_path / "junk.rrd").write_bytes(b"not a recording")
-    for argv in (["replay", str(tmp_path / "missing.rrd")], ["replay", str(tmp_path / "junk.rrd")],
-                 ["evaluate", "battery", "--policy", "always", "--record", str(tmp_path / "x.txt")]):
+    for argv in (
+        ["replay", str(tmp_path / "missing.rrd")],
+        ["replay", str(tmp_path / "junk.rrd")],
+        ["evaluate", "battery", "--policy", "always", "--record", str(tmp_path / "x.txt")],
+    ):
         assert main(argv) == 2
         err = capsys.readouterr().err
         assert err.count("\n") == 1, err
@@ -396,12 +449,31 @@ def test_replay_cli_prints_the_figures_and_refuses_bad_files(tmp_path, capsys):
 
 def test_render_puts_the_video_frames_into_the_recording(tmp_path, capsys):
     out, rec = tmp_path / "v.mp4", tmp_path / "v.rrd"
-    argv = ["render", "cart_pendulum", "--policy", "every:5", "--episode", "3", "--out", str(out),
-            "--width", "160", "--height", "120", "--record", str(rec)]
+    argv = [
+        "render",
+        "cart_pendulum",
+        "--policy",
+        "every:5",
+        "--episode",
+        "3",
+        "--out",
+        str(out),
+        "--width",
+        "160",
+        "--height",
+        "120",
+        "--record",
+        str(rec),
+    ]
     assert main(argv) == 0
     assert "101 frames" in capsys.readouterr().out
-    images = [b for e, batches in chunks_by_entity(rec).items() if e.endswith("/camera") for b in batches
-              if "EncodedImage:blob" in b.schema.names]
+    images = [
+        b
+        for e, batches in chunks_by_entity(rec).items()
+        if e.endswith("/camera")
+        for b in batches
+        if "EncodedImage:blob" in b.schema.names
+    ]
     steps = sorted(s for b in images for s in b.column("step").to_pylist())
     assert steps == list(range(101))
     spatial = [v["origin"] for v in views_of(read_blueprint(rec)[0]) if v["class"] == "2D"]
@@ -415,14 +487,19 @@ def test_render_puts_the_video_frames_into_the_recording(tmp_path, capsys):
 def test_train_records_its_evaluations_without_changing_any_result(tmp_path):
     from etmpc.learning.train import TrainConfig, train
 
-    config = TrainConfig("battery", seeds=(0, 1), episodes=4, eval_every=2, eval_episodes=3, normalisation_episodes=2,
-                         validation_episodes=2)
+    config = TrainConfig(
+        "battery", seeds=(0, 1), episodes=4, eval_every=2, eval_episodes=3, normalisation_episodes=2, validation_episodes=2
+    )
     train(config, tmp_path / "plain", workers=1, progress=False)
     train(config, tmp_path / "rec", workers=1, progress=False, record_episodes=2)
     plain = {p.relative_to(tmp_path / "plain"): p.read_bytes() for p in (tmp_path / "plain").rglob("*") if p.is_file()}
     recorded = {p.relative_to(tmp_path / "rec"): p.read_bytes() for p in (tmp_path / "rec").rglob("*") if p.is_file()}
     assert {k: v for k, v in recorded.items() if k.parts[0] != "recordings"} == plain
-    assert sorted(p.name for p in (tmp_path / "rec" / "recordings").iterdir()) == ["eval_00000.rrd", "eval_00002.rrd", "eval_00004.rrd"]
+    assert sorted(p.name for p in (tmp_path / "rec" / "recordings").iterdir()) == [
+        "eval_00000.rrd",
+        "eval_00002.rrd",
+        "eval_00004.rrd",
+    ]
 
     replayed = replay_summary(tmp_path / "rec" / "recordings" / "eval_00004.rrd")
     assert sorted((r.policy, r.episode) for r in replayed) == [(f"seed{s}/episodes00004", e) for s in (0, 1) for e in (0, 1)]
@@ -444,8 +521,9 @@ def test_a_self_trigger_records_what_it_announced_at_each_solve(tmp_path, cart_s
     theta = np.zeros((len(st.CANDIDATES), 1 + p))
     theta[st.CANDIDATES.index(2), 3], theta[st.CANDIDATES.index(6), 3] = 1.0, -1.0  # by the sign of the pole angle
     policy_file = tmp_path / "announcing.json"
-    policy_file.write_text(json.dumps(st.SelfTrigger("x", "cart_pendulum", st.CANDIDATES, theta, np.zeros(p),
-                                                     np.ones(p)).to_json()))
+    policy_file.write_text(
+        json.dumps(st.SelfTrigger("x", "cart_pendulum", st.CANDIDATES, theta, np.zeros(p), np.ones(p)).to_json())
+    )
     path = tmp_path / "s.rrd"
     evaluate("cart_pendulum", [f"self:{policy_file}"], episodes=1, workers=1, progress=False, record=path)
     entities = chunks_by_entity(path)

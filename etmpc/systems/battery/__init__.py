@@ -14,5 +14,4 @@ TEST_SET_SEEDS = {"trading": 20210602}
 # gained how today's forecasts revise the kept plan's (0b5a03e).
 VERSIONS = {"trading": 1}
 
-__getattr__ = lazy(__name__, {"trading": "etmpc.systems.battery.system:BatterySystem"},
-                   "etmpc.systems.battery.task:SUITE")
+__getattr__ = lazy(__name__, {"trading": "etmpc.systems.battery.system:BatterySystem"}, "etmpc.systems.battery.task:SUITE")

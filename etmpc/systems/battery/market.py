@@ -16,8 +16,9 @@ import numpy as np
 from etmpc.systems.battery.parameters import SECONDS_PER_HOUR, Battery, Market, Signal
 
 
-def ou_path(rng: np.random.Generator, steps: int, dt_s: float, time_constant_s: float, std: float,
-            rows: int | None = None) -> np.ndarray:
+def ou_path(
+    rng: np.random.Generator, steps: int, dt_s: float, time_constant_s: float, std: float, rows: int | None = None
+) -> np.ndarray:
     """Stationary Ornstein-Uhlenbeck samples at ``dt_s`` spacing, exactly discretised.
 
     ``o_0 ~ N(0, std^2)``, ``o_{k+1} = rho o_k + std sqrt(1 - rho^2) xi_k`` with ``rho = exp(-dt/tau)``.
@@ -34,8 +35,7 @@ def ou_path(rng: np.random.Generator, steps: int, dt_s: float, time_constant_s: 
     return std * path
 
 
-def event_levels(rng: np.random.Generator, times_s: np.ndarray, low: float, high: float,
-                 mean_duration_s: float) -> np.ndarray:
+def event_levels(rng: np.random.Generator, times_s: np.ndarray, low: float, high: float, mean_duration_s: float) -> np.ndarray:
     """A level redrawn ``U(low, high)`` at the end of each exponentially distributed event.
 
     The first event is already running at ``times_s[0]``; by memorylessness its remaining duration
@@ -52,8 +52,9 @@ def event_levels(rng: np.random.Generator, times_s: np.ndarray, low: float, high
     return levels
 
 
-def draw_signal(rng: np.random.Generator, signal: Signal, start_s: float, steps: int, dt_s: float,
-                forecast_steps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def draw_signal(
+    rng: np.random.Generator, signal: Signal, start_s: float, steps: int, dt_s: float, forecast_steps: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(true, base, forecasts)`` for steps ``0..steps-1`` of an episode starting ``start_s`` into
     the clock hour; ``forecasts[k, j]`` is the forecast made at ``k`` for ``k + j`` (``[k, 0]`` is the
     true value at ``k``)."""
@@ -95,8 +96,9 @@ class Episode:
         return self.production_kw.shape[0] - 1
 
     @classmethod
-    def draw(cls, rng: np.random.Generator, battery: Battery = Battery(), market: Market = Market(),
-             steps: int | None = None) -> Episode:
+    def draw(
+        cls, rng: np.random.Generator, battery: Battery = Battery(), market: Market = Market(), steps: int | None = None
+    ) -> Episode:
         steps = battery.episode_steps if steps is None else steps
         initial_soc = float(rng.uniform(market.initial_soc_low, market.initial_soc_high))
         start_s = float(rng.uniform(0.0, SECONDS_PER_HOUR))
@@ -118,12 +120,13 @@ class Episode:
         values = {name: np.array(arrays[name], dtype=float) for name in names}
         rows = values["production_kw"].shape
         signals, forecasts = names[2:], ("production_forecast_kw", "price_forecast_eur_kwh")
-        if values["initial_soc"].shape != () or len(rows) != 1 or any(
-            values[name].shape[0] != rows[0] or values[name].ndim != (2 if name in forecasts else 1) for name in signals
+        if (
+            values["initial_soc"].shape != ()
+            or len(rows) != 1
+            or any(values[name].shape[0] != rows[0] or values[name].ndim != (2 if name in forecasts else 1) for name in signals)
         ):
             raise ValueError("bad episode arrays: inconsistent shapes " + str({n: values[n].shape for n in names}))
         return cls(float(values["initial_soc"]), float(values["start_s"]), *(values[name] for name in signals))
-
 
 
 # Each Market signal's arrays in an Episode: (true, base, forecast).
@@ -133,8 +136,7 @@ SIGNAL_ARRAYS = {
 }
 
 
-def sample_future(rng: np.random.Generator, episode: Episode, known_rows: int, battery: Battery,
-                  market: Market) -> Episode:
+def sample_future(rng: np.random.Generator, episode: Episode, known_rows: int, battery: Battery, market: Market) -> Episode:
     """A copy of ``episode`` whose rows ``known_rows..`` are redrawn from the task's generators,
     conditioned only on what a controller has seen by row ``k = known_rows - 1`` (``1 <= known_rows
     <= steps + 1``): the true values and forecast rows up to ``k``, and the clock.

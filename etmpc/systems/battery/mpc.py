@@ -37,7 +37,9 @@ class EconomicMPC:
         cumulative = np.tril(np.ones((horizon, horizon)))
         self._a = ca.DM(cumulative * self._per_kw * self._limit)  # SoC drop per unit of scaled input
         self._solver = ca.conic(
-            "battery_lp", "highs", {"h": ca.Sparsity(horizon, horizon), "a": self._a.sparsity()},
+            "battery_lp",
+            "highs",
+            {"h": ca.Sparsity(horizon, horizon), "a": self._a.sparsity()},
             {"highs": {"output_flag": False, "presolve": "off"}, "error_on_fail": True},
         )
 
@@ -46,7 +48,9 @@ class EconomicMPC:
         return self._profit(price, inputs_kw, self.rollout(soc, production_kw, inputs_kw)[-1])
 
     def _profit(self, price: np.ndarray, inputs_kw: np.ndarray, final_soc: float) -> float:
-        return float(np.dot(price, inputs_kw) * self.battery.interval_h + self.terminal_price * self.battery.capacity_kwh * final_soc)
+        return float(
+            np.dot(price, inputs_kw) * self.battery.interval_h + self.terminal_price * self.battery.capacity_kwh * final_soc
+        )
 
     def rollout(self, soc: float, production_kw: np.ndarray, inputs_kw: np.ndarray) -> np.ndarray:
         """Predicted states of charge ``x_0..x_N`` (the model knows no bounds)."""
@@ -67,7 +71,11 @@ class EconomicMPC:
         try:
             solution = self._solver(
                 g=-(price - self.terminal_price) * self.battery.interval_h * self._limit,
-                a=self._a, lba=inflow - 1.0, uba=inflow, lbx=-1.0, ubx=1.0,
+                a=self._a,
+                lba=inflow - 1.0,
+                uba=inflow,
+                lbx=-1.0,
+                ubx=1.0,
             )
             success, status = True, "optimal"
             inputs = np.clip(np.asarray(solution["x"]).ravel(), -1.0, 1.0) * self._limit

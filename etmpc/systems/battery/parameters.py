@@ -77,21 +77,35 @@ class Signal:
 # Net production minus consumption on the battery's grid, kW (> 0: surplus flows into the battery).
 # Events are loads and generators switching (+-100 kW, 28 % of a full-power trade) every 4 minutes on
 # average, so about one change falls inside each 200 s MPC horizon: plans go stale for a reason.
-PRODUCTION = Signal(unit="kW",
-                    hourly_low=0.0, hourly_high=0.0,  # no hourly level: the events and the OU are the signal
-                    event_low=-100.0, event_high=100.0, event_mean_duration_s=240.0,
-                    ou_time_constant_s=60.0, ou_std=15.0,
-                    forecast_std_per_step=2.0, forecast_time_constant_s=60.0)  # 38 kW at a 20-step forecast's last lead
+PRODUCTION = Signal(
+    unit="kW",
+    hourly_low=0.0,
+    hourly_high=0.0,  # no hourly level: the events and the OU are the signal
+    event_low=-100.0,
+    event_high=100.0,
+    event_mean_duration_s=240.0,
+    ou_time_constant_s=60.0,
+    ou_std=15.0,
+    forecast_std_per_step=2.0,
+    forecast_time_constant_s=60.0,
+)  # 38 kW at a 20-step forecast's last lead
 
 # Balance-market price, EUR/kWh. The spot price (40-60 EUR/MWh) is fixed per clock hour; imbalance
 # events move the balance price by up to +-30 EUR/MWh for two minutes on average, and a fast OU
 # (30 s, 10 EUR/MWh) adds the noise of the balance market. Its mean, 0.05 EUR/kWh, is the terminal
 # value of stored energy.
-PRICE = Signal(unit="EUR/kWh",
-               hourly_low=0.04, hourly_high=0.06,  # the spot price, fixed per clock hour
-               event_low=-0.03, event_high=0.03, event_mean_duration_s=120.0,
-               ou_time_constant_s=30.0, ou_std=0.01,
-               forecast_std_per_step=0.001, forecast_time_constant_s=60.0)  # 0.019 EUR/kWh at the last lead
+PRICE = Signal(
+    unit="EUR/kWh",
+    hourly_low=0.04,
+    hourly_high=0.06,  # the spot price, fixed per clock hour
+    event_low=-0.03,
+    event_high=0.03,
+    event_mean_duration_s=120.0,
+    ou_time_constant_s=30.0,
+    ou_std=0.01,
+    forecast_std_per_step=0.001,
+    forecast_time_constant_s=60.0,
+)  # 0.019 EUR/kWh at the last lead
 
 
 @dataclass(frozen=True)
@@ -105,4 +119,3 @@ class Market:
     initial_soc_high: float = 0.9
     # Each episode starts at a uniform time within the clock hour, so the 1000 s of about 28 % of
     # the episodes see the spot price change.
-

@@ -15,8 +15,9 @@ from scipy.optimize import linprog
 from etmpc.systems.battery.parameters import Battery
 
 
-def solve_with_linprog(battery: Battery, terminal_price: float, soc: float, production_kw: np.ndarray,
-                       price: np.ndarray) -> tuple[np.ndarray, float, bool]:
+def solve_with_linprog(
+    battery: Battery, terminal_price: float, soc: float, production_kw: np.ndarray, price: np.ndarray
+) -> tuple[np.ndarray, float, bool]:
     """``(inputs_kw, profit_eur, success)`` of the LP: variables ``[u_0..u_{N-1}, x_1..x_N]``."""
     n = len(price)
     dt_h, per_kw, limit = battery.interval_h, battery.soc_per_kw, battery.trade_limit_kw
@@ -50,7 +51,10 @@ class LinprogReference:
         obs = timestep.observation
         start = time.perf_counter()
         inputs, _, ok = solve_with_linprog(
-            self.battery, self.terminal_price, float(x[0]),
-            obs["production_forecast_kw"][: self.horizon], obs["price_forecast_eur_kwh"][: self.horizon],
+            self.battery,
+            self.terminal_price,
+            float(x[0]),
+            obs["production_forecast_kw"][: self.horizon],
+            obs["price_forecast_eur_kwh"][: self.horizon],
         )
         return inputs, time.perf_counter() - start, ok

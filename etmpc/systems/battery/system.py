@@ -30,7 +30,8 @@ EXOGENOUS_FEATURES = (
     "trade_value_eur",  # (lambda_i - lambda_bar) u_plan,i delta: today's worth of the trade the plan makes now
     "price_forecast_revision_eur_kwh",  # RMS over the plan's remaining steps: today's price forecast minus the plan's
     "production_forecast_revision_kw",  # the same for the production forecast
-    "plan_value_revision_eur",  # sum over them of (today's forecast - the plan's) u_plan delta: what the plan's trades gained or lost
+    # sum over them of (today's forecast - the plan's) u_plan delta: what the plan's trades gained or lost
+    "plan_value_revision_eur",
 )
 _MEAN_PRICE, _INTERVAL_H = Market().price.mean, Battery().interval_h
 
@@ -51,12 +52,23 @@ def exogenous_features(s) -> np.ndarray:
     trade_value = (price - _MEAN_PRICE) * float(plan.input_at(age)[0]) * _INTERVAL_H
     # The forecasts now against those the plan was made with, over the steps it has left (index 0: now).
     left = plan.horizon - age
-    price_revision = np.asarray(obs["price_forecast_eur_kwh"][:left]) - plan.forecasts["price_eur_kwh"][age:age + left]
-    production_revision = np.asarray(obs["production_forecast_kw"][:left]) - plan.forecasts["production_kw"][age:age + left]
-    value_revision = float(np.dot(price_revision, plan.inputs[age:age + left, 0])) * _INTERVAL_H
-    return np.array([price, production, planned_price, planned_production, price - planned_price,
-                     production - planned_production, trade_value, float(np.sqrt(np.mean(price_revision**2))),
-                     float(np.sqrt(np.mean(production_revision**2))), value_revision])
+    price_revision = np.asarray(obs["price_forecast_eur_kwh"][:left]) - plan.forecasts["price_eur_kwh"][age : age + left]
+    production_revision = np.asarray(obs["production_forecast_kw"][:left]) - plan.forecasts["production_kw"][age : age + left]
+    value_revision = float(np.dot(price_revision, plan.inputs[age : age + left, 0])) * _INTERVAL_H
+    return np.array(
+        [
+            price,
+            production,
+            planned_price,
+            planned_production,
+            price - planned_price,
+            production - planned_production,
+            trade_value,
+            float(np.sqrt(np.mean(price_revision**2))),
+            float(np.sqrt(np.mean(production_revision**2))),
+            value_revision,
+        ]
+    )
 
 
 @dataclass(frozen=True)
@@ -86,7 +98,9 @@ class BatterySystem(SystemBase):
         if config.lqr_state_weight < 0 or config.lqr_input_weight <= 0:
             raise ValueError(f"LQR weights need Q >= 0 and R > 0, got Q={config.lqr_state_weight}, R={config.lqr_input_weight}")
         if config.horizon > config.market.forecast_steps:
-            raise EtmpcError(f"horizon {config.horizon} exceeds the {config.market.forecast_steps} forecast values the task provides")
+            raise EtmpcError(
+                f"horizon {config.horizon} exceeds the {config.market.forecast_steps} forecast values the task provides"
+            )
         self.config = config
         battery = config.battery
         self.episode_steps = battery.episode_steps
@@ -95,7 +109,8 @@ class BatterySystem(SystemBase):
         self.u_min = np.array([-battery.trade_limit_kw])
         self.u_max = np.array([battery.trade_limit_kw])
         self.error_weights = np.sqrt([config.lqr_state_weight])
-        # The SoC error: eps+ = eps - delta/C u_lqr (the paper's LQR, Q = 1, R = 0.1: docs/paper.md), a discrete system with its timebase.
+        # The SoC error: eps+ = eps - delta/C u_lqr (the paper's LQR, Q = 1, R = 0.1: docs/paper.md), a discrete
+        # system with its timebase.
         soc_error = ct.ss([[1.0]], [[-battery.soc_per_kw]], [[1.0]], [[0.0]], dt=battery.interval_s)
         gain = discrete_lqr_gain(soc_error, np.array([[config.lqr_state_weight]]), np.array([[config.lqr_input_weight]]))
         self.feedback = ErrorFeedback(gain)
@@ -125,8 +140,9 @@ class BatterySystem(SystemBase):
     def plan_cost(self, x: np.ndarray, u_prev: np.ndarray, timestep: dm_env.TimeStep, inputs: np.ndarray) -> float:
         """The OCP's minimised objective (negative profit, EUR) of an input sequence."""
         obs, n = timestep.observation, self.config.horizon
-        return -self.mpc.profit(float(x[0]), obs["production_forecast_kw"][:n], obs["price_forecast_eur_kwh"][:n], np.ravel(inputs))
+        return -self.mpc.profit(
+            float(x[0]), obs["production_forecast_kw"][:n], obs["price_forecast_eur_kwh"][:n], np.ravel(inputs)
+        )
 
     def reference_solvers(self) -> list:
         return [LinprogReference(self.config.battery, self.config.horizon, self.terminal_price)]
-

@@ -23,7 +23,8 @@ or absorb, and only the executed trade is paid. If even the largest trade cannot
 (:meth:`Physics.unbalanced_energy_kwh`); with the default generators this does not happen.
 
 **Reward** ``lambda_k u_k delta`` (EUR) for the executed trade, plus the value of the stored energy
-``lambda_bar C x_T`` at the last step, with ``lambda_bar = E[lambda]`` (the paper's terminal value; docs/paper.md). Higher is better.
+``lambda_bar C x_T`` at the last step, with ``lambda_bar = E[lambda]`` (the paper's terminal value;
+docs/paper.md). Higher is better.
 
 **Observation**: the state of charge, the current net production and price, and the forecasts of
 both for the next 20 intervals (the first value of each is the current true value).
@@ -123,8 +124,9 @@ class Physics(control.Physics):
         self._computing = min(max(computing, 0.0), 1.0)
 
     def render(self, *args, **kwargs):
-        raise NotImplementedError("the battery has no scene to render; record the run to Rerun instead "
-                                  "(etmpc evaluate battery --record FILE.rrd)")
+        raise NotImplementedError(
+            "the battery has no scene to render; record the run to Rerun instead (etmpc evaluate battery --record FILE.rrd)"
+        )
 
     def step(self, n_sub_steps: int = 1) -> None:
         b = self.battery
@@ -165,8 +167,7 @@ class Trading(EpisodeTask):
     :class:`etmpc.systems.episodes.EpisodeTask`).
     """
 
-    def __init__(self, random: Random = None, battery: Battery = Battery(),
-                 market: Market = Market(), steps: int | None = None):
+    def __init__(self, random: Random = None, battery: Battery = Battery(), market: Market = Market(), steps: int | None = None):
         super().__init__(random)
         self.battery, self.market = battery, market
         self._steps = battery.episode_steps if steps is None else steps
@@ -177,8 +178,9 @@ class Trading(EpisodeTask):
         if episode.steps < self._steps:
             raise ValueError(f"episode has {episode.steps} steps, need {self._steps}")
         if episode.production_forecast_kw.shape[1] < self.market.forecast_steps:
-            raise ValueError(f"episode forecasts have {episode.production_forecast_kw.shape[1]} values, "
-                             f"need {self.market.forecast_steps}")
+            raise ValueError(
+                f"episode forecasts have {episode.production_forecast_kw.shape[1]} values, need {self.market.forecast_steps}"
+            )
 
     def draw_episode(self, random: np.random.Generator) -> Episode:
         return Episode.draw(random, self.battery, self.market, self._steps)
@@ -228,13 +230,15 @@ class Trading(EpisodeTask):
 
     def get_observation(self, physics: Physics) -> collections.OrderedDict:
         e, k, n = self._episode, self._step, self.market.forecast_steps
-        return collections.OrderedDict((
-            ("state_of_charge", np.float64(physics.state_of_charge())),
-            ("net_production_kw", np.float64(e.production_kw[k])),
-            ("price_eur_kwh", np.float64(e.price_eur_kwh[k])),
-            ("production_forecast_kw", e.production_forecast_kw[k, :n]),
-            ("price_forecast_eur_kwh", e.price_forecast_eur_kwh[k, :n]),
-        ))
+        return collections.OrderedDict(
+            (
+                ("state_of_charge", np.float64(physics.state_of_charge())),
+                ("net_production_kw", np.float64(e.production_kw[k])),
+                ("price_eur_kwh", np.float64(e.price_eur_kwh[k])),
+                ("production_forecast_kw", e.production_forecast_kw[k, :n]),
+                ("price_forecast_eur_kwh", e.price_forecast_eur_kwh[k, :n]),
+            )
+        )
 
 
 def make_environment(
@@ -249,5 +253,11 @@ def make_environment(
     return build_environment(Physics(battery), task, steps, battery.interval_s, environment_kwargs)
 
 
-add_task(SUITE, "trading", make_environment, Battery().episode_steps, Battery().interval_s,
-         "Trade a 10 kWh battery on the balance market: 100 intervals of 10 s by default.")
+add_task(
+    SUITE,
+    "trading",
+    make_environment,
+    Battery().episode_steps,
+    Battery().interval_s,
+    "Trade a 10 kWh battery on the balance market: 100 intervals of 10 s by default.",
+)

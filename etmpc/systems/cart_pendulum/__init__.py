@@ -13,6 +13,11 @@ TASKS = ("balance", "kicks")
 # The seed of each task's stored test set (tasks/cart_pendulum/<task>_testset.npz: etmpc testset TASK --seed SEED).
 TEST_SET_SEEDS = {"balance": 20210601, "kicks": 20261126}
 
-__getattr__ = lazy(__name__, {"balance": "etmpc.systems.cart_pendulum.system:CartPendulumSystem",
-                              "kicks": "etmpc.systems.cart_pendulum.kicks_system:KicksSystem"},
-                   "etmpc.systems.cart_pendulum.suite:SUITE")
+__getattr__ = lazy(
+    __name__,
+    {
+        "balance": "etmpc.systems.cart_pendulum.system:CartPendulumSystem",
+        "kicks": "etmpc.systems.cart_pendulum.kicks_system:KicksSystem",
+    },
+    "etmpc.systems.cart_pendulum.suite:SUITE",
+)

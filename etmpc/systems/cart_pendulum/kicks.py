@@ -152,16 +152,24 @@ class Kicks(CartPendulumTask):
         sees that interval's reference (kicks and jumps are memoryless)."""
         kick, reference = np.array(episode.kick), np.array(episode.reference)
         kick[step:] = draw_kicks(random, kick.size - step)
-        reference[step + 1:] = continue_references(random, reference[step], reference.size - step - 1)
+        reference[step + 1 :] = continue_references(random, reference[step], reference.size - step - 1)
         return KickEpisode(episode.initial_state, kick, reference)
 
     def episode_parameters(self) -> dict:
         """What the episodes are drawn from (recorded in the test set)."""
-        return {"initial_state_low": INITIAL_STATE_LOW.tolist(), "initial_state_high": INITIAL_STATE_HIGH.tolist(),
-                "kicks_per_s": KICKS_PER_S, "kick_rad_s": list(KICK_RAD_S), "steps": EPISODE_STEPS,
-                "reference_m": REFERENCE_M, "reference_jump_probability": REFERENCE_JUMP_PROBABILITY,
-                "position_scale_m": POSITION_SCALE_M, "bumpers": asdict(BUMPERS), "fall_rad": FALL_RAD,
-                "fall_cost": FALL_COST}
+        return {
+            "initial_state_low": INITIAL_STATE_LOW.tolist(),
+            "initial_state_high": INITIAL_STATE_HIGH.tolist(),
+            "kicks_per_s": KICKS_PER_S,
+            "kick_rad_s": list(KICK_RAD_S),
+            "steps": EPISODE_STEPS,
+            "reference_m": REFERENCE_M,
+            "reference_jump_probability": REFERENCE_JUMP_PROBABILITY,
+            "position_scale_m": POSITION_SCALE_M,
+            "bumpers": asdict(BUMPERS),
+            "fall_rad": FALL_RAD,
+            "fall_cost": FALL_COST,
+        }
 
     def signals(self, episode: KickEpisode) -> dict[str, np.ndarray]:
         """The episode's kicks and the cart's reference, per step, for recordings."""
@@ -206,10 +214,10 @@ class Kicks(CartPendulumTask):
         return collections.OrderedDict(zip(self.observation_names, np.append(physics.state(), self.current_reference())))
 
 
-def make_environment(random: Random = None, plant: str = "mismatched", steps: int = EPISODE_STEPS,
-                     environment_kwargs: dict | None = None) -> control.Environment:
+def make_environment(
+    random: Random = None, plant: str = "mismatched", steps: int = EPISODE_STEPS, environment_kwargs: dict | None = None
+) -> control.Environment:
     root = load_model(plant, timestep_s=PHYSICS_DT_S, bumpers=BUMPERS, reference=True)
     physics = Physics.from_xml_string(root.to_xml_string(), assets=root.get_assets())
     physics.bumpers = BUMPERS
     return build_environment(physics, Kicks(random=random, steps=steps), steps, CONTROL_DT_S, environment_kwargs)
-

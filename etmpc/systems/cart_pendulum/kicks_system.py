@@ -72,9 +72,17 @@ class Config:
     recompute_price: float = 0.1
     rk4_substeps: int = 2
     plant: str = "mismatched"
-    solver: SolverSettings = field(default_factory=lambda: SolverSettings(
-        tolerance=1e-6, dual_tolerance=1e-4, max_iterations=30, block=1, cold_start="hold", warm_from_expired=False,
-        sqp_options=(("merit_memory", 1), ("max_iter_ls", 8))))
+    solver: SolverSettings = field(
+        default_factory=lambda: SolverSettings(
+            tolerance=1e-6,
+            dual_tolerance=1e-4,
+            max_iterations=30,
+            block=1,
+            cold_start="hold",
+            warm_from_expired=False,
+            sqp_options=(("merit_memory", 1), ("max_iter_ls", 8)),
+        )
+    )
 
 
 class KicksSystem(GaussNewtonSystem):
@@ -105,12 +113,33 @@ class KicksSystem(GaussNewtonSystem):
         x, u, du, r = ca.SX.sym("x", NX), ca.SX.sym("u", NU), ca.SX.sym("du", NU), ca.SX.sym("r", 1)
         eta, v, beta, omega = x[0], x[1], x[2], x[3]
         inside = kicks.BUMPERS.position_m - c.rail_margin_m
-        stage = ca.Function("stage_residual", [x, u, du, r], [ca.vertcat(
-            3 * ca.sin(beta / 2), c.position_weight * (eta - r), 0.03 * omega, c.input_weight * u, 0.01 * du,
-            5 * ca.fmax(0, ca.fabs(eta) - inside))])
-        terminal = ca.Function("terminal_residual", [x, r], [ca.vertcat(
-            9 * ca.sin(beta / 2), c.terminal_position_weight * (eta - r), 0.3 * omega, 0.3 * v,
-            5 * ca.fmax(0, ca.fabs(eta) - inside))])
+        stage = ca.Function(
+            "stage_residual",
+            [x, u, du, r],
+            [
+                ca.vertcat(
+                    3 * ca.sin(beta / 2),
+                    c.position_weight * (eta - r),
+                    0.03 * omega,
+                    c.input_weight * u,
+                    0.01 * du,
+                    5 * ca.fmax(0, ca.fabs(eta) - inside),
+                )
+            ],
+        )
+        terminal = ca.Function(
+            "terminal_residual",
+            [x, r],
+            [
+                ca.vertcat(
+                    9 * ca.sin(beta / 2),
+                    c.terminal_position_weight * (eta - r),
+                    0.3 * omega,
+                    0.3 * v,
+                    5 * ca.fmax(0, ca.fabs(eta) - inside),
+                )
+            ],
+        )
         return stage, terminal
 
     def feedback_weights(self) -> FeedbackWeights:

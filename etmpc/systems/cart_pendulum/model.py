@@ -86,13 +86,6 @@ class AnalyticModel(RK4Model):
 def paper_lqr_matrices(p: Parameters = Parameters()) -> tuple[np.ndarray, np.ndarray]:
     """Eq. (cartpend:lqr) exactly as printed in the paper, for checking the linearisation."""
     m, l, M, g = p.pole_mass_kg, p.pole_half_length_m, p.total_mass_kg, p.gravity_m_s2
-    A = np.array(
-        [
-            [0, 1, 0, 0],
-            [0, 0, -m * g / (4 / 3 * M - m), 0],
-            [0, 0, 0, 1],
-            [0, 0, M * g / (l * (4 / 3 * M - m)), 0],
-        ]
-    )
+    A = np.array([[0, 1, 0, 0], [0, 0, -m * g / (4 / 3 * M - m), 0], [0, 0, 0, 1], [0, 0, M * g / (l * (4 / 3 * M - m)), 0]])
     B = np.array([[0], [1 / (M - 3 / 4 * m)], [0], [-1 / (l * (4 / 3 * M - m))]])
     return A, B

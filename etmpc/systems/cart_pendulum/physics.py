@@ -39,8 +39,6 @@ class Bumpers:
     damping_n_s_m: float = 40.0
 
 
-
-
 def _matched(root: mjcf.RootElement) -> None:
     """Remove the MJCF's deliberate differences from the analytic model (edits by MJCF name)."""
     p = Parameters()
@@ -55,8 +53,9 @@ def _matched(root: mjcf.RootElement) -> None:
     root.find("body", "cart").inertial.mass = p.cart_mass_kg
 
 
-def load_model(plant: str = "mismatched", timestep_s: float | None = None, bumpers: Bumpers | None = None,
-               reference: bool = False) -> mjcf.RootElement:
+def load_model(
+    plant: str = "mismatched", timestep_s: float | None = None, bumpers: Bumpers | None = None, reference: bool = False
+) -> mjcf.RootElement:
     """The MJCF, with the plant setting's edits; ``timestep_s`` replaces the physics step,
     ``bumpers`` draws the rail's bumpers (their force is the physics', see :meth:`Physics.step`), and
     ``reference`` adds a marker on the rail where the cart should be (a mocap body: it shows the
@@ -64,12 +63,17 @@ def load_model(plant: str = "mismatched", timestep_s: float | None = None, bumpe
     root = load_plant("cart_pendulum.xml", plant, _matched, timestep_s)
     if bumpers is not None:  # where the cart's end meets them (the cart is 0.5 m long)
         for side in (-1, 1):
-            root.worldbody.add("geom", name=f"bumper_{'left' if side < 0 else 'right'}", type="box", material="rail",
-                               pos=[side * (bumpers.position_m + 0.25 + 0.05), 0, 0], size=[0.05, 0.2, 0.2])
+            root.worldbody.add(
+                "geom",
+                name=f"bumper_{'left' if side < 0 else 'right'}",
+                type="box",
+                material="rail",
+                pos=[side * (bumpers.position_m + 0.25 + 0.05), 0, 0],
+                size=[0.05, 0.2, 0.2],
+            )
     if reference:
         marker = root.worldbody.add("body", name="reference", mocap=True, pos=[0, 0, 0])
-        marker.add("geom", name="reference", type="box", pos=[0, -0.2, -0.06], size=[0.03, 0.03, 0.2],
-                   rgba=[0.95, 0.8, 0.1, 1])
+        marker.add("geom", name="reference", type="box", pos=[0, -0.2, -0.06], size=[0.03, 0.03, 0.2], rgba=[0.95, 0.8, 0.1, 1])
     return root
 
 
@@ -206,5 +210,3 @@ class Physics(MjPhysics):
         if self._warnings_cause_exception:
             raise control.PhysicsError(message)
         logging.warning(message)
-
-

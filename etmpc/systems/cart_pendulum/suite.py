@@ -8,7 +8,19 @@ from etmpc.systems.cart_pendulum import kicks, task
 from etmpc.systems.episodes import add_task
 
 SUITE = containers.TaggedTasks()
-add_task(SUITE, "balance", task.make_environment, task.EPISODE_STEPS, task.CONTROL_DT_S,
-         "Balance the pole under the angular disturbance: 100 control intervals of 0.1 s by default (plant=...).")
-add_task(SUITE, "kicks", kicks.make_environment, kicks.EPISODE_STEPS, kicks.CONTROL_DT_S,
-         "Keep the pole up on a 5 m rail through random kicks: 150 control intervals of 0.1 s by default (plant=...).")
+add_task(
+    SUITE,
+    "balance",
+    task.make_environment,
+    task.EPISODE_STEPS,
+    task.CONTROL_DT_S,
+    "Balance the pole under the angular disturbance: 100 control intervals of 0.1 s by default (plant=...).",
+)
+add_task(
+    SUITE,
+    "kicks",
+    kicks.make_environment,
+    kicks.EPISODE_STEPS,
+    kicks.CONTROL_DT_S,
+    "Keep the pole up on a 5 m rail through random kicks: 150 control intervals of 0.1 s by default (plant=...).",
+)

@@ -66,7 +66,13 @@ class CartPendulumSystem(SystemBase):
         stage = ca.Function("stage_residual", [x, u, du], [ca.vertcat(x[2], sqrt_d * du)])
         terminal = ca.Function("terminal_residual", [x], [x[2]])
         return GaussNewtonMPC(
-            self.model.discrete, stage, terminal, self.config.horizon, self.u_min, self.u_max, self.config.solver,
+            self.model.discrete,
+            stage,
+            terminal,
+            self.config.horizon,
+            self.u_min,
+            self.u_max,
+            self.config.solver,
             name="cart_pendulum_mpc",
         )
 

@@ -45,6 +45,7 @@ INITIAL_STATE_HIGH = np.array([0.0, 1.0, 0.78, 1.0])
 _POLE_RGB = np.array([0.2, 0.45, 0.85])  # the MJCF's "pole" material
 _FALLEN_RGB = np.array([0.85, 0.1, 0.1])
 
+
 @dataclass(frozen=True)
 class Episode:
     """Everything random about one episode, drawn in advance: a test-set row."""
@@ -116,8 +117,12 @@ class Balance(CartPendulumTask):
 
     def episode_parameters(self) -> dict:
         """What the episodes are drawn from (recorded in the test set)."""
-        return {"initial_state_low": INITIAL_STATE_LOW.tolist(), "initial_state_high": INITIAL_STATE_HIGH.tolist(),
-                "disturbance_std_rad_s2": DISTURBANCE_STD_RAD_S2, "steps": EPISODE_STEPS}
+        return {
+            "initial_state_low": INITIAL_STATE_LOW.tolist(),
+            "initial_state_high": INITIAL_STATE_HIGH.tolist(),
+            "disturbance_std_rad_s2": DISTURBANCE_STD_RAD_S2,
+            "steps": EPISODE_STEPS,
+        }
 
     def signals(self, episode: Episode) -> dict[str, np.ndarray]:
         """The episode's exogenous inputs, per step, for recordings."""
@@ -149,16 +154,12 @@ class Balance(CartPendulumTask):
         physics.named.model.mat_rgba["pole", :3] = upright * _POLE_RGB + (1.0 - upright) * _FALLEN_RGB
 
     def get_reward(self, physics: Physics) -> float:
-        return -physics.pole_angle() ** 2
+        return -(physics.pole_angle() ** 2)
 
 
 def make_environment(
-    random: Random = None,
-    plant: str = "mismatched",
-    steps: int = EPISODE_STEPS,
-    environment_kwargs: dict | None = None,
+    random: Random = None, plant: str = "mismatched", steps: int = EPISODE_STEPS, environment_kwargs: dict | None = None
 ) -> control.Environment:
     root = load_model(plant)
     physics = Physics.from_xml_string(root.to_xml_string(), assets=root.get_assets())
     return build_environment(physics, Balance(random=random, steps=steps), steps, CONTROL_DT_S, environment_kwargs)
-

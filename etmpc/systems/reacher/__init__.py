@@ -12,5 +12,4 @@ TASKS = ("jumps",)
 # The seed of each task's stored test set (tasks/reacher/<task>_testset.npz: etmpc testset TASK --seed SEED).
 TEST_SET_SEEDS = {"jumps": 20261125}
 
-__getattr__ = lazy(__name__, {"jumps": "etmpc.systems.reacher.system:ReacherSystem"},
-                   "etmpc.systems.reacher.task:SUITE")
+__getattr__ = lazy(__name__, {"jumps": "etmpc.systems.reacher.system:ReacherSystem"}, "etmpc.systems.reacher.task:SUITE")

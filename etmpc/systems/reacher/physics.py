@@ -26,7 +26,6 @@ from etmpc.systems.plants import load_plant
 from etmpc.systems.reacher.model import NU, Parameters
 
 
-
 def _matched(root: mjcf.RootElement) -> None:
     """Remove the MJCF's deliberate differences from the analytic model (edits by MJCF name)."""
     p = Parameters()
@@ -55,8 +54,10 @@ class Physics(MjPhysics):
         self._qpos = np.array([m.jnt_qposadr[j] for j in joints])
         self._qvel = np.array([m.jnt_dofadr[j] for j in joints])
         self._target = m.body_mocapid[m.name2id("target", "body")]
-        self._links = (float(np.linalg.norm(m.body_pos[m.name2id("forearm", "body")])),
-                       float(np.linalg.norm(m.site_pos[m.name2id("fingertip", "site")])))
+        self._links = (
+            float(np.linalg.norm(m.body_pos[m.name2id("forearm", "body")])),
+            float(np.linalg.norm(m.site_pos[m.name2id("fingertip", "site")])),
+        )
 
     # -- vocabulary -------------------------------------------------------------------------------
     def joint_angles(self) -> np.ndarray:

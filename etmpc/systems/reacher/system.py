@@ -88,9 +88,16 @@ class Config:
     recompute_price: float = 0.1
     rk4_substeps: int = 2
     plant: str = "mismatched"
-    solver: SolverSettings = field(default_factory=lambda: SolverSettings(
-        tolerance=1e-6, dual_tolerance=1e-5, max_iterations=300, block=1, regularisation=1e-3,
-        sqp_options=(("merit_memory", 1), ("max_iter_ls", 8))))
+    solver: SolverSettings = field(
+        default_factory=lambda: SolverSettings(
+            tolerance=1e-6,
+            dual_tolerance=1e-5,
+            max_iterations=300,
+            block=1,
+            regularisation=1e-3,
+            sqp_options=(("merit_memory", 1), ("max_iter_ls", 8)),
+        )
+    )
 
 
 class ReacherSystem(GaussNewtonSystem):
@@ -121,10 +128,14 @@ class ReacherSystem(GaussNewtonSystem):
         c = self.config
         x, u, du, target = ca.SX.sym("x", NX), ca.SX.sym("u", NU), ca.SX.sym("du", NU), ca.SX.sym("target", 2)
         e = (fingertip(x, self.model.params) - target) / c.distance_scale_m
-        stage = ca.Function("stage_residual", [x, u, du, target], [ca.vertcat(
-            e, c.velocity_weight * x[2:], c.torque_weight * u, c.torque_change_weight * du)])
-        terminal = ca.Function("terminal_residual", [x, target], [ca.vertcat(
-            c.terminal_distance_factor * e, c.terminal_velocity_weight * x[2:])])
+        stage = ca.Function(
+            "stage_residual",
+            [x, u, du, target],
+            [ca.vertcat(e, c.velocity_weight * x[2:], c.torque_weight * u, c.torque_change_weight * du)],
+        )
+        terminal = ca.Function(
+            "terminal_residual", [x, target], [ca.vertcat(c.terminal_distance_factor * e, c.terminal_velocity_weight * x[2:])]
+        )
         return stage, terminal
 
     def feedback_weights(self) -> FeedbackWeights:

@@ -119,14 +119,19 @@ class Jumps(EpisodeTask):
         """``episode`` with the targets of intervals after ``step`` redrawn: at the decision of step
         ``step`` the controller sees that interval's target, and jumps are memoryless."""
         target = np.array(episode.target)
-        target[step + 1:] = continue_targets(random, target[step], target.shape[0] - step - 1)
+        target[step + 1 :] = continue_targets(random, target[step], target.shape[0] - step - 1)
         return Episode(episode.initial_state, target)
 
     def episode_parameters(self) -> dict:
         """What the episodes are drawn from (recorded in the test set)."""
-        return {"initial_state_low": INITIAL_STATE_LOW.tolist(), "initial_state_high": INITIAL_STATE_HIGH.tolist(),
-                "jump_probability": JUMP_PROBABILITY, "target_radius_m": list(TARGET_RADIUS_M),
-                "steps": EPISODE_STEPS, "distance_scale_m": DISTANCE_SCALE_M}
+        return {
+            "initial_state_low": INITIAL_STATE_LOW.tolist(),
+            "initial_state_high": INITIAL_STATE_HIGH.tolist(),
+            "jump_probability": JUMP_PROBABILITY,
+            "target_radius_m": list(TARGET_RADIUS_M),
+            "steps": EPISODE_STEPS,
+            "distance_scale_m": DISTANCE_SCALE_M,
+        }
 
     def signals(self, episode: Episode) -> dict[str, np.ndarray]:
         """The episode's target, per step, for recordings."""
@@ -164,12 +169,19 @@ class Jumps(EpisodeTask):
         return collections.OrderedDict(zip(OBSERVATION_NAMES, values))
 
 
-def make_environment(random: Random = None, plant: str = "mismatched", steps: int = EPISODE_STEPS,
-                     environment_kwargs: dict | None = None) -> control.Environment:
+def make_environment(
+    random: Random = None, plant: str = "mismatched", steps: int = EPISODE_STEPS, environment_kwargs: dict | None = None
+) -> control.Environment:
     root = load_model(plant, timestep_s=PHYSICS_DT_S)
     physics = Physics.from_xml_string(root.to_xml_string(), assets=root.get_assets())
     return build_environment(physics, Jumps(random=random, steps=steps), steps, CONTROL_DT_S, environment_kwargs)
 
 
-add_task(SUITE, "jumps", make_environment, EPISODE_STEPS, CONTROL_DT_S,
-         "Keep the fingertip on a jumping target: 100 control intervals of 0.1 s by default (plant=...).")
+add_task(
+    SUITE,
+    "jumps",
+    make_environment,
+    EPISODE_STEPS,
+    CONTROL_DT_S,
+    "Keep the fingertip on a jumping target: 100 control intervals of 0.1 s by default (plant=...).",
+)

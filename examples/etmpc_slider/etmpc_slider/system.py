@@ -101,11 +101,21 @@ class SliderSystem(GaussNewtonSystem):
         c = self.config
         x, u, du, r = ca.SX.sym("x", NX), ca.SX.sym("u", NU), ca.SX.sym("du", NU), ca.SX.sym("reference", 1)
         e = (x[0] - r) / c.error_scale_m
-        stage = ca.Function("stage_residual", [x, u, du, r], [ca.vertcat(
-            e, c.velocity_weight * x[1], c.force_weight * (u - holding_force(r, self.model.params)),
-            c.force_change_weight * du)])
-        terminal = ca.Function("terminal_residual", [x, r], [ca.vertcat(
-            c.terminal_error_factor * e, c.terminal_velocity_weight * x[1])])
+        stage = ca.Function(
+            "stage_residual",
+            [x, u, du, r],
+            [
+                ca.vertcat(
+                    e,
+                    c.velocity_weight * x[1],
+                    c.force_weight * (u - holding_force(r, self.model.params)),
+                    c.force_change_weight * du,
+                )
+            ],
+        )
+        terminal = ca.Function(
+            "terminal_residual", [x, r], [ca.vertcat(c.terminal_error_factor * e, c.terminal_velocity_weight * x[1])]
+        )
         return stage, terminal
 
     def feedback_weights(self) -> FeedbackWeights:

@@ -113,14 +113,19 @@ class Track(EpisodeTask):
         """``episode`` with the references of intervals after ``step`` redrawn: at the decision of step
         ``step`` the controller sees that interval's reference, and jumps are memoryless."""
         reference = np.array(episode.reference)
-        reference[step + 1:] = continue_references(random, reference[step], reference.shape[0] - step - 1)
+        reference[step + 1 :] = continue_references(random, reference[step], reference.shape[0] - step - 1)
         return Episode(episode.initial_state, reference)
 
     def episode_parameters(self) -> dict:
         """What the episodes are drawn from (recorded in the test set)."""
-        return {"initial_state_low": INITIAL_STATE_LOW.tolist(), "initial_state_high": INITIAL_STATE_HIGH.tolist(),
-                "jump_probability": JUMP_PROBABILITY, "reference_range_m": list(REFERENCE_RANGE_M),
-                "steps": EPISODE_STEPS, "error_scale_m": ERROR_SCALE_M}
+        return {
+            "initial_state_low": INITIAL_STATE_LOW.tolist(),
+            "initial_state_high": INITIAL_STATE_HIGH.tolist(),
+            "jump_probability": JUMP_PROBABILITY,
+            "reference_range_m": list(REFERENCE_RANGE_M),
+            "steps": EPISODE_STEPS,
+            "error_scale_m": ERROR_SCALE_M,
+        }
 
     def signals(self, episode: Episode) -> dict[str, np.ndarray]:
         """The reference, per step, for recordings."""
@@ -157,12 +162,19 @@ class Track(EpisodeTask):
         return collections.OrderedDict(zip(OBSERVATION_NAMES, values))
 
 
-def make_environment(random: Random = None, plant: str = "mismatched", steps: int = EPISODE_STEPS,
-                     environment_kwargs: dict | None = None) -> control.Environment:
+def make_environment(
+    random: Random = None, plant: str = "mismatched", steps: int = EPISODE_STEPS, environment_kwargs: dict | None = None
+) -> control.Environment:
     root = load_model(plant, timestep_s=PHYSICS_DT_S)
     physics = Physics.from_xml_string(root.to_xml_string(), assets=root.get_assets())
     return build_environment(physics, Track(random=random, steps=steps), steps, CONTROL_DT_S, environment_kwargs)
 
 
-add_task(SUITE, "track", make_environment, EPISODE_STEPS, CONTROL_DT_S,
-         "Keep the block on a jumping reference: 60 control intervals of 0.05 s by default (plant=...).")
+add_task(
+    SUITE,
+    "track",
+    make_environment,
+    EPISODE_STEPS,
+    CONTROL_DT_S,
+    "Keep the block on a jumping reference: 60 control intervals of 0.05 s by default (plant=...).",
+)

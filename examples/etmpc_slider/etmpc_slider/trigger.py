@@ -61,5 +61,10 @@ def build(arg: str, spec: str, system) -> DriftOrAge:
 
 
 # What etmpc's registry of policy kinds reads (this package's entry point: driftage = "etmpc_slider.trigger:KIND").
-KIND = Kind("driftage", "driftage:X:T", "recompute when the weighted prediction error exceeds X or the plan is T steps old",
-            build, family="event")
+KIND = Kind(
+    "driftage",
+    "driftage:X:T",
+    "recompute when the weighted prediction error exceeds X or the plan is T steps old",
+    build,
+    family="event",
+)

@@ -164,18 +164,35 @@ def ipopt_reference(system, x, u_prev, r):
     e = (X[0, :] - r) / 0.2
     obj = ca.sumsqr(e[:n]) + ca.sumsqr(0.05 * X[1, :n]) + ca.sumsqr(0.02 * (U - 4.0 * r)) + ca.sumsqr(0.02 * du)
     obj += ca.sumsqr(2 * e[n]) + ca.sumsqr(0.3 * X[1, n])
-    nlp = {"x": ca.vertcat(ca.vec(X), ca.vec(U)), "f": obj,
-           "g": ca.vertcat(X[:, 0] - x, *[model(X[:, k], U[:, k]) - X[:, k + 1] for k in range(n)])}
-    solver = ca.nlpsol("reference", "ipopt", nlp, {
-        "print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes",
-        "ipopt.tol": 1e-12, "ipopt.acceptable_iter": 0, "ipopt.max_iter": 1000,
-    })
+    nlp = {
+        "x": ca.vertcat(ca.vec(X), ca.vec(U)),
+        "f": obj,
+        "g": ca.vertcat(X[:, 0] - x, *[model(X[:, k], U[:, k]) - X[:, k + 1] for k in range(n)]),
+    }
+    solver = ca.nlpsol(
+        "reference",
+        "ipopt",
+        nlp,
+        {
+            "print_time": False,
+            "ipopt.print_level": 0,
+            "ipopt.sb": "yes",
+            "ipopt.tol": 1e-12,
+            "ipopt.acceptable_iter": 0,
+            "ipopt.max_iter": 1000,
+        },
+    )
     states = system.mpc.rollout(x, np.zeros((n, 1)))
     bound = np.full(n, c.force_limit_n)
-    sol = solver(x0=np.concatenate([states.ravel(), np.zeros(n)]), lbx=np.r_[np.full(2 * (n + 1), -np.inf), -bound],
-                 ubx=np.r_[np.full(2 * (n + 1), np.inf), bound], lbg=0, ubg=0)
+    sol = solver(
+        x0=np.concatenate([states.ravel(), np.zeros(n)]),
+        lbx=np.r_[np.full(2 * (n + 1), -np.inf), -bound],
+        ubx=np.r_[np.full(2 * (n + 1), np.inf), bound],
+        lbg=0,
+        ubg=0,
+    )
     assert solver.stats()["success"]
-    return float(sol["f"]), np.asarray(sol["x"]).ravel()[2 * (n + 1):]
+    return float(sol["f"]), np.asarray(sol["x"]).ravel()[2 * (n + 1) :]
 
 
 def test_optimum_matches_ipopt(system):
@@ -267,8 +284,7 @@ def test_driftage_parses_its_argument(system):
     policy = build("0.5:4", "driftage:0.5:4", system)
     assert policy == DriftOrAge(0.5, 4, policy.weights) and policy.spec == "driftage:0.5:4" and not policy.stochastic
     np.testing.assert_array_equal(policy.weights, system.error_weights)
-    bad_args = ("", "0.5", "0.5:", ":4", "x:4", "0.5:0", "0.5:2.5", "-1:4", "inf:4", "nan:4", "0.5:4:1",
-                " 0.5:4", "0.5: 4")
+    bad_args = ("", "0.5", "0.5:", ":4", "x:4", "0.5:0", "0.5:2.5", "-1:4", "inf:4", "nan:4", "0.5:4:1", " 0.5:4", "0.5: 4")
     for bad in bad_args:
         with pytest.raises(EtmpcError, match="bad policy"):
             build(bad, f"driftage:{bad}", system)

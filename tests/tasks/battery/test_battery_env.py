@@ -177,13 +177,16 @@ def test_the_trigger_features_revise_the_kept_plans_forecasts_with_todays(batter
     episode = battery_system.episode_from_arrays(battery_testset.episode_arrays(4))
     seen, s = features_while_kept(battery_system, episode)
     n = battery_system.config.horizon
-    assert EXOGENOUS_FEATURES[-3:] == ("price_forecast_revision_eur_kwh", "production_forecast_revision_kw",
-                                       "plan_value_revision_eur")
+    assert EXOGENOUS_FEATURES[-3:] == (
+        "price_forecast_revision_eur_kwh",
+        "production_forecast_revision_kw",
+        "plan_value_revision_eur",
+    )
     for age, features in enumerate(seen, start=1):
         left = n - age
-        price = arrays["price_forecast_eur_kwh"][age, :left] - arrays["price_forecast_eur_kwh"][0, age:age + left]
-        production = arrays["production_forecast_kw"][age, :left] - arrays["production_forecast_kw"][0, age:age + left]
-        trades = s.plan.inputs[age:age + left, 0]  # the plan made at step 0 is the one still kept
+        price = arrays["price_forecast_eur_kwh"][age, :left] - arrays["price_forecast_eur_kwh"][0, age : age + left]
+        production = arrays["production_forecast_kw"][age, :left] - arrays["production_forecast_kw"][0, age : age + left]
+        trades = s.plan.inputs[age : age + left, 0]  # the plan made at step 0 is the one still kept
         assert features[-3] == pytest.approx(np.sqrt(np.mean(price**2)), rel=1e-12)
         assert features[-2] == pytest.approx(np.sqrt(np.mean(production**2)), rel=1e-12)
         assert features[-1] == pytest.approx(np.dot(price, trades) * DT_H, rel=1e-12, abs=1e-15)

@@ -78,6 +78,7 @@ def futures(episode):
 
 # -- what is kept ---------------------------------------------------------------------------------
 
+
 @pytest.mark.parametrize("known_rows", [1, KNOWN, 100])
 def test_known_rows_are_kept_and_the_rest_is_redrawn(episode, known_rows):
     future = sample_future(np.random.default_rng(0), episode, known_rows, B, M)
@@ -123,9 +124,9 @@ def test_same_seed_same_future_other_seed_other_future(episode):
 
 # -- the law of what is redrawn -------------------------------------------------------------------
 
+
 @pytest.mark.parametrize("name, signal, true_name, base_name, forecast_name", SIGNALS, ids=SIGNAL_IDS)
-def test_the_ou_deviation_continues_from_what_was_seen(episode, futures, name, signal, true_name, base_name,
-                                                       forecast_name):
+def test_the_ou_deviation_continues_from_what_was_seen(episode, futures, name, signal, true_name, base_name, forecast_name):
     deviation = stack(futures, true_name) - stack(futures, base_name)
     rho = np.exp(-DT / signal.ou_time_constant_s)
     step_std = signal.ou_std * np.sqrt(1 - rho**2)
@@ -134,7 +135,7 @@ def test_the_ou_deviation_continues_from_what_was_seen(episode, futures, name, s
     assert_mean(deviation[:, KNOWN], rho * seen, step_std)
     assert_std(deviation[:, KNOWN], step_std)
     # Every later step is the exact OU transition: its innovations are i.i.d. N(0, step_std^2).
-    innovation = deviation[:, KNOWN + 1:] - rho * deviation[:, KNOWN:-1]
+    innovation = deviation[:, KNOWN + 1 :] - rho * deviation[:, KNOWN:-1]
     assert_mean(innovation, 0.0, step_std)
     assert_std(innovation, step_std)
     # 80 rows ahead, the seen deviation is forgotten: the stationary law.
@@ -192,8 +193,7 @@ def test_a_base_beyond_the_range_keeps_the_nearest_hourly_level(episode, price, 
     one_hour = modified(episode, start_s=0.0, price_forecast_eur_kwh=price, production_forecast_kw=production)
     rng = np.random.default_rng(13)
     futures = [sample_future(rng, one_hour, KNOWN, B, M) for _ in range(300)]
-    for seen, signal, base_name in ((price, M.price, "price_base_eur_kwh"),
-                                    (production, M.production, "production_base_kw")):
+    for seen, signal, base_name in ((price, M.price, "price_base_eur_kwh"), (production, M.production, "production_base_kw")):
         hourly = signal.hourly_high if seen > 0 else signal.hourly_low
         base = stack(futures, base_name)[:, KNOWN:]
         kept = np.isclose(base, seen, rtol=0, atol=1e-12)

@@ -40,7 +40,7 @@ def test_specs_match_what_it_returns_over_a_whole_episode():
         timestep = env.step(action_spec.generate_value())
         steps += 1
         env.reward_spec().validate(np.asarray(timestep.reward))
-        assert timestep.reward == pytest.approx(-env.physics.pole_angle() ** 2)
+        assert timestep.reward == pytest.approx(-(env.physics.pole_angle() ** 2))
     assert steps == cp_env.EPISODE_STEPS
 
 

@@ -29,19 +29,49 @@ def ipopt_reference(system, x, u_prev, r, start=None):
     X, U = ca.SX.sym("X", 4, n + 1), ca.SX.sym("U", 1, n)
     du = U - ca.horzcat(ca.DM(u_prev), U[:, :-1])
     rail = lambda eta: 5 * ca.fmax(0, ca.fabs(eta) - inside)  # noqa: E731
-    f = sum(9 * ca.sin(X[2, k] / 2) ** 2 + (c.position_weight * (X[0, k] - r)) ** 2 + (0.03 * X[3, k]) ** 2
-            + (c.input_weight * U[0, k]) ** 2 + (0.01 * du[0, k]) ** 2 + rail(X[0, k]) ** 2 for k in range(n))
-    f += (81 * ca.sin(X[2, n] / 2) ** 2 + (c.terminal_position_weight * (X[0, n] - r)) ** 2 + 0.09 * X[3, n] ** 2
-          + 0.09 * X[1, n] ** 2 + rail(X[0, n]) ** 2)
-    nlp = {"x": ca.vertcat(ca.vec(X), ca.vec(U)), "f": f,
-           "g": ca.vertcat(X[:, 0] - x, *[model(X[:, k], U[:, k]) - X[:, k + 1] for k in range(n)])}
-    solver = ca.nlpsol("reference", "ipopt", nlp, {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes",
-                                                   "ipopt.tol": 1e-12, "ipopt.acceptable_iter": 0, "ipopt.max_iter": 3000})
+    f = sum(
+        9 * ca.sin(X[2, k] / 2) ** 2
+        + (c.position_weight * (X[0, k] - r)) ** 2
+        + (0.03 * X[3, k]) ** 2
+        + (c.input_weight * U[0, k]) ** 2
+        + (0.01 * du[0, k]) ** 2
+        + rail(X[0, k]) ** 2
+        for k in range(n)
+    )
+    f += (
+        81 * ca.sin(X[2, n] / 2) ** 2
+        + (c.terminal_position_weight * (X[0, n] - r)) ** 2
+        + 0.09 * X[3, n] ** 2
+        + 0.09 * X[1, n] ** 2
+        + rail(X[0, n]) ** 2
+    )
+    nlp = {
+        "x": ca.vertcat(ca.vec(X), ca.vec(U)),
+        "f": f,
+        "g": ca.vertcat(X[:, 0] - x, *[model(X[:, k], U[:, k]) - X[:, k + 1] for k in range(n)]),
+    }
+    solver = ca.nlpsol(
+        "reference",
+        "ipopt",
+        nlp,
+        {
+            "print_time": False,
+            "ipopt.print_level": 0,
+            "ipopt.sb": "yes",
+            "ipopt.tol": 1e-12,
+            "ipopt.acceptable_iter": 0,
+            "ipopt.max_iter": 3000,
+        },
+    )
     inputs = np.zeros((n, 1)) if start is None else start
     states = np.tile(x, (n + 1, 1)) if start is None else system.mpc.rollout(x, inputs)  # the pole held up, or our plan
-    sol = solver(x0=np.concatenate([states.ravel(), inputs.ravel()]),
-                 lbx=np.r_[np.full(4 * (n + 1), -np.inf), np.full(n, -c.force_limit_n)],
-                 ubx=np.r_[np.full(4 * (n + 1), np.inf), np.full(n, c.force_limit_n)], lbg=0, ubg=0)
+    sol = solver(
+        x0=np.concatenate([states.ravel(), inputs.ravel()]),
+        lbx=np.r_[np.full(4 * (n + 1), -np.inf), np.full(n, -c.force_limit_n)],
+        ubx=np.r_[np.full(4 * (n + 1), np.inf), np.full(n, c.force_limit_n)],
+        lbg=0,
+        ubg=0,
+    )
     assert solver.stats()["success"]
     return float(sol["f"])
 

@@ -75,8 +75,11 @@ CASES = [  # (initial state, input pattern)
 
 
 def _inputs(pattern, rng, steps=20):
-    return {"shoulder": np.tile([1.0, 0.0], (steps, 1)), "random": rng.uniform(-2, 2, (steps, 2)),
-            "bang": np.tile([[2.0, -2.0], [-2.0, 2.0]], (steps // 2, 1))}[pattern]
+    return {
+        "shoulder": np.tile([1.0, 0.0], (steps, 1)),
+        "random": rng.uniform(-2, 2, (steps, 2)),
+        "bang": np.tile([[2.0, -2.0], [-2.0, 2.0]], (steps // 2, 1)),
+    }[pattern]
 
 
 @pytest.mark.parametrize("x0, pattern", CASES)
@@ -91,7 +94,9 @@ def test_matched_plant_follows_the_analytic_model(x0, pattern):
     matched = plant_trajectory("matched", x0, inputs)
     np.testing.assert_allclose(matched, rk4_trajectory(x0, inputs, rt.PHYSICS_DT_S), rtol=0, atol=1e-10)
     exact = analytic_trajectory(x0, inputs)
-    error, halved = (np.max(np.abs(plant_trajectory("matched", x0, inputs, h) - exact)) for h in (rt.PHYSICS_DT_S, rt.PHYSICS_DT_S / 2))
+    error, halved = (
+        np.max(np.abs(plant_trajectory("matched", x0, inputs, h) - exact)) for h in (rt.PHYSICS_DT_S, rt.PHYSICS_DT_S / 2)
+    )
     assert error < 1e-3 and halved < error / 12, (error, halved)
     assert np.max(np.abs(plant_trajectory("mismatched", x0, inputs) - exact)) > 1e-2
 
@@ -141,18 +146,36 @@ def ipopt_reference(system, x, u_prev, target, start=None):
 
     f = sum(ca.sumsqr(error(k) / 0.3) for k in range(n)) + ca.sumsqr(0.02 * X[2:, :n]) + ca.sumsqr(0.01 * U)
     f += ca.sumsqr(0.02 * du) + ca.sumsqr(2 * error(n) / 0.3) + ca.sumsqr(0.1 * X[2:, n])
-    nlp = {"x": ca.vertcat(ca.vec(X), ca.vec(U)), "f": f,
-           "g": ca.vertcat(X[:, 0] - x, *[model(X[:, k], U[:, k]) - X[:, k + 1] for k in range(n)])}
+    nlp = {
+        "x": ca.vertcat(ca.vec(X), ca.vec(U)),
+        "f": f,
+        "g": ca.vertcat(X[:, 0] - x, *[model(X[:, k], U[:, k]) - X[:, k + 1] for k in range(n)]),
+    }
     stay = {} if start is None else {"ipopt.bound_push": 1e-12, "ipopt.bound_frac": 1e-12, "ipopt.mu_init": 1e-9}
-    solver = ca.nlpsol("reference", "ipopt", nlp, {
-        "print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes",
-        "ipopt.tol": 1e-12, "ipopt.acceptable_iter": 0, "ipopt.max_iter": 3000,
-    } | stay)
+    solver = ca.nlpsol(
+        "reference",
+        "ipopt",
+        nlp,
+        {
+            "print_time": False,
+            "ipopt.print_level": 0,
+            "ipopt.sb": "yes",
+            "ipopt.tol": 1e-12,
+            "ipopt.acceptable_iter": 0,
+            "ipopt.max_iter": 3000,
+        }
+        | stay,
+    )
     inputs = np.zeros((n, nu)) if start is None else np.asarray(start, float)
     states = system.mpc.rollout(x, inputs)
     bound = np.full(nu * n, c.torque_limit_nm)
-    sol = solver(x0=np.concatenate([states.ravel(), inputs.ravel()]), lbx=np.r_[np.full(nx * (n + 1), -np.inf), -bound],
-                 ubx=np.r_[np.full(nx * (n + 1), np.inf), bound], lbg=0, ubg=0)
+    sol = solver(
+        x0=np.concatenate([states.ravel(), inputs.ravel()]),
+        lbx=np.r_[np.full(nx * (n + 1), -np.inf), -bound],
+        ubx=np.r_[np.full(nx * (n + 1), np.inf), bound],
+        lbg=0,
+        ubg=0,
+    )
     assert solver.stats()["success"]
     return float(sol["f"])
 
@@ -319,7 +342,7 @@ def test_the_observation_shows_the_target_of_the_interval_about_to_be_played(sys
         np.testing.assert_array_equal(system.target(timestep), episode.target[i])
         timestep = env.step(np.zeros(2))
         d = np.linalg.norm(env.physics.fingertip() - episode.target[i])  # the reward is for interval i's target
-        assert timestep.reward == pytest.approx(-d**2 / (d**2 + 0.01), rel=1e-12)
+        assert timestep.reward == pytest.approx(-(d**2) / (d**2 + 0.01), rel=1e-12)
 
 
 # -- failures and features --------------------------------------------------------------------------------
