@@ -32,12 +32,9 @@ settings are kept in ``DIR/settings.json`` and a second run with other settings 
 
 from __future__ import annotations
 
-import importlib.util
 import json
-import shutil
-import sys
 import time
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from etmpc.common.errors import EtmpcError
@@ -45,10 +42,9 @@ from etmpc.common.outputs import refuse_foreign, what_differs, write_text
 from etmpc.common.provenance import commit_and_date
 from etmpc.evaluation.evaluate import evaluate
 from etmpc.evaluation.render import render_rollout
-from etmpc.evaluation.workers import play_test_episode, shared_pools
+from etmpc.evaluation.workers import shared_pools
 from etmpc.experiments import sweep as sweeps
 from etmpc.experiments.report import PAPER, machine, report, software_versions
-from etmpc.evaluation.references import stored
 from etmpc.experiments.summary import (
     summarise_default,
     summarise_headroom,
@@ -57,18 +53,24 @@ from etmpc.experiments.summary import (
     summarise_system,
 )
 from etmpc.learning.dpi import Settings as DpiSettings
-from etmpc.experiments import efficiency
-from etmpc.learning import hyperparams
-from etmpc.learning.ppo import PpoSettings, train_ppo
-from etmpc.learning.base import BUILT_IN, learners
-from etmpc.learning.runner import cost_path, run, timed  # noqa: F401 (cost_path: reproduce's API)
+from etmpc.learning.runner import cost_path, timed  # noqa: F401 (cost_path: reproduce's API)
 from etmpc.learning.train import TrainConfig, curve_summary, load_checkpoint, train
-from etmpc.policies import parse_policy
 from etmpc.policies.learned import write_json_atomically
 from etmpc.systems import folder_name, make_system, names
 from etmpc.systems.base import provides, require
 from etmpc.views import figures
 from etmpc.views.curves import write_efficiency_png
+from etmpc.experiments.stages import (  # noqa: F401 (evaluated_once: reproduce's API)
+    _cost,
+    _efficiency,
+    _forecasts_png,
+    _other_learners,
+    _ppo,
+    _say,
+    _stored_best,
+    _trajectory_png,
+    evaluated_once,
+)
 
 
 @dataclass(frozen=True)
@@ -193,19 +195,6 @@ def _check_settings(out: Path, settings: Settings, domains) -> None:
         refuse_foreign(out, lambda name: False, "reproduce run")  # a new run starts in a new or empty directory
         out.mkdir(parents=True, exist_ok=True)
         write_json_atomically(path, wanted)
-
-
-def evaluated_once(path: Path, timed: int | None = None, **kwargs) -> dict:
-    """An evaluation's JSON, made once: a complete file from an earlier invocation is reused. With
-    ``timed`` (the number of workers), its wall time and that number are kept in the file."""
-    if path.exists():
-        return json.loads(path.read_text())
-    started = time.perf_counter()
-    data = evaluate(**kwargs).to_json()
-    if timed is not None:
-        data["cost"] = {"wall_seconds": time.perf_counter() - started, "workers": timed}
-    write_json_atomically(path, data)
-    return data
 
 
 def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: bool) -> dict:
@@ -353,137 +342,3 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
         files["video"] = "episode.mp4"
     summary["files"] = {k: f"{folder.name}/{v}" for k, v in files.items()}
     return summary
-
-
-def _stored_best(system) -> str:
-    """The task's best periodic schedule, as its stored references name it (``every:1`` if there are none)."""
-    try:
-        best = stored(system.name).best
-    except EtmpcError:
-        best = "every:1"
-    return "always" if best == "every:1" else best  # the same schedule, as reproduce's fixed policies name it
-
-
-def _ppo(folder: Path, domain: str, settings: Settings, run: dict, common: dict) -> tuple[dict | None, dict | None, dict | None]:
-    """PPO on the trigger environment (``train_ppo/``, redone whole if it was interrupted) with the task's
-    hyperparameters, its chosen network copied to ``DIR/policies/`` and evaluated on the test set
-    (``learned_ppo.json``), and every checkpoint (``learned_ppo_checkpoints.json``, its learning curve);
-    ``(None, None, None)`` without the 'rl' extra."""
-    if settings.ppo_timesteps == 0 or importlib.util.find_spec("stable_baselines3") is None:
-        _say(f"{domain}: PPO skipped" + ("" if settings.ppo_timesteps == 0 else " (pip install 'etmpc[rl]' to run it)"))
-        return None, None, None
-    ppo_dir = folder / "train_ppo"
-    chosen = hyperparams.shipped(domain, PpoSettings(validation_episodes=settings.validation_episodes))
-    if settings.ppo_timesteps is not None:
-        chosen = replace(chosen, timesteps=settings.ppo_timesteps)
-    if not (ppo_dir / "training.json").exists():
-        _say(f"{domain}: PPO (Stable-Baselines3), {chosen.timesteps} environment steps")
-        if ppo_dir.exists():
-            shutil.rmtree(ppo_dir)  # an interrupted run starts again
-        with timed(ppo_dir, run["workers"]):
-            train_ppo(domain, ppo_dir, chosen, run["workers"], say=_say)
-    training = json.loads((ppo_dir / "training.json").read_text())
-    shipped = folder.parent / "policies" / folder_name(domain)
-    if not (shipped / "ppo.zip").exists():
-        shipped.mkdir(parents=True, exist_ok=True)
-        source = hyperparams.shipped_path(domain)
-        if settings.ppo_timesteps is None and source.is_file():  # the file it trained with, as it is
-            shutil.copyfile(source, shipped / "ppo.yml")
-        else:
-            write_text(shipped / "ppo.yml", hyperparams.dump(chosen, domain, "the hyperparameters this run's PPO used"))
-        shutil.copyfile(ppo_dir / "selected.json", shipped / "ppo.json")
-        shutil.copyfile(ppo_dir / "selected.zip", shipped / "ppo.zip")
-    ppo = evaluated_once(folder / "learned_ppo.json", policies=[f"sb3:{ppo_dir / 'selected.zip'}"], **common)
-    curve = evaluated_once(
-        folder / "learned_ppo_checkpoints.json",
-        policies=[f"sb3:{ppo_dir / c['file']}" for c in training["checkpoints"]],
-        **common,
-    )
-    return training, ppo, curve
-
-
-def _other_learners(folder: Path, domain: str, settings: Settings, run_options: dict, common: dict) -> dict:
-    """Every registered learner that is not built in (:data:`etmpc.learning.base.LEARNERS`), trained with
-    its settings (its ``quick_settings()`` in a smoke run) into ``train_<name>/`` by the runner, its policy
-    evaluated on the test set (``learned_<name>.json``): ``{name: (evaluation JSON, spec)}``."""
-    found = {}
-    for name, cls in learners().items():
-        if name in BUILT_IN:
-            continue
-        chosen = cls.quick_settings() if settings.smoke and hasattr(cls, "quick_settings") else cls.Settings()
-        stage = folder / f"train_{name}"
-        _say(f"{domain}: the learner {name}")
-        with timed(stage, run_options["workers"]):
-            trained = run(
-                cls(chosen),
-                domain,
-                stage,
-                None,
-                run_options["workers"],
-                resume=True,
-                backend=run_options["backend"],
-                address=run_options["address"],
-                progress=common["progress"],
-                say=_say,
-            )
-        found[name] = (evaluated_once(folder / f"learned_{name}.json", policies=[trained.policy], **common), trained.policy)
-    return found
-
-
-def _cost(folder: Path) -> dict | None:
-    path = cost_path(folder)
-    return json.loads(path.read_text()) if path.exists() else None
-
-
-def _efficiency(folder: Path, system, baselines: dict, best: str, state, ppo_run: dict | None, ppo_curve: dict | None) -> dict:
-    """Each learner's curve of test-set gain against the steps one run (one seed) simulated."""
-    sense, steps = system.objective_sense, system.episode_steps
-    curves = {
-        "dpi": efficiency.dpi_points(
-            json.loads((folder / "train_dpi" / "checkpoint.json").read_text()),
-            json.loads((folder / "train_dpi" / "curve.json").read_text()),
-            baselines,
-            best,
-            sense,
-            steps,
-        )
-    }
-    if state is not None:
-        curves["gpomdp"] = efficiency.gpomdp_points(
-            json.loads((folder / "train" / "checkpoint.json").read_text()),
-            json.loads((folder / "train" / "curve.json").read_text()),
-            baselines,
-            best,
-            sense,
-            steps,
-        )
-    if ppo_run is not None:
-        curves["ppo"] = efficiency.ppo_points(ppo_run, ppo_curve, baselines, best, sense)
-    return curves
-
-
-def _trajectory_png(path: Path, system, spec: str) -> None:
-    if path.exists():
-        return
-    played = play_test_episode(system.name, parse_policy(spec, system), 0, 0, 0)
-    figures.write_trajectory_png(
-        path,
-        system,
-        played.trajectory,
-        title=f"{system.name}: test-set episode 0 under {spec}",
-        signals=system.signals(played.episode),
-    )
-
-
-def _forecasts_png(path: Path, system) -> None:
-    if path.exists():
-        return
-    runs = [(spec, play_test_episode(system.name, parse_policy(spec, system), 0, 0, 0)) for spec in ("every:20", "every:5")]
-    fig = figures.forecast_figure(
-        runs[0][1].episode, [(spec, played.trajectory) for spec, played in runs], system.control_interval_s, system.terminal_price
-    )
-    figures.save_png_atomically(fig, path, dpi=110)
-
-
-def _say(line: str) -> None:
-    print(line, file=sys.stderr, flush=True)

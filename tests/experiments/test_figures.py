@@ -311,11 +311,11 @@ def test_ungrouped_learned_policies_have_the_std_over_repeats(cart_evaluations):
 def test_bars_refuse_evaluations_of_different_tasks_or_episodes(cart_evaluations):
     fixed, _, _ = cart_evaluations
     battery = dict(fixed, domain="battery", task="trading")
-    with pytest.raises(figures.EtmpcError, match="mismatched tasks: a evaluates cart_pendulum/balance, b battery/trading"):
+    with pytest.raises(EtmpcError, match="mismatched tasks: a evaluates cart_pendulum/balance, b battery/trading"):
         figures.draw_policy_bars([fixed, battery], sources=["a", "b"])
     fewer = json.loads(json.dumps(fixed))
     fewer["policies"] = {"every:5": dict(fewer["policies"]["every:3"], policy="every:5", episodes=1)}
-    with pytest.raises(figures.EtmpcError, match="mismatched test-set episodes"):
+    with pytest.raises(EtmpcError, match="mismatched test-set episodes"):
         figures.draw_policy_bars([fixed, fewer])
 
 
