@@ -223,7 +223,7 @@ def test_rl_spec_needs_a_path():
     from etmpc.common.errors import EtmpcError
 
     with pytest.raises(EtmpcError, match="rl:PATH"):
-        parse_policy("rl:", np.ones(4))
+        parse_policy("rl:", "cart_pendulum")
     assert Settings().discount == 0.975 and Settings().learning_rate == 0.05
 
 
