@@ -197,6 +197,17 @@ def no_ctrl_c(monkeypatch):
     monkeypatch.setattr(interrupts, "_received", 0)
 
 
+@pytest.fixture
+def a_terminal():
+    """SIGINT as a terminal's command has it (Python's default handler): a background job of a shell
+    without job control, as a CI runner may start the suite, ignores it and no Ctrl-C could arrive."""
+    import signal
+
+    before = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, before)
+
+
 @pytest.mark.parametrize("source, raised", HOSTILE_IMPORTS)
 def test_a_task_plugin_whose_import_exits_or_raises_anything_is_one_warning(plugins, no_ctrl_c, source, raised):
     plugins("etmpc.tasks", "hostile", "fake_hostile", source)
@@ -221,7 +232,7 @@ def test_a_policy_kind_plugin_whose_import_exits_or_raises_anything_is_one_warni
     assert specs.parse_policy("every:3", TASK).period == 3
 
 
-def test_a_real_ctrl_c_while_a_plugin_imports_still_interrupts(plugins, no_ctrl_c):
+def test_a_real_ctrl_c_while_a_plugin_imports_still_interrupts(plugins, no_ctrl_c, a_terminal):
     plugins("etmpc.tasks", "slow", "fake_slow", "import os, signal, time\nos.kill(os.getpid(), signal.SIGINT)\ntime.sleep(5)")
     with pytest.raises(KeyboardInterrupt):
         registry.names()
@@ -272,7 +283,7 @@ def test_a_policy_kind_plugin_whose_builder_fails_is_one_error_naming_it(plugins
     assert specs.parse_policy("every:3", TASK).period == 3
 
 
-def test_a_real_ctrl_c_while_a_plugin_kind_builds_still_interrupts(plugins, no_ctrl_c):
+def test_a_real_ctrl_c_while_a_plugin_kind_builds_still_interrupts(plugins, no_ctrl_c, a_terminal):
     plugins("etmpc.policies", "boom", "fake_boom:KIND", BOOM)
     with pytest.raises(KeyboardInterrupt):
         specs.parse_policy("boom:real-ctrl-c", TASK)
