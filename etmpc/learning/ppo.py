@@ -19,10 +19,13 @@ one thread per process, on the CPU. Stable-Baselines3 and PyTorch are the option
 
 The budget is environment steps, in ``checkpoints`` slices; after each the network is saved, scored on
 validation episodes and the run's state kept (``checkpoints/resume.json`` and the normalisation's
-running statistics, ``checkpoints/resume_normalize.pkl``; both removed when the run ends, so a run's
+running statistics, ``checkpoints/resume_normalize.json``; both removed when the run ends, so a run's
 files are what they were). A stopped run resumed continues from its last checkpoint's network and
-statistics, with its environments reset: it is not bit for bit the uninterrupted run (the episodes in
-progress, the rollout and the random generators' states are not in Stable-Baselines3's save).
+statistics, with its environments reset, and reads them as data: the statistics as JSON, the network
+and the optimiser into a model built from the run's settings with torch's weights-only reader
+(nothing in the run's folder is unpickled, so a folder someone hands you runs no code). It is not bit
+for bit the uninterrupted run (the episodes in progress, the rollout and the random generators' states
+are not in Stable-Baselines3's save).
 """
 
 from __future__ import annotations
@@ -54,7 +57,8 @@ from etmpc.policies.learned import write_json_atomically
 from etmpc.policies.sb3 import metadata_path
 from etmpc.systems import SystemKey, system_key
 
-RESUME, NORMALIZE = "resume.json", "resume_normalize.pkl"  # in checkpoints/, while the run is under way
+RESUME, NORMALIZE = "resume.json", "resume_normalize.json"  # in checkpoints/, while the run is under way
+_RUNNING = ("obs_rms", "ret_rms")  # VecNormalize's running statistics, each a mean, a var and a count
 
 
 class PpoLearner(Learner):
@@ -181,14 +185,12 @@ class PpoLearner(Learner):
             raise EtmpcError(
                 f"{self.out} holds a PPO run with other settings; resume with the same ones, or choose another --out"
             )
-        from stable_baselines3.common.vec_env import VecNormalize
-
-        self.torch.set_num_threads(1)
         self.checkpoints = list(state["checkpoints"])
         last = self.checkpoints[-1]
-        self.vec = VecNormalize.load(str(self.out / "checkpoints" / NORMALIZE), self._environments())
-        self.model = self.sb3.PPO.load(str(self.out / last["file"]), env=self.vec, device="cpu")
-        self._timesteps = int(self.model.num_timesteps)
+        self.setup()  # the model and the normalisation the settings make, then the run's numbers into them
+        _restore_running(self.vec, self.out / "checkpoints" / NORMALIZE)
+        self.model.set_parameters(str(self.out / last["file"]), exact_match=True, device="cpu")  # weights only
+        self.model.num_timesteps = self._timesteps = int(last["timesteps"])
         self.started = time.perf_counter() - last["wall_seconds"]
         self._simulated_before = int(last["simulated_steps"])
         self.say(f"{self.key.task}: PPO resumed at {self._timesteps} steps (its environments reset)")
@@ -229,7 +231,14 @@ class PpoLearner(Learner):
 
     def save(self) -> None:
         if self.result is None and self.checkpoints:  # under way: what resume needs
-            self.vec.save(str(self.out / "checkpoints" / NORMALIZE))
+            write_json_atomically(
+                self.out / "checkpoints" / NORMALIZE,
+                {
+                    name: {"mean": rms.mean.tolist(), "var": rms.var.tolist(), "count": float(rms.count)}
+                    for name in _RUNNING
+                    for rms in [getattr(self.vec, name)]
+                },
+            )
             write_json_atomically(self.out / "checkpoints" / RESUME, self.state())
 
     @property
@@ -308,3 +317,18 @@ def train_ppo(
     learner = PpoLearner(settings, workers)
     run(learner, key, out, (settings.seed,), workers, resume, progress=False, say=say)
     return learner.result
+
+
+def _restore_running(vec, path) -> None:
+    """Put the running statistics :meth:`PpoLearner.save` wrote as JSON back into ``vec`` (a VecNormalize
+    of the same shapes); a file that is not theirs is one line."""
+    try:
+        data = json.loads(path.read_text())
+        for name in _RUNNING:
+            rms, values = getattr(vec, name), data[name]
+            mean, var = np.asarray(values["mean"], float), np.asarray(values["var"], float)
+            if mean.shape != np.shape(rms.mean) or var.shape != np.shape(rms.var):
+                raise ValueError(f"{name} has the shape {mean.shape}, the environment's is {np.shape(rms.mean)}")
+            rms.mean, rms.var, rms.count = mean, var, float(values["count"])
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise EtmpcError(f"{path}: not this run's normalisation statistics ({exc}); start the run again") from None

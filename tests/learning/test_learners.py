@@ -230,3 +230,52 @@ def test_a_new_learner_is_one_class_and_the_runner_trains_chooses_and_resumes_it
     assert done.policy == ("every:3", "every:5")[int(np.argmax(means))]  # battery: profit, higher is better
     again = run(new_learner(settings), "battery", tmp_path / "run", resume=True, progress=False)
     assert again.policy == done.policy
+
+
+class _Opens:
+    """Unpickled, it creates ``marker``: a payload that shows whether anything was unpickled."""
+
+    def __init__(self, marker):
+        self.marker = str(marker)
+
+    def __reduce__(self):
+        return open, (self.marker, "w")
+
+
+def test_a_stopped_ppo_run_resumes_from_data_and_unpickles_nothing_in_its_folder(tmp_path, monkeypatch):
+    pytest.importorskip("stable_baselines3")
+    import base64
+    import pickle
+    import zipfile
+
+    cls, marker = learner_class("ppo"), tmp_path / "ran"
+    learn, calls = cls.learn, []
+
+    def learn_once(self, budget, callback):
+        calls.append(budget)
+        if len(calls) > 1:
+            raise KeyboardInterrupt  # stopped after the first milestone, its resume state kept
+        learn(self, budget, callback)
+
+    monkeypatch.setattr(cls, "learn", learn_once)
+    with pytest.raises(KeyboardInterrupt):
+        run(tiny("ppo"), "battery", tmp_path / "cut", SEEDS["ppo"], progress=False)
+    monkeypatch.setattr(cls, "learn", learn)
+    checkpoints = tmp_path / "cut" / "checkpoints"
+    payload = base64.b64encode(pickle.dumps(_Opens(marker))).decode()
+    (last,) = [p for p in checkpoints.glob("step_*.zip")]
+    with zipfile.ZipFile(last) as zf:  # the checkpoint's data entry carries a payload where SB3 keeps a pickle
+        entries = {name: zf.read(name) for name in zf.namelist()}
+    data = json.loads(entries["data"])
+    data["lr_schedule"][":serialized:"] = payload
+    entries["data"] = json.dumps(data).encode()
+    with zipfile.ZipFile(last, "w") as zf:
+        for name, content in entries.items():
+            zf.writestr(name, content)
+    (checkpoints / "resume_normalize.pkl").write_bytes(pickle.dumps(_Opens(marker)))  # a planted pickle
+    assert json.loads((checkpoints / "resume_normalize.json").read_text())["obs_rms"]["count"] > 1
+    done = run(tiny("ppo"), "battery", tmp_path / "cut", SEEDS["ppo"], resume=True, progress=False)
+    assert not marker.exists()  # the resume read the statistics as JSON and the weights only
+    training = json.loads((tmp_path / "cut" / "training.json").read_text())
+    assert training["environment_steps"] == 512 and len(training["checkpoints"]) == 2 and done.policy.startswith("sb3:")
+    assert not (checkpoints / "resume_normalize.json").exists()
