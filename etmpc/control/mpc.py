@@ -152,25 +152,19 @@ class GaussNewtonMPC:
         if settings.qpsol == "qrqp":
             quiet |= {"print_iter": False, "print_header": False, "print_info": False}
         self.nlp = {"x": w, "p": params, "f": f, "g": g}
-        nlpsol = ca.nlpsol(
-            f"{name}_sqp",
-            "sqpmethod",
-            self.nlp,
-            {
-                "qpsol": settings.qpsol,
-                "qpsol_options": quiet | dict(settings.qpsol_options),
-                "hess_lag": hess,
-                "tol_pr": settings.tolerance,
-                "tol_du": self._dual_tolerance,
-                "max_iter": settings.max_iterations,
-                "print_time": False,
-                "print_header": False,
-                "print_iteration": False,
-                "print_status": False,
-                "error_on_fail": False,
-            }
-            | dict(settings.sqp_options),
-        )
+        self._sqp_options = {
+            "qpsol": settings.qpsol,
+            "qpsol_options": quiet | dict(settings.qpsol_options),
+            "hess_lag": hess,
+            "tol_pr": settings.tolerance,
+            "tol_du": self._dual_tolerance,
+            "max_iter": settings.max_iterations,
+            "print_time": False,
+            "print_header": False,
+            "print_iteration": False,
+            "print_status": False,
+            "error_on_fail": False,
+        } | dict(settings.sqp_options)
         nw = w.shape[0]
         self._lbw, self._ubw = np.full(nw, -np.inf), np.full(nw, np.inf)
         self._lbw[self._u_index], self._ubw[self._u_index] = self.u_min, self.u_max
@@ -179,30 +173,42 @@ class GaussNewtonMPC:
         lam_x = ca.SX.sym("lam_x", nw)
         violation = ca.mmax(ca.vertcat(ca.fabs(g), ca.fmax(self._lbw - w, 0), ca.fmax(w - self._ubw, 0)))
         grad_lagrangian = ca.gradient(f, w) + ca.jtimes(g, w, lam_g, True) + lam_x
-        kkt = ca.Function("kkt", [w, params, lam_x, lam_g], [ca.vertcat(violation, ca.norm_inf(grad_lagrangian))])
-        trajectory = ca.Function("trajectory", [w, params], [ca.vertcat(*states)])
+        self._kkt = ca.Function("kkt", [w, params, lam_x, lam_g], [ca.vertcat(violation, ca.norm_inf(grad_lagrangian))])
+        self._trajectory = ca.Function("trajectory", [w, params], [ca.vertcat(*states)])
+        self._name = name
+        self.function = self._solver_function(name, settings.max_iterations)
+        self._compiled = self._compile(self.function) if settings.compiled else None
+        self._step = None  # one SQP iteration (iterate()), built when first asked
 
-        # One function: solve from a guess, then the plan's trajectory and the KKT residuals (and,
-        # with feedback weights, the gains of the time-varying LQR along the plan).
-        guess, p = ca.MX.sym("guess", nw), ca.MX.sym("p", params.shape[0])
+    def _solver_function(self, name: str, max_iterations: int) -> ca.Function:
+        """One function: the SQP (at most ``max_iterations`` iterations) from a guess, then the plan's
+        trajectory and the KKT residuals (and, with feedback weights, the gains of the time-varying LQR
+        along the plan)."""
+        options = (
+            self._sqp_options
+            if max_iterations == self.settings.max_iterations
+            else self._sqp_options | {"max_iter": max_iterations}
+        )
+        nlpsol = ca.nlpsol(f"{name}_sqp", "sqpmethod", self.nlp, options)
+        nw = self._lbw.shape[0]
+        guess, p = ca.MX.sym("guess", nw), ca.MX.sym("p", self.nlp["p"].shape[0])
         sol = nlpsol(x0=guess, p=p, lbx=self._lbw, ubx=self._ubw, lbg=0, ubg=0)
-        planned = trajectory(sol["x"], p)
-        outputs = [sol["x"], sol["f"], planned, kkt(sol["x"], p, sol["lam_x"], sol["lam_g"])]
+        planned = self._trajectory(sol["x"], p)
+        outputs = [sol["x"], sol["f"], planned, self._kkt(sol["x"], p, sol["lam_x"], sol["lam_g"])]
         names = ["w", "f", "states", "kkt"]
-        if feedback is not None:
-            outputs.append(self._gains(planned, sol["x"], feedback))
+        if self.feedback is not None:
+            outputs.append(self._gains(planned, sol["x"], self.feedback))
             names.append("gains")
-        self.function = ca.Function(name, [guess, p], outputs, ["guess", "p"], names)
-        self._compiled = None
-        if settings.compiled:
-            try:
-                self._compiled = CompiledFunction(self.function)
-            except CompileError as exc:
-                warnings.warn(
-                    f"{exc}; the MPC runs in CasADi's virtual machine instead (slower, same optimum)",
-                    RuntimeWarning,
-                    stacklevel=2,
-                )
+        return ca.Function(name, [guess, p], outputs, ["guess", "p"], names)
+
+    def _compile(self, function: ca.Function):
+        try:
+            return CompiledFunction(function)
+        except CompileError as exc:
+            warnings.warn(
+                f"{exc}; the MPC runs in CasADi's virtual machine instead (slower, same optimum)", RuntimeWarning, stacklevel=3
+            )
+            return None
 
     def objective(self, x: np.ndarray, u_prev: np.ndarray, inputs: np.ndarray, parameters: np.ndarray | None = None) -> float:
         """The OCP's objective of an input sequence ``(N, nu)``, rolled out through the predictor
@@ -294,15 +300,70 @@ class GaussNewtonMPC:
         inputs, states, cost, success, status, gains = result
         return Plan(inputs, states, cost, time.perf_counter() - start, success, -1, status, gains=gains)
 
-    def _solve_from(self, guess: np.ndarray, p: np.ndarray):
+    def iterate(
+        self,
+        x: np.ndarray,
+        u_prev: np.ndarray,
+        warm: Plan | None = None,
+        age: int = 0,
+        parameters: np.ndarray | None = None,
+        limit: int = 1,
+    ) -> Plan:
+        """Plan by SQP iterations counted one by one: at most ``limit`` of them from ``warm`` shifted by
+        ``age`` (a cold guess without one), stopping as soon as the KKT residuals are within
+        tolerance. ``Plan.iterations`` says how many were made: the work a solve did, which a price per
+        iteration and a latency per iteration read.
+
+        ``limit=1`` is one real-time iteration (Diehl's RTI, here with sqpmethod's line search): the
+        plan is then usable if it is finite (``success``) though not converged (``status`` says so).
+        With ``limit=settings.max_iterations`` it is a full solve whose success is :meth:`solve`'s (KKT
+        residuals within 10 tolerances), retried once from a cold guess when a warm start fails. Each
+        iteration is one call of a compiled one-iteration SQP (``{name}_step``); the multipliers start
+        from zero at each, which the Gauss-Newton Hessian does not depend on, so the iterates are those of
+        an SQP that restarts its line search's penalty at every iteration: the same optimum as
+        :meth:`solve`, within its tolerance, not the same bits."""
+        if limit < 1:
+            raise ValueError(f"limit must be at least 1 iteration, got {limit}")
+        start = time.perf_counter()
+        p = np.concatenate([x, np.atleast_1d(u_prev)] + ([np.asarray(parameters, float)] if self.parameters else []))
+        result, iterations = self._iterate_from(self.initial_guess(x, warm, age), p, limit)
+        full = limit >= self.settings.max_iterations
+        if full and not result[3] and warm is not None and (age < self.horizon or self.settings.warm_from_expired):
+            retry, more = self._iterate_from(self.initial_guess(x, None, 0), p, limit)
+            iterations += more
+            if retry[3]:
+                result = retry
+        inputs, states, cost, success, status, gains = result
+        if not full and not success and status.startswith("not converged"):
+            success, status = True, f"{iterations} iteration(s), {status}"  # a real-time iterate: usable, not converged
+        return Plan(inputs, states, cost, time.perf_counter() - start, success, iterations, status, gains=gains)
+
+    def _iterate_from(self, guess: np.ndarray, p: np.ndarray, limit: int):
+        """``(result, iterations)``: up to ``limit`` single SQP iterations from ``guess``, until converged
+        (``result`` as :meth:`_solve_from`'s)."""
+        if self._step is None:
+            function = self._solver_function(f"{self._name}_step", 1)
+            self._step = (function, self._compile(function) if self.settings.compiled else None)
+        w = guess
+        for iteration in range(1, limit + 1):
+            result = self._solve_from(w, p, self._step)
+            if result[3] or result[4] in ("evaluation failed", "non-finite iterate"):
+                return result, iteration
+            w = self._last_w.copy()
+        return result, limit
+
+    def _solve_from(self, guess: np.ndarray, p: np.ndarray, solver: tuple | None = None):
         """``(inputs, states, cost, success, status, gains)`` of one SQP run from ``guess`` (``gains``:
-        ``(N, nu, nx)`` with feedback weights, else None)."""
-        if self._compiled is not None:
-            outputs, code = self._compiled.call(guess, p)
+        ``(N, nu, nx)`` with feedback weights, else None); ``solver``: ``(function, compiled or None)``,
+        the full solve's by default."""
+        function, compiled = (self.function, self._compiled) if solver is None else solver
+        if compiled is not None:
+            outputs, code = compiled.call(guess, p)
         else:
             code = 0
-            outputs = [np.asarray(v).ravel() for v in self.function(guess, p)]
+            outputs = [np.asarray(v).ravel() for v in function(guess, p)]
         w, f, states, kkt = outputs[:4]
+        self._last_w = w  # the iterate itself (a buffer the next call overwrites)
         cost, violation, stationarity = float(f[0]), float(kkt[0]), float(kkt[1])
         inputs = w[self._u_index]  # (N, nu), a copy
         states = states.reshape(self.horizon + 1, self.nx).copy()
