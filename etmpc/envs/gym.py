@@ -1,7 +1,8 @@
 """The trigger environment as a ``gymnasium.Env`` (:class:`TriggerEnv`), registered for every task on
 ``import etmpc`` as ``etmpc/<domain>-<task>-v0`` (``gymnasium.make("etmpc/cart_pendulum-balance-v0")``).
 
-Spaces: ``Discrete(2)`` actions (0 keep, 1 recompute) and a float32 ``Box`` of
+Spaces: ``Discrete(2)`` actions (0 keep, 1 recompute; ``Discrete(3)`` on a task with compute levels:
+0 keep, 1 one SQP iteration, 2 a full solve) and a float32 ``Box`` of
 :attr:`TriggerEnv.observation_names` over the whole float32 range (the features are unbounded; a
 diverged plant's are clipped to that range, never NaN). ``reset(seed=S)`` draws a training-distribution episode from
 ``gymnasium``'s generator seeded by ``S`` (the same ``S``, the same episode); ``reset(options=
@@ -31,11 +32,12 @@ from etmpc.envs.trigger import TriggerEnvironment
 from etmpc.systems import SystemKey
 
 
-def trigger_spaces(size: int) -> tuple[spaces.Box, spaces.Discrete]:
-    """The observation and action spaces of a trigger environment with ``size`` features, newly made
-    (a saved model pickles them: made afresh, they pickle to the same bytes however they travelled)."""
+def trigger_spaces(size: int, actions: int = 2) -> tuple[spaces.Box, spaces.Discrete]:
+    """The observation and action spaces of a trigger environment with ``size`` features and ``actions``
+    actions (3 on a task with compute levels), newly made (a saved model pickles them: made afresh, they
+    pickle to the same bytes however they travelled)."""
     top = np.finfo(np.float32).max
-    return spaces.Box(-top, top, shape=(size,), dtype=np.float32, seed=0), spaces.Discrete(2, seed=0)
+    return spaces.Box(-top, top, shape=(size,), dtype=np.float32, seed=0), spaces.Discrete(actions, seed=0)
 
 
 class TriggerEnv(gymnasium.Env):
@@ -54,7 +56,7 @@ class TriggerEnv(gymnasium.Env):
         self.normalization = None if normalize is None else Normalization.read(normalize, task)  # before the MPC is built
         self.core = TriggerEnvironment(task, recompute_price=recompute_price, test_set=test_set, reward_baseline=reward_baseline)
         self.observation_names = self.core.observation_names
-        self.observation_space, self.action_space = trigger_spaces(len(self.observation_names))
+        self.observation_space, self.action_space = trigger_spaces(len(self.observation_names), self.core.actions)
 
     @property
     def simulated_steps(self) -> int:

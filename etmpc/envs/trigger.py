@@ -11,7 +11,11 @@ trajectory that ``evaluate`` reports for them (``tests/envs/test_trigger_env.py`
   them), then each squared. Unbounded, but finite: a diverged plant's are clipped to the float32
   range. Zeros at the first step, before there is a plan.
 * **Action**: ``0`` keep, ``1`` recompute. When there is no plan (the first step) or the plan has run
-  out (age N), the loop recomputes whatever the action says: :attr:`info` says it was ``forced``.
+  out (age N), the loop recomputes whatever the action says: :attr:`info` says it was ``forced``. On a
+  task with compute levels (``kicks_levels``) ``0`` keep, ``1`` one SQP iteration, ``2`` a full solve
+  (``Discrete(3)``). On a task with a latency, an action while a solve is in flight is ignored:
+  :attr:`info` says ``in_flight`` (and ``pending``: one is still under way after the step), ``level``
+  and ``work`` (what was computed and its priced work).
 * **Reward**: the task's reward for the interval minus the price of a computation when one was made,
   forced ones included (:attr:`info` has both parts). Higher is better on every task: the cart
   pendulum's reward is ``-beta^2``.
@@ -49,26 +53,27 @@ from etmpc.policies.sb3 import finite_observation
 from etmpc.policies.specs import find
 from etmpc.systems import SystemKey, system_key
 
-KEEP, RECOMPUTE = 0, 1
+KEEP, RECOMPUTE = 0, 1  # a task's actions; on a task with compute levels 0 keep, 1 one SQP iteration, 2 a full solve
+MEANINGS = {2: "0 (keep the plan) or 1 (recompute)", 3: "0 (keep the plan), 1 (one SQP iteration) or 2 (a full solve)"}
 
 
-def check_action(action: Any) -> int:
+def check_action(action: Any, actions: int = 2) -> int:
     """The action as an int, if it is exactly what the action space holds: ``0`` or ``1`` as a Python
     int (``True``/``False`` are ints in Python), a numpy integer scalar (``np.int64(1)``, what a
     vectorised environment hands each copy) or a 0-d integer array (``np.array(1)``, what
     Stable-Baselines3's ``predict`` returns for one observation): the forms ``gymnasium.spaces.
     Discrete(2).contains`` accepts. Anything else (a float, a list, an array of another shape, a
-    numpy bool, a string) raises :class:`InvalidAction`."""
+    numpy bool, a string) raises :class:`InvalidAction`. ``actions``: 2, or 3 on a task with compute levels."""
     if isinstance(action, int) or (
         isinstance(action, (np.integer, np.ndarray)) and action.shape == () and np.issubdtype(action.dtype, np.integer)
     ):
         value = int(action)
-        if value in (KEEP, RECOMPUTE):
+        if 0 <= value < actions:
             return value
-        raise InvalidAction(f"an action is 0 (keep the plan) or 1 (recompute), got {value}")
+        raise InvalidAction(f"an action is {MEANINGS[actions]}, got {value}")
     shape = f" of shape {action.shape}" if isinstance(action, np.ndarray) else ""
     raise InvalidAction(
-        f"an action is 0 (keep the plan) or 1 (recompute): an int, a numpy integer or a 0-d integer "
+        f"an action is {MEANINGS[actions]}: an int, a numpy integer or a 0-d integer "
         f"array, got {type(action).__name__}{shape} {action!r}"
     )
 
@@ -129,6 +134,7 @@ class TriggerEnvironment(dm_env.Environment):
             raise EtmpcError(f"test_set: a file path is needed, got {type(test_set).__name__} {test_set!r}")
         self.key = system_key(task, recompute_price)  # the task and the price, checked here
         self.system = self.key.make()
+        self.actions = 3 if self.system.compute_levels else 2  # Discrete(3) on a task with compute levels
         self.loop = ClosedLoop(self.system, self.system.make_env())
         self.observation_names = observation_names(self.system.name, self.system.state_names)
         self._size = len(self.observation_names)
@@ -163,19 +169,22 @@ class TriggerEnvironment(dm_env.Environment):
     def step(self, action) -> dm_env.TimeStep:
         if self.loop.done:
             return self.reset()
-        asked = check_action(action)
+        asked = check_action(action, self.actions)
         loop = self.loop
-        forced = loop.forced
-        recompute = forced or asked == RECOMPUTE
-        reward = loop.step(recompute)  # the task's reward, net of the computation's price
+        forced, in_flight = loop.forced, loop.in_flight
+        reward = loop.step(
+            asked if self.actions == 3 else asked == RECOMPUTE
+        )  # the task's reward, net of the computation's price
         self.info = {
             "step": loop.step_index,
-            "recompute": recompute,
+            "recompute": loop.recomputed,
             "forced": forced,
             "control_reward": loop.reward,
             "computation_cost": loop.cost,
             "nonfinite": loop.trajectory.nonfinite,
         }
+        if not (self.system.latency.instant and self.actions == 2):  # time in the loop: what was computed, and when
+            self.info |= {"in_flight": in_flight, "level": int(loop.level), "work": loop.work, "pending": loop.in_flight}
         self.simulated_steps += 1
         if self._shadow is not None:
             baseline = self._baseline_step()
@@ -200,7 +209,7 @@ class TriggerEnvironment(dm_env.Environment):
         return specs.Array((self._size,), np.float32, name="trigger_features")
 
     def action_spec(self) -> specs.BoundedArray:
-        return specs.BoundedArray((), np.int64, KEEP, RECOMPUTE, name="recompute")
+        return specs.BoundedArray((), np.int64, KEEP, self.actions - 1, name="recompute" if self.actions == 2 else "compute")
 
     def reward_spec(self) -> specs.Array:
         return specs.Array((), np.float64, name="reward")

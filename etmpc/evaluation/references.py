@@ -5,8 +5,9 @@ oracle over the best of them, per episode of its test set (see :mod:`etmpc.evalu
 the task's price and the software that computed them, sealed with the SHA-256 of its content. A file
 that does not match what is being scored, was edited after it was written, or does not hold together
 is refused in one line that says how to rebuild it (``etmpc score --references``). Holding together
-means: a finite objective for every schedule ``every:1`` .. ``every:N`` (the task's horizon) and the
-oracle on every episode; the named best schedule is the one with the best mean (the first on a tie);
+means: a finite objective for every schedule ``every:1`` .. ``every:N`` (the task's horizon; and
+``iterate:1`` .. ``iterate:N`` on a task with compute levels) and the oracle on every episode; the
+named best schedule is the one with the best mean (the first on a tie);
 and on every episode the oracle does no worse than that schedule, as a one-step lookahead over a
 schedule with the episode's future known must (it can always answer as the schedule does).
 """
@@ -56,7 +57,7 @@ class References:
     episodes: int
     recompute_price: float
     objective_sense: str
-    periodic: dict[str, list[float]]  # every:T -> objective per episode
+    periodic: dict[str, list[float]]  # every:T (and iterate:T on a task with compute levels) -> objective per episode
     best: str  # the periodic schedule with the best mean objective
     oracle: list[float]  # oracle:BEST's objective per episode
     suite_version: int = SUITE_VERSION
@@ -100,6 +101,14 @@ def best_schedule(periodic: dict[str, list[float]], sense: str) -> str:
     return best_of(list(periodic), sense, key=lambda spec: mean(periodic[spec]))
 
 
+def periodic_schedules(system) -> list[str]:
+    """The fixed schedules a task's references play: ``every:1`` .. ``every:N`` (N its horizon) and, on a
+    task with compute levels, ``iterate:1`` .. ``iterate:N`` too (the best of them all is the one scored
+    against)."""
+    periods = range(1, system.horizon + 1)
+    return [f"every:{t}" for t in periods] + ([f"iterate:{t}" for t in periods] if system.compute_levels else [])
+
+
 def references_path(task: str) -> Path:
     system = make_system(task)
     return data_dir(system.domain) / f"{system.task}_references.json"
@@ -124,7 +133,7 @@ def build_references(
     """Play every periodic schedule and the oracle over the best of them on ``task``'s test set (the
     stored one by default)."""
     system = make_system(task)
-    periodic = [f"every:{t}" for t in range(1, system.horizon + 1)]
+    periodic = periodic_schedules(system)
     say(f"{system.name}: references: {len(periodic)} periodic schedules, then the oracle over the best")
     fixed = evaluate(system.name, periodic, workers=workers, testset_path=testset_path, progress=progress)
     table = {spec: _objectives(fixed, spec) for spec in periodic}
@@ -217,7 +226,7 @@ def _problem(data: dict, system) -> str | None:
         return f"objective_sense {sense!r}, the task's is {system.objective_sense!r}"
     if not isinstance(data.get("task"), str) or not isinstance(data.get("software"), dict):
         return "task or software missing"
-    schedules = [f"every:{t}" for t in range(1, system.horizon + 1)]
+    schedules = periodic_schedules(system)
     if not isinstance(periodic, dict) or list(periodic) != schedules:
         return f"periodic must hold {schedules[0]} .. {schedules[-1]} in order"
     if not all(_numbers(v, episodes) for v in periodic.values()) or not _numbers(data.get("oracle"), episodes):

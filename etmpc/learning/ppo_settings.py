@@ -136,7 +136,7 @@ def save_model(model, path: Path) -> None:
     regenerated shipped policy can be compared byte for byte."""
     from etmpc.envs.gym import trigger_spaces
 
-    fresh = trigger_spaces(model.observation_space.shape[0])
+    fresh = trigger_spaces(model.observation_space.shape[0], int(model.action_space.n))
     if fresh != (model.observation_space, model.action_space):
         raise EtmpcError(f"a trigger model's spaces are {fresh}, not {(model.observation_space, model.action_space)}")
     model.observation_space, model.action_space = fresh

@@ -14,6 +14,7 @@ from dm_control.rl.control import PhysicsError
 
 from etmpc.common.frozen import frozen, readonly
 from etmpc.control.plan import Plan
+from etmpc.control.timing import ITERATE, KEEP, LEVEL_NAMES, SOLVE
 from etmpc.loop.records import Continuation, Trajectory, computation_cost
 from etmpc.loop.state import AugmentedState, DecisionContext, Policy, Snapshot
 from etmpc.systems.base import System
@@ -53,13 +54,23 @@ class ClosedLoop:
     physics, ``system.measure``, and the task's observation is made only when a solve or a policy
     reads it), and nothing is recorded or timed (no :attr:`trajectory`). It starts from a snapshot
     (:meth:`resume`); a plant that fails sets :attr:`failed`.
+
+    Time in the loop (:mod:`etmpc.control.timing`): on a task with a latency, a solve started at step
+    ``k`` is :attr:`pending` until ``k + d``; the trigger is not asked meanwhile (:attr:`in_flight`)
+    and the plan comes into force with age ``d``. On a task with compute levels a decision is
+    ``KEEP``, ``ITERATE`` or ``SOLVE`` (``True``/``False`` are a full solve/keep), and a computation
+    costs its SQP iterations.
     """
 
     def __init__(self, system: System, env: dm_env.Environment, records: bool = True):
         self.system, self.env, self.records = system, env, records
         self.done, self.failed = True, False
-        # the last step's: the task's reward, whether it computed, and the price of that computation
-        self.reward, self.recomputed, self.cost = 0.0, False, 0.0
+        # the last step's: the task's reward, whether it computed, what (a level), its work and its price
+        self.reward, self.recomputed, self.level, self.work, self.cost = 0.0, False, KEEP, 0, 0.0
+        self.latency, self.levels = system.latency, system.compute_levels
+        self._per_iteration = self.levels  # a computation's work: its SQP iterations, else 1 per solve
+        self.pending: tuple[int, int, Plan] | None = None  # the solve in flight: (arrives at, made for, plan)
+        self._instant = True  # the next plan is made before the interval (the first, or after a restart)
 
     def reset(self, episode: Any = None) -> ClosedLoop:
         """Start an episode: a stored one if given, else one drawn by the task."""
@@ -73,6 +84,7 @@ class ClosedLoop:
         self.trajectory = Trajectory.empty(system.episode_steps, self.x.shape[0], nu)
         self.plan: Plan | None = None
         self.age, self.u_prev, self.step_index, self.done, self.failed = 0, readonly(np.zeros(nu)), 0, False, False
+        self.pending, self._instant = None, True
         self._arrive()
         return self
 
@@ -85,13 +97,23 @@ class ClosedLoop:
         self.env.task.resume(snapshot.episode if episode is None else episode, snapshot.step)
         self.plan, self.age, self.u_prev, self.x = snapshot.plan, snapshot.age, snapshot.u_prev, snapshot.x
         self._observation, self.step_index, self.done, self.failed = snapshot.observation, snapshot.step, False, False
+        self.pending, self._instant = snapshot.pending, snapshot.plan is None
         self.timestep = None
         return self
 
     @property
     def forced(self) -> bool:
-        """The plan has run out (age = N), or there is none yet: the loop must solve, whatever is asked."""
-        return self.plan is None or self.age >= self.plan.horizon
+        """The plan has run out (age = N; with a latency of ``d`` intervals, it would run out before a
+        solve started now arrives: age >= N - d), or there is none yet: the loop must solve, whatever
+        is asked. Never while a solve is in flight."""
+        if self.pending is not None:
+            return False
+        return self.plan is None or self.age >= self.plan.horizon - (0 if self._instant else self.latency.intervals)
+
+    @property
+    def in_flight(self) -> bool:
+        """A solve is under way: its plan is not in force yet, and no other starts (the trigger is not asked)."""
+        return self.pending is not None
 
     @property
     def observation(self) -> Mapping:
@@ -105,8 +127,9 @@ class ClosedLoop:
     def augmented_state(self, context: bool = False, observes: bool = True) -> AugmentedState | None:
         """What a policy sees at this step's decision; ``None`` when the decision is forced. With
         ``context``, the loop's whole state too (for policies that simulate); without ``observes``,
-        no observation (a policy that never reads it: the light mode then does not make it)."""
-        return None if self.forced else self.observed_state(context, observes)
+        no observation (a policy that never reads it: the light mode then does not make it). Also
+        ``None`` while a solve is in flight: the trigger is not asked then."""
+        return None if (self.forced or self.pending is not None) else self.observed_state(context, observes)
 
     def observed_state(self, context: bool = False, observes: bool = True) -> AugmentedState | None:
         """The augmented state now, also when the decision is forced; ``None`` before the first plan."""
@@ -116,32 +139,41 @@ class ClosedLoop:
         ctx = DecisionContext(self.system, self.env, self.step_index, plan, age, self.u_prev, self.timestep) if context else None
         return AugmentedState(self.x, plan.states[0], age, plan.state_at(age), plan, self.observation if observes else None, ctx)
 
-    def step(self, recompute: bool, started: float | None = None, solved: Plan | None = None) -> float:
-        """Play this control interval: solve a new plan if ``recompute`` (or if forced), apply the
-        plan's input plus the LQR correction, clipped, and step the plant. Returns the trigger's
-        reward for it: the task's (:attr:`reward`) minus the price of the computation, if one was
-        made (:attr:`cost`). A plant that fails (non-finite) ends the episode; the step's reward is
-        then 0. ``started``: when the step's decision began (the step's wall time counts from there).
-        ``solved``: the plan a solve now gives, when the caller has it already."""
+    def step(self, recompute: bool | int, started: float | None = None, solved: Plan | None = None) -> float:
+        """Play this control interval: compute a new plan if ``recompute`` (or if forced; on a task
+        with compute levels ``recompute`` is the level), apply the plan in force's input plus the LQR
+        correction, clipped, and step the plant. Returns the trigger's reward for it: the task's
+        (:attr:`reward`) minus the price of the computation started, if one was (:attr:`cost`). A plant
+        that fails (non-finite) ends the episode; the step's reward is then 0. ``started``: when the
+        step's decision began (the step's wall time counts from there). ``solved``: the plan this
+        step's computation gives, when the caller has it already. While a solve is in flight the
+        answer is ignored (recorded as :attr:`in_flight` in the trajectory)."""
         if self.done:
             raise RuntimeError("the episode is over: reset the loop")
         records = self.records
         start = (time.perf_counter() if started is None else started) if records else 0.0
-        system, i, x, plan = self.system, self.step_index, self.x, self.plan
-        forced = self.forced
-        recompute = forced or bool(recompute)
-        if recompute:
-            new = solved if solved is not None else self._solve(i)
-            if new.success or forced:  # a failed solve keeps the old plan only while it has steps left
-                plan, self.plan, self.age = new, new, 0
-                if records:
-                    self.trajectory.plans.append((i, plan))
+        system, i, x = self.system, self.step_index, self.x
+        in_flight, forced = self.pending is not None, self.forced
+        level = SOLVE if forced else KEEP if in_flight else self._level(recompute)
+        work = 0
+        if level != KEEP:
+            new = solved if solved is not None else self._compute(level, i)
+            work = new.iterations if self._per_iteration else 1
+            delay = 0 if self._instant else self.latency.delay(new.iterations, system.control_interval_s)
+            if delay == 0:
+                self._deliver(new, i, forced)
+            else:  # made for step i (or, delay-compensated, for the step its prediction is of)
+                self.pending = (i + delay, i + (self.latency.intervals if self._compensates() else 0), new)
+            self._instant = False
+        plan = self.plan
         feedback_start = time.perf_counter() if records else 0.0
         u, u_planned, correction, x_predicted = _input(system, plan, self.age, x)
         if records:
             self.trajectory.feedback_time_s[i] = time.perf_counter() - feedback_start
+        recompute = level != KEEP
         reward = self._advance(system.action(u, recompute))
-        self.recomputed, self.cost = recompute, computation_cost(recompute, system.recompute_price)
+        self.recomputed, self.level, self.work = recompute, level, work
+        self.cost = computation_cost(work, system.recompute_price)
         if reward is None:  # the plant failed
             self.failed = self.done = True
             if records:
@@ -151,16 +183,26 @@ class ClosedLoop:
         self.reward = reward
         if records:
             traj = self.trajectory
+            traj.recompute[i], traj.forced[i], traj.level[i], traj.work[i], traj.in_flight[i] = (
+                recompute,
+                forced,
+                level,
+                work,
+                in_flight,
+            )
             traj.applied[i], traj.planned[i], traj.correction[i] = u, u_planned, correction
             traj.predicted[i], traj.plan_age[i] = x_predicted, self.age
-            traj.recompute[i], traj.forced[i] = recompute, forced
             traj.rewards[i] = reward
             traj.steps = i + 1
         self.step_index = i + 1
         u.flags.writeable = False  # the loop's own new array (np.minimum's): shown as u_prev, never written again
         self.age, self.u_prev = self.age + 1, u
-        if self.env.task.restarted:  # the task put the plant back: the plan no longer applies
-            self.age = plan.horizon
+        if self.env.task.restarted:  # the task put the plant back: the plan (and one in flight) no longer applies
+            self.age, self.pending, self._instant = plan.horizon, None, True
+        elif self.pending is not None and self.pending[0] == self.step_index:
+            _, made, arrived = self.pending
+            self.pending = None
+            self._deliver(arrived, made, self.age >= plan.horizon, self.step_index)
         if records:
             self.trajectory.step_time_s[i] = time.perf_counter() - start
             if self.timestep.last() or self.step_index >= system.episode_steps:
@@ -173,17 +215,48 @@ class ClosedLoop:
             self.done = True
         return reward - self.cost
 
-    def _solve(self, i: int) -> Plan:
-        """A new plan from the state now (the whole computation timed, a failure counted, when recording)."""
+    def _level(self, answer) -> int:
+        """A decision as a compute level: on a task with levels, ``KEEP``/``ITERATE``/``SOLVE`` (a bool is
+        keep or a full solve); elsewhere any true answer is a full solve."""
+        if not self.levels or isinstance(answer, (bool, np.bool_)):
+            return SOLVE if answer else KEEP
+        level = int(answer)
+        if level not in (KEEP, ITERATE, SOLVE):
+            raise ValueError(
+                f"a decision is {KEEP} ({LEVEL_NAMES[0]}), {ITERATE} ({LEVEL_NAMES[1]}) or {SOLVE} "
+                f"({LEVEL_NAMES[2]}) on task {self.system.name}, got {answer!r}"
+            )
+        return level
+
+    def _deliver(self, new: Plan, made: int, expired: bool, now: int | None = None) -> None:
+        """Put ``new`` (made for step ``made``) in force now, unless it failed and the plan in force
+        still has steps left (``expired``: it has none, or there is no plan)."""
+        if new.success or expired or self.plan is None:
+            now = made if now is None else now
+            self.plan, self.age = new, now - made
+            if self.records:
+                self.trajectory.plans.append((made, new))
+                self.trajectory.arrivals.append(now)
+
+    def _compensates(self) -> bool:
+        return self.latency.compensate and self.latency.intervals > 0 and not self._instant and self.plan is not None
+
+    def _compute(self, level: int, i: int) -> Plan:
+        """A new plan from the state now (or, delay-compensated, from the state the kept plan predicts
+        for when it will arrive): a full solve or one SQP iteration; timed and a failure counted when
+        recording."""
+        system, x, u_prev, warm, age = self.system, self.x, self.u_prev, self.plan, self.age
+        if self._compensates():
+            ahead = np.array([warm.input_at(age + j) for j in range(self.latency.intervals)])
+            x, u_prev, age = readonly(system.predict(x, ahead)[-1]), readonly(ahead[-1]), age + self.latency.intervals
+        solver = system.plan if level == SOLVE else system.iterate
         if not self.records:
             observation = self._observation
             if observation is None:
                 observation = self.env.task.get_observation(self.env.physics)
-            return self.system.plan(
-                self.x, self.u_prev, self.plan, self.age, dm_env.TimeStep(dm_env.StepType.MID, None, None, observation)
-            )
+            return solver(x, u_prev, warm, age, dm_env.TimeStep(dm_env.StepType.MID, None, None, observation))
         solve_start = time.perf_counter()
-        new = self.system.plan(self.x, self.u_prev, self.plan, self.age, self.timestep)
+        new = solver(x, u_prev, warm, age, self.timestep)
         self.trajectory.solve_time_s[i] = time.perf_counter() - solve_start
         if not new.success:
             self.trajectory.solver_failures += 1
@@ -231,10 +304,10 @@ def run_episode(
     while not loop.done:
         started = time.perf_counter()
         s = loop.augmented_state(simulates)
-        recompute = s is not None and bool(policy.decide(s, rng))
+        answer = False if s is None else policy.decide(s, rng)  # a level on a task with compute levels
         if s is not None:
             loop.trajectory.decide_time_s[loop.step_index] = time.perf_counter() - started
-        loop.step(recompute, started)
+        loop.step(answer, started)
     return loop.trajectory
 
 
@@ -255,7 +328,8 @@ def play_on(
     each computation taken off), plus ``system.truncation_value`` of the last state when the play
     stops before the episode's end.
 
-    The first decision is ``first`` (recompute or keep), the later ones ``policy``'s. ``episode``
+    The first decision is ``first`` (recompute or keep; a level on a task with compute levels), the
+    later ones ``policy``'s. ``episode``
     replaces the episode being played from the snapshot's step on (a sampled future); ``first_plan``
     is the plan a recompute at the first step gives, when the caller has solved it already (it is
     the same for every future). ``stop`` is the step to stop before (default: the episode's end). A
@@ -274,14 +348,16 @@ def play_on(
             added = loop.step(first, solved=first_plan)
         else:
             s = loop.augmented_state(observes=observes)
-            added = loop.step(s is not None and bool(policy.decide(s, rng)))
+            added = loop.step(False if s is None else policy.decide(s, rng))
         if loop.failed:
             return -math.inf
         total += added
         if trace is not None:
             trace.added.append(added)
             trace.recomputed.append(loop.recomputed)
-            trace.after.append((loop.x, loop.plan, loop.age, loop.u_prev))
+            if loop.levels:
+                trace.levels.append(loop.level)
+            trace.after.append((loop.x, loop.plan, loop.age, loop.u_prev, loop.pending))
     if end < system.episode_steps:
         total += system.truncation_value(loop.x)
     return total

@@ -26,14 +26,18 @@ class Trajectory:
     correction: np.ndarray  # (T, nu) LQR correction before clipping
     predicted: np.ndarray  # (T, nx) the plan's prediction x_hat_i
     plan_age: np.ndarray  # (T,) i - k at the decision
-    recompute: np.ndarray  # (T,) a_i: a computation was spent (includes forced ones)
+    recompute: np.ndarray  # (T,) a_i: a computation was started (includes forced ones)
     forced: np.ndarray  # (T,) the plan had run out (or there was none)
+    level: np.ndarray  # (T,) what was computed: 0 keep, 1 one SQP iteration, 2 a full solve (etmpc.control.timing)
+    work: np.ndarray  # (T,) the computation's priced work: 1 per solve, or its SQP iterations on a task with levels
+    in_flight: np.ndarray  # (T,) a solve was under way at the decision: the trigger was not asked
     rewards: np.ndarray  # (T,) the environment's reward for the step
     solve_time_s: np.ndarray  # (T,) wall time of the MPC computation (NaN where none happened)
     step_time_s: np.ndarray  # (T,) wall time of the whole step, solve included
     feedback_time_s: np.ndarray  # (T,) wall time of the input: the plan's, plus the LQR correction, clipped
     decide_time_s: np.ndarray  # (T,) wall time of the policy's decision (0 where the loop did not ask it)
-    plans: list[tuple[int, Plan]] = field(default_factory=list)  # (step made, plan), successful or used
+    plans: list[tuple[int, Plan]] = field(default_factory=list)  # (step made for, plan), successful or used
+    arrivals: list[int] = field(default_factory=list)  # the step each of plans came into force (its made step + latency)
     steps: int = 0
     solver_failures: int = 0
     nonfinite: bool = False  # the episode ended early on a non-finite state
@@ -50,6 +54,9 @@ class Trajectory:
             plan_age=np.zeros(steps, int),
             recompute=np.zeros(steps, bool),
             forced=np.zeros(steps, bool),
+            level=np.zeros(steps, np.int8),
+            work=np.zeros(steps),
+            in_flight=np.zeros(steps, bool),
             rewards=np.zeros(steps),
             solve_time_s=nan(steps),
             step_time_s=nan(steps),
@@ -72,13 +79,18 @@ class Trajectory:
     def recomputes(self) -> int:
         return int(self.recompute[: self.steps].sum())
 
+    @property
+    def total_work(self) -> float:
+        """The work priced over the episode: the computations, or their SQP iterations on a task with levels."""
+        return float(self.work[: self.steps].sum())
+
     def policy_rewards(self, recompute_price: float) -> np.ndarray:
         """Per-step rewards the policy maximises: the environment's, minus the price of a computation."""
-        return self.rewards[: self.steps] - computation_cost(self.recompute[: self.steps], recompute_price)
+        return self.rewards[: self.steps] - computation_cost(self.work[: self.steps], recompute_price)
 
     def policy_return(self, recompute_price: float) -> float:
         """The policy's return: rewards minus the price of every computation."""
-        return float(self.rewards[: self.steps].sum() - computation_cost(self.recomputes, recompute_price))
+        return float(self.rewards[: self.steps].sum() - computation_cost(self.total_work, recompute_price))
 
 
 @dataclass(eq=False)
@@ -91,6 +103,7 @@ class Continuation:
     start: int  # the step it started at
     added: list[float] = field(default_factory=list)
     recomputed: list[bool] = field(default_factory=list)
+    levels: list[int] = field(default_factory=list)  # what each step computed, on a task with compute levels
     after: list[tuple] = field(default_factory=list)
 
     def return_from(self, k: int) -> float:

@@ -69,6 +69,7 @@ class Snapshot:
     u_prev: np.ndarray
     x: np.ndarray
     observation: Mapping
+    pending: Any = None  # a solve in flight (ClosedLoop.pending): none at a decision, where snapshots are taken
 
     @classmethod
     def take(cls, context: DecisionContext) -> Snapshot:

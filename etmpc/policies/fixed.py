@@ -1,4 +1,5 @@
-"""Fixed schedules: ``always`` (standard MPC), ``never`` (keep each plan to its end) and ``every:T``."""
+"""Fixed schedules: ``always`` (standard MPC), ``never`` (keep each plan to its end), ``every:T`` and,
+on a task with compute levels, ``iterate:T`` (real-time iterations)."""
 
 from __future__ import annotations
 
@@ -7,6 +8,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from etmpc.control.timing import ITERATE, KEEP
 from etmpc.loop import AugmentedState
 
 
@@ -41,6 +43,22 @@ class Every(_Schedule):
 
     def decide(self, s: AugmentedState, rng: np.random.Generator) -> bool:
         return s.age >= self.period
+
+
+@dataclass(frozen=True)
+class Iterate(_Schedule):
+    """Real-time iterations: one SQP iteration from the shifted plan when the plan is ``period`` steps
+    old (a full solve only where the loop forces one). On a task with compute levels only."""
+
+    period: int
+    stochastic: bool = False
+
+    @property
+    def spec(self) -> str:
+        return f"iterate:{self.period}"
+
+    def decide(self, s: AugmentedState, rng: np.random.Generator) -> int:
+        return ITERATE if s.age >= self.period else KEEP
 
 
 @dataclass(frozen=True)

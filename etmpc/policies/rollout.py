@@ -29,6 +29,7 @@ import numpy as np
 
 from etmpc.common.errors import EtmpcError
 from etmpc.common.numerics import fsum
+from etmpc.control.timing import ITERATE, KEEP, SOLVE
 from etmpc.loop import AugmentedState, Continuation, DecisionContext, Policy, Snapshot, play_on
 
 DEFAULT_FUTURES = 8
@@ -45,7 +46,9 @@ def q_values(
     oracle: bool = False,
     memo: OracleMemo | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Returns of keeping and of recomputing at ``context``'s decision, one per future (paired).
+    """Returns of each answer at ``context``'s decision, one row per answer and one column per future
+    (paired): keeping and recomputing, or, on a task with compute levels, keeping, one SQP iteration
+    and a full solve (:func:`answers`).
 
     ``twin`` is an environment of the same task to simulate in (``context.env`` is left untouched).
     With ``oracle``, the one future is the episode's stored one; then ``memo`` (an oracle's, whose
@@ -59,22 +62,44 @@ def q_values(
     episodes = [None] if oracle else [system.sample_future(snapshot.episode, context.step, rng) for _ in range(futures)]
     seeds = rng.integers(2**63, size=len(episodes)) if (base.stochastic and rng is not None) else [None] * len(episodes)
     known = memo.lookup(snapshot) if memo is not None else None
-    solved = None
     stop = None if horizon is None else context.step + horizon
-    returns = np.empty((2, len(episodes)))
-    for first in (0, 1):
-        if known is not None and known[0] == first:
-            returns[first, 0] = known[1]
+    options = answers(system)
+    returns = np.empty((len(options), len(episodes)))
+    # The plan a recompute now gives is the same for every future: solved once, where the loop would
+    # solve it now from the state now (no latency, no levels); else the loop solves it in each play.
+    shared = system.latency.instant and not system.compute_levels
+    for index, first in enumerate(options):
+        if known is not None and known[0] == int(first):
+            returns[index, 0] = known[1]
             continue
-        if first and solved is None:  # the same plan for every future
+        solved = None
+        if first and shared:
             solved = system.plan(snapshot.x, snapshot.u_prev, snapshot.plan, snapshot.age, context.timestep)
         for k, (episode, seed) in enumerate(zip(episodes, seeds)):
             base_rng = None if seed is None else np.random.default_rng(seed)
             trace = Continuation(context.step) if memo is not None else None
-            returns[first, k] = play_on(system, twin, snapshot, base, base_rng, bool(first), episode, solved, stop, trace)
+            returns[index, k] = play_on(system, twin, snapshot, base, base_rng, first, episode, solved, stop, trace)
             if memo is not None:
-                memo.played(bool(first), trace, returns[first, k])
-    return returns[0], returns[1]
+                memo.played(int(first), trace, returns[index, k])
+    return returns
+
+
+def answers(system) -> tuple:
+    """What a trigger may answer at a decision of ``system``: keep or recompute (``False``, ``True``), or,
+    on a task with compute levels, keep, one SQP iteration, a full solve (``0``, ``1``, ``2``)."""
+    return (KEEP, ITERATE, SOLVE) if system.compute_levels else (False, True)
+
+
+def best_answer(system, returns: np.ndarray):
+    """The answer whose mean return over the same futures is highest (``returns`` as :func:`q_values`
+    gives them); on a tie the cheaper one (keep before an iteration before a solve)."""
+    options = answers(system)
+    means = [fsum(row.tolist()) for row in returns]
+    best = 0
+    for index in range(1, len(options)):
+        if means[index] > means[best]:
+            best = index
+    return options[best]
 
 
 @dataclass(eq=False)
@@ -102,9 +127,11 @@ class OracleMemo:
         trace, k = self.taken
         if trace.start + k != snapshot.step or k >= len(trace.added):
             return None
-        x, plan, age, u_prev = trace.after[k - 1]
+        x, plan, age, u_prev, pending = trace.after[k - 1]
         same = (
-            age == snapshot.age
+            pending is None
+            and snapshot.pending is None
+            and age == snapshot.age
             and np.array_equal(x, snapshot.x)
             and np.array_equal(u_prev, snapshot.u_prev)
             and (
@@ -114,11 +141,11 @@ class OracleMemo:
         )
         if not same:
             return None
-        answer = int(trace.recomputed[k])
+        answer = int(trace.levels[k]) if trace.levels else int(trace.recomputed[k])
         self._plays[answer] = (trace, k)
         return answer, trace.return_from(k)
 
-    def played(self, first: bool, trace: Continuation, value: float) -> None:
+    def played(self, first: int, trace: Continuation, value: float) -> None:
         self._plays[int(first)] = (trace, 0) if math.isfinite(value) else None
 
     def take(self, answer: bool, episode: Any) -> None:
@@ -169,10 +196,9 @@ class Rollout:
         memo = None
         if self.oracle and not self.base.stochastic and self.horizon is None:
             memo = self._memo = self._memo or OracleMemo()
-        keep, recompute = q_values(
-            s.context, self.base, self.futures, rng, self.twin(s.context.system), self.horizon, self.oracle, memo
-        )
-        answer = fsum(recompute.tolist()) > fsum(keep.tolist())  # the better mean over the same futures
+        system = s.context.system
+        returns = q_values(s.context, self.base, self.futures, rng, self.twin(system), self.horizon, self.oracle, memo)
+        answer = best_answer(system, returns)  # the better mean over the same futures
         if memo is not None:
             memo.take(answer, s.context.env.task.episode)
         return answer

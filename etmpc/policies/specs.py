@@ -29,7 +29,7 @@ import numpy as np
 from etmpc.common import interrupts
 from etmpc.common.errors import EtmpcError, UnknownNameError
 from etmpc.loop import Policy
-from etmpc.policies.fixed import Always, Every, Never
+from etmpc.policies.fixed import Always, Every, Iterate, Never
 from etmpc.policies.learned import load_policy
 from etmpc.policies.rollout import parse_rollout
 from etmpc.policies.sb3 import load_sb3
@@ -51,6 +51,7 @@ class Context:
     task: str | None
     steps: int
     parse: Callable[[str], Policy]
+    levels: bool = False  # the task's decisions are compute levels (keep, one SQP iteration, a full solve)
 
 
 @dataclass(frozen=True)
@@ -93,6 +94,18 @@ def _every(arg: str, spec: str, context: Context) -> Policy:
     return Every(period)
 
 
+def _iterate(arg: str, spec: str, context: Context) -> Policy:
+    if not context.levels:
+        raise EtmpcError(
+            f"bad policy {spec!r}: one SQP iteration is a compute level, and task {context.task} has none "
+            "(its decisions are keep or solve)"
+        )
+    period = _number(arg, int, spec)
+    if period < 1:
+        raise EtmpcError(f"bad policy {spec!r}: the period must be a whole number of steps >= 1")
+    return Iterate(period)
+
+
 def _threshold(arg: str, spec: str, context: Context) -> Policy:
     level = _number(arg, float, spec)
     if not (math.isfinite(level) and level >= 0):
@@ -122,6 +135,13 @@ BUILT_IN: tuple[Kind, ...] = (
     Kind("always", "always", "recompute at every step (standard MPC)", _no_argument(Always), family="periodic"),
     Kind("never", "never", "keep each plan to its end", _no_argument(Never), family="periodic"),
     Kind("every", "every:T", "recompute when the plan is T steps old", _every, family="periodic"),
+    Kind(
+        "iterate",
+        "iterate:T",
+        "one SQP iteration when the plan is T steps old (a task with compute levels)",
+        _iterate,
+        family="periodic",
+    ),
     Kind("threshold", "threshold:X", "recompute when the weighted prediction error exceeds X", _threshold, family="event"),
     Kind(
         "rl",
@@ -242,12 +262,13 @@ def parse_policy(spec: str, system, *legacy) -> Policy:
             stacklevel=2,
         )
         return _parse(spec, Context(np.asarray(system), *(legacy + (None, 100)[len(legacy) :]), None))
-    return _parse(spec, Context(system.error_weights, system.name, system.episode_steps, None))
+    levels = bool(getattr(system, "compute_levels", False))
+    return _parse(spec, Context(system.error_weights, system.name, system.episode_steps, None, levels))
 
 
 def _parse(spec: str, context: Context) -> Policy:
     if context.parse is None:
-        context = Context(context.error_weights, context.task, context.steps, lambda base: _parse(base, context))
+        context = Context(context.error_weights, context.task, context.steps, lambda base: _parse(base, context), context.levels)
     if any(ord(c) < 32 or ord(c) == 127 for c in spec):  # a line break would split every table and message
         raise EtmpcError(f"bad policy {spec!r}: it holds a control character (a line break?)")
     kind = kind_of(spec)

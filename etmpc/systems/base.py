@@ -25,6 +25,7 @@ import numpy as np
 
 from etmpc.common.errors import EtmpcError
 from etmpc.control.plan import Plan
+from etmpc.control.timing import Latency
 
 
 @dataclass(frozen=True)
@@ -113,6 +114,7 @@ CAPABILITIES: dict[str, tuple[str, ...]] = {
     "render": ("camera",),  # a 3-D scene for etmpc render and the recordings' video (with show)
     "bench": ("plan_cost",),  # what etmpc bench compares the MPC with (with reference_solvers and interpreted)
     "failures": ("failures",),  # how often an episode failed, reported beside the mean objective
+    "time in the loop": ("iterate", "predict"),  # compute levels, work-priced solves, delay compensation
 }
 
 
@@ -195,6 +197,26 @@ class SystemBase:
     failures: Any = None  # (rewards) -> int: the failures of an episode, counted from its rewards
     plan_cost: Any = None  # (x, u_prev, timestep, inputs) -> the OCP's objective of an input sequence
     interpreted: Any = None  # () -> the same system with its MPC not compiled (None: it has no other way to run)
+    # (x, u_prev, warm, age, timestep) -> a Plan from one SQP iteration (Plan.iterations: 1), for compute levels
+    iterate: Any = None
+    predict: Any = None  # (x, inputs) -> the predictor's states from x under inputs (N+1 rows), for delay compensation
+
+    # -- time in the loop (etmpc.control.timing): a Config's latency and compute_levels, if it has them ----------
+    @cached_property
+    def latency(self) -> Latency:
+        """How many control intervals a solve takes (the Config's ``latency``; none by default)."""
+        return getattr(self.config, "latency", Latency())
+
+    @cached_property
+    def compute_levels(self) -> bool:
+        """A decision is one of keep, one SQP iteration, a full solve (the Config's ``compute_levels``);
+        a computation is then priced per SQP iteration. False: keep or solve, priced per solve."""
+        return bool(getattr(self.config, "compute_levels", False))
+
+    @cached_property
+    def counts_iterations(self) -> bool:
+        """The MPC reports each solve's SQP iterations (Plan.iterations): for a price or a delay per iteration."""
+        return self.compute_levels or self.latency.counts_work
 
     # -- derived from the members the task writes (a task may set its own in __init__) --------------------
     @cached_property

@@ -74,8 +74,26 @@ class GaussNewtonSystem(SystemBase):
         return np.array([obs[name] for name in self.tracked], dtype=float)
 
     def plan(self, x: np.ndarray, u_prev: np.ndarray, warm: Plan | None, age: int, timestep: dm_env.TimeStep) -> Plan:
+        """A full solve; on a task that prices or delays by SQP iterations, counted iteration by
+        iteration (:meth:`GaussNewtonMPC.iterate`: the same optimum within tolerance)."""
         p = self.observed(timestep)
-        plan = self.mpc.solve(x, u_prev, warm, age, parameters=p)
+        if self.counts_iterations:
+            plan = self.mpc.iterate(x, u_prev, warm, age, parameters=p, limit=self.config.solver.max_iterations)
+        else:
+            plan = self.mpc.solve(x, u_prev, warm, age, parameters=p)
+        return self._tracking(plan, p)
+
+    def iterate(self, x: np.ndarray, u_prev: np.ndarray, warm: Plan | None, age: int, timestep: dm_env.TimeStep) -> Plan:
+        """One SQP iteration from ``warm`` shifted by ``age`` (a real-time iteration)."""
+        p = self.observed(timestep)
+        return self._tracking(self.mpc.iterate(x, u_prev, warm, age, parameters=p, limit=1), p)
+
+    def predict(self, x: np.ndarray, inputs: np.ndarray) -> np.ndarray:
+        """The predictor's states from ``x`` under ``inputs`` (for delay compensation)."""
+        return self.mpc.rollout(x, inputs)
+
+    def _tracking(self, plan: Plan, p: np.ndarray) -> Plan:
+        """The plan with the tracked values it was made for as its forecasts (one value per step)."""
         return replace(plan, forecasts={name: np.full(self.horizon, p[i]) for i, name in enumerate(self.tracked)})
 
     def plan_cost(self, x: np.ndarray, u_prev: np.ndarray, timestep: dm_env.TimeStep, inputs: np.ndarray) -> float:

@@ -77,7 +77,7 @@ def test_an_installed_plugin_adds_its_task_and_kind_everywhere_and_uninstalling_
     assert before.returncode == 0, before.stderr
     assert before.stdout.splitlines() == [
         "tasks cart_pendulum cart_pendulum/kicks battery reacher",
-        "kinds always never every threshold rl self py sb3 rollout oracle",
+        "kinds always never every iterate threshold rl self py sb3 rollout oracle",
     ]
 
     pip("install", "--no-deps", "--no-build-isolation", str(source))
@@ -85,7 +85,7 @@ def test_an_installed_plugin_adds_its_task_and_kind_everywhere_and_uninstalling_
     assert after.returncode == 0, after.stderr
     assert after.stdout.splitlines() == [
         "tasks cart_pendulum cart_pendulum/kicks battery reacher slider",
-        "kinds always never every threshold rl self py sb3 rollout oracle driftage",
+        "kinds always never every iterate threshold rl self py sb3 rollout oracle driftage",
         "suite () (1,)",
         "gym (12,)",
     ]
@@ -120,5 +120,6 @@ def test_an_installed_plugin_adds_its_task_and_kind_everywhere_and_uninstalling_
     refused = run("-m", "etmpc.cli", "evaluate", "slider", "--policy", "every:3", "--episodes", "1")
     assert refused.returncode == 2
     assert refused.stderr.strip() == (
-        "etmpc: error: unknown task 'slider'; valid: cart_pendulum, cart_pendulum/kicks, battery, reacher"
+        "etmpc: error: unknown task 'slider'; valid: cart_pendulum, cart_pendulum/kicks, cart_pendulum/kicks_late, "
+        "cart_pendulum/kicks_levels, battery, reacher, reacher/jumps_late"
     )

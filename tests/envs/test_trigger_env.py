@@ -33,14 +33,16 @@ def test_gymnasiums_checker_passes(task):
 
 
 def _play(env: gym.Env, rule, test_episode: int):
-    """Play a test-set episode through the gymnasium environment; ``rule(age) -> action``."""
+    """Play a test-set episode through the gymnasium environment; ``rule(age) -> 0 or 1`` (keep or a full
+    solve: the last action, 2, on a task with compute levels). ``recompute`` is each step's priced work."""
     obs, info = env.reset(options={"test_episode": test_episode})
     rewards, control, recompute, forced = [], [], [], []
+    solve = env.action_space.n - 1
     while True:
-        obs, reward, terminated, truncated, info = env.step(rule(env.unwrapped.core.loop.age))
+        obs, reward, terminated, truncated, info = env.step(solve * rule(env.unwrapped.core.loop.age))
         rewards.append(reward)
         control.append(info["control_reward"])
-        recompute.append(info["recompute"])
+        recompute.append(info.get("work", info["recompute"]))
         forced.append(info["forced"])
         if terminated or truncated:
             assert truncated and not terminated
@@ -63,7 +65,7 @@ def test_an_agent_answering_like_a_fixed_policy_gets_what_evaluate_reports_bit_f
         played = play_test_episode(system.name, parse_policy(spec, system), 0, 0, e).trajectory
         # The loop is the same: the same rewards, computations and forced steps, to the last bit.
         np.testing.assert_array_equal(control, played.rewards[: played.steps])
-        np.testing.assert_array_equal(recompute, played.recompute[: played.steps])
+        np.testing.assert_array_equal(recompute, played.work[: played.steps])
         np.testing.assert_array_equal(forced, played.forced[: played.steps])
         np.testing.assert_array_equal(rewards, control - system.recompute_price * recompute)
         # And the objective evaluate reports is these rewards' sum, as evaluate sums them.
@@ -81,7 +83,7 @@ def test_a_reward_against_a_baseline_is_the_agents_reward_minus_the_baselines_on
     baseline = play_test_episode(system.name, parse_policy("every:4", system), 0, 0, 2).trajectory
     own = play_test_episode(system.name, parse_policy("every:3", system), 0, 0, 2).trajectory
     np.testing.assert_array_equal(control, own.rewards[: own.steps])
-    paid = baseline.rewards[: baseline.steps] - system.recompute_price * baseline.recompute[: baseline.steps]
+    paid = baseline.rewards[: baseline.steps] - system.recompute_price * baseline.work[: baseline.steps]
     np.testing.assert_array_equal(rewards, (control - system.recompute_price * recompute) - paid)
     # Its return is still the task's own, and both simulations are counted.
     assert env.unwrapped.core.episode_return == own.policy_return(system.recompute_price)

@@ -1,0 +1,79 @@
+"""Time in the control loop: how long a solve takes (:class:`Latency`) and how much a trigger may compute at a
+decision (:data:`KEEP`, :data:`ITERATE`, :data:`SOLVE`).
+
+The paper's loop re-plans instantly and all or nothing. A task whose ``Config`` has a ``latency``
+delivers each plan ``d`` control intervals after the solve started, from the state measured then:
+the kept plan and its feedback run meanwhile, one solve is in flight at a time (the trigger is not
+asked then), and the late plan comes into force at its own time index (its age is ``d`` when it
+arrives). A task with ``compute_levels`` lets the trigger choose, at a decision, between keeping the
+plan, one SQP iteration from the shifted last plan (a real-time iteration) and a full solve; each is
+priced by its work, SQP iterations, and the latency applies to each.
+
+``d`` is deterministic, so runs stay bit-reproducible: a fixed number of intervals plus, on a named
+target platform, the solve's own work, its SQP iterations times the time one takes there, rounded up
+to whole intervals. Latency 0 is the paper's loop, bit for bit.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from etmpc.common.errors import EtmpcError
+
+#: What a trigger may ask for at a decision on a task with compute levels (``Discrete(3)``); on any other
+#: task a decision is a yes or no, and a yes is a full solve.
+KEEP, ITERATE, SOLVE = 0, 1, 2
+LEVEL_NAMES = ("keep", "iterate", "solve")
+
+
+@dataclass(frozen=True)
+class Latency:
+    """How many control intervals a solve takes before its plan is in force.
+
+    ``d = intervals + ceil(iterations * iteration_s / interval_s)``: a fixed part (communication, a
+    solver with a fixed budget) and, where ``iteration_s > 0``, the solve's SQP iterations on the
+    target platform ``platform``, each taking ``iteration_s`` seconds there (a hard solve takes
+    longer). ``compensate``: the MPC solves from the state predicted ``intervals`` steps ahead under
+    the kept plan (its predictor and the kept plan's inputs), as made for the step it arrives at:
+    delay compensation, the controller's choice. The plan that starts an episode (or follows a
+    plant the task put back) is made before the first interval: it is in force at once.
+    """
+
+    intervals: int = 0
+    iteration_s: float = 0.0
+    platform: str = ""
+    compensate: bool = False
+
+    def __post_init__(self):
+        if isinstance(self.intervals, bool) or not isinstance(self.intervals, int) or self.intervals < 0:
+            raise EtmpcError(f"latency: intervals must be a whole number >= 0, got {self.intervals!r}")
+        if not (isinstance(self.iteration_s, (int, float)) and math.isfinite(self.iteration_s) and self.iteration_s >= 0):
+            raise EtmpcError(f"latency: iteration_s must be a finite number of seconds >= 0, got {self.iteration_s!r}")
+        if self.iteration_s and not self.platform:
+            raise EtmpcError("latency: a time per SQP iteration needs the platform it was measured on (platform=...)")
+
+    @property
+    def instant(self) -> bool:
+        """No latency at all: the paper's loop."""
+        return self.intervals == 0 and self.iteration_s == 0
+
+    @property
+    def counts_work(self) -> bool:
+        """The delay depends on the solve's SQP iterations (the MPC then counts them)."""
+        return self.iteration_s > 0
+
+    def delay(self, iterations: int, interval_s: float) -> int:
+        """``d`` for a solve of ``iterations`` SQP iterations, in control intervals of ``interval_s``."""
+        if not self.iteration_s:
+            return self.intervals
+        # rounded up, with a relative slack so that an exact multiple is not pushed up by rounding error
+        return self.intervals + math.ceil(iterations * self.iteration_s / interval_s - 1e-9)
+
+    def describe(self) -> str:
+        if self.instant:
+            return "none"
+        parts = [f"{self.intervals} interval(s)"] if self.intervals else []
+        if self.iteration_s:
+            parts.append(f"{self.iteration_s * 1e3:g} ms per SQP iteration on {self.platform}")
+        return " + ".join(parts) + (", delay-compensated" if self.compensate else "")
