@@ -63,7 +63,16 @@ TWIN = """
 
 def test_a_task_plugin_joins_the_registry_the_suite_and_gymnasium(plugins):
     plugins("etmpc.tasks", "twin", "fake_twin", TWIN)
-    assert registry.names() == ("cart_pendulum", "cart_pendulum/kicks", "battery", "reacher", "twin")
+    assert registry.names() == (
+        "cart_pendulum",
+        "cart_pendulum/kicks",
+        "cart_pendulum/kicks_late",
+        "cart_pendulum/kicks_levels",
+        "battery",
+        "reacher",
+        "reacher/jumps_late",
+        "twin",
+    )
     system = registry.make_system(registry.SystemKey("twin/balance", 0.5))
     assert (system.name, system.domain, system.recompute_price, registry.stored_seed("twin")) == ("twin", "twin", 0.5, 20210601)
     assert registry.data_dir("twin") == registry.data_dir("cart_pendulum")
@@ -93,11 +102,23 @@ def test_a_broken_task_plugin_is_one_warning_naming_it_and_every_other_task_stil
     with pytest.warns(RuntimeWarning) as caught:
         names = registry.names()
     assert [str(w.message) for w in caught] == [f"etmpc: task plugin 'broken' (fake_broken) {problem}; its tasks are left out"]
-    assert names == ("cart_pendulum", "cart_pendulum/kicks", "battery", "reacher")
+    assert names == (
+        "cart_pendulum",
+        "cart_pendulum/kicks",
+        "cart_pendulum/kicks_late",
+        "cart_pendulum/kicks_levels",
+        "battery",
+        "reacher",
+        "reacher/jumps_late",
+    )
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # read once: no second warning
         assert registry.make_system("battery").name == "battery"
-    with pytest.raises(UnknownNameError, match="valid: cart_pendulum, cart_pendulum/kicks, battery, reacher"):
+    with pytest.raises(
+        UnknownNameError,
+        match="valid: cart_pendulum, cart_pendulum/kicks, cart_pendulum/kicks_late, cart_pendulum/kicks_levels, "
+        "battery, reacher, reacher/jumps_late",
+    ):
         registry.check_name("broken")
 
 
@@ -216,7 +237,15 @@ def test_a_task_plugin_whose_import_exits_or_raises_anything_is_one_warning(plug
     assert [str(w.message) for w in caught] == [
         f"etmpc: task plugin 'hostile' (fake_hostile) failed to import ({raised}); its tasks are left out"
     ]
-    assert names == ("cart_pendulum", "cart_pendulum/kicks", "battery", "reacher")
+    assert names == (
+        "cart_pendulum",
+        "cart_pendulum/kicks",
+        "cart_pendulum/kicks_late",
+        "cart_pendulum/kicks_levels",
+        "battery",
+        "reacher",
+        "reacher/jumps_late",
+    )
     assert registry.make_system("battery").name == "battery"
 
 

@@ -85,7 +85,11 @@ def test_keys_name_the_default_task_by_its_domain_and_carry_a_price():
         with pytest.raises(EtmpcError, match="recompute_price: "):
             systems.SystemKey("battery", bad)
     for bad in ("cartpole", "cart_pendulum/swing", "battery/balance", "", "battery@0.001"):
-        with pytest.raises(UnknownNameError, match="valid: cart_pendulum, cart_pendulum/kicks, battery, reacher"):
+        with pytest.raises(
+            UnknownNameError,
+            match="valid: cart_pendulum, cart_pendulum/kicks, cart_pendulum/kicks_late, cart_pendulum/kicks_levels, "
+            "battery, reacher, reacher/jumps_late",
+        ):
             systems.check_name(bad)
 
 

@@ -1,7 +1,9 @@
 """Cart pendulum: the MuJoCo plant (``physics.py``), the paper's analytic model as the MPC's predictor
-(``model.py``), and two tasks: ``balance`` (the paper's: ``task.py``, and the system the loop plays,
+(``model.py``), and its tasks: ``balance`` (the paper's: ``task.py``, and the system the loop plays,
 ``system.py``: the Gauss-Newton MPC and the LQR on the prediction error) and ``kicks`` (the pole
-kicked at random times on a rail with bumpers: ``kicks.py``, ``kicks_system.py``). ``mismatch.py`` measures the model
+kicked at random times on a rail with bumpers: ``kicks.py``, ``kicks_system.py``), and kicks with time in
+the loop (``timing.py``: ``kicks_late``, whose solves take an interval, and ``kicks_levels``, whose
+trigger chooses how much to compute). ``mismatch.py`` measures the model
 against the plant; ``dompc.py`` solves the same OCP with do-mpc, the paper's stack, for ``etmpc bench``.
 """
 
@@ -9,15 +11,18 @@ from etmpc.systems.registry import lazy
 
 # Its tasks, the default first: what etmpc.systems lists without loading MuJoCo or dm-control (which
 # pick their OpenGL backend on import). SYSTEMS and SUITE load the domain's modules when first asked.
-TASKS = ("balance", "kicks")
+TASKS = ("balance", "kicks", "kicks_late", "kicks_levels")
 # The seed of each task's stored test set (tasks/cart_pendulum/<task>_testset.npz: etmpc testset TASK --seed SEED).
-TEST_SET_SEEDS = {"balance": 20210601, "kicks": 20261126}
+# The timing variants play kicks' episodes (the same seed): their scores pair with kicks' episode by episode.
+TEST_SET_SEEDS = {"balance": 20210601, "kicks": 20261126, "kicks_late": 20261126, "kicks_levels": 20261126}
 
 __getattr__ = lazy(
     __name__,
     {
         "balance": "etmpc.systems.cart_pendulum.system:CartPendulumSystem",
         "kicks": "etmpc.systems.cart_pendulum.kicks_system:KicksSystem",
+        "kicks_late": "etmpc.systems.cart_pendulum.timing:KicksLateSystem",
+        "kicks_levels": "etmpc.systems.cart_pendulum.timing:KicksLevelsSystem",
     },
     "etmpc.systems.cart_pendulum.suite:SUITE",
 )

@@ -34,6 +34,7 @@ import dm_env
 import numpy as np
 
 from etmpc.control.mpc import FeedbackWeights, SolverSettings
+from etmpc.control.timing import Latency
 from etmpc.systems.gauss_newton import GaussNewtonSystem
 from etmpc.systems.cart_pendulum import kicks
 from etmpc.systems.cart_pendulum.model import NU, NX, STATE_NAMES, AnalyticModel
@@ -72,6 +73,8 @@ class Config:
     recompute_price: float = 0.1
     rk4_substeps: int = 2
     plant: str = "mismatched"
+    latency: Latency = Latency()  # how long a solve takes (etmpc.control.timing); none: the paper's loop
+    compute_levels: bool = False  # a decision is keep, one SQP iteration or a full solve, priced per iteration
     solver: SolverSettings = field(
         default_factory=lambda: SolverSettings(
             tolerance=1e-6,
@@ -102,8 +105,8 @@ class KicksSystem(GaussNewtonSystem):
     failure_name = "falls"  # per episode, beside the mean objective
     camera = "track"
 
-    def __init__(self, config: Config = Config()):
-        self.config = config
+    def __init__(self, config: Config | None = None):
+        self.config = config = self.Config() if config is None else config
         self.model = AnalyticModel(dt_s=kicks.CONTROL_DT_S, rk4_substeps=config.rk4_substeps)
         self.u_min, self.u_max = np.array([-config.force_limit_n]), np.array([config.force_limit_n])
         self.error_weights = np.sqrt(np.asarray(config.feedback_state_weights))

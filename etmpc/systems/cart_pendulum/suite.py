@@ -24,3 +24,16 @@ add_task(
     kicks.CONTROL_DT_S,
     "Keep the pole up on a 5 m rail through random kicks: 150 control intervals of 0.1 s by default (plant=...).",
 )
+for name, what in (
+    ("kicks_late", "solves take one control interval"),
+    ("kicks_levels", "compute levels and solves that take time"),
+):
+    add_task(
+        SUITE,
+        name,
+        kicks.make_environment,
+        kicks.EPISODE_STEPS,
+        kicks.CONTROL_DT_S,
+        f"The kicks world, for the task whose {what} (they are the controller's).",
+        tags=("benchmarking", "timing"),
+    )

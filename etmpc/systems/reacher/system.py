@@ -42,6 +42,7 @@ import dm_env
 import numpy as np
 
 from etmpc.control.mpc import FeedbackWeights, SolverSettings
+from etmpc.control.timing import Latency
 from etmpc.systems.gauss_newton import GaussNewtonSystem
 from etmpc.systems.reacher import task as reacher_task
 from etmpc.systems.reacher.model import INPUT_NAMES, NU, NX, STATE_NAMES, AnalyticModel, fingertip
@@ -88,6 +89,8 @@ class Config:
     recompute_price: float = 0.1
     rk4_substeps: int = 2
     plant: str = "mismatched"
+    latency: Latency = Latency()  # how long a solve takes (etmpc.control.timing); none: the paper's loop
+    compute_levels: bool = False  # a decision is keep, one SQP iteration or a full solve, priced per iteration
     solver: SolverSettings = field(
         default_factory=lambda: SolverSettings(
             tolerance=1e-6,
@@ -117,8 +120,8 @@ class ReacherSystem(GaussNewtonSystem):
     failure_name = "far from target"  # steps ending > 0.1 m from the target, per episode
     camera = "top"  # the scene shows the arm; the target stays where the physics has it
 
-    def __init__(self, config: Config = Config()):
-        self.config = config
+    def __init__(self, config: Config | None = None):
+        self.config = config = self.Config() if config is None else config
         self.model = AnalyticModel(dt_s=reacher_task.CONTROL_DT_S, rk4_substeps=config.rk4_substeps)
         self.u_max = np.full(NU, config.torque_limit_nm)
         self.u_min = -self.u_max

@@ -185,3 +185,12 @@ add_task(
     CONTROL_DT_S,
     "Keep the fingertip on a jumping target: 100 control intervals of 0.1 s by default (plant=...).",
 )
+add_task(
+    SUITE,
+    "jumps_late",
+    make_environment,
+    EPISODE_STEPS,
+    CONTROL_DT_S,
+    "The jumps world, for the task whose solves take one control interval (the latency is the controller's).",
+    tags=("benchmarking", "timing"),
+)
