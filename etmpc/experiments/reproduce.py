@@ -205,7 +205,7 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
     require(system, "experiments", "etmpc reproduce")
     folder.mkdir(parents=True, exist_ok=True)
     common = dict(
-        domain=domain,
+        task=domain,
         episodes=settings.test_episodes,
         workers=run["workers"],
         backend=run["backend"],

@@ -623,7 +623,7 @@ def test_the_python_api_refuses_what_the_command_line_refuses_with_the_same_mess
     from etmpc.common.errors import EtmpcError
 
     monkeypatch.chdir(tmp_path)
-    arguments = {"domain": "battery", "policies": ["always"], "episodes": 1, "workers": 1, "progress": False} | kwargs
+    arguments = {"task": "battery", "policies": ["always"], "episodes": 1, "workers": 1, "progress": False} | kwargs
     with pytest.raises(EtmpcError) as raised:
         etmpc.evaluate(**arguments)
     message = str(raised.value)
