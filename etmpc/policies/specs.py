@@ -17,12 +17,14 @@ The parser sits above the policies it builds: it imports each kind, none of them
 
 from __future__ import annotations
 
+import json
 import math
 import warnings
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cache
 from importlib.metadata import entry_points
+from pathlib import Path
 
 import numpy as np
 
@@ -52,6 +54,7 @@ class Context:
     steps: int
     parse: Callable[[str], Policy]
     levels: bool = False  # the task's decisions are compute levels (keep, one SQP iteration, a full solve)
+    variant_of: str | None = None  # the task whose world this one plays with time in the loop: its rl: files fit
 
 
 @dataclass(frozen=True)
@@ -113,6 +116,24 @@ def _threshold(arg: str, spec: str, context: Context) -> Policy:
     return Threshold(level, np.asarray(context.error_weights, dtype=float))
 
 
+def _learned(path: str, context: Context) -> Policy:
+    """An ``rl:`` file made for the task, or for the task a timing variant plays with time in the loop
+    (the same world and features: the learner trained at latency 0, played late)."""
+    task = context.task
+    if context.variant_of is not None and task is not None and _trained_on(path) == context.variant_of:
+        task = context.variant_of
+    return load_policy(path, task, nx=len(context.error_weights))
+
+
+def _trained_on(path: str) -> str | None:
+    """The task a policy file says it was made for (None if it cannot say: load_policy says why)."""
+    try:
+        data = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    return data.get("domain") if isinstance(data, dict) else None
+
+
 def _file(load: Callable[[str, Context], Policy], what: str) -> Callable[[str, str, Context], Policy]:
     def build(arg: str, spec: str, context: Context) -> Policy:
         if not arg:
@@ -143,14 +164,7 @@ BUILT_IN: tuple[Kind, ...] = (
         family="periodic",
     ),
     Kind("threshold", "threshold:X", "recompute when the weighted prediction error exceeds X", _threshold, family="event"),
-    Kind(
-        "rl",
-        "rl:PATH",
-        "a learned policy (etmpc train)",
-        _file(lambda path, c: load_policy(path, c.task, nx=len(c.error_weights)), "policy"),
-        family="learned",
-        path=True,
-    ),
+    Kind("rl", "rl:PATH", "a learned policy (etmpc train)", _file(_learned, "policy"), family="learned", path=True),
     Kind(
         "self",
         "self:PATH",
@@ -262,13 +276,13 @@ def parse_policy(spec: str, system, *legacy) -> Policy:
             stacklevel=2,
         )
         return _parse(spec, Context(np.asarray(system), *(legacy + (None, 100)[len(legacy) :]), None))
-    levels = bool(getattr(system, "compute_levels", False))
-    return _parse(spec, Context(system.error_weights, system.name, system.episode_steps, None, levels))
+    levels, variant_of = bool(getattr(system, "compute_levels", False)), getattr(system, "variant_of", None)
+    return _parse(spec, Context(system.error_weights, system.name, system.episode_steps, None, levels, variant_of))
 
 
 def _parse(spec: str, context: Context) -> Policy:
     if context.parse is None:
-        context = Context(context.error_weights, context.task, context.steps, lambda base: _parse(base, context), context.levels)
+        context = replace(context, parse=lambda base: _parse(base, context))
     if any(ord(c) < 32 or ord(c) == 127 for c in spec):  # a line break would split every table and message
         raise EtmpcError(f"bad policy {spec!r}: it holds a control character (a line break?)")
     kind = kind_of(spec)

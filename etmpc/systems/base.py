@@ -201,6 +201,9 @@ class SystemBase:
     iterate: Any = None
     predict: Any = None  # (x, inputs) -> the predictor's states from x under inputs (N+1 rows), for delay compensation
 
+    # the task this one plays with time in the loop (its world, episodes and learned policies), if any
+    variant_of: str | None = None
+
     # -- time in the loop (etmpc.control.timing): a Config's latency and compute_levels, if it has them ----------
     @cached_property
     def latency(self) -> Latency:

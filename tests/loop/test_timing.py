@@ -15,6 +15,7 @@ from etmpc.loop import ClosedLoop, play_on, run_episode
 from etmpc.policies import parse_policy
 from etmpc.systems import make_system
 
+from tests.conftest import REPO
 from tests.loop.test_rollout import SnapshotAt, _returns_from
 
 
@@ -193,3 +194,16 @@ def test_a_bad_latency_is_one_line(arguments, says):
     with pytest.raises(EtmpcError, match=says) as raised:
         Latency(**arguments)
     assert "\n" not in str(raised.value)
+
+
+def test_a_policy_learned_at_latency_zero_plays_on_its_timing_variant_and_nowhere_else():
+    from etmpc.policies.learned import PolicyFileError
+
+    path = f"rl:{REPO}/policies/cart_pendulum-kicks/learned.json"
+    late = make_system("cart_pendulum/kicks_late")
+    policy = parse_policy(path, late)
+    assert policy.domain == "cart_pendulum/kicks"
+    traj = run_episode(late, late.make_env(), policy, None, _episode(late, 0))
+    assert traj.steps == late.episode_steps and 0 < traj.recomputes < late.episode_steps
+    with pytest.raises(PolicyFileError, match="trained on 'cart_pendulum/kicks', not 'reacher/jumps_late'"):
+        parse_policy(path, make_system("reacher/jumps_late"))

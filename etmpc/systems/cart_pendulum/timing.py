@@ -40,8 +40,10 @@ class LevelsConfig(Config):
 class KicksLateSystem(KicksSystem):
     Config = LateConfig
     task = "kicks_late"
+    variant_of = "cart_pendulum/kicks"  # its world, episodes and rl: policies are kicks'
 
 
 class KicksLevelsSystem(KicksSystem):
     Config = LevelsConfig
     task = "kicks_levels"
+    variant_of = "cart_pendulum/kicks"

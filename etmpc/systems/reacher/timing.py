@@ -21,3 +21,4 @@ class LateConfig(Config):
 class JumpsLateSystem(ReacherSystem):
     Config = LateConfig
     task = "jumps_late"
+    variant_of = "reacher"  # its world, episodes and rl: policies are jumps'
