@@ -17,6 +17,11 @@ the settings, the validation scores, the environment and simulated steps and the
 Evaluate it like any policy: ``etmpc evaluate TASK --policy sb3:DIR/selected.zip``. PyTorch runs on
 one thread per process, on the CPU. Stable-Baselines3 and PyTorch are the optional extra ``rl``.
 
+On a task with compute levels (``cart_pendulum/kicks_levels``) the environment's actions are
+``Discrete(3)`` (keep, one SQP iteration, a full solve): the network has three outputs, its ``sb3:``
+policy answers the level, and the reward baseline may be ``iterate:T`` (real-time iterations, a fixed
+schedule too). On a task with latency alone (``kicks_late``) the actions stay keep or recompute.
+
 The budget is environment steps, in ``checkpoints`` slices; after each the network is saved, scored on
 validation episodes and the run's state kept (``checkpoints/resume.json`` and the normalisation's
 running statistics, ``checkpoints/resume_normalize.json``; both removed when the run ends, so a run's

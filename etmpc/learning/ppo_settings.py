@@ -54,7 +54,10 @@ RANGES = {
         "a non-empty tuple of positive layer sizes",
         lambda v: isinstance(v, tuple) and bool(v) and all(type(n) is int and n > 0 for n in v),
     ),
-    "reward_baseline": ("None or a fixed schedule's spec (always, never or every:T)", lambda v: v is None or isinstance(v, str)),
+    "reward_baseline": (
+        "None or a fixed schedule's spec (always, never, every:T, or iterate:T on a task with compute levels)",
+        lambda v: v is None or isinstance(v, str),
+    ),
 }
 
 

@@ -6,7 +6,14 @@ variance of the observations it was normalised with while training (``VecNormali
 policy computes the environment's observation (:func:`etmpc.policies.features.observation`, made
 finite as the environment makes it: :func:`finite_observation`), normalises it the same way
 (:func:`normalise`, what ``gymnasium.make(ID, normalize=JSON)`` applies too) and takes the network's
-likelier action (deterministic: it draws nothing).
+likeliest action (deterministic: it draws nothing).
+
+A model has as many actions as the trigger environment it was trained on: two (keep, recompute: the
+policy answers ``True``/``False``) or, on a task with compute levels (``cart_pendulum/kicks_levels``),
+three (the policy answers the level: 0 keep, 1 one SQP iteration, 2 a full solve). A model plays on
+the task it was trained on, or on a task that plays that task's world with time in the loop (the
+system's ``variant_of``: a model of ``cart_pendulum/kicks`` on ``kicks_late`` and ``kicks_levels``, where
+its recompute is a full solve); a model whose actions are not its task's is refused when loaded.
 
 Without the ``.json`` (a model saved by a plain ``model.save(PATH)``), the policy is evaluated on the
 task it is given and sees the raw observation, as a model trained on the plain environment saw it; its
@@ -77,10 +84,24 @@ def normalise(obs: np.ndarray, mean: np.ndarray | None, scale: np.ndarray | None
     return np.clip((obs - mean) / scale, -CLIP, CLIP).astype(np.float32)
 
 
+def task_actions(task: str) -> int:
+    """The trigger environment's actions on ``task``: 3 on a task with compute levels, else 2 (read from
+    its system's ``Config``, without building the system)."""
+    return 3 if getattr(getattr(system_class(task), "Config", None), "compute_levels", False) else 2
+
+
+def plays_on(trained_on: str, task: str) -> bool:
+    """Whether a model trained on ``trained_on`` plays on ``task`` (both canonical): the same task, or one
+    that plays its world with time in the loop (``task``'s system names it as its ``variant_of``)."""
+    variant = getattr(system_class(task), "variant_of", None)
+    return trained_on == task or (variant is not None and canonical(variant) == trained_on)
+
+
 class SB3Policy:
     """A Stable-Baselines3 model as a recomputation policy (see the module's docstring). It pickles
     with its network's numpy weights: a worker process decides without reading the file again.
-    ``mean`` and ``var`` None: the raw observation (a model trained on the plain environment)."""
+    ``mean`` and ``var`` None: the raw observation (a model trained on the plain environment).
+    A two-action network answers ``True``/``False``, a three-action one the compute level."""
 
     stochastic: ClassVar[bool] = False
     observes: ClassVar[bool] = True
@@ -91,6 +112,7 @@ class SB3Policy:
         self.scale = None if var is None else np.sqrt(np.asarray(var, float) + EPSILON)
         self.domain = system_class(task).name
         self._size = (network.hidden[0][0] if network.hidden else network.head[0]).shape[1]
+        self._levels = network.actions == 3  # keep, one SQP iteration, a full solve: the level is the answer
 
     @property
     def normalises(self) -> bool:
@@ -105,8 +127,9 @@ class SB3Policy:
         """What the network sees at ``s``: the environment's observation, normalised (:func:`normalise`)."""
         return normalise(finite_observation(observation(self.domain, s, self._size)), self.mean, self.scale)
 
-    def decide(self, s: AugmentedState, rng: np.random.Generator) -> bool:
-        return self.network.action(self.normalised(s)) == 1
+    def decide(self, s: AugmentedState, rng: np.random.Generator) -> bool | int:
+        action = self.network.action(self.normalised(s))
+        return action if self._levels else action == 1
 
 
 def read_description(meta_file: Path, task: str | None, trained: str, missing: str) -> tuple[str, np.ndarray, np.ndarray, dict]:
@@ -137,9 +160,11 @@ def read_description(meta_file: Path, task: str | None, trained: str, missing: s
 
 
 def load_sb3(path: str, task: str | None) -> SB3Policy:
-    """``sb3:PATH``, checked against ``task`` (the one it is evaluated on), and loaded once here so that
-    a file that is not a model fails before any work starts. Without ``PATH.json``: on ``task``, on the
-    raw observation, unless the zip shows it was trained behind ``VecNormalize`` (see the module's docstring)."""
+    """``sb3:PATH``, checked against ``task`` (the one it is evaluated on: the one it was trained on, or
+    one that plays that one's world with time in the loop, see :func:`plays_on`) and its actions against
+    those of the task it was trained on, and loaded once here so that a file that is not a model fails
+    before any work starts. Without ``PATH.json``: on ``task``, on the raw observation, unless the zip
+    shows it was trained behind ``VecNormalize`` (see the module's docstring)."""
     model = Path(path)
     if model.suffix == ".json":
         raise EtmpcError(f"sb3:{model} is the model's description; give the model itself, sb3:{model.with_suffix('.zip')}")
@@ -149,11 +174,16 @@ def load_sb3(path: str, task: str | None) -> SB3Policy:
     missing = f"{model} has no {meta_file.name} beside it (what it was trained on)"
     if task is not None and not meta_file.exists():
         return _raw(model, canonical(task), missing)
-    trained_on, mean, var, meta = read_description(meta_file, task, f"policy {model}", missing)
+    trained_on, mean, var, meta = read_description(meta_file, None, f"policy {model}", missing)
+    if task is not None and not plays_on(trained_on, canonical(task)):
+        raise EtmpcError(f"policy {model} was trained on {trained_on!r}, not {canonical(task)!r}")
     algorithm = meta.get("algorithm", "ppo")
     if not isinstance(algorithm, str):
         raise EtmpcError(f"{meta_file} is corrupt (algorithm {algorithm!r} is not a name)")
-    return SB3Policy(model, trained_on, mean, var, open_network(model, algorithm, mean.size))
+    network = open_network(model, algorithm, mean.size, task_actions(trained_on), trained_on)
+    if task is not None and network.actions > task_actions(canonical(task)):  # not in etmpc's tasks: a guard
+        raise EtmpcError(f"policy {model} answers compute levels, which {canonical(task)} has not (keep or solve)")
+    return SB3Policy(model, trained_on, mean, var, network)
 
 
 def _raw(model: Path, task: str, missing: str) -> SB3Policy:
@@ -165,4 +195,5 @@ def _raw(model: Path, task: str, missing: str) -> SB3Policy:
             f"{str(metadata_path(model))!r})"
         )
     cls = system_class(task)
-    return SB3Policy(model, task, None, None, open_network(model, "ppo", len(observation_names(cls.name, cls.state_names))))
+    size = len(observation_names(cls.name, cls.state_names))
+    return SB3Policy(model, task, None, None, open_network(model, "ppo", size, task_actions(task), task))

@@ -2,7 +2,8 @@
 :mod:`etmpc.policies.sb3`): the zip's ``data`` entry as JSON, the policy class's pickle listed by
 ``pickletools`` and never run, the weights through torch's weights-only reader, checked against
 the architecture; :class:`Network` evaluates the tanh layers and the action logits, and decides a
-near tie again with exact sums."""
+near tie again with exact sums. A trigger's model has two actions (keep, recompute) or, on a task with
+compute levels, three (keep, one SQP iteration, a full solve)."""
 
 from __future__ import annotations
 
@@ -26,6 +27,7 @@ POLICY_CLASS = "stable_baselines3.common.policies.ActorCriticPolicy"  # what PPO
 BOX, DISCRETE = "<class 'gymnasium.spaces.box.Box'>", "<class 'gymnasium.spaces.discrete.Discrete'>"
 DEFAULT_NET_ARCH = [64, 64]  # ActorCriticPolicy's policy layers when policy_kwargs has no net_arch
 ALGORITHMS = ("a2c", "ddpg", "dqn", "ppo", "sac", "td3")  # Stable-Baselines3's
+MEANINGS = {2: "keep, recompute", 3: "keep, one SQP iteration, a full solve"}  # a trigger's actions, by their number
 MAX_ENTRY = 64 << 20  # bytes of 'data' or 'policy.pth': far above a trigger's network, far below a zip bomb
 
 _STRINGS = {"STRING", "BINSTRING", "SHORT_BINSTRING", "UNICODE", "BINUNICODE", "SHORT_BINUNICODE", "BINUNICODE8"}
@@ -40,23 +42,31 @@ def metadata_path(model: Path) -> Path:
 
 class Network:
     """The actor of a PPO ``MlpPolicy``: ``hidden`` layers ``h = tanh(W h + b)``, then the action logits
-    ``W h + b`` (``head``); the deterministic action is the larger logit's (SB3's Categorical mode).
+    ``W h + b`` (``head``, one row per action); the deterministic action is the largest logit's, the
+    lowest such index on a tie (SB3's Categorical mode: torch's argmax of the probabilities).
 
     The weights are float32 values held in float64, and so is the observation: the first layer's
     products are exact. The logits are computed in float64 with numpy (BLAS, SIMD ``tanh``); when the
-    two are within :data:`TOLERANCE` of each other, far above any difference of rounding between
-    kernels, the decision is made again as :mod:`etmpc.common.numerics` makes every decision: each
+    largest is within :data:`TOLERANCE` of the next (far above any difference of rounding between
+    kernels), the decision is made again as :mod:`etmpc.common.numerics` makes every decision: each
     pre-activation the exactly rounded sum of its IEEE-rounded products and its bias
-    (:func:`~etmpc.common.numerics.matvec`), then ``math.tanh`` (the C library's scalar routine), and
-    action 1 only if its logit is strictly larger (a tie is action 0, as torch's argmax gives). So no
-    decision hinges on the kernel, the vector width or the threads the CPU selects.
+    (:func:`~etmpc.common.numerics.matvec`), then ``math.tanh`` (the C library's scalar routine), and an
+    action beats a lower one only if its logit is strictly larger (a tie is the lower action, as torch's
+    argmax gives). So no decision hinges on the kernel, the vector width or the threads the CPU selects.
+    With two actions this is action 1 exactly when ``logits[1] - logits[0]`` is positive.
 
     SB3 computes the same network in float32 and takes the argmax of the softmax: the two agree
     unless the logits are within float32 noise of each other; ``tests/policies/test_sb3_safe.py`` compares them
-    at every decision of the shipped models on test-set episodes."""
+    at every decision of the shipped models on test-set episodes, ``tests/policies/test_sb3_levels.py``
+    a three-action network on random observations and near ties."""
 
     def __init__(self, hidden: list[tuple[np.ndarray, np.ndarray]], head: tuple[np.ndarray, np.ndarray]):
         self.hidden, self.head = hidden, head
+
+    @property
+    def actions(self) -> int:
+        """How many actions the network chooses among (its logits)."""
+        return self.head[0].shape[0]
 
     def logits(self, x: np.ndarray) -> np.ndarray:
         h = np.asarray(x, dtype=np.float64)
@@ -71,13 +81,24 @@ class Network:
         return _exact_layer(*self.head, h)
 
     def action(self, x: np.ndarray) -> int:
-        """0 (keep) or 1 (recompute) for the normalised observation ``x`` (float32), see the class's docstring."""
+        """The action (0 keep, 1 recompute; with three, 0 keep, 1 one SQP iteration, 2 a full solve) for
+        the normalised observation ``x`` (float32), see the class's docstring."""
         logits = self.logits(x)
-        margin = logits[1] - logits[0]
-        if abs(margin) > TOLERANCE:  # a nan margin (a nan observation) goes on too: the exact sums give 0
-            return int(margin > 0)
-        exact = self.exact_logits(x)
-        return int(exact[1] > exact[0])
+        best = int(np.argmax(logits))  # the first largest (a nan's, if any: its margin is nan)
+        margin = logits[best] - np.max(np.delete(logits, best))
+        if margin > TOLERANCE:  # a nan margin (a nan observation) goes on too: the exact sums give 0
+            return best
+        return first_largest(self.exact_logits(x))
+
+
+def first_largest(values) -> int:
+    """The index of the largest of ``values``, the lowest on a tie: each beats the best so far only if
+    strictly larger (so a nan never wins, and with nans at 0 the answer is 0)."""
+    best = 0
+    for i in range(1, len(values)):
+        if values[i] > values[best]:
+            best = i
+    return best
 
 
 def _exact_layer(weight: np.ndarray, bias: np.ndarray, h: np.ndarray) -> np.ndarray:
@@ -147,9 +168,10 @@ def _fields(path: Path, data: bytes) -> dict:
     return fields
 
 
-def _architecture(path: Path, data: bytes, size: int) -> list[int]:
+def _architecture(path: Path, data: bytes, size: int, actions: int = 2, task: str | None = None) -> list[int]:
     """The widths of the policy's hidden layers, from the zip's ``data`` read as JSON, if it is PPO's
-    ``MlpPolicy`` on ``size`` observations and two actions; else :class:`EtmpcError`."""
+    ``MlpPolicy`` on ``size`` observations and ``actions`` actions (``task``'s, named in the refusal);
+    else :class:`EtmpcError`."""
     fields = _fields(path, data)
     policy_class = fields.get("policy_class")
     try:
@@ -170,12 +192,12 @@ def _architecture(path: Path, data: bytes, size: int) -> list[int]:
                 f"sb3:{path} needs an {kind} space of type {_short(found)}; etmpc reads a Box of "
                 "observations and a Discrete of actions"
             )
-    shape, actions = spaces["observation"].get("_shape"), spaces["action"].get("n")
-    if shape != [size] or type(shape[0]) is not int or actions != "2" or spaces["action"].get("start", "0") != "0":
+    shape, found = spaces["observation"].get("_shape"), spaces["action"].get("n")
+    if shape != [size] or type(shape[0]) is not int or found != str(actions) or spaces["action"].get("start", "0") != "0":
         shape = tuple(shape) if isinstance(shape, list) else shape
         raise EtmpcError(
-            f"sb3:{path} takes observations of shape {_short(shape)} and {_short(actions)} actions; "
-            f"the trigger environment has ({size},) and 2 (keep, recompute)"
+            f"sb3:{path} takes observations of shape {_short(shape)} and {_short(found)} actions; the trigger "
+            f"environment has ({size},) and {actions} ({MEANINGS.get(actions, 'its actions')})" + (f" on {task}" if task else "")
         )
     return _net_arch(path, fields.get("policy_kwargs", {}))
 
@@ -230,7 +252,7 @@ def _state_dict(path: Path, blob: bytes) -> dict:
     return state
 
 
-def _network(path: Path, state: dict, widths: list[int], size: int) -> Network:
+def _network(path: Path, state: dict, widths: list[int], size: int, actions: int = 2) -> Network:
     """The numpy network of ``state`` (a state dict), checked against the architecture: the policy's
     layers and the action layer with exactly the shapes it gives, float32 and finite; besides them only
     the value function's weights (not needed)."""
@@ -241,8 +263,8 @@ def _network(path: Path, state: dict, widths: list[int], size: int) -> Network:
         layer = f"mlp_extractor.policy_net.{2 * i}"  # the Linear before the i-th Tanh
         shapes |= {f"{layer}.weight": (width, inputs), f"{layer}.bias": (width,)}
         inputs = width
-    shapes |= {"action_net.weight": (2, inputs), "action_net.bias": (2,)}
-    fits = f"sb3:{path}: its policy.pth does not fit its architecture ({size} inputs, tanh layers {widths}, 2 actions)"
+    shapes |= {"action_net.weight": (actions, inputs), "action_net.bias": (actions,)}
+    fits = f"sb3:{path}: its policy.pth does not fit its architecture ({size} inputs, tanh layers {widths}, {actions} actions)"
     missing = [k for k in shapes if k not in state]
     if missing:
         raise EtmpcError(f"{fits}: it has no {missing[0]}")
@@ -262,10 +284,10 @@ def _network(path: Path, state: dict, widths: list[int], size: int) -> Network:
     return Network(pairs[:-1], pairs[-1])
 
 
-def open_network(path: Path, algorithm: str, size: int) -> Network:
+def open_network(path: Path, algorithm: str, size: int, actions: int = 2, task: str | None = None) -> Network:
     """The policy network in the Stable-Baselines3 zip ``path``, read as data (see the module's
     docstring); :class:`EtmpcError` (one line) unless it is PPO's ``MlpPolicy`` with ``size`` observations
-    and two actions."""
+    and ``actions`` actions (2, or 3 on a task with compute levels; ``task`` is named in the refusal)."""
     if algorithm.lower() != "ppo":
         known = (
             "; etmpc reads PPO's networks (ppo) alone"
@@ -274,5 +296,5 @@ def open_network(path: Path, algorithm: str, size: int) -> Network:
         )
         raise EtmpcError(f"sb3:{path}: {metadata_path(path).name} names the algorithm {algorithm!r}{known}")
     data, blob = _entries(path)
-    widths = _architecture(path, data, size)
-    return _network(path, _state_dict(path, blob), widths, size)
+    widths = _architecture(path, data, size, actions, task)
+    return _network(path, _state_dict(path, blob), widths, size, actions)
