@@ -89,11 +89,11 @@ def _fixed_schedule(spec: str, system):
     """The baseline of a relative reward: a fixed schedule (it must not depend on what the agent does)."""
     kind = find(spec) if isinstance(spec, str) else None
     if kind is None or kind.family != "periodic":
-        raise EtmpcError(f"reward_baseline: a fixed schedule (always, never or every:T) is needed, got {spec!r}")
+        raise EtmpcError(f"reward_baseline: a fixed schedule (always, never, every:T or iterate:T) is needed, got {spec!r}")
     try:
         return parse_policy(spec, system)
     except EtmpcError as exc:
-        raise EtmpcError(f"reward_baseline: a fixed schedule (always, never or every:T) is needed: {exc}") from None
+        raise EtmpcError(f"reward_baseline: a fixed schedule (always, never, every:T or iterate:T) is needed: {exc}") from None
 
 
 class InvalidAction(EtmpcError, ValueError):

@@ -54,9 +54,9 @@ def _check_members(policy: Any, where: str) -> None:
 
 @dataclass(eq=False)
 class Checked:
-    """``policy`` with its answers checked: an exception or a non-bool answer in ``decide`` is an
-    :class:`EtmpcError` naming the policy. Its ``spec`` is ``name``: the policy's own spec, or the
-    ``py:MODULE:NAME`` it was loaded by."""
+    """``policy`` with its answers checked: an exception in ``decide``, or an answer that is neither a bool
+    nor a compute level (0, 1, 2), is an :class:`EtmpcError` naming the policy. Its ``spec`` is
+    ``name``: the policy's own spec, or the ``py:MODULE:NAME`` it was loaded by."""
 
     policy: Any
     name: str
@@ -97,11 +97,14 @@ class Checked:
             if genuine(exc):
                 raise
             raise failed(f"policy {self.name}: decide", exc) from None
-        if not isinstance(answer, (bool, np.bool_)):
-            raise EtmpcError(
-                f"policy {self.name}: decide must return a bool (True: recompute), it returned {type(answer).__name__} {answer!r}"
-            )
-        return bool(answer)
+        if isinstance(answer, (bool, np.bool_)):
+            return bool(answer)
+        if isinstance(answer, (int, np.integer)) and 0 <= answer <= 2:  # a compute level (keep, one iteration, solve)
+            return int(answer)
+        raise EtmpcError(
+            f"policy {self.name}: decide must return a bool (True: recompute), or on a task with compute levels "
+            f"0, 1 or 2 (keep, one SQP iteration, a full solve); it returned {type(answer).__name__} {answer!r}"
+        )
 
 
 def checked(policy: Any, name: str | None = None) -> Policy:

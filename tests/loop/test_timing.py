@@ -207,3 +207,20 @@ def test_a_policy_learned_at_latency_zero_plays_on_its_timing_variant_and_nowher
     assert traj.steps == late.episode_steps and 0 < traj.recomputes < late.episode_steps
     with pytest.raises(PolicyFileError, match="trained on 'cart_pendulum/kicks', not 'reacher/jumps_late'"):
         parse_policy(path, make_system("reacher/jumps_late"))
+
+
+def test_a_python_trigger_answers_a_compute_level_as_the_built_in_schedule_does():
+    from etmpc.policies.user import checked
+
+    class RealTime:
+        spec, stochastic = "my-rti", False
+
+        def decide(self, s, rng):
+            return ITERATE if s.age >= 2 else KEEP
+
+    system = make_system("cart_pendulum/kicks_levels")
+    episode = _episode(system, 5)
+    mine = run_episode(system, system.make_env(), checked(RealTime()), None, episode)
+    built_in = run_episode(system, system.make_env(), parse_policy("iterate:2", system), None, episode)
+    np.testing.assert_array_equal(mine.rewards, built_in.rewards)
+    np.testing.assert_array_equal(mine.level, built_in.level)
