@@ -57,6 +57,9 @@ class Learner(ABC):
     resumes_exactly: ClassVar[bool] = False  # a resumed run ends bit for bit like an uninterrupted one
     shipped: ClassVar[tuple[str, str, str] | None] = None  # leaderboard entry: (name, file in policies/<task>/, what it is)
     unit: ClassVar[str] = "episodes"  # what the budget counts
+    # True: it trains only on tasks whose decisions are keep or solve (the runner refuses a task with
+    # compute levels, keep, one SQP iteration or a full solve, before any work)
+    keep_or_solve_only: ClassVar[bool] = False
 
     def __init_subclass__(cls, **kwargs):
         super().__init_subclass__(**kwargs)
@@ -156,6 +159,17 @@ class Learner(ABC):
     def simulated_steps(self) -> int | None:
         """Environment steps the run simulated so far (None: not counted)."""
         return None
+
+
+def check_decisions(learner: Learner | type[Learner], task: str) -> None:
+    """Refuse, in one line, a learner that trains only keep-or-solve triggers on a task with compute levels."""
+    from etmpc.policies.learned import task_has_levels
+
+    if learner.keep_or_solve_only and task_has_levels(task):
+        raise EtmpcError(
+            f"{learner.name} needs a task whose decisions are keep or solve; task {task}'s are keep, one SQP "
+            "iteration or a full solve (compute levels): train it with --algorithm dpi"
+        )
 
 
 def learners() -> dict[str, type[Learner]]:

@@ -26,7 +26,7 @@ class RunState:
     policy: dict  # the initial policy's JSON: normalisation, domain, hyperparameters
     learners: dict  # seed (str) -> learner JSON
     curve: list = field(default_factory=list)  # rows: {"episodes", "seed", "objective", "control", "recomputes"}
-    best: dict = field(default_factory=dict)  # seed (str) -> {"episodes", "objective", "theta"}
+    best: dict = field(default_factory=dict)  # seed (str) -> {"episodes", "objective", "theta"[, "theta_level"]}
     training: list = field(default_factory=list)  # per-episode stats, all seeds
     base: str | None = None  # DPI: the fixed schedule iteration 0 rolls out over (chosen on training episodes)
     validation: dict = field(default_factory=dict)  # seed (str) -> final policy's objective on the validation episodes
@@ -81,16 +81,27 @@ def state_from_json(data: dict, where: str = "checkpoint") -> RunState:
         )
         if sorted(state.learners) != sorted(str(s) for s in config.seeds):
             raise ValueError("learners do not match the seeds")
-        for learner in state.learners.values():
+        levels = "theta_level" in data["policy"]
+        for learner in (*state.learners.values(), *state.best.values()):
             if len(learner["theta"]) != len(data["policy"]["theta"]):
                 raise ValueError("feature size differs between learners and policy")
+            if levels != ("theta_level" in learner) or (levels and len(learner["theta_level"]) != len(learner["theta"])):
+                raise ValueError("the learners' and the policy's compute levels (theta_level) differ")
     except (AttributeError, ValueError, KeyError, TypeError) as exc:
         raise PolicyFileError(f"{where} is corrupt or unreadable ({exc}); move it away to start afresh") from None
     return state
 
 
-def policy_at(state: RunState, theta) -> dict:
-    return dict(state.policy, theta=list(theta))
+def policy_at(state: RunState, theta, theta_level=None) -> dict:
+    """The run's policy at parameters ``theta`` (and, on a task with compute levels, ``theta_level``)."""
+    if theta_level is None:
+        return dict(state.policy, theta=list(theta))
+    return dict(state.policy, theta=list(theta), theta_level=list(theta_level))
+
+
+def policy_of(state: RunState, params: dict) -> dict:
+    """The run's policy at a learner's or a best point's parameters (``params``: their JSON)."""
+    return policy_at(state, params["theta"], params.get("theta_level"))
 
 
 def save(out: Path, state: RunState) -> dict:
@@ -101,12 +112,12 @@ def save(out: Path, state: RunState) -> dict:
         hyper = dict(state.policy["hyperparameters"], seed=seed)
         write_json_atomically(
             out / f"seed{seed}" / "last.json",
-            dict(policy_at(state, state.learners[key]["theta"]), hyperparameters=dict(hyper, episodes=state.done)),
+            dict(policy_of(state, state.learners[key]), hyperparameters=dict(hyper, episodes=state.done)),
         )
         best = state.best[key]
         write_json_atomically(
             out / f"seed{seed}" / "best.json",
-            dict(policy_at(state, best["theta"]), hyperparameters=dict(hyper, episodes=best["episodes"])),
+            dict(policy_of(state, best), hyperparameters=dict(hyper, episodes=best["episodes"])),
         )
     if state.validation:
         sense = state.objective_sense
@@ -118,9 +129,7 @@ def save(out: Path, state: RunState) -> dict:
             validation_objective=state.validation[str(pick)],
             validation_episodes=state.config.validation_episodes,
         )
-        write_json_atomically(
-            out / "selected.json", dict(policy_at(state, state.learners[str(pick)]["theta"]), hyperparameters=hyper)
-        )
+        write_json_atomically(out / "selected.json", dict(policy_of(state, state.learners[str(pick)]), hyperparameters=hyper))
     summary = curve_summary(state)
     write_json_atomically(out / "curve.json", summary)
     write_curve_png(out / "curve.png", summary, len(state.config.seeds))

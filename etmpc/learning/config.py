@@ -11,6 +11,7 @@ from etmpc.common.errors import EtmpcError
 from etmpc.learning import dpi
 from etmpc.learning.gpomdp import Settings
 from etmpc.policies.features import DEFAULT_FEATURES, check_features
+from etmpc.policies.learned import task_has_levels
 from etmpc.systems import SystemKey, canonical
 
 TRAIN_ENTROPY = 0x6574_6D70_6321  # "etmpc!"
@@ -35,7 +36,7 @@ class TrainConfig:
     gpomdp: Settings = field(default_factory=Settings)
     features: str = DEFAULT_FEATURES  # the policy's feature set (etmpc.policies.learned.FEATURE_SETS)
     algorithm: str = "gpomdp"  # "gpomdp" or "dpi"
-    dpi: dpi.Settings = field(default_factory=dpi.Settings)  # used when algorithm == "dpi"
+    dpi: dpi.Settings = field(default_factory=dpi.Settings)  # used when algorithm == "dpi" (levels: dpi.level_bases)
     validation_episodes: int = 50  # training-distribution episodes that choose selected.json
     recompute_price: float | None = None  # the price of a computation to train for (None: the system's)
 
@@ -50,6 +51,9 @@ class TrainConfig:
             raise EtmpcError(f"unknown algorithm {self.algorithm!r}; valid: {', '.join(ALGORITHMS)}")
         object.__setattr__(self, "domain", canonical(self.domain))  # the task's own name; a bad one fails here
         self.system  # a bad price fails here
+        # On a task with compute levels DPI's default first schedules include iterate:2..5, written out here
+        # (so the checkpoint and the policy's hyperparameters say which it chose among).
+        object.__setattr__(self, "dpi", dpi.level_bases(self.dpi, task_has_levels(self.domain)))
 
     @property
     def system(self) -> SystemKey:

@@ -24,6 +24,16 @@ Then each iteration, for the current policy ``pi_t``:
 4. **The next policy** (:func:`iteration`). ``pi_{t+1}(keep | s) = sigma(theta . phi(s))``, for
    every seed of the run.
 
+**Compute levels.** On a task whose decisions are keep, one SQP iteration or a full solve, the policy
+has a second stage, ``pi(solve | compute, s) = sigma(theta_level . phi(s))`` (see
+:mod:`etmpc.policies.learned`), and DPI labels the three answers: ``q_values`` gives each one's
+returns, and a labelled decision's row holds their means, ``(phi, q_keep, q_solve, step, q_iterate)``
+(a keep-or-solve task's rows are ``(phi, q_keep, q_solve, step)``, as before). Stage 1 is fitted as
+above with the advantage of keeping ``q_keep - max(q_iterate, q_solve)``; stage 2 by :func:`fit_level`:
+label *iterate* where ``q_iterate >= q_solve``, weight ``|q_iterate - q_solve|``, on the labelled decisions
+where the just-fitted stage 1 computes (:func:`fit_level_labels` says why). ``pi_0``'s candidates then
+include the real-time iterations ``iterate:2..5`` (:func:`level_bases`).
+
 :func:`label_episode` is a worker's job (a pure function of its arguments, as those of
 :mod:`etmpc.learning.jobs`); the rest runs in the driver, :func:`etmpc.learning.train.train`.
 :class:`Labeller` also labels the self-trigger's training (:mod:`etmpc.learning.selftrigger`).
@@ -31,11 +41,12 @@ Then each iteration, for the current policy ``pi_t``:
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.optimize import minimize
 
+from etmpc.common.numerics import dot
 from etmpc.common.sense import oriented
 from etmpc.evaluation.workers import context
 from etmpc.loop import run_episode
@@ -44,6 +55,8 @@ from etmpc.policies.learned import LogisticPolicy
 from etmpc.policies.rollout import q_values
 
 DPI_ENTROPY = 0x6470_6921  # "dpi!"
+BASES = ("always", "every:2", "every:3", "every:4", "every:5")  # pi_0's candidates by default
+LEVEL_BASES = ("iterate:2", "iterate:3", "iterate:4", "iterate:5")  # and on a task with compute levels
 
 
 @dataclass(frozen=True)
@@ -54,7 +67,7 @@ class Settings:
     horizon: int = 20  # H: steps simulated ahead of each decision (the MPC's own horizon)
     states_per_episode: int = 25  # decisions labelled per training episode
     ridge: float = 1e-2  # L2 weight on theta (not on the bias), per labelled decision
-    bases: tuple[str, ...] = ("always", "every:2", "every:3", "every:4", "every:5")  # candidates for pi_0
+    bases: tuple[str, ...] = BASES  # candidates for pi_0 (with levels, by default also LEVEL_BASES: level_bases)
     selection_episodes: int = 30  # training episodes that choose pi_0 among the bases
 
     def __post_init__(self):
@@ -66,6 +79,13 @@ class Settings:
 
 
 # 0. The first policy.
+
+
+def level_bases(settings: Settings, levels: bool) -> Settings:
+    """``settings`` for a task with compute levels (``levels``): the default candidates for ``pi_0``
+    grow the real-time iterations ``iterate:2..5``; candidates someone chose are kept as they are, and a
+    keep-or-solve task's settings are returned unchanged."""
+    return replace(settings, bases=BASES + LEVEL_BASES) if levels and settings.bases == BASES else settings
 
 
 def choose_base(settings: Settings, sense: str, mean_scores) -> str:
@@ -112,7 +132,8 @@ class Labeller:
 
 def label_episode(domain: str, base, settings: Settings, policy_json: dict, seed: int, e: int) -> list:
     """DPI's training episode ``e`` of ``seed`` under ``base`` (``pi_t``: a fixed spec or a policy's
-    JSON): ``[(phi, q_keep, q_recompute, step), ...]`` at its picked decisions."""
+    JSON): ``[(phi, q_keep, q_recompute, step), ...]`` at its picked decisions; on a task with compute
+    levels ``[(phi, q_keep, q_solve, step, q_iterate), ...]``."""
     system, env, _ = context(domain)
     base = parse_policy(base, system) if isinstance(base, str) else LogisticPolicy.from_json(base)
     featurise = LogisticPolicy.from_json(policy_json).phi
@@ -121,13 +142,16 @@ def label_episode(domain: str, base, settings: Settings, policy_json: dict, seed
         pick_rng.choice(system.episode_steps, size=min(settings.states_per_episode, system.episode_steps), replace=False).tolist()
     )
 
-    def label(s, twin):  # both answers over the same sampled futures, then phi(s)
+    def label(s, twin):  # every answer over the same sampled futures, then phi(s)
+        if system.compute_levels:
+            keep, iterate, solve = q_values(s.context, base, settings.futures, future_rng, twin, settings.horizon)
+            return featurise(s), float(np.mean(keep)), float(np.mean(solve)), s.context.step, float(np.mean(iterate))
         keep, recompute = q_values(s.context, base, settings.futures, future_rng, twin, settings.horizon)
         return featurise(s), float(np.mean(keep)), float(np.mean(recompute)), s.context.step
 
     labeller = Labeller(base, picked, label)
     run_episode(system, env, labeller, policy_rng, system.draw_episode(episode_rng))
-    return [(phi.tolist(), keep, recompute, step) for phi, keep, recompute, step in labeller.rows]
+    return [(phi.tolist(), *rest) for phi, *rest in labeller.rows]
 
 
 def _label_job(job) -> list:
@@ -165,8 +189,39 @@ def fit(features: np.ndarray, keep_advantage: np.ndarray, ridge: float, theta0: 
 
 def fit_labels(rows: list, ridge: float, theta0: np.ndarray | None = None) -> np.ndarray:
     """:func:`fit` on :func:`label_episode`'s rows ``(phi, q_keep, q_recompute, ...)``: the advantage of
-    keeping is ``q_keep - q_recompute``."""
-    return fit(np.array([row[0] for row in rows]), np.array([row[1] - row[2] for row in rows]), ridge, theta0)
+    keeping is ``q_keep - q_recompute``; with compute levels (rows ``(phi, q_keep, q_solve, step,
+    q_iterate)``) ``q_keep - max(q_iterate, q_solve)``, keeping against the better computation."""
+    return fit(np.array([row[0] for row in rows]), np.array([keep_advantage(row) for row in rows]), ridge, theta0)
+
+
+def keep_advantage(row) -> float:
+    return row[1] - row[2] if len(row) < 5 else row[1] - max(row[4], row[2])
+
+
+def fit_level(features: np.ndarray, iterate_advantage: np.ndarray, ridge: float) -> np.ndarray:
+    """Stage 2 of a policy with compute levels: ``theta_level``, with ``sigma(theta_level . phi)`` the
+    probability of a full solve when computing, fitted as :func:`fit` fits stage 1: label *iterate*
+    where ``iterate_advantage = q_iterate - q_solve >= 0`` (a tie takes the cheaper answer), weight its
+    size. :func:`fit` gives the logit of its label, iterate; the logit of a solve is its negative."""
+    return -fit(features, iterate_advantage, ridge)
+
+
+def fit_level_labels(rows: list, ridge: float, theta) -> np.ndarray:
+    """:func:`fit_level` on the rows of a task with compute levels where stage 1 (``theta``, the one just
+    fitted) computes: at a state the policy keeps, it never asks stage 2, and a wrong level costs
+    nothing. The greedy policy's loss at a labelled state splits exactly so, ``q_best - q_chosen =``
+    (stage 1's loss: ``q_keep - max(q_iterate, q_solve)`` if it computes where keeping is best, ``q_best
+    - q_keep`` if it keeps where computing is) ``+ 1[stage 1 computes] |q_iterate - q_solve| 1[wrong
+    level]``; so stage 2 is fitted where its mistakes cost, and its linear boundary is not spent on
+    states where it is never asked. (Where stage 1 computes is decided as the policy decides it, on the
+    exact logit.) If stage 1 computes at none of the rows, on all of them."""
+    features = np.array([row[0] for row in rows], dtype=float)
+    theta = np.asarray(theta, dtype=float)
+    computes = np.array([dot(theta, phi) < 0.0 for phi in features], dtype=bool)
+    if not computes.any():
+        computes[:] = True
+    advantage = np.array([row[4] - row[2] for row in rows], dtype=float)
+    return fit_level(features[computes], advantage[computes], ridge)
 
 
 # 4. The next policy.
@@ -175,13 +230,15 @@ def fit_labels(rows: list, ridge: float, theta0: np.ndarray | None = None) -> np
 def iteration(state, pool, tick, start: int, stop: int) -> None:
     """One DPI iteration per seed of ``state`` (the run's :class:`etmpc.learning.checkpoint.RunState`,
     updated in place): label episodes ``start..stop-1`` by rollouts over the current policy (over the
-    chosen schedule at iteration 0) on ``pool``, then refit ``theta`` on every label so far. ``tick``
-    is told of each finished job."""
+    chosen schedule at iteration 0) on ``pool``, then refit ``theta`` (and, with compute levels,
+    ``theta_level``) on every label so far. ``tick`` is told of each finished job."""
     config = state.config
 
-    def base(seed):  # pi_t: the schedule, then the policy at the learner's theta (checkpoint.policy_at)
+    def base(seed):  # pi_t: the schedule, then the policy at the learner's parameters (checkpoint.policy_of)
         learner = state.learners[str(seed)]
-        return state.base if learner["iterations"] == 0 else dict(state.policy, theta=list(learner["theta"]))
+        if learner["iterations"] == 0:
+            return state.base
+        return dict(state.policy, **{name: list(learner[name]) for name in ("theta", "theta_level") if name in learner})
 
     jobs = [("label", (config.system, base(s), config.dpi, state.policy, s, e)) for s in config.seeds for e in range(start, stop)]
     results = pool.map(_label_job, jobs, tick)
@@ -191,6 +248,8 @@ def iteration(state, pool, tick, start: int, stop: int) -> None:
         for rows in results[k * per_seed : (k + 1) * per_seed]:
             learner["data"] += [list(row) for row in rows]
         learner["theta"] = fit_labels(learner["data"], config.dpi.ridge).tolist()
+        if "theta_level" in learner:  # compute levels: stage 2 too
+            learner["theta_level"] = fit_level_labels(learner["data"], config.dpi.ridge, learner["theta"]).tolist()
         learner["iterations"] += 1
         learner["episodes"] = stop
         state.training += [

@@ -17,11 +17,11 @@ from etmpc.common.outputs import refuse_foreign
 from etmpc.evaluation.workers import context
 from etmpc.learning import dpi, gpomdp
 from etmpc.learning.base import Learner
-from etmpc.learning.checkpoint import RunState, load_checkpoint, ours, policy_at, save, state_from_json
+from etmpc.learning.checkpoint import RunState, load_checkpoint, ours, policy_of, save, state_from_json
 from etmpc.learning.config import SELECTION_ENTROPY, TrainConfig
 from etmpc.learning.jobs import _call, _learner_to_json, mean_scores
 from etmpc.policies.features import DEFAULT_FEATURES, check_features
-from etmpc.policies.learned import LogisticPolicy, Normalisation
+from etmpc.policies.learned import LogisticPolicy, Normalisation, task_has_levels
 from etmpc.systems import SystemKey, make_system
 from etmpc.views.recording import Recorder
 
@@ -80,7 +80,7 @@ class DpiSettings(PhasedSettings):
     horizon: int = 20
     states_per_episode: int = 25
     ridge: float = 1e-2
-    bases: tuple[str, ...] = ("always", "every:2", "every:3", "every:4", "every:5")
+    bases: tuple[str, ...] = dpi.BASES  # on a task with compute levels, by default also dpi.LEVEL_BASES
     selection_episodes: int = 30
 
     @property
@@ -207,7 +207,8 @@ class _Phased(Learner):
         if config.recompute_price is not None:  # trained for another price than the system's own
             hyper["recompute_price"] = config.recompute_price
         hyper.update(self._hyperparameters(config))
-        initial = LogisticPolicy.initial(normalisation, config.domain, hyper, config.features, greedy=config.algorithm == "dpi")
+        greedy, levels = config.algorithm == "dpi", task_has_levels(config.domain)
+        initial = LogisticPolicy.initial(normalisation, config.domain, hyper, config.features, greedy=greedy, levels=levels)
         learner, base = self._start(config, initial)
         # One learner per seed, sharing nothing (a DPI learner's labels grow in place).
         self.run_state = RunState(
@@ -240,7 +241,7 @@ class _Phased(Learner):
 
     def candidates(self) -> dict:
         state = self.run_state
-        return {str(s): policy_at(state, state.learners[str(s)]["theta"]) for s in state.config.seeds}
+        return {str(s): policy_of(state, state.learners[str(s)]) for s in state.config.seeds}
 
     def choose(self, scores: list[float]) -> None:
         self.run_state.validation = {str(s): mean for s, mean in zip(self.run_state.config.seeds, scores)}
@@ -268,7 +269,7 @@ class _Phased(Learner):
             return {"policy": f"seed{seed}/episodes{done:05d}", "training_seed": seed, "training_episodes": done}
 
         jobs = [
-            ("evaluate", (config.system, sha256, policy_at(state, state.learners[str(s)]["theta"]), r, e, identity(s, e)))
+            ("evaluate", (config.system, sha256, policy_of(state, state.learners[str(s)]), r, e, identity(s, e)))
             for s in config.seeds
             for r in range(config.eval_repeats)
             for e in range(testset_n)
@@ -294,11 +295,10 @@ class _Phased(Learner):
             best = state.best.get(str(seed))
             better = best is None or oriented(row["objective"], sense) > oriented(best["objective"], sense)
             if better:
-                state.best[str(seed)] = {
-                    "episodes": done,
-                    "objective": row["objective"],
-                    "theta": state.learners[str(seed)]["theta"],
-                }
+                learner = state.learners[str(seed)]
+                state.best[str(seed)] = {"episodes": done, "objective": row["objective"], "theta": learner["theta"]}
+                if "theta_level" in learner:  # compute levels
+                    state.best[str(seed)]["theta_level"] = learner["theta_level"]
 
 
 class GpomdpLearner(_Phased):
@@ -307,6 +307,7 @@ class GpomdpLearner(_Phased):
     name = "gpomdp"
     algorithm = "gpomdp"
     Settings = GpomdpSettings
+    keep_or_solve_only = True  # its gradient is of the keep-or-solve policy
     shipped = (
         "GPOMDP (shipped)",
         "gpomdp.json",
@@ -341,7 +342,10 @@ class DpiLearner(_Phased):
         return dict(asdict(config.dpi), bases=list(config.dpi.bases))
 
     def _start(self, config: TrainConfig, initial: LogisticPolicy) -> tuple[dict, str]:
-        learner = {"theta": initial.theta.tolist(), "episodes": 0, "iterations": 0, "data": []}
+        learner = {"theta": initial.theta.tolist()}
+        if initial.levels:  # compute levels: the second stage's parameters
+            learner["theta_level"] = initial.theta_level.tolist()
+        learner.update(episodes=0, iterations=0, data=[])
         base = dpi.choose_base(
             config.dpi,
             make_system(config.system).objective_sense,

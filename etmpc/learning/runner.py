@@ -22,7 +22,7 @@ import numpy as np
 from etmpc.common.sense import oriented
 from etmpc.common.errors import EtmpcError
 from etmpc.evaluation.workers import make_backend
-from etmpc.learning.base import Learner, learner_class
+from etmpc.learning.base import Learner, check_decisions, learner_class
 from etmpc.learning.config import VALIDATION_ENTROPY
 from etmpc.learning.jobs import mean_scores
 from etmpc.policies.learned import write_json_atomically
@@ -58,6 +58,7 @@ def run(
     started = time.perf_counter()
     learner.key, learner.seeds, learner.out, learner.say = system_key(task), _seeds(learner, seeds), Path(out), say
     learner.workers = workers
+    check_decisions(learner, learner.key.task)
     learner.check()
     if learner.has_saved() and not resume:
         raise EtmpcError(f"{out} already holds a training run; pass --resume to continue it, or choose another --out")

@@ -162,6 +162,7 @@ class SelfLearner(Learner):
     Settings = SelfSettings
     policy_kind = "self"
     seeding = "none"
+    keep_or_solve_only = True  # it announces when to solve next
 
     def __init__(self, settings: SelfSettings | None = None, policy_file: Path | None = None):
         super().__init__(settings)

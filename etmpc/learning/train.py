@@ -2,7 +2,10 @@
 
 Two learners (``--algorithm``): ``gpomdp``, the paper's policy gradient (:mod:`etmpc.learning.gpomdp`), and
 ``dpi``, direct policy iteration with rollout-labelled classification (:mod:`etmpc.learning.dpi`); and two
-feature sets (``--features``, :mod:`etmpc.policies.learned`): ``error`` (the default) and ``paper``.
+feature sets (``--features``, :mod:`etmpc.policies.learned`): ``error`` (the default) and ``paper``. On a
+task with compute levels (keep, one SQP iteration or a full solve: ``cart_pendulum/kicks_levels``) DPI trains
+the two-stage policy (keep or compute, then a full solve or one iteration; see :mod:`etmpc.learning.dpi`) and
+GPOMDP, whose gradient is the keep-or-solve policy's, refuses the task.
 
 The run advances in *phases* of ``eval_every`` training episodes. In each phase every seed trains
 its block of episodes (seeds run in parallel), then every seed's policy is evaluated on the test

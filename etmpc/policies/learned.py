@@ -20,6 +20,16 @@ rl:PATH`` evaluates it anywhere. The decision rule is saved too: ``sample`` draw
 ``pi`` (the paper's policy, and what GPOMDP's gradient needs), ``greedy`` takes the likelier answer
 (what a classifier trained by DPI is). JSON keeps every float exactly (Python writes the shortest repr
 that reads back to the same double). Files of format version 1 (before feature sets) are ``paper``.
+
+**Compute levels.** On a task whose decisions are keep, one SQP iteration or a full solve
+(``system.compute_levels``), the policy has a second stage on the same features:
+``pi(solve | compute, s) = sigma(theta_level . phi(s))``, else one SQP iteration. It decides in two
+steps: keep or compute as above, then, if computing, a full solve or an iteration (greedy: a full
+solve exactly when ``theta_level . phi > 0``, so a tie takes the cheaper iteration; sampled: the
+second draw is made only when the first says compute), and answers a level (``KEEP``, ``ITERATE``,
+``SOLVE``). Such a file has ``theta_level`` and format version 3 (so an etmpc that does not know levels
+refuses it rather than playing its first stage alone); a file without is a keep-or-solve policy, read
+and played exactly as before. Neither kind is loaded for a task of the other kind (:func:`load_policy`).
 """
 
 from __future__ import annotations
@@ -27,6 +37,7 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import dataclass, field
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -34,12 +45,16 @@ import numpy as np
 from etmpc.common.errors import EtmpcError
 from etmpc.common.numerics import dot
 from etmpc.common.outputs import dumps, write_text
+from etmpc.control.timing import ITERATE, KEEP, SOLVE
 from etmpc.loop import AugmentedState
 from etmpc.policies.features import FEATURE_SETS, feature_size, raw_features
+from etmpc.systems import system_class
 
 FORMAT = "etmpc-logistic-policy"
 VERSION = 2
+LEVELS_VERSION = 3  # a policy with compute levels (theta_level)
 INITIAL_KEEP_LOGIT = -3.0  # sigma(-3) = 0.047: at first the policy recomputes 95 % of the time
+INITIAL_SOLVE_LOGIT = 3.0  # with levels, a computation is at first a full solve 95 % of the time
 
 
 class PolicyFileError(EtmpcError):
@@ -83,8 +98,9 @@ def sigmoid(z: float) -> float:
 class LogisticPolicy:
     """``pi(keep | s) = sigma(theta . phi(s))``; draws its decisions from the generator it is given.
 
-    With ``record`` set, every decision appends ``(phi, recompute, p_keep)`` to :attr:`decisions`
-    (what GPOMDP needs); the control loop only asks at steps where the plan has not run out.
+    With ``record`` set, every decision appends ``(phi, answer, p_keep)`` to :attr:`decisions`
+    (what GPOMDP needs); the control loop only asks at steps where the plan has not run out. With
+    ``theta_level`` it is a policy with compute levels (see the module docstring).
     """
 
     theta: np.ndarray
@@ -95,6 +111,12 @@ class LogisticPolicy:
     decisions: list = field(default_factory=list)
     features: str = "paper"  # the feature set (FEATURE_SETS)
     greedy: bool = False  # True: recompute exactly when pi(keep | s) < 1/2, drawing nothing
+    theta_level: np.ndarray | None = None  # compute levels: pi(solve | compute, s) = sigma(theta_level . phi(s))
+
+    @property
+    def levels(self) -> bool:
+        """Whether it answers compute levels (keep, one SQP iteration, a full solve) rather than keep or solve."""
+        return self.theta_level is not None
 
     @property
     def stochastic(self) -> bool:
@@ -112,12 +134,20 @@ class LogisticPolicy:
         hyperparameters: dict | None = None,
         features: str = "paper",
         greedy: bool = False,
+        levels: bool = False,
     ) -> LogisticPolicy:
         theta = np.zeros(normalisation.mean.size * 2 + 1)
         theta[-1] = INITIAL_KEEP_LOGIT
-        return cls(theta, normalisation, domain, dict(hyperparameters or {}), features=features, greedy=greedy)
+        theta_level = None
+        if levels:
+            theta_level = np.zeros(theta.size)
+            theta_level[-1] = INITIAL_SOLVE_LOGIT
+        hyper = dict(hyperparameters or {})
+        return cls(theta, normalisation, domain, hyper, features=features, greedy=greedy, theta_level=theta_level)
 
-    def with_theta(self, theta: np.ndarray, record: bool = False) -> LogisticPolicy:
+    def with_theta(self, theta: np.ndarray, record: bool = False, theta_level: np.ndarray | None = None) -> LogisticPolicy:
+        """The same policy with parameters ``theta`` (and ``theta_level``, if given; else its own)."""
+        level = self.theta_level if theta_level is None else np.array(theta_level, dtype=float)
         return LogisticPolicy(
             np.array(theta, dtype=float),
             self.normalisation,
@@ -126,6 +156,7 @@ class LogisticPolicy:
             record,
             features=self.features,
             greedy=self.greedy,
+            theta_level=level,
         )
 
     def phi(self, s: AugmentedState) -> np.ndarray:
@@ -133,6 +164,10 @@ class LogisticPolicy:
 
     def keep_probability(self, s: AugmentedState) -> float:
         return sigmoid(self.decision_value(self.phi(s)))
+
+    def solve_probability(self, s: AugmentedState) -> float:
+        """``pi(solve | compute, s)`` of a policy with compute levels."""
+        return sigmoid(self.level_value(self.phi(s)))
 
     def decision_value(self, phi: np.ndarray) -> float:
         """The logit ``theta . phi`` of keeping, the same on every machine: the terms ``theta_j phi_j``
@@ -142,38 +177,52 @@ class LogisticPolicy:
         exact sum beyond the double range is ``+-inf`` by its sign. Terms of both infinities, or NaN,
         have no value: that is an error, on every machine (a BLAS ``theta @ phi`` gives NaN or
         ``-inf`` for them depending on the CPU's kernel)."""
+        return self._logit(self.theta, phi, "decision value")
+
+    def level_value(self, phi: np.ndarray) -> float:
+        """The logit ``theta_level . phi`` of a full solve over one SQP iteration, as :meth:`decision_value`."""
+        return self._logit(self.theta_level, phi, "level value")
+
+    def _logit(self, theta: np.ndarray, phi: np.ndarray, what: str) -> float:
         with np.errstate(over="ignore", invalid="ignore"):
-            logit = dot(self.theta, phi)
+            logit = dot(theta, phi)
         if math.isnan(logit):
             raise PolicyFileError(
-                f"the {self.domain} policy's decision value is not a number at this state "
+                f"the {self.domain} policy's {what} is not a number at this state "
                 "(its parameters overflow against the features): retrain it or check its file"
             )
         return logit
 
-    def decide(self, s: AugmentedState, rng: np.random.Generator) -> bool:
+    def decide(self, s: AugmentedState, rng: np.random.Generator) -> bool | int:
         phi = self.phi(s)
         logit = self.decision_value(phi)
         p_keep = sigmoid(logit)
         # Greedy: recompute when pi(keep | s) < 1/2, i.e. when the logit is negative (decided on the
         # logit itself, so no exp rounding can move the boundary).
-        recompute = logit < 0.0 if self.greedy else bool(rng.random() >= p_keep)
+        answer = recompute = logit < 0.0 if self.greedy else bool(rng.random() >= p_keep)
+        if self.theta_level is not None:  # compute levels: then a full solve or one SQP iteration
+            answer = KEEP
+            if recompute:
+                level = self.level_value(phi)
+                solve = level > 0.0 if self.greedy else bool(rng.random() < sigmoid(level))
+                answer = SOLVE if solve else ITERATE
         if self.record:
-            self.decisions.append((phi, recompute, p_keep))
-        return recompute
+            self.decisions.append((phi, answer, p_keep))
+        return answer
 
     # -- file -------------------------------------------------------------------------------------
     def to_json(self) -> dict:
-        return {
+        data = {
             "format": FORMAT,
-            "version": VERSION,
+            "version": VERSION if self.theta_level is None else LEVELS_VERSION,
             "domain": self.domain,
             "features": self.features,
             "decision": "greedy" if self.greedy else "sample",
             "theta": self.theta.tolist(),
-            "normalisation": self.normalisation.to_json(),
-            "hyperparameters": self.hyperparameters,
         }
+        if self.theta_level is not None:
+            data["theta_level"] = self.theta_level.tolist()
+        return dict(data, normalisation=self.normalisation.to_json(), hyperparameters=self.hyperparameters)
 
     def save(self, path: str | Path) -> None:
         """Write atomically: a crash leaves the old file or the new one, never half of one."""
@@ -185,17 +234,24 @@ class LogisticPolicy:
             raise PolicyFileError(
                 f"{where} is not an etmpc logistic policy (format {data.get('format') if isinstance(data, dict) else None!r})"
             )
-        if data.get("version") not in (1, VERSION):
-            raise PolicyFileError(f"{where} has format version {data.get('version')!r}; this etmpc reads 1 and {VERSION}")
-        features = data.get("features", "paper") if data.get("version") == VERSION else "paper"
+        version = data.get("version")
+        if version not in (1, VERSION, LEVELS_VERSION):
+            raise PolicyFileError(f"{where} has format version {version!r}; this etmpc reads 1, {VERSION} and {LEVELS_VERSION}")
+        if (version == LEVELS_VERSION) != ("theta_level" in data):
+            raise PolicyFileError(
+                f"{where} is corrupt: theta_level (compute levels) comes with format version {LEVELS_VERSION}, "
+                f"and only with it (this file: version {version}, {'with' if 'theta_level' in data else 'without'} theta_level)"
+            )
+        features = data.get("features", "paper") if version != 1 else "paper"
         if features not in FEATURE_SETS:
             raise PolicyFileError(f"{where} has unknown feature set {features!r}; this etmpc knows {', '.join(FEATURE_SETS)}")
-        decision = data.get("decision", "sample") if data.get("version") == VERSION else "sample"
+        decision = data.get("decision", "sample") if version != 1 else "sample"
         if decision not in ("sample", "greedy"):
             raise PolicyFileError(f"{where} has unknown decision rule {decision!r}; this etmpc knows sample, greedy")
         try:
             normalisation = Normalisation.from_json(data["normalisation"])
             theta = np.asarray(data["theta"], dtype=float)
+            theta_level = np.asarray(data["theta_level"], dtype=float) if "theta_level" in data else None
             policy = cls(
                 theta,
                 normalisation,
@@ -203,19 +259,23 @@ class LogisticPolicy:
                 dict(data.get("hyperparameters", {})),
                 features=features,
                 greedy=decision == "greedy",
+                theta_level=theta_level,
             )
         except (KeyError, TypeError, ValueError) as exc:
             raise PolicyFileError(f"{where} is corrupt ({exc!r})") from None
         n = normalisation.mean.size
         if theta.shape != (2 * n + 1,) or any(getattr(normalisation, a).shape != (n,) for a in ("std", "mean_sq", "std_sq")):
             raise PolicyFileError(f"{where} is corrupt: {theta.size} parameters for {n} state components")
+        if theta_level is not None and (theta_level.shape != theta.shape or not np.all(np.isfinite(theta_level))):
+            raise PolicyFileError(f"{where} is corrupt: theta_level is not {theta.size} finite numbers")
         if not (np.all(np.isfinite(theta)) and np.all(normalisation.std > 0) and np.all(normalisation.std_sq > 0)):
             raise PolicyFileError(f"{where} is corrupt: non-finite parameters or non-positive scales")
         return policy
 
 
 def load_policy(path: str | Path, domain: str | None = None, nx: int | None = None) -> LogisticPolicy:
-    """Read a saved policy; check it was made for ``domain`` and its feature size fits ``nx`` states."""
+    """Read a saved policy; check it was made for ``domain``, decides as that task's decisions are (keep or
+    solve, or compute levels: :func:`task_has_levels`) and its feature size fits ``nx`` states."""
     path = Path(path)
     try:
         data = json.loads(path.read_text())
@@ -226,12 +286,26 @@ def load_policy(path: str | Path, domain: str | None = None, nx: int | None = No
     policy = LogisticPolicy.from_json(data, where=f"policy file {path}")
     if domain is not None and policy.domain != domain:
         raise PolicyFileError(f"policy file {path} was trained on {policy.domain!r}, not {domain!r}")
+    if domain is not None and policy.levels != task_has_levels(domain):
+        raise PolicyFileError(
+            f"policy file {path} decides {_DECISIONS[policy.levels]}, but task {domain}'s decisions are "
+            f"{_DECISIONS[not policy.levels]}: train a policy for it"
+        )
     if nx is not None and policy.theta.size != feature_size(nx, policy.features, policy.domain):
         raise PolicyFileError(
             f"policy file {path} has {policy.theta.size} features; {domain or 'this task'} needs "
             f"{feature_size(nx, policy.features, policy.domain)} ({policy.features} features)"
         )
     return policy
+
+
+_DECISIONS = {False: "keep or solve", True: "keep, one SQP iteration or a full solve (compute levels)"}
+
+
+@lru_cache(maxsize=None)
+def task_has_levels(task: str) -> bool:
+    """Whether task ``task``'s decisions are compute levels (its Config's ``compute_levels``), without building it."""
+    return bool(getattr(system_class(task).Config(), "compute_levels", False))
 
 
 def write_json_atomically(path: Path, data: dict) -> None:
