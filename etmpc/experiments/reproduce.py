@@ -213,7 +213,7 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
         progress=progress,
     )
     _say(f"{domain}: fixed policies")
-    baselines = evaluated_once(folder / "baselines.json", policies=system.benchmark.baselines(), **common)
+    baselines = evaluated_once(folder / "baselines.json", policies=system.benchmark.baselines(system.compute_levels), **common)
 
     learned, state, learned_specs = None, None, []
     if system.name in PAPER:

@@ -51,9 +51,16 @@ class Benchmark:
         """A rollout's horizon ``horizon`` (None: to the episode's end) within the task's ``lookahead``."""
         return self.lookahead if horizon is None else min(horizon, self.lookahead)
 
-    def baselines(self) -> list[str]:
-        """Reproduce's fixed policies: always, never, every:T and threshold:X."""
-        return ["always", "never"] + [f"every:{t}" for t in self.periods] + [f"threshold:{x:g}" for x in self.report_thresholds]
+    def baselines(self, levels: bool = False) -> list[str]:
+        """Reproduce's fixed policies: always, never, every:T and threshold:X; with compute ``levels``,
+        iterate:T too (one SQP iteration at the same periods)."""
+        iterations = [f"iterate:{t}" for t in self.periods] if levels else []
+        return (
+            ["always", "never"]
+            + [f"every:{t}" for t in self.periods]
+            + iterations
+            + [f"threshold:{x:g}" for x in self.report_thresholds]
+        )
 
 
 class System(Protocol):

@@ -608,7 +608,7 @@ API_CASES = [  # (id, keyword arguments, what the message says, the command line
     ),
     ("policies-empty", {"policies": []}, "policies: the list is empty", None),
     ("policies-a-dict", {"policies": {"always": 1}}, "a list of policy specs or objects is needed, got dict", None),
-    ("task-not-a-name", {"domain": 3}, "task: a task name (str) is needed, got int 3", None),
+    ("task-not-a-name", {"task": 3}, "task: a task name (str) is needed, got int 3", None),
     ("record-not-rrd", {"record": "r.txt"}, "r.txt does not end in .rrd", None),
     ("unpicklable-on-workers", {"policies": [_Unpicklable()], "workers": 2}, "workers=1", None),
     ("progress-not-a-bool", {"progress": "yes"}, "progress: True or False", None),
