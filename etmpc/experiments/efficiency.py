@@ -7,7 +7,8 @@ What one learner run (one seed) simulates, counted from what its files record:
   episodes that measure its feature normalisation;
 * **DPI**: the same normalisation, the choice of ``pi_0`` (every candidate schedule played on the
   selection episodes), its training episodes, and at each labelled decision (step ``t``) both
-  answers over ``K`` futures, ``2 K min(H, T - t)`` steps (the rollouts end with the episode);
+  answers over ``K`` futures, ``2 K min(H, T - t)`` steps (the rollouts end with the episode; three
+  answers on a task with compute levels);
 * **PPO**: the steps its environments took, the reward baseline's lockstep simulation included
   (``training.json``'s ``simulated_steps``).
 
@@ -64,7 +65,8 @@ def dpi_points(checkpoint: dict, curve: dict, baselines: dict, best: str, sense:
         cost = {}  # episode -> the rollouts' steps of its labels
         for entry in (t for t in checkpoint["training"] if t["seed"] == seed):
             labels = [next(rows) for _ in range(entry["labels"])]
-            cost[entry["episode"]] = sum(2 * dpi["futures"] * min(dpi["horizon"], steps - row[3]) for row in labels)
+            # a row holds each answer's return: 2 (keep, solve), or 3 with q_iterate last on a task with compute levels
+            cost[entry["episode"]] = sum((len(row) - 2) * dpi["futures"] * min(dpi["horizon"], steps - row[3]) for row in labels)
         per_seed.append(cost)
     points = []
     for p in curve["points"]:
