@@ -48,7 +48,7 @@ from etmpc.common.outputs import dumps, write_text
 from etmpc.control.timing import ITERATE, KEEP, SOLVE
 from etmpc.loop import AugmentedState
 from etmpc.policies.features import FEATURE_SETS, feature_size, raw_features
-from etmpc.systems import system_class
+from etmpc.systems import has_levels
 
 FORMAT = "etmpc-logistic-policy"
 VERSION = 2
@@ -304,8 +304,8 @@ _DECISIONS = {False: "keep or solve", True: "keep, one SQP iteration or a full s
 
 @lru_cache(maxsize=None)
 def task_has_levels(task: str) -> bool:
-    """Whether task ``task``'s decisions are compute levels (its Config's ``compute_levels``), without building it."""
-    return bool(getattr(system_class(task).Config(), "compute_levels", False))
+    """Whether task ``task``'s decisions are compute levels (:func:`etmpc.systems.has_levels`)."""
+    return has_levels(task)
 
 
 def write_json_atomically(path: Path, data: dict) -> None:

@@ -47,7 +47,7 @@ from etmpc.common.documents import read_document
 from etmpc.common.errors import EtmpcError
 from etmpc.loop import AugmentedState
 from etmpc.policies.features import observation, observation_names
-from etmpc.systems import canonical, system_class
+from etmpc.systems import canonical, has_levels, system_class
 from etmpc.policies.sb3_network import (  # noqa: F401 (re-exported: what reads a zip as data, and the network)
     ALGORITHMS,
     DEFAULT_NET_ARCH,
@@ -87,7 +87,7 @@ def normalise(obs: np.ndarray, mean: np.ndarray | None, scale: np.ndarray | None
 def task_actions(task: str) -> int:
     """The trigger environment's actions on ``task``: 3 on a task with compute levels, else 2 (read from
     its system's ``Config``, without building the system)."""
-    return 3 if getattr(getattr(system_class(task), "Config", None), "compute_levels", False) else 2
+    return 3 if has_levels(task) else 2
 
 
 def plays_on(trained_on: str, task: str) -> bool:

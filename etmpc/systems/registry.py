@@ -177,6 +177,12 @@ def stored_seed(name: str) -> int | None:
     return domain(domain_name).TEST_SET_SEEDS.get(task)
 
 
+def has_levels(name: str) -> bool:
+    """Whether task ``name``'s decisions are compute levels (keep, one SQP iteration, a full solve: its
+    Config's ``compute_levels``), read off the Config class without building the system."""
+    return bool(getattr(system_class(name).Config, "compute_levels", False))
+
+
 def system_class(name: str) -> type:
     """The :class:`~etmpc.systems.base.System` class of task ``name`` (``DOMAIN`` or ``DOMAIN/TASK``)."""
     domain_name, task = parse(name)
