@@ -29,7 +29,8 @@ def test_every_task_ships_a_file_that_reads_back_to_what_it_says(task):
     # And writing the settings gives a document that reads back to the same settings.
     assert hyperparams.parse(yaml.safe_load(hyperparams.dump(settings, task, "a comment")), task, "dump") == settings
     # The baseline is one of the task's fixed schedules (what the environment takes).
-    assert settings.reward_baseline in make_system(task).benchmark.baselines()
+    system = make_system(task)
+    assert settings.reward_baseline in system.benchmark.baselines(system.compute_levels)
 
 
 def test_settings_not_in_the_file_keep_the_given_defaults(tmp_path):
