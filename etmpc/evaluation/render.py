@@ -1,4 +1,6 @@
-"""``etmpc render``: play one test-set episode as ``evaluate`` does, and write its video (and recording)."""
+"""``etmpc render``: play one test-set episode as ``evaluate`` does, and write its video (and recording).
+On a task with time in the loop each frame is captioned: the plan in force, a new plan coming into force,
+a solve in flight (``etmpc.views.solves.frame_captions``)."""
 
 from __future__ import annotations
 
@@ -13,7 +15,8 @@ from etmpc.policies import parse_policy
 from etmpc.evaluation.inputs import check_shipped
 from etmpc.systems import check_name, system_class
 from etmpc.views.recording import Recorder
-from etmpc.views.video import check_display, check_framebuffer, check_scene, check_size, iter_frames, render_frames, write_video
+from etmpc.views.solves import frame_captions
+from etmpc.views.video import caption_frames, check_display, check_framebuffer, check_scene, check_size, iter_frames, write_video
 
 
 @dataclass(frozen=True)
@@ -53,11 +56,15 @@ def render_rollout(
     fps = 1.0 / env.control_timestep() if fps is None else fps
     states = traj.states[: traj.steps + 1]
     states = states[np.all(np.isfinite(states), axis=1)]  # an episode that diverged ends on a NaN row
+    kept = played.record(policy_spec, getattr(policy, "announce", None))
+    frames = iter_frames(system, env, states, width, height)
+    if kept.timed:  # time in the loop: each frame says which plan is in force, and which solve is in flight
+        frames = caption_frames(frames, frame_captions(kept, bool(system.compute_levels)))
     if record is None:  # frames go straight into the encoder
-        count = write_video(iter_frames(system, env, states, width, height), out, fps)
+        count = write_video(frames, out, fps)
     else:
-        frames = render_frames(system, env, states, width, height)
+        frames = list(frames)
         count = write_video(frames, out, fps)
         with Recorder(record) as recorder:
-            recorder.log_episode(played.record(policy_spec, getattr(policy, "announce", None)), frames)
+            recorder.log_episode(kept, frames)
     return RenderResult(path=Path(out), frames=count, fps=fps, trajectory=traj)

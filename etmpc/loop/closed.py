@@ -69,7 +69,7 @@ class ClosedLoop:
         self.reward, self.recomputed, self.level, self.work, self.cost = 0.0, False, KEEP, 0, 0.0
         self.latency, self.levels = system.latency, system.compute_levels
         self._per_iteration = self.levels  # a computation's work: its SQP iterations, else 1 per solve
-        self.pending: tuple[int, int, Plan] | None = None  # the solve in flight: (arrives at, made for, plan)
+        self.pending: tuple[int, int, Plan, int] | None = None  # the solve in flight: (arrives at, made for, plan, started)
         self._instant = True  # the next plan is made before the interval (the first, or after a restart)
 
     def reset(self, episode: Any = None) -> ClosedLoop:
@@ -163,7 +163,7 @@ class ClosedLoop:
             if delay == 0:
                 self._deliver(new, i, forced)
             else:  # made for step i (or, delay-compensated, for the step its prediction is of)
-                self.pending = (i + delay, i + (self.latency.intervals if self._compensates() else 0), new)
+                self.pending = (i + delay, i + (self.latency.intervals if self._compensates() else 0), new, i)
             self._instant = False
         plan = self.plan
         feedback_start = time.perf_counter() if records else 0.0
@@ -200,9 +200,9 @@ class ClosedLoop:
         if self.env.task.restarted:  # the task put the plant back: the plan (and one in flight) no longer applies
             self.age, self.pending, self._instant = plan.horizon, None, True
         elif self.pending is not None and self.pending[0] == self.step_index:
-            _, made, arrived = self.pending
+            _, made, arrived, started = self.pending
             self.pending = None
-            self._deliver(arrived, made, self.age >= plan.horizon, self.step_index)
+            self._deliver(arrived, made, self.age >= plan.horizon, self.step_index, started)
         if records:
             self.trajectory.step_time_s[i] = time.perf_counter() - start
             if self.timestep.last() or self.step_index >= system.episode_steps:
@@ -228,15 +228,16 @@ class ClosedLoop:
             )
         return level
 
-    def _deliver(self, new: Plan, made: int, expired: bool, now: int | None = None) -> None:
-        """Put ``new`` (made for step ``made``) in force now, unless it failed and the plan in force
-        still has steps left (``expired``: it has none, or there is no plan)."""
+    def _deliver(self, new: Plan, made: int, expired: bool, now: int | None = None, started: int | None = None) -> None:
+        """Put ``new`` (made for step ``made``, its computation started at ``started``) in force now, unless
+        it failed and the plan in force still has steps left (``expired``: it has none, or there is no plan)."""
         if new.success or expired or self.plan is None:
             now = made if now is None else now
             self.plan, self.age = new, now - made
             if self.records:
                 self.trajectory.plans.append((made, new))
                 self.trajectory.arrivals.append(now)
+                self.trajectory.starts.append(made if started is None else started)
 
     def _compensates(self) -> bool:
         return self.latency.compensate and self.latency.intervals > 0 and not self._instant and self.plan is not None

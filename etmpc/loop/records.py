@@ -38,6 +38,7 @@ class Trajectory:
     decide_time_s: np.ndarray  # (T,) wall time of the policy's decision (0 where the loop did not ask it)
     plans: list[tuple[int, Plan]] = field(default_factory=list)  # (step made for, plan), successful or used
     arrivals: list[int] = field(default_factory=list)  # the step each of plans came into force (its made step + latency)
+    starts: list[int] = field(default_factory=list)  # the step each of plans' computation started (its made step, or earlier)
     steps: int = 0
     solver_failures: int = 0
     nonfinite: bool = False  # the episode ended early on a non-finite state

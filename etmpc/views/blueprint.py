@@ -11,8 +11,10 @@ episode wide, on the ``step`` timeline:
   exogenous signals that have forecasts, each with every forecast the controller was given;
 - the inputs (applied, every plan's inputs, the bounds), the LQR correction, the other exogenous
   signals, and the prediction error ``‖W (x − x̂)‖`` (with a ``threshold:X`` policy's threshold);
-- the recomputes (the age of the plan each one replaced, by kind), the reward per step, the
-  running objective, and the recompute log.
+- the recomputes (the age of the plan each one replaced, by kind), on a task with time in the loop
+  the plan in force (with each solve's start and arrival) and each step's computation (level, work,
+  in flight), the reward per step, the running objective, and the recompute log (with each solve's
+  start and arrival there).
 
 Each quantity has a panel of its own, so none flattens another; legends are off (they cover data)
 and each panel's name says what its lines are. Rerun is imported only when a blueprint is built.
@@ -110,7 +112,8 @@ BOUND = (140, 140, 140)  # input bounds, thresholds: grey
 CHOSEN = (66, 133, 244)  # a recompute the policy chose: blue
 FORCED = (219, 68, 55)  # a recompute forced because the plan ran out: red
 FIRST = (140, 140, 140)
-ANNOUNCED = (15, 157, 88)  # what a self-trigger announced at a solve: green
+ANNOUNCED = (15, 157, 88)  # what a self-trigger announced at a solve, a plan that came into force: green
+ITERATION = (150, 90, 220)  # a computation of one SQP iteration (compute levels): violet
 # A plan's colour says when it was made: blue (episode start) -> violet -> teal -> green (end).
 _PLAN_ANCHORS = np.array([(70, 110, 235), (150, 90, 220), (0, 165, 190), (70, 185, 60)], float)
 PLAN_ALPHA = 210
@@ -212,6 +215,11 @@ def episode_container(layout: EpisodeLayout):
             + (" · ▲ announced at the solve" if "announced" in layout.entities else ""),
             ["recompute", "announced"],
         ),
+        view(
+            "plan in force: the step it was made for [step] · ● solve started ▲ plan in force ✕ no plan",
+            ["solve/in_force", "solve/started", "solve/arrived"],
+        ),
+        view("computation per step: level (1 one SQP iteration, 2 full solve), work, in flight", ["compute"]),
         view(f"reward per step [{units}]", ["objective/reward"]),
         view(f"running objective [{units}], computations included", ["objective/running"]),
     ]

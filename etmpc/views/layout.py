@@ -1,5 +1,6 @@
 """How an episode is laid out in a recording: its title line, the plans' slots and fans on the timeline,
-and the timeline of a series (for :class:`etmpc.views.recording.Recorder`)."""
+each solve's start and arrival (a task with time in the loop), and the timeline of a series (for
+:class:`etmpc.views.recording.Recorder`)."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ import numpy as np
 from etmpc.common.sense import cost_or_profit, higher_or_lower
 from etmpc.views import blueprint as look
 from etmpc.views.record import EpisodeRecord
+from etmpc.views.solves import in_force, solves
 
 
 def _about(name: str, record: EpisodeRecord, objective: float) -> str:
@@ -25,10 +27,78 @@ def _about(name: str, record: EpisodeRecord, objective: float) -> str:
         + f" · objective **{objective:.5g}** {unit if unit != '-' else ''} ({sense} is better)"
         f" · {int(record.recompute.sum())} computations, {forced} forced · seed {identity['seed']}"
         + (f" · policy `{spec}`" if spec != name else "")
+        + (f" · latency: {identity['latency']}" if "latency" in identity else "")
+        + (f" · work {record.work.sum():g} SQP iterations" if identity.get("compute_levels") else "")
         + "  \n"
         "Orange: what happened. Thin lines: each plan's prediction from the step it was made, coloured by when: "
         f"blue (early) → violet → teal → green (late). A step is {identity['control_interval_s']:g} s."
+        + (" A plan is in force from the step it arrives (▲), after its solve started (●)." if record.timed else "")
     )
+
+
+def _solve_series(record: EpisodeRecord) -> list[tuple]:
+    """A task with time in the loop: ``(path, steps, values, names, kind, style)`` of the series that show
+    each step's computation (``compute``: level, work, in flight, in the order ``replay`` reads them),
+    the plan in force (``solve/in_force``: the step it was made for) and, on the same axis, each
+    solve's start (``solve/started``, at the step it started) and arrival (``solve/arrived``, at the
+    step it was made for; one that gave no plan, at the step it started)."""
+    n, levels = record.steps, bool(record.identity.get("compute_levels"))
+    steps = np.arange(n)
+    made = [k for k, *_ in record.plans]
+    work_unit = "SQP iterations" if levels else "solves"
+    compute = np.column_stack([record.level, record.work, record.in_flight]).astype(float)
+    out = [
+        (
+            "compute",
+            steps,
+            compute,
+            ["level (0 keep, 1 one SQP iteration, 2 full solve)", f"work [{work_unit}]", "in flight (trigger not asked)"],
+            "SeriesLines",
+            dict(colors=[look.FORCED, look.REALISED, look.BOUND], widths=[1.5, 2.0, 1.0]),
+        ),
+        (
+            "solve/in_force",
+            steps,
+            in_force(record.arrivals, made, n).astype(float),
+            ["plan in force: the step it was made for [step]"],
+            "SeriesLines",
+            dict(colors=[look.REALISED], widths=[look.REALISED_WIDTH]),
+        ),
+    ]
+    every = solves(record)
+    if not every:
+        return out
+    start = np.array([v.start for v in every])
+    kinds = [("one SQP iteration started", np.array([v.level == 1 for v in every]))] if levels else []
+    kinds.append(("full solve started" if levels else "solve started", np.array([v.level != 1 for v in every])))
+    out.append(
+        (
+            "solve/started",
+            start,
+            np.column_stack([np.where(k, start, np.nan) for _, k in kinds]).astype(float),
+            [what for what, _ in kinds],
+            "SeriesPoints",
+            dict(
+                colors=[look.ITERATION, look.CHOSEN][-len(kinds) :],
+                markers=["circle"] * len(kinds),
+                marker_sizes=[3.5] * len(kinds),
+            ),
+        )
+    )
+    arrived = sorted((v.due, v.delivered, v.made_for if v.delivered else v.start) for v in every if v.due <= n)
+    if arrived:
+        due, delivered, y = (np.array(c) for c in zip(*arrived))
+        out.append(
+            (
+                "solve/arrived",
+                due,
+                np.column_stack([np.where(delivered, y, np.nan), np.where(delivered, np.nan, y)]).astype(float),
+                ["plan in force from here (y: the step it was made for)", "no plan in force (y: the step it started)"],
+                "SeriesPoints",
+                dict(colors=[look.ANNOUNCED, look.FORCED], markers=["up", "cross"], marker_sizes=[4.0, 4.5]),
+            )
+        )
+    return out
 
 
 def _slots(made: np.ndarray, length: int) -> tuple[np.ndarray, int]:

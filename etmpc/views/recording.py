@@ -29,7 +29,10 @@ episode started), and every series name carries its unit:
   ``threshold``: the threshold of a ``threshold:X`` policy;
 - ``objective/reward`` (the environment's, per step) and ``objective/running`` (the running
   objective, computations included, in its own sense; a computation's price is the identity's
-  ``recompute_price`` times ``decision``'s ``recompute``).
+  ``recompute_price`` times its work: ``compute``'s ``work`` where written, else ``decision``'s ``recompute``);
+- a task with time in the loop (its identity has ``latency`` and ``compute_levels``): ``compute`` (each
+  step's level, work and in flight), ``solve/in_force``, ``solve/started``, ``solve/arrived`` (the plan
+  in force and each solve's start and arrival: ``etmpc.views.layout._solve_series``), ``events/solves``.
 
 In one view, Rerun draws entities in the order of their paths: ``realised/…`` comes over
 ``plan/…`` and ``forecast/…``. The file carries a blueprint (``etmpc.views.blueprint``): a tab per
@@ -52,11 +55,13 @@ from etmpc.common.errors import EtmpcError
 from etmpc.common.sense import sign as sense_sign
 from etmpc.loop import computation_cost
 from etmpc.views.record import EpisodeRecord
-from etmpc.views.layout import _about, _fan, _slots, _timeline
+from etmpc.views.layout import _about, _fan, _slots, _solve_series, _timeline
+from etmpc.views.solves import solve_log
 
 APPLICATION_ID = "etmpc"
 END_MARKER = "/etmpc_recording_end"  # static, logged last: {"episodes": how many the file holds}
 DECISION_SERIES = ("recompute", "forced")
+COMPUTE_SERIES = ("level", "work", "in_flight")  # the columns of ``compute`` (etmpc.views.layout._solve_series)
 OBJECTIVE_SERIES = ("reward", "computation", "running")
 
 
@@ -321,9 +326,16 @@ class Recorder:
                 widths=[1.0],
             )
 
-        # The objective.
+        if record.timed:  # time in the loop: each step's computation, the plan in force, each solve's start and arrival
+            for path, steps, values, names, kind, style in _solve_series(record):
+                series(path, _timeline(steps, dt), values, names, kind=kind, **style)
+            steps, text, levels = solve_log(record, bool(identity.get("compute_levels")))
+            stream.send_columns(f"{root}/events/solves", _timeline(steps, dt), rr.TextLog.columns(text=text, level=levels))
+            written.append("events/solves")
+
+        # The objective: each computation priced by its work (1 per solve, or its SQP iterations).
         sign = sense_sign(identity["objective_sense"])
-        running = sign * np.cumsum(record.rewards - computation_cost(record.recompute, identity["recompute_price"]))
+        running = sign * np.cumsum(record.rewards - computation_cost(record.work, identity["recompute_price"]))
         series("objective/reward", self._steps(n, dt), record.rewards, ["reward"], **realised)
         series(
             "objective/running",

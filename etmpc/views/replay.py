@@ -17,7 +17,7 @@ import numpy as np
 from etmpc.common.errors import EtmpcError
 from etmpc.common.sense import higher_or_lower, oriented
 from etmpc.loop import computation_cost
-from etmpc.views.recording import DECISION_SERIES, END_MARKER, OBJECTIVE_SERIES
+from etmpc.views.recording import COMPUTE_SERIES, DECISION_SERIES, END_MARKER, OBJECTIVE_SERIES
 from etmpc.systems import canonical
 
 _ROOT = re.compile(r"^(.*/episode_\d+/repeat_\d+)/(.+)$")
@@ -30,13 +30,14 @@ READ = {
     "objective": OBJECTIVE_SERIES,
     "decision": DECISION_SERIES,
     "prediction_error": ("prediction_error",),
+    "compute": COMPUTE_SERIES,  # a task with time in the loop only
 }
 
 
 def read_recording(path: str | Path) -> dict[str, dict]:
     """``{episode root: {"identity": {...}, "reward": (steps, values), "recompute": …, "forced": …,
     "computation": …, "running": …, "prediction_error": …}}`` from a ``.rrd`` file, read with
-    Rerun's own reader."""
+    Rerun's own reader; on a task with time in the loop also ``"level"``, ``"work"``, ``"in_flight"``."""
     from rerun.chunk import RrdReader
 
     path = Path(path)
@@ -110,6 +111,7 @@ class ReplayedEpisode:
     prediction_error_mean: float
     prediction_error_max: float
     prediction_error_at_recompute: float  # mean error at the steps where the policy chose to recompute
+    work: float = float("nan")  # the priced work: the recomputes, or their SQP iterations on a task with compute levels
 
 
 def replay_summary(path: str | Path) -> list[ReplayedEpisode]:
@@ -122,8 +124,10 @@ def replay_summary(path: str | Path) -> list[ReplayedEpisode]:
         _, forced = data.get("forced", (None, np.zeros_like(recompute)))
         steps_err, errors = data.get("prediction_error", (np.zeros(0, int), np.zeros(0)))
         recomputes = int(recompute.sum())
-        # The same expressions as Trajectory.policy_return and evaluate.scores, on the same floats.
-        ret = float(rewards.sum() - computation_cost(recomputes, identity["recompute_price"]))
+        # The same expressions as Trajectory.policy_return and evaluate.scores, on the same floats: each
+        # computation priced by its work (a file without ``work``: one per recompute, the same floats).
+        work = float(data["work"][1].sum()) if "work" in data else recomputes
+        ret = float(rewards.sum() - computation_cost(work, identity["recompute_price"]))
         control = float(rewards.sum())
         objective, control = oriented(ret, identity["objective_sense"]), oriented(control, identity["objective_sense"])
         chosen = np.flatnonzero((recompute > 0) & (forced == 0))
@@ -144,6 +148,7 @@ def replay_summary(path: str | Path) -> list[ReplayedEpisode]:
                 prediction_error_mean=_mean(errors),
                 prediction_error_max=float(errors.max()) if len(errors) else float("nan"),
                 prediction_error_at_recompute=_mean(at_recompute),
+                work=float(work),
             )
         )
     out.sort(key=lambda r: (r.task, r.policy, r.episode, r.repeat))

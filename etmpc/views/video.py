@@ -11,6 +11,9 @@ intervals gives 101 frames, shown at one frame per control interval (10 fps) unl
 Videos are H.264 in yuv420p (plays everywhere; needs an even width and height), encoded with PyAV
 into a temporary file beside the destination and renamed into place, so an interrupted render never
 leaves a half-written file under the final name.
+
+:func:`caption_frames` writes lines of text over the frames' top left corner, on a dark band (what
+``etmpc render`` shows of time in the loop: ``etmpc.views.solves.frame_captions``).
 """
 
 from __future__ import annotations
@@ -91,6 +94,33 @@ def render_frames(system, env, states: np.ndarray, width: int = 640, height: int
     Leaves ``env.physics`` at the last state: reset the environment before playing it again.
     """
     return list(iter_frames(system, env, states, width, height))
+
+
+def caption_frames(frames: Iterable[np.ndarray], captions: Iterable[list[tuple[str, tuple]]]) -> Iterator[np.ndarray]:
+    """Each frame with its caption, lines of ``(text, RGB)``, drawn over its top left corner on a dark
+    band (Pillow's own font, sized to the frame's height); a frame without lines is left as it is."""
+    from PIL import Image, ImageDraw, ImageFont
+
+    font = None
+    for frame, lines in zip(frames, captions):
+        if not lines:
+            yield frame
+            continue
+        image = Image.fromarray(np.asarray(frame, dtype=np.uint8)).convert("RGBA")
+        if font is None:
+            try:  # a scalable font (Pillow >= 10.1 with FreeType), else Pillow's small bitmap one
+                font = ImageFont.load_default(size=max(8, image.height // 30))
+            except (TypeError, ImportError, OSError):
+                font = ImageFont.load_default()
+            size = font.getbbox("Ag")[3]
+            pitch = size + max(2, size // 4)
+        band = Image.new("RGBA", image.size, (0, 0, 0, 0))
+        draw = ImageDraw.Draw(band)
+        width = max(draw.textlength(text, font=font) for text, _ in lines)
+        draw.rectangle((0, 0, int(width) + 2 * pitch // 3, len(lines) * pitch + pitch // 3), fill=(0, 0, 0, 150))
+        for row, (text, colour) in enumerate(lines):
+            draw.text((pitch // 3, pitch // 4 + row * pitch), text, fill=tuple(colour) + (255,), font=font)
+        yield np.asarray(Image.alpha_composite(image, band).convert("RGB"))
 
 
 def write_video(frames: Iterable[np.ndarray], path: str | Path, fps: float) -> int:

@@ -224,3 +224,12 @@ def test_a_python_trigger_answers_a_compute_level_as_the_built_in_schedule_does(
     built_in = run_episode(system, system.make_env(), parse_policy("iterate:2", system), None, episode)
     np.testing.assert_array_equal(mine.rewards, built_in.rewards)
     np.testing.assert_array_equal(mine.level, built_in.level)
+
+
+def test_the_trajectory_keeps_when_each_plans_computation_started_and_when_it_came_into_force():
+    d = 2
+    system = _kicks(latency=Latency(intervals=d, compensate=True))
+    traj = run_episode(system, system.make_env(), parse_policy("every:4", system), None, _episode(system, 1))
+    assert len(traj.starts) == len(traj.plans) == len(traj.arrivals) and traj.starts[0] == 0
+    for start, (made, _), arrived in zip(traj.starts[1:], traj.plans[1:], traj.arrivals[1:]):
+        assert traj.recompute[start] and made == start + d == arrived  # compensated: made for its arrival
