@@ -7,8 +7,8 @@ MPC as ``kicks``, with a controller whose solves take time.
   plan (a real-time iteration) or solves to convergence. Each is priced 0.05 per SQP iteration and
   takes ``ceil(iterations x 30 ms / 0.1 s)`` intervals, on a notional embedded target where one
   Gauss-Newton SQP iteration of this OCP (N = 20, four states, full multiple shooting) takes 30 ms.
-  That figure is an assumption of the task, not a measurement: on a desktop x86-64 core the compiled
-  iteration takes about 0.2 ms. A full solve here takes 1 to 8 iterations (2 to 4 typically).
+  That figure is an assumption of the task, not a measurement (a desktop core is two orders of
+  magnitude faster). A full solve takes more iterations after a jump or from a cold start.
 
 Their test sets are ``kicks``' episodes (the same seed), so a trigger's score with and without
 latency is paired episode by episode.
@@ -22,7 +22,7 @@ from etmpc.control.timing import Latency
 from etmpc.systems.cart_pendulum.kicks_system import Config, KicksSystem
 
 #: The target platform of ``kicks_levels``: the time one SQP iteration takes there (an assumption).
-PLATFORM = "a notional embedded target, 30 ms per SQP iteration"
+PLATFORM = "a notional embedded target"
 
 
 @dataclass(frozen=True)
