@@ -53,8 +53,8 @@ class Benchmark:
 
     def baselines(self, levels: bool = False) -> list[str]:
         """Reproduce's fixed policies: always, never, every:T and threshold:X; with compute ``levels``,
-        iterate:T too (one SQP iteration at the same periods)."""
-        iterations = [f"iterate:{t}" for t in self.periods] if levels else []
+        iterate:T too (one SQP iteration every step, and at the same periods)."""
+        iterations = [f"iterate:{t}" for t in (1, *self.periods)] if levels else []
         return (
             ["always", "never"]
             + [f"every:{t}" for t in self.periods]

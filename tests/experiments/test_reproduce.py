@@ -17,6 +17,10 @@ from etmpc.systems import folder_name, make_system, names
 
 from tests.conftest import REPO
 
+# Every registered task but the two whose only difference from kicks and jumps is a fixed latency:
+# kicks_levels takes every path of time in the loop they take (a late plan, the trigger not asked) and more.
+TASKS = [t for t in names() if t not in ("cart_pendulum/kicks_late", "reacher/jumps_late")]
+
 TINY = Settings(
     seeds=(0, 1),
     episodes=2,
@@ -43,7 +47,7 @@ TINY = Settings(
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
     out = tmp_path_factory.mktemp("reproduce")
-    return out, reproduce(out, TINY, workers=1, progress=False)
+    return out, reproduce(out, TINY, workers=1, domains=TASKS, progress=False)
 
 
 @pytest.mark.slow
@@ -94,7 +98,7 @@ def test_report_states_the_json_numbers_and_the_files_exist(run):
     out, results = run
     report = (out / "REPORT.md").read_text()
     assert json.loads((out / "results.json").read_text())["systems"] == results["systems"]
-    assert set(results["systems"]) == set(names())  # every registered task, the paper's and the others
+    assert set(results["systems"]) == set(TASKS)  # the paper's tasks, the others and time in the loop
     for name, r in results["systems"].items():
         folder, best = folder_name(name), r["best_fixed"]
         assert f"| `{best['policy']}` **(best fixed)** | {best['objective_mean']:.5f} |" in report
@@ -127,11 +131,11 @@ def test_report_states_the_json_numbers_and_the_files_exist(run):
 def test_a_second_run_continues_and_other_settings_are_refused(run):
     out, results = run
     mtimes = {p: p.stat().st_mtime_ns for p in out.rglob("*") if p.is_file() and p.name not in ("results.json", "REPORT.md")}
-    again = reproduce(out, TINY, workers=1, progress=False)
+    again = reproduce(out, TINY, workers=1, domains=TASKS, progress=False)
     assert again["systems"] == results["systems"]
     assert {p: p.stat().st_mtime_ns for p in mtimes} == mtimes  # nothing was redone
     with pytest.raises(EtmpcError, match="other settings"):
-        reproduce(out, Settings(seeds=(0,), episodes=2, eval_every=1, test_episodes=3), workers=1, progress=False)
+        reproduce(out, Settings(seeds=(0,), episodes=2, eval_every=1, test_episodes=3), workers=1, domains=TASKS, progress=False)
 
 
 @pytest.mark.slow

@@ -129,6 +129,9 @@ def test_shipped_keep_or_solve_policies_read_and_decide_as_before():
     rng = np.random.default_rng(9)
     for path in sorted((REPO / "policies").glob("*/learned.json")):
         data = json.loads(path.read_text())
+        if task_has_levels(data["domain"]):  # a levels task's own policy: format 3 (the other tests)
+            assert data["version"] == 3 and "theta_level" in data
+            continue
         policy = load_policy(path, data["domain"])
         assert data["version"] == 2 and "theta_level" not in data and not policy.levels
         assert policy.to_json() == data

@@ -102,7 +102,7 @@ def test_with_the_matched_plant_a_kept_plan_predicts_the_plant(system):
     errors = {}
     for plant in ("matched", "mismatched"):
         sys_ = SliderSystem(SliderSystem.Config(plant=plant))
-        traj = run_episode(sys_, sys_.make_env(), parse_policy("never", sys_.error_weights), None, episode)
+        traj = run_episode(sys_, sys_.make_env(), parse_policy("never", sys_), None, episode)
         errors[plant] = np.abs(traj.states[: traj.steps] - traj.predicted)
     assert errors["matched"].max() < 1e-4
     assert errors["mismatched"].max() > 5e-3
@@ -125,7 +125,7 @@ def test_the_system_has_every_member_etmpc_asks_for(system):
 
     assert isinstance(system, SystemBase) and [m for m in REQUIRED + DERIVED if not hasattr(system, m)] == []
     offered = {f for f in CAPABILITIES if provides(system, f)}
-    assert offered == {"experiments", "rollouts", "exogenous features", "render", "bench"}
+    assert offered == {"experiments", "rollouts", "exogenous features", "render", "bench", "time in the loop"}
     assert (system.name, system.objective_sense, system.horizon, system.recompute_price) == ("slider", "min", 10, 0.13)
     assert system.u_min.shape == system.u_max.shape == (1,) and system.error_weights.shape == (2,)
 
