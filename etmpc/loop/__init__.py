@@ -8,6 +8,11 @@ If a solve fails, the previous plan is kept while it has steps left (the feedbac
 around it) and the failure is counted; a forced solve that fails is used as it is (the solver's last
 iterate). Every recompute attempt counts as a computation (``a_i = 1``).
 
+With time in the loop (a task's ``Config.latency`` and ``compute_levels``, :mod:`etmpc.control.timing`)
+a solve started at step ``k`` delivers its plan at ``k + d`` while the kept plan runs, the trigger is
+not asked meanwhile, and a decision may be one SQP iteration instead of a full solve, priced by its
+iterations. Latency 0 is the loop above, bit for bit.
+
 A system plugs in by providing what :class:`etmpc.systems.base.System` lists; a policy by providing
 what :class:`Policy` lists, deciding from an :class:`AugmentedState`. Nothing here knows about MuJoCo,
 batteries or any particular policy.
