@@ -26,7 +26,7 @@ from etmpc.policies.specs import names_a_kind
 from etmpc.policies.user import checked
 from etmpc.views.record import EpisodeRecord
 from etmpc.views.recording import Recorder
-from etmpc.systems import SystemKey, system_class, system_key
+from etmpc.systems import SystemKey, has_levels, system_key
 from etmpc.evaluation.inputs import check_run_outputs, check_shipped, run_inputs
 from etmpc.evaluation.mainscript import refuse_in_rerun_main, unimportable_main
 from etmpc.evaluation.workers import BACKENDS, make_backend, play_test_episode, workers_for
@@ -318,7 +318,7 @@ def format_table(evaluation: Evaluation) -> str:
         f"{'policy':<{width}}{'objective':>12}{'± std':>10}{'control':>11}{'recomputes':>12}{extra}"
         f"{'solver failures':>17}{'non-finite':>12}"
     )
-    levels = getattr(system_class(f"{evaluation.domain}/{evaluation.task}").Config, "compute_levels", False)
+    levels = has_levels(f"{evaluation.domain}/{evaluation.task}")
     lines = [
         f"{evaluation.domain}/{evaluation.task}: objective ({higher_or_lower(sense)} is better), "
         f"test set {evaluation.testset_sha256[:12]}, {evaluation.recompute_price:g} per "

@@ -163,9 +163,9 @@ class Learner(ABC):
 
 def check_decisions(learner: Learner | type[Learner], task: str) -> None:
     """Refuse, in one line, a learner that trains only keep-or-solve triggers on a task with compute levels."""
-    from etmpc.policies.learned import task_has_levels
+    from etmpc.systems import has_levels
 
-    if learner.keep_or_solve_only and task_has_levels(task):
+    if learner.keep_or_solve_only and has_levels(task):
         raise EtmpcError(
             f"{learner.name} needs a task whose decisions are keep or solve; task {task}'s are keep, one SQP "
             "iteration or a full solve (compute levels): train it with --algorithm dpi"

@@ -11,8 +11,7 @@ from etmpc.common.errors import EtmpcError
 from etmpc.learning import dpi
 from etmpc.learning.gpomdp import Settings
 from etmpc.policies.features import DEFAULT_FEATURES, check_features
-from etmpc.policies.learned import task_has_levels
-from etmpc.systems import SystemKey, canonical
+from etmpc.systems import SystemKey, canonical, has_levels
 
 TRAIN_ENTROPY = 0x6574_6D70_6321  # "etmpc!"
 NORMALISATION_ENTROPY = 0x6E6F_726D  # "norm"
@@ -53,7 +52,7 @@ class TrainConfig:
         self.system  # a bad price fails here
         # On a task with compute levels DPI's default first schedules include iterate:2..5, written out here
         # (so the checkpoint and the policy's hyperparameters say which it chose among).
-        object.__setattr__(self, "dpi", dpi.level_bases(self.dpi, task_has_levels(self.domain)))
+        object.__setattr__(self, "dpi", dpi.level_bases(self.dpi, has_levels(self.domain)))
 
     @property
     def system(self) -> SystemKey:

@@ -21,8 +21,8 @@ from etmpc.learning.checkpoint import RunState, load_checkpoint, ours, policy_of
 from etmpc.learning.config import SELECTION_ENTROPY, TrainConfig
 from etmpc.learning.jobs import _call, _learner_to_json, mean_scores
 from etmpc.policies.features import DEFAULT_FEATURES, check_features
-from etmpc.policies.learned import LogisticPolicy, Normalisation, task_has_levels
-from etmpc.systems import SystemKey, make_system
+from etmpc.policies.learned import LogisticPolicy, Normalisation
+from etmpc.systems import SystemKey, has_levels, make_system
 from etmpc.views.recording import Recorder
 
 
@@ -207,7 +207,7 @@ class _Phased(Learner):
         if config.recompute_price is not None:  # trained for another price than the system's own
             hyper["recompute_price"] = config.recompute_price
         hyper.update(self._hyperparameters(config))
-        greedy, levels = config.algorithm == "dpi", task_has_levels(config.domain)
+        greedy, levels = config.algorithm == "dpi", has_levels(config.domain)
         initial = LogisticPolicy.initial(normalisation, config.domain, hyper, config.features, greedy=greedy, levels=levels)
         learner, base = self._start(config, initial)
         # One learner per seed, sharing nothing (a DPI learner's labels grow in place).

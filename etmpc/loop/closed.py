@@ -68,7 +68,6 @@ class ClosedLoop:
         # the last step's: the task's reward, whether it computed, what (a level), its work and its price
         self.reward, self.recomputed, self.level, self.work, self.cost = 0.0, False, KEEP, 0, 0.0
         self.latency, self.levels = system.latency, system.compute_levels
-        self._per_iteration = self.levels  # a computation's work: its SQP iterations, else 1 per solve
         self.pending: tuple[int, int, Plan, int] | None = None  # the solve in flight: (arrives at, made for, plan, started)
         self._instant = True  # the next plan is made before the interval (the first, or after a restart)
 
@@ -158,7 +157,7 @@ class ClosedLoop:
         work = 0
         if level != KEEP:
             new = solved if solved is not None else self._compute(level, i)
-            work = new.iterations if self._per_iteration else 1
+            work = new.iterations if self.levels else 1  # its SQP iterations on a task with levels, else 1 per solve
             delay = 0 if self._instant else self.latency.delay(new.iterations, system.control_interval_s)
             if delay == 0:
                 self._deliver(new, i, forced)

@@ -37,7 +37,6 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import dataclass, field
-from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -275,7 +274,7 @@ class LogisticPolicy:
 
 def load_policy(path: str | Path, domain: str | None = None, nx: int | None = None) -> LogisticPolicy:
     """Read a saved policy; check it was made for ``domain``, decides as that task's decisions are (keep or
-    solve, or compute levels: :func:`task_has_levels`) and its feature size fits ``nx`` states."""
+    solve, or compute levels: :func:`etmpc.systems.has_levels`) and its feature size fits ``nx`` states."""
     path = Path(path)
     try:
         data = json.loads(path.read_text())
@@ -286,7 +285,7 @@ def load_policy(path: str | Path, domain: str | None = None, nx: int | None = No
     policy = LogisticPolicy.from_json(data, where=f"policy file {path}")
     if domain is not None and policy.domain != domain:
         raise PolicyFileError(f"policy file {path} was trained on {policy.domain!r}, not {domain!r}")
-    if domain is not None and policy.levels != task_has_levels(domain):
+    if domain is not None and policy.levels != has_levels(domain):
         raise PolicyFileError(
             f"policy file {path} decides {_DECISIONS[policy.levels]}, but task {domain}'s decisions are "
             f"{_DECISIONS[not policy.levels]}: train a policy for it"
@@ -300,12 +299,6 @@ def load_policy(path: str | Path, domain: str | None = None, nx: int | None = No
 
 
 _DECISIONS = {False: "keep or solve", True: "keep, one SQP iteration or a full solve (compute levels)"}
-
-
-@lru_cache(maxsize=None)
-def task_has_levels(task: str) -> bool:
-    """Whether task ``task``'s decisions are compute levels (:func:`etmpc.systems.has_levels`)."""
-    return has_levels(task)
 
 
 def write_json_atomically(path: Path, data: dict) -> None:

@@ -10,7 +10,8 @@ import pytest
 from etmpc.cli import main
 from etmpc.control.timing import ITERATE, KEEP, SOLVE
 from etmpc.policies import AugmentedState, parse_policy
-from etmpc.policies.learned import LogisticPolicy, Normalisation, PolicyFileError, load_policy, task_has_levels
+from etmpc.policies.learned import LogisticPolicy, Normalisation, PolicyFileError, load_policy
+from etmpc.systems import has_levels
 from tests.conftest import REPO
 
 LEVELS, KICKS, LATE = "cart_pendulum/kicks_levels", "cart_pendulum/kicks", "cart_pendulum/kicks_late"
@@ -125,11 +126,11 @@ def test_a_keep_or_solve_file_for_a_task_with_levels_is_refused_and_version_3_ne
 def test_shipped_keep_or_solve_policies_read_and_decide_as_before():
     """Format version 2, no theta_level, written back as they are read; bool decisions; the kicks policy
     passes the levels check on kicks_late (keep or solve, as kicks)."""
-    assert not task_has_levels(KICKS) and not task_has_levels(LATE) and task_has_levels(LEVELS)
+    assert not has_levels(KICKS) and not has_levels(LATE) and has_levels(LEVELS)
     rng = np.random.default_rng(9)
     for path in sorted((REPO / "policies").glob("*/learned.json")):
         data = json.loads(path.read_text())
-        if task_has_levels(data["domain"]):  # a levels task's own policy: format 3 (the other tests)
+        if has_levels(data["domain"]):  # a levels task's own policy: format 3 (the other tests)
             assert data["version"] == 3 and "theta_level" in data
             continue
         policy = load_policy(path, data["domain"])
