@@ -1,13 +1,19 @@
 """A MuJoCo plant from its MJCF file in ``models/``, under a plant setting: ``mismatched`` (the file as it
 is, unlike the MPC's predictor on purpose) or ``matched`` (edited to agree with the predictor, which a
-test then checks: it pins down the sign conventions)."""
+test then checks: it pins down the sign conventions), and :class:`Physics`, what every MuJoCo plant's
+physics shares: snapshots of the whole ``mjData`` and dm-control's RK4 stepping with its check inlined."""
 
 from __future__ import annotations
 
+import copy
+import logging
 from collections.abc import Callable
 from pathlib import Path
 
+import mujoco
 from dm_control import mjcf
+from dm_control.mujoco import Physics as MjPhysics
+from dm_control.rl import control
 
 from etmpc.common.errors import UnknownNameError
 from etmpc.common.resources import model_path
@@ -28,3 +34,33 @@ def load_plant(
     if timestep_s is not None:
         root.option.timestep = timestep_s
     return root
+
+
+class Physics(MjPhysics):
+    """A MuJoCo plant's physics: a task's subclass adds its named accessors (its vocabulary)."""
+
+    # -- snapshots (rollouts) ---------------------------------------------------------------------
+    def snapshot(self) -> mujoco.MjData:
+        """A copy of the whole ``mjData`` (state, mocap bodies, applied forces, every derived quantity)."""
+        return copy.copy(self.data.ptr)
+
+    def restore(self, snapshot: mujoco.MjData) -> None:
+        """Put back a snapshot, taken here or in a twin physics of the same model, exactly."""
+        mujoco.mj_copyData(self.data.ptr, self.model.ptr, snapshot)
+
+    # -- stepping ---------------------------------------------------------------------------------
+    def step(self, nstep: int = 1) -> None:
+        """Advance ``nstep`` physics steps, as dm-control's legacy stepping does for RK4 (``mj_step``,
+        then ``mj_step1`` to bring mjData up to the new state), with its invalid-state check inlined
+        (this is the hot loop of every rollout)."""
+        m, d = self.model.ptr, self.data.ptr
+        warnings_before = self._warnings.tolist()
+        mujoco.mj_step(m, d, nstep)  # mj_step computes all it uses from the state: mj_step1 is needed after the last only
+        mujoco.mj_step1(m, d)
+        warnings_after = self._warnings.tolist()
+        if warnings_after != warnings_before:
+            names = [name for name, b, a in zip(mujoco.mjtWarning.__members__, warnings_before, warnings_after) if a > b]
+            message = f"Physics state is invalid. Warning(s) raised: {', '.join(names)}"
+            if self._warnings_cause_exception:
+                raise control.PhysicsError(message)
+            logging.warning(message)

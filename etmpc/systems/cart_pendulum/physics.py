@@ -14,7 +14,6 @@ Two plant settings (see the MJCF header for the numbers):
 
 from __future__ import annotations
 
-import copy
 import logging
 import math
 from dataclasses import dataclass
@@ -22,9 +21,9 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 from dm_control import mjcf
-from dm_control.mujoco import Physics as MjPhysics
 from dm_control.rl import control
 
+from etmpc.systems.plants import Physics as PlantPhysics
 from etmpc.systems.plants import load_plant
 from etmpc.systems.cart_pendulum.model import Parameters
 
@@ -77,7 +76,7 @@ def load_model(
     return root
 
 
-class Physics(MjPhysics):
+class Physics(PlantPhysics):
     """Cart-pendulum physics with named accessors and the held angular disturbance."""
 
     bumpers: Bumpers | None = None  # set by a task with a rail (kicks): see step()
@@ -139,15 +138,6 @@ class Physics(MjPhysics):
         if not math.isfinite(value):
             raise ValueError(f"the cart pendulum's force must be finite, got {value}")
         self.data.ctrl[0] = value
-
-    # -- snapshots (rollouts) ---------------------------------------------------------------------
-    def snapshot(self) -> mujoco.MjData:
-        """A copy of the whole ``mjData`` (state, disturbance, and every derived quantity)."""
-        return copy.copy(self.data.ptr)
-
-    def restore(self, snapshot: mujoco.MjData) -> None:
-        """Put back a snapshot, taken here or in a twin physics of the same model, exactly."""
-        mujoco.mj_copyData(self.data.ptr, self.model.ptr, snapshot)
 
     # -- stepping ---------------------------------------------------------------------------------
     def step(self, nstep: int = 1) -> None:

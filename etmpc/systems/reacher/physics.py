@@ -12,16 +12,12 @@ go; it does not act on the arm.
 
 from __future__ import annotations
 
-import copy
-import logging
 import math
 
-import mujoco
 import numpy as np
 from dm_control import mjcf
-from dm_control.mujoco import Physics as MjPhysics
-from dm_control.rl import control
 
+from etmpc.systems.plants import Physics as PlantPhysics
 from etmpc.systems.plants import load_plant
 from etmpc.systems.reacher.model import NU, Parameters
 
@@ -44,8 +40,8 @@ def load_model(plant: str = "mismatched", timestep_s: float | None = None) -> mj
     return load_plant("reacher.xml", plant, _matched, timestep_s)
 
 
-class Physics(MjPhysics):
-    """The reacher's physics with named accessors."""
+class Physics(PlantPhysics):
+    """The reacher's physics with named accessors (snapshots and stepping: :class:`~etmpc.systems.plants.Physics`)."""
 
     def _reload_from_data(self, data):  # called by dm-control whenever the model is (re)bound
         super()._reload_from_data(data)
@@ -98,29 +94,3 @@ class Physics(MjPhysics):
         if not np.all(np.isfinite(torque)):
             raise ValueError(f"the reacher's torques must be finite, got {torque.tolist()}")
         self.data.ctrl[:] = torque
-
-    # -- snapshots (rollouts) ---------------------------------------------------------------------
-    def snapshot(self) -> mujoco.MjData:
-        """A copy of the whole ``mjData`` (state, target, and every derived quantity)."""
-        return copy.copy(self.data.ptr)
-
-    def restore(self, snapshot: mujoco.MjData) -> None:
-        """Put back a snapshot, taken here or in a twin physics of the same model, exactly."""
-        mujoco.mj_copyData(self.data.ptr, self.model.ptr, snapshot)
-
-    # -- stepping ---------------------------------------------------------------------------------
-    def step(self, nstep: int = 1) -> None:
-        """Advance ``nstep`` physics steps, as dm-control's legacy stepping does for RK4 (``mj_step``,
-        then ``mj_step1`` to bring mjData up to the new state), with its invalid-state check inlined
-        (this is the hot loop of every rollout)."""
-        m, d = self.model.ptr, self.data.ptr
-        warnings_before = self._warnings.tolist()
-        mujoco.mj_step(m, d, nstep)  # mj_step computes all it uses from the state: mj_step1 is needed after the last only
-        mujoco.mj_step1(m, d)
-        warnings_after = self._warnings.tolist()
-        if warnings_after != warnings_before:
-            names = [name for name, b, a in zip(mujoco.mjtWarning.__members__, warnings_before, warnings_after) if a > b]
-            message = f"Physics state is invalid. Warning(s) raised: {', '.join(names)}"
-            if self._warnings_cause_exception:
-                raise control.PhysicsError(message)
-            logging.warning(message)
