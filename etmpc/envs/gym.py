@@ -9,7 +9,8 @@ diverged plant's are clipped to that range, never NaN). ``reset(seed=S)`` draws 
 {"test_episode": i})`` plays episode ``i`` of the stored test set. An episode ends ``truncated`` at the
 task's time limit, ``terminated`` only when the plant fails. ``info`` holds the step's
 ``control_reward`` and ``computation_cost`` (the reward is their difference), whether it
-``recompute``-d and whether that was ``forced``. See :mod:`etmpc.envs.trigger` for the rest.
+``recompute``-d and whether that was ``forced``, and the episode's ``failures`` so far (an int, on
+every task that counts them). See :mod:`etmpc.envs.trigger` for the rest.
 
 ``normalize="policies/<task>/ppo.json"`` hands out the observation normalised as that trained policy
 saw it (:class:`~etmpc.envs.normalization.Normalization`: ``VecNormalize``'s statistics, frozen, read

@@ -19,6 +19,9 @@ trajectory that ``evaluate`` reports for them (``tests/envs/test_trigger_env.py`
 * **Reward**: the task's reward for the interval minus the price of a computation when one was made,
   forced ones included (:attr:`info` has both parts). Higher is better on every task: the cart
   pendulum's reward is ``-beta^2``.
+* **Failures**: :attr:`info` ``["failures"]`` is the episode's failures so far (an int: the task's
+  ``failures``, e.g. falls or steps off balance, counted over the steps played; 0 at the reset), on every
+  task that counts them (every built-in one); at the episode's end it is what ``evaluate`` reports for it.
 * **Reward against a baseline** (``reward_baseline="every:3"``, off by default): the same episode is
   also played, in lockstep, under a fixed schedule (``always``, ``never`` or ``every:T``), and the
   reward is the agent's minus the baseline's for the same interval. The baseline never depends on the
@@ -142,6 +145,7 @@ class TriggerEnvironment(dm_env.Environment):
         self._test_set_path = test_set
         self._test_set = None
         self.info: dict = {}
+        self._episode = None  # the episode being played
         self.reward_baseline = None if reward_baseline is None else _fixed_schedule(reward_baseline, self.system)
         self._shadow = None if reward_baseline is None else ClosedLoop(self.system, self.key.make().make_env())
         self.simulated_steps = 0  # the agent's steps, and the baseline's
@@ -161,9 +165,10 @@ class TriggerEnvironment(dm_env.Environment):
             test_episode = check_index(test_episode)
         episode = self.system.draw_episode(self._rng) if test_episode is None else self.test_episode(test_episode)
         self.loop.reset(episode)
+        self._episode = episode
         if self._shadow is not None:
             self._shadow.reset(episode)
-        self.info = {"step": 0}
+        self.info = {"step": 0} | self._failures()
         return dm_env.restart(self._observation())
 
     def step(self, action) -> dm_env.TimeStep:
@@ -182,7 +187,7 @@ class TriggerEnvironment(dm_env.Environment):
             "control_reward": loop.reward,
             "computation_cost": loop.cost,
             "nonfinite": loop.trajectory.nonfinite,
-        }
+        } | self._failures()
         if not (self.system.latency.instant and self.actions == 2):  # time in the loop: what was computed, and when
             self.info |= {"in_flight": in_flight, "level": int(loop.level), "work": loop.work, "pending": loop.in_flight}
         self.simulated_steps += 1
@@ -195,6 +200,12 @@ class TriggerEnvironment(dm_env.Environment):
         if loop.trajectory.nonfinite:  # the plant failed: a termination
             return dm_env.termination(reward, self._observation())
         return dm_env.truncation(reward, self._observation())
+
+    def _failures(self) -> dict:
+        """``{"failures": n}``, the episode's failures so far, on a task that counts them (else nothing)."""
+        if self.system.failures is None:
+            return {}
+        return {"failures": int(self.system.failures(self.loop.trajectory, self._episode))}
 
     def _baseline_step(self) -> float:
         """One interval of the baseline's loop (its reward net of its computations; 0 once it is over)."""

@@ -30,7 +30,7 @@ from etmpc.systems import SystemKey, has_levels, system_key
 from etmpc.evaluation.inputs import check_run_outputs, check_shipped, run_inputs
 from etmpc.evaluation.mainscript import refuse_in_rerun_main, unimportable_main
 from etmpc.evaluation.workers import BACKENDS, make_backend, play_test_episode, workers_for
-from etmpc.evaluation.results import Evaluation, PolicySummary, RunResult, summarise  # noqa: F401 (re-exported)
+from etmpc.evaluation.results import Evaluation, PolicySummary, RunResult, failures_cell, summarise  # noqa: F401 (re-exported)
 
 
 # -- worker side ---------------------------------------------------------------------------------
@@ -59,7 +59,7 @@ def _run(job: tuple) -> tuple[RunResult, EpisodeRecord | None, dict[str, float]]
             solver_failures=traj.solver_failures,
             steps=traj.steps,
             finite=not traj.nonfinite,
-            failures=None if played.system.failures is None else played.system.failures(traj.rewards[: traj.steps]),
+            failures=None if played.system.failures is None else played.system.failures(traj, played.episode),
         ),
         (
             played.record(spec, getattr(policy, "announce", None), upper_bound=bool(getattr(policy, "upper_bound", False)))
@@ -313,7 +313,8 @@ def format_table(evaluation: Evaluation) -> str:
     names = {s.policy: s.policy + (" (upper bound)" if s.upper_bound else "") for s in evaluation.summaries}
     width = max([16] + [len(name) + 2 for name in names.values()])  # long rl:PATH specs stay aligned
     task_failures = next((s.failure_name for s in evaluation.summaries if s.failure_name), None)
-    extra = f"{task_failures + '/episode':>{len(task_failures) + 10}}" if task_failures else ""
+    failures_width = max(len(task_failures) + 10, 16) if task_failures else 0
+    extra = f"{task_failures + '/episode':>{failures_width}}" if task_failures else ""
     head = (
         f"{'policy':<{width}}{'objective':>12}{'± std':>10}{'control':>11}{'recomputes':>12}{extra}"
         f"{'solver failures':>17}{'non-finite':>12}"
@@ -327,7 +328,7 @@ def format_table(evaluation: Evaluation) -> str:
         "-" * len(head),
     ]
     for s in evaluation.summaries:
-        column = f"{s.failures_mean:>{len(extra)}.2f}" if task_failures else ""
+        column = f"{failures_cell(s.failures_mean, s.failures_ci95):>{failures_width}}" if task_failures else ""
         lines.append(
             f"{names[s.policy]:<{width}}{s.objective_mean:>12.5f}{s.objective_std:>10.5f}{s.control_objective_mean:>11.5f}"
             f"{s.recomputes_mean:>12.2f}{column}{s.solver_failures:>17d}{s.nonfinite_episodes:>12d}"
@@ -337,6 +338,8 @@ def format_table(evaluation: Evaluation) -> str:
         if evaluation.summaries
         else ""
     )
+    if task_failures:
+        lines.append(f"{task_failures}/episode: the task's failures, mean ± 95 % CI over the episodes (1.96 sd / √n)")
     if any(s.upper_bound for s in evaluation.summaries):
         lines.append(
             "(upper bound): an oracle knows each episode's future; it bounds what a trigger can gain and is not a policy"

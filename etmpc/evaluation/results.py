@@ -16,6 +16,7 @@ import numpy as np
 from etmpc.common.documents import loads
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import write_json
+from etmpc.evaluation import metrics
 
 
 @dataclass(frozen=True)
@@ -50,6 +51,7 @@ class PolicySummary:
     upper_bound: bool = False  # an oracle: it knows the episode's future; a bound, not a policy
     failures_mean: float | None = None  # the task's failures per episode (failure_name), if it counts them
     failure_name: str | None = None
+    failures_ci95: float | None = None  # 1.96 sd / sqrt(n) of the failures over the episodes (NaN below two)
 
 
 def summarise(
@@ -66,11 +68,14 @@ def summarise(
     finite = [r for r in runs if r.finite]
     by_episode: dict[int, list[float]] = {}
     by_repeat: dict[int, list[float]] = {}
+    failures_by_episode: dict[int, list[int]] = {}
     for r in finite:
         by_episode.setdefault(r.episode, []).append(r.objective)
         by_repeat.setdefault(r.repeat, []).append(r.objective)
+        failures_by_episode.setdefault(r.episode, []).append(r.failures)
     mean = lambda values: float(np.mean(values)) if len(values) else math.nan  # noqa: E731
     std = lambda values: float(np.std(values, ddof=1)) if len(values) > 1 else 0.0  # noqa: E731
+    counted = failure_name is not None and all(r.failures is not None for r in finite)
     return PolicySummary(
         policy=spec,
         objective_mean=mean([r.objective for r in finite]),
@@ -84,9 +89,22 @@ def summarise(
         episodes=episodes,
         repeats=repeats,
         upper_bound=upper_bound,
-        failures_mean=mean([r.failures for r in finite]) if failure_name is not None else None,
+        failures_mean=mean([r.failures for r in finite]) if counted else None,
         failure_name=failure_name,
+        # over the episodes, each averaged over its repeats (as objective_std)
+        failures_ci95=metrics.mean_ci95([mean(v) for v in failures_by_episode.values()]) if counted else None,
     )
+
+
+def failures_cell(mean: float | None, ci95: float | None = None) -> str:
+    """A task's failures per episode as the tables show them: ``mean ± 95 % CI``; ``-`` where they are not
+    known (a task that counts none), the mean alone where the CI is not (a row of an older etmpc), ``± -``
+    where there is none (one episode)."""
+    if mean is None or not math.isfinite(mean):
+        return "-"
+    if ci95 is None:
+        return f"{mean:.2f}"
+    return f"{mean:.2f} ± {ci95:.2f}" if math.isfinite(ci95) else f"{mean:.2f} ± -"
 
 
 @dataclass(frozen=True)
@@ -174,10 +192,14 @@ def _row(kind: type, data: dict):
     for f in fields(kind):
         if f.type == "float" and values.get(f.name, 0.0) is None:
             values[f.name] = math.nan
+    if values.get("failure_name") is not None and values.get("failures_mean", 0.0) is None:
+        values["failures_mean"] = math.nan  # a task that counts failures: null is a number not known
+    if values.get("failure_name") is not None and "failures_ci95" in values and values["failures_ci95"] is None:
+        values["failures_ci95"] = math.nan  # (a summary of an older etmpc has none: it stays None)
     return kind(**values)
 
 
-_TASK_FAILURES = ("failures", "failures_mean", "failure_name")
+_TASK_FAILURES = ("failures", "failures_mean", "failure_name", "failures_ci95")
 
 
 def _fields(row) -> dict:

@@ -90,6 +90,11 @@ class TaskScore:
     reference: str  # the best periodic schedule
     error: str | None = None
     task_version: int = 0  # the task's version it was scored on (docs/versioning.md)
+    # The task's failures, if it counts them (None: it does not, or a row of an older etmpc): the 95 % CI of
+    # failures_mean, 1.96 sd / sqrt(n) over the episodes (NaN below two), and each episode's count, in the
+    # order of episode_scores, so that two triggers' failures can be paired episode by episode.
+    failures_ci95: float | None = None
+    episode_failures: list[float] | None = None
 
     @property
     def scores(self) -> np.ndarray:
@@ -113,6 +118,8 @@ class TaskScore:
             fields[name] = _nan(fields[name])
         fields["episode_scores"] = [_nan(v) for v in fields["episode_scores"]]
         fields["cpu_ms"] = {k: _nan(v) for k, v in dict(fields["cpu_ms"]).items()}
+        if fields.get("episode_failures") is not None:  # the row counted failures: null is a number not known
+            fields["failures_mean"], fields["failures_ci95"] = _nan(fields["failures_mean"]), _nan(fields.get("failures_ci95"))
         return cls(**fields)
 
 
@@ -122,16 +129,19 @@ def task_score(refs: References, evaluation: Evaluation | dict, spec: str) -> Ta
     reproduce's files: no CPU time). A stochastic policy's passes are averaged per episode."""
     data = evaluation.to_json(cpu=True) if isinstance(evaluation, Evaluation) else evaluation
     by_episode: dict[int, list[float]] = {}
+    failures: dict[int, list[int | None]] = {}
     nonfinite = 0
     runs = [r for r in data["runs"] if r["policy"] == spec]
     for r in runs:  # a non-finite episode's objective is null in strict JSON
         by_episode.setdefault(r["episode"], []).append(_nan(r["objective"]))
+        failures.setdefault(r["episode"], []).append(r.get("failures"))
         nonfinite += not r["finite"]
     if data["test_set"]["sha256"] != refs.test_set_sha256:
         raise EtmpcError(f"{refs.task}: {spec} was evaluated on another test set than the references'")
     cpu = [c for r, c in zip(data["runs"], data.get("cpu_seconds") or []) if r["policy"] == spec]
     parts = {k: 1e3 * float(np.mean([c[k] for c in cpu])) for k in ("solve", "feedback", "decide")} if cpu else {}
     episodes = sorted(by_episode)
+    counted = all(f is not None for e in episodes for f in failures[e])  # by a task that counts them
     return _scored(
         refs,
         spec,
@@ -140,11 +150,20 @@ def task_score(refs: References, evaluation: Evaluation | dict, spec: str) -> Ta
         nonfinite,
         data["policies"][spec],
         parts | {"total": sum(parts.values())} if parts else {},
+        # an episode's count, or its mean over a stochastic policy's passes
+        [f[0] if len(f) == 1 else float(np.mean(f)) for f in map(failures.get, episodes)] if counted else None,
     )
 
 
 def _scored(
-    refs: References, spec: str, episodes: list[int], objectives: list[float], nonfinite: int, summary: dict, cpu_ms: dict
+    refs: References,
+    spec: str,
+    episodes: list[int],
+    objectives: list[float],
+    nonfinite: int,
+    summary: dict,
+    cpu_ms: dict,
+    episode_failures: list[float] | None = None,
 ) -> TaskScore:
     if episodes != list(range(refs.episodes)):
         raise EtmpcError(f"{refs.task}: {spec} was not played on each of the references' {refs.episodes} episodes")
@@ -174,6 +193,10 @@ def _scored(
         cpu_ms,
         refs.best,
         task_version=task_version(refs.task),
+        failures_ci95=None
+        if episode_failures is None
+        else _nan(summary.get("failures_ci95", metrics.mean_ci95(episode_failures))),
+        episode_failures=episode_failures,
     )
 
 

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import math
 
+from etmpc.evaluation.results import failures_cell
+
 _CPU = (("total", 11), ("solve", 9), ("feedback", 10), ("decide", 10))  # a row's CPU columns and their widths
 
 
@@ -14,12 +16,13 @@ def format_scorecard(card) -> str:
     width = max([18] + [len(r.policy) + 2 for r in card.rows])
     task_width = max([14] + [len(t) + 2 for t in card.tasks])
     head = (
-        f"{'task':<{task_width}}{'policy':<{width}}{'objective':>11}{'computations':>14}{'failures':>10}"
+        f"{'task':<{task_width}}{'policy':<{width}}{'objective':>11}{'computations':>14}{'failures ± CI':>16}"
         f"{'score':>9}{'± 95 % CI':>11}{'CPU ms/ep':>11}{'(solve':>9}{'feedback':>10}{'trigger)':>10}"
     )
     lines = [
         "normalized score per task: 0 = its best periodic schedule, 100 = the oracle over it (a one-step "
-        "lookahead: above 100 is possible); CPU: measured on this machine, per episode",
+        "lookahead: above 100 is possible); failures: the task's own per episode (falls, ...), 95 % CI over the "
+        "episodes; CPU: measured on this machine, per episode",
         head,
         "-" * len(head),
     ]
@@ -27,7 +30,7 @@ def format_scorecard(card) -> str:
         if r.error is not None:
             lines.append(f"{r.task:<{task_width}}{r.policy:<{width}}failed: {r.error}")
             continue
-        failures = f"{r.failures_mean:.2f}" if r.failures_mean is not None else "-"
+        failures = failures_cell(r.failures_mean, r.failures_ci95)  # per episode, the task's own (falls, ...)
         score = (
             f"{r.score:>9.1f}{r.score_ci95:>11.1f}"
             if math.isfinite(r.score)
@@ -36,7 +39,7 @@ def format_scorecard(card) -> str:
         cpu = "".join(f"{r.cpu_ms[k]:>{w}.1f}" if k in r.cpu_ms else f"{'-':>{w}}" for k, w in _CPU)  # -: not measured
         lines.append(
             f"{r.task:<{task_width}}{r.policy:<{width}}{r.objective_mean:>11.4f}{r.recomputes_mean:>14.2f}"
-            f"{failures:>10}{score}{cpu}"
+            f"{failures:>16}{score}{cpu}"
         )
     lines += [
         "",

@@ -7,13 +7,14 @@ against the task's stored references. Anyone with the trigger can check it:
    etmpc's, and it was scored against the stored references (a card scored on another test set is
    not a suite result).
 2. **It holds together**: per row, the episode count, the score (the mean of the episode scores),
-   the confidence interval and the share of better episodes follow from its episode scores, and the
+   the confidence interval and the share of better episodes follow from its episode scores (the
+   failures' mean and CI from its episodes' failure counts, where the card has them), and the
    suite's aggregates (IQM, probability of improvement, their bootstrap intervals) follow from the rows,
    as :mod:`etmpc.evaluation.scorecard` computes them (with :mod:`etmpc.evaluation.metrics`).
 3. **It replays**: a seeded sample of each row's episodes is played again with the trigger the row
    names (its spec: the handed-in ``py:MODULE:NAME``, ``rl:PATH``, ``sb3:PATH`` must be importable or
-   readable here), and each episode's score must be the card's bit for bit (the loop's numbers do not
-   depend on the machine's kernels or the number of workers: ``docs/using.md``).
+   readable here), and each episode's score (and failure count) must be the card's bit for bit (the
+   loop's numbers do not depend on the machine's kernels or the number of workers: ``docs/using.md``).
 
 Every mismatch is one line; :func:`verify` returns them (an empty list: the card verifies).
 """
@@ -137,6 +138,24 @@ def _consistency(row: TaskScore, refs: References) -> list[str]:
     better = metrics.improvement_share(s)
     if not _same(row.better_share, better):
         found.append(f"{name}: better in {row.better_share!r} of the episodes in the card, {better!r} from its episode scores")
+    return found + _failures_consistency(row, name)
+
+
+def _failures_consistency(row: TaskScore, name: str) -> list[str]:
+    """What of a row's failures (a card of an older etmpc has none) does not follow from its episodes' counts."""
+    counts = row.episode_failures
+    if counts is None:
+        return []
+    if len(counts) != row.episodes or not all(isinstance(c, (int, float)) and math.isfinite(c) for c in counts):
+        return [f"{name}: {len(counts)} episode failure counts for {row.episodes} episodes, or one not a number"]
+    found = []
+    mean = float(np.mean(counts))
+    if row.failures_mean is None or not math.isclose(row.failures_mean, mean, rel_tol=TOLERANCE, abs_tol=TOLERANCE):
+        found.append(f"{name}: failures {row.failures_mean!r} per episode in the card, {mean!r} from its episodes")
+    if not _same(row.failures_ci95, metrics.mean_ci95(counts)):
+        found.append(
+            f"{name}: failures' 95 % CI {row.failures_ci95!r} in the card, {metrics.mean_ci95(counts)!r} from its episodes"
+        )
     return found
 
 
@@ -204,5 +223,10 @@ def verify(path: str | Path, size: int = SAMPLE, seed: int = 0, workers: int | N
             mismatches.append(
                 f"{path}: {row.task} {row.policy} episode {episode}: score {row.episode_scores[episode]!r} "
                 f"in the card, {replayed!r} replayed"
+            )
+        if row.episode_failures is not None and row.episode_failures[episode] != result.failures:
+            mismatches.append(
+                f"{path}: {row.task} {row.policy} episode {episode}: {row.episode_failures[episode]!r} failures "
+                f"in the card, {result.failures!r} replayed"
             )
     return Verdict(str(path), len(rows), len(jobs), mismatches)

@@ -18,8 +18,8 @@ The entries, each one spec per task (:func:`entries`):
 
 Each (entry, task) is scored by :mod:`etmpc.evaluation.scorecard` and kept in the work directory as it
 finishes, so an interrupted run continues where it stopped. A kept row is sealed with the SHA-256 of its
-content: one edited by hand is refused in one line, never published; one of an older etmpc (no seal)
-or of other policy files is played again. The page (``docs/leaderboard.md``), its
+content: one edited by hand is refused in one line, never published; one of an older etmpc (no seal, or
+no failures counted) or of other policy files is played again. The page (``docs/leaderboard.md``), its
 JSON and the performance profiles are written at the end, with the commit, date, machine and
 software that produced them; the README's headline table is the page's, rewritten between its markers.
 """
@@ -173,6 +173,8 @@ def _row(
         "test_set_sha256": refs.test_set_sha256,
         "suite_version": SUITE_VERSION,
         "task_version": task_version(task),
+        # what the row counts as a failure: a row kept by an etmpc that counted none (or other ones) is played again
+        "failures": make_system(task).failure_name,
     }
     files = policy_files(spec)
     if files:  # a policy read from files (rl:, sb3:): a row played with other files is played again
@@ -357,6 +359,7 @@ def _build(
                 "test_set_sha256": r.test_set_sha256,
                 "recompute_price": r.recompute_price,
                 "objective_sense": r.objective_sense,
+                "failure_name": make_system(t).failure_name,  # what its rows count as failures (None: none)
             }
             for t, r in references.items()
         },

@@ -10,6 +10,7 @@ import numpy as np
 
 from etmpc.loop import computation_cost
 from etmpc.evaluation.metrics import higher_or_lower, oriented
+from etmpc.evaluation.results import failures_cell
 
 BEGIN, END = "<!-- leaderboard:begin -->", "<!-- leaderboard:end -->"
 ORACLE_NOTE = (
@@ -29,6 +30,13 @@ def _cell(row: dict) -> str:
     if not _finite(row["score"]):
         return f"{row['nonfinite_episodes']} non-finite"
     return f"{row['score']:.1f} ± {_number(row['score_ci95'], '.1f')}"
+
+
+def _failures(row: dict) -> str:
+    """The task's failures per episode, mean ± 95 % CI; a row of an older etmpc has no CI (the mean alone), a
+    task that counts none ``-``. In the JSON a CI that could not be given (one episode) is null."""
+    ci = row.get("failures_ci95")
+    return failures_cell(row["failures_mean"], math.nan if ci is None and row.get("episode_failures") is not None else ci)
 
 
 def _number(value, spec: str) -> str:
@@ -171,7 +179,12 @@ def page(data: dict) -> str:
             f"### {task}",
             "",
             f"References: `{ref['best_periodic']}` and `{ref['oracle']}` (mean gap {ref['gap']:.5g}); objective: "
-            f"{sense} is better, at {ref['recompute_price']:g} per computation.",
+            f"{sense} is better, at {ref['recompute_price']:g} per computation."
+            + (
+                f" Failures ({ref['failure_name']}): per episode, mean ± 95 % CI ([what counts](scorecard.md#failures))."
+                if ref.get("failure_name")
+                else ""
+            ),
             "",
             "| trigger | spec | objective | computations | failures | score | CPU ms/ep (solve / feedback / trigger) |",
             "|---|---|---:|---:|---:|---:|---:|",
@@ -183,7 +196,7 @@ def page(data: dict) -> str:
             if row.get("error"):
                 lines.append(f"| {entry['name']} | `{row['policy']}` | failed: {row['error']} | | | | |")
                 continue
-            failures = "-" if row["failures_mean"] is None else f"{row['failures_mean']:.2f}"
+            failures = _failures(row)
             cpu = row["cpu_ms"]
             lines.append(
                 f"| {entry['name']} | `{row['policy']}` | {_number(row['objective_mean'], '.5g')} | "

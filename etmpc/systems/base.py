@@ -120,7 +120,7 @@ CAPABILITIES: dict[str, tuple[str, ...]] = {
     "exogenous features": ("exogenous_features",),  # what the learned policy's "error" features add
     "render": ("camera",),  # a 3-D scene for etmpc render and the recordings' video (with show)
     "bench": ("plan_cost",),  # what etmpc bench compares the MPC with (with reference_solvers and interpreted)
-    "failures": ("failures",),  # how often an episode failed, reported beside the mean objective
+    "failures": ("failures",),  # how often an episode failed (falls, ...), reported beside the mean objective
     "time in the loop": ("iterate", "predict"),  # compute levels, work-priced solves, delay compensation
 }
 
@@ -201,7 +201,10 @@ class SystemBase:
     exogenous_features: Any = None  # (s) -> array: the values of exogenous_feature_names
     camera: str | None = None  # the MJCF camera that films the scene
     failure_name: str | None = None  # what a failure is called ("falls")
-    failures: Any = None  # (rewards) -> int: the failures of an episode, counted from its rewards
+    # (trajectory, episode) -> int: the failures of an episode so far, counted from what it played (the loop's
+    # Trajectory, its first trajectory.steps rows: rewards, states, inputs, computations) and the episode it
+    # played; each step judged on the steps up to it, so that the count never decreases as the episode goes on
+    failures: Any = None
     plan_cost: Any = None  # (x, u_prev, timestep, inputs) -> the OCP's objective of an input sequence
     interpreted: Any = None  # () -> the same system with its MPC not compiled (None: it has no other way to run)
     # (x, u_prev, warm, age, timestep) -> a Plan from one SQP iteration (Plan.iterations: 1), for compute levels

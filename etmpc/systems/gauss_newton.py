@@ -26,6 +26,18 @@ from etmpc.control.plan import Plan
 from etmpc.systems.base import SystemBase
 
 
+def tracked_change(s, tracked: tuple[str, ...]) -> np.ndarray:
+    """Exogenous features of a tracking task at augmented state ``s`` (it carries the kept plan and the
+    current observation): the ``tracked`` values now, the ones the kept plan was made for, their
+    difference, and its length (0 until the tracked values change)."""
+    obs, forecasts, age = s.observation, s.plan.forecasts, s.age
+    now = np.array([float(obs[name]) for name in tracked])
+    j = min(age, len(forecasts[tracked[0]]) - 1)
+    planned = np.array([float(forecasts[name][j]) for name in tracked])
+    change = now - planned
+    return np.array([*now, *planned, *change, float(np.hypot.reduce(change))])
+
+
 class GaussNewtonSystem(SystemBase):
     """A tracking task: a subclass sets :attr:`tracked` and :attr:`mpc_name`, builds ``self.model``
     (``model.discrete``, the predictor over one interval) and ``self.u_min``/``self.u_max`` in its

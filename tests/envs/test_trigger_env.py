@@ -34,9 +34,10 @@ def test_gymnasiums_checker_passes(task):
 
 def _play(env: gym.Env, rule, test_episode: int):
     """Play a test-set episode through the gymnasium environment; ``rule(age) -> 0 or 1`` (keep or a full
-    solve: the last action, 2, on a task with compute levels). ``recompute`` is each step's priced work."""
+    solve: the last action, 2, on a task with compute levels). ``recompute`` is each step's priced work;
+    ``failures`` the episode's failures so far as ``info`` gives them, at the reset and after each step."""
     obs, info = env.reset(options={"test_episode": test_episode})
-    rewards, control, recompute, forced = [], [], [], []
+    rewards, control, recompute, forced, failures = [], [], [], [], [info["failures"]]
     solve = env.action_space.n - 1
     while True:
         obs, reward, terminated, truncated, info = env.step(solve * rule(env.unwrapped.core.loop.age))
@@ -44,9 +45,10 @@ def _play(env: gym.Env, rule, test_episode: int):
         control.append(info["control_reward"])
         recompute.append(info.get("work", info["recompute"]))
         forced.append(info["forced"])
+        failures.append(info["failures"])
         if terminated or truncated:
             assert truncated and not terminated
-            return np.array(rewards), np.array(control), np.array(recompute), np.array(forced)
+            return np.array(rewards), np.array(control), np.array(recompute), np.array(forced), failures
 
 
 RULES = {"always": lambda age: 1, "every:3": lambda age: int(age >= 3), "never": lambda age: 0}
@@ -60,8 +62,9 @@ def test_an_agent_answering_like_a_fixed_policy_gets_what_evaluate_reports_bit_f
     episodes = [0, 7]
     result = evaluate(task, [spec], episodes=max(episodes) + 1, workers=1, progress=False).to_json()
     objectives = {r["episode"]: r["objective"] for r in result["runs"]}
+    counted = {r["episode"]: r["failures"] for r in result["runs"]}  # every task counts its failures
     for e in episodes:
-        rewards, control, recompute, forced = _play(env, RULES[spec], e)
+        rewards, control, recompute, forced, failures = _play(env, RULES[spec], e)
         played = play_test_episode(system.name, parse_policy(spec, system), 0, 0, e).trajectory
         # The loop is the same: the same rewards, computations and forced steps, to the last bit.
         np.testing.assert_array_equal(control, played.rewards[: played.steps])
@@ -71,6 +74,24 @@ def test_an_agent_answering_like_a_fixed_policy_gets_what_evaluate_reports_bit_f
         # And the objective evaluate reports is these rewards' sum, as evaluate sums them.
         total = control.sum() - system.recompute_price * recompute.sum()
         assert (total if system.objective_sense == "max" else -total) == objectives[e]
+        # info's failures so far: ints, 0 at the reset, never decreasing, and at the end what evaluate counts.
+        assert all(type(f) is int for f in failures) and failures[0] == 0 and failures == sorted(failures)
+        assert failures[-1] == counted[e]
+
+
+def test_info_carries_the_failures_so_far_step_by_step():
+    """On the balance task, counted by hand from the pole's angle after each step: beyond 0.1 rad, but for the
+    recovery from the initial tilt (test episode 34, each plan kept as long as it lasts, tips the pole)."""
+    env = TriggerEnvironment("cart_pendulum")
+    timestep = env.reset(test_episode=34)
+    shown, by_hand, settled = [env.info["failures"]], [0], False
+    while not timestep.last():
+        timestep = env.step(0)
+        beta, k = abs(env.loop.x[2]), env.loop.step_index - 1
+        by_hand.append(by_hand[-1] + (beta > 0.1 and (settled or k >= 10)))
+        settled = settled or beta <= 0.1
+        shown.append(env.info["failures"])
+    assert shown == by_hand and shown[-1] > 0
 
 
 @pytest.mark.parametrize("task", TASKS)
@@ -79,7 +100,7 @@ def test_a_reward_against_a_baseline_is_the_agents_reward_minus_the_baselines_on
     # step for step and to the last bit; the agent's own stay as they were.
     system = make_system(task)
     env = TriggerEnv(task, reward_baseline="every:4")
-    rewards, control, recompute, _ = _play(env, RULES["every:3"], 2)
+    rewards, control, recompute, _, _ = _play(env, RULES["every:3"], 2)
     baseline = play_test_episode(system.name, parse_policy("every:4", system), 0, 0, 2).trajectory
     own = play_test_episode(system.name, parse_policy("every:3", system), 0, 0, 2).trajectory
     np.testing.assert_array_equal(control, own.rewards[: own.steps])

@@ -82,9 +82,25 @@ def test_json_has_the_documented_fields(serial, cart_testset):
             "episodes",
             "repeats",
             "nonfinite_episodes",
+            "failure_name",  # every built-in task counts its failures: per run, and per policy with a 95 % CI
+            "failures_mean",
+            "failures_ci95",
         ):
             assert key in entry
-    assert len(data["runs"]) == 3 * 4
+    assert len(data["runs"]) == 3 * 4 and all(isinstance(r["failures"], int) for r in data["runs"])
+
+
+def test_the_table_shows_the_failures_per_episode_with_their_95_percent_ci(serial):
+    from statistics import fmean, stdev
+
+    from etmpc.evaluation.evaluate import format_table
+
+    table = format_table(serial)
+    assert "off balance/episode" in table
+    for spec in POLICIES:
+        counts = [r.failures for r in serial.runs if r.policy == spec]
+        line = next(line for line in table.splitlines() if line.startswith(spec + " "))
+        assert f"{fmean(counts):.2f} ± {1.96 * stdev(counts) / 2:.2f}" in line  # n = 4 episodes
 
 
 def test_the_task_is_called_task_and_the_old_keyword_domain_still_works_with_a_warning():

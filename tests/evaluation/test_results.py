@@ -29,8 +29,13 @@ def test_an_evaluation_saved_and_loaded_is_the_same_evaluation(played, tmp_path)
 def test_a_missing_number_written_as_null_is_nan_again(played):
     data = strict(played.to_json())
     data["policies"]["every:3"]["objective_mean"] = None  # a policy whose every run failed has no mean
+    assert data["policies"]["every:3"]["failures_ci95"] is None  # one episode: the failures have no CI
     summary = Evaluation.from_json(data).summaries[0]
-    assert np.isnan(summary.objective_mean) and summary.failure_name is None  # a field that may be None stays None
+    assert np.isnan(summary.objective_mean) and np.isnan(summary.failures_ci95) and summary.failure_name == "off balance"
+    for name in ("failure_name", "failures_mean", "failures_ci95"):  # as a task that counts no failures writes it
+        del data["policies"]["every:3"][name]
+    summary = Evaluation.from_json(data).summaries[0]
+    assert summary.failure_name is None and summary.failures_ci95 is None  # a field that may be None stays None
 
 
 def test_a_policys_objectives_are_its_runs_by_repeat_and_episode(played):

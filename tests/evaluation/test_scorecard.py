@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import math
+import statistics
 from dataclasses import replace
 
 import numpy as np
@@ -61,6 +62,12 @@ def test_a_score_is_the_formula_computed_by_hand(small_battery):
         assert row.score == pytest.approx(by_hand, rel=1e-12, abs=1e-9)
         assert np.mean(row.episode_scores) == pytest.approx(by_hand, rel=1e-9, abs=1e-9)
         assert row.better_share == np.mean((profit > best) + 0.5 * (profit == best))
+        # The failures: each episode's count, in episode order (to pair them), their mean and 1.96 sd / sqrt(n).
+        counts = [r.failures for r in sorted(played.runs, key=lambda r: r.episode) if r.policy == spec]
+        assert row.episode_failures == counts and all(type(c) is int for c in counts)
+        assert row.failures_mean == pytest.approx(statistics.fmean(counts), abs=1e-12)
+        assert row.failures_ci95 == pytest.approx(1.96 * statistics.stdev(counts) / math.sqrt(4), abs=1e-12)
+    assert task_score(refs, played, "every:7").failures_ci95 > 0  # the counts differ between episodes
 
 
 def _row(task: str, scores) -> TaskScore:
@@ -135,7 +142,12 @@ def test_a_card_round_trips_through_its_json_missing_numbers_included(tmp_path):
     from etmpc.evaluation.scoretable import format_scorecard
 
     rows = [_row("battery", [10.0, -20.0, 5.0]), _row("reacher", [1.0]), failed_task("reacher", "other", "it failed")]
-    rows[1] = replace(rows[1], score_ci95=math.nan)  # one episode: no interval
+    rows[0] = replace(
+        rows[0], failures_mean=4 / 3, failures_ci95=1.96 * statistics.stdev([0, 1, 3]) / 3**0.5, episode_failures=[0, 1, 3]
+    )
+    rows[1] = replace(
+        rows[1], score_ci95=math.nan, failures_mean=2.0, failures_ci95=math.nan, episode_failures=[2]
+    )  # one episode: no interval
     card = Scorecard(
         ["battery", "reacher"],
         {"battery": {"best_periodic": "every:3", "oracle": "oracle:every:3"}},
@@ -144,13 +156,33 @@ def test_a_card_round_trips_through_its_json_missing_numbers_included(tmp_path):
     )
     text = write_json(tmp_path / "card.json", card.to_json()).read_text()
     assert "NaN" not in text  # strict JSON: null
+    written = json.loads(text)["rows"]
+    assert (
+        written[1]["failures_ci95"] is None and written[1]["episode_failures"] == [2] and written[2]["episode_failures"] is None
+    )
     again = Scorecard.from_json(json.loads(text))
+    assert math.isnan(again.rows[1].failures_ci95) and again.rows[2].failures_ci95 is None  # not known / not counted
     assert format_scorecard(again) == format_scorecard(card)
     assert json.dumps(again.to_json()["rows"]) == json.dumps(card.to_json()["rows"])  # NaN for NaN, null read as NaN
     assert again.aggregates[0] == card.aggregates[0] and isinstance(again.aggregates[0].iqm_ci95, tuple)
     assert all(map(math.isnan, again.aggregates[1].iqm_ci95)) and isinstance(again.aggregates[1], Aggregate)
     unmeasured = format_scorecard(Scorecard(["battery"], {}, [replace(rows[0], cpu_ms={})], []))
     assert unmeasured.splitlines()[3].split()[-4:] == ["-", "-", "-", "-"]  # CPU not measured: no numbers
+    shown = format_scorecard(card).splitlines()
+    assert f"1.33 ± {rows[0].failures_ci95:.2f}" in shown[3] and "2.00 ± -" in shown[4]  # failures per episode, mean ± 95 % CI
+
+
+def test_a_card_row_of_an_older_etmpc_without_the_failures_ci_and_counts_still_loads():
+    from etmpc.evaluation.scorecard import Scorecard
+    from etmpc.evaluation.scoretable import format_scorecard
+
+    old = replace(_row("cart_pendulum/kicks", [10.0, -20.0]), failures_mean=0.5).to_json()
+    for name in ("failures_ci95", "episode_failures", "task_version"):  # fields an older etmpc did not write
+        del old[name]
+    row = TaskScore.from_json(json.loads(json.dumps(old)))
+    assert (row.failures_mean, row.failures_ci95, row.episode_failures) == (0.5, None, None)  # the CI is not known
+    line = format_scorecard(Scorecard(["cart_pendulum/kicks"], {}, [row], [])).splitlines()[3]
+    assert " 0.50 " in line and "0.50 ±" not in line  # the mean alone
 
 
 @pytest.mark.parametrize("task", names())

@@ -101,3 +101,30 @@ def test_the_sample_is_seeded_and_within_the_episodes():
     assert sample(100, 5, 0, 3) != sample(100, 5, 0, 4)
     assert len(set(sample(100, 5, 0, 0))) == 5 and all(0 <= e < 100 for e in sample(100, 5, 0, 0))
     assert sample(4, 5, 0, 0) == sample(4, 0, 0, 0) == [0, 1, 2, 3]
+
+
+def test_the_failure_counts_are_checked_too_and_a_card_without_them_still_verifies(card, tmp_path):
+    """A forger who edits one episode's failure count, its mean and CI with it, is found by the replay; one who
+    edits the mean alone by the card's own counts. A card of an older etmpc (no CI, no counts) verifies."""
+    from etmpc.evaluation import metrics
+
+    def fewer(data):
+        row = data["rows"][0]
+        row["episode_failures"][1] += 1
+        row["failures_mean"] = float(np.mean(row["episode_failures"]))
+        row["failures_ci95"] = metrics.mean_ci95(row["episode_failures"])
+
+    original = json.loads(card.read_text())["rows"][0]["episode_failures"]
+    forged = _edited(card, tmp_path, fewer)
+    assert verify(forged, size=0).mismatches == [
+        f"{forged}: battery every:3 episode 1: {original[1] + 1} failures in the card, {original[1]} replayed"
+    ]
+    forged = _edited(card, tmp_path, lambda data: data["rows"][0].update(failures_mean=data["rows"][0]["failures_mean"] + 1))
+    (line,) = verify(forged, size=1).mismatches
+    assert "battery every:3: failures" in line and "per episode in the card" in line
+
+    def older(data):
+        for row in data["rows"]:
+            del row["failures_ci95"], row["episode_failures"]
+
+    assert verify(_edited(card, tmp_path, older), size=1).verified

@@ -103,3 +103,40 @@ def test_a_verified_card_joins_as_a_row_and_a_forged_one_is_refused_before_any_r
     (tmp_path / "forged.json").write_text(json.dumps(forged))
     with pytest.raises(EtmpcError, match="does not verify"):
         build(tmp_path / "docs", out / "work", ["battery"], episodes=2, workers=1, cards=[tmp_path / "forged.json"])
+
+
+def _failures_cell(page_text: str, name: str) -> str:
+    """The failures cell of entry ``name``'s row in the page's first per-task table."""
+    line = next(line for line in page_text.split("## Per task")[1].splitlines() if line.startswith(f"| {name} | "))
+    return line.split(" | ")[4]
+
+
+def test_the_failures_column_is_mean_and_ci_and_an_older_row_or_page_without_them_still_works(board, tmp_path):
+    import copy
+
+    from etmpc.common.documents import SEAL, sealed
+    from etmpc.experiments.leaderboard_page import page
+
+    out, data = board
+    always = next(e for e in data["entries"] if e["name"] == "always")["rows"][0]
+    assert always["episode_failures"] == [0, 0] and always["failures_ci95"] == 0.0  # a plan every step is never cut
+    assert _failures_cell(page(data), "always") == "0.00 ± 0.00" and "Failures (curtailed): per episode" in page(data)
+    # A row kept by an etmpc that counted no failures is played again; the row kept now is kept.
+    (kept,) = (out / "work" / "always").glob("*.json")
+    current = json.loads(kept.read_text())
+    assert current["key"]["failures"] == "curtailed"
+    assert leaderboard._kept(kept, current["key"]) is not None
+    older = {k: v for k, v in current.items() if k != SEAL}
+    older["key"] = {k: v for k, v in current["key"].items() if k != "failures"}
+    older["row"] = {k: v for k, v in current["row"].items() if k not in ("failures_ci95", "episode_failures")}
+    (tmp_path / "older.json").write_text(json.dumps(sealed(older)))
+    assert leaderboard._kept(tmp_path / "older.json", current["key"]) is None
+    # A page made from an older JSON (rows without the CI, references without failure names) shows the mean alone.
+    data = copy.deepcopy(data)
+    for entry in data["entries"]:
+        entry["rows"] = [{k: v for k, v in r.items() if k not in ("failures_ci95", "episode_failures")} for r in entry["rows"]]
+    for ref in data["references"].values():
+        del ref["failure_name"]
+    assert _failures_cell(page(data), "always") == "0.00" and "Failures (" not in page(data)
+    stored = page(json.loads((REPO / "docs" / "leaderboard.json").read_text()))  # the stored page's JSON, as it is
+    assert _failures_cell(stored, "always") == "-"  # cart_pendulum: made before its failures were counted

@@ -7,7 +7,9 @@ import pytest
 
 from etmpc import systems
 from etmpc.common.errors import EtmpcError, UnknownNameError
+from etmpc.loop import Trajectory
 from etmpc.systems.base import CAPABILITIES, DERIVED, REQUIRED, Benchmark, SystemBase, provides
+from etmpc.systems.registry import BUILT_IN
 
 
 def test_a_task_writes_at_most_twelve_members():
@@ -44,15 +46,23 @@ def test_what_a_task_offers_works_as_its_capability_says(name):
     if "render" in offered:
         physics = system.make_env().physics
         assert physics.model.name2id(system.camera, "camera") >= 0
-    if "failures" in offered:
+    if "failures" in offered:  # counted from what an episode played: none before its first step
         assert isinstance(system.failure_name, str) and system.failure_name
-        assert system.failures(np.zeros(system.episode_steps)) >= 0
+        unplayed = Trajectory.empty(system.episode_steps, len(system.state_names), len(system.input_names))
+        assert system.failures(unplayed, episode) == 0
     if "experiments" in offered:
         assert isinstance(system.benchmark, Benchmark) and system.benchmark.lookahead >= 1
     if "exogenous features" in offered:
         assert len(system.exogenous_feature_names) >= 1
     if "bench" in offered and system.interpreted is not None:
         assert type(system.interpreted()) is type(system)
+
+
+@pytest.mark.parametrize("name", [n for n in systems.names() if n.split("/")[0] in BUILT_IN])
+def test_every_built_in_task_counts_its_failures(name):
+    """Every task of etmpc's own reports failures beside its objective (docs/scorecard.md#failures says
+    what each counts); a plugin's task may offer none."""
+    assert provides(systems.make_system(name), "failures")
 
 
 def test_a_missing_capability_is_one_line_naming_the_task_and_what_needs_it():

@@ -1,4 +1,14 @@
-"""The battery-trading system as the control loop sees it: plant, economic MPC, LQR and profit."""
+"""The battery-trading system as the control loop sees it: plant, economic MPC, LQR and profit.
+
+**Failures**, "curtailed": the intervals whose trade the battery could not execute as commanded, because
+it ran empty or full (``task.py``: a trade is curtailed to what the battery can deliver or absorb, and
+only the executed trade is paid), by more than ``CURTAILMENT_TOLERANCE`` of the trade limit (1 %:
+3.6 kW, 0.01 kWh over a 10 s interval). For the operator it is a sale or purchase promised and not
+delivered. The tolerance leaves out the computer's own draw (0.1 kW), which the MPC does not predict,
+so a plan that empties the battery exactly falls short by that much whenever it computes. The
+executed trade is the battery's charge balance, ``u = P - eta_c a + (x - x+) C / delta``: from the
+played trajectory's charges and computations and the episode's net production.
+"""
 
 from __future__ import annotations
 
@@ -34,6 +44,7 @@ EXOGENOUS_FEATURES = (
     "plan_value_revision_eur",
 )
 _MEAN_PRICE, _INTERVAL_H = Market().price.mean, Battery().interval_h
+CURTAILMENT_TOLERANCE = 0.01  # of the trade limit: a trade curtailed by more is a failure (see the module's docstring)
 
 
 def exogenous_features(s) -> np.ndarray:
@@ -93,6 +104,7 @@ class BatterySystem(SystemBase):
     state_names = ("state_of_charge",)
     input_names = ("trade_kw",)
     Episode = battery_env.Episode
+    failure_name = "curtailed"  # intervals whose commanded trade the empty or full battery cut by > 1 % of the limit
 
     def __init__(self, config: Config = Config()):
         if config.lqr_state_weight < 0 or config.lqr_input_weight <= 0:
@@ -135,6 +147,22 @@ class BatterySystem(SystemBase):
 
     def action(self, u: np.ndarray, recompute: bool) -> np.ndarray:
         return np.array([u[0], 1.0 if recompute else 0.0])  # computing draws eta_c from the battery
+
+    # -- failures ---------------------------------------------------------------------------------
+    def curtailments_kw(self, trajectory, episode) -> np.ndarray:
+        """Per step played, the commanded trade minus the executed one (kW): the battery's charge balance
+        ``x+ = x - delta/C (u - P + eta_c a)`` solved for the executed ``u``, with ``a`` 1 where the step
+        computed (:meth:`action`)."""
+        n, battery = trajectory.steps, self.config.battery
+        soc = trajectory.states[: n + 1, 0]
+        net_in = episode.production_kw[:n] - battery.compute_power_kw * trajectory.recompute[:n]
+        executed = net_in + (soc[:-1] - soc[1:]) / battery.soc_per_kw
+        return trajectory.applied[:n, 0] - executed
+
+    def failures(self, trajectory, episode) -> int:
+        """Intervals curtailed by more than ``CURTAILMENT_TOLERANCE`` of the trade limit."""
+        limit = CURTAILMENT_TOLERANCE * self.config.battery.trade_limit_kw
+        return int(np.sum(np.abs(self.curtailments_kw(trajectory, episode)) > limit))
 
     # -- for etmpc bench --------------------------------------------------------------------------
     def plan_cost(self, x: np.ndarray, u_prev: np.ndarray, timestep: dm_env.TimeStep, inputs: np.ndarray) -> float:

@@ -153,6 +153,6 @@ class KicksSystem(GaussNewtonSystem):
         return self.observed(timestep)
 
     # -- failures (episodes are drawn, resampled and described by the task: kicks.Kicks) -----------------
-    def failures(self, rewards: np.ndarray) -> int:
-        """Falls in an episode."""
-        return kicks.falls(rewards)
+    def failures(self, trajectory, episode) -> int:
+        """Falls in an episode, from its rewards."""
+        return kicks.falls(trajectory.rewards[: trajectory.steps])

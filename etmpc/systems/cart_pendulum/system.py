@@ -43,6 +43,7 @@ class CartPendulumSystem(SystemBase):
     state_names = STATE_NAMES
     input_names = ("force_n",)
     Episode = cp_env.Episode  # the objective is sum(beta^2) + price * computations (a cost)
+    failure_name = "off balance"  # steps ending with the pole > 0.1 rad from upright, but the initial recovery (task.py)
 
     def __init__(self, config: Config = Config()):
         self.config = config
@@ -81,6 +82,11 @@ class CartPendulumSystem(SystemBase):
 
     def plan(self, x: np.ndarray, u_prev: np.ndarray, warm: Plan | None, age: int, timestep: dm_env.TimeStep) -> Plan:
         return self.mpc.solve(x, u_prev, warm, age)
+
+    # -- failures ---------------------------------------------------------------------------------
+    def failures(self, trajectory, episode) -> int:
+        """Steps off balance (:func:`~etmpc.systems.cart_pendulum.task.off_balance_steps`), from the rewards."""
+        return cp_env.off_balance_steps(trajectory.rewards[: trajectory.steps])
 
     # -- the scene, for etmpc render ----------------------------------------------------------------
     camera = "track"  # models/cart_pendulum.xml: rides with the cart (the "fixed" camera only turns towards it)

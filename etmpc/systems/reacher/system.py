@@ -43,7 +43,7 @@ import numpy as np
 
 from etmpc.control.mpc import FeedbackWeights, SolverSettings
 from etmpc.control.timing import Latency
-from etmpc.systems.gauss_newton import GaussNewtonSystem
+from etmpc.systems.gauss_newton import GaussNewtonSystem, tracked_change
 from etmpc.systems.reacher import task as reacher_task
 from etmpc.systems.reacher.model import INPUT_NAMES, NU, NX, STATE_NAMES, AnalyticModel, fingertip
 
@@ -62,14 +62,8 @@ EXOGENOUS_FEATURES = (
 
 
 def exogenous_features(s) -> np.ndarray:
-    """The values of :data:`EXOGENOUS_FEATURES` at augmented state ``s`` (it carries the kept plan
-    and the current observation)."""
-    obs, forecasts, age = s.observation, s.plan.forecasts, s.age
-    now = np.array([float(obs[TARGET[0]]), float(obs[TARGET[1]])])
-    j = min(age, len(forecasts[TARGET[0]]) - 1)
-    planned = np.array([float(forecasts[TARGET[0]][j]), float(forecasts[TARGET[1]][j])])
-    change = now - planned
-    return np.array([*now, *planned, *change, float(np.hypot(*change))])
+    """The values of :data:`EXOGENOUS_FEATURES` at augmented state ``s``."""
+    return tracked_change(s, TARGET)
 
 
 @dataclass(frozen=True)
@@ -149,6 +143,6 @@ class ReacherSystem(GaussNewtonSystem):
         return self.observed(timestep)
 
     # -- failures (episodes are drawn, resampled and described by the task: task.Jumps) -----------------
-    def failures(self, rewards: np.ndarray) -> int:
-        """Steps ending farther than 0.1 m from the target."""
-        return reacher_task.far_steps(rewards)
+    def failures(self, trajectory, episode) -> int:
+        """Steps ending farther than 0.1 m from the target, from the rewards."""
+        return reacher_task.far_steps(trajectory.rewards[: trajectory.steps])

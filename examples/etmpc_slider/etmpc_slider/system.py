@@ -27,6 +27,8 @@ feedback weights and what is tracked; the base solves the plans and carries the 
 * **Lookahead** 10 steps (``Benchmark.lookahead``): a reference jumps every 20 steps on average.
 * **Exogenous features** for the learned trigger: the reference now, the kept plan's, and their
   difference. A state-error trigger cannot see a jump; these can.
+* **Failures** (``failure_name``, ``failures(trajectory, episode)``): the steps that end more than 0.1 m
+  from the reference, "far from reference", counted from the episode's rewards.
 """
 
 from __future__ import annotations
@@ -89,6 +91,7 @@ class SliderSystem(GaussNewtonSystem):
     exogenous_feature_names = EXOGENOUS_FEATURES  # what the learned policy's "error" features add
     exogenous_features = staticmethod(exogenous_features)
     camera = "side"  # the scene shows the block; the reference marker stays where the physics has it
+    failure_name = "far from reference"  # steps ending > 0.1 m from the reference, per episode
 
     def __init__(self, config: Config = Config()):
         self.config = config
@@ -120,3 +123,7 @@ class SliderSystem(GaussNewtonSystem):
 
     def feedback_weights(self) -> FeedbackWeights:
         return FeedbackWeights(self.config.feedback_state_weights, self.config.feedback_input_weights)
+
+    def failures(self, trajectory, episode) -> int:
+        """Steps ending farther than 0.1 m from the reference, from the rewards the episode played."""
+        return slider_task.far_steps(trajectory.rewards[: trajectory.steps])

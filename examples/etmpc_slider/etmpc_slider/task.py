@@ -15,8 +15,9 @@ knows when to re-plan beats any periodic schedule at the same rate of computatio
 * **Observation**: the state (``model.STATE_NAMES``) and the current reference ``reference_m``.
 * **Reward** ``-e^2 / (e^2 + 0.1^2)`` per step, in ``(-1, 0]``, with ``e`` the block's distance from the
   interval's reference after the step: -1/2 at 0.1 m, -0.8 at 0.2 m, and bounded, so that a long
-  move after a far jump does not rule an episode's mean. The block cannot fall or hit a limit: no
-  failures are counted.
+  move after a far jump does not rule an episode's mean.
+* **Failures**, "far from reference": the steps that end more than 0.1 m from the interval's reference
+  (reward below -1/2; :func:`far_steps`), counted from the rewards.
 """
 
 from __future__ import annotations
@@ -90,6 +91,11 @@ def error_reward(error_m: float) -> float:
     """``-e^2 / (e^2 + 0.1^2)``: 0 on the reference, -1/2 at 0.1 m, towards -1 far away."""
     e2 = error_m * error_m
     return -e2 / (e2 + ERROR_SCALE_M**2)
+
+
+def far_steps(rewards: np.ndarray) -> int:
+    """The steps of an episode that ended farther than 0.1 m from the reference (reward below -1/2)."""
+    return int(np.sum(np.asarray(rewards) < error_reward(ERROR_SCALE_M)))
 
 
 class Track(EpisodeTask):

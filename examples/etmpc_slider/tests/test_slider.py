@@ -125,9 +125,16 @@ def test_the_system_has_every_member_etmpc_asks_for(system):
 
     assert isinstance(system, SystemBase) and [m for m in REQUIRED + DERIVED if not hasattr(system, m)] == []
     offered = {f for f in CAPABILITIES if provides(system, f)}
-    assert offered == {"experiments", "rollouts", "exogenous features", "render", "bench", "time in the loop"}
+    assert offered == {"experiments", "rollouts", "exogenous features", "render", "bench", "time in the loop", "failures"}
     assert (system.name, system.objective_sense, system.horizon, system.recompute_price) == ("slider", "min", 10, 0.13)
     assert system.u_min.shape == system.u_max.shape == (1,) and system.error_weights.shape == (2,)
+
+
+def test_failures_are_the_steps_ending_farther_than_a_tenth_of_a_metre_from_the_reference(system):
+    episode = system.draw_episode(np.random.default_rng(5))
+    traj = run_episode(system, system.make_env(), parse_policy("every:5", system), None, episode)
+    far = np.abs(traj.states[1:, 0] - episode.reference) > 0.1  # the block's position against each interval's reference
+    assert system.failures(traj, episode) == int(far.sum()) > 0
 
 
 def test_the_registry_and_the_suite_know_the_slider():

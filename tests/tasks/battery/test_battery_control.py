@@ -147,3 +147,30 @@ def test_bench_compares_against_linprog():
     (reference,) = figures["references"]
     assert reference["reference"]["samples"] == 30 and reference["reference_failures"] == 0
     assert reference["objective_gap_relative"]["max_abs"] < 1e-9
+
+
+# -- failures: trades curtailed ---------------------------------------------------------------------------
+@pytest.mark.parametrize("spec", ["always", "every:3", "never"])
+def test_failures_are_the_intervals_whose_trade_the_battery_cut_by_more_than_1_percent_of_the_limit(
+    battery_system, battery_testset, spec, monkeypatch
+):
+    """Counted from the played trajectory and the episode; checked against what the battery itself says it
+    was commanded and executed at each interval."""
+    traded = []
+    reward = battery_env.Trading.get_reward
+
+    def recorded(task, physics):
+        traded.append((physics.commanded_trade_kw(), physics.executed_trade_kw()))
+        return reward(task, physics)
+
+    monkeypatch.setattr(battery_env.Trading, "get_reward", recorded)
+    episode = battery_system.episode_from_arrays(battery_testset.episode_arrays(0))
+    traj = run_episode(battery_system, battery_system.make_env(), parse_policy(spec, battery_system), None, episode)
+    commanded, executed = np.array(traded).T
+    np.testing.assert_allclose(battery_system.curtailments_kw(traj, episode), commanded - executed, rtol=0, atol=1e-9)
+    cut = np.abs(commanded - executed) > 0.01 * B.trade_limit_kw  # 3.6 kW
+    assert battery_system.failure_name == "curtailed" and battery_system.failures(traj, episode) == int(cut.sum())
+    if spec == "always":  # only the computer's own draw, which the MPC does not predict, is ever cut
+        assert int(cut.sum()) == 0 and np.abs(commanded - executed).max() <= B.compute_power_kw + 1e-9
+    else:
+        assert int(cut.sum()) > 0

@@ -1,11 +1,15 @@
 """The cart pendulum's balance task as a dm-control environment: suite registration, specs, episode length,
-seeding and stored episodes."""
+seeding and stored episodes; and its failures, counted by hand from the pole's angles."""
+
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 from dm_control.rl import control
 
 from etmpc import suite
+from etmpc.evaluation.workers import play_test_episode
+from etmpc.policies import parse_policy
 from etmpc.systems import cart_pendulum
 from etmpc.systems.cart_pendulum import task as cp_env
 from etmpc.common.errors import UnknownNameError
@@ -95,3 +99,50 @@ def test_non_finite_state_terminates():
     env.reset()
     env.physics.data.qvel[0] = np.nan
     assert env.task.get_termination(env.physics) == 0.0
+
+
+# -- failures: steps off balance ---------------------------------------------------------------------------
+def _off_balance_by_hand(angles) -> list[int]:
+    """The failures so far after each step, from the pole's angle at each step's end: beyond 0.1 rad, but for
+    the recovery from the initial tilt (the steps before the first within 0.1 rad, among the first ten)."""
+    counts, count, settled = [], 0, False
+    for k, beta in enumerate(angles):
+        if abs(beta) <= 0.1:
+            settled = True
+        elif settled or k >= 10:
+            count += 1
+        counts.append(count)
+    return counts
+
+
+def _counted(system, angles) -> int:
+    rewards = -(np.asarray(angles, dtype=float) ** 2)  # the task's reward: -beta^2 of the state a step leads to
+    return system.failures(SimpleNamespace(rewards=np.append(rewards, np.nan), steps=len(rewards)), None)
+
+
+@pytest.mark.parametrize(
+    "angles",
+    [
+        [0.5, 0.3, 0.05, 0.2, 0.0, -0.12],  # the recovery's steps (0, 1) are not counted; steps 3 and 5 are
+        [0.7] * 12,  # never within: from step 10 on every step counts
+        [0.05, 0.5, 0.5],  # within at once: the recovery is over
+        [],
+    ],
+)
+def test_off_balance_steps_follow_the_rule(cart_system, angles):
+    assert cart_system.failure_name == "off balance"
+    by_hand = _off_balance_by_hand(angles)
+    assert [_counted(cart_system, angles[: k + 1]) for k in range(len(angles))] == by_hand  # never decreasing
+    assert _counted(cart_system, angles) == (by_hand[-1] if angles else 0)
+
+
+@pytest.mark.parametrize("spec", ["always", "every:10", "never"])
+def test_a_played_episodes_failures_are_its_pole_angles_counted_by_hand(cart_system, spec):
+    played = play_test_episode("cart_pendulum", parse_policy(spec, cart_system), 0, 0, 34)  # a test episode a kept plan tips
+    traj = played.trajectory
+    by_hand = _off_balance_by_hand(traj.states[1 : traj.steps + 1, 2])
+    assert cart_system.failures(traj, played.episode) == by_hand[-1]
+    if spec == "never":  # a plan kept N steps lets the pole out; re-planning every step does not
+        assert by_hand[-1] > 0
+    if spec == "always":
+        assert by_hand[-1] == 0

@@ -348,12 +348,12 @@ def test_the_observation_shows_the_target_of_the_interval_about_to_be_played(sys
 # -- failures and features --------------------------------------------------------------------------------
 def test_failures_are_the_steps_farther_than_a_tenth_of_a_metre(system, stored):
     assert rt.distance_reward(0.1) == -0.5 and rt.distance_reward(0.0) == 0.0
-    assert system.failures(np.array([-0.49, -0.5, -0.51, -0.9, 0.0])) == 2
+    assert rt.far_steps(np.array([-0.49, -0.5, -0.51, -0.9, 0.0])) == 2
     episode = system.episode_from_arrays(stored.episode_arrays(0))
     traj = run_episode(system, system.make_env(), parse_policy("every:5", system), None, episode)
     tips = np.array([system.model.fingertip(x) for x in traj.states[1:]])  # the model's arm has the plant's lengths
     far = np.linalg.norm(tips - episode.target, axis=1) > 0.1
-    assert system.failures(traj.rewards) == int(far.sum()) > 0
+    assert system.failures(traj, episode) == int(far.sum()) > 0
 
 
 def test_exogenous_features_see_a_jump_that_the_state_error_cannot(system, features_while_kept):
