@@ -43,7 +43,6 @@ BUILT_IN = {
     "cart_pendulum": "etmpc.systems.cart_pendulum",
     "battery": "etmpc.systems.battery",
     "reacher": "etmpc.systems.reacher",
-    "quadrotor": "etmpc.systems.quadrotor",
 }
 ENTRY_POINTS = "etmpc.tasks"
 
