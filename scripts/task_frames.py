@@ -2,7 +2,7 @@
 3-D scene, drawn mid-episode from its camera while ``every:3`` plays stored episode 0, and for the
 battery (no scene) its episode's prices and production.
 
-    MUJOCO_GL=egl python scripts/task_frames.py [--out docs/tasks] [--step 30]
+    MUJOCO_GL=egl python scripts/task_frames.py [--out docs/tasks] [--step 30] [--task TASK ...]
 """
 
 from __future__ import annotations
@@ -30,9 +30,10 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", type=Path, default=Path("docs/tasks"))
     parser.add_argument("--step", type=int, default=30, help="the step drawn (default 30)")
+    parser.add_argument("--task", action="append", help="draw only these tasks (repeatable; default: every task)")
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
-    for task in names():
+    for task in args.task or names():
         system = make_system(task)
         played = play_test_episode(task, parse_policy("every:3", system), 0, 0, 0)
         path = args.out / f"{PICTURE.get(task, folder_name(task))}.png"

@@ -43,6 +43,7 @@ BUILT_IN = {
     "cart_pendulum": "etmpc.systems.cart_pendulum",
     "battery": "etmpc.systems.battery",
     "reacher": "etmpc.systems.reacher",
+    "quadrotor": "etmpc.systems.quadrotor",
 }
 ENTRY_POINTS = "etmpc.tasks"
 

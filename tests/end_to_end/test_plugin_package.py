@@ -77,7 +77,7 @@ def test_an_installed_plugin_adds_its_task_and_kind_everywhere_and_uninstalling_
     assert before.returncode == 0, before.stderr
     assert before.stdout.splitlines() == [
         "tasks cart_pendulum cart_pendulum/kicks cart_pendulum/kicks_late cart_pendulum/kicks_levels battery reacher "
-        "reacher/jumps_late",
+        "reacher/jumps_late quadrotor",
         "kinds always never every iterate threshold rl self py sb3 rollout oracle",
     ]
 
@@ -86,7 +86,7 @@ def test_an_installed_plugin_adds_its_task_and_kind_everywhere_and_uninstalling_
     assert after.returncode == 0, after.stderr
     assert after.stdout.splitlines() == [
         "tasks cart_pendulum cart_pendulum/kicks cart_pendulum/kicks_late cart_pendulum/kicks_levels battery reacher "
-        "reacher/jumps_late slider",
+        "reacher/jumps_late quadrotor slider",
         "kinds always never every iterate threshold rl self py sb3 rollout oracle driftage",
         "suite () (1,)",
         "gym (12,)",
@@ -123,5 +123,5 @@ def test_an_installed_plugin_adds_its_task_and_kind_everywhere_and_uninstalling_
     assert refused.returncode == 2
     assert refused.stderr.strip() == (
         "etmpc: error: unknown task 'slider'; valid: cart_pendulum, cart_pendulum/kicks, cart_pendulum/kicks_late, "
-        "cart_pendulum/kicks_levels, battery, reacher, reacher/jumps_late"
+        "cart_pendulum/kicks_levels, battery, reacher, reacher/jumps_late, quadrotor"
     )

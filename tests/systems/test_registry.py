@@ -71,6 +71,7 @@ def test_a_task_plugin_joins_the_registry_the_suite_and_gymnasium(plugins):
         "battery",
         "reacher",
         "reacher/jumps_late",
+        "quadrotor",
         "twin",
     )
     system = registry.make_system(registry.SystemKey("twin/balance", 0.5))
@@ -110,6 +111,7 @@ def test_a_broken_task_plugin_is_one_warning_naming_it_and_every_other_task_stil
         "battery",
         "reacher",
         "reacher/jumps_late",
+        "quadrotor",
     )
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # read once: no second warning
@@ -117,7 +119,7 @@ def test_a_broken_task_plugin_is_one_warning_naming_it_and_every_other_task_stil
     with pytest.raises(
         UnknownNameError,
         match="valid: cart_pendulum, cart_pendulum/kicks, cart_pendulum/kicks_late, cart_pendulum/kicks_levels, "
-        "battery, reacher, reacher/jumps_late",
+        "battery, reacher, reacher/jumps_late, quadrotor",
     ):
         registry.check_name("broken")
 
@@ -245,6 +247,7 @@ def test_a_task_plugin_whose_import_exits_or_raises_anything_is_one_warning(plug
         "battery",
         "reacher",
         "reacher/jumps_late",
+        "quadrotor",
     )
     assert registry.make_system("battery").name == "battery"
 

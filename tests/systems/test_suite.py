@@ -52,6 +52,7 @@ def test_suite_containers_list_every_task_as_dm_control_suite_does():
         "cart_pendulum": ("balance", "kicks", "kicks_late", "kicks_levels"),
         "battery": ("trading",),
         "reacher": ("jumps", "jumps_late"),
+        "quadrotor": ("waypoints",),
     }
     assert suite.TASKS_BY_DOMAIN.items() >= built_in.items()
     assert set(suite.BENCHMARKING) == set(suite.ALL_TASKS)

@@ -98,7 +98,7 @@ def test_keys_name_the_default_task_by_its_domain_and_carry_a_price():
         with pytest.raises(
             UnknownNameError,
             match="valid: cart_pendulum, cart_pendulum/kicks, cart_pendulum/kicks_late, cart_pendulum/kicks_levels, "
-            "battery, reacher, reacher/jumps_late",
+            "battery, reacher, reacher/jumps_late, quadrotor",
         ):
             systems.check_name(bad)
 

@@ -8,7 +8,7 @@ import pytest
 
 from etmpc.systems import make_system
 
-TASKS = ["cart_pendulum", "cart_pendulum/kicks", "battery", "reacher"]
+TASKS = ["cart_pendulum", "cart_pendulum/kicks", "battery", "reacher", "quadrotor"]
 
 
 @pytest.mark.parametrize("task", TASKS)

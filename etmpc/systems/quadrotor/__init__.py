@@ -1,0 +1,18 @@
+"""Quadrotor: a nano quadrotor (``models/quadrotor.xml``; its MuJoCo plant in ``physics.py``) held on a
+waypoint that changes at random times while gusts push it, inside a geofence: the ``waypoints`` task
+(``task.py``), the analytic rigid body as the MPC's predictor (``model.py``), and the system the loop
+plays (``system.py``: a Gauss-Newton MPC with the waypoint as a parameter and a time-varying LQR
+along each plan).
+"""
+
+from etmpc.systems.registry import lazy
+
+# Its tasks, the default first: what etmpc.systems lists without loading MuJoCo or dm-control (which
+# pick their OpenGL backend on import). SYSTEMS and SUITE load the domain's modules when first asked.
+TASKS = ("waypoints",)
+# The seed of each task's stored test set (tasks/quadrotor/<task>_testset.npz: etmpc testset TASK --seed SEED).
+TEST_SET_SEEDS = {"waypoints": 20261127}
+
+__getattr__ = lazy(
+    __name__, {"waypoints": "etmpc.systems.quadrotor.system:QuadrotorSystem"}, "etmpc.systems.quadrotor.task:SUITE"
+)

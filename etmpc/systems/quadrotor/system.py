@@ -1,0 +1,167 @@
+"""The ``waypoints`` task as the control loop sees it: an MPC that flies to the current waypoint, a
+feedback that follows the plan, and the price of a computation.
+
+* **MPC** (Gauss-Newton SQP, full multiple shooting, N = 20 (1 s), compiled): the analytic rigid
+  body (``model.py``, RK4, 2 steps per interval), the waypoint ``p`` as the OCP's parameter;
+  residuals ``[e / 0.3, 0.1 v, 0.2 angles, 0.02 rates, 0.1 (u - hover) / max, 0.2 du / max]`` per
+  stage, ``e = position - p`` (m), and ``[2 e / 0.3, 0.3 v, 0.3 angles, 0.05 rates]`` at the end;
+  ``0 <= u_i <= 0.149`` N. ``hover`` is the model's (its mass), not the plant's. The plan carries the
+  waypoint it was made for as ``Plan.forecasts`` (``target_x_m``, ``target_y_m``, ``target_z_m``).
+* **Feedback** while a plan is kept: a time-varying LQR along the plan (``PlanFeedback``), from the
+  predictor's linearisation at each planned step, ``Q = diag(10 I3, 1 I3, 1 I3, 0.1 I3)``
+  (position, angles, velocity, rates), ``R = 20 I4`` (N^-2). ``threshold:X`` weighs the prediction
+  error by ``sqrt(Q)``.
+* **Objective** (lower is better): the episode's cost (``task.py``) plus the price per computation.
+* **Exogenous features** for the learned trigger: the waypoint now, the kept plan's, their
+  difference and its length (:func:`etmpc.systems.gauss_newton.tracked_change`). Gusts are not
+  observed: a trigger sees them only as the drone's drift from its plan.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import casadi as ca
+import dm_env
+import numpy as np
+
+from etmpc.control.mpc import FeedbackWeights, SolverSettings
+from etmpc.control.timing import Latency
+from etmpc.systems.gauss_newton import GaussNewtonSystem, tracked_change
+from etmpc.systems.quadrotor import task as quadrotor_task
+from etmpc.systems.quadrotor.model import INPUT_NAMES, NU, NX, STATE_NAMES, AnalyticModel, Parameters
+
+TARGET = ("target_x_m", "target_y_m", "target_z_m")  # the observation's current waypoint, and the plan's forecasts of it
+
+# What the learned policy's default ("error") feature set adds for the quadrotor (etmpc.policies.learned).
+EXOGENOUS_FEATURES = (
+    "target_x_m",  # the waypoint now
+    "target_y_m",
+    "target_z_m",
+    "planned_target_x_m",  # the waypoint the kept plan flies to
+    "planned_target_y_m",
+    "planned_target_z_m",
+    "target_change_x_m",  # the waypoint now minus the plan's
+    "target_change_y_m",
+    "target_change_z_m",
+    "target_change_m",  # its length: 0 until the waypoint changes
+)
+
+
+def exogenous_features(s) -> np.ndarray:
+    """The values of :data:`EXOGENOUS_FEATURES` at augmented state ``s``."""
+    return tracked_change(s, TARGET)
+
+
+@dataclass(frozen=True)
+class Config:
+    """The quadrotor's controller and price."""
+
+    horizon: int = 20
+    distance_scale_m: float = 0.3  # stage residual e / 0.3
+    terminal_distance_factor: float = 2.0  # terminal residual 2 e / 0.3
+    velocity_weight: float = 0.1
+    terminal_velocity_weight: float = 0.3
+    angle_weight: float = 0.5
+    terminal_angle_weight: float = 0.3
+    rate_weight: float = 0.3
+    terminal_rate_weight: float = 0.05
+    thrust_weight: float = 0.1  # on (u - hover) / max
+    clearance_m: float = 0.3  # the MPC keeps the drone above this height: a soft constraint
+    clearance_weight: float = 10.0  # on the shortfall below it (smoothed over 5 cm) / 0.3
+    idle_thrust_n: float = 0.02  # the least thrust the MPC plans per rotor (the plant's rotors may stop)
+    thrust_change_weight: float = 1.0  # on du / max
+    feedback_state_weights: tuple[float, ...] = (
+        (10.0,) * 3 + (3.0,) * 3 + (1.0,) * 3 + (0.3,) * 3
+    )  # Q (and W of threshold:X: sqrt Q)
+    feedback_input_weights: tuple[float, ...] = (5000.0,) * 4  # R
+    recompute_price: float = 0.5
+    rk4_substeps: int = 2
+    plant: str = "mismatched"
+    latency: Latency = Latency()  # how long a solve takes (etmpc.control.timing); none: the paper's loop
+    compute_levels: bool = False  # a decision is keep, one SQP iteration or a full solve, priced per iteration
+    solver: SolverSettings = field(
+        default_factory=lambda: SolverSettings(
+            tolerance=1e-6,
+            dual_tolerance=1e-5,
+            max_iterations=300,
+            block=1,
+            regularisation=1e-3,
+            sqp_options=(("merit_memory", 1), ("max_iter_ls", 8)),
+        )
+    )
+
+
+class QuadrotorSystem(GaussNewtonSystem):
+    Config = Config
+    domain = "quadrotor"
+    task = "waypoints"
+    episode_steps = quadrotor_task.EPISODE_STEPS
+    control_interval_s = quadrotor_task.CONTROL_DT_S
+    state_names = STATE_NAMES
+    input_names = INPUT_NAMES
+    Episode = quadrotor_task.Episode
+    tracked = TARGET  # the current waypoint (m), as observed: the OCP's parameters
+    mpc_name = "quadrotor_waypoints_mpc"
+    make_environment = staticmethod(quadrotor_task.make_environment)
+    exogenous_feature_names = EXOGENOUS_FEATURES  # what the learned policy's "error" features add
+    exogenous_features = staticmethod(exogenous_features)
+    failure_name = "outside geofence"  # steps ending outside the geofence or on the ground, per episode
+    camera = "arena"
+
+    def __init__(self, config: Config | None = None):
+        self.config = config = self.Config() if config is None else config
+        self.params = Parameters()
+        self.model = AnalyticModel(params=self.params, dt_s=quadrotor_task.CONTROL_DT_S, rk4_substeps=config.rk4_substeps)
+        self.u_min = np.full(NU, config.idle_thrust_n)
+        self.u_max = np.full(NU, self.params.max_thrust_n)
+        self.error_weights = np.sqrt(np.asarray(config.feedback_state_weights))
+
+    def residuals(self) -> tuple[ca.Function, ca.Function]:
+        c, p = self.config, self.params
+        x, u, du, target = ca.SX.sym("x", NX), ca.SX.sym("u", NU), ca.SX.sym("du", NU), ca.SX.sym("target", 3)
+        e = (x[:3] - target) / c.distance_scale_m
+        # below the clearance: a softplus of the shortfall (smooth, so the Gauss-Newton Jacobian is), 5 cm wide
+        low = c.clearance_weight * 0.05 * ca.log1p(ca.exp((c.clearance_m - x[2]) / 0.05)) / c.distance_scale_m
+        thrust = (u - p.hover_thrust_n) / p.max_thrust_n
+        stage = ca.Function(
+            "stage_residual",
+            [x, u, du, target],
+            [
+                ca.vertcat(
+                    e,
+                    low,
+                    c.velocity_weight * x[6:9],
+                    c.angle_weight * x[3:6],
+                    c.rate_weight * x[9:12],
+                    c.thrust_weight * thrust,
+                    c.thrust_change_weight * du / p.max_thrust_n,
+                )
+            ],
+        )
+        terminal = ca.Function(
+            "terminal_residual",
+            [x, target],
+            [
+                ca.vertcat(
+                    c.terminal_distance_factor * e,
+                    low,
+                    c.terminal_velocity_weight * x[6:9],
+                    c.terminal_angle_weight * x[3:6],
+                    c.terminal_rate_weight * x[9:12],
+                )
+            ],
+        )
+        return stage, terminal
+
+    def feedback_weights(self) -> FeedbackWeights:
+        return FeedbackWeights(self.config.feedback_state_weights, self.config.feedback_input_weights)
+
+    def target(self, timestep: dm_env.TimeStep) -> np.ndarray:
+        """The current waypoint ``(x, y, z)`` (m), as observed."""
+        return self.observed(timestep)
+
+    # -- failures (episodes are drawn, resampled and described by the task: task.Waypoints) --------------
+    def failures(self, trajectory, episode) -> int:
+        """Steps ending outside the geofence or on the ground."""
+        return quadrotor_task.failure_steps(trajectory.rewards[: trajectory.steps])

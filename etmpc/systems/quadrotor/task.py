@@ -1,0 +1,272 @@
+"""The quadrotor's ``waypoints`` task: hold a nano quadrotor on a waypoint that changes at random
+times while gusts push it, inside a geofence, and the domain's suite.
+
+Two kinds of event call for a new plan, and no schedule knows when they come: a waypoint change
+(observed: the kept plan still flies to the old waypoint) and a gust (not observed: the drone drifts
+from its plan). Both arrive at random times (Bernoulli per interval).
+
+* **Plant**: the quadrotor of ``physics.py`` (``mismatched`` by default: heavier, more inertia,
+  rotor lag, air) lifted by four rotor thrusts ``0 <= u_i <= 0.149`` N (MuJoCo clamps to the
+  actuators' ``ctrlrange``), integrated by RK4 at 5 ms under a 0.05 s control interval.
+* **Episodes**: 100 intervals (5 s). The drone starts at rest, level, hovering on its rotors, at a
+  position drawn uniformly in the waypoint box ``|x|, |y| <= 1`` m, ``0.5 <= z <= 1.5`` m, with yaw
+  ``U(+-0.3)`` rad. A waypoint is drawn uniformly in the same box; at each later interval, with
+  probability 0.05 (one change per second), it changes to a new one drawn alike.
+* **Gusts**: at each interval, with probability 0.03 (0.6 per second), a gust begins: a horizontal
+  force on the drone's centre, of peak ``U(0.06, 0.15)`` N (20 % to 51 % of the plant's weight) in
+  a direction ``U(+-pi)``, lasting ``U(0.3, 0.8)`` s rounded to whole intervals, with the 1-cosine
+  profile of aviation's discrete gust (``peak (1 - cos(2 pi t / T)) / 2``, evaluated at each
+  interval's middle and held over it). Gusts overlap by adding. They are not observed.
+* **Geofence**: ``|x|, |y| <= 2`` m and ``z <= 2.5`` m; the ground is ``z < 0.05`` m (the centre of
+  a drone resting on the floor is at 0.012 m). A step ending outside the geofence or on the ground
+  is a **failure**.
+* **Observation**: the state (``model.STATE_NAMES``) and the current waypoint ``target_x_m``,
+  ``target_y_m``, ``target_z_m``.
+* **Reward** ``-d^2 / (d^2 + 0.5^2)`` per step, ``d`` the drone's distance from the interval's
+  waypoint after the step (-1/2 at 0.5 m, bounded by -1: a waypoint is up to 2.4 m away, and a
+  scale of 0.2 m made every distance beyond 0.5 m cost nearly the same, so that how soon the drone
+  set off after a change hardly counted), and 1 more off on a failure step: so a step's reward is at
+  most -1 exactly when it is a failure (:func:`failure_steps`).
+"""
+
+from __future__ import annotations
+
+import collections
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from dm_control.rl import control
+from dm_control.utils import containers
+from dm_env import specs
+
+from etmpc.systems.episodes import EpisodeTask, Random, add_task, build_environment, jump_process
+from etmpc.systems.plants import PLANTS
+from etmpc.systems.quadrotor.model import NX, STATE_NAMES
+from etmpc.systems.quadrotor.physics import Physics, load_model
+
+__all__ = ["PLANTS", "SUITE", "Episode", "Physics", "Waypoints", "load_model", "make_environment"]
+
+CONTROL_DT_S = 0.05
+PHYSICS_DT_S = 0.005  # 10 RK4 steps per interval
+EPISODE_STEPS = 100
+BOX_LOW = np.array([-1.0, -1.0, 0.5])  # where the drone starts and the waypoints are drawn (m)
+BOX_HIGH = np.array([1.0, 1.0, 1.5])
+INITIAL_YAW_RAD = 0.3
+CHANGE_PROBABILITY = 0.05  # a waypoint change per interval after the first
+GUST_PROBABILITY = 0.03  # a gust's onset per interval
+GUST_PEAK_N = (0.06, 0.15)
+GUST_DURATION_S = (0.3, 0.8)
+FENCE_HALF_WIDTH_M = 2.0  # |x|, |y| <= 2
+FENCE_HEIGHT_M = 2.5
+GROUND_M = 0.05  # z below this is on the ground
+DISTANCE_SCALE_M = 0.5  # reward -d^2 / (d^2 + 0.5^2)
+FAILURE_PENALTY = 1.0
+OBSERVATION_NAMES = (*STATE_NAMES, "target_x_m", "target_y_m", "target_z_m")
+SUITE = containers.TaggedTasks()
+
+
+@dataclass(frozen=True)
+class Episode:
+    """Everything random about one episode, drawn in advance: a test-set row."""
+
+    initial_state: np.ndarray  # (12,)
+    target: np.ndarray  # (steps, 3) m: the waypoint of each interval
+    gust_peak: np.ndarray  # (steps, 3) N: the peak force of a gust beginning at that interval (0: none)
+    gust_intervals: np.ndarray  # (steps,) its length in intervals (0: none)
+
+    @classmethod
+    def draw(cls, rng: np.random.Generator, steps: int = EPISODE_STEPS) -> Episode:
+        position = rng.uniform(BOX_LOW, BOX_HIGH)
+        yaw = rng.uniform(-INITIAL_YAW_RAD, INITIAL_YAW_RAD)
+        initial_state = np.concatenate([position, [0.0, 0.0, yaw], np.zeros(6)])
+        first = draw_target(rng)
+        target = np.vstack([first, jump_process(rng, first, steps - 1, CHANGE_PROBABILITY, draw_target)])
+        peak, intervals = draw_gusts(rng, steps)
+        return cls(initial_state, target, peak, intervals)
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        return {
+            "initial_state": self.initial_state,
+            "target": self.target,
+            "gust_peak": self.gust_peak,
+            "gust_intervals": self.gust_intervals,
+        }
+
+    @classmethod
+    def from_arrays(cls, arrays: dict[str, np.ndarray]) -> Episode:
+        initial_state = np.asarray(arrays["initial_state"], dtype=float)
+        target = np.asarray(arrays["target"], dtype=float)
+        peak = np.asarray(arrays["gust_peak"], dtype=float)
+        intervals = np.asarray(arrays["gust_intervals"])
+        steps = target.shape[0] if target.ndim == 2 else -1
+        if (
+            initial_state.shape != (NX,)
+            or target.shape != (steps, 3)
+            or peak.shape != (steps, 3)
+            or intervals.shape != (steps,)
+            or not np.issubdtype(intervals.dtype, np.integer)
+            or np.any(intervals < 0)
+        ):
+            raise ValueError(f"bad episode arrays: {initial_state.shape}, {target.shape}, {peak.shape}, {intervals.shape}")
+        return cls(initial_state, target, peak, intervals.astype(np.int64))
+
+    def gusts(self) -> np.ndarray:
+        """The gust force (N, world frame) held over each interval: every gust's 1-cosine profile, added."""
+        steps = self.target.shape[0]
+        force = np.zeros((steps, 3))
+        for start in np.flatnonzero(self.gust_intervals):
+            n = int(self.gust_intervals[start])
+            k = np.arange(n)
+            shape = (1 - np.cos(2 * math.pi * (k + 0.5) / n)) / 2
+            end = min(start + n, steps)
+            force[start:end] += shape[: end - start, None] * self.gust_peak[start]
+        return force
+
+
+def draw_target(rng: np.random.Generator) -> np.ndarray:
+    """A waypoint, uniform in the box."""
+    return rng.uniform(BOX_LOW, BOX_HIGH)
+
+
+def draw_gusts(rng: np.random.Generator, steps: int) -> tuple[np.ndarray, np.ndarray]:
+    """``steps`` intervals of gusts: onsets first, then each gust's peak, direction and length in order,
+    so a future redrawn from an interval on (a rollout's) uses the generator as an episode's own draw did."""
+    onsets = np.flatnonzero(rng.random(steps) < GUST_PROBABILITY)
+    peak, intervals = np.zeros((steps, 3)), np.zeros(steps, dtype=np.int64)
+    for j in onsets:
+        size, angle = rng.uniform(*GUST_PEAK_N), rng.uniform(-math.pi, math.pi)
+        peak[j] = [size * math.cos(angle), size * math.sin(angle), 0.0]
+        intervals[j] = max(1, round(rng.uniform(*GUST_DURATION_S) / CONTROL_DT_S))
+    return peak, intervals
+
+
+def distance_reward(distance_m: float) -> float:
+    """``-d^2 / (d^2 + 0.5^2)``: 0 on the waypoint, -1/2 at 0.5 m, towards -1 far away."""
+    d2 = distance_m * distance_m
+    return -d2 / (d2 + DISTANCE_SCALE_M**2)
+
+
+def outside(position_m: np.ndarray) -> bool:
+    """Outside the geofence, or on the ground."""
+    x, y, z = position_m
+    return bool(abs(x) > FENCE_HALF_WIDTH_M or abs(y) > FENCE_HALF_WIDTH_M or z > FENCE_HEIGHT_M or z < GROUND_M)
+
+
+def failure_steps(rewards: np.ndarray) -> int:
+    """The steps of an episode that ended outside the geofence or on the ground (reward at most -1)."""
+    return int(np.sum(np.asarray(rewards) <= -FAILURE_PENALTY))
+
+
+class Waypoints(EpisodeTask):
+    """Hold the drone on a waypoint that changes at random times, under gusts (see the module's docstring)."""
+
+    def __init__(self, random: Random = None, steps: int = EPISODE_STEPS):
+        super().__init__(random)
+        self._steps = steps
+        self._step = 0
+        self._gusts = np.zeros((steps, 3))
+
+    def check_episode(self, episode: Episode) -> None:
+        if episode.target.shape[0] < self._steps:
+            raise ValueError(f"episode has {episode.target.shape[0]} waypoints, need {self._steps}")
+
+    def draw_episode(self, random: np.random.Generator) -> Episode:
+        return Episode.draw(random, self._steps)
+
+    def resample_episode(self, episode: Episode, step: int, random: np.random.Generator) -> Episode:
+        """``episode`` with what comes after interval ``step`` redrawn: the waypoints (the controller
+        sees interval ``step``'s at its decision) and the gusts that begin later (one that has begun
+        goes on as drawn: a future that forgot it would be as wrong the other way)."""
+        steps = episode.target.shape[0]
+        target = np.array(episode.target)
+        target[step + 1 :] = jump_process(random, target[step], steps - step - 1, CHANGE_PROBABILITY, draw_target)
+        peak, intervals = np.array(episode.gust_peak), np.array(episode.gust_intervals)
+        peak[step + 1 :], intervals[step + 1 :] = draw_gusts(random, steps - step - 1)
+        return Episode(episode.initial_state, target, peak, intervals)
+
+    def episode_parameters(self) -> dict:
+        """What the episodes are drawn from (recorded in the test set)."""
+        return {
+            "box_low_m": BOX_LOW.tolist(),
+            "box_high_m": BOX_HIGH.tolist(),
+            "initial_yaw_rad": INITIAL_YAW_RAD,
+            "change_probability": CHANGE_PROBABILITY,
+            "gust_probability": GUST_PROBABILITY,
+            "gust_peak_n": list(GUST_PEAK_N),
+            "gust_duration_s": list(GUST_DURATION_S),
+            "fence_half_width_m": FENCE_HALF_WIDTH_M,
+            "fence_height_m": FENCE_HEIGHT_M,
+            "ground_m": GROUND_M,
+            "steps": EPISODE_STEPS,
+            "distance_scale_m": DISTANCE_SCALE_M,
+        }
+
+    def signals(self, episode: Episode) -> dict[str, np.ndarray]:
+        """The episode's waypoints and gusts, per step, for recordings."""
+        gusts = episode.gusts()
+        return {
+            "target_x_m": episode.target[:, 0],
+            "target_y_m": episode.target[:, 1],
+            "target_z_m": episode.target[:, 2],
+            "gust_x_n": gusts[:, 0],
+            "gust_y_n": gusts[:, 1],
+        }
+
+    def current_target(self) -> np.ndarray:
+        """The waypoint of the interval about to be played (the last one's once the episode is over)."""
+        return self._episode.target[min(self._step, self._episode.target.shape[0] - 1)]
+
+    def resume(self, episode: Episode, step: int) -> None:
+        super().resume(episode, step)
+        self._gusts = episode.gusts()
+
+    def initialize_episode(self, physics: Physics) -> None:
+        episode = self.next_episode()
+        self._step = 0
+        self._gusts = episode.gusts()
+        physics.set_state_vector(episode.initial_state)
+        physics.set_thrusts(np.full(4, physics.weight_n() / 4))
+        physics.set_gust(np.zeros(3))
+        physics.set_target(self.current_target())
+
+    def before_step(self, action, physics: Physics) -> None:
+        physics.set_control(action)
+        physics.set_gust(self._gusts[self._step])
+        physics.set_target(self.current_target())
+        self._step += 1
+
+    def get_reward(self, physics: Physics) -> float:
+        """Against the waypoint of the interval just played; 1 more off outside the geofence or on the ground."""
+        position = physics.position()
+        reward = distance_reward(float(np.linalg.norm(position - self._episode.target[self._step - 1])))
+        return reward - FAILURE_PENALTY if outside(position) else reward
+
+    def action_spec(self, physics: Physics) -> specs.BoundedArray:
+        low, high = physics.model.actuator_ctrlrange.T
+        return specs.BoundedArray((4,), np.float64, low, high, name="thrust")
+
+    def observation_spec(self, physics: Physics) -> collections.OrderedDict:
+        return collections.OrderedDict((name, specs.Array((), np.float64, name=name)) for name in OBSERVATION_NAMES)
+
+    def get_observation(self, physics: Physics) -> collections.OrderedDict:
+        values = np.concatenate([physics.state(), self.current_target()])
+        return collections.OrderedDict(zip(OBSERVATION_NAMES, values))
+
+
+def make_environment(
+    random: Random = None, plant: str = "mismatched", steps: int = EPISODE_STEPS, environment_kwargs: dict | None = None
+) -> control.Environment:
+    root = load_model(plant, timestep_s=PHYSICS_DT_S)
+    physics = Physics.from_xml_string(root.to_xml_string(), assets=root.get_assets())
+    return build_environment(physics, Waypoints(random=random, steps=steps), steps, CONTROL_DT_S, environment_kwargs)
+
+
+add_task(
+    SUITE,
+    "waypoints",
+    make_environment,
+    EPISODE_STEPS,
+    CONTROL_DT_S,
+    "Hold a quadrotor on changing waypoints under gusts, inside a geofence: 100 control intervals of 0.05 s (plant=...).",
+)
