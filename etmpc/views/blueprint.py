@@ -14,7 +14,8 @@ episode wide, on the ``step`` timeline:
 - the recomputes (the age of the plan each one replaced, by kind), on a task with time in the loop
   the plan in force (with each solve's start and arrival) and each step's computation (level, work,
   in flight), the reward per step, the running objective, and the recompute log (with each solve's
-  start and arrival there).
+  start and arrival there);
+- before them, for a system with a 3-D scene, a 3-D view of it (:mod:`etmpc.views.space`).
 
 Each quantity has a panel of its own, so none flattens another; legends are off (they cover data)
 and each panel's name says what its lines are. Rerun is imported only when a blueprint is built.
@@ -228,6 +229,10 @@ def episode_container(layout: EpisodeLayout):
         panels.insert(0, rrb.Spatial2DView(name="camera", origin=f"{layout.root}/camera"))
     columns = [panels[i : i + ROWS] for i in range(0, len(panels), ROWS)]
     shares = [3] * len(columns)
+    if "space" in layout.entities:  # a 3-D view of the flight (etmpc.views.space), a column two wide of its own, first
+        name = "3-D, z up [m] · orange: what happened · thin: the plan in force · red: target · yellow: force · grey: box"
+        columns.insert(0, [rrb.Spatial3DView(name=name, origin=f"{layout.root}/space")])
+        shares.insert(0, 6)
     if "events" in layout.entities:
         log = rrb.TextLogView(
             name="recomputes",

@@ -38,6 +38,7 @@ class EpisodeRecord:
     signals: dict = field(default_factory=dict)  # name -> (>= S,)
     input_bounds: tuple = ()  # (u_min (nu,), u_max (nu,)), or () if the system has none
     announced: tuple = ()  # a self-trigger's (step a plan was made, steps it announced it would be kept)
+    space: object = None  # the system's etmpc.systems.space.Space: a 3-D view of the episode (etmpc.views.space), or None
 
     @property
     def steps(self) -> int:
@@ -86,6 +87,7 @@ class EpisodeRecord:
             arrivals=tuple(int(a) for a in arrivals),
             starts=tuple(int(s) for s in _starts(traj, arrivals, shift)),
             timed=timed,
+            space=getattr(system, "space", None),
         )
 
 

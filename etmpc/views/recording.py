@@ -32,7 +32,8 @@ episode started), and every series name carries its unit:
   ``recompute_price`` times its work: ``compute``'s ``work`` where written, else ``decision``'s ``recompute``);
 - a task with time in the loop (its identity has ``latency`` and ``compute_levels``): ``compute`` (each
   step's level, work and in flight), ``solve/in_force``, ``solve/started``, ``solve/arrived`` (the plan
-  in force and each solve's start and arrival: ``etmpc.views.layout._solve_series``), ``events/solves``.
+  in force and each solve's start and arrival: ``etmpc.views.layout._solve_series``), ``events/solves``;
+- a system with a 3-D scene (its ``space``): ``space/…``, the flight, each plan's and the target in 3-D (``etmpc.views.space``).
 
 In one view, Rerun draws entities in the order of their paths: ``realised/…`` comes over
 ``plan/…`` and ``forecast/…``. The file carries a blueprint (``etmpc.views.blueprint``): a tab per
@@ -57,6 +58,7 @@ from etmpc.loop import computation_cost
 from etmpc.views.record import EpisodeRecord
 from etmpc.views.layout import _about, _fan, _slots, _solve_series, _timeline
 from etmpc.views.solves import solve_log
+from etmpc.views.space import log_space
 
 APPLICATION_ID = "etmpc"
 END_MARKER = "/etmpc_recording_end"  # static, logged last: {"episodes": how many the file holds}
@@ -232,11 +234,8 @@ class Recorder:
             slots, n_slots = _slots(made, max(p[1].shape[0] for p in record.plans))
             colours = look.plan_colours(made, n)
             # Every slot drawn: the viewer shows only the first 20 series of an entity unless told.
-            plan_style = lambda what: self._style(
-                "SeriesLines",
-                names=[what] * n_slots,  # noqa: E731
-                widths=[look.PLAN_WIDTH] * n_slots,
-                visible_series=[True] * n_slots,
+            plan_style = lambda what: self._style(  # noqa: E731
+                "SeriesLines", names=[what] * n_slots, widths=[look.PLAN_WIDTH] * n_slots, visible_series=[True] * n_slots
             )
             fans = [
                 (f"plan/state/{s}", np.stack([p[1][:, j] for p in record.plans]), n, f"each plan [{look.unit(s)}]")
@@ -256,6 +255,7 @@ class Recorder:
                 )
                 stream.log(f"{root}/{path}", plan_style(what), static=True)
                 written.append(path)
+        written += log_space(rr, stream, root, record, dt)  # a system with a Space: its 3-D view (etmpc.views.space)
 
         # The decisions.
         decisions = np.stack([record.recompute, record.forced], axis=1).astype(float)

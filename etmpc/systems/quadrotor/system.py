@@ -30,8 +30,20 @@ from etmpc.control.timing import Latency
 from etmpc.systems.gauss_newton import GaussNewtonSystem, tracked_change
 from etmpc.systems.quadrotor import task as quadrotor_task
 from etmpc.systems.quadrotor.model import INPUT_NAMES, NU, NX, STATE_NAMES, AnalyticModel, Parameters
+from etmpc.systems.space import Space
 
 TARGET = ("target_x_m", "target_y_m", "target_z_m")  # the observation's current waypoint, and the plan's forecasts of it
+
+# The recordings' 3-D view (etmpc.views.space): the flight, each plan's, the waypoint, the gust (the
+# strongest gust's peak drawn 0.5 m long) and the geofence, from the floor up.
+_FENCE = quadrotor_task.FENCE_HALF_WIDTH_M
+SPACE = Space(
+    position=STATE_NAMES[:3],
+    target=TARGET,
+    force=("gust_x_n", "gust_y_n", None),
+    box=((-_FENCE, -_FENCE, 0.0), (_FENCE, _FENCE, quadrotor_task.FENCE_HEIGHT_M)),
+    force_scale=0.5 / max(quadrotor_task.GUST_PEAK_N),
+)
 
 # What the learned policy's default ("error") feature set adds for the quadrotor (etmpc.policies.learned).
 EXOGENOUS_FEATURES = (
@@ -108,6 +120,7 @@ class QuadrotorSystem(GaussNewtonSystem):
     exogenous_features = staticmethod(exogenous_features)
     failure_name = "outside geofence"  # steps ending outside the geofence or on the ground, per episode
     camera = "arena"
+    space = SPACE  # the recordings' 3-D view of the flight
 
     def __init__(self, config: Config | None = None):
         self.config = config = self.Config() if config is None else config
