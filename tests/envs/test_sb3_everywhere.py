@@ -29,15 +29,12 @@ from etmpc.common.errors import EtmpcError  # noqa: E402
 from etmpc.envs.registration import env_id  # noqa: E402
 from etmpc.evaluation import evaluate as evaluate_module  # noqa: E402
 from etmpc.policies.sb3 import load_sb3  # noqa: E402
+from etmpc.systems import folder_name, names  # noqa: E402
 
 from tests.conftest import REPO
 
-SHIPPED = {
-    "cart_pendulum": "cart_pendulum",
-    "cart_pendulum-kicks": "cart_pendulum/kicks",
-    "battery": "battery",
-    "reacher": "reacher",
-}  # policies/<directory>: its task
+# policies/<directory>: its task, for every shipped PPO network
+SHIPPED = {folder_name(task): task for task in names() if (REPO / "policies" / folder_name(task) / "ppo.zip").exists()}
 BATTERY = env_id("battery")  # its gymnasium id (a version that grows with its observation)
 EPISODES = int(os.environ.get("ETMPC_SB3_EPISODES", "5"))  # test-set episodes 0 .. EPISODES - 1
 
@@ -80,6 +77,12 @@ def evaluate_plays(task: str, spec: str, episodes: int, tmp_path: Path, monkeypa
         caught[run["episode"]] |= {"objective": run["objective"], "recomputes": run["recomputes"]}
     assert sorted(caught) == list(range(episodes))
     return caught
+
+
+def test_every_shipped_network_is_compared():
+    """No ``policies/*/ppo.zip`` escapes the comparison below (a folder no task of the suite names would)."""
+    assert sorted(SHIPPED) == sorted(p.parent.name for p in (REPO / "policies").glob("*/ppo.zip"))
+    assert {"cart_pendulum", "battery", "reacher", "quadrotor"} <= set(SHIPPED)
 
 
 @pytest.mark.parametrize("directory", list(SHIPPED))
