@@ -8,6 +8,7 @@
 * after ``|``, options, each ``name=value`` (a bare first one is the format):
   ``.1f`` (any Python format; one ending in ``%`` multiplies by 100 and prints ``11.36 %``),
   ``vs=KEY`` (the relative change against another key of the same file: ``(value - other) / |other|``),
+  ``per=KEY`` (the ratio to another key of the same file: ``value / |other|``, a gap as a share of a mean),
   ``scale=X`` (multiplies, after ``vs``: ``scale=-1`` turns a cost's change into a gain, ``scale=100`` a share
   into a count of 100 episodes).
 
@@ -56,12 +57,12 @@ def parse(spec: str) -> tuple[str, str, dict[str, str]]:
     options: dict[str, str] = {}
     for i, option in enumerate(rest):
         name, eq, value = option.partition("=")
-        if eq and name in ("fmt", "vs", "scale"):
+        if eq and name in ("fmt", "vs", "per", "scale"):
             options[name] = value.strip()
         elif i == 0 and not eq:
             options["fmt"] = option
         else:
-            raise ValueError(f"unknown option {option!r} in {spec!r} (fmt, vs=KEY, scale=X)")
+            raise ValueError(f"unknown option {option!r} in {spec!r} (fmt, vs=KEY, per=KEY, scale=X)")
     return source, key.strip(), options
 
 
@@ -101,6 +102,8 @@ def source_value(number: Number, root: Path = ROOT, cache: dict | None = None):
     if "vs" in number.options:
         other = lookup(data, number.options["vs"])
         value = (value - other) / abs(other)
+    if "per" in number.options:
+        value = value / abs(lookup(data, number.options["per"]))
     if "scale" in number.options:
         value = value * float(number.options["scale"])
     return value

@@ -99,6 +99,16 @@ def test_the_checker_fails_on_a_key_its_source_does_not_have(fake):
     assert "cannot be read" in problem and "0 items with task='reacher'" in problem
 
 
+def test_a_ratio_to_another_key_is_the_value_over_its_size(fake):
+    root, page = fake
+    rows = "entries[name=best periodic].rows[task=battery]", "entries[name=DPI (shipped)].rows[task=battery]"
+    gap = f"r.json {rows[0]}.objective | .2% | per={rows[1]}.objective"
+    page.write_text(f"<!-- number: {gap} -->89.80 %<!-- /number -->\n")  # 0.80173 / 0.89278, by hand
+    assert doc_numbers.check([page], root) == []
+    page.write_text(f"<!-- number: {gap} -->89.81 %<!-- /number -->\n")
+    assert len(doc_numbers.check([page], root)) == 1
+
+
 def test_write_rewrites_every_marked_number_from_its_source(fake):
     root, page = fake
     right = page.read_text()
