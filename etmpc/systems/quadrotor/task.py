@@ -109,7 +109,7 @@ class Episode:
             or np.any(intervals < 0)
         ):
             raise ValueError(f"bad episode arrays: {initial_state.shape}, {target.shape}, {peak.shape}, {intervals.shape}")
-        return cls(initial_state, target, peak, intervals.astype(np.int64))
+        return cls(initial_state, target, peak, intervals.astype(np.int64, copy=False))  # no copy: a stored set stays read-only
 
     def gusts(self) -> np.ndarray:
         """The gust force (N, world frame) held over each interval: every gust's 1-cosine profile, added."""
