@@ -21,9 +21,20 @@ import dm_env
 import numpy as np
 
 from etmpc.control.lqr import PlanFeedback
-from etmpc.control.mpc import FeedbackWeights, GaussNewtonMPC
+from etmpc.control.mpc import FeedbackWeights, GaussNewtonMPC, SolverSettings
 from etmpc.control.plan import Plan
 from etmpc.systems.base import SystemBase
+
+# The SQP of the tracking tasks (the reacher, the quadrotor): a Gauss-Newton Hessian regularised by 1e-3 I, a
+# non-monotone line search (merit_memory 1, at most 8 steps), full multiple shooting, to 1e-6 (primal), 1e-5 (dual).
+TRACKING_SOLVER = SolverSettings(
+    tolerance=1e-6,
+    dual_tolerance=1e-5,
+    max_iterations=300,
+    block=1,
+    regularisation=1e-3,
+    sqp_options=(("merit_memory", 1), ("max_iter_ls", 8)),
+)
 
 
 def tracked_change(s, tracked: tuple[str, ...]) -> np.ndarray:

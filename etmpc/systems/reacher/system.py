@@ -35,7 +35,7 @@ feedback that follows the plan, and the price of a computation.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import casadi as ca
 import dm_env
@@ -43,7 +43,7 @@ import numpy as np
 
 from etmpc.control.mpc import FeedbackWeights, SolverSettings
 from etmpc.control.timing import Latency
-from etmpc.systems.gauss_newton import GaussNewtonSystem, tracked_change
+from etmpc.systems.gauss_newton import TRACKING_SOLVER, GaussNewtonSystem, tracked_change
 from etmpc.systems.reacher import task as reacher_task
 from etmpc.systems.reacher.model import INPUT_NAMES, NU, NX, STATE_NAMES, AnalyticModel, fingertip
 
@@ -85,16 +85,7 @@ class Config:
     plant: str = "mismatched"
     latency: Latency = Latency()  # how long a solve takes (etmpc.control.timing); none: the paper's loop
     compute_levels: bool = False  # a decision is keep, one SQP iteration or a full solve, priced per iteration
-    solver: SolverSettings = field(
-        default_factory=lambda: SolverSettings(
-            tolerance=1e-6,
-            dual_tolerance=1e-5,
-            max_iterations=300,
-            block=1,
-            regularisation=1e-3,
-            sqp_options=(("merit_memory", 1), ("max_iter_ls", 8)),
-        )
-    )
+    solver: SolverSettings = TRACKING_SOLVER
 
 
 class ReacherSystem(GaussNewtonSystem):
