@@ -11,6 +11,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 import mujoco
+import numpy as np
 from dm_control import mjcf
 from dm_control.mujoco import Physics as MjPhysics
 from dm_control.rl import control
@@ -34,6 +35,19 @@ def load_plant(
     if timestep_s is not None:
         root.option.timestep = timestep_s
     return root
+
+
+def finite_control(control_, size: int, owner: str, inputs: str, values: str):
+    """``control_`` as ``size`` finite floats, for a plant's ``set_control``; else a ``ValueError`` naming
+    ``owner``'s action: "the reacher's action is 2 torques, got an action of shape (3,)", "the reacher's
+    torques must be finite, got [...]" (``owner`` "the reacher", ``inputs`` "torques", ``values`` "torques")."""
+    control_ = np.asarray(control_, dtype=float)
+    if control_.size != size:
+        raise ValueError(f"{owner}'s action is {size} {inputs}, got an action of shape {control_.shape}")
+    control_ = control_.reshape(size)
+    if not np.all(np.isfinite(control_)):
+        raise ValueError(f"{owner}'s {values} must be finite, got {control_.tolist()}")
+    return control_
 
 
 class Physics(MjPhysics):

@@ -76,3 +76,24 @@ def test_the_reachers_stepping_is_the_legacy_rk4_stepping_bit_for_bit():
         physics.step(10)
         _reference_step(twin, 10, lambda m, d: np.zeros(m.nv))
         assert _same(physics.data.ptr, twin.data.ptr), trial
+
+
+@pytest.mark.parametrize(
+    "task, size, bad_size, not_finite",
+    [
+        ("quadrotor", 4, "the quadrotor's action is 4 rotor thrusts, got an action of shape (3,)", "the quadrotor's thrusts"),
+        ("reacher", 2, "the reacher's action is 2 torques, got an action of shape (3,)", "the reacher's torques"),
+    ],
+)
+def test_a_plant_takes_its_own_number_of_finite_inputs_and_says_so_in_one_line(task, size, bad_size, not_finite):
+    physics = make_system(task).make_env().physics
+    with pytest.raises(ValueError) as raised:
+        physics.set_control(np.zeros(3))
+    assert str(raised.value) == bad_size
+    bad = np.zeros(size)
+    bad[-1] = np.nan
+    with pytest.raises(ValueError) as raised:
+        physics.set_control(bad)
+    assert str(raised.value) == f"{not_finite} must be finite, got {bad.tolist()}"
+    physics.set_control(np.full((1, size), 0.01))  # any shape of the right size, as a flat vector
+    np.testing.assert_array_equal(physics.data.ctrl, np.full(size, 0.01))

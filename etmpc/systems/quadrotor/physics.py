@@ -17,7 +17,7 @@ import numpy as np
 from dm_control import mjcf
 
 from etmpc.systems.plants import Physics as PlantPhysics
-from etmpc.systems.plants import load_plant
+from etmpc.systems.plants import finite_control, load_plant
 from etmpc.systems.quadrotor.model import GRAVITY_M_S2, NU, Parameters
 
 ROTORS = ("rotor0", "rotor1", "rotor2", "rotor3")
@@ -116,10 +116,4 @@ class Physics(PlantPhysics):
 
     def set_control(self, control_) -> None:
         """The rotors' commanded thrusts (N): four finite numbers (MuJoCo clamps them to ``ctrlrange``)."""
-        thrust = np.asarray(control_, dtype=float)
-        if thrust.size != NU:
-            raise ValueError(f"the quadrotor's action is {NU} rotor thrusts, got an action of shape {thrust.shape}")
-        thrust = thrust.reshape(NU)
-        if not np.all(np.isfinite(thrust)):
-            raise ValueError(f"the quadrotor's thrusts must be finite, got {thrust.tolist()}")
-        self.data.ctrl[:] = thrust
+        self.data.ctrl[:] = finite_control(control_, NU, "the quadrotor", "rotor thrusts", "thrusts")

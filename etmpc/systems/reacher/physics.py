@@ -18,7 +18,7 @@ import numpy as np
 from dm_control import mjcf
 
 from etmpc.systems.plants import Physics as PlantPhysics
-from etmpc.systems.plants import load_plant
+from etmpc.systems.plants import finite_control, load_plant
 from etmpc.systems.reacher.model import NU, Parameters
 
 
@@ -87,10 +87,4 @@ class Physics(PlantPhysics):
 
     def set_control(self, control_) -> None:
         """The joint torques (N m): two finite numbers (MuJoCo clamps them to ``ctrlrange``)."""
-        torque = np.asarray(control_, dtype=float)
-        if torque.size != NU:
-            raise ValueError(f"the reacher's action is {NU} torques, got an action of shape {torque.shape}")
-        torque = torque.reshape(NU)
-        if not np.all(np.isfinite(torque)):
-            raise ValueError(f"the reacher's torques must be finite, got {torque.tolist()}")
-        self.data.ctrl[:] = torque
+        self.data.ctrl[:] = finite_control(control_, NU, "the reacher", "torques", "torques")

@@ -20,7 +20,7 @@ import numpy as np
 from dm_control import mjcf
 from dm_control.mujoco import Physics as MjPhysics
 
-from etmpc.systems.plants import load_plant
+from etmpc.systems.plants import finite_control, load_plant
 from etmpc_slider.model import NU, Parameters
 
 MODEL_PATH = Path(__file__).with_name("slider.xml")  # package data: found beside this module, wherever installed
@@ -74,13 +74,7 @@ class Physics(MjPhysics):
 
     def set_control(self, control_) -> None:
         """The motor's force (N): one finite number (MuJoCo clamps it to ``ctrlrange``)."""
-        force = np.asarray(control_, dtype=float)
-        if force.size != NU:
-            raise ValueError(f"the slider's action is {NU} force, got an action of shape {force.shape}")
-        force = force.reshape(NU)
-        if not np.all(np.isfinite(force)):
-            raise ValueError(f"the slider's force must be finite, got {force.tolist()}")
-        self.data.ctrl[:] = force
+        self.data.ctrl[:] = finite_control(control_, NU, "the slider", "force", "force")
 
     # -- snapshots (rollouts) ---------------------------------------------------------------------
     def snapshot(self) -> mujoco.MjData:
