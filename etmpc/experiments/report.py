@@ -7,6 +7,7 @@ import platform
 from importlib import metadata
 from pathlib import Path
 
+from etmpc.experiments.clock import time_table
 from etmpc.evaluation.metrics import higher_or_lower, oriented
 from etmpc.experiments.pareto import report_section
 
@@ -102,6 +103,7 @@ def report(results: dict) -> str:
             lines += report_section(pareto) + ["", f"![trade-off](sweep/{domain.replace('/', '-')}/pareto.png)", ""]
     lines += ["## Against the paper", ""]
     lines += (["No verdicts in a smoke run."] if s.get("smoke") else against_the_paper(results)) + [""]
+    lines += time_table(results["systems"])
     lines += ["## Software and machine", "", "| package | version |", "|---|---|"]
     lines += [f"| {k} | {v} |" for k, v in results["software"].items()]
     m = results["machine"]

@@ -44,6 +44,7 @@ from etmpc.evaluation.evaluate import evaluate
 from etmpc.evaluation.render import render_rollout
 from etmpc.evaluation.workers import shared_pools
 from etmpc.experiments import sweep as sweeps
+from etmpc.experiments.clock import StageClock
 from etmpc.experiments.report import PAPER, machine, report, software_versions
 from etmpc.experiments.summary import (
     summarise_default,
@@ -212,8 +213,12 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
         address=run["address"],
         progress=progress,
     )
+    clock = StageClock(folder)
     _say(f"{domain}: fixed policies")
-    baselines = evaluated_once(folder / "baselines.json", policies=system.benchmark.baselines(system.compute_levels), **common)
+    with clock.stage("fixed policies", folder / "baselines.json"):
+        baselines = evaluated_once(
+            folder / "baselines.json", policies=system.benchmark.baselines(system.compute_levels), **common
+        )
 
     learned, state, learned_specs = None, None, []
     if system.name in PAPER:
@@ -222,7 +227,7 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
             domain, settings.seeds, settings.episodes, settings.eval_every, settings.eval_episodes, features="paper"
         )  # the paper's learner on the paper's features, as the report says
         train_dir = folder / "train"
-        with timed(train_dir, run["workers"]):
+        with clock.stage("GPOMDP training", cost_path(train_dir)), timed(train_dir, run["workers"]):
             train(
                 config,
                 train_dir,
@@ -236,7 +241,8 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
 
         _say(f"{domain}: the learned policies, {settings.repeats} passes")
         learned_specs = [f"rl:{train_dir / f'seed{s}' / 'last.json'}" for s in settings.seeds]
-        learned = evaluated_once(folder / "learned.json", policies=learned_specs, repeats=settings.repeats, **common)
+        with clock.stage("GPOMDP evaluation", folder / "learned.json"):
+            learned = evaluated_once(folder / "learned.json", policies=learned_specs, repeats=settings.repeats, **common)
 
     _say(f"{domain}: the default learner (DPI), {len(settings.dpi_seeds)} seeds x {settings.dpi_episodes} episodes")
     dpi_config = TrainConfig(
@@ -255,7 +261,7 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
         ),
     )
     dpi_dir = folder / "train_dpi"
-    with timed(dpi_dir, run["workers"]):
+    with clock.stage("DPI training", cost_path(dpi_dir)), timed(dpi_dir, run["workers"]):
         train(
             dpi_config,
             dpi_dir,
@@ -268,7 +274,8 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
     shipped = folder.parent / "policies" / folder_name(system.name) / "learned.json"
     if not shipped.exists():
         write_json_atomically(shipped, json.loads((dpi_dir / "selected.json").read_text()))
-    default = evaluated_once(folder / "learned_default.json", policies=[f"rl:{shipped}"], **common)
+    with clock.stage("DPI evaluation", folder / "learned_default.json"):
+        default = evaluated_once(folder / "learned_default.json", policies=[f"rl:{shipped}"], **common)
 
     summary = summarise_system(system, baselines, learned, curve_summary(state) if state is not None else None)
     best = summary["best_fixed"]["policy"]
@@ -276,11 +283,13 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
     _say(f"{domain}: headroom, rollout and oracle over {best} on {settings.rollout_episodes} episodes")
     rollout_spec = f"rollout:{best}:{settings.rollout_futures}:{system.benchmark.capped(settings.rollout_horizon)}"
     subset = dict(common, episodes=settings.rollout_episodes)
-    rollout = evaluated_once(folder / "headroom_rollout.json", timed=run["workers"], policies=[rollout_spec], **subset)
-    oracle = evaluated_once(folder / "headroom_oracle.json", timed=run["workers"], policies=[f"oracle:{best}"], **subset)
+    with clock.stage("rollout", folder / "headroom_rollout.json"):
+        rollout = evaluated_once(folder / "headroom_rollout.json", timed=run["workers"], policies=[rollout_spec], **subset)
+    with clock.stage("oracle", folder / "headroom_oracle.json"):
+        oracle = evaluated_once(folder / "headroom_oracle.json", timed=run["workers"], policies=[f"oracle:{best}"], **subset)
     summary["default_learner"] = summarise_default(system, baselines, default, load_checkpoint(dpi_dir / "checkpoint.json"))
     summary["headroom"] = summarise_headroom(system, best, baselines, learned, default, rollout, oracle)
-    ppo_run, ppo, ppo_curve = _ppo(folder, domain, settings, run, common)
+    ppo_run, ppo, ppo_curve = _ppo(folder, domain, settings, run, common, clock)
     costs = {name: _cost(folder / stage) for name, stage in (("gpomdp", "train"), ("dpi", "train_dpi"), ("ppo", "train_ppo"))}
     curves = _efficiency(folder, system, baselines, best, state, ppo_run, ppo_curve)
     summary["learners"] = summarise_learners(system, baselines, learned, default, ppo, ppo_run, settings.to_json(), costs, curves)
@@ -299,46 +308,50 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
         "DPI": (default, f"rl:{shipped}"),
         "PPO": (ppo, f"sb3:{folder / 'train_ppo' / 'selected.zip'}"),
     }
-    others = _other_learners(folder, domain, settings, run, common)
+    others = _other_learners(folder, domain, settings, run, common, clock)
     if others:  # learners registered beyond the built-in ones: each trained, evaluated and scored
         summary["other_learners"] = {name: {"policy": spec, "evaluation": data} for name, (data, spec) in others.items()}
         scored.update(others)
     summary["scorecard"] = summarise_scorecard(system, scored)
 
     _say(f"{domain}: figures, recording, video")
-    if not (folder / "figure3.png").exists():
-        figures.write_policy_bars_png(folder / "figure3.png", [baselines, learned if learned is not None else default])
-    if not (folder / "episodes.rrd").exists():
-        evaluate(
-            domain,
-            [best, *learned_specs[:1], f"rl:{shipped}"],
-            episodes=settings.record_episodes,
-            workers=run["workers"],
-            progress=False,
-            record=folder / "episodes.rrd",
-        )
-    files = {
-        "baselines": "baselines.json",
-        "learned": "learned.json",
-        "curve": "train/curve.png",
-        "figure3": "figure3.png",
-        "recording": "episodes.rrd",
-        "trajectory": "trajectory.png",
-        "default_learner": "learned_default.json",
-        "curve_dpi": "train_dpi/curve.png",
-        "headroom_rollout": "headroom_rollout.json",
-        "headroom_oracle": "headroom_oracle.json",
-        "efficiency": "efficiency.png",
-    }
-    if learned is None:
-        del files["learned"], files["curve"]
-    _trajectory_png(folder / "trajectory.png", system, best)
-    if system.name == "battery":  # the paper's Figure 1: forecasts of the battery's prices and production
-        _forecasts_png(folder / "figure1_forecasts.png", system)
-        files["figure1"] = "figure1_forecasts.png"
-    if provides(system, "render"):
-        if not (folder / "episode.mp4").exists():
-            render_rollout(domain, best, 0, folder / "episode.mp4", width=settings.video_size[0], height=settings.video_size[1])
-        files["video"] = "episode.mp4"
+    with clock.stage("figures, recording, video", folder / "figure3.png", folder / "episodes.rrd", folder / "trajectory.png"):
+        if not (folder / "figure3.png").exists():
+            figures.write_policy_bars_png(folder / "figure3.png", [baselines, learned if learned is not None else default])
+        if not (folder / "episodes.rrd").exists():
+            evaluate(
+                domain,
+                [best, *learned_specs[:1], f"rl:{shipped}"],
+                episodes=settings.record_episodes,
+                workers=run["workers"],
+                progress=False,
+                record=folder / "episodes.rrd",
+            )
+        files = {
+            "baselines": "baselines.json",
+            "learned": "learned.json",
+            "curve": "train/curve.png",
+            "figure3": "figure3.png",
+            "recording": "episodes.rrd",
+            "trajectory": "trajectory.png",
+            "default_learner": "learned_default.json",
+            "curve_dpi": "train_dpi/curve.png",
+            "headroom_rollout": "headroom_rollout.json",
+            "headroom_oracle": "headroom_oracle.json",
+            "efficiency": "efficiency.png",
+        }
+        if learned is None:
+            del files["learned"], files["curve"]
+        _trajectory_png(folder / "trajectory.png", system, best)
+        if system.name == "battery":  # the paper's Figure 1: forecasts of the battery's prices and production
+            _forecasts_png(folder / "figure1_forecasts.png", system)
+            files["figure1"] = "figure1_forecasts.png"
+        if provides(system, "render"):
+            if not (folder / "episode.mp4").exists():
+                render_rollout(
+                    domain, best, 0, folder / "episode.mp4", width=settings.video_size[0], height=settings.video_size[1]
+                )
+            files["video"] = "episode.mp4"
     summary["files"] = {k: f"{folder.name}/{v}" for k, v in files.items()}
+    summary["stage_seconds"] = clock.read()
     return summary

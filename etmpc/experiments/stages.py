@@ -18,6 +18,7 @@ from etmpc.evaluation.evaluate import evaluate
 from etmpc.evaluation.workers import play_test_episode
 from etmpc.evaluation.references import stored
 from etmpc.experiments import efficiency
+from etmpc.experiments.clock import StageClock
 from etmpc.learning import hyperparams
 from etmpc.learning.ppo import PpoSettings, train_ppo
 from etmpc.learning.base import BUILT_IN, learners
@@ -50,7 +51,9 @@ def _stored_best(system) -> str:
     return "always" if best == "every:1" else best  # the same schedule, as reproduce's fixed policies name it
 
 
-def _ppo(folder: Path, domain: str, settings, run: dict, common: dict) -> tuple[dict | None, dict | None, dict | None]:
+def _ppo(
+    folder: Path, domain: str, settings, run: dict, common: dict, clock: StageClock
+) -> tuple[dict | None, dict | None, dict | None]:
     """PPO on the trigger environment (``train_ppo/``, redone whole if it was interrupted) with the task's
     hyperparameters, its chosen network copied to ``DIR/policies/`` and evaluated on the test set
     (``learned_ppo.json``), and every checkpoint (``learned_ppo_checkpoints.json``, its learning curve);
@@ -62,12 +65,13 @@ def _ppo(folder: Path, domain: str, settings, run: dict, common: dict) -> tuple[
     chosen = hyperparams.shipped(domain, PpoSettings(validation_episodes=settings.validation_episodes))
     if settings.ppo_timesteps is not None:
         chosen = replace(chosen, timesteps=settings.ppo_timesteps)
-    if not (ppo_dir / "training.json").exists():
-        _say(f"{domain}: PPO (Stable-Baselines3), {chosen.timesteps} environment steps")
-        if ppo_dir.exists():
-            shutil.rmtree(ppo_dir)  # an interrupted run starts again
-        with timed(ppo_dir, run["workers"]):
-            train_ppo(domain, ppo_dir, chosen, run["workers"], say=_say)
+    with clock.stage("PPO training", ppo_dir / "training.json"):
+        if not (ppo_dir / "training.json").exists():
+            _say(f"{domain}: PPO (Stable-Baselines3), {chosen.timesteps} environment steps")
+            if ppo_dir.exists():
+                shutil.rmtree(ppo_dir)  # an interrupted run starts again
+            with timed(ppo_dir, run["workers"]):
+                train_ppo(domain, ppo_dir, chosen, run["workers"], say=_say)
     training = json.loads((ppo_dir / "training.json").read_text())
     shipped = folder.parent / "policies" / folder_name(domain)
     if not (shipped / "ppo.zip").exists():
@@ -79,16 +83,17 @@ def _ppo(folder: Path, domain: str, settings, run: dict, common: dict) -> tuple[
             write_text(shipped / "ppo.yml", hyperparams.dump(chosen, domain, "the hyperparameters this run's PPO used"))
         shutil.copyfile(ppo_dir / "selected.json", shipped / "ppo.json")
         shutil.copyfile(ppo_dir / "selected.zip", shipped / "ppo.zip")
-    ppo = evaluated_once(folder / "learned_ppo.json", policies=[f"sb3:{ppo_dir / 'selected.zip'}"], **common)
-    curve = evaluated_once(
-        folder / "learned_ppo_checkpoints.json",
-        policies=[f"sb3:{ppo_dir / c['file']}" for c in training["checkpoints"]],
-        **common,
-    )
+    with clock.stage("PPO evaluation", folder / "learned_ppo.json", folder / "learned_ppo_checkpoints.json"):
+        ppo = evaluated_once(folder / "learned_ppo.json", policies=[f"sb3:{ppo_dir / 'selected.zip'}"], **common)
+        curve = evaluated_once(
+            folder / "learned_ppo_checkpoints.json",
+            policies=[f"sb3:{ppo_dir / c['file']}" for c in training["checkpoints"]],
+            **common,
+        )
     return training, ppo, curve
 
 
-def _other_learners(folder: Path, domain: str, settings, run_options: dict, common: dict) -> dict:
+def _other_learners(folder: Path, domain: str, settings, run_options: dict, common: dict, clock: StageClock) -> dict:
     """Every registered learner that is not built in (:data:`etmpc.learning.base.LEARNERS`), trained with
     its settings (its ``quick_settings()`` in a smoke run) into ``train_<name>/`` by the runner, its policy
     evaluated on the test set (``learned_<name>.json``): ``{name: (evaluation JSON, spec)}``."""
@@ -99,20 +104,21 @@ def _other_learners(folder: Path, domain: str, settings, run_options: dict, comm
         chosen = cls.quick_settings() if settings.smoke and hasattr(cls, "quick_settings") else cls.Settings()
         stage = folder / f"train_{name}"
         _say(f"{domain}: the learner {name}")
-        with timed(stage, run_options["workers"]):
-            trained = run(
-                cls(chosen),
-                domain,
-                stage,
-                None,
-                run_options["workers"],
-                resume=True,
-                backend=run_options["backend"],
-                address=run_options["address"],
-                progress=common["progress"],
-                say=_say,
-            )
-        found[name] = (evaluated_once(folder / f"learned_{name}.json", policies=[trained.policy], **common), trained.policy)
+        with clock.stage(f"learner {name}", folder / f"learned_{name}.json"):
+            with timed(stage, run_options["workers"]):
+                trained = run(
+                    cls(chosen),
+                    domain,
+                    stage,
+                    None,
+                    run_options["workers"],
+                    resume=True,
+                    backend=run_options["backend"],
+                    address=run_options["address"],
+                    progress=common["progress"],
+                    say=_say,
+                )
+            found[name] = (evaluated_once(folder / f"learned_{name}.json", policies=[trained.policy], **common), trained.policy)
     return found
 
 

@@ -262,3 +262,29 @@ def test_the_papers_learner_trains_on_the_papers_features_as_the_report_says(run
         config = json.loads((out / folder_name(name) / "train" / "checkpoint.json").read_text())["config"]
         assert config["algorithm"] == "gpomdp" and config["features"] == "paper"
     assert "GPOMDP, paper features" in (out / "REPORT.md").read_text()
+
+
+@pytest.mark.slow
+def test_every_stage_of_every_task_is_timed_and_the_report_says_where_the_time_went(run):
+    out, results = run
+    report = (out / "REPORT.md").read_text().split("## Where the time went")[1]
+    wall = results["wall_seconds_this_invocation"]
+    totals = {}
+    for name, r in results["systems"].items():
+        times = r["stage_seconds"]
+        expected = {"fixed policies", "DPI training", "DPI evaluation", "rollout", "oracle", "figures, recording, video"}
+        expected |= {"GPOMDP training", "GPOMDP evaluation"} if name in PAPER else set()
+        expected |= {"PPO training", "PPO evaluation"} if "ppo" in r["efficiency"] else set()
+        assert expected <= set(times) and all(v > 0 for v in times.values()), (name, times)
+        # A training stage's clock holds the learner's own timer (its wall time in the report's learners table).
+        for stage, folder in (("DPI training", "train_dpi"), ("GPOMDP training", "train"), ("PPO training", "train_ppo")):
+            if stage in times:
+                inner = json.loads((out / folder_name(name) / f"{folder}_cost.json").read_text())["wall_seconds"]
+                assert inner <= times[stage] <= inner + 5.0
+        totals[name] = sum(times.values())
+    assert sum(totals.values()) <= wall  # stages are disjoint parts of the one invocation that played them all
+    for name, total in totals.items():
+        (row,) = [line for line in report.splitlines() if line.startswith(f"| {name} | ")]
+        assert row.endswith(f"| {total / 60:.1f} | {100 * total / sum(totals.values()):.0f} % |")
+    costliest = max(totals, key=totals.get)
+    assert f"Costliest: {costliest}, {totals[costliest] / 60:.1f} min of {sum(totals.values()) / 60:.1f}." in report
