@@ -2,7 +2,9 @@
 
 Every policy of an evaluation meets the same test-set episodes, so a policy is compared with a
 reference episode by episode: the mean difference, its 95 % CI (normal approximation, ``1.96 sd /
-sqrt(n)``), the same as a percentage of the reference's mean, and the episodes where it is better.
+sqrt(n)``), the same as a percentage of the reference's mean, and the episodes where it is better. On a
+task that counts failures (falls, steps outside a geofence, ...) the failures are paired too: the mean
+difference per episode (> 0: more failures than the reference) and its 95 % CI.
 ``etmpc evaluate --against SPEC`` prints :func:`format_against`.
 """
 
@@ -14,14 +16,29 @@ from etmpc.common.errors import EtmpcError
 from etmpc.evaluation import metrics
 
 
-def per_episode(evaluation: dict, policies=None) -> dict[int, float]:
-    """Episode -> the mean objective of ``policies`` (default: every policy in the file) over their
-    finite runs (seeds and passes together)."""
+def per_episode(evaluation: dict, policies=None, value: str = "objective") -> dict[int, float]:
+    """Episode -> the mean ``value`` (the objective, or ``"failures"``) of ``policies`` (default: every
+    policy in the file) over their finite runs (seeds and passes together)."""
     values: dict[int, list[float]] = {}
     for r in evaluation["runs"]:
         if r["finite"] and (policies is None or r["policy"] in policies):
-            values.setdefault(r["episode"], []).append(r["objective"])
+            values.setdefault(r["episode"], []).append(r[value])
     return {e: float(np.mean(v)) for e, v in values.items()}
+
+
+def paired_failures(evaluation: dict, spec: str, reference: str) -> dict | None:
+    """``spec``'s failures against ``reference``'s on their common episodes: the mean difference per
+    episode (> 0: more) and its 95 % CI; None on a task that counts none."""
+    if any(r.get("failures") is None for r in evaluation["runs"] if r["finite"]):
+        return None
+    mine, theirs = per_episode(evaluation, {spec}, "failures"), per_episode(evaluation, {reference}, "failures")
+    common = sorted(set(mine) & set(theirs))
+    diff = metrics.paired_differences([mine[e] for e in common], [theirs[e] for e in common], "min")
+    return {
+        "failures_mean": float(np.mean([mine[e] for e in common])),
+        "difference": diff["mean_difference"],
+        "ci95": diff["ci95"],
+    }
 
 
 def paired(a: dict[int, float], b: dict[int, float], sense: str, episodes=None) -> dict:
@@ -58,6 +75,7 @@ def against(evaluation: dict, reference: str) -> dict[str, dict]:
             paired(per_episode(evaluation, {spec}), base, sense),
             recomputes_mean=row["recomputes_mean"],
             upper_bound=row.get("upper_bound", False),
+            failures=paired_failures(evaluation, spec, reference),
         )
         for spec, row in policies.items()
         if spec != reference
@@ -68,10 +86,12 @@ def format_against(evaluation: dict, reference: str) -> str:
     """The table of :func:`against`: objective, paired difference and gain (95 % CI), episodes better."""
     rows = against(evaluation, reference)
     ref = evaluation["policies"][reference]
+    name = next((row.get("failure_name") for row in evaluation["policies"].values() if row.get("failure_name")), None)
+    counted = name is not None and all(r["failures"] is not None for r in rows.values())
     width = max([16] + [len(spec) + 2 for spec in rows])
     head = (
         f"{'policy':<{width}}{'objective':>12}{'difference':>13}{'± 95 % CI':>11}{'gain %':>9}{'± CI':>7}{'better':>9}"
-        f"{'recomputes':>12}"
+        f"{'recomputes':>12}" + (f"{'Δ failures ± CI':>19}" if counted else "")
     )
     lines = [
         f"paired over the same test-set episodes against {reference} ({ref['objective_mean']:.5f}, "
@@ -80,10 +100,13 @@ def format_against(evaluation: dict, reference: str) -> str:
         "-" * len(head),
     ]
     for spec, r in rows.items():
-        name = spec + (" (bound)" if r["upper_bound"] else "")
+        label = spec + (" (bound)" if r["upper_bound"] else "")
+        failures = f"{r['failures']['difference']:>+11.2f} ± {r['failures']['ci95']:<5.2f}" if counted else ""
         lines.append(
-            f"{name:<{width}}{r['objective_mean']:>12.5f}{r['mean_difference']:>+13.5f}{r['ci95']:>11.5f}"
+            f"{label:<{width}}{r['objective_mean']:>12.5f}{r['mean_difference']:>+13.5f}{r['ci95']:>11.5f}"
             f"{r['gain_percent']:>+9.2f}{r['gain_percent_ci95']:>7.2f}{r['better_episodes']:>5d}/{r['episodes']:<3d}"
-            f"{r['recomputes_mean']:>12.2f}"
+            f"{r['recomputes_mean']:>12.2f}{failures}"
         )
+    if counted:
+        lines.append(f"Δ failures: {name} per episode against {reference}'s on the same episodes (> 0: more), 95 % CI")
     return "\n".join(lines)
