@@ -24,6 +24,9 @@ Per system, in ``DIR/<domain>/``:
 5. ``episodes.rrd``: a Rerun recording of representative episodes (the best fixed policy and
    the first seed's learned policy); ``episode.mp4``: a rendered video (cart pendulum).
 
+Each stage's wall time is kept in ``DIR/<domain>/stage_seconds.json`` as it finishes
+(:mod:`etmpc.experiments.clock`): the report's table of where the time went.
+
 Then ``DIR/results.json`` (everything the report says, machine-readable) and ``DIR/REPORT.md``,
 which is written from ``results.json`` alone. Every stage writes its files atomically and is
 skipped when they are there, so running the command again after an interruption continues; the
