@@ -6,7 +6,8 @@ The entries, each one spec per task (:func:`entries`):
 * **best periodic**: the task's best ``every:T`` on its stored test set (its reference: 0);
 * **best threshold**: the event trigger ``threshold:X`` whose mean objective is best on
   training-distribution episodes (the validation stream of ``etmpc train``, never the test set), over
-  the task's ``Benchmark.sweep_thresholds``;
+  the task's ``Benchmark.sweep_thresholds`` (the choice is kept with the rows: a run that continues does not
+  choose again);
 * the learners shipped in ``policies/<task>/`` (from a checkout): **GPOMDP** (``gpomdp.json``, the
   paper's tasks), **DPI** (``learned.json``) and **PPO** (``ppo.zip``), each where it is shipped;
 * **rollout meter**: ``rollout:BEST:4:H``, the one-step lookahead over sampled futures with the task's
@@ -121,7 +122,30 @@ def best_threshold(task: str, workers: int, say: Callable[[str], None]) -> str:
     return chosen
 
 
-def entries(tasks: list[str], references: dict[str, References], workers: int, say: Callable[[str], None]) -> list[Entry]:
+def kept_threshold(task: str, work: Path | None, workers: int, say: Callable[[str], None]) -> str:
+    """:func:`best_threshold`, kept in ``work`` (``best-threshold/<task>.choice.json``, sealed) for the grid,
+    the validation episodes and the task's version it was chosen on: a run that continues does not choose
+    again (one that changed any of them does)."""
+    system = make_system(task)
+    key = {
+        "grid": [f"threshold:{x:g}" for x in system.benchmark.sweep_thresholds],
+        "validation_entropy": VALIDATION_ENTROPY,
+        "validation_episodes": VALIDATION_EPISODES,
+        "suite_version": SUITE_VERSION,
+        "task_version": task_version(task),
+    }
+    path = None if work is None else work / _slug(FIRST[2]) / f"{folder_name(task)}.choice.json"
+    if (kept := path and _read_kept(path)) and SEAL in kept and kept.get("key") == key and kept.get("chosen") in key["grid"]:
+        return kept["chosen"]
+    chosen = best_threshold(task, workers, say)
+    if path is not None:
+        write_json(path, sealed({"key": key, "chosen": chosen}))
+    return chosen
+
+
+def entries(
+    tasks: list[str], references: dict[str, References], workers: int, say: Callable[[str], None], work: Path | None = None
+) -> list[Entry]:
     best = {t: references[t].best for t in tasks}
     found = [
         Entry(FIRST[0], "baseline", {t: "always" for t in tasks}, "standard MPC: a new plan every step"),
@@ -129,7 +153,7 @@ def entries(tasks: list[str], references: dict[str, References], workers: int, s
         Entry(
             FIRST[2],
             "baseline",
-            {t: best_threshold(t, workers, say) for t in tasks},
+            {t: kept_threshold(t, work, workers, say) for t in tasks},
             f"threshold:X chosen on {VALIDATION_EPISODES} training-distribution episodes",
         ),
     ]
@@ -319,7 +343,7 @@ def _build(
             system,
             [f"{prefix}{path}" for _, file, prefix, _ in shipped_learners() if (path := shipped_policy(task, file)) is not None],
         )
-    board = entries(tasks, references, workers, say) + extra
+    board = entries(tasks, references, workers, say, work) + extra
     n = episodes or min(r.episodes for r in references.values())
     result = []
     rows_all: list[TaskScore] = []

@@ -51,9 +51,33 @@ def test_an_interrupted_run_continues_without_playing_a_finished_row_again(board
         raise AssertionError("played again")
 
     monkeypatch.setattr(leaderboard, "play_and_score", no_play)
-    monkeypatch.setattr(leaderboard, "best_threshold", lambda task, workers, say: data["entries"][2]["specs"][task])
+    monkeypatch.setattr(leaderboard, "best_threshold", no_play)  # its choice is kept too
     again = build(out / "again", out / "work", ["battery"], episodes=2, workers=1)
     assert headline(again) == headline(data)
+
+
+def test_the_best_threshold_is_chosen_once_and_chosen_again_when_its_task_changes(board, monkeypatch, tmp_path):
+    import shutil
+
+    from etmpc.common.errors import EtmpcError
+
+    out, data = board
+    work = tmp_path / "work"
+    shutil.copytree(out / "work", work)
+    path = work / "best-threshold" / "battery.choice.json"
+    chosen = data["entries"][2]["specs"]["battery"]
+    assert json.loads(path.read_text())["chosen"] == chosen
+    monkeypatch.setattr(leaderboard, "best_threshold", lambda *a: pytest.fail("chosen again"))
+    assert leaderboard.kept_threshold("battery", work, 1, lambda line: None) == chosen
+    calls = []
+    monkeypatch.setattr(leaderboard, "best_threshold", lambda task, workers, say: calls.append(task) or "threshold:0.01")
+    monkeypatch.setattr(leaderboard, "task_version", lambda task: 99)  # the task changed: its choice does not stand
+    assert leaderboard.kept_threshold("battery", work, 1, lambda line: None) == "threshold:0.01" and calls == ["battery"]
+    edited = json.loads(path.read_text())
+    edited["chosen"] = "threshold:0.02"  # by hand: refused, never used
+    path.write_text(json.dumps(edited))
+    with pytest.raises(EtmpcError, match="kept leaderboard row"):
+        leaderboard.kept_threshold("battery", work, 1, lambda line: None)
 
 
 def test_the_readmes_headline_table_is_the_generated_leaderboards():
