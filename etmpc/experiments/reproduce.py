@@ -318,6 +318,21 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
     summary["scorecard"] = summarise_scorecard(system, scored)
 
     _say(f"{domain}: figures, recording, video")
+    files = {
+        "baselines": "baselines.json",
+        "learned": "learned.json",
+        "curve": "train/curve.png",
+        "figure3": "figure3.png",
+        "recording": "episodes.rrd",
+        "trajectory": "trajectory.png",
+        "default_learner": "learned_default.json",
+        "curve_dpi": "train_dpi/curve.png",
+        "headroom_rollout": "headroom_rollout.json",
+        "headroom_oracle": "headroom_oracle.json",
+        "efficiency": "efficiency.png",
+    }
+    if learned is None:
+        del files["learned"], files["curve"]
     with clock.stage("figures, recording, video", folder / "figure3.png", folder / "episodes.rrd", folder / "trajectory.png"):
         if not (folder / "figure3.png").exists():
             figures.write_policy_bars_png(folder / "figure3.png", [baselines, learned if learned is not None else default])
@@ -330,21 +345,6 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
                 progress=False,
                 record=folder / "episodes.rrd",
             )
-        files = {
-            "baselines": "baselines.json",
-            "learned": "learned.json",
-            "curve": "train/curve.png",
-            "figure3": "figure3.png",
-            "recording": "episodes.rrd",
-            "trajectory": "trajectory.png",
-            "default_learner": "learned_default.json",
-            "curve_dpi": "train_dpi/curve.png",
-            "headroom_rollout": "headroom_rollout.json",
-            "headroom_oracle": "headroom_oracle.json",
-            "efficiency": "efficiency.png",
-        }
-        if learned is None:
-            del files["learned"], files["curve"]
         _trajectory_png(folder / "trajectory.png", system, best)
         if system.name == "battery":  # the paper's Figure 1: forecasts of the battery's prices and production
             _forecasts_png(folder / "figure1_forecasts.png", system)
