@@ -20,9 +20,9 @@ from etmpc.evaluation.evaluate import scores
 from etmpc.evaluation.workers import play_test_episode
 from etmpc.policies import parse_policy
 from etmpc.systems import make_system
+from etmpc.systems.quadrotor.task import GROUND_M  # a step below it is a failure
 from etmpc.views import figures
 
-GROUND_M = 0.05  # the task's ground: a step below it is a failure
 COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd")
 
 

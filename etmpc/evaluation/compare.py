@@ -26,12 +26,9 @@ def per_episode(evaluation: dict, policies=None, value: str = "objective") -> di
     return {e: float(np.mean(v)) for e, v in values.items()}
 
 
-def paired_failures(evaluation: dict, spec: str, reference: str) -> dict | None:
-    """``spec``'s failures against ``reference``'s on their common episodes: the mean difference per
-    episode (> 0: more) and its 95 % CI; None on a task that counts none."""
-    if any(r.get("failures") is None for r in evaluation["runs"] if r["finite"]):
-        return None
-    mine, theirs = per_episode(evaluation, {spec}, "failures"), per_episode(evaluation, {reference}, "failures")
+def paired_failures(mine: dict[int, float], theirs: dict[int, float]) -> dict:
+    """Failures per episode (episode -> mean) against the reference's on their common episodes: ``mine``'s
+    mean, the mean difference per episode (> 0: more) and its 95 % CI."""
     common = sorted(set(mine) & set(theirs))
     diff = metrics.paired_differences([mine[e] for e in common], [theirs[e] for e in common], "min")
     return {
@@ -70,12 +67,16 @@ def against(evaluation: dict, reference: str) -> dict[str, dict]:
         raise EtmpcError(f"--against {reference}: not one of the evaluated policies ({', '.join(policies)})")
     sense = policies[reference]["objective_sense"]
     base = per_episode(evaluation, {reference})
+    counted = all(r.get("failures") is not None for r in evaluation["runs"] if r["finite"])  # the task counts failures
+    base_failures = per_episode(evaluation, {reference}, "failures") if counted else None
     return {
         spec: dict(
             paired(per_episode(evaluation, {spec}), base, sense),
             recomputes_mean=row["recomputes_mean"],
             upper_bound=row.get("upper_bound", False),
-            failures=paired_failures(evaluation, spec, reference),
+            failures=None
+            if base_failures is None
+            else paired_failures(per_episode(evaluation, {spec}, "failures"), base_failures),
         )
         for spec, row in policies.items()
         if spec != reference
