@@ -48,7 +48,7 @@ def main(argv=None) -> int:
         start = time.perf_counter()
         plan = type(mpc).solve(mpc, x, u_prev, warm, age, parameters)
         seconds = time.perf_counter() - start
-        p = np.concatenate([x, np.atleast_1d(u_prev)] + ([np.asarray(parameters, float)] if mpc.parameters else []))
+        p = mpc.parameter_vector(x, u_prev, parameters)
         count, converged = counted(mpc.initial_guess(x, warm, age), p)
         if not converged and warm is not None:  # the solve's cold retry
             count += counted(mpc.initial_guess(x, None, 0), p)[0]

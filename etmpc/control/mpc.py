@@ -281,6 +281,10 @@ class GaussNewtonMPC:
             return self.pack(inputs, self.rollout(x, inputs))
         return self.pack(*warm.shifted(age))
 
+    def parameter_vector(self, x: np.ndarray, u_prev: np.ndarray, parameters: np.ndarray | None = None) -> np.ndarray:
+        """The NLP's parameters ``p``: the measured state, the previous input and the OCP's other parameters."""
+        return np.concatenate([x, np.atleast_1d(u_prev)] + ([np.asarray(parameters, float)] if self.parameters else []))
+
     def solve(
         self, x: np.ndarray, u_prev: np.ndarray, warm: Plan | None = None, age: int = 0, parameters: np.ndarray | None = None
     ) -> Plan:
@@ -291,7 +295,7 @@ class GaussNewtonMPC:
         start (zero inputs), since a poor warm start is the usual cause of a failed SQP.
         """
         start = time.perf_counter()
-        p = np.concatenate([x, np.atleast_1d(u_prev)] + ([np.asarray(parameters, float)] if self.parameters else []))
+        p = self.parameter_vector(x, u_prev, parameters)
         result = self._solve_from(self.initial_guess(x, warm, age), p)
         if not result[3] and warm is not None and (age < self.horizon or self.settings.warm_from_expired):
             retry = self._solve_from(self.initial_guess(x, None, 0), p)
@@ -325,7 +329,7 @@ class GaussNewtonMPC:
         if limit < 1:
             raise ValueError(f"limit must be at least 1 iteration, got {limit}")
         start = time.perf_counter()
-        p = np.concatenate([x, np.atleast_1d(u_prev)] + ([np.asarray(parameters, float)] if self.parameters else []))
+        p = self.parameter_vector(x, u_prev, parameters)
         result, iterations = self._iterate_from(self.initial_guess(x, warm, age), p, limit)
         full = limit >= self.settings.max_iterations
         if full and not result[3] and warm is not None and (age < self.horizon or self.settings.warm_from_expired):
