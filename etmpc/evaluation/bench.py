@@ -2,10 +2,13 @@
 
 For each system, through the :class:`etmpc.loop.System` protocol only, in one process:
 
-* MPC solve: wall time of each recompute (the whole ``system.plan`` call) under ``always``:
+The step times are CPU seconds of the thread that plays (:data:`etmpc.loop.closed.cpu_clock`); the
+episodes per second and the side-by-side solver comparisons below are wall time.
+
+* MPC solve: the time of each recompute (the whole ``system.plan`` call) under ``always``:
   median and 90th percentile.
 * Rest of a step on the ``dm_env`` path (:func:`etmpc.loop.run_episode`, what ``evaluate`` plays):
-  step wall time minus the solve (plant, LQR, policy, bookkeeping), under ``always``, ``every:3``
+  step time minus the solve (plant, LQR, policy, bookkeeping), under ``always``, ``every:3``
   and ``never`` together.
 * Rollout step: a step of :func:`etmpc.loop.play_on` (the fast path rollouts and the oracle bound
   simulate futures with) under ``never``, forced solves taken out; and the steps per second that
@@ -30,6 +33,7 @@ import numpy as np
 from etmpc.evaluation import testsets as ts_mod
 from etmpc.common.errors import EtmpcError
 from etmpc.loop import Snapshot, play_on, run_episode
+from etmpc.loop.closed import cpu_clock
 from etmpc.policies import parse_policy
 from etmpc.systems import make_system
 from etmpc.systems.base import provides
@@ -156,7 +160,7 @@ class _Snapshotter:
 
 
 def _rollout_steps(system, env, testset, episodes: int, repeats: int = 5) -> dict:
-    """Wall time per step of :func:`etmpc.loop.play_on` under ``never`` from step 1 of each
+    """CPU time per step of :func:`etmpc.loop.play_on` under ``never`` from step 1 of each
     episode (the plan made at step 0 kept, forced solves every N steps excluded): a rollout step
     without a solve, the fast path rollouts and the oracle bound simulate with."""
     never, twin = parse_policy("never", system), system.make_env()
@@ -167,9 +171,9 @@ def _rollout_steps(system, env, testset, episodes: int, repeats: int = 5) -> dic
             return getattr(system, name)
 
         def plan(self, *args):
-            start = time.perf_counter()
+            start = cpu_clock()
             plan = system.plan(*args)
-            solve_s[0] += time.perf_counter() - start
+            solve_s[0] += cpu_clock() - start
             return plan
 
     timed = _Timed()
@@ -179,10 +183,10 @@ def _rollout_steps(system, env, testset, episodes: int, repeats: int = 5) -> dic
         snapshot = snapshotter.snapshot
         for _ in range(repeats):
             solve_s[0] = 0.0
-            start = time.perf_counter()
+            start = cpu_clock()
             play_on(timed, twin, snapshot, never, None, False)
             steps = system.episode_steps - snapshot.step
-            per_step.append((time.perf_counter() - start - solve_s[0]) / steps)
+            per_step.append((cpu_clock() - start - solve_s[0]) / steps)
     median_s = float(np.median(per_step))
     return {
         "median_us": median_s * 1e6,

@@ -20,7 +20,7 @@ The entries, each one spec per task (:func:`entries`):
 Each (entry, task) is scored by :mod:`etmpc.evaluation.scorecard` and kept in the work directory as it
 finishes, so an interrupted run continues where it stopped. A kept row is sealed with the SHA-256 of its
 content: one edited by hand is refused in one line, never published; one of an older etmpc (no seal, or
-no failures counted) or of other policy files is played again. The page (``docs/leaderboard.md``), its
+no failures counted, wall-clock times) or of other policy files is played again. The page (``docs/leaderboard.md``), its
 JSON and the performance profiles are written at the end, with the commit, date, machine and
 software that produced them; the README's headline table is the page's, rewritten between its markers.
 """
@@ -49,15 +49,8 @@ from etmpc.evaluation.inputs import policy_files
 from etmpc.evaluation.scorecard import Scorecard, TaskScore, aggregate, play_and_score, profiles
 from etmpc.evaluation.verify import read_card, verify
 from etmpc.evaluation.workers import make_backend, shared_pools
-from etmpc.experiments.leaderboard_page import (
-    BEGIN,
-    END,
-    ORACLE_NOTE,
-    headline,
-    page,
-    table_in,  # noqa: F401
-    with_table,
-)
+from etmpc.experiments.leaderboard_page import BEGIN, END, ORACLE_NOTE, headline, page, table_in, with_table  # noqa: F401
+from etmpc.loop.closed import cpu_clock
 from etmpc.learning.base import shipped
 from etmpc.learning.config import VALIDATION_ENTROPY
 from etmpc.learning.jobs import mean_scores
@@ -197,8 +190,10 @@ def _row(
         "test_set_sha256": refs.test_set_sha256,
         "suite_version": SUITE_VERSION,
         "task_version": task_version(task),
-        # what the row counts as a failure: a row kept by an etmpc that counted none (or other ones) is played again
+        # what the row counts as a failure and how it timed the controller: a row kept by an etmpc that counted
+        # none (or other ones), or timed the wall clock rather than the loop thread's CPU, is played again
         "failures": make_system(task).failure_name,
+        "cpu_clock": cpu_clock.__name__,
     }
     files = policy_files(spec)
     if files:  # a policy read from files (rl:, sb3:): a row played with other files is played again

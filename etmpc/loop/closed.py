@@ -19,6 +19,11 @@ from etmpc.loop.records import Continuation, Trajectory, computation_cost
 from etmpc.loop.state import AugmentedState, DecisionContext, Policy, Snapshot
 from etmpc.systems.base import System
 
+# The clock of the trajectory's timings: the CPU time of the thread that runs the loop (the solve, MuJoCo,
+# the feedback and the trigger all run in it), so a step played while other processes share the cores
+# counts what the controller computed, not the time it waited for a core.
+cpu_clock = time.thread_time
+
 
 def _shown(timestep: dm_env.TimeStep) -> dm_env.TimeStep:
     """The step with its observation frozen: the loop shows it to policies, and they cannot write into it."""
@@ -144,13 +149,13 @@ class ClosedLoop:
         correction, clipped, and step the plant. Returns the trigger's reward for it: the task's
         (:attr:`reward`) minus the price of the computation started, if one was (:attr:`cost`). A plant
         that fails (non-finite) ends the episode; the step's reward is then 0. ``started``: when the
-        step's decision began (the step's wall time counts from there). ``solved``: the plan this
-        step's computation gives, when the caller has it already. While a solve is in flight the
+        step's decision began, on :data:`cpu_clock` (the step's time counts from there). ``solved``: the
+        plan this step's computation gives, when the caller has it already. While a solve is in flight the
         answer is ignored (recorded as :attr:`in_flight` in the trajectory)."""
         if self.done:
             raise RuntimeError("the episode is over: reset the loop")
         records = self.records
-        start = (time.perf_counter() if started is None else started) if records else 0.0
+        start = (cpu_clock() if started is None else started) if records else 0.0
         system, i, x = self.system, self.step_index, self.x
         in_flight, forced = self.pending is not None, self.forced
         level = SOLVE if forced else KEEP if in_flight else self._level(recompute)
@@ -165,10 +170,10 @@ class ClosedLoop:
                 self.pending = (i + delay, i + (self.latency.intervals if self._compensates() else 0), new, i)
             self._instant = False
         plan = self.plan
-        feedback_start = time.perf_counter() if records else 0.0
+        feedback_start = cpu_clock() if records else 0.0
         u, u_planned, correction, x_predicted = _input(system, plan, self.age, x)
         if records:
-            self.trajectory.feedback_time_s[i] = time.perf_counter() - feedback_start
+            self.trajectory.feedback_time_s[i] = cpu_clock() - feedback_start
         recompute = level != KEEP
         reward = self._advance(system.action(u, recompute))
         self.recomputed, self.level, self.work = recompute, level, work
@@ -203,7 +208,7 @@ class ClosedLoop:
             self.pending = None
             self._deliver(arrived, made, self.age >= plan.horizon, self.step_index, started)
         if records:
-            self.trajectory.step_time_s[i] = time.perf_counter() - start
+            self.trajectory.step_time_s[i] = cpu_clock() - start
             if self.timestep.last() or self.step_index >= system.episode_steps:
                 self._finish()
             else:
@@ -255,9 +260,9 @@ class ClosedLoop:
             if observation is None:
                 observation = self.env.task.get_observation(self.env.physics)
             return solver(x, u_prev, warm, age, dm_env.TimeStep(dm_env.StepType.MID, None, None, observation))
-        solve_start = time.perf_counter()
+        solve_start = cpu_clock()
         new = solver(x, u_prev, warm, age, self.timestep)
-        self.trajectory.solve_time_s[i] = time.perf_counter() - solve_start
+        self.trajectory.solve_time_s[i] = cpu_clock() - solve_start
         if not new.success:
             self.trajectory.solver_failures += 1
         return new
@@ -302,11 +307,11 @@ def run_episode(
     loop = ClosedLoop(system, env).reset(episode)
     simulates = getattr(policy, "simulates", False)
     while not loop.done:
-        started = time.perf_counter()
+        started = cpu_clock()
         s = loop.augmented_state(simulates)
         answer = False if s is None else policy.decide(s, rng)  # a level on a task with compute levels
         if s is not None:
-            loop.trajectory.decide_time_s[loop.step_index] = time.perf_counter() - started
+            loop.trajectory.decide_time_s[loop.step_index] = cpu_clock() - started
         loop.step(answer, started)
     return loop.trajectory
 

@@ -32,10 +32,11 @@ class Trajectory:
     work: np.ndarray  # (T,) the computation's priced work: 1 per solve, or its SQP iterations on a task with levels
     in_flight: np.ndarray  # (T,) a solve was under way at the decision: the trigger was not asked
     rewards: np.ndarray  # (T,) the environment's reward for the step
-    solve_time_s: np.ndarray  # (T,) wall time of the MPC computation (NaN where none happened)
-    step_time_s: np.ndarray  # (T,) wall time of the whole step, solve included
-    feedback_time_s: np.ndarray  # (T,) wall time of the input: the plan's, plus the LQR correction, clipped
-    decide_time_s: np.ndarray  # (T,) wall time of the policy's decision (0 where the loop did not ask it)
+    # The timings are CPU seconds of the loop's thread (etmpc.loop.closed.cpu_clock), not wall time.
+    solve_time_s: np.ndarray  # (T,) CPU time of the MPC computation (NaN where none happened)
+    step_time_s: np.ndarray  # (T,) CPU time of the whole step, solve included
+    feedback_time_s: np.ndarray  # (T,) CPU time of the input: the plan's, plus the LQR correction, clipped
+    decide_time_s: np.ndarray  # (T,) CPU time of the policy's decision (0 where the loop did not ask it)
     plans: list[tuple[int, Plan]] = field(default_factory=list)  # (step made for, plan), successful or used
     arrivals: list[int] = field(default_factory=list)  # the step each of plans came into force (its made step + latency)
     starts: list[int] = field(default_factory=list)  # the step each of plans' computation started (its made step, or earlier)
@@ -66,9 +67,9 @@ class Trajectory:
         )
 
     def cpu_seconds(self) -> dict[str, float]:
-        """The controller's time spent in this episode, summed over its steps (wall clock per call, so a
-        machine-dependent figure): the MPC's ``solve``s, the ``feedback`` (the LQR), the trigger's
-        ``decide``s (a rollout's simulations included)."""
+        """The controller's CPU time in this episode, summed over its steps (the loop thread's: a
+        machine-dependent figure, which other processes sharing the cores do not inflate): the MPC's
+        ``solve``s, the ``feedback`` (the LQR), the trigger's ``decide``s (a rollout's simulations included)."""
         n = self.steps
         return {
             "solve": float(np.nansum(self.solve_time_s[:n])),

@@ -1,6 +1,7 @@
 """Algorithm 1 with the fixed policies: recompute counts, the LQR path and policy parsing."""
 
 import math
+import time
 from types import SimpleNamespace
 
 import numpy as np
@@ -36,6 +37,36 @@ def test_every_one_equals_always(cart_system, env, episode):
     a = run_episode(cart_system, env, parse_policy("always", cart_system), None, episode)
     b = run_episode(cart_system, env, parse_policy("every:1", cart_system), None, episode)
     np.testing.assert_array_equal(a.states, b.states)
+
+
+class _Waits:
+    """A trigger that keeps the plan after waiting 2 ms at each decision: asleep (wall time, no CPU) or
+    spinning (2 ms of its thread's CPU)."""
+
+    stochastic = False
+
+    def __init__(self, spin: bool):
+        self.spec, self.spin = ("spins" if spin else "sleeps"), spin
+
+    def decide(self, s, rng):
+        if self.spin:
+            end = time.thread_time() + 0.002
+            while time.thread_time() < end:
+                pass
+        else:
+            time.sleep(0.002)
+        return False
+
+
+def test_the_loop_times_the_controllers_cpu_not_the_wall_clock(cart_system, env, episode):
+    """A row's CPU column counts what the controller computed: a trigger that sleeps costs nothing, one that
+    spins costs its spinning, whatever else shares the machine."""
+    sleeps, spins = (run_episode(cart_system, env, _Waits(spin), None, episode) for spin in (False, True))
+    asked = int((~sleeps.forced[: sleeps.steps]).sum())
+    assert asked == 95  # every step but the 5 where the plan ran out
+    assert sleeps.cpu_seconds()["decide"] < 0.1 * asked * 0.002  # the wall clock would count >= 190 ms
+    assert spins.cpu_seconds()["decide"] >= asked * 0.002
+    assert np.all(spins.decide_time_s[: spins.steps][~spins.forced[: spins.steps]] >= 0.002)
 
 
 def test_applied_input_is_plan_plus_lqr_clipped(cart_system, env, episode):
