@@ -135,6 +135,19 @@ def _failures_cell(page_text: str, name: str) -> str:
     return line.split(" | ")[4]
 
 
+def test_a_row_timed_on_the_wall_clock_is_played_again(board, tmp_path):
+    from etmpc.common.documents import SEAL, sealed
+
+    out, _ = board
+    (kept,) = (out / "work" / "always").glob("*.json")
+    current = json.loads(kept.read_text())
+    assert current["key"]["cpu_clock"] == "thread_time" and leaderboard._kept(kept, current["key"]) is not None
+    wall = {k: v for k, v in current.items() if k != SEAL}
+    wall["key"] = {k: v for k, v in current["key"].items() if k != "cpu_clock"}  # as an etmpc that timed the wall kept it
+    (tmp_path / "wall.json").write_text(json.dumps(sealed(wall)))
+    assert leaderboard._kept(tmp_path / "wall.json", current["key"]) is None
+
+
 def test_the_failures_column_is_mean_and_ci_and_an_older_row_or_page_without_them_still_works(board, tmp_path):
     import copy
 
