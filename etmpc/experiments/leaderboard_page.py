@@ -150,7 +150,8 @@ def page(data: dict) -> str:
         "bootstrap CIs. The oracle scores exactly 100 on every task, yet its IQM is lower: the IQM trims the quarter "
         "of episodes at each end, and the oracle's episode scores are skewed (a few episodes gain far more than the "
         "mean). CPU is the controller's CPU time per episode on this machine (solves, feedback and the "
-        "trigger's own decisions, on the thread that runs the loop), averaged over the tasks. See `etmpc score --help` and the README.",
+        "trigger's own decisions, on the thread that runs the loop), averaged over the tasks. See `etmpc score --help` "
+        "and the README.",
         "",
         BEGIN,
         headline(data),
