@@ -50,10 +50,10 @@ from etmpc.evaluation.scorecard import Scorecard, TaskScore, aggregate, play_and
 from etmpc.evaluation.verify import read_card, verify
 from etmpc.evaluation.workers import make_backend, shared_pools
 from etmpc.experiments.leaderboard_page import BEGIN, END, ORACLE_NOTE, headline, page, table_in, with_table  # noqa: F401
-from etmpc.loop.closed import cpu_clock
 from etmpc.learning.base import shipped
 from etmpc.learning.config import VALIDATION_ENTROPY
 from etmpc.learning.jobs import mean_scores
+from etmpc.loop.closed import cpu_clock
 from etmpc.systems import distinct, folder_name, make_system, names, task_version
 from etmpc.systems.base import require
 from etmpc.views.figures import write_performance_profile_png
