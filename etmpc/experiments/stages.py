@@ -55,8 +55,9 @@ def _ppo(
     folder: Path, domain: str, settings, run: dict, common: dict, clock: StageClock
 ) -> tuple[dict | None, dict | None, dict | None]:
     """PPO on the trigger environment (``train_ppo/``, redone whole if it was interrupted) with the task's
-    hyperparameters, its chosen network copied to ``DIR/policies/`` and evaluated on the test set
-    (``learned_ppo.json``), and every checkpoint (``learned_ppo_checkpoints.json``, its learning curve);
+    hyperparameters, every checkpoint evaluated on the test set (``learned_ppo_checkpoints.json``, its
+    learning curve), and its chosen network copied to ``DIR/policies/`` with its test-set rows
+    (``learned_ppo.json``: the checkpoint it was chosen from was just played, so it is not played again);
     ``(None, None, None)`` without the 'rl' extra."""
     if settings.ppo_timesteps == 0 or importlib.util.find_spec("stable_baselines3") is None:
         _say(f"{domain}: PPO skipped" + ("" if settings.ppo_timesteps == 0 else " (pip install 'etmpc[rl]' to run it)"))
@@ -84,13 +85,27 @@ def _ppo(
         shutil.copyfile(ppo_dir / "selected.json", shipped / "ppo.json")
         shutil.copyfile(ppo_dir / "selected.zip", shipped / "ppo.zip")
     with clock.stage("PPO evaluation", folder / "learned_ppo.json", folder / "learned_ppo_checkpoints.json"):
-        ppo = evaluated_once(folder / "learned_ppo.json", policies=[f"sb3:{ppo_dir / 'selected.zip'}"], **common)
         curve = evaluated_once(
             folder / "learned_ppo_checkpoints.json",
             policies=[f"sb3:{ppo_dir / c['file']}" for c in training["checkpoints"]],
             **common,
         )
+        selected, picked = ppo_dir / "selected.zip", ppo_dir / training["selected"]
+        if not (folder / "learned_ppo.json").exists() and selected.read_bytes() == picked.read_bytes():
+            # the chosen network is one of the checkpoints just scored: its rows, under its own name
+            write_json_atomically(folder / "learned_ppo.json", _renamed(curve, f"sb3:{picked}", f"sb3:{selected}"))
+        ppo = evaluated_once(folder / "learned_ppo.json", policies=[f"sb3:{selected}"], **common)
     return training, ppo, curve
+
+
+def _renamed(evaluation: dict, policy: str, name: str) -> dict:
+    """``evaluation`` (an :class:`~etmpc.evaluation.results.Evaluation`'s JSON) of ``policy`` alone, named ``name``."""
+    summary = evaluation["policies"][policy]
+    return dict(
+        {k: v for k, v in evaluation.items() if k != "cost"},  # its wall time was every checkpoint's
+        policies={name: dict(summary, policy=name)},
+        runs=[dict(r, policy=name) for r in evaluation["runs"] if r["policy"] == policy],
+    )
 
 
 def _other_learners(folder: Path, domain: str, settings, run_options: dict, common: dict, clock: StageClock) -> dict:
