@@ -68,7 +68,8 @@ class Trajectory:
 
     def cpu_seconds(self) -> dict[str, float]:
         """The controller's CPU time in this episode, summed over its steps (the loop thread's: a
-        machine-dependent figure, which other processes sharing the cores inflate far less than wall time): the MPC's
+        machine-dependent figure, which other processes sharing the cores inflate less than wall time, but still
+        inflate: compare figures played on an idle machine): the MPC's
         ``solve``s, the ``feedback`` (the LQR), the trigger's ``decide``s (a rollout's simulations included)."""
         n = self.steps
         return {
