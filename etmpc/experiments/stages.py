@@ -102,7 +102,8 @@ def _renamed(evaluation: dict, policy: str, name: str) -> dict:
     """``evaluation`` (an :class:`~etmpc.evaluation.results.Evaluation`'s JSON) of ``policy`` alone, named ``name``."""
     summary = evaluation["policies"][policy]
     return dict(
-        {k: v for k, v in evaluation.items() if k != "cost"},  # its wall time was every checkpoint's
+        # its wall time and per-run CPU list (if any) were every checkpoint's: neither is this policy's alone
+        {k: v for k, v in evaluation.items() if k not in ("cost", "cpu_seconds")},
         policies={name: dict(summary, policy=name)},
         runs=[dict(r, policy=name) for r in evaluation["runs"] if r["policy"] == policy],
     )

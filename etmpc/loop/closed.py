@@ -22,7 +22,7 @@ from etmpc.systems.base import System
 # The clock of the trajectory's timings: the CPU time of the thread that runs the loop (the solve, MuJoCo,
 # the feedback and the trigger all run in it), so a step played while other processes share the cores
 # does not count the time it waited for a core. Their competition for caches and memory still slows it
-# (1.6-1.8x beside a running test suite on 2 cores): compare CPU figures played on an idle machine.
+# (measured in docs/scorecard.md): compare CPU figures played on an idle machine.
 cpu_clock = time.thread_time
 
 
