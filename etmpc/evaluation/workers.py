@@ -316,7 +316,9 @@ class RayBackend:
             else:
                 _check_reachable(self.address)
             try:
-                ray.init(address=self.address, **options)
+                # "local": our own instance, even when RAY_ADDRESS or a Ray already running on this
+                # machine would otherwise be joined (with num_cpus, which Ray refuses for a join).
+                ray.init(address=self.address or "local", **options)
             except ConnectionError as exc:
                 raise EtmpcError(
                     f"cannot join the Ray cluster at {self.address}: {exc} (a cluster with token "

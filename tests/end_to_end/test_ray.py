@@ -28,7 +28,10 @@ def files(out):
 
 
 @pytest.mark.slow
-def test_training_and_evaluation_agree_exactly_on_local_and_ray(tmp_path):
+def test_training_and_evaluation_agree_exactly_on_local_and_ray(tmp_path, monkeypatch):
+    # Without --address the backend starts its own instance, even where Ray would otherwise join
+    # another: RAY_ADDRESS names a cluster (here one that is gone), as a Ray left running would.
+    monkeypatch.setenv("RAY_ADDRESS", f"127.0.0.1:{_free_port()}")
     config = TrainConfig("cart_pendulum", **TINY)
     train(config, tmp_path / "local", workers=1, progress=False)
     train(config, tmp_path / "ray", workers=2, backend="ray", progress=False)
