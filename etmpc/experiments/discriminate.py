@@ -30,7 +30,7 @@ def discriminate(task: str, price: float | None = None, episodes: int = EPISODES
     system = make_system(task)
     price = system.recompute_price if price is None else price
     periodic = [f"every:{t}" for t in range(1, system.horizon + 1)]
-    events = [f"threshold:{x:g}" for x in system.benchmark.sweep_thresholds]
+    events = system.benchmark.threshold_specs()
     common = dict(episodes=episodes, progress=False, workers=workers)
     fixed = evaluate(task, periodic + events, **common).to_json()
     best = best_periodic(fixed, periodic, price, system.objective_sense)

@@ -107,7 +107,7 @@ def best_threshold(task: str, workers: int, say: Callable[[str], None]) -> str:
     """The ``threshold:X`` of the task's grid with the best mean objective on training-distribution episodes."""
     system = make_system(task)
     require(system, "experiments", "the leaderboard's best threshold")
-    specs = [f"threshold:{x:g}" for x in system.benchmark.sweep_thresholds]
+    specs = system.benchmark.threshold_specs()
     with make_backend("local", workers) as pool:
         means = mean_scores(pool, system.name, specs, VALIDATION_ENTROPY, VALIDATION_EPISODES)
     chosen = metrics.best(zip(specs, means), system.objective_sense, key=lambda pair: pair[1])[0]
@@ -121,7 +121,7 @@ def kept_threshold(task: str, work: Path | None, workers: int, say: Callable[[st
     again (one that changed any of them does)."""
     system = make_system(task)
     key = {
-        "grid": [f"threshold:{x:g}" for x in system.benchmark.sweep_thresholds],
+        "grid": system.benchmark.threshold_specs(),
         "validation_entropy": VALIDATION_ENTROPY,
         "validation_episodes": VALIDATION_EPISODES,
         "suite_version": SUITE_VERSION,

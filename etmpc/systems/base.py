@@ -51,6 +51,10 @@ class Benchmark:
         """A rollout's horizon ``horizon`` (None: to the episode's end) within the task's ``lookahead``."""
         return self.lookahead if horizon is None else min(horizon, self.lookahead)
 
+    def threshold_specs(self) -> list[str]:
+        """``threshold:X`` for each of the sweep's levels: the grid a best threshold is chosen from."""
+        return [f"threshold:{x:g}" for x in self.sweep_thresholds]
+
     def baselines(self, levels: bool = False) -> list[str]:
         """Reproduce's fixed policies: always, never, every:T and threshold:X; with compute ``levels``,
         iterate:T too (one SQP iteration every step, and at the same periods)."""
