@@ -142,7 +142,12 @@ def entries(
     best = {t: references[t].best for t in tasks}
     found = [
         Entry(FIRST[0], "baseline", {t: "always" for t in tasks}, "standard MPC: a new plan every step"),
-        Entry(FIRST[1], "reference", {t: best[t] for t in tasks}, "each task's best every:T on its test set"),
+        Entry(
+            FIRST[1],
+            "reference",
+            {t: best[t] for t in tasks},
+            "each task's best fixed schedule on its test set (every:T, or iterate:T on a task with compute levels)",
+        ),
         Entry(
             FIRST[2],
             "baseline",
