@@ -293,10 +293,10 @@ BACKENDS = ("local", "ray")
 
 
 class RayBackend:
-    """Jobs as Ray tasks, in chunks, with at most ``2 * workers`` chunks in flight; results in job
-    order. Without ``address`` it starts a Ray instance of ``workers`` CPUs for the run and stops it
-    afterwards; with one (``auto``, ``HOST:PORT`` or ``ray://HOST:PORT``) it joins that cluster, and
-    ``workers`` only bounds how much work is queued at once."""
+    """Jobs as Ray tasks, in chunks, with at most ``2 * workers`` chunks in flight; results in job order. Without
+    ``address`` it starts its own Ray instance of ``workers`` CPUs for the run (``"local"``: never one that ``RAY_ADDRESS``
+    or a Ray running on the machine names) and stops it afterwards; with one (``auto``, ``HOST:PORT`` or
+    ``ray://HOST:PORT``) it joins that cluster, and ``workers`` only bounds how much work is queued at once."""
 
     def __init__(self, workers: int, address: str | None = None):
         self.workers, self.address = workers, address
@@ -316,8 +316,6 @@ class RayBackend:
             else:
                 _check_reachable(self.address)
             try:
-                # "local": our own instance, even when RAY_ADDRESS or a Ray already running on this
-                # machine would otherwise be joined (with num_cpus, which Ray refuses for a join).
                 ray.init(address=self.address or "local", **options)
             except ConnectionError as exc:
                 raise EtmpcError(
