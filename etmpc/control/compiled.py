@@ -25,6 +25,7 @@ import shutil
 import subprocess
 import sys
 import tempfile
+from collections.abc import Sequence
 from pathlib import Path
 
 import casadi as ca
@@ -98,13 +99,17 @@ def _described(name: str) -> str:
     return f"{name.removesuffix('_mpc')} MPC" if name.endswith("_mpc") else f"{name} code"
 
 
-def library_for(function: ca.Function, cache: Path | None = None) -> Path:
-    """The shared library of ``function``'s generated C code: from the cache if valid, else built."""
+def library_for(function: ca.Function | Sequence[ca.Function], cache: Path | None = None) -> Path:
+    """The shared library of ``function``'s generated C code (of several functions, one library named after
+    the first): from the cache if valid, else built."""
+    functions = [function] if isinstance(function, ca.Function) else list(function)
+    name = functions[0].name()
     cache = cache_dir() if cache is None else Path(cache)
     cc = compiler()
     with tempfile.TemporaryDirectory() as tmp:
         generator = ca.CodeGenerator("generated.c", {"with_header": False})
-        generator.add(function)
+        for each in functions:
+            generator.add(each)
         generator.generate(tmp + os.sep)
         source = (Path(tmp) / "generated.c").read_text()
     key = hashlib.sha256(
@@ -114,10 +119,10 @@ def library_for(function: ca.Function, cache: Path | None = None) -> Path:
         cache.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise CompileError(f"cannot create the compiled-code cache {cache}: {exc.strerror}") from None
-    library, digest_file = cache / f"{function.name()}-{key}.so", cache / f"{function.name()}-{key}.sha256"
+    library, digest_file = cache / f"{name}-{key}.so", cache / f"{name}-{key}.sha256"
     if _valid(library, digest_file):
         return library
-    with open(cache / f"{function.name()}-{key}.lock", "w") as lock:
+    with open(cache / f"{name}-{key}.lock", "w") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)  # another process may be building it right now
         if not _valid(library, digest_file):
             with contextlib.suppress(FileNotFoundError):
@@ -125,12 +130,18 @@ def library_for(function: ca.Function, cache: Path | None = None) -> Path:
             # Said by the one process that builds (under the lock: another that waited finds it built), so a
             # first run is not silent for the half minute a build takes.
             print(
-                f"etmpc: compiling the {_described(function.name())} to C once (about 20-30 s; cached in {cache})",
+                f"etmpc: compiling the {_described(name)} to C once (about 20-30 s; cached in {cache})",
                 file=sys.stderr,
                 flush=True,
             )
             _build(source, library, digest_file, cc)
     return library
+
+
+def compile_functions(functions: Sequence[ca.Function], cache: Path | None = None) -> list[CompiledFunction]:
+    """Several functions built into one library (one compiler run), each callable as a :class:`CompiledFunction`."""
+    library = library_for(functions, cache)
+    return [CompiledFunction(function, cache, bundle=functions, library=library) for function in functions]
 
 
 class CompiledFunction:
@@ -140,7 +151,10 @@ class CompiledFunction:
     themselves (overwritten by the next call: copy what you keep) and the C return code (0: fine).
     """
 
-    def __init__(self, function: ca.Function, cache: Path | None = None):
+    def __init__(
+        self, function: ca.Function, cache: Path | None = None, bundle: Sequence[ca.Function] = (), library: Path | None = None
+    ):
+        """``bundle`` and ``library``: the functions built together into ``library`` (:func:`compile_functions`)."""
         for i in range(function.n_in()):
             if not function.sparsity_in(i).is_dense():
                 raise ValueError(f"input {function.name_in(i)} of {function.name()} is not dense")
@@ -148,12 +162,13 @@ class CompiledFunction:
             if not function.sparsity_out(i).is_dense():
                 raise ValueError(f"output {function.name_out(i)} of {function.name()} is not dense")
         self.name = function.name()
-        self.library = library_for(function, cache)
+        built = bundle or function
+        self.library = library_for(built, cache) if library is None else library
         try:
             lib = ctypes.CDLL(str(self.library))
         except OSError:  # digest matched but the loader refused it: rebuild once, from scratch
             self.library.unlink(missing_ok=True)
-            self.library = library_for(function, cache)
+            self.library = library_for(built, cache)
             lib = ctypes.CDLL(str(self.library))
         symbol = lambda suffix: getattr(lib, self.name + suffix)  # noqa: E731
         if symbol("_n_in")() != function.n_in() or symbol("_n_out")() != function.n_out():
