@@ -1,4 +1,7 @@
-"""Nonlinear least-squares MPC solved by a Gauss-Newton SQP (CasADi ``sqpmethod`` + ``qrqp``).
+"""Nonlinear least-squares MPC solved by a Gauss-Newton SQP, by one of two routes (``SolverSettings.route``):
+``"sqpmethod"``, this module's (CasADi ``sqpmethod`` + ``qrqp`` on a multiple-shooting NLP), and
+``"condensed"`` (:mod:`etmpc.control.condensed`: the inputs alone, dense QPs by DAQP). What follows
+describes the first.
 
 The OCP
 
@@ -31,42 +34,17 @@ from __future__ import annotations
 import math
 import time
 import warnings
-from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
 
 from etmpc.control.compiled import CompiledFunction, CompileError
+from etmpc.control.condensed import CondensedGaussNewton
 from etmpc.control.plan import Plan
+from etmpc.control.riccati import FeedbackWeights, gains_along
+from etmpc.control.settings import ROUTES, SolverSettings
 
-
-@dataclass(frozen=True)
-class SolverSettings:
-    tolerance: float = 1e-8  # sqpmethod tol_pr (and tol_du unless dual_tolerance is given)
-    max_iterations: int = 100
-    qpsol: str = "qrqp"
-    qpsol_options: tuple[tuple[str, object], ...] = ()
-    block: int = 4  # shooting nodes every `block` intervals (1: full multiple shooting)
-    compiled: bool = True  # generated C, built once per machine; False: CasADi's virtual machine
-    dual_tolerance: float | None = None  # sqpmethod tol_du (None: tolerance)
-    regularisation: float = 0.0  # mu I added to the Gauss-Newton Hessian (Levenberg-Marquardt); 0: none
-    sqp_options: tuple[tuple[str, object], ...] = ()  # more sqpmethod options (merit_memory, max_iter_ls, ...)
-    # A cold start's guess: "rollout" (zero inputs, the predictor's states from x) or "hold" (zero
-    # inputs, every state x). Near an unstable equilibrium "hold" stays near it, where a rollout of
-    # zero inputs falls away and can lead the SQP to another optimum (a pole swung over the top).
-    cold_start: str = "rollout"
-    warm_from_expired: bool = True  # False: a plan kept to its end (or past a restart) gives no warm start
-
-
-@dataclass(frozen=True)
-class FeedbackWeights:
-    """Weights of the time-varying LQR computed along each plan (``Plan.gains``): the discrete Riccati
-    recursion on the predictor's linearisation at each planned ``(x_k, u_k)``, from ``terminal`` (the
-    weight of ``x_N``; default 10 Q) backwards. A correction then follows the plan's own dynamics."""
-
-    Q: tuple[float, ...]  # diagonal state weights
-    R: tuple[float, ...]  # diagonal input weights
-    terminal_factor: float = 10.0
+__all__ = ["FeedbackWeights", "GaussNewtonMPC", "ROUTES", "SolverSettings"]
 
 
 class GaussNewtonMPC:
@@ -89,6 +67,8 @@ class GaussNewtonMPC:
         :meth:`solve` and passed to both residuals last: ``stage_residual(x, u, du, p)``,
         ``terminal_residual(x, p)``. With ``feedback``, every plan carries the gains of a
         time-varying LQR along it (:class:`FeedbackWeights`)."""
+        if settings.route not in ROUTES:
+            raise ValueError(f"route must be one of {', '.join(ROUTES)}, got {settings.route!r}")
         if not 1 <= settings.block <= horizon:
             raise ValueError(f"block must be in 1..{horizon}, got {settings.block}")
         if settings.cold_start not in ("rollout", "hold"):
@@ -99,6 +79,18 @@ class GaussNewtonMPC:
         self.u_min, self.u_max = np.atleast_1d(u_min).astype(float), np.atleast_1d(u_max).astype(float)
         self._model = model
         self.stage_residual, self.terminal_residual = stage_residual, terminal_residual
+        self._condensed = self._compiled = self._step = None
+        if settings.route == "condensed":
+            self._condensed = CondensedGaussNewton(
+                model, stage_residual, terminal_residual, horizon, self.u_min, self.u_max, parameters, settings, name, feedback
+            )
+        else:
+            self._transcribe(name)
+
+    def _transcribe(self, name: str) -> None:
+        """The sqpmethod route: the multiple-shooting NLP, its SQP and the solve function (compiled)."""
+        nx, nu, horizon, settings, parameters = self.nx, self.nu, self.horizon, self.settings, self.parameters
+        model, stage_residual, terminal_residual = self._model, self.stage_residual, self.terminal_residual
         self.nodes = [k for k in range(settings.block, horizon, settings.block)] + [horizon]
 
         # Variables in stage order: [u0 .. x_node u_node .. x_N]; x0, u_prev (and the parameters) are parameters.
@@ -177,8 +169,7 @@ class GaussNewtonMPC:
         self._trajectory = ca.Function("trajectory", [w, params], [ca.vertcat(*states)])
         self._name = name
         self.function = self._solver_function(name, settings.max_iterations)
-        self._compiled = self._compile(self.function) if settings.compiled else None
-        self._step = None  # one SQP iteration (iterate()), built when first asked
+        self._compiled = self._compile(self.function) if settings.compiled else None  # _step: iterate()'s, when first asked
 
     def _solver_function(self, name: str, max_iterations: int) -> ca.Function:
         """One function: the SQP (at most ``max_iterations`` iterations) from a guess, then the plan's
@@ -228,30 +219,22 @@ class GaussNewtonMPC:
         return float(self._objective(x, u_prev, np.asarray(inputs, float).reshape(self.horizon, self.nu).T, extra))
 
     def _gains(self, states: ca.MX, w: ca.MX, weights: FeedbackWeights) -> ca.MX:
-        """The TV-LQR gains ``K_k`` (row-major, ``N nu nx`` values) of the plan ``(states, w)``: the
-        Riccati recursion ``K = (R + B'PB)^-1 B'PA``, ``P <- Q + A'P(A - BK)`` from ``P_N`` backwards."""
+        """The TV-LQR gains ``K_k`` (row-major, ``N nu nx`` values) of the plan ``(states, w)``
+        (:func:`~etmpc.control.riccati.gains_along`, on the predictor's linearisation at each planned step)."""
         nx, nu = self.nx, self.nu
         xs, us = ca.SX.sym("x", nx), ca.SX.sym("u", nu)
         nxt = self._model(xs, us)
         linearised = ca.Function("linearised", [xs, us], [ca.jacobian(nxt, xs), ca.jacobian(nxt, us)])
-        P, A, B = ca.SX.sym("P", nx, nx), ca.SX.sym("A", nx, nx), ca.SX.sym("B", nx, nu)
-        Q, R = ca.DM(np.diag(weights.Q)), ca.DM(np.diag(weights.R))
-        K = ca.solve(R + B.T @ P @ B, B.T @ P @ A)
-        P_next = Q + A.T @ P @ (A - B @ K)
-        riccati = ca.Function("riccati", [P, A, B], [K, 0.5 * (P_next + P_next.T)])
         states = ca.reshape(states, nx, self.horizon + 1)
-        P_k = ca.DM(np.diag(weights.Q)) * weights.terminal_factor
-        gains = [None] * self.horizon
-        for k in range(self.horizon - 1, -1, -1):
-            u_k = ca.vertcat(*[w[int(i)] for i in self._u_index[k]])
-            A_k, B_k = linearised(states[:, k], u_k)
-            K_k, P_k = riccati(P_k, A_k, B_k)
-            gains[k] = ca.reshape(K_k.T, nu * nx, 1)  # K_k row by row
-        return ca.vertcat(*gains)
+
+        def linearisation(k):
+            return linearised(states[:, k], ca.vertcat(*[w[int(i)] for i in self._u_index[k]]))
+
+        return gains_along(linearisation, self.horizon, weights, nx, nu)
 
     @property
     def is_compiled(self) -> bool:
-        return self._compiled is not None
+        return self._condensed.is_compiled if self._condensed is not None else self._compiled is not None
 
     # -- packing ----------------------------------------------------------------------------------
     def pack(self, inputs: np.ndarray, states: np.ndarray) -> np.ndarray:
@@ -294,6 +277,8 @@ class GaussNewtonMPC:
         Warm started from ``warm`` shifted by ``age``; if that fails, retried once from a cold
         start (zero inputs), since a poor warm start is the usual cause of a failed SQP.
         """
+        if self._condensed is not None:
+            return self._condensed.plan(x, u_prev, warm, age, parameters, self.settings.max_iterations, self.rollout)
         start = time.perf_counter()
         p = self.parameter_vector(x, u_prev, parameters)
         result = self._solve_from(self.initial_guess(x, warm, age), p)
@@ -328,6 +313,8 @@ class GaussNewtonMPC:
         :meth:`solve`, within its tolerance, not the same bits."""
         if limit < 1:
             raise ValueError(f"limit must be at least 1 iteration, got {limit}")
+        if self._condensed is not None:
+            return self._condensed.plan(x, u_prev, warm, age, parameters, limit, self.rollout)
         start = time.perf_counter()
         p = self.parameter_vector(x, u_prev, parameters)
         result, iterations = self._iterate_from(self.initial_guess(x, warm, age), p, limit)
