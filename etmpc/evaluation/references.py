@@ -62,6 +62,10 @@ class References:
     oracle: list[float]  # oracle:BEST's objective per episode
     suite_version: int = SUITE_VERSION
     software: dict[str, str] = field(default_factory=dict)
+    # The oracle's evaluation as it was played for these references (``etmpc evaluate --json``'s document, with
+    # each episode's CPU time): the leaderboard's oracle row, scored without playing it again. None in
+    # references made before suite 3, and in :meth:`head`'s.
+    oracle_evaluation: dict | None = None
 
     @property
     def oracle_spec(self) -> str:
@@ -82,12 +86,17 @@ class References:
         if not 1 <= episodes <= self.episodes:
             raise EtmpcError(f"--episodes must be in 1..{self.episodes} for these references, got {episodes}")
         return replace(
-            self, episodes=episodes, periodic={k: v[:episodes] for k, v in self.periodic.items()}, oracle=self.oracle[:episodes]
+            self,
+            episodes=episodes,
+            periodic={k: v[:episodes] for k, v in self.periodic.items()},
+            oracle=self.oracle[:episodes],
+            oracle_evaluation=self.oracle_evaluation if episodes == self.episodes else None,
         )
 
     def to_json(self) -> dict:
-        """The file's content, sealed with the SHA-256 of the rest."""
-        return sealed({"format": FORMAT} | asdict(self))
+        """The file's content, sealed with the SHA-256 of the rest (no ``oracle_evaluation`` when there is none)."""
+        content = {k: v for k, v in asdict(self).items() if not (k == "oracle_evaluation" and v is None)}
+        return sealed({"format": FORMAT} | content)
 
 
 def mean(values) -> float:
@@ -149,6 +158,7 @@ def build_references(
         best,
         _objectives(oracle, f"oracle:{best}"),
         software=software(),
+        oracle_evaluation=oracle.to_json(cpu=True),
     )
     if not refs.gap > 0:
         raise EtmpcError(
@@ -205,7 +215,8 @@ def load_references(task: str, test_set_sha256: str, path: Path | None = None) -
                 "suite_version",
                 "software",
             )
-        }
+        },
+        oracle_evaluation=data.get("oracle_evaluation"),
     )
 
 
@@ -234,12 +245,24 @@ def _problem(data: dict, system) -> str | None:
     best = best_schedule(periodic, sense)
     if data.get("best") != best:
         return f"best names {data.get('best')!r}, but {best} has the best mean objective"
+    played = data.get("oracle_evaluation")
+    if played is not None and _played_objectives(played, f"oracle:{best}") != data["oracle"]:
+        return "oracle_evaluation does not hold the oracle's objectives"
     worse = [e for e, (o, b) in enumerate(zip(data["oracle"], periodic[best])) if oriented(o - b, sense) < 0]
     if worse:
         return f"the oracle does worse than {best} on episode {worse[0]}, which the oracle over it cannot"
     if not mean([oriented(o, sense) - oriented(b, sense) for o, b in zip(data["oracle"], periodic[best])]) > 0:
         return f"the oracle does not improve on {best}: there is no scale to score against"
     return None
+
+
+def _played_objectives(evaluation, spec: str) -> list | None:
+    """``spec``'s objective per episode, in episode order, in an evaluation's JSON; None if it is not one."""
+    try:
+        runs = sorted((r for r in evaluation["runs"] if r["policy"] == spec), key=lambda r: r["episode"])
+        return [r["objective"] for r in runs]
+    except (KeyError, TypeError):
+        return None
 
 
 def stored(task: str, episodes: int | None = None) -> References:

@@ -46,10 +46,19 @@ from etmpc.evaluation import metrics
 from etmpc.evaluation.references import SUITE_VERSION, References, software, stored
 from etmpc.evaluation.evaluate import parse_policies
 from etmpc.evaluation.inputs import policy_files
-from etmpc.evaluation.scorecard import Scorecard, TaskScore, aggregate, play_and_score, profiles
+from etmpc.evaluation.scorecard import Scorecard, TaskScore, aggregate, play_and_score, profiles, task_score
 from etmpc.evaluation.verify import read_card, verify
 from etmpc.evaluation.workers import make_backend, shared_pools
-from etmpc.experiments.leaderboard_page import BEGIN, END, ORACLE_NOTE, headline, page, table_in, with_table  # noqa: F401
+from etmpc.experiments.leaderboard_page import (  # noqa: F401
+    BEGIN,
+    END,
+    ORACLE_NOTE,
+    check_readme,
+    headline,
+    page,
+    table_in,
+    with_table,
+)
 from etmpc.learning.base import shipped
 from etmpc.learning.config import VALIDATION_ENTROPY
 from etmpc.learning.jobs import mean_scores
@@ -206,8 +215,12 @@ def _row(
     kept = _kept(path, key)
     if kept is not None:
         return kept
-    say(f"{task}: {entry.name} ({spec})")
-    row = play_and_score(task, refs, spec, workers=workers, progress=False)
+    if spec == refs.oracle_spec and refs.oracle_evaluation is not None:  # as the references played it: not again
+        say(f"{task}: {entry.name} ({spec}), from the stored references")
+        row = task_score(refs, refs.oracle_evaluation, spec)
+    else:
+        say(f"{task}: {entry.name} ({spec})")
+        row = play_and_score(task, refs, spec, workers=workers, progress=False)
     played_at = commit_and_date()
     write_json(path, sealed({"key": key, "row": row.to_json(), "played": played_at}))
     return row, played_at
@@ -247,22 +260,6 @@ def check_kept(work: Path) -> None:
     """Every row kept in ``work``, checked before any is played (see :func:`_kept`)."""
     for path in sorted(Path(work).glob("*/*.json")):
         _read_kept(path)
-
-
-def check_readme(readme: Path) -> None:
-    """Raise :class:`EtmpcError` unless ``readme`` has the leaderboard's markers, once each and in order
-    (checked before any row is played)."""
-    try:
-        text = Path(readme).read_text()
-    except FileNotFoundError:
-        raise EtmpcError(f"--readme {readme} not found") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise EtmpcError(f"--readme {readme} cannot be read ({exc})") from None
-    if text.count(BEGIN) != 1 or text.count(END) != 1 or text.index(BEGIN) > text.index(END):
-        raise EtmpcError(
-            f"--readme {readme} needs one {BEGIN} ... {END} block for the leaderboard's table "
-            f"(found {text.count(BEGIN)} begin and {text.count(END)} end markers)"
-        )
 
 
 def _provenance() -> dict:

@@ -5,11 +5,13 @@ clairvoyant reference and why. :mod:`etmpc.experiments.leaderboard` plays the ro
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 
 from etmpc.loop import computation_cost
 from etmpc.evaluation.metrics import higher_or_lower, oriented
+from etmpc.common.errors import EtmpcError
 from etmpc.evaluation.results import failures_cell
 
 BEGIN, END = "<!-- leaderboard:begin -->", "<!-- leaderboard:end -->"
@@ -208,3 +210,19 @@ def page(data: dict) -> str:
         lines.append("")
         lines += above_the_oracle(data, task)
     return "\n".join(lines)
+
+
+def check_readme(readme: Path) -> None:
+    """Raise :class:`EtmpcError` unless ``readme`` has the leaderboard's markers, once each and in order
+    (checked before any row is played)."""
+    try:
+        text = Path(readme).read_text()
+    except FileNotFoundError:
+        raise EtmpcError(f"--readme {readme} not found") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise EtmpcError(f"--readme {readme} cannot be read ({exc})") from None
+    if text.count(BEGIN) != 1 or text.count(END) != 1 or text.index(BEGIN) > text.index(END):
+        raise EtmpcError(
+            f"--readme {readme} needs one {BEGIN} ... {END} block for the leaderboard's table "
+            f"(found {text.count(BEGIN)} begin and {text.count(END)} end markers)"
+        )

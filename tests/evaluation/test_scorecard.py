@@ -196,6 +196,10 @@ def test_the_stored_references_are_what_playing_the_episodes_again_gives(task):
     played = evaluate(task, [refs.best, refs.oracle_spec], episodes=1, workers=1, progress=False)
     again = {r.policy: r.objective for r in played.runs}
     assert again == {refs.best: refs.periodic[refs.best][0], refs.oracle_spec: refs.oracle[0]}
+    if refs.oracle_evaluation is not None:  # the oracle's whole run as kept for the leaderboard's row: its first episode
+        kept = next(r for r in refs.oracle_evaluation["runs"] if r["episode"] == 0)
+        again = next(r for r in played.to_json()["runs"] if r["policy"] == refs.oracle_spec)
+        assert kept == json.loads(json.dumps(again))  # objective, computations, failures, solver failures
 
 
 def test_scoring_plays_only_the_trigger_and_says_what_it_costs(tmp_path):

@@ -57,6 +57,34 @@ def test_an_interrupted_run_continues_without_playing_a_finished_row_again(board
     assert headline(again) == headline(data)
 
 
+def test_the_oracle_row_comes_from_references_that_kept_its_evaluation_and_is_the_played_one(monkeypatch, tmp_path):
+    """References that kept the oracle's evaluation give its row without playing it again, the same row as
+    playing it gives (that the stored evaluation is what playing gives: tests/evaluation/test_scorecard.py)."""
+    from dataclasses import replace
+
+    from etmpc.evaluation.evaluate import evaluate
+    from etmpc.evaluation.references import stored
+
+    refs = stored("battery").head(3)
+    played = evaluate("battery", [refs.oracle_spec], episodes=3, workers=1, progress=False)
+    expected = leaderboard.play_and_score("battery", refs, refs.oracle_spec, workers=1, progress=False)
+
+    def no_play(*args, **kwargs):
+        raise AssertionError("played again")
+
+    monkeypatch.setattr(leaderboard, "play_and_score", no_play)
+    entry = leaderboard.Entry("oracle", "bound", {"battery": refs.oracle_spec})
+    kept = replace(refs, oracle_evaluation=played.to_json(cpu=True))
+    row, _ = leaderboard._row(entry, "battery", kept, tmp_path, 3, 1, lambda line: None)
+    assert row.score == 100.0 and row.episode_scores == expected.episode_scores
+    assert (row.objective_mean, row.recomputes_mean, row.solver_failures) == (
+        expected.objective_mean,
+        expected.recomputes_mean,
+        expected.solver_failures,
+    )
+    assert kept.head(2).oracle_evaluation is None  # a part of the test set: its oracle row is played
+
+
 def test_the_best_threshold_is_chosen_once_and_chosen_again_when_its_task_changes(board, monkeypatch, tmp_path):
     import shutil
 
