@@ -95,8 +95,10 @@ def _build(source: str, library: Path, digest_file: Path, cc: str) -> None:
 
 
 def _described(name: str) -> str:
-    """``cart_pendulum_mpc`` as ``cart_pendulum MPC``; another function by its name."""
-    return f"{name.removesuffix('_mpc')} MPC" if name.endswith("_mpc") else f"{name} code"
+    """``cart_pendulum_mpc`` as ``cart_pendulum MPC``, ``quadrotor_waypoints_mpc_linearise`` (the condensed route's
+    first function) as ``quadrotor_waypoints MPC``; another function by its name."""
+    base = name.removesuffix("_linearise")
+    return f"{base.removesuffix('_mpc')} MPC" if base.endswith("_mpc") else f"{name} code"
 
 
 def library_for(function: ca.Function | Sequence[ca.Function], cache: Path | None = None) -> Path:

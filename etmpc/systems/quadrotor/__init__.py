@@ -12,6 +12,8 @@ from etmpc.systems.registry import lazy
 TASKS = ("waypoints",)
 # The seed of each task's stored test set (tasks/quadrotor/<task>_testset.npz: etmpc testset TASK --seed SEED).
 TEST_SET_SEEDS = {"waypoints": 20261127}
+# Version 1: the MPC flies the condensed route (etmpc.control.condensed) instead of sqpmethod (docs/versioning.md).
+VERSIONS = {"waypoints": 1}
 
 __getattr__ = lazy(
     __name__, {"waypoints": "etmpc.systems.quadrotor.system:QuadrotorSystem"}, "etmpc.systems.quadrotor.task:SUITE"

@@ -1,15 +1,18 @@
 """The ``waypoints`` task as the control loop sees it: an MPC that flies to the current waypoint, a
-feedback that follows the plan, and the price of a computation.
+feedback that follows the plan, and the price of a computation. The numbers are the ``Config``'s below.
 
-* **MPC** (Gauss-Newton SQP, full multiple shooting, N = 20 (1 s), compiled): the analytic rigid
-  body (``model.py``, RK4, 2 steps per interval), the waypoint ``p`` as the OCP's parameter;
-  residuals ``[e / 0.3, 0.1 v, 0.2 angles, 0.02 rates, 0.1 (u - hover) / max, 0.2 du / max]`` per
-  stage, ``e = position - p`` (m), and ``[2 e / 0.3, 0.3 v, 0.3 angles, 0.05 rates]`` at the end;
-  ``0 <= u_i <= 0.149`` N. ``hover`` is the model's (its mass), not the plant's. The plan carries the
-  waypoint it was made for as ``Plan.forecasts`` (``target_x_m``, ``target_y_m``, ``target_z_m``).
+* **MPC** (N = 20 (1 s), compiled): the condensed Gauss-Newton SQP (:mod:`etmpc.control.condensed`:
+  the thrusts alone are the variables, each QP dense and solved by DAQP), the analytic rigid body
+  (``model.py``, RK4, 2 steps per interval) as predictor, the waypoint ``p`` as the OCP's parameter.
+  Residuals per stage: ``e / 0.3`` (``e = position - p``, m), a soft floor (a softplus of the height
+  below 0.3 m, 5 cm wide, times 10 / 0.3), ``0.1 v``, ``0.5 angles``, ``0.3 rates``,
+  ``0.1 (u - hover) / max`` and ``1.0 du / max``; at the end ``[2 e / 0.3, floor, 0.3 v, 0.3 angles,
+  0.05 rates]``; ``0.02 <= u_i <= 0.149`` N. ``hover`` is the model's (its mass), not the plant's. The
+  plan carries the waypoint it was made for as ``Plan.forecasts`` (``target_x_m``, ``target_y_m``,
+  ``target_z_m``).
 * **Feedback** while a plan is kept: a time-varying LQR along the plan (``PlanFeedback``), from the
-  predictor's linearisation at each planned step, ``Q = diag(10 I3, 1 I3, 1 I3, 0.1 I3)``
-  (position, angles, velocity, rates), ``R = 20 I4`` (N^-2). ``threshold:X`` weighs the prediction
+  predictor's linearisation at each planned step, ``Q = diag(10 I3, 3 I3, 1 I3, 0.3 I3)``
+  (position, angles, velocity, rates), ``R = 5000 I4`` (N^-2). ``threshold:X`` weighs the prediction
   error by ``sqrt(Q)``.
 * **Objective** (lower is better): the episode's cost (``task.py``) plus the price per computation.
 * **Exogenous features** for the learned trigger: the waypoint now, the kept plan's, their
@@ -27,7 +30,7 @@ import numpy as np
 
 from etmpc.control.mpc import FeedbackWeights, SolverSettings
 from etmpc.control.timing import Latency
-from etmpc.systems.gauss_newton import TRACKING_SOLVER, GaussNewtonSystem, tracked_change
+from etmpc.systems.gauss_newton import GaussNewtonSystem, tracked_change
 from etmpc.systems.quadrotor import task as quadrotor_task
 from etmpc.systems.quadrotor.model import INPUT_NAMES, NU, NX, STATE_NAMES, AnalyticModel, Parameters
 from etmpc.systems.space import Space
@@ -92,7 +95,9 @@ class Config:
     plant: str = "mismatched"
     latency: Latency = Latency()  # how long a solve takes (etmpc.control.timing); none: the paper's loop
     compute_levels: bool = False  # a decision is keep, one SQP iteration or a full solve, priced per iteration
-    solver: SolverSettings = TRACKING_SOLVER
+    # The condensed Gauss-Newton SQP (etmpc.control.condensed): at most 100 QPs by DAQP, converged when a step
+    # moves no thrust by more than 1e-3 of its range; the Gauss-Newton Hessian regularised by 1e-3 I.
+    solver: SolverSettings = SolverSettings(route="condensed", max_iterations=100, regularisation=1e-3, step_tolerance=1e-3)
 
 
 class QuadrotorSystem(GaussNewtonSystem):
