@@ -23,7 +23,8 @@ would fly, converged or not, and a QP has bounds only: always feasible.
    (``Q, S, R, q, s``: the stage's ``C'C, D'C, D'D, C'r, D'r`` with ``C, D`` the residual's Jacobians
    in ``z`` and ``u``). ``O(N^2)`` small products, each written out for the model's sparsity.
 2. *The QP* ``min 1/2 d'Hd + g'd`` s.t. ``u_min - U <= d <= u_max - U``, by DAQP (a dual
-   active-set method for dense QPs, in C).
+   active-set method for dense QPs, in C); if DAQP cannot solve it (a Hessian too ill-conditioned to
+   factorise), again with Levenberg-Marquardt damping on its diagonal.
 3. *Converged?* The QP's step is zero exactly at a KKT point of the OCP: when it moves no input by
    more than ``step_tolerance`` of its range, the iterate is returned (the step is not taken).
 4. *A step* ``U + t d``, ``t`` halved from 1 until the objective falls by Armijo's rule.
@@ -58,6 +59,8 @@ from etmpc.control.riccati import FeedbackWeights, gains_along
 
 ARMIJO = 1e-4  # sufficient decrease: f(U + t d) <= f(U) + ARMIJO t g'd
 SMALLEST_STEP = 2.0**-20  # the line search gives up below this fraction of the QP's step
+# Shares of H's largest diagonal entry added to its diagonal, in turn, when DAQP cannot solve the QP.
+DAMPING = (1e-8, 1e-4, 1.0)
 
 
 @dataclass(frozen=True)
@@ -244,11 +247,14 @@ class CondensedGaussNewton:
         """A plan from at most ``limit`` iterations from :meth:`guess`. Every iterate is a descent from the
         guess and a plan the predictor flies, so one that stops short of the tolerance is still a plan
         (``success``; ``status`` says it did not converge); a plan fails only when a linearisation is not
-        finite or the first QP is not solved (its states are then ``rollout(x, inputs)``)."""
+        finite or the first QP is not solved, from the warm guess and then from a cold one (its states are
+        then ``rollout(x, inputs)``)."""
         start = time.perf_counter()
         use_warm = warm is not None and (age < self.horizon or self.settings.warm_from_expired)
         extra = np.zeros(0) if parameters is None else np.asarray(parameters, dtype=float)
         out = self.run(x, u_prev, self.guess(x, u_prev, warm, age, extra, use_warm), extra, limit)
+        if not out.usable and use_warm:  # a warm start flown into a useless linearisation: once more, cold
+            out = self.run(x, u_prev, self.guess(x, u_prev, None, 0, extra), extra, limit)
         inputs, states, cost, gains = out.inputs, out.states, out.cost, out.gains
         if not out.usable:
             states, cost = rollout(x, inputs), float("nan")
@@ -289,7 +295,7 @@ class CondensedGaussNewton:
             if not (math.isfinite(f) and np.isfinite(g).all() and np.isfinite(H).all()):
                 usable, status = False, "non-finite linearisation"
                 break
-            d, _, flag, _ = daqp.solve(H, g, self._no_constraints, self._upper - U, self._lower - U)
+            d, flag = self._step(H, g, U)
             iterations += 1
             if flag < 1 or not np.isfinite(d).all():
                 usable, status = iterations > 1, f"QP failed (DAQP exit flag {flag})"
@@ -328,6 +334,19 @@ class CondensedGaussNewton:
             usable and math.isfinite(f) and bool(np.isfinite(states).all()) and (gains is None or bool(np.isfinite(gains).all()))
         )
         return Outcome(inputs, states, float(f), gains, iterations, converged, status, usable)
+
+    def _step(self, H: np.ndarray, g: np.ndarray, U: np.ndarray) -> tuple[np.ndarray, int]:
+        """The QP's step and DAQP's exit flag (1: solved). A QP DAQP cannot solve is one whose Hessian is too
+        ill-conditioned to factorise (a prediction from a tumbling or upturned drone reaches 1e19): it is
+        solved again with Levenberg-Marquardt damping, ``H + share max(diag H) I`` for each share of
+        :data:`DAMPING` until one is solved: a shorter step along a descent direction."""
+        d, _, flag, _ = daqp.solve(H, g, self._no_constraints, self._upper - U, self._lower - U)
+        for share in DAMPING:
+            if flag >= 1 or not np.isfinite(H).all():
+                break
+            damped = H + (share * float(np.max(np.diag(H)))) * np.eye(H.shape[0])
+            d, _, flag, _ = daqp.solve(damped, g, self._no_constraints, self._upper - U, self._lower - U)
+        return d, flag
 
     def _linearised(self, U: np.ndarray, z0: np.ndarray, p: np.ndarray, slot: int):
         """``(f, g, H, states, A, B)`` at ``U``: compiled, the arrays are buffer ``slot``'s (0 or 1), valid
