@@ -28,7 +28,8 @@ sweep: setup
 
 # The leaderboard: every built-in trigger scored on every task's stored test set (etmpc score
 # --leaderboard), written to docs/leaderboard.md and .json with the profile figure; the README's headline
-# table is rewritten from it. Finished rows are kept in results/leaderboard: an interrupted run continues.
+# table is rewritten from it. Finished rows are kept in results/leaderboard, in git: an interrupted run continues, and
+# a fresh checkout plays only the rows whose task, policy file or etmpc changed.
 # Play it on an otherwise idle machine: its CPU column grows when heavy work shares the cores.
 leaderboard: setup
 	$(BIN)/etmpc score --leaderboard --out docs --readme README.md
