@@ -1,0 +1,263 @@
+"""The MPC's two solver routes side by side: every re-plan's CPU time, iterations and failures, and what
+the closed loop scores, on the same stored test-set episodes, in one run.
+
+    python scripts/solver_routes.py [TASK ...] [--episodes 20] [--policy always] [--json docs/results/solvers.json]
+
+Each task (default: every task whose MPC is a Gauss-Newton one: ``cart_pendulum``, ``cart_pendulum/kicks``,
+``reacher``, ``quadrotor``) is played under ``--policy`` on the first ``--episodes`` episodes of its stored
+test set by two controllers that differ only in their ``SolverSettings``: ``sqpmethod`` (CasADi's SQP on the
+multiple-shooting NLP, its QPs by qrqp) and ``condensed`` (``etmpc.control.condensed``: a Gauss-Newton SQP on the
+inputs alone, its dense QPs by DAQP). The task's own route is played as it ships; the other is the task's
+settings with the route swapped (the quadrotor's sqpmethod route is the one it flew through version 0,
+``TRACKING_SOLVER``). The two alternate episode by episode, so that whatever else the machine does falls on
+both. Each compiled MPC solves once before timing (its lazy build is not a re-plan).
+
+A re-plan's time is the controller's thread CPU time for it (``Trajectory.solve_time_s``, as the score card's
+``cpu_ms.solve``); ``failed`` counts plans the loop could not use, ``short`` plans returned before the
+solver's own convergence test passed (the condensed route still flies them: each is a descent from the
+warm start). ``--json`` writes everything with the commit and the machine; ``--page`` also writes the
+docs' solver page from it (``docs/solvers.md``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import subprocess
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+TASKS = ("cart_pendulum", "cart_pendulum/kicks", "reacher", "quadrotor")
+ROUTES = ("sqpmethod", "condensed")
+
+
+def variants(task: str) -> dict:
+    """``route -> system`` for ``task``: the task as it ships, and its settings with the route swapped."""
+    from etmpc.systems import make_system
+    from etmpc.systems.gauss_newton import TRACKING_SOLVER
+
+    shipped = make_system(task)
+    own = shipped.config.solver
+    if own.route == "condensed":
+        other = (
+            replace(TRACKING_SOLVER, compiled=own.compiled) if task.startswith("quadrotor") else replace(own, route="sqpmethod")
+        )
+    else:
+        other = replace(own, route="condensed")
+    swapped = type(shipped)(replace(shipped.config, solver=other))
+    return {own.route: shipped, other.route: swapped}
+
+
+def counted(system) -> list:
+    """Wrap ``system.mpc``'s solve and iterate to keep each plan's ``(success, converged, iterations)``."""
+    mpc, kept = system.mpc, []
+    for name in ("solve", "iterate"):
+        method = getattr(mpc, name)
+
+        def wrapper(*args, _method=method, **kwargs):
+            plan = _method(*args, **kwargs)
+            kept.append((plan.success, plan.status == "converged", plan.iterations))
+            return plan
+
+        setattr(mpc, name, wrapper)
+    return kept
+
+
+def play(task: str, episodes: int, policy_spec: str) -> dict:
+    from etmpc.evaluation import testsets
+    from etmpc.evaluation.evaluate import scores
+    from etmpc.loop import run_episode
+    from etmpc.policies import parse_policy
+    from etmpc.systems.registry import parse
+
+    systems = variants(task)
+    domain, name = parse(task)
+    testset = testsets.load(testsets.default_path(domain, name), domain, name)
+    setups = {}
+    for route, system in systems.items():
+        env = system.make_env()
+        first = env.reset()
+        system.plan(system.state(first), np.zeros(len(system.u_min)), None, 0, first)  # the compiled MPC's lazy build
+        setups[route] = (system, env, parse_policy(policy_spec, system), counted(system))
+    times = {route: [] for route in systems}
+    objective = {route: [] for route in systems}
+    solver_failures = {route: 0 for route in systems}
+    failures = {route: 0 for route in systems}
+    for i in range(min(episodes, testset.episodes)):
+        for route, (system, env, policy, _) in setups.items():
+            episode = system.episode_from_arrays(testset.episode_arrays(i))
+            traj = run_episode(system, env, policy, np.random.default_rng(i), episode)
+            solved = traj.solve_time_s[: traj.steps]
+            times[route].extend(solved[solved > 0].tolist())
+            objective[route].append(scores(system, traj)[0])
+            solver_failures[route] += traj.solver_failures
+            if system.failures is not None:
+                failures[route] += system.failures(traj, episode)
+    result = {}
+    for route, (system, _, _, kept) in setups.items():
+        t = np.array(times[route]) * 1e3
+        iterations = np.array([k[2] for k in kept], dtype=float)
+        result[route] = {
+            "settings": {k: v for k, v in vars(system.config.solver).items() if not isinstance(v, tuple) or v},
+            "replans": int(t.size),
+            "ms": {
+                "median": float(np.median(t)),
+                "mean": float(t.mean()),
+                "p99": float(np.quantile(t, 0.99)),
+                "max": float(t.max()),
+            },
+            "iterations": {
+                "median": float(np.median(iterations)),
+                "mean": float(iterations.mean()),
+                "max": int(iterations.max()),
+            },
+            "failed": int(sum(not k[0] for k in kept)),
+            "short": int(sum(k[0] and not k[1] for k in kept)),
+            "solver_failures": solver_failures[route],
+            "objective_mean": float(np.mean(objective[route])),
+            "task_failures": failures[route],
+        }
+    return result
+
+
+def machine() -> dict:
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    try:
+        commit = subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=True
+        ).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        commit = "(not a git checkout)"
+    return {"cpu": cpu, "cores": len(os.sched_getaffinity(0)), "python": platform.python_version(), "commit": commit}
+
+
+# Published figures of the field's solvers, quoted from their sources: not measured here.
+QUOTED = (
+    (
+        "acados SQP_RTI with HPIPM, nonlinear least squares, from Python",
+        "hexarotor, 13 states, 6 inputs, N = 20",
+        "about 2 ms per step on average, spikes above 7 ms",
+        "a desktop PC",
+        "acados forum, thread 1467",
+    ),
+    (
+        "acados against CasADi + Ipopt (safe-control-gym)",
+        "3-D quadrotor, figure-8 tracking",
+        "full SQP at least 10x, SQP_RTI about 100x faster than Ipopt",
+        "not stated",
+        "safe-control-gym, pull request 175",
+    ),
+    (
+        "DAQP (dual active set), linear MPC",
+        "Crazyflie 2.1, 12 states, 4 inputs",
+        "500 Hz on the flight controller, faster than TinyMPC there",
+        "STM32F405, 168 MHz",
+        "arXiv 2603.09342",
+    ),
+    ("Tiny LB-MPC", "Crazyflie 2.1 (53 g)", "100 Hz on board", "Teensy 4.0", "arXiv 2410.23634"),
+)
+
+
+def page(report: dict) -> str:
+    """The docs' solver page from a report of :func:`main`."""
+    m = report["machine"]
+    lines = [
+        "# The MPC's solve: two routes, measured side by side",
+        "",
+        "<!-- Generated by scripts/solver_routes.py --page: edit the script, not this page. -->",
+        "",
+        "Every task whose MPC is a Gauss-Newton one can solve its OCP by two routes (`SolverSettings.route`):",
+        "",
+        "* **`sqpmethod`**: CasADi's SQP on the multiple-shooting NLP, its QPs by `qrqp` (CasADi's sparse active-set",
+        "  method), a failed warm solve retried cold. The cart pendulum's tasks and the reacher's fly it.",
+        "* **`condensed`** (`etmpc.control.condensed`): the OCP made stage-separable (the previous input carried in the",
+        "  state), condensed onto its inputs by a backward recursion in generated C, each QP a dense one with bounds",
+        "  only, solved by [DAQP](https://github.com/darnstrom/daqp) (a dual active-set method, in C). Every iterate is",
+        "  a plan the predictor flies; it is warm started by the kept plan flown under its own feedback gains. The",
+        "  quadrotor flies it (since `quadrotor/waypoints` v1).",
+        "",
+        f"Measured with `{report['command']}` at commit `{m['commit']}` on {m['cpu']} ({m['cores']} cores),",
+        f"Python {m['python']}: each task's first {report['episodes']} stored test-set episodes under `{report['policy']}`,",
+        "played by both routes in turn, episode by episode. A re-plan's time is the thread's CPU time for it",
+        "(the score card's `cpu_ms.solve`); *failed*: plans the loop could not use; *short*: plans returned before",
+        "the solver's convergence test passed; *objective*: the closed loop's mean per episode.",
+        "",
+        "| task | route | re-plans | median ms | mean ms | p99 ms | max ms | QPs median / mean / max | failed | short "
+        "| objective | task failures |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for task, routes in report["tasks"].items():
+        for route, r in routes.items():
+            ms, it = r["ms"], r["iterations"]
+            qps = "(not counted)" if it["max"] < 0 else f"{it['median']:.0f} / {it['mean']:.1f} / {it['max']}"
+            lines.append(
+                f"| {task} | {route} | {r['replans']} | {ms['median']:.2f} | {ms['mean']:.2f} | {ms['p99']:.2f} | "
+                f"{ms['max']:.1f} | {qps} | {r['failed']} | {r['short']} | {r['objective_mean']:.4f} | {r['task_failures']} |"
+            )
+    lines += [
+        "",
+        "`sqpmethod` does not report its iterations per solve here (one compiled call runs the whole SQP).",
+        "",
+        "## The field's figures (quoted, not measured here)",
+        "",
+        "Published by others, on other problems and other hardware; quoted as their sources give them.",
+        "",
+        "| solver | problem | time | hardware | source |",
+        "|---|---|---|---|---|",
+        *[f"| {' | '.join(row)} |" for row in QUOTED],
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("tasks", nargs="*", default=list(TASKS))
+    parser.add_argument("--episodes", type=int, default=20)
+    parser.add_argument("--policy", default="always")
+    parser.add_argument("--json", type=Path, help="write the measurements here")
+    parser.add_argument("--page", type=Path, help="also write the docs' solver page here (docs/solvers.md)")
+    args = parser.parse_args(argv)
+    if args.episodes < 1:
+        parser.error("--episodes must be at least 1")
+    results = {}
+    for task in args.tasks:
+        results[task] = play(task, args.episodes, args.policy)
+        for route, r in results[task].items():
+            ms, it = r["ms"], r["iterations"]
+            print(
+                f"{task:22s} {route:9s} median {ms['median']:6.2f} ms  mean {ms['mean']:6.2f}  p99 {ms['p99']:6.2f}  "
+                f"max {ms['max']:7.2f}  iterations {it['median']:.0f}/{it['mean']:.1f}/{it['max']}  failed {r['failed']}  "
+                f"short {r['short']}  objective {r['objective_mean']:.4f}  task failures {r['task_failures']}",
+                flush=True,
+            )
+    report = {
+        "command": "python scripts/solver_routes.py " + " ".join(sys.argv[1:] if argv is None else argv),
+        "policy": args.policy,
+        "episodes": args.episodes,
+        "machine": machine(),
+        "tasks": results,
+    }
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(report, indent=1) + "\n")
+    if args.page:
+        args.page.parent.mkdir(parents=True, exist_ok=True)
+        args.page.write_text(page(report))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
