@@ -23,9 +23,7 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import platform
-import subprocess
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -126,21 +124,11 @@ def play(task: str, episodes: int, policy_spec: str) -> dict:
 
 
 def machine() -> dict:
-    cpu = platform.processor() or platform.machine()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    try:
-        commit = subprocess.run(
-            ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=True
-        ).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        commit = "(not a git checkout)"
-    return {"cpu": cpu, "cores": len(os.sched_getaffinity(0)), "python": platform.python_version(), "commit": commit}
+    """The machine (``etmpc reproduce``'s description of it), the Python and the checkout's commit."""
+    from etmpc.common.provenance import commit_and_date
+    from etmpc.experiments.report import machine as described
+
+    return described() | commit_and_date() | {"python": platform.python_version()}
 
 
 # Published figures of the field's solvers, quoted from their sources: not measured here.
