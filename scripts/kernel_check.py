@@ -9,11 +9,18 @@ the same packages, forced on this one through the libraries' own switches:
 * ``NPY_DISABLE_CPU_FEATURES``: numpy's own vectorised loops (its dispatch targets above the baseline);
 * ``GLIBC_TUNABLES=glibc.cpu.hwcaps=...``: which variant of libm's exp, sin, cos, log glibc picks.
 
-Only settings this CPU can run are tried. Usage::
+Only settings this CPU can run are tried. One difference is expected and reported, not failed
+(:data:`EXPECTED`): the quadrotor under libm without FMA. Its MPC's generated C calls libm's ``sin``,
+``cos`` and ``tan`` about 1,800 times per linearisation, and glibc's FMA variants of them (picked on
+every x86-64 CPU with FMA: Intel since Haswell, AMD since Piledriver) round a few arguments differently
+from the SSE2 ones. Machines with FMA replay its evaluations byte for byte; one without does not.
+
+Usage::
 
     python scripts/kernel_check.py [--episodes 4]
 
-prints one line per setting and exits 1 if any evaluation differs from the default one. A setting's
+prints one line per setting and exits 1 if any evaluation differs from the default one, other than
+an expected difference. A setting's
 run is this script with ``--digest``: it prints the sha256 of each system's evaluation JSON.
 """
 
@@ -30,6 +37,9 @@ import tempfile
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+NO_FMA = "no FMA: OpenBLAS Prescott, numpy baseline, libm without AVX2/FMA"
+# (system, setting) pairs that differ by a known cause (the module's docstring): reported, not failed
+EXPECTED = {("quadrotor", NO_FMA)}
 
 
 def cpu_flags() -> set[str]:
@@ -69,7 +79,7 @@ def settings() -> dict[str, dict[str, str]]:
             "NPY_DISABLE_CPU_FEATURES": " ".join(wide),
             "GLIBC_TUNABLES": "glibc.cpu.hwcaps=-AVX512F,-AVX512DQ,-AVX512BW,-AVX512VL,-AVX512CD",
         }
-        chosen["no FMA: OpenBLAS Prescott, numpy baseline, libm without AVX2/FMA"] = {
+        chosen[NO_FMA] = {
             "OPENBLAS_CORETYPE": "Prescott",
             "NPY_DISABLE_CPU_FEATURES": " ".join(dispatch),
             "GLIBC_TUNABLES": "glibc.cpu.hwcaps=-AVX2,-FMA,-AVX512F,-AVX",
@@ -79,6 +89,9 @@ def settings() -> dict[str, dict[str, str]]:
     return chosen
 
 
+SELF_TRIGGER_FEATURES = {"cart_pendulum": 4 + 4 + 4 + 1 + 1, "battery": 1 + 1 + 1 + 1 + 1 + 4}
+
+
 def _self_trigger(path: Path, domain: str) -> str:
     """A self-trigger whose announcements depend on the plan (random but fixed parameters)."""
     import numpy as np
@@ -86,7 +99,7 @@ def _self_trigger(path: Path, domain: str) -> str:
     from etmpc.common.outputs import write_json
     from etmpc.policies.selftrigger import CANDIDATES, SelfTrigger
 
-    p = {"cart_pendulum": 4 + 4 + 4 + 1 + 1, "battery": 1 + 1 + 1 + 1 + 1 + 4}[domain]
+    p = SELF_TRIGGER_FEATURES[domain]
     theta = np.random.default_rng(5).normal(size=(len(CANDIDATES), 1 + p))
     write_json(path, SelfTrigger(str(path), domain, CANDIDATES, theta, np.zeros(p), np.ones(p)).to_json())
     return f"self:{path}"
@@ -104,11 +117,13 @@ def digests(episodes: int) -> dict[str, str]:
             "rollout:every:3:2:5",
         ],
         "battery": ["every:3", "threshold:0.01", f"rl:{ROOT / 'policies/battery/learned.json'}", "rollout:always:2:5"],
+        "quadrotor": ["every:7", "threshold:0.5", f"rl:{ROOT / 'policies/quadrotor/learned.json'}"],
     }
     out = {}
     with tempfile.TemporaryDirectory() as tmp:
         for domain, specs in policies.items():
-            specs = specs + [_self_trigger(Path(tmp) / f"self_{domain}.json", domain)]
+            if domain in SELF_TRIGGER_FEATURES:
+                specs = specs + [_self_trigger(Path(tmp) / f"self_{domain}.json", domain)]
             text = json.dumps(evaluate(domain, specs, episodes=episodes, workers=1, progress=False).to_json())
             out[domain] = hashlib.sha256(text.replace(tmp, "TMP").encode()).hexdigest()  # the file's name is no result
     return out
@@ -129,6 +144,16 @@ def compare(episodes: int = 4) -> dict[str, dict[str, str]]:
     return found
 
 
+def unexpected(found: dict[str, dict[str, str]]) -> dict[str, list[str]]:
+    """Setting -> the systems whose evaluations differ from the default setting's, other than :data:`EXPECTED`."""
+    reference = found["default"]
+    return {
+        name: differing
+        for name, values in found.items()
+        if (differing := [d for d, v in values.items() if v != reference[d] and (d, name) not in EXPECTED])
+    }
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--episodes", type=int, default=4, help="first N test-set episodes per system (default 4)")
@@ -138,13 +163,11 @@ def main() -> int:
         print(json.dumps(digests(args.episodes)))
         return 0
     found = compare(args.episodes)
-    reference = found["default"]
-    same = True
+    reference, failed = found["default"], unexpected(found)
     for name, values in found.items():
-        equal = values == reference
-        same &= equal
-        print(f"{'same' if equal else 'DIFFERS':8s} {name}: " + ", ".join(f"{d} {v[:12]}" for d, v in values.items()))
-    return 0 if same else 1
+        verdict = "DIFFERS" if name in failed else "same" if values == reference else "expected"
+        print(f"{verdict:8s} {name}: " + ", ".join(f"{d} {v[:12]}" for d, v in values.items()))
+    return 1 if failed else 0
 
 
 if __name__ == "__main__":

@@ -174,7 +174,7 @@ def page(report: dict) -> str:
         "  state), condensed onto its inputs by a backward recursion in generated C, each QP a dense one with bounds",
         "  only, solved by [DAQP](https://github.com/darnstrom/daqp) (a dual active-set method, in C). Every iterate is",
         "  a plan the predictor flies; it is warm started by the kept plan flown under its own feedback gains. The",
-        "  quadrotor flies it (since `quadrotor/waypoints` v1).",
+        "  quadrotor flies it (since `quadrotor/waypoints` v1; at most 10 QPs a re-plan since v2).",
         "",
         f"Measured with `{report['command']}` at commit `{m['commit']}` on {m['cpu']} ({m['cores']} cores),",
         f"Python {m['python']}: each task's first {report['episodes']} stored test-set episodes under `{report['policy']}`,",

@@ -107,8 +107,9 @@ def ipopt_quadrotor(system, x, u_prev, target) -> tuple[float, np.ndarray]:
 def test_the_optimum_is_ipopts_on_random_flights(quadrotor):
     """Converged to a tight tolerance, the objective agrees with Ipopt's to 1e-7 relative (only the 1e-3 I
     regularisation of H separates them: it changes the steps, not the fixed point); at the task's own
-    tolerance (a step within 1e-3 of the thrust range), to 1e-4, and the first thrusts to 1e-3 of the range."""
-    tight = interpreted(quadrotor, step_tolerance=1e-7)
+    settings (a step within 0.3 % of the thrust range, or 10 QPs from a cold start), to 1e-4, and the first
+    thrusts to 1e-3 of the range."""
+    tight = interpreted(quadrotor, step_tolerance=1e-7, max_iterations=200)
     span = quadrotor.u_max - quadrotor.u_min
     rng = np.random.default_rng(11)
     for _ in range(3):
@@ -117,8 +118,8 @@ def test_the_optimum_is_ipopts_on_random_flights(quadrotor):
         exact = tight.mpc.solve(x, u_prev, parameters=target)
         assert exact.success and exact.status == "converged"
         assert exact.cost == pytest.approx(reference, rel=1e-7)
-        plan = quadrotor.mpc.solve(x, u_prev, parameters=target)
-        assert plan.success and plan.status == "converged"
+        plan = quadrotor.mpc.solve(x, u_prev, parameters=target)  # converged, or stopped at the task's 10 QPs
+        assert plan.success and (plan.status == "converged" or plan.iterations == quadrotor.config.solver.max_iterations)
         assert plan.cost == pytest.approx(reference, rel=1e-4)
         assert np.all(np.abs(plan.inputs[0] - first) <= 1e-3 * span)
         # the plan is what the predictor flies: its states are the rollout of its inputs

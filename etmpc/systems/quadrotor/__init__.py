@@ -12,8 +12,9 @@ from etmpc.systems.registry import lazy
 TASKS = ("waypoints",)
 # The seed of each task's stored test set (tasks/quadrotor/<task>_testset.npz: etmpc testset TASK --seed SEED).
 TEST_SET_SEEDS = {"waypoints": 20261127}
-# Version 1: the MPC flies the condensed route (etmpc.control.condensed) instead of sqpmethod (docs/versioning.md).
-VERSIONS = {"waypoints": 1}
+# Version 1: the MPC flies the condensed route (etmpc.control.condensed) instead of sqpmethod; version 2: at
+# most 10 of its QPs, and the plant's arithmetic the same on any CPU with FMA (docs/versioning.md).
+VERSIONS = {"waypoints": 2}
 
 __getattr__ = lazy(
     __name__, {"waypoints": "etmpc.systems.quadrotor.system:QuadrotorSystem"}, "etmpc.systems.quadrotor.task:SUITE"

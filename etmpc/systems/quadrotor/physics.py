@@ -12,6 +12,8 @@ it) that the task sets before each interval. The target is a mocap body the task
 
 from __future__ import annotations
 
+import math
+
 import mujoco
 import numpy as np
 from dm_control import mjcf
@@ -42,19 +44,23 @@ def load_model(plant: str = "mismatched", timestep_s: float | None = None) -> mj
 
 
 def euler(quaternion: np.ndarray) -> np.ndarray:
-    """Z-Y-X Euler angles ``[roll, pitch, yaw]`` (rad) of a unit quaternion ``[w, x, y, z]``."""
-    w, x, y, z = quaternion
-    roll = np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
-    pitch = np.arcsin(np.clip(2 * (w * y - z * x), -1.0, 1.0))
-    yaw = np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+    """Z-Y-X Euler angles ``[roll, pitch, yaw]`` (rad) of a unit quaternion ``[w, x, y, z]``.
+
+    By the C library's scalar functions (:mod:`math`), not NumPy's: NumPy picks vectorised ``arctan2`` and
+    ``arcsin`` by the CPU (Intel's SVML on AVX-512), whose last bits differ from one machine to another."""
+    w, x, y, z = (float(v) for v in quaternion)
+    roll = math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
+    pitch = math.asin(min(max(2 * (w * y - z * x), -1.0), 1.0))
+    yaw = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
     return np.array([roll, pitch, yaw])
 
 
 def quaternion(angles: np.ndarray) -> np.ndarray:
     """The unit quaternion ``[w, x, y, z]`` of Z-Y-X Euler angles ``[roll, pitch, yaw]``."""
-    cr, sr = np.cos(angles[0] / 2), np.sin(angles[0] / 2)
-    cp, sp = np.cos(angles[1] / 2), np.sin(angles[1] / 2)
-    cy, sy = np.cos(angles[2] / 2), np.sin(angles[2] / 2)
+    half = [float(a) / 2 for a in angles]  # scalar maths, as in euler()
+    cr, sr = math.cos(half[0]), math.sin(half[0])
+    cp, sp = math.cos(half[1]), math.sin(half[1])
+    cy, sy = math.cos(half[2]), math.sin(half[2])
     return np.array(
         [cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy]
     )

@@ -117,8 +117,8 @@ class Episode:
         force = np.zeros((steps, 3))
         for start in np.flatnonzero(self.gust_intervals):
             n = int(self.gust_intervals[start])
-            k = np.arange(n)
-            shape = (1 - np.cos(2 * math.pi * (k + 0.5) / n)) / 2
+            # math.cos, not np.cos: NumPy's vectorised cosine differs in its last bits from one CPU to another
+            shape = np.array([(1 - math.cos(2 * math.pi * (k + 0.5) / n)) / 2 for k in range(n)])
             end = min(start + n, steps)
             force[start:end] += shape[: end - start, None] * self.gust_peak[start]
         return force
@@ -239,7 +239,8 @@ class Waypoints(EpisodeTask):
     def get_reward(self, physics: Physics) -> float:
         """Against the waypoint of the interval just played; 1 more off outside the geofence or on the ground."""
         position = physics.position()
-        reward = distance_reward(float(np.linalg.norm(position - self._episode.target[self._step - 1])))
+        dx, dy, dz = (float(v) for v in position - self._episode.target[self._step - 1])
+        reward = distance_reward(math.sqrt(dx * dx + dy * dy + dz * dz))  # no BLAS: the same bits on any CPU
         return reward - FAILURE_PENALTY if outside(position) else reward
 
     def action_spec(self, physics: Physics) -> specs.BoundedArray:
