@@ -2,7 +2,7 @@
 
 An MPC makes plans, an LQR corrects prediction errors while a plan is kept, and a recomputation
 policy decides when to re-plan. The package is built in floors, each importing only the ones below
-it (README "Layout"; import-linter checks it):
+it (docs/architecture.md; import-linter checks it):
 
 * ``etmpc.common``: errors, safe file writing, where the data lives, exact sums;
 * ``etmpc.control``: the parts of a controller: plan, MPC, compiled code, LQR;

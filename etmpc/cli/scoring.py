@@ -144,7 +144,7 @@ def run(args) -> None:
     check_run_outputs({"--json": args.json, "--figure": args.figure}, inputs=run_inputs(args.policy, args.test_set))
     card = score(args.policy, tasks, args.test_set, args.workers, json_path=args.json, say=_say, episodes=args.episodes)
     print(format_scorecard(card))
-    if args.json is not None:
+    if args.json is not None and card.complete:  # a card with a failed row is never written (below)
         print(f"wrote {args.json}")
     if args.figure is not None:
         import numpy as np
