@@ -219,8 +219,10 @@ def page(report: dict) -> str:
                 "",
                 f"**The quadrotor's stopping rule.** Since version 2 a re-plan stops after at most "
                 f"{new['settings']['max_iterations']} QPs, or when a step moves no thrust by more than "
-                f"{100 * new['settings']['step_tolerance']:.1f} % of its range; version 1 solved to {100 * V1_STOPPING['step_tolerance']:.1f} % "
-                f"with up to {V1_STOPPING['max_iterations']} QPs (the row `{CONVERGED}`). On the same episodes, the "
+                f"{100 * new['settings']['step_tolerance']:.1f} % of its range; "
+                f"version 1 solved to {100 * V1_STOPPING['step_tolerance']:.1f} % "
+                f"with up to {V1_STOPPING['max_iterations']} QPs (the row `{CONVERGED}`). "
+                "On the same episodes, the "
                 f"stopped plans fly a closed loop whose cost differs by {100 * change:+.3f} % from the converged ones' "
                 f"({new['objective_mean']:.4f} against {full['objective_mean']:.4f}; task failures {new['task_failures']} "
                 f"against {full['task_failures']}), while the re-plan is {full['ms']['mean'] / new['ms']['mean']:.2f}x "
