@@ -1,5 +1,7 @@
 """A task's reference points for the scorecard, stored with the task: every periodic schedule and the
-oracle over the best of them, per episode of its test set (see :mod:`etmpc.evaluation.scorecard`).
+oracle over the best of them, per episode of its test set (see :mod:`etmpc.evaluation.scorecard`), and the
+whole runs of the oracle and of the rollout meter over the best schedule as they were played (the
+leaderboard's rows of both, which it does not play again).
 
 ``tasks/<domain>/<task>_references.json`` holds them with the suite's version, the test set's sha256,
 the task's price and the software that computed them, sealed with the SHA-256 of its content. A file
@@ -32,10 +34,13 @@ from etmpc.common.sense import best as best_of, oriented
 from etmpc.evaluation import testsets
 from etmpc.evaluation.evaluate import Evaluation, evaluate
 from etmpc.systems import data_dir, make_system
+from etmpc.systems.base import provides
 
 SUITE_VERSION = 3  # what changes it, and what changes a task's version instead: docs/versioning.md
 FORMAT = "etmpc-references"
-SOFTWARE = ("etmpc", "mujoco", "dm-control", "casadi", "numpy", "scipy")
+ROLLOUT_FUTURES = 4  # the rollout meter's sampled futures per decision
+
+SOFTWARE = ("etmpc", "mujoco", "dm-control", "casadi", "daqp", "numpy", "scipy")
 
 
 def software() -> dict[str, str]:
@@ -66,10 +71,22 @@ class References:
     # each episode's CPU time): the leaderboard's oracle row, scored without playing it again. None in
     # references made before suite 3, and in :meth:`head`'s.
     oracle_evaluation: dict | None = None
+    # Likewise the rollout meter's (:func:`rollout_meter_spec`), the leaderboard's row of it; None where the task
+    # has no rollouts, in references made before it was kept, and in :meth:`head`'s.
+    rollout_evaluation: dict | None = None
 
     @property
     def oracle_spec(self) -> str:
         return f"oracle:{self.best}"
+
+    def kept_evaluation(self, spec: str) -> dict | None:
+        """The evaluation of ``spec`` these references kept as it was played (the oracle's, the rollout
+        meter's), or None."""
+        if spec == self.oracle_spec:
+            return self.oracle_evaluation
+        if self.rollout_evaluation is not None and _played_spec(self.rollout_evaluation) == spec:
+            return self.rollout_evaluation
+        return None
 
     def costs(self, objectives) -> np.ndarray:
         """Objectives as costs (lower is better), whatever the task's sense."""
@@ -91,12 +108,16 @@ class References:
             periodic={k: v[:episodes] for k, v in self.periodic.items()},
             oracle=self.oracle[:episodes],
             oracle_evaluation=self.oracle_evaluation if episodes == self.episodes else None,
+            rollout_evaluation=self.rollout_evaluation if episodes == self.episodes else None,
         )
 
     def to_json(self) -> dict:
-        """The file's content, sealed with the SHA-256 of the rest (no ``oracle_evaluation`` when there is none)."""
-        content = {k: v for k, v in asdict(self).items() if not (k == "oracle_evaluation" and v is None)}
+        """The file's content, sealed with the SHA-256 of the rest (no kept evaluation that there is not)."""
+        content = {k: v for k, v in asdict(self).items() if not (k in KEPT and v is None)}
         return sealed({"format": FORMAT} | content)
+
+
+KEPT = ("oracle_evaluation", "rollout_evaluation")  # written only when there is one
 
 
 def mean(values) -> float:
@@ -116,6 +137,14 @@ def periodic_schedules(system) -> list[str]:
     against)."""
     periods = range(1, system.horizon + 1)
     return [f"every:{t}" for t in periods] + ([f"iterate:{t}" for t in periods] if system.compute_levels else [])
+
+
+def rollout_meter_spec(system, best: str) -> str | None:
+    """The rollout meter over ``best``: ``rollout:BEST:4:H``, the one-step lookahead over sampled futures with
+    the task's lookahead ``H``; None for a task without rollouts or a benchmark's lookahead."""
+    if not (provides(system, "rollouts") and provides(system, "experiments")):
+        return None
+    return f"rollout:{best}:{ROLLOUT_FUTURES}:{system.benchmark.lookahead}"
 
 
 def references_path(task: str) -> Path:
@@ -139,15 +168,17 @@ def build_references(
     progress: bool = True,
     say: Callable[[str], None] = lambda line: None,
 ) -> References:
-    """Play every periodic schedule and the oracle over the best of them on ``task``'s test set (the
-    stored one by default)."""
+    """Play every periodic schedule, then the oracle and the rollout meter over the best of them, on ``task``'s
+    test set (the stored one by default)."""
     system = make_system(task)
     periodic = periodic_schedules(system)
-    say(f"{system.name}: references: {len(periodic)} periodic schedules, then the oracle over the best")
+    say(f"{system.name}: references: {len(periodic)} periodic schedules, then the oracle and the rollout meter over the best")
     fixed = evaluate(system.name, periodic, workers=workers, testset_path=testset_path, progress=progress)
     table = {spec: _objectives(fixed, spec) for spec in periodic}
     best = best_schedule(table, system.objective_sense)
     oracle = evaluate(system.name, [f"oracle:{best}"], workers=workers, testset_path=testset_path, progress=progress)
+    meter = rollout_meter_spec(system, best)
+    rollout = meter and evaluate(system.name, [meter], workers=workers, testset_path=testset_path, progress=progress)
     refs = References(
         system.name,
         fixed.testset_sha256,
@@ -159,6 +190,7 @@ def build_references(
         _objectives(oracle, f"oracle:{best}"),
         software=software(),
         oracle_evaluation=oracle.to_json(cpu=True),
+        rollout_evaluation=None if rollout is None else rollout.to_json(cpu=True),
     )
     if not refs.gap > 0:
         raise EtmpcError(
@@ -217,6 +249,7 @@ def load_references(task: str, test_set_sha256: str, path: Path | None = None) -
             )
         },
         oracle_evaluation=data.get("oracle_evaluation"),
+        rollout_evaluation=data.get("rollout_evaluation"),
     )
 
 
@@ -248,12 +281,24 @@ def _problem(data: dict, system) -> str | None:
     played = data.get("oracle_evaluation")
     if played is not None and _played_objectives(played, f"oracle:{best}") != data["oracle"]:
         return "oracle_evaluation does not hold the oracle's objectives"
+    meter, spec = data.get("rollout_evaluation"), rollout_meter_spec(system, best)
+    if meter is not None and not (spec and _played_spec(meter) == spec and _numbers(_played_objectives(meter, spec), episodes)):
+        return f"rollout_evaluation is not {spec or 'a rollout meter'}'s run on {episodes} episodes"
     worse = [e for e, (o, b) in enumerate(zip(data["oracle"], periodic[best])) if oriented(o - b, sense) < 0]
     if worse:
         return f"the oracle does worse than {best} on episode {worse[0]}, which the oracle over it cannot"
     if not mean([oriented(o, sense) - oriented(b, sense) for o, b in zip(data["oracle"], periodic[best])]) > 0:
         return f"the oracle does not improve on {best}: there is no scale to score against"
     return None
+
+
+def _played_spec(evaluation) -> str | None:
+    """The one policy an evaluation's JSON played, or None."""
+    try:
+        specs = {r["policy"] for r in evaluation["runs"]}
+    except (KeyError, TypeError):
+        return None
+    return specs.pop() if len(specs) == 1 else None
 
 
 def _played_objectives(evaluation, spec: str) -> list | None:

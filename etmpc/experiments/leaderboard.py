@@ -17,6 +17,10 @@ The entries, each one spec per task (:func:`entries`):
   one-step lookahead over that schedule, so a trigger that saves computations it spends can score above 100 (the
   page says, per task, where and why).
 
+The rollout meter's and the oracle's rows are scored from the runs the task's sealed references kept when they
+were built (:meth:`References.kept_evaluation`), not played again: they are the two costliest rows, and the
+same runs (a test plays them again and compares).
+
 Each (entry, task) is scored by :mod:`etmpc.evaluation.scorecard` and kept in the work directory as it
 finishes, so an interrupted run continues where it stopped. A kept row is sealed with the SHA-256 of its
 content: one edited by hand is refused in one line, never published; one of an older etmpc (no seal, or
@@ -43,7 +47,7 @@ from etmpc.common.outputs import write_json, write_text
 from etmpc.common.provenance import commit_and_date
 from etmpc.common.resources import data_root
 from etmpc.evaluation import metrics
-from etmpc.evaluation.references import SUITE_VERSION, References, software, stored
+from etmpc.evaluation.references import SUITE_VERSION, References, rollout_meter_spec, software, stored
 from etmpc.evaluation.evaluate import parse_policies
 from etmpc.evaluation.inputs import policy_files
 from etmpc.evaluation.scorecard import Scorecard, TaskScore, aggregate, play_and_score, profiles, task_score
@@ -70,7 +74,6 @@ from etmpc.views.figures import write_performance_profile_png
 FORMAT = "etmpc-leaderboard"
 WORK = Path("results") / "leaderboard"  # where finished rows are kept (make leaderboard runs from the checkout)
 VALIDATION_EPISODES = 20  # training-distribution episodes that choose the best threshold
-ROLLOUT_FUTURES = 4
 THRESHOLDS = np.linspace(-100.0, 200.0, 301)
 
 
@@ -179,7 +182,7 @@ def entries(
         Entry(
             LAST[0],
             "meter",
-            {t: f"rollout:{best[t]}:{ROLLOUT_FUTURES}:{make_system(t).benchmark.lookahead}" for t in tasks},
+            {t: rollout_meter_spec(make_system(t), best[t]) for t in tasks},
             "one-step lookahead over sampled futures: a real policy",
         ),
         Entry(LAST[1], "bound", {t: references[t].oracle_spec for t in tasks}, ORACLE_NOTE),
@@ -215,9 +218,9 @@ def _row(
     kept = _kept(path, key)
     if kept is not None:
         return kept
-    if spec == refs.oracle_spec and refs.oracle_evaluation is not None:  # as the references played it: not again
+    if (played := refs.kept_evaluation(spec)) is not None:  # as the references played it: not again
         say(f"{task}: {entry.name} ({spec}), from the stored references")
-        row = task_score(refs, refs.oracle_evaluation, spec)
+        row = task_score(refs, played, spec)
     else:
         say(f"{task}: {entry.name} ({spec})")
         row = play_and_score(task, refs, spec, workers=workers, progress=False)

@@ -29,6 +29,7 @@ from etmpc.evaluation.references import (
     build_references,
     load_references,
     references_path,
+    rollout_meter_spec,
     write_references,
 )
 from etmpc.evaluation.scorecard import TaskScore, aggregate, task_score
@@ -200,6 +201,12 @@ def test_the_stored_references_are_what_playing_the_episodes_again_gives(task):
         kept = next(r for r in refs.oracle_evaluation["runs"] if r["episode"] == 0)
         again = next(r for r in played.to_json()["runs"] if r["policy"] == refs.oracle_spec)
         assert kept == json.loads(json.dumps(again))  # objective, computations, failures, solver failures
+    meter = rollout_meter_spec(system, refs.best)
+    assert refs.kept_evaluation(meter) is refs.rollout_evaluation and (refs.rollout_evaluation is None) == (meter is None)
+    if meter is not None and task in ("cart_pendulum", "battery", "quadrotor"):  # one per domain: a rollout costs seconds
+        kept = next(r for r in refs.rollout_evaluation["runs"] if r["episode"] == 0)
+        again = evaluate(task, [meter], episodes=1, workers=1, progress=False).to_json()["runs"][0]
+        assert kept == json.loads(json.dumps(again))
 
 
 def test_scoring_plays_only_the_trigger_and_says_what_it_costs(tmp_path):
@@ -294,6 +301,11 @@ def _swap_best(data: dict) -> None:
 
 def _worse_oracle(data: dict) -> None:  # the battery's objective is a profit: less is worse
     data["oracle"][7] = data["periodic"][data["best"]][7] - 1.0
+    del data["oracle_evaluation"]  # else refused first for not holding the oracle's objectives (the next case)
+
+
+def _oracle_run_not_the_oracle(data: dict) -> None:
+    data["oracle_evaluation"]["runs"][7]["objective"] += 1.0
 
 
 def _periodic_a_list(data: dict) -> None:
@@ -316,10 +328,22 @@ def _nan_objective(data: dict) -> None:
     data["periodic"]["every:4"][0] = None
 
 
+def _rollout_of_another_schedule(data: dict) -> None:
+    for run in data["rollout_evaluation"]["runs"]:
+        run["policy"] = run["policy"].replace("rollout:every:1:", "rollout:every:2:")
+
+
+def _rollout_missing_an_episode(data: dict) -> None:
+    del data["rollout_evaluation"]["runs"][-1]
+
+
 @pytest.mark.parametrize(
     "edit, says",
     [
+        (_rollout_of_another_schedule, "rollout_evaluation is not rollout:every:1:4:20's run on 100 episodes"),
+        (_rollout_missing_an_episode, "rollout_evaluation is not rollout:every:1:4:20's run on 100 episodes"),
         (_swap_best, "best names 'every:2', but every:1 has the best mean objective"),
+        (_oracle_run_not_the_oracle, "oracle_evaluation does not hold the oracle's objectives"),
         (_worse_oracle, "the oracle does worse than every:1 on episode 7"),
         (_periodic_a_list, "periodic must hold every:1 .. every:20 in order"),
         (_episodes_text, "episodes '100' is not a count"),

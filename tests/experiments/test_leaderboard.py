@@ -57,32 +57,41 @@ def test_an_interrupted_run_continues_without_playing_a_finished_row_again(board
     assert headline(again) == headline(data)
 
 
-def test_the_oracle_row_comes_from_references_that_kept_its_evaluation_and_is_the_played_one(monkeypatch, tmp_path):
-    """References that kept the oracle's evaluation give its row without playing it again, the same row as
-    playing it gives (that the stored evaluation is what playing gives: tests/evaluation/test_scorecard.py)."""
+@pytest.mark.parametrize("kind", ["oracle", "rollout meter"])
+def test_the_costliest_rows_come_from_references_that_kept_their_runs_and_are_the_played_ones(kind, monkeypatch, tmp_path):
+    """References that kept the oracle's or the rollout meter's evaluation give its row without playing it again,
+    the same row as playing it gives (that the stored evaluations are what playing gives:
+    tests/evaluation/test_scorecard.py)."""
     from dataclasses import replace
 
     from etmpc.evaluation.evaluate import evaluate
-    from etmpc.evaluation.references import stored
+    from etmpc.evaluation.references import rollout_meter_spec, stored
+    from etmpc.systems import make_system
 
-    refs = stored("battery").head(3)
-    played = evaluate("battery", [refs.oracle_spec], episodes=3, workers=1, progress=False)
-    expected = leaderboard.play_and_score("battery", refs, refs.oracle_spec, workers=1, progress=False)
+    refs = replace(stored("cart_pendulum").head(2), oracle_evaluation=None, rollout_evaluation=None)
+    spec = refs.oracle_spec if kind == "oracle" else rollout_meter_spec(make_system("cart_pendulum"), refs.best)
+    played = evaluate("cart_pendulum", [spec], episodes=2, workers=1, progress=False)
+    expected = leaderboard.play_and_score("cart_pendulum", refs, spec, workers=1, progress=False)
 
     def no_play(*args, **kwargs):
         raise AssertionError("played again")
 
     monkeypatch.setattr(leaderboard, "play_and_score", no_play)
-    entry = leaderboard.Entry("oracle", "bound", {"battery": refs.oracle_spec})
-    kept = replace(refs, oracle_evaluation=played.to_json(cpu=True))
-    row, _ = leaderboard._row(entry, "battery", kept, tmp_path, 3, 1, lambda line: None)
-    assert row.score == 100.0 and row.episode_scores == expected.episode_scores
-    assert (row.objective_mean, row.recomputes_mean, row.solver_failures) == (
+    entry = leaderboard.Entry(kind, "bound", {"cart_pendulum": spec})
+    field = "oracle_evaluation" if kind == "oracle" else "rollout_evaluation"
+    kept = replace(refs, **{field: played.to_json(cpu=True)})
+    row, _ = leaderboard._row(entry, "cart_pendulum", kept, tmp_path, 2, 1, lambda line: None)
+    assert row.episode_scores == expected.episode_scores and (kind != "oracle" or row.score == 100.0)
+    assert (row.objective_mean, row.recomputes_mean, row.solver_failures, row.failures_mean) == (
         expected.objective_mean,
         expected.recomputes_mean,
         expected.solver_failures,
+        expected.failures_mean,
     )
-    assert kept.head(2).oracle_evaluation is None  # a part of the test set: its oracle row is played
+    assert getattr(kept.head(1), field) is None  # a part of the test set: its row is played
+    other = replace(entry, specs={"cart_pendulum": spec.replace(refs.best, "every:2")})
+    with pytest.raises(AssertionError, match="played again"):  # a row of another spec is not taken from them
+        leaderboard._row(other, "cart_pendulum", kept, tmp_path / "other", 2, 1, lambda line: None)
 
 
 def test_the_best_threshold_is_chosen_once_and_chosen_again_when_its_task_changes(board, monkeypatch, tmp_path):
