@@ -1,8 +1,9 @@
 """Are evaluations the same, byte for byte, whatever numerical kernels the CPU selects?
 
-Plays the same policies on the first test-set episodes of both systems once per *kernel setting* and
-compares the evaluation JSONs byte for byte. A setting is what another x86-64 machine would run with
-the same packages, forced on this one through the libraries' own switches:
+Plays the same policies on the first test-set episodes of the cart pendulum, the battery and the
+quadrotor once per *kernel setting* and compares the evaluation JSONs byte for byte. A setting is what
+another x86-64 machine would run with the same packages, forced on this one through the libraries' own
+switches:
 
 * ``OPENBLAS_CORETYPE``: OpenBLAS's kernels (``Prescott``: SSE3, no FMA; ``Haswell``: AVX2 + FMA;
   ``SkylakeX``: AVX-512);
