@@ -8,6 +8,7 @@ import argparse
 import math
 from pathlib import Path
 
+from etmpc.common.documents import yaml_loads
 from etmpc.common import checks
 
 MAX_FPS = 1000.0
@@ -97,13 +98,11 @@ def rrd_path(text: str) -> Path:
 def setting(text: str) -> tuple[str, object]:
     """``KEY=VALUE`` (``--set``): the key, and the value read as YAML (``yaml.safe_load``: numbers, words,
     ``[a, b]`` lists, ``null``; never evaluated as code)."""
-    import yaml
-
     key, sep, value = text.partition("=")
     key = key.strip()
     if not sep or not key.isidentifier():
         raise argparse.ArgumentTypeError(f"{text!r} is not KEY=VALUE (a setting's name, =, its value)")
     try:
-        return key, yaml.safe_load(value)
-    except yaml.YAMLError as exc:
-        raise argparse.ArgumentTypeError(f"{key}: cannot read {value!r} ({' '.join(str(exc).split())})") from None
+        return key, yaml_loads(value)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"{key}: cannot read {value[:60]!r} ({exc})") from None

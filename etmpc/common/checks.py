@@ -4,8 +4,12 @@ refuse the same input with the same message (the command line prefixes ``argumen
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import math
 import numbers
+import types
+import typing
 import warnings
 from typing import Any
 
@@ -76,3 +80,78 @@ def renamed(new: str, value: Any, old: str, old_value: Any, required: bool = Tru
     if value is None and required:
         raise EtmpcError(f"{new}: missing")
     return value
+
+
+# -- records read from files and settings: every field of the type its dataclass annotates -----------------
+#: The largest count a setting may hold: more than any run could do (an episode a second for 30 years),
+#: small enough for every C integer, array and range a count ends up in.
+MAX_COUNT = 10**9
+
+
+def short(count: int) -> str:
+    """A large whole number as a reader takes it in: ``10**9`` is ``1e9``."""
+    return f"{count:.0e}".replace("e+0", "e").replace("e+", "e") if count >= 10**6 else str(count)
+
+
+@functools.cache
+def _hints(cls: type) -> dict[str, Any]:
+    return typing.get_type_hints(cls)
+
+
+def _conforms(value: Any, hint: Any, finite: bool, most: int | None) -> bool:
+    """Whether ``value`` is of the type ``hint`` (an annotation: int, float, str, bool, None, ``X | Y``,
+    ``list[X]``, ``tuple[X, ...]``, ``dict[K, V]``, ``Any``, a class), as a file's reader must see it."""
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if hint is Any:
+        return True
+    if hint is type(None):
+        return value is None
+    if origin in (typing.Union, types.UnionType):
+        return any(_conforms(value, arg, finite, most) for arg in args)
+    if hint is bool:
+        return isinstance(value, bool)
+    if hint is int:
+        return isinstance(value, numbers.Integral) and not isinstance(value, bool) and (most is None or abs(value) <= most)
+    if hint is float:
+        return isinstance(value, numbers.Real) and not isinstance(value, bool) and (not finite or math.isfinite(value))
+    if origin in (list, tuple):
+        if not isinstance(value, origin):
+            return False
+        if origin is tuple and args and args[-1] is not Ellipsis:
+            return len(value) == len(args) and all(_conforms(v, a, finite, most) for v, a in zip(value, args))
+        return not args or all(_conforms(v, args[0], finite, most) for v in value)
+    if origin is dict:
+        return isinstance(value, dict) and all(
+            _conforms(k, args[0], finite, most) and _conforms(v, args[1], finite, most) for k, v in value.items()
+        )
+    return isinstance(value, origin or hint)
+
+
+_WORDS = {int: "a whole number", float: "a number", str: "text", bool: "true or false", type(None): "null"}
+
+
+def _spelled(hint: Any, finite: bool = False, most: int | None = None) -> str:
+    """``hint`` in words: ``a whole number in 0..10**9 or null``, ``a list of text``."""
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if origin in (typing.Union, types.UnionType):
+        return " or ".join(_spelled(arg, finite, most) for arg in args)
+    if origin in (list, tuple) and args:
+        return "a list of " + ", ".join(_spelled(a, finite, most) for a in args if a is not Ellipsis)
+    if origin is dict:
+        return f"an object of {_spelled(args[1], finite, most)}"
+    word = _WORDS.get(hint, getattr(hint, "__name__", str(hint)))
+    if hint is int and most is not None:
+        word += f" in -{short(most)}..{short(most)}"
+    return word + (" (finite)" if hint is float and finite else "")
+
+
+def typed(record: Any, finite: bool = False, most: int | None = None) -> None:
+    """Raise :class:`BadValue` naming the first field of the dataclass ``record`` whose value is not of its
+    annotated type (a bool is not a number; with ``finite``, a float is finite; with ``most``, a whole number
+    is within ``-most..most``): the one check of settings and of records read from files, so that text where
+    a number goes, a list where an object goes or a count past any C integer is one line, before any work."""
+    for field in dataclasses.fields(record):
+        hint, value = _hints(type(record))[field.name], getattr(record, field.name)
+        if not _conforms(value, hint, finite, most):
+            shown = repr(value) if len(repr(value)) <= 60 else repr(value)[:57] + "..."
+            raise BadValue(f"{field.name} must be {_spelled(hint, finite, most)}, got {shown}")

@@ -13,16 +13,34 @@ import json
 from pathlib import Path
 
 from etmpc.common.errors import EtmpcError
+from etmpc.common.outputs import strict
 
 
 def _refuse_constant(name: str):
     raise ValueError(f"{name} is not a JSON number (strict JSON writes null)")
 
 
-def loads(text: str):
+def loads(text: str | bytes):
     """``json.loads``, strict: ``NaN``, ``Infinity`` and ``-Infinity``, which JSON does not have, are
-    refused (``ValueError``)."""
-    return json.loads(text, parse_constant=_refuse_constant)
+    refused (``ValueError``), and so is a document nested deeper than Python's reader goes (which raises
+    ``RecursionError`` there): every JSON file etmpc reads, its own or a user's, is read by this."""
+    try:
+        return json.loads(text, parse_constant=_refuse_constant)
+    except RecursionError:
+        raise ValueError("nested too deeply for a JSON document of etmpc") from None
+
+
+def yaml_loads(text: str):
+    """A YAML document (a settings file, ``--set``'s value) as ``yaml.safe_load`` reads it (plain data, never
+    code); one it cannot read, or nested too deeply for it, raises ``ValueError`` saying why."""
+    import yaml
+
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise ValueError(" ".join(str(exc).split())) from None
+    except RecursionError:
+        raise ValueError("nested too deeply for a settings document") from None
 
 
 def read_document(path: str | Path, format: str, missing: str, unreadable: str, foreign: str) -> dict:
@@ -43,8 +61,10 @@ SEAL = "sha256"
 
 
 def content_sha256(data: dict) -> str:
-    """The SHA-256 of ``data`` without its seal, as canonical JSON (sorted keys, no spaces, exact floats)."""
-    content = {k: v for k, v in data.items() if k != SEAL}
+    """The SHA-256 of ``data`` without its seal, as canonical JSON (sorted keys, no spaces, exact floats) of
+    what a file holds: a number not scored (NaN, an infinity) is ``null`` there (:func:`~etmpc.common.outputs.strict`),
+    so a row that was not scored is sealed as it is written, and checks when it is read back."""
+    content = strict({k: v for k, v in data.items() if k != SEAL})
     return hashlib.sha256(json.dumps(content, sort_keys=True, separators=(",", ":"), allow_nan=False).encode()).hexdigest()
 
 

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from etmpc.common import checks
 from etmpc.common.documents import loads
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import write_json
@@ -135,13 +136,14 @@ class Evaluation:
         } | extra
 
     @classmethod
-    def from_json(cls, data: dict) -> Evaluation:
+    def from_json(cls, data: dict, where: str = "an evaluation") -> Evaluation:
         """The evaluation :meth:`to_json` gave, also as strict JSON wrote it (a missing number, NaN, is
-        ``null`` there); a document that is not one raises :class:`EtmpcError` in one line."""
+        ``null`` there), every field of the type it is written with; a document that is not one raises
+        :class:`EtmpcError` in one line naming what is wrong."""
         try:
             summaries = [_row(PolicySummary, s) for s in data["policies"].values()]
             runs = [_row(RunResult, r) for r in data["runs"]]
-            return cls(
+            evaluation = cls(
                 data["domain"],
                 data["task"],
                 data["test_set"]["path"],
@@ -152,8 +154,12 @@ class Evaluation:
                 _number(data.get("recompute_price")),
                 data.get("cpu_seconds"),
             )
+            checks.typed(evaluation)
+        except ValueError as exc:  # checks.BadValue: a field of another type
+            raise EtmpcError(f"{where} is not an etmpc evaluation ({exc})") from None
         except (KeyError, TypeError, AttributeError) as exc:
-            raise EtmpcError(f"not an etmpc evaluation (missing or wrong {exc})") from None
+            raise EtmpcError(f"{where} is not an etmpc evaluation (missing or wrong {exc})") from None
+        return evaluation
 
     @classmethod
     def load(cls, path: str | Path) -> Evaluation:
@@ -164,7 +170,7 @@ class Evaluation:
             raise EtmpcError(f"{path}: cannot read an evaluation ({exc})") from None
         if not isinstance(data, dict):
             raise EtmpcError(f"{path}: not an etmpc evaluation")
-        return cls.from_json(data)
+        return cls.from_json(data, str(path))
 
     def save(self, path: str | Path, cpu: bool = False) -> Path:
         """Write :meth:`to_json` to ``path``, atomically, as strict JSON."""
@@ -196,7 +202,9 @@ def _row(kind: type, data: dict):
         values["failures_mean"] = math.nan  # a task that counts failures: null is a number not known
     if values.get("failure_name") is not None and "failures_ci95" in values and values["failures_ci95"] is None:
         values["failures_ci95"] = math.nan  # (a summary of an older etmpc has none: it stays None)
-    return kind(**values)
+    row = kind(**values)
+    checks.typed(row)
+    return row
 
 
 _TASK_FAILURES = ("failures", "failures_mean", "failure_name", "failures_ci95")

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from etmpc.common.documents import loads
 from etmpc.common.frozen import readonly
 from etmpc.common.errors import EtmpcError, TestSetError
 from etmpc.common.outputs import check_outputs, write_bytes
@@ -135,7 +136,7 @@ def load(path: Path, domain: str, task: str) -> TestSet:
         with np.load(path, allow_pickle=False) as data:
             # Read-only: every policy meets the same episodes, and nothing that plays one can change it.
             arrays = {name: readonly(data[name]) for name in data.files if name != "meta"}
-            meta = json.loads(data["meta"].item())
+            meta = loads(data["meta"].item())
     except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
         raise TestSetError(f"test set {path} cannot be read ({exc}); {advice}") from None
     if not isinstance(meta, dict):

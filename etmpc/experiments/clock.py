@@ -10,12 +10,12 @@ timed by the invocation that finished it (the part before the interruption is lo
 
 from __future__ import annotations
 
-import json
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
+from etmpc.common.documents import loads
 from etmpc.policies.learned import write_json_atomically
 
 FILE = "stage_seconds.json"
@@ -44,7 +44,7 @@ class StageClock:
 
     def read(self) -> dict[str, float | None]:
         """``{stage: wall seconds, or None if it was not timed}``, in the order the stages finished."""
-        return json.loads(self.path.read_text()) if self.path.exists() else {}
+        return loads(self.path.read_text()) if self.path.exists() else {}
 
     @contextmanager
     def stage(self, name: str, *outputs: Path) -> Iterator[None]:

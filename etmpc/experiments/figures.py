@@ -12,7 +12,6 @@ written as PNGs (the drawing is :mod:`etmpc.views.figures`'s).
 
 from __future__ import annotations
 
-import json
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -23,6 +22,7 @@ from etmpc.common.errors import EtmpcError
 from etmpc.common.sense import cost_or_profit
 from etmpc.evaluation import testsets
 from etmpc.evaluation.evaluate import scores
+from etmpc.evaluation.results import Evaluation
 from etmpc.evaluation.inputs import check_shipped
 from etmpc.evaluation.workers import context, play_test_episode
 from etmpc.loop import run_episode
@@ -93,19 +93,14 @@ def trajectory(out: str | Path, task: str, spec: str, episode: int = 0, seed: in
 
 
 def load_evaluation(path: str | Path) -> dict:
-    """An ``etmpc evaluate --json`` document as read (checked when drawn); a missing or unreadable file, or
-    one that is not JSON, raises :class:`EtmpcError`."""
+    """An ``etmpc evaluate --json`` document, read and checked as :meth:`Evaluation.load` does (every run and
+    summary of its fields' types; one that is not raises :class:`EtmpcError` in one line), as its JSON."""
     path = Path(path)
-    try:
-        return json.loads(path.read_text())
-    except FileNotFoundError:
-        raise EtmpcError(f"{path} not found") from None
-    except IsADirectoryError:
-        raise EtmpcError(f"{path} is a directory, not a file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise EtmpcError(f"cannot read {path}: {exc}") from None
-    except json.JSONDecodeError as exc:
-        raise EtmpcError(f"{path} is not valid JSON ({exc})") from None
+    if not path.exists():
+        raise EtmpcError(f"{path} not found")
+    if path.is_dir():
+        raise EtmpcError(f"{path} is a directory, not a file")
+    return Evaluation.load(path).to_json(cpu=True)
 
 
 def bars_path(evaluations: list[dict], sources: list[str] | None = None) -> Path:

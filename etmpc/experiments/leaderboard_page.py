@@ -213,8 +213,11 @@ def page(data: dict) -> str:
 
 
 def check_readme(readme: Path) -> None:
-    """Raise :class:`EtmpcError` unless ``readme`` has the leaderboard's markers, once each and in order
-    (checked before any row is played)."""
+    """Raise :class:`EtmpcError` unless ``readme`` has the leaderboard's markers, once each and in order, and
+    lies outside etmpc's data folders (checked before any row is played)."""
+    from etmpc.evaluation.inputs import check_run_outputs
+
+    check_run_outputs({"--readme": readme})
     try:
         text = Path(readme).read_text()
     except FileNotFoundError:

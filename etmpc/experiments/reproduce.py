@@ -35,11 +35,11 @@ settings are kept in ``DIR/settings.json`` and a second run with other settings 
 
 from __future__ import annotations
 
-import json
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from etmpc.common.documents import loads
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import refuse_foreign, what_differs, write_text
 from etmpc.common.provenance import commit_and_date
@@ -190,7 +190,7 @@ def _check_settings(out: Path, settings: Settings, domains) -> None:
     wanted = {"settings": settings.to_json(), "domains": list(domains)}
     if path.exists():
         try:
-            stored = json.loads(path.read_text())
+            stored = loads(path.read_text())
         except (OSError, ValueError) as exc:
             raise EtmpcError(f"{path} is unreadable ({exc}); move it away to start afresh") from None
         if stored != wanted:
@@ -276,7 +276,7 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
         )
     shipped = folder.parent / "policies" / folder_name(system.name) / "learned.json"
     if not shipped.exists():
-        write_json_atomically(shipped, json.loads((dpi_dir / "selected.json").read_text()))
+        write_json_atomically(shipped, loads((dpi_dir / "selected.json").read_text()))
     with clock.stage("DPI evaluation", folder / "learned_default.json"):
         default = evaluated_once(folder / "learned_default.json", policies=[f"rl:{shipped}"], **common)
 

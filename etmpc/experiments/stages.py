@@ -5,13 +5,13 @@ into a run's folder (a complete file from an earlier invocation is reused): spli
 from __future__ import annotations
 
 import importlib.util
-import json
 import shutil
 import sys
 import time
 from dataclasses import replace
 from pathlib import Path
 
+from etmpc.common.documents import loads
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import write_text
 from etmpc.evaluation.evaluate import evaluate
@@ -33,7 +33,7 @@ def evaluated_once(path: Path, timed: int | None = None, **kwargs) -> dict:
     """An evaluation's JSON, made once: a complete file from an earlier invocation is reused. With
     ``timed`` (the number of workers), its wall time and that number are kept in the file."""
     if path.exists():
-        return json.loads(path.read_text())
+        return loads(path.read_text())
     started = time.perf_counter()
     data = evaluate(**kwargs).to_json()
     if timed is not None:
@@ -73,7 +73,7 @@ def _ppo(
                 shutil.rmtree(ppo_dir)  # an interrupted run starts again
             with timed(ppo_dir, run["workers"]):
                 train_ppo(domain, ppo_dir, chosen, run["workers"], say=_say)
-    training = json.loads((ppo_dir / "training.json").read_text())
+    training = loads((ppo_dir / "training.json").read_text())
     shipped = folder.parent / "policies" / folder_name(domain)
     if not (shipped / "ppo.zip").exists():
         shipped.mkdir(parents=True, exist_ok=True)
@@ -140,7 +140,7 @@ def _other_learners(folder: Path, domain: str, settings, run_options: dict, comm
 
 def _cost(folder: Path) -> dict | None:
     path = cost_path(folder)
-    return json.loads(path.read_text()) if path.exists() else None
+    return loads(path.read_text()) if path.exists() else None
 
 
 def _efficiency(folder: Path, system, baselines: dict, best: str, state, ppo_run: dict | None, ppo_curve: dict | None) -> dict:
@@ -148,8 +148,8 @@ def _efficiency(folder: Path, system, baselines: dict, best: str, state, ppo_run
     sense, steps = system.objective_sense, system.episode_steps
     curves = {
         "dpi": efficiency.dpi_points(
-            json.loads((folder / "train_dpi" / "checkpoint.json").read_text()),
-            json.loads((folder / "train_dpi" / "curve.json").read_text()),
+            loads((folder / "train_dpi" / "checkpoint.json").read_text()),
+            loads((folder / "train_dpi" / "curve.json").read_text()),
             baselines,
             best,
             sense,
@@ -158,8 +158,8 @@ def _efficiency(folder: Path, system, baselines: dict, best: str, state, ppo_run
     }
     if state is not None:
         curves["gpomdp"] = efficiency.gpomdp_points(
-            json.loads((folder / "train" / "checkpoint.json").read_text()),
-            json.loads((folder / "train" / "curve.json").read_text()),
+            loads((folder / "train" / "checkpoint.json").read_text()),
+            loads((folder / "train" / "curve.json").read_text()),
             baselines,
             best,
             sense,

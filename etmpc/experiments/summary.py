@@ -4,11 +4,11 @@ learner and the headroom (rollout and the oracle bound)."""
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 
+from etmpc.common.documents import loads
 from etmpc.evaluation.compare import paired, per_episode
 from etmpc.evaluation import metrics
 from etmpc.learning.train import curve_summary
@@ -77,7 +77,7 @@ def summarise_default(system, baselines: dict, default: dict, state) -> dict:
     sense = system.objective_sense
     best = _best_fixed(baselines["policies"], sense)
     ((spec, row),) = default["policies"].items()
-    hyper = json.loads(Path(spec[3:]).read_text())["hyperparameters"]
+    hyper = loads(Path(spec[3:]).read_text())["hyperparameters"]
     return {
         "policy": spec,
         "seed": hyper["seed"],

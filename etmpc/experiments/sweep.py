@@ -35,11 +35,11 @@ self-trigger trained at price ``i``), ``pareto.json``, ``pareto.png`` and ``SWEE
 
 from __future__ import annotations
 
-import json
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from etmpc.common.documents import loads
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import refuse_foreign, what_differs, write_json, write_text
 from etmpc.evaluation.evaluate import evaluate
@@ -184,7 +184,7 @@ def check_directory(out: Path, domain: str, settings: SweepSettings) -> bool:
         refuse_foreign(out, lambda name: False, "sweep")
         return False
     try:
-        stored = json.loads(path.read_text())
+        stored = loads(path.read_text())
     except (OSError, ValueError) as exc:
         raise EtmpcError(f"{path} is unreadable ({exc}); move it away to start afresh") from None
     if stored != _settings_json(domain, settings):
@@ -211,7 +211,7 @@ def _stage(path: Path, **kwargs) -> dict:
     """An evaluation made once (a complete file from an earlier invocation is reused), with its
     wall time and number of workers."""
     if path.exists():
-        return json.loads(path.read_text())
+        return loads(path.read_text())
     started = time.perf_counter()
     data = evaluate(**kwargs).to_json()
     data["cost"] = {"wall_seconds": time.perf_counter() - started, "workers": kwargs.get("workers")}
@@ -270,7 +270,7 @@ def _learned(out: Path, i: int, domain: str, price: float, learner: LearnerSetti
     evaluated on the sweep's episodes at that price (``learned_<i>.json``)."""
     path, train_dir = out / f"learned_{i}.json", out / f"train_{i}"
     if path.exists():
-        return json.loads(path.read_text())
+        return loads(path.read_text())
     train(
         learner.config(domain, price),
         train_dir,
@@ -288,7 +288,7 @@ def _self(out: Path, i: int, domain: str, price: float, settings: SelfSettings, 
     on the sweep's episodes at that price (``self_<i>.json``)."""
     path, policy = out / f"self_{i}.json", out / f"self_policy_{i}.json"
     if path.exists():
-        return json.loads(path.read_text())
+        return loads(path.read_text())
     if not policy.exists():
         train_self(system_key(domain, price), policy, settings, run["workers"], run["backend"], run["address"], say=say)
     return _stage(path, policies=[f"self:{policy}"], recompute_price=price, **run)

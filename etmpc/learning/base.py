@@ -27,12 +27,12 @@ from __future__ import annotations
 
 import dataclasses
 import importlib
-import json
 import typing
 from abc import ABC, abstractmethod
 from pathlib import Path
 from typing import Any, Callable, ClassVar
 
+from etmpc.common.documents import loads, yaml_loads
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import refuse_foreign
 
@@ -222,12 +222,10 @@ def load_settings(learner: type[Learner], path: str | Path | None, task: str | N
         return own.__get__(None, learner)(path, task)
     if path is None:
         return learner.Settings()
-    import yaml
-
     path = Path(path)
     try:
         text = path.read_text()
-        document = json.loads(text) if path.suffix == ".json" else yaml.safe_load(text)
-    except (OSError, ValueError, yaml.YAMLError) as exc:
+        document = loads(text) if path.suffix == ".json" else yaml_loads(text)
+    except (OSError, ValueError) as exc:
         raise EtmpcError(f"{path}: cannot read it ({' '.join(str(exc).split())})") from None
     return settings_from(learner.Settings, document or {}, str(path))

@@ -3,7 +3,6 @@ learning curve, written so that the checkpoint never points past the files (see 
 
 from __future__ import annotations
 
-import json
 import re
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -11,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from etmpc.common.documents import loads
 from etmpc.common.sense import best as best_of
 from etmpc.learning.config import CHECKPOINT_FORMAT, TrainConfig
 from etmpc.policies.learned import LogisticPolicy, PolicyFileError, write_json_atomically
@@ -56,7 +56,7 @@ class RunState:
 
 def load_checkpoint(path: Path) -> RunState:
     try:
-        data = json.loads(path.read_text())
+        data = loads(path.read_text())
     except (OSError, UnicodeDecodeError, ValueError) as exc:
         raise PolicyFileError(f"checkpoint {path} is corrupt or unreadable ({exc}); move it away to start afresh") from None
     return state_from_json(data, f"checkpoint {path}")

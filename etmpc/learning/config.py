@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
 
+from etmpc.common import checks
 from etmpc.common.errors import EtmpcError
 from etmpc.learning import dpi
 from etmpc.learning.gpomdp import Settings
@@ -40,11 +41,12 @@ class TrainConfig:
     recompute_price: float | None = None  # the price of a computation to train for (None: the system's)
 
     def __post_init__(self):
+        checks.typed(self, finite=True, most=checks.MAX_SEED)  # a checkpoint's too: read from a file
         if not self.seeds or len(set(self.seeds)) != len(self.seeds):
             raise EtmpcError(f"seeds must be distinct and at least one, got {self.seeds}")
         for name in ("episodes", "eval_every", "eval_repeats", "normalisation_episodes", "validation_episodes"):
-            if getattr(self, name) < 1:
-                raise EtmpcError(f"{name.replace('_', '-')} must be >= 1, got {getattr(self, name)}")
+            if not 1 <= getattr(self, name) <= checks.MAX_COUNT:
+                raise checks.BadValue(f"{name.replace('_', '-')} must be in 1..{checks.MAX_COUNT:.0e}, got {getattr(self, name)}")
         check_features(self.features)
         if self.algorithm not in ALGORITHMS:
             raise EtmpcError(f"unknown algorithm {self.algorithm!r}; valid: {', '.join(ALGORITHMS)}")

@@ -46,6 +46,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.optimize import minimize
 
+from etmpc.common import checks
 from etmpc.common.numerics import dot
 from etmpc.common.sense import oriented
 from etmpc.evaluation.workers import context
@@ -71,6 +72,7 @@ class Settings:
     selection_episodes: int = 30  # training episodes that choose pi_0 among the bases
 
     def __post_init__(self):
+        checks.typed(self, finite=True, most=checks.MAX_COUNT)
         for name in ("futures", "horizon", "states_per_episode", "selection_episodes"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")

@@ -30,6 +30,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from etmpc.common import checks
+
 BASELINES = ("none", "mean", "state")
 VALUE_RIDGE = 1.0  # ridge of the state baseline's least squares (features are normalised to O(1))
 
@@ -43,6 +45,7 @@ class Settings:
     baseline: str = "none"  # "none" (the paper), "mean" (per step index) or "state" (linear in phi)
 
     def __post_init__(self):
+        checks.typed(self, finite=True, most=checks.MAX_COUNT)
         if not 0.0 < self.discount <= 1.0:
             raise ValueError(f"discount must be in (0, 1], got {self.discount}")
         if not 0.0 < self.learning_rate < math.inf:

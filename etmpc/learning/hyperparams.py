@@ -37,6 +37,7 @@ from dataclasses import fields, replace
 from pathlib import Path
 from typing import Any
 
+from etmpc.common.documents import yaml_loads
 from etmpc.common.errors import EtmpcError
 from etmpc.common.resources import data_root
 from etmpc.envs.registration import env_id
@@ -67,12 +68,10 @@ def shipped(task: str | SystemKey, base: PpoSettings = PpoSettings()) -> PpoSett
 
 def load(path: str | Path, task: str, base: PpoSettings = PpoSettings()) -> PpoSettings:
     """``base`` with what the file at ``path`` sets for ``task`` (``DOMAIN`` or ``DOMAIN/TASK``)."""
-    import yaml
-
     path = Path(path)
     try:
-        document = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError) as exc:
+        document = yaml_loads(path.read_text())
+    except (OSError, ValueError) as exc:
         raise HyperparameterError(f"{path}: cannot read it ({' '.join(str(exc).split())})") from None
     return parse(document, task, str(path), base)
 

@@ -11,6 +11,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from etmpc.common import checks
 from etmpc.common.sense import oriented
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import refuse_foreign
@@ -40,6 +41,7 @@ class PhasedSettings:
     record_episodes: int = 0  # test-set episodes per seed recorded at each evaluation (changes no result)
 
     def __post_init__(self):
+        checks.typed(self, finite=True, most=checks.MAX_COUNT)
         for name in ("episodes", "eval_every", "eval_repeats", "normalisation_episodes", "validation_episodes"):
             if not isinstance(getattr(self, name), int) or getattr(self, name) < 1:
                 raise EtmpcError(f"{name.replace('_', '-')} must be an integer >= 1, got {getattr(self, name)!r}")

@@ -35,14 +35,17 @@ are not in Stable-Baselines3's save).
 
 from __future__ import annotations
 
-import json
+import pickle
 import shutil
 import time
+import warnings
+import zipfile
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
+from etmpc.common.documents import loads
 from etmpc.common.sense import best as best_of
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import refuse_foreign, write_json
@@ -50,6 +53,7 @@ from etmpc.envs.normalization import save_normalization
 from etmpc.learning.base import Learner
 from etmpc.learning.ppo_settings import (  # noqa: F401 (SettingError and the rest re-exported, as before the split)
     PpoSettings,
+    checked_checkpoints,
     SettingError,
     _json,
     _libraries,
@@ -109,6 +113,10 @@ class PpoLearner(Learner):
         self.sb3, self.torch = _libraries()
         self.system = self.key.make()
         s = self.settings
+        if s.reward_baseline is not None:  # the environments' own check, before the run's folder is made
+            from etmpc.envs.trigger import _fixed_schedule
+
+            _fixed_schedule(s.reward_baseline, self.system)
         # PPO collects n_steps per environment between updates: a budget too small for that shrinks n_steps,
         # and each checkpoint's slice is a whole number of rollouts (so the steps reported are the steps run).
         self.n_steps = min(s.n_steps, max(1, s.timesteps // (s.checkpoints * s.n_envs)))
@@ -126,10 +134,26 @@ class PpoLearner(Learner):
         return (self.out / "training.json").exists() or (self.out / "checkpoints" / RESUME).exists()
 
     def saved_state(self) -> dict | None:
-        if (self.out / "training.json").exists():
-            return {"finished": json.loads((self.out / "training.json").read_text())}
-        path = self.out / "checkpoints" / RESUME
-        return json.loads(path.read_text()) if path.exists() else None
+        """The run's state in :attr:`out`, checked: a folder handed to ``--resume`` is read as data, and its
+        checkpoint files are the run's own (a path elsewhere is refused, never followed)."""
+        finished, path = self.out / "training.json", self.out / "checkpoints" / RESUME
+        found = finished if finished.exists() else path if path.exists() else None
+        if found is None:
+            return None
+        try:
+            state = loads(found.read_text())
+        except (OSError, ValueError) as exc:
+            raise EtmpcError(f"{found} cannot be read ({exc}); start the run again in another --out") from None
+        if not isinstance(state, dict):
+            raise EtmpcError(f"{found} is not a PPO run's state; start the run again in another --out")
+        checked_checkpoints(state.get("checkpoints"), str(found))
+        if found is finished:
+            files = [c["file"] for c in state["checkpoints"]]
+            steps = state.get("environment_steps")
+            if state.get("selected") not in files or isinstance(steps, bool) or not isinstance(steps, int):
+                raise EtmpcError(f"{found} is not a finished PPO run (its selected checkpoint or steps)")
+            return {"finished": state}
+        return state
 
     def state(self) -> dict:
         return {"format": "etmpc-ppo-resume", "version": 1, "settings": _json(self.settings), "checkpoints": self.checkpoints}
@@ -194,7 +218,13 @@ class PpoLearner(Learner):
         last = self.checkpoints[-1]
         self.setup()  # the model and the normalisation the settings make, then the run's numbers into them
         _restore_running(self.vec, self.out / "checkpoints" / NORMALIZE)
-        self.model.set_parameters(str(self.out / last["file"]), exact_match=True, device="cpu")  # weights only
+        try:  # the weights only: PyTorch's weights-only reader refuses a pickle (and would warn of its protocol)
+            with warnings.catch_warnings():
+                warnings.filterwarnings("ignore", message="Detected pickle protocol")
+                self.model.set_parameters(str(self.out / last["file"]), exact_match=True, device="cpu")
+        except (pickle.UnpicklingError, RuntimeError, ValueError, KeyError, OSError, EOFError, zipfile.BadZipFile) as exc:
+            first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+            raise EtmpcError(f"{self.out / last['file']}: not this run's weights ({first[:160]}); start the run again") from None
         self.model.num_timesteps = self._timesteps = int(last["timesteps"])
         self.started = time.perf_counter() - last["wall_seconds"]
         self._simulated_before = int(last["simulated_steps"])
@@ -260,7 +290,7 @@ class PpoLearner(Learner):
         out, s, system = self.out, self.settings, self.system
         pick = best_of(self.checkpoints, system.objective_sense, key=lambda c: c["validation_objective"])
         shutil.copyfile(out / pick["file"], out / "selected.zip")
-        meta = json.loads(metadata_path(out / pick["file"]).read_text())
+        meta = loads(metadata_path(out / pick["file"]).read_text())
         write_json(
             out / "selected.json",
             dict(meta, validation_objective=pick["validation_objective"], validation_episodes=s.validation_episodes),
@@ -328,7 +358,7 @@ def _restore_running(vec, path) -> None:
     """Put the running statistics :meth:`PpoLearner.save` wrote as JSON back into ``vec`` (a VecNormalize
     of the same shapes); a file that is not theirs is one line."""
     try:
-        data = json.loads(path.read_text())
+        data = loads(path.read_text())
         for name in _RUNNING:
             rms, values = getattr(vec, name), data[name]
             mean, var = np.asarray(values["mean"], float), np.asarray(values["var"], float)

@@ -13,6 +13,8 @@ from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
 
+from etmpc.common import checks
+from etmpc.common.checks import MAX_COUNT, short
 from etmpc.common.errors import EtmpcError
 from etmpc.systems import SystemKey
 
@@ -38,13 +40,14 @@ def _real(holds):
     return lambda v: isinstance(v, numbers.Real) and not isinstance(v, bool) and holds(v)  # NaN holds nothing
 
 
+_COUNT = f"an integer in [1, {short(MAX_COUNT)}]"
 # field -> (what it must be, the test); the first out of range is the one reported
 RANGES = {
-    "timesteps": ("an integer >= 1", _integer(1)),
+    "timesteps": (_COUNT, _integer(1, MAX_COUNT)),
     "seed": (f"an integer in [0, {2**32 - 1}]", _integer(0, 2**32 - 1)),  # NumPy's seeds (SB3 seeds it with this)
-    **{name: ("an integer >= 1", _integer(1)) for name in ("n_envs", "checkpoints", "validation_episodes", "n_steps")},
-    "batch_size": ("an integer >= 2 (Stable-Baselines3 asserts > 1)", _integer(2)),
-    "n_epochs": ("an integer >= 1", _integer(1)),
+    **{name: (_COUNT, _integer(1, MAX_COUNT)) for name in ("n_envs", "checkpoints", "validation_episodes", "n_steps")},
+    "batch_size": (f"an integer in [2, {short(MAX_COUNT)}] (Stable-Baselines3 asserts > 1)", _integer(2, MAX_COUNT)),
+    "n_epochs": (_COUNT, _integer(1, MAX_COUNT)),
     "learning_rate": ("a finite number > 0", _real(lambda x: 0 < x < math.inf)),
     "gamma": ("in (0, 1]", _real(lambda x: 0 < x <= 1)),
     "gae_lambda": ("in [0, 1]", _real(lambda x: 0 <= x <= 1)),
@@ -52,7 +55,7 @@ RANGES = {
     "ent_coef": ("a finite number >= 0", _real(lambda x: 0 <= x < math.inf)),
     "hidden": (
         "a non-empty tuple of positive layer sizes",
-        lambda v: isinstance(v, tuple) and bool(v) and all(type(n) is int and n > 0 for n in v),
+        lambda v: isinstance(v, tuple) and bool(v) and all(type(n) is int and 0 < n <= MAX_COUNT for n in v),
     ),
     "reward_baseline": (
         "None or a fixed schedule's spec (always, never, every:T, or iterate:T on a task with compute levels)",
@@ -173,3 +176,36 @@ def _json(settings: PpoSettings) -> dict:
     data = asdict(settings)
     data["hidden"] = list(settings.hidden)
     return data
+
+
+# -- a run's saved state, read back on --resume from a folder a user may hand in ----------------------
+_CHECKPOINT_FILE = re.compile(r"checkpoints/step_[0-9]{8}\.zip")
+
+
+@dataclass(frozen=True)
+class SavedCheckpoint:
+    """One checkpoint as a run's ``checkpoints/resume.json`` and ``training.json`` list it."""
+
+    timesteps: int
+    simulated_steps: int
+    file: str  # checkpoints/step_N.zip, inside the run's folder
+    validation_objective: float
+    wall_seconds: float
+
+
+def checked_checkpoints(entries, where: str) -> list[dict]:
+    """``entries`` if each is a :class:`SavedCheckpoint` of the run's own folder (its file one of the run's
+    ``checkpoints/step_N.zip``, never a path elsewhere); else :class:`EtmpcError`, one line."""
+    try:
+        if not isinstance(entries, list) or not entries:
+            raise ValueError(f"its checkpoints are {str(entries)[:40]!r}, not a list of them")
+        for entry in entries:
+            if not isinstance(entry, dict):
+                raise ValueError(f"a checkpoint is {str(entry)[:40]!r}")
+            saved = SavedCheckpoint(**entry)
+            checks.typed(saved, most=2**62)
+            if not _CHECKPOINT_FILE.fullmatch(saved.file):
+                raise ValueError(f"checkpoint file {saved.file[:80]!r} is not one of the run's checkpoints/step_N.zip")
+    except (TypeError, ValueError) as exc:
+        raise EtmpcError(f"{where} is not a PPO run's state ({exc}); start the run again in another --out") from None
+    return entries

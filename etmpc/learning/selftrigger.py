@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import minimize
 
+from etmpc.common import checks
 from etmpc.common.sense import oriented
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import write_json
@@ -55,6 +56,7 @@ class SelfSettings:
     candidates: tuple[int, ...] = CANDIDATES
 
     def __post_init__(self):
+        checks.typed(self, finite=True, most=checks.MAX_COUNT)
         for name in ("selection_episodes", "episodes", "solves_per_episode", "futures", "validation_episodes"):
             if getattr(self, name) < 1:
                 raise EtmpcError(f"self-trigger training needs {name} >= 1, got {getattr(self, name)}")

@@ -41,6 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
+from etmpc.common.documents import loads
 from etmpc.common.errors import EtmpcError
 from etmpc.common.numerics import dot
 from etmpc.common.outputs import dumps, write_text
@@ -277,7 +278,7 @@ def load_policy(path: str | Path, domain: str | None = None, nx: int | None = No
     solve, or compute levels: :func:`etmpc.systems.has_levels`) and its feature size fits ``nx`` states."""
     path = Path(path)
     try:
-        data = json.loads(path.read_text())
+        data = loads(path.read_text())
     except FileNotFoundError:
         raise PolicyFileError(f"policy file {path} not found") from None
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:

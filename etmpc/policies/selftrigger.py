@@ -17,13 +17,13 @@ rollout policy improvement over a periodic base.
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
 
+from etmpc.common.documents import loads
 from etmpc.common.errors import EtmpcError
 from etmpc.common.numerics import matvec
 from etmpc.loop import AugmentedState
@@ -101,7 +101,7 @@ class SelfTrigger:
 def load_self(path: str, domain: str | None) -> SelfTrigger:
     """A self-triggering policy from its file; any problem is one :class:`EtmpcError`."""
     try:
-        data = json.loads(Path(path).read_text())
+        data = loads(Path(path).read_text())
     except FileNotFoundError:
         raise EtmpcError(f"self-trigger policy {path} not found") from None
     except (OSError, ValueError) as exc:

@@ -17,7 +17,6 @@ The parser sits above the policies it builds: it imports each kind, none of them
 
 from __future__ import annotations
 
-import json
 import math
 import warnings
 from collections.abc import Callable
@@ -28,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from etmpc.common.documents import loads
 from etmpc.common import interrupts
 from etmpc.common.errors import EtmpcError, UnknownNameError
 from etmpc.loop import Policy
@@ -128,7 +128,7 @@ def _learned(path: str, context: Context) -> Policy:
 def _trained_on(path: str) -> str | None:
     """The task a policy file says it was made for (None if it cannot say: load_policy says why)."""
     try:
-        data = json.loads(Path(path).read_text(encoding="utf-8"))
+        data = loads(Path(path).read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return None
     return data.get("domain") if isinstance(data, dict) else None

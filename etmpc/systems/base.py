@@ -13,7 +13,6 @@ This module may import ``etmpc.common`` and ``etmpc.control``.
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, fields
 from functools import cache, cached_property
@@ -23,6 +22,7 @@ from typing import Any, Protocol
 import dm_env
 import numpy as np
 
+from etmpc.common.documents import loads
 from etmpc.common.errors import EtmpcError
 from etmpc.control.plan import Plan
 from etmpc.control.timing import Latency
@@ -151,7 +151,7 @@ def read_benchmark(path: Path) -> Benchmark:
     """A :class:`Benchmark` from its JSON file (its fields, and an optional ``notes`` object that says
     why a value is what it is); a file that is not one raises :class:`EtmpcError` in one line."""
     try:
-        data = json.loads(Path(path).read_text(encoding="utf-8"))
+        data = loads(Path(path).read_text(encoding="utf-8"))
     except (OSError, ValueError) as exc:
         raise EtmpcError(f"{path}: not a task's benchmark file ({exc})") from None
     names = {f.name: f for f in fields(Benchmark)}

@@ -50,7 +50,7 @@ def test_a_policys_objectives_are_its_runs_by_repeat_and_episode(played):
 
 def test_a_file_that_is_not_an_evaluation_is_one_line(tmp_path):
     (tmp_path / "x.json").write_text('{"domain": "cart_pendulum"}')
-    with pytest.raises(EtmpcError, match="^not an etmpc evaluation"):
+    with pytest.raises(EtmpcError, match=r"x.json is not an etmpc evaluation \(missing or wrong 'policies'\)"):
         Evaluation.load(tmp_path / "x.json")
     (tmp_path / "y.json").write_text("[NaN]")
     with pytest.raises(EtmpcError, match="cannot read an evaluation"):

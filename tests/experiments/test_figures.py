@@ -359,10 +359,16 @@ def test_bars_command_rejects_bad_input(tmp_path, capsys, monkeypatch, cart_eval
     (tmp_path / "battery.json").write_text(json.dumps(dict(fixed, domain="battery", task="trading")))
     (tmp_path / "broken.json").write_text('{"domain": "cart_pendulum", ')
     (tmp_path / "other.json").write_text('{"episodes": []}')
+    (tmp_path / "deep.json").write_text("[" * 100_000 + "]" * 100_000)
+    (tmp_path / "text.json").write_text(json.dumps(dict(fixed, runs=[dict(fixed["runs"][0], objective="0.4")])))
+    (tmp_path / "runs.json").write_text(json.dumps(dict(fixed, runs="every:2")))
     cases = [
         (("fixed.json", "missing.json"), "missing.json not found"),
-        (("broken.json",), "broken.json is not valid JSON"),
-        (("other.json",), "other.json is not an `etmpc evaluate --json` document"),
+        (("broken.json",), "broken.json: cannot read an evaluation (Expecting property name"),
+        (("other.json",), "other.json is not an etmpc evaluation"),
+        (("deep.json",), "deep.json: cannot read an evaluation (nested too deeply"),
+        (("text.json",), "text.json is not an etmpc evaluation (objective must be a number, got '0.4')"),
+        (("runs.json",), "runs.json is not an etmpc evaluation"),
         (
             ("fixed.json", "battery.json"),
             "mismatched tasks: fixed.json evaluates cart_pendulum/balance, battery.json battery/trading",

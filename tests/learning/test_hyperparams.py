@@ -50,7 +50,7 @@ def test_settings_not_in_the_file_keep_the_given_defaults(tmp_path):
         ("etmpc/cart_pendulum-balance-v0:\n  policy_kwargs: {net_arch: [64, 0]}\n", "positive layer sizes"),
         ("etmpc/cart_pendulum-balance-v0:\n  env_kwargs: {price: 3}\n", "env_kwargs takes reward_baseline"),
         ("etmpc/cart_pendulum-balance-v0:\n  gamma: '0.9'\n", "gamma must be a number"),
-        ("etmpc/cart_pendulum-balance-v0:\n  n_steps: 0\n", "n_steps must be an integer >= 1, got 0"),
+        ("etmpc/cart_pendulum-balance-v0:\n  n_steps: 0\n", "n_steps must be an integer in [1, 1e9], got 0"),
         ("etmpc/cart_pendulum-balance-v0: [1, 2]\n", "must map hyperparameter names"),
         ("etmpc/cart_pendulum-balance-v0: {gamma: [\n", "cannot read it"),
     ],
@@ -58,7 +58,7 @@ def test_settings_not_in_the_file_keep_the_given_defaults(tmp_path):
 def test_a_bad_file_is_one_line_naming_it(tmp_path, text, message):
     path = tmp_path / "bad.yml"
     path.write_text(text)
-    with pytest.raises(HyperparameterError, match=message) as caught:
+    with pytest.raises(HyperparameterError, match=re.escape(message)) as caught:
         hyperparams.load(path, "cart_pendulum")
     assert str(path) in str(caught.value) and "\n" not in str(caught.value)
 
@@ -83,19 +83,19 @@ HEAD = "etmpc/cart_pendulum-balance-v0:\n"
         ("clip_range: .inf", "clip_range must be a finite number > 0, got inf"),
         ("ent_coef: -0.01", "ent_coef must be a finite number >= 0, got -0.01"),
         ("ent_coef: .nan", "ent_coef must be a finite number >= 0, got nan"),
-        ("n_timesteps: 0", "n_timesteps must be an integer >= 1, got 0"),
-        ("n_timesteps: 8.5", "n_timesteps must be an integer >= 1, got 8.5"),
+        ("n_timesteps: 0", "n_timesteps must be an integer in [1, 1e9], got 0"),
+        ("n_timesteps: 8.5", "n_timesteps must be an integer in [1, 1e9], got 8.5"),
         ("n_timesteps: 1e6", "n_timesteps must be a number, got '1e6'"),
-        ("n_steps: 8.5", "n_steps must be an integer >= 1, got 8.5"),
-        ("n_steps: 8.0", "n_steps must be an integer >= 1, got 8.0"),
-        ("n_steps: true", "n_steps must be an integer >= 1, got True"),
-        ("n_epochs: 0", "n_epochs must be an integer >= 1, got 0"),
-        ("n_envs: 0", "n_envs must be an integer >= 1, got 0"),
-        ("n_envs: 2.0", "n_envs must be an integer >= 1, got 2.0"),
-        ("checkpoints: 0", "checkpoints must be an integer >= 1, got 0"),
-        ("checkpoints: yes", "checkpoints must be an integer >= 1, got True"),
-        ("batch_size: 1", "batch_size must be an integer >= 2 (Stable-Baselines3 asserts > 1), got 1"),
-        ("batch_size: 64.0", "batch_size must be an integer >= 2"),
+        ("n_steps: 8.5", "n_steps must be an integer in [1, 1e9], got 8.5"),
+        ("n_steps: 8.0", "n_steps must be an integer in [1, 1e9], got 8.0"),
+        ("n_steps: true", "n_steps must be an integer in [1, 1e9], got True"),
+        ("n_epochs: 0", "n_epochs must be an integer in [1, 1e9], got 0"),
+        ("n_envs: 0", "n_envs must be an integer in [1, 1e9], got 0"),
+        ("n_envs: 2.0", "n_envs must be an integer in [1, 1e9], got 2.0"),
+        ("checkpoints: 0", "checkpoints must be an integer in [1, 1e9], got 0"),
+        ("checkpoints: yes", "checkpoints must be an integer in [1, 1e9], got True"),
+        ("batch_size: 1", "batch_size must be an integer in [2, 1e9] (Stable-Baselines3 asserts > 1), got 1"),
+        ("batch_size: 64.0", "batch_size must be an integer in [2, 1e9]"),
         ("seed: -1", "seed must be an integer in [0, 4294967295], got -1"),
         ("seed: 4294967296", "seed must be an integer in [0, 4294967295], got 4294967296"),
         ("seed: 0.5", "seed must be an integer in [0, 4294967295], got 0.5"),

@@ -279,3 +279,48 @@ def test_a_stopped_ppo_run_resumes_from_data_and_unpickles_nothing_in_its_folder
     training = json.loads((tmp_path / "cut" / "training.json").read_text())
     assert training["environment_steps"] == 512 and len(training["checkpoints"]) == 2 and done.policy.startswith("sb3:")
     assert not (checkpoints / "resume_normalize.json").exists()
+
+
+def test_a_ppo_run_folder_handed_to_resume_is_data_its_paths_stay_inside_and_a_pickle_is_one_line(tmp_path, monkeypatch):
+    """A folder handed to --resume may be anybody's: a checkpoint path in its state that leads out of the folder
+    is refused, never followed; weights that carry a pickle are refused in one line (no traceback)."""
+    pytest.importorskip("stable_baselines3")
+    import pickle
+    import shutil
+    import zipfile
+
+    cls = learner_class("ppo")
+    learn, calls = cls.learn, []
+
+    def learn_once(self, budget, callback):
+        calls.append(budget)
+        if len(calls) > 1:
+            raise KeyboardInterrupt
+        learn(self, budget, callback)
+
+    monkeypatch.setattr(cls, "learn", learn_once)
+    with pytest.raises(KeyboardInterrupt):
+        run(tiny("ppo"), "battery", tmp_path / "cut", SEEDS["ppo"], progress=False)
+    monkeypatch.setattr(cls, "learn", learn)
+    resume = tmp_path / "cut" / "checkpoints" / "resume.json"
+    state = json.loads(resume.read_text())
+    (last,) = (tmp_path / "cut" / "checkpoints").glob("step_*.zip")
+    shutil.copyfile(last, tmp_path / "outside.zip")
+    for file in ("../outside.zip", str(tmp_path / "outside.zip"), "checkpoints/../../outside.zip"):
+        resume.write_text(json.dumps(dict(state, checkpoints=[dict(state["checkpoints"][0], file=file)])))
+        with pytest.raises(EtmpcError, match=r"is not a PPO run's state \(checkpoint file .* is not one of the run's"):
+            run(tiny("ppo"), "battery", tmp_path / "cut", SEEDS["ppo"], resume=True, progress=False)
+    for bad in ({"checkpoints": "step_00000256.zip"}, {"checkpoints": [dict(state["checkpoints"][0], timesteps="256")]}):
+        resume.write_text(json.dumps(dict(state, **bad)))
+        with pytest.raises(EtmpcError, match="is not a PPO run's state"):
+            run(tiny("ppo"), "battery", tmp_path / "cut", SEEDS["ppo"], resume=True, progress=False)
+    resume.write_text(json.dumps(state))
+    with zipfile.ZipFile(last) as zf:
+        entries = {name: zf.read(name) for name in zf.namelist()}
+    entries["policy.pth"] = pickle.dumps(_Opens(tmp_path / "ran"))  # a pickle where the weights go
+    with zipfile.ZipFile(last, "w") as zf:
+        for name, content in entries.items():
+            zf.writestr(name, content)
+    with pytest.raises(EtmpcError, match=r"step_\d{8}\.zip: not this run's weights") as refused:
+        run(tiny("ppo"), "battery", tmp_path / "cut", SEEDS["ppo"], resume=True, progress=False)
+    assert "\n" not in str(refused.value) and not (tmp_path / "ran").exists()
