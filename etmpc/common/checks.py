@@ -9,6 +9,8 @@ import numbers
 import warnings
 from typing import Any
 
+import numpy as np
+
 from etmpc.common.errors import EtmpcError
 
 MAX_WORKERS = 512
@@ -19,11 +21,23 @@ class BadValue(EtmpcError, ValueError):
     """A number out of its range or of the wrong kind (a ``ValueError`` too, for callers that catch those)."""
 
 
+class BadType(EtmpcError, TypeError):
+    """An argument of the wrong type (a path where a name is needed, ...): a ``TypeError`` too."""
+
+
 def whole(value: Any) -> int:
     """``value`` as an int if it is a whole number (an int or numpy integer, never a bool or a float)."""
     if isinstance(value, bool) or not isinstance(value, numbers.Integral):
         raise BadValue(f"{value!r} is not a whole number")
     return int(value)
+
+
+def flag(value: Any) -> bool:
+    """``value`` as a bool if it is one (a Python or numpy bool). Anything else is refused, never read by
+    its truth: ``"no"`` is a true string, and 0 or 1 may be a count given in the wrong place."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise BadValue(f"must be True or False, got {type(value).__name__} {value!r}")
+    return bool(value)
 
 
 def at_least(value: int, low: int) -> int:

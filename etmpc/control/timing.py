@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from etmpc.common.errors import EtmpcError
+from etmpc.common.checks import BadValue, argument, flag
 
 #: What a trigger may ask for at a decision on a task with compute levels (``Discrete(3)``); on any other
 #: task a decision is a yes or no, and a yes is a full solve.
@@ -46,12 +46,17 @@ class Latency:
     compensate: bool = False
 
     def __post_init__(self):
+        # Each field is checked for its kind, not read by its truth: compensate="no" would turn compensation on.
         if isinstance(self.intervals, bool) or not isinstance(self.intervals, int) or self.intervals < 0:
-            raise EtmpcError(f"latency: intervals must be a whole number >= 0, got {self.intervals!r}")
-        if not (isinstance(self.iteration_s, (int, float)) and math.isfinite(self.iteration_s) and self.iteration_s >= 0):
-            raise EtmpcError(f"latency: iteration_s must be a finite number of seconds >= 0, got {self.iteration_s!r}")
+            raise BadValue(f"latency: intervals must be a whole number >= 0, got {self.intervals!r}")
+        real = isinstance(self.iteration_s, (int, float)) and not isinstance(self.iteration_s, bool)
+        if not (real and math.isfinite(self.iteration_s) and self.iteration_s >= 0):
+            raise BadValue(f"latency: iteration_s must be a finite number of seconds >= 0, got {self.iteration_s!r}")
+        if not isinstance(self.platform, str):
+            raise BadValue(f"latency: platform must be a str (a name), got {type(self.platform).__name__} {self.platform!r}")
         if self.iteration_s and not self.platform:
-            raise EtmpcError("latency: a time per SQP iteration needs the platform it was measured on (platform=...)")
+            raise BadValue("latency: a time per SQP iteration needs the platform it was measured on (platform=...)")
+        object.__setattr__(self, "compensate", argument("latency: compensate", flag, self.compensate))
 
     @property
     def instant(self) -> bool:

@@ -3,6 +3,7 @@ compute levels price SQP iterations. Checked against a loop written here from th
 predictor, the solver's own optimum and the bookkeeping of work and price."""
 
 import copy
+import re
 from dataclasses import replace
 
 import numpy as np
@@ -194,6 +195,25 @@ def test_a_bad_latency_is_one_line(arguments, says):
     with pytest.raises(EtmpcError, match=says) as raised:
         Latency(**arguments)
     assert "\n" not in str(raised.value)
+
+
+@pytest.mark.parametrize(
+    "arguments, says",
+    [
+        ({"compensate": "no"}, "latency: compensate: must be True or False, got str 'no'"),
+        ({"intervals": 1, "compensate": 1}, "latency: compensate: must be True or False, got int 1"),
+        ({"compensate": None}, "latency: compensate: must be True or False"),
+        ({"platform": 3}, "latency: platform must be a str"),
+        ({"iteration_s": True, "platform": "x"}, "latency: iteration_s must be a finite number"),
+    ],
+)
+def test_a_latencys_flag_and_names_are_of_their_kind_not_read_by_their_truth(arguments, says):
+    """compensate="no" is a true string: read by its truth it turned compensation on."""
+    from etmpc.common.checks import BadValue
+
+    with pytest.raises(BadValue, match=re.escape(says)):
+        Latency(**arguments)
+    assert Latency(intervals=1, compensate=np.bool_(True)).compensate is True  # a numpy bool is a bool
 
 
 def test_a_policy_learned_at_latency_zero_plays_on_its_timing_variant_and_nowhere_else():
