@@ -18,8 +18,9 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
-from etmpc.common.checks import BadValue, argument, flag
+from etmpc.common.checks import BadType, BadValue, argument, flag
 
 #: What a trigger may ask for at a decision on a task with compute levels (``Discrete(3)``); on any other
 #: task a decision is a yes or no, and a yes is a full solve.
@@ -82,3 +83,22 @@ class Latency:
         if self.iteration_s:
             parts.append(f"{self.iteration_s * 1e3:g} ms per SQP iteration on {self.platform}")
         return " + ".join(parts) + (", delay-compensated" if self.compensate else "")
+
+
+def checked_latency(latency: Any, horizon: int) -> Latency:
+    """``latency``, a task's ``Config.latency``, if its system can play it: a :class:`Latency` (an int read as
+    one failed with an AttributeError in the middle of an episode) whose fixed ``intervals`` are fewer than
+    the MPC's ``horizon`` N. A plan that arrives ``d`` intervals late has ``N - d`` steps left when it comes
+    into force: with ``d >= N`` every plan would arrive after it ran out, and the loop would play a whole
+    episode of plans that never apply. (A delay that grows with a solve's iterations is the platform's, and
+    is not known before the solve.)"""
+    if not isinstance(latency, Latency):
+        raise BadType(
+            f"latency: a Latency(...) is needed (etmpc.control.timing.Latency), got {type(latency).__name__} {latency!r}"
+        )
+    if latency.intervals >= horizon:
+        raise BadValue(
+            f"latency: {latency.intervals} intervals is not shorter than the MPC's horizon of {horizon} steps: "
+            "every plan would arrive after it ran out"
+        )
+    return latency

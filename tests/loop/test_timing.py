@@ -253,3 +253,38 @@ def test_the_trajectory_keeps_when_each_plans_computation_started_and_when_it_ca
     assert len(traj.starts) == len(traj.plans) == len(traj.arrivals) and traj.starts[0] == 0
     for start, (made, _), arrived in zip(traj.starts[1:], traj.plans[1:], traj.arrivals[1:]):
         assert traj.recompute[start] and made == start + d == arrived  # compensated: made for its arrival
+
+
+@pytest.mark.parametrize(
+    "config, error, says",
+    [
+        ({"latency": 2}, "BadType", "latency: a Latency(...) is needed (etmpc.control.timing.Latency), got int 2"),
+        (
+            {"latency": Latency(intervals=25)},
+            "BadValue",
+            "latency: 25 intervals is not shorter than the MPC's horizon of 20 steps",
+        ),
+        (
+            {"latency": Latency(intervals=20)},
+            "BadValue",
+            "latency: 20 intervals is not shorter than the MPC's horizon of 20 steps",
+        ),
+        ({"compute_levels": "no"}, "BadValue", "compute_levels: must be True or False, got str 'no'"),
+        ({"compute_levels": 1}, "BadValue", "compute_levels: must be True or False, got int 1"),
+    ],
+)
+def test_a_tasks_time_in_the_loop_is_refused_when_its_system_is_made_not_mid_episode(config, error, says, monkeypatch):
+    """One check for every task (SystemBase reads a Config's latency and compute_levels): an int for a Latency
+    failed with an AttributeError mid-episode, compute_levels="no" turned levels on, and a latency as long as the
+    horizon played a whole episode of plans that arrived after they ran out."""
+    from etmpc.common import checks
+    from etmpc.systems.cart_pendulum.timing import KicksLateSystem, LateConfig
+
+    system = _kicks(**config)
+    with pytest.raises(getattr(checks, error), match=re.escape(says)):
+        ClosedLoop(system, system.make_env())  # refused before an episode starts
+    # A task whose Config() holds it is refused by the registry when the system is made.
+    monkeypatch.setattr(KicksLateSystem, "Config", lambda: replace(LateConfig(), **config))
+    with pytest.raises(getattr(checks, error), match=re.escape(says)):
+        make_system("cart_pendulum/kicks_late")
+    assert make_system("cart_pendulum/kicks").latency.instant  # the default is none, and is a Latency
