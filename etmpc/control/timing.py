@@ -20,12 +20,39 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from etmpc.common.checks import BadType, BadValue, argument, flag
 
 #: What a trigger may ask for at a decision on a task with compute levels (``Discrete(3)``); on any other
 #: task a decision is a yes or no, and a yes is a full solve.
 KEEP, ITERATE, SOLVE = 0, 1, 2
 LEVEL_NAMES = ("keep", "iterate", "solve")
+#: What a trigger may answer, on a task without compute levels (False) and with them (True).
+ANSWERS = {
+    False: "False or 0 (keep) or True or 1 (a full solve)",
+    True: f"{KEEP} ({LEVEL_NAMES[0]}), {ITERATE} ({LEVEL_NAMES[1]}) or {SOLVE} ({LEVEL_NAMES[2]}), or False/True (keep/solve)",
+}
+
+
+def level_of(answer: Any, levels: bool) -> int | None:
+    """The level a trigger's ``answer`` asks for (:data:`KEEP`, :data:`ITERATE`, :data:`SOLVE`), or None if it
+    is no answer on a task with compute ``levels`` (or without): the one check of an answer, shared by the
+    loop and the check of a user's trigger. A bool (Python's or numpy's) is keep or a full solve; an integer
+    (Python's or numpy's) is a level by its value: 0 or 1 (keep, a full solve) on a task without levels, 0, 1
+    or 2 with them. Anything else is no answer, never read by its truth: 2 on a keep-or-solve task was taken
+    as a solve, and a float, a string or None as whatever its truth said. Asked at every decision: the
+    common answers cost an identity test or two."""
+    if answer is True or answer is False or isinstance(answer, np.bool_):
+        return SOLVE if answer else KEEP
+    if isinstance(answer, (int, np.integer)):
+        if answer == KEEP:
+            return KEEP
+        if answer == 1:
+            return ITERATE if levels else SOLVE
+        if answer == SOLVE and levels:
+            return SOLVE
+    return None
 
 
 @dataclass(frozen=True)

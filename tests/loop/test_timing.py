@@ -246,6 +246,63 @@ def test_a_python_trigger_answers_a_compute_level_as_the_built_in_schedule_does(
     np.testing.assert_array_equal(mine.level, built_in.level)
 
 
+class _Answers:
+    spec, stochastic = "answers", False
+
+    def __init__(self, answer):
+        self.answer = answer
+
+    def decide(self, s, rng):
+        return self.answer
+
+
+@pytest.mark.parametrize("answer", [2, np.int64(2), 1.0, 0.0, "no", None, np.array(1), -1])
+def test_an_answer_a_keep_or_solve_task_does_not_take_is_refused_naming_the_trigger_and_the_answer(answer):
+    """Read by its truth, 2 (a compute level) was a full solve on a task without levels, "no" a solve too."""
+    from etmpc.common.checks import BadValue
+    from etmpc.policies.user import checked
+
+    system = make_system("cart_pendulum/kicks")
+    episode = _episode(system, 0)
+    said = f"it returned {type(answer).__name__} {answer!r}"
+    with pytest.raises(EtmpcError, match="^policy answers: decide must return a bool.*" + re.escape(said)):
+        run_episode(system, system.make_env(), checked(_Answers(answer), levels=False), None, episode)
+    # The loop refuses it too, naming the task, for a policy that is not checked (the one check: level_of).
+    loop = ClosedLoop(system, system.make_env()).reset(episode)
+    loop.step(True)
+    with pytest.raises(BadValue, match=re.escape(f"on task cart_pendulum/kicks, got {type(answer).__name__} {answer!r}")):
+        loop.step(answer)
+
+
+def test_a_trigger_answers_a_bool_or_a_level_by_its_value_python_or_numpy():
+    from etmpc.control.timing import level_of
+
+    for answer, plain, levels in [
+        (False, KEEP, KEEP),
+        (True, SOLVE, SOLVE),
+        (0, KEEP, KEEP),
+        (1, SOLVE, ITERATE),
+        (np.bool_(True), SOLVE, SOLVE),
+        (np.int64(1), SOLVE, ITERATE),
+        (np.uint8(0), KEEP, KEEP),
+        (2, None, SOLVE),
+        (np.int32(2), None, SOLVE),
+        (3, None, None),
+        (2.0, None, None),
+    ]:
+        assert (level_of(answer, False), level_of(answer, True)) == (plain, levels), answer
+    # A user's trigger is checked as its task takes answers (not known: as a task with levels; the loop checks the rest).
+    from types import SimpleNamespace
+
+    from etmpc.policies.user import checked
+
+    s = SimpleNamespace(context=None)
+    assert checked(_Answers(np.int64(2)), levels=True).decide(s, None) == SOLVE
+    assert checked(_Answers(np.int64(2))).decide(s, None) == SOLVE
+    with pytest.raises(EtmpcError, match=r"policy answers: .* on a task without compute levels; it returned int64 np.int64\(2\)"):
+        checked(_Answers(np.int64(2)), levels=False).decide(s, None)
+
+
 def test_the_trajectory_keeps_when_each_plans_computation_started_and_when_it_came_into_force():
     d = 2
     system = _kicks(latency=Latency(intervals=d, compensate=True))
