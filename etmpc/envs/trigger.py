@@ -242,7 +242,9 @@ class TriggerEnvironment(dm_env.Environment):
         """Episode ``index`` of the stored test set (or of ``test_set``)."""
         if self._test_set is None:
             path = self._test_set_path or testsets.default_path(self.system.domain, self.system.task)
-            self._test_set = testsets.load(path, self.system.domain, self.system.task)
+            test_set = testsets.load(path, self.system.domain, self.system.task)
+            test_set.check_playable(self.system, self.loop.env.task)  # a bad episode is refused here, named
+            self._test_set = test_set
         return self.system.episode_from_arrays(self._test_set.episode_arrays(check_index(index, "the index")))
 
     def _observation(self) -> np.ndarray:

@@ -223,6 +223,20 @@ def test_unknown_reset_options_and_bad_test_episodes_are_refused():
         env.reset(options={"test_episode": 1000})
 
 
+def test_a_test_set_holding_what_its_task_cannot_draw_is_refused_when_the_environment_reads_it(tmp_path):
+    from etmpc.common.errors import TestSetError
+    from etmpc.evaluation import testsets
+
+    stored = testsets.load(testsets.default_path("cart_pendulum", "balance"), "cart_pendulum", "balance")
+    arrays = {name: np.array(values[:2]) for name, values in stored.arrays.items()}
+    arrays["disturbance"][1, 7] = 1e6
+    path = tmp_path / "mine.npz"
+    testsets.write(path, arrays, dict(stored.meta, episodes=2))
+    env = TriggerEnvironment("cart_pendulum", test_set=str(path))
+    with pytest.raises(TestSetError, match=re.escape("episode 1: disturbance: 1000000.0 at [7] is outside the task's range")):
+        env.reset(test_episode=0)  # any episode: the whole set is checked when first read
+
+
 def test_a_dm_env_environment_underneath():
     env = TriggerEnvironment("battery", seed=0)
     timestep = env.reset()
