@@ -41,6 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
+from etmpc.common import checks
 from etmpc.common.errors import EtmpcError
 from etmpc.common.numerics import dot
 from etmpc.common.outputs import dumps, write_text
@@ -54,10 +55,10 @@ VERSION = 2
 LEVELS_VERSION = 3  # a policy with compute levels (theta_level)
 INITIAL_KEEP_LOGIT = -3.0  # sigma(-3) = 0.047: at first the policy recomputes 95 % of the time
 INITIAL_SOLVE_LOGIT = 3.0  # with levels, a computation is at first a full solve 95 % of the time
-# What a policy file's numbers may be (see LogisticPolicy.from_json for why), checked when it is read.
-MAX_WEIGHT = 1e6  # the size of a weight (theta, theta_level)
-MAX_SCALE = 1e100  # the size of a normalisation's mean or scale
-MIN_SCALE = 1e-12  # the smallest scale: Normalisation.fit writes a smaller standard deviation as 1
+# What a policy file's numbers may be (see LogisticPolicy.from_json for why), checked when it is read: the
+# size of a weight (theta, theta_level), of a normalisation's mean or scale, and the smallest scale
+# (Normalisation.fit writes a smaller standard deviation as 1). The self-trigger's files share them.
+MAX_WEIGHT, MAX_SCALE, MIN_SCALE = checks.MAX_WEIGHT, checks.MAX_SCALE, checks.MIN_SCALE
 
 
 class PolicyFileError(EtmpcError):
@@ -90,36 +91,24 @@ class Normalisation:
 
     @classmethod
     def from_json(cls, data: dict, where: str = "policy") -> Normalisation:
-        """From a policy file's ``normalisation``, each number checked (:func:`numbers`)."""
+        """From a policy file's ``normalisation``, each number checked (:func:`file_numbers`)."""
         if not isinstance(data, dict):
             raise PolicyFileError(f"{where}: normalisation is not an object of mean, std, mean_sq and std_sq")
         return cls(
             *(
-                numbers(data[name], f"normalisation.{name}", where, MAX_SCALE, MIN_SCALE if name.startswith("std") else None)
+                file_numbers(data[name], f"normalisation.{name}", where, MAX_SCALE, MIN_SCALE if name.startswith("std") else None)
                 for name in ("mean", "std", "mean_sq", "std_sq")
             )
         )
 
 
-def numbers(values, field: str, where: str, largest: float, smallest: float | None = None) -> np.ndarray:
-    """``values``, the field ``field`` of a policy file (``where``), as an array, if it is a list of JSON
-    numbers (not bools, strings or nulls), each finite, at most ``largest`` in size and, for a scale, at
-    least ``smallest``; else :class:`PolicyFileError` in one line naming the file, the field and the first
-    bad number. Compared as read (Python compares an int with a float exactly): an integer too large for a
-    double is refused here, not an ``OverflowError`` on converting it."""
-    if not isinstance(values, list):
-        raise PolicyFileError(f"{where}: {field} is not a list of numbers ({type(values).__name__})")
-    for i, x in enumerate(values):
-        shown = repr(x) if len(repr(x)) <= 24 else repr(x)[:20] + "..."
-        if isinstance(x, bool) or not isinstance(x, (int, float)):
-            raise PolicyFileError(f"{where}: {field}[{i}] is {shown}, not a number")
-        if isinstance(x, float) and not math.isfinite(x):
-            raise PolicyFileError(f"{where}: {field}[{i}] is {shown}, not a finite number")
-        if not -largest <= x <= largest:
-            raise PolicyFileError(f"{where}: {field}[{i}] is {shown}, beyond the +-{largest:g} it may be")
-        if smallest is not None and x < smallest:
-            raise PolicyFileError(f"{where}: {field}[{i}] is {shown}, below the {smallest:g} a scale may be")
-    return np.array(values, dtype=float)
+def file_numbers(values, field: str, where: str, largest: float, smallest: float | None = None) -> np.ndarray:
+    """The numbers of field ``field`` of a policy file (``where``), as :func:`etmpc.common.checks.json_numbers`
+    checks them; else :class:`PolicyFileError` in one line naming the file, the field and the first bad number."""
+    try:
+        return checks.json_numbers(values, field, largest, smallest)
+    except checks.BadValue as exc:
+        raise PolicyFileError(f"{where}: {exc}") from None
 
 
 def sigmoid(z: float) -> float:
@@ -263,7 +252,7 @@ class LogisticPolicy:
     @classmethod
     def from_json(cls, data: dict, where: str = "policy") -> LogisticPolicy:
         """A policy from its file's content (``where`` names the file in errors), checked: its format, and
-        each number (:func:`numbers`) finite, a weight at most :data:`MAX_WEIGHT` (1e6) in size, the
+        each number (:func:`file_numbers`) finite, a weight at most :data:`MAX_WEIGHT` (1e6) in size, the
         normalisation's means and scales at most :data:`MAX_SCALE` (1e100), its scales at least
         :data:`MIN_SCALE` (1e-12, what :meth:`Normalisation.fit` writes). A bad one is refused here, in one
         line naming the file and the field, rather than clipped or played.
@@ -298,8 +287,8 @@ class LogisticPolicy:
             raise PolicyFileError(f"{where} has unknown decision rule {decision!r}; this etmpc knows sample, greedy")
         try:
             normalisation = Normalisation.from_json(data["normalisation"], where)
-            theta = numbers(data["theta"], "theta", where, MAX_WEIGHT)
-            theta_level = numbers(data["theta_level"], "theta_level", where, MAX_WEIGHT) if "theta_level" in data else None
+            theta = file_numbers(data["theta"], "theta", where, MAX_WEIGHT)
+            theta_level = file_numbers(data["theta_level"], "theta_level", where, MAX_WEIGHT) if "theta_level" in data else None
             policy = cls(
                 theta,
                 normalisation,
