@@ -140,6 +140,8 @@ def test_the_keyword_refuses_another_tasks_normalisation_in_one_line(tmp_path):
         with pytest.raises(EtmpcError) as refused:
             gym.make("etmpc/cart_pendulum-balance-v0", normalize=given)
         assert says in str(refused.value) and len(str(refused.value).splitlines()) == 1, str(refused.value)
+        if given == 3 or str(given).endswith(".zip"):  # a wrong type, a wrong value: Python's own errors too
+            assert isinstance(refused.value, TypeError if given == 3 else ValueError)
 
 
 def test_the_keyword_composes_with_make_vec_env_and_keeps_the_spaces():
