@@ -18,13 +18,41 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
-from etmpc.common.errors import EtmpcError
+import numpy as np
+
+from etmpc.common.checks import BadType, BadValue, argument, flag
 
 #: What a trigger may ask for at a decision on a task with compute levels (``Discrete(3)``); on any other
 #: task a decision is a yes or no, and a yes is a full solve.
 KEEP, ITERATE, SOLVE = 0, 1, 2
 LEVEL_NAMES = ("keep", "iterate", "solve")
+#: What a trigger may answer, on a task without compute levels (False) and with them (True).
+ANSWERS = {
+    False: "False or 0 (keep) or True or 1 (a full solve)",
+    True: f"{KEEP} ({LEVEL_NAMES[0]}), {ITERATE} ({LEVEL_NAMES[1]}) or {SOLVE} ({LEVEL_NAMES[2]}), or False/True (keep/solve)",
+}
+
+
+def level_of(answer: Any, levels: bool) -> int | None:
+    """The level a trigger's ``answer`` asks for (:data:`KEEP`, :data:`ITERATE`, :data:`SOLVE`), or None if it
+    is no answer on a task with compute ``levels`` (or without): the one check of an answer, shared by the
+    loop and the check of a user's trigger. A bool (Python's or numpy's) is keep or a full solve; an integer
+    (Python's or numpy's) is a level by its value: 0 or 1 (keep, a full solve) on a task without levels, 0, 1
+    or 2 with them. Anything else is no answer, never read by its truth: 2 on a keep-or-solve task was taken
+    as a solve, and a float, a string or None as whatever its truth said. Asked at every decision: the
+    common answers cost an identity test or two."""
+    if answer is True or answer is False or isinstance(answer, np.bool_):
+        return SOLVE if answer else KEEP
+    if isinstance(answer, (int, np.integer)):
+        if answer == KEEP:
+            return KEEP
+        if answer == 1:
+            return ITERATE if levels else SOLVE
+        if answer == SOLVE and levels:
+            return SOLVE
+    return None
 
 
 @dataclass(frozen=True)
@@ -46,12 +74,17 @@ class Latency:
     compensate: bool = False
 
     def __post_init__(self):
+        # Each field is checked for its kind, not read by its truth: compensate="no" would turn compensation on.
         if isinstance(self.intervals, bool) or not isinstance(self.intervals, int) or self.intervals < 0:
-            raise EtmpcError(f"latency: intervals must be a whole number >= 0, got {self.intervals!r}")
-        if not (isinstance(self.iteration_s, (int, float)) and math.isfinite(self.iteration_s) and self.iteration_s >= 0):
-            raise EtmpcError(f"latency: iteration_s must be a finite number of seconds >= 0, got {self.iteration_s!r}")
+            raise BadValue(f"latency: intervals must be a whole number >= 0, got {self.intervals!r}")
+        real = isinstance(self.iteration_s, (int, float)) and not isinstance(self.iteration_s, bool)
+        if not (real and math.isfinite(self.iteration_s) and self.iteration_s >= 0):
+            raise BadValue(f"latency: iteration_s must be a finite number of seconds >= 0, got {self.iteration_s!r}")
+        if not isinstance(self.platform, str):
+            raise BadValue(f"latency: platform must be a str (a name), got {type(self.platform).__name__} {self.platform!r}")
         if self.iteration_s and not self.platform:
-            raise EtmpcError("latency: a time per SQP iteration needs the platform it was measured on (platform=...)")
+            raise BadValue("latency: a time per SQP iteration needs the platform it was measured on (platform=...)")
+        object.__setattr__(self, "compensate", argument("latency: compensate", flag, self.compensate))
 
     @property
     def instant(self) -> bool:
@@ -77,3 +110,22 @@ class Latency:
         if self.iteration_s:
             parts.append(f"{self.iteration_s * 1e3:g} ms per SQP iteration on {self.platform}")
         return " + ".join(parts) + (", delay-compensated" if self.compensate else "")
+
+
+def checked_latency(latency: Any, horizon: int) -> Latency:
+    """``latency``, a task's ``Config.latency``, if its system can play it: a :class:`Latency` (an int read as
+    one failed with an AttributeError in the middle of an episode) whose fixed ``intervals`` are fewer than
+    the MPC's ``horizon`` N. A plan that arrives ``d`` intervals late has ``N - d`` steps left when it comes
+    into force: with ``d >= N`` every plan would arrive after it ran out, and the loop would play a whole
+    episode of plans that never apply. (A delay that grows with a solve's iterations is the platform's, and
+    is not known before the solve.)"""
+    if not isinstance(latency, Latency):
+        raise BadType(
+            f"latency: a Latency(...) is needed (etmpc.control.timing.Latency), got {type(latency).__name__} {latency!r}"
+        )
+    if latency.intervals >= horizon:
+        raise BadValue(
+            f"latency: {latency.intervals} intervals is not shorter than the MPC's horizon of {horizon} steps: "
+            "every plan would arrive after it ran out"
+        )
+    return latency

@@ -72,7 +72,7 @@ class TriggerEnv(gymnasium.Env):
         options = dict(options or {})
         test_episode = options.pop("test_episode", None)
         if options:
-            raise ValueError(f"unknown reset options {sorted(options)}; known: test_episode")
+            raise BadValue(f"unknown reset options {sorted(options)}; known: test_episode")
         timestep = self.core.reset(test_episode=test_episode)
         return self._observed(timestep.observation)
 

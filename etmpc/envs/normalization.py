@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from etmpc.common.errors import EtmpcError
+from etmpc.common.checks import BadType, BadValue
 from etmpc.common.outputs import write_json
 from etmpc.policies.features import observation_names
 from etmpc.policies.sb3 import CLIP, EPSILON, FORMAT, normalise, read_description
@@ -37,12 +37,13 @@ class Normalization:
     @classmethod
     def read(cls, path: str | os.PathLike, task: str | SystemKey) -> Normalization:
         """The normalisation in ``path`` (a policy's ``.json``), checked against ``task``: the same task,
-        the same observation names; :class:`EtmpcError` in one line otherwise."""
+        the same observation names; :class:`EtmpcError` in one line otherwise (``BadType``, a ``TypeError``,
+        for a ``path`` that is not one; ``BadValue``, a ``ValueError``, for a model given instead of its description)."""
         if not isinstance(path, (str, os.PathLike)):
-            raise EtmpcError(f"normalize: the path of a policy's .json is needed, got {type(path).__name__} {path!r}")
+            raise BadType(f"normalize: the path of a policy's .json is needed, got {type(path).__name__} {path!r}")
         path = Path(path)
         if path.suffix == ".zip":
-            raise EtmpcError(f"normalize={path} is a model; give its description, normalize={path.with_suffix('.json')}")
+            raise BadValue(f"normalize={path} is a model; give its description, normalize={path.with_suffix('.json')}")
         key = system_key(task)
         trained_on, mean, var, _ = read_description(
             path, key.task, f"normalize={path}: its policy", f"normalize={path}: no such file"
@@ -69,18 +70,18 @@ def save_normalization(vec_normalize, task: str | SystemKey, path: str | os.Path
     mean = np.asarray(getattr(rms, "mean", np.nan), float)
     var = np.asarray(getattr(rms, "var", np.nan), float)
     if not getattr(vec_normalize, "norm_obs", False) or mean.shape != (len(names),) or var.shape != mean.shape:
-        raise EtmpcError(
+        raise BadValue(
             f"save_normalization: a VecNormalize with norm_obs=True on {key.task}'s {len(names)} "
             f"observations is needed, got {type(vec_normalize).__name__}"
         )
     clip, epsilon = getattr(vec_normalize, "clip_obs", None), getattr(vec_normalize, "epsilon", None)
     if (clip, epsilon) != (CLIP, EPSILON):
-        raise EtmpcError(
+        raise BadValue(
             f"save_normalization: sb3: normalises with VecNormalize's defaults, clip_obs={CLIP:g} and "
             f"epsilon={EPSILON:g}; this one has clip_obs={clip!r}, epsilon={epsilon!r}"
         )
     if not (np.all(np.isfinite(mean)) and np.all(np.isfinite(var)) and np.all(var >= 0)):
-        raise EtmpcError("save_normalization: its statistics are non-finite or negative")
+        raise BadValue("save_normalization: its statistics are non-finite or negative")
     path = Path(path)
     write_json(
         path,

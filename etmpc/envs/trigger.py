@@ -89,14 +89,19 @@ def check_index(index: Any, what: str = "test_episode") -> int:
 
 
 def _fixed_schedule(spec: str, system):
-    """The baseline of a relative reward: a fixed schedule (it must not depend on what the agent does)."""
-    kind = find(spec) if isinstance(spec, str) else None
+    """The baseline of a relative reward: a fixed schedule (it must not depend on what the agent does). A bad
+    one is an argument's bad value (:class:`~etmpc.common.checks.BadValue`, a ``ValueError`` too), or of the
+    wrong type (:class:`~etmpc.common.checks.BadType`, a ``TypeError``), as Python's own are."""
+    needed = "reward_baseline: a fixed schedule (always, never, every:T or iterate:T) is needed"
+    if not isinstance(spec, str):
+        raise checks.BadType(f"{needed}, got {type(spec).__name__} {spec!r}")
+    kind = find(spec)
     if kind is None or kind.family != "periodic":
-        raise EtmpcError(f"reward_baseline: a fixed schedule (always, never, every:T or iterate:T) is needed, got {spec!r}")
+        raise checks.BadValue(f"{needed}, got {spec!r}")
     try:
         return parse_policy(spec, system)
     except EtmpcError as exc:
-        raise EtmpcError(f"reward_baseline: a fixed schedule (always, never, every:T or iterate:T) is needed: {exc}") from None
+        raise checks.BadValue(f"{needed}: {exc}") from None
 
 
 class InvalidAction(EtmpcError, ValueError):
@@ -130,11 +135,11 @@ class TriggerEnvironment(dm_env.Environment):
         reward_baseline: str | None = None,
     ):
         if not isinstance(task, (str, SystemKey)):
-            raise EtmpcError(f"task: a task name (str) is needed, got {type(task).__name__} {task!r}")
+            raise checks.BadType(f"task: a task name (str) is needed, got {type(task).__name__} {task!r}")
         if seed is not None:
             checks.argument("seed", checks.seed, seed)
         if test_set is not None and not isinstance(test_set, (str, os.PathLike)):
-            raise EtmpcError(f"test_set: a file path is needed, got {type(test_set).__name__} {test_set!r}")
+            raise checks.BadType(f"test_set: a file path is needed, got {type(test_set).__name__} {test_set!r}")
         self.key = system_key(task, recompute_price)  # the task and the price, checked here
         self.system = self.key.make()
         self.actions = 3 if self.system.compute_levels else 2  # Discrete(3) on a task with compute levels
@@ -242,7 +247,9 @@ class TriggerEnvironment(dm_env.Environment):
         """Episode ``index`` of the stored test set (or of ``test_set``)."""
         if self._test_set is None:
             path = self._test_set_path or testsets.default_path(self.system.domain, self.system.task)
-            self._test_set = testsets.load(path, self.system.domain, self.system.task)
+            test_set = testsets.load(path, self.system.domain, self.system.task)
+            test_set.check_playable(self.system, self.loop.env.task)  # a bad episode is refused here, named
+            self._test_set = test_set
         return self.system.episode_from_arrays(self._test_set.episode_arrays(check_index(index, "the index")))
 
     def _observation(self) -> np.ndarray:

@@ -217,7 +217,7 @@ def parse_policies(system, policies: list) -> dict:
             check_shipped(policy)
             spec, policy = policy, parse_policy(policy, system)
         else:
-            policy = checked(policy)
+            policy = checked(policy, levels=system.compute_levels)  # its answers checked as the task takes them
             spec = policy.spec
             if names_a_kind(spec) and not type(policy.policy).__module__.startswith("etmpc."):
                 raise EtmpcError(

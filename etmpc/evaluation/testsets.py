@@ -93,10 +93,11 @@ class TestSet:
 
     def check_playable(self, system, task) -> None:
         """Raise :class:`TestSetError` unless every episode is one ``task`` (of ``system``) can
-        play: the arrays it needs, of the shapes it needs."""
+        play: the arrays it needs, of the shapes it needs, every value within the task's ranges
+        (``EpisodeTask.check_stored``); the error names the episode and the field."""
         for index in range(self.episodes):
             try:
-                task.check_episode(system.episode_from_arrays(self.episode_arrays(index)))
+                task.check_stored(system.episode_from_arrays(self.episode_arrays(index)))
             except KeyError as exc:
                 raise TestSetError(f"test set {self.path} has no array {exc}") from None
             except (ValueError, TypeError) as exc:

@@ -12,9 +12,10 @@ import dm_env
 import numpy as np
 from dm_control.rl.control import PhysicsError
 
+from etmpc.common.checks import BadValue
 from etmpc.common.frozen import frozen, readonly
 from etmpc.control.plan import Plan
-from etmpc.control.timing import ITERATE, KEEP, LEVEL_NAMES, SOLVE
+from etmpc.control.timing import ANSWERS, KEEP, SOLVE, level_of
 from etmpc.loop.records import Continuation, Trajectory, computation_cost
 from etmpc.loop.state import AugmentedState, DecisionContext, Policy, Snapshot
 from etmpc.systems.base import System
@@ -221,15 +222,13 @@ class ClosedLoop:
         return reward - self.cost
 
     def _level(self, answer) -> int:
-        """A decision as a compute level: on a task with levels, ``KEEP``/``ITERATE``/``SOLVE`` (a bool is
-        keep or a full solve); elsewhere any true answer is a full solve."""
-        if not self.levels or isinstance(answer, (bool, np.bool_)):
-            return SOLVE if answer else KEEP
-        level = int(answer)
-        if level not in (KEEP, ITERATE, SOLVE):
-            raise ValueError(
-                f"a decision is {KEEP} ({LEVEL_NAMES[0]}), {ITERATE} ({LEVEL_NAMES[1]}) or {SOLVE} "
-                f"({LEVEL_NAMES[2]}) on task {self.system.name}, got {answer!r}"
+        """A decision as a compute level (:func:`~etmpc.control.timing.level_of`): on a task with levels,
+        ``KEEP``/``ITERATE``/``SOLVE`` (a bool is keep or a full solve); elsewhere a bool, 0 or 1. Any other
+        answer is refused, naming the task: read by its truth, 2 was a full solve on a keep-or-solve task."""
+        level = level_of(answer, self.levels)
+        if level is None:
+            raise BadValue(
+                f"a decision is {ANSWERS[self.levels]} on task {self.system.name}, got {type(answer).__name__} {answer!r}"
             )
         return level
 

@@ -34,13 +34,13 @@ and played exactly as before. Neither kind is loaded for a task of the other kin
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from etmpc.common import checks
 from etmpc.common.documents import loads
 from etmpc.common.errors import EtmpcError
 from etmpc.common.numerics import dot
@@ -55,6 +55,10 @@ VERSION = 2
 LEVELS_VERSION = 3  # a policy with compute levels (theta_level)
 INITIAL_KEEP_LOGIT = -3.0  # sigma(-3) = 0.047: at first the policy recomputes 95 % of the time
 INITIAL_SOLVE_LOGIT = 3.0  # with levels, a computation is at first a full solve 95 % of the time
+# What a policy file's numbers may be (see LogisticPolicy.from_json for why), checked when it is read: the
+# size of a weight (theta, theta_level), of a normalisation's mean or scale, and the smallest scale
+# (Normalisation.fit writes a smaller standard deviation as 1). The self-trigger's files share them.
+MAX_WEIGHT, MAX_SCALE, MIN_SCALE = checks.MAX_WEIGHT, checks.MAX_SCALE, checks.MIN_SCALE
 
 
 class PolicyFileError(EtmpcError):
@@ -86,8 +90,25 @@ class Normalisation:
         return {name: getattr(self, name).tolist() for name in ("mean", "std", "mean_sq", "std_sq")}
 
     @classmethod
-    def from_json(cls, data: dict) -> Normalisation:
-        return cls(*(np.asarray(data[name], dtype=float) for name in ("mean", "std", "mean_sq", "std_sq")))
+    def from_json(cls, data: dict, where: str = "policy") -> Normalisation:
+        """From a policy file's ``normalisation``, each number checked (:func:`file_numbers`)."""
+        if not isinstance(data, dict):
+            raise PolicyFileError(f"{where}: normalisation is not an object of mean, std, mean_sq and std_sq")
+        return cls(
+            *(
+                file_numbers(data[name], f"normalisation.{name}", where, MAX_SCALE, MIN_SCALE if name.startswith("std") else None)
+                for name in ("mean", "std", "mean_sq", "std_sq")
+            )
+        )
+
+
+def file_numbers(values, field: str, where: str, largest: float, smallest: float | None = None) -> np.ndarray:
+    """The numbers of field ``field`` of a policy file (``where``), as :func:`etmpc.common.checks.json_numbers`
+    checks them; else :class:`PolicyFileError` in one line naming the file, the field and the first bad number."""
+    try:
+        return checks.json_numbers(values, field, largest, smallest)
+    except checks.BadValue as exc:
+        raise PolicyFileError(f"{where}: {exc}") from None
 
 
 def sigmoid(z: float) -> float:
@@ -230,6 +251,22 @@ class LogisticPolicy:
 
     @classmethod
     def from_json(cls, data: dict, where: str = "policy") -> LogisticPolicy:
+        """A policy from its file's content (``where`` names the file in errors), checked: its format, and
+        each number (:func:`file_numbers`) finite, a weight at most :data:`MAX_WEIGHT` (1e6) in size, the
+        normalisation's means and scales at most :data:`MAX_SCALE` (1e100), its scales at least
+        :data:`MIN_SCALE` (1e-12, what :meth:`Normalisation.fit` writes). A bad one is refused here, in one
+        line naming the file and the field, rather than clipped or played.
+
+        Why refused, and why these bounds: a fitted policy's weights are of order 1 (every shipped file's are
+        below 4) on features scaled to unit variance. A weight of 1e6 puts the logit beyond +-37, where the
+        probability is exactly 0 or 1 in double precision, at 1e-4 standard deviations of its feature: a
+        larger one decides nothing a smaller one does not, and only makes the dot product overflow. Weights
+        of +-1e308 gave terms of +inf and -inf, a logit with no value, and an error in the middle of a run,
+        after its work was spent; an integer too large for a double was an ``OverflowError`` traceback.
+        Within the bounds, the logit at any state whose raw features are within +-1e100 is a finite number
+        (no term exceeds 1e6 x 1e212), so a file that loads decides wherever a plant goes that far. Beyond,
+        a logit of +-inf is still a probability (:func:`sigmoid` gives 1 or 0); only terms of both
+        infinities have no value, and are an error naming the policy (:meth:`decision_value`)."""
         if not isinstance(data, dict) or data.get("format") != FORMAT:
             raise PolicyFileError(
                 f"{where} is not an etmpc logistic policy (format {data.get('format') if isinstance(data, dict) else None!r})"
@@ -249,9 +286,9 @@ class LogisticPolicy:
         if decision not in ("sample", "greedy"):
             raise PolicyFileError(f"{where} has unknown decision rule {decision!r}; this etmpc knows sample, greedy")
         try:
-            normalisation = Normalisation.from_json(data["normalisation"])
-            theta = np.asarray(data["theta"], dtype=float)
-            theta_level = np.asarray(data["theta_level"], dtype=float) if "theta_level" in data else None
+            normalisation = Normalisation.from_json(data["normalisation"], where)
+            theta = file_numbers(data["theta"], "theta", where, MAX_WEIGHT)
+            theta_level = file_numbers(data["theta_level"], "theta_level", where, MAX_WEIGHT) if "theta_level" in data else None
             policy = cls(
                 theta,
                 normalisation,
@@ -266,10 +303,8 @@ class LogisticPolicy:
         n = normalisation.mean.size
         if theta.shape != (2 * n + 1,) or any(getattr(normalisation, a).shape != (n,) for a in ("std", "mean_sq", "std_sq")):
             raise PolicyFileError(f"{where} is corrupt: {theta.size} parameters for {n} state components")
-        if theta_level is not None and (theta_level.shape != theta.shape or not np.all(np.isfinite(theta_level))):
+        if theta_level is not None and theta_level.shape != theta.shape:
             raise PolicyFileError(f"{where} is corrupt: theta_level is not {theta.size} finite numbers")
-        if not (np.all(np.isfinite(theta)) and np.all(normalisation.std > 0) and np.all(normalisation.std_sq > 0)):
-            raise PolicyFileError(f"{where} is corrupt: non-finite parameters or non-positive scales")
         return policy
 
 
@@ -281,7 +316,7 @@ def load_policy(path: str | Path, domain: str | None = None, nx: int | None = No
         data = loads(path.read_text())
     except FileNotFoundError:
         raise PolicyFileError(f"policy file {path} not found") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+    except (OSError, ValueError) as exc:  # UnicodeDecodeError and JSONDecodeError are ValueErrors
         raise PolicyFileError(f"policy file {path} cannot be read ({exc})") from None
     policy = LogisticPolicy.from_json(data, where=f"policy file {path}")
     if domain is not None and policy.domain != domain:

@@ -43,6 +43,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from etmpc.common import checks
 from etmpc.common.documents import read_document
 from etmpc.common.errors import EtmpcError
 from etmpc.loop import AugmentedState
@@ -146,16 +147,18 @@ def read_description(meta_file: Path, task: str | None, trained: str, missing: s
     try:
         trained_on = canonical(str(meta["task"]))
         cls = system_class(trained_on)
-        mean, var = np.asarray(meta["observation_mean"], float), np.asarray(meta["observation_var"], float)
+        # finite numbers, a variance >= 0 (checks.json_numbers: an integer beyond a double is refused, not an OverflowError)
+        mean = checks.json_numbers(meta["observation_mean"], "observation_mean")
+        var = checks.json_numbers(meta["observation_var"], "observation_var", smallest=0.0)
         names = tuple(meta["observation_names"])
+    except checks.BadValue as exc:
+        raise EtmpcError(f"{meta_file}: {exc}") from None
     except (KeyError, TypeError, ValueError) as exc:
         raise EtmpcError(f"{meta_file} is corrupt ({exc!r})") from None
     if task is not None and canonical(task) != trained_on:
         raise EtmpcError(f"{trained} was trained on {trained_on!r}, not {canonical(task)!r}")
     if names != observation_names(cls.name, cls.state_names) or mean.shape != var.shape or mean.shape != (len(names),):
         raise EtmpcError(f"{meta_file}: its observation does not match the task's")
-    if not (np.all(np.isfinite(mean)) and np.all(np.isfinite(var)) and np.all(var >= 0)):
-        raise EtmpcError(f"{meta_file} has non-finite or negative normalisation")
     return trained_on, mean, var, meta
 
 

@@ -23,6 +23,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from etmpc.common import checks
 from etmpc.common.documents import loads
 from etmpc.common.errors import EtmpcError
 from etmpc.common.numerics import matvec
@@ -117,7 +118,12 @@ def from_json(data: Any, path: str, domain: str | None) -> SelfTrigger:
         raise EtmpcError(f"self-trigger policy {path} is for {data.get('domain')!r}, not {domain!r}")
     try:
         candidates = tuple(int(c) for c in data["candidates"])
-        theta, mean, scale = (np.asarray(data[k], dtype=float) for k in ("theta", "mean", "scale"))
+        # each number checked as a learned policy's are (etmpc.policies.learned.LogisticPolicy.from_json says why)
+        theta = checks.json_numbers(data["theta"], "theta", checks.MAX_WEIGHT)
+        mean = checks.json_numbers(data["mean"], "mean", checks.MAX_SCALE)
+        scale = checks.json_numbers(data["scale"], "scale", checks.MAX_SCALE, checks.MIN_SCALE)
+    except checks.BadValue as exc:
+        raise EtmpcError(f"self-trigger policy {path}: {exc}") from None
     except (KeyError, TypeError, ValueError) as exc:
         raise EtmpcError(f"self-trigger policy {path} is incomplete or malformed ({exc})") from None
     if (

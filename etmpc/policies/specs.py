@@ -173,7 +173,13 @@ BUILT_IN: tuple[Kind, ...] = (
         family="self",
         path=True,
     ),
-    Kind("py", "py:MODULE:NAME", "your own trigger (a class or factory)", lambda arg, spec, c: load_user(spec), family="users"),
+    Kind(
+        "py",
+        "py:MODULE:NAME",
+        "your own trigger (a class or factory)",
+        lambda arg, spec, c: load_user(spec, c.levels),
+        family="users",
+    ),
     Kind(
         "sb3",
         "sb3:PATH",

@@ -7,7 +7,7 @@ from the generator it is given?) and ``decide(s, rng) -> bool`` (True: recompute
 ``s.observation``, and ``simulates = True`` for a policy that needs the loop's whole state
 (``s.context``). :func:`checked` wraps one so that whatever goes wrong inside it is one line that names
 it: a ``decide`` that raises anything (``SystemExit`` and ``KeyboardInterrupt`` included: only a real
-Ctrl-C stops the command) or answers anything but a bool.
+Ctrl-C stops the command) or answers what its task does not take (a bool, 0 or 1; 0, 1 or 2 with compute levels).
 
 A trigger cannot change the run it is scored on: what it is shown is read-only (see
 :class:`etmpc.loop.AugmentedState`), and a trigger that simulates (``simulates = True``) is handed a
@@ -30,6 +30,7 @@ import numpy as np
 
 from etmpc.common.errors import EtmpcError
 from etmpc.common.interrupts import described, failed, genuine, users_code
+from etmpc.control.timing import ANSWERS, level_of
 from etmpc.loop import AugmentedState, DecisionContext, Policy
 
 
@@ -54,13 +55,16 @@ def _check_members(policy: Any, where: str) -> None:
 
 @dataclass(eq=False)
 class Checked:
-    """``policy`` with its answers checked: an exception in ``decide``, or an answer that is neither a bool
-    nor a compute level (0, 1, 2), is an :class:`EtmpcError` naming the policy. Its ``spec`` is
-    ``name``: the policy's own spec, or the ``py:MODULE:NAME`` it was loaded by."""
+    """``policy`` with its answers checked: an exception in ``decide``, or an answer that is no answer on the
+    task (:func:`~etmpc.control.timing.level_of`: a bool, 0 or 1; with compute ``levels`` 0, 1 or 2 too), is
+    an :class:`EtmpcError` naming the policy and the answer. Its ``spec`` is ``name``: the policy's own spec,
+    or the ``py:MODULE:NAME`` it was loaded by. ``levels``: whether the task it plays has compute levels
+    (None: not known here; 0, 1 and 2 pass, and the loop refuses a level its task has not)."""
 
     policy: Any
     name: str
     _twin: Any = field(default=None, repr=False)  # (system, environment) a simulating policy plays in
+    levels: bool | None = None
 
     def __post_init__(self):  # read once: a property of the user's that changes cannot change the run
         self.stochastic = bool(self._member("stochastic", None))
@@ -97,33 +101,42 @@ class Checked:
             if genuine(exc):
                 raise
             raise failed(f"policy {self.name}: decide", exc) from None
-        if isinstance(answer, (bool, np.bool_)):
-            return bool(answer)
-        if isinstance(answer, (int, np.integer)) and 0 <= answer <= 2:  # a compute level (keep, one iteration, solve)
-            return int(answer)
-        raise EtmpcError(
-            f"policy {self.name}: decide must return a bool (True: recompute), or on a task with compute levels "
-            f"0, 1 or 2 (keep, one SQP iteration, a full solve); it returned {type(answer).__name__} {answer!r}"
-        )
+        if answer is True or answer is False:  # the common answer, at once: this is asked at every decision
+            return answer
+        if level_of(answer, self.levels is not False) is None:
+            raise EtmpcError(
+                f"policy {self.name}: decide must return a bool (True: recompute), {_EXPECTED[self.levels]}; "
+                f"it returned {type(answer).__name__} {answer!r}"
+            )
+        return bool(answer) if isinstance(answer, np.bool_) else int(answer)
 
 
-def checked(policy: Any, name: str | None = None) -> Policy:
-    """``policy`` (a policy object) checked on entry and at every decision."""
+_EXPECTED = {
+    False: "or 0 or 1 (keep, a full solve) on a task without compute levels",
+    True: f"or a compute level ({ANSWERS[True]})",
+    None: "or on a task with compute levels 0, 1 or 2 (keep, one SQP iteration, a full solve)",
+}
+
+
+def checked(policy: Any, name: str | None = None, levels: bool | None = None) -> Policy:
+    """``policy`` (a policy object) checked on entry and at every decision; ``levels``: whether the task it
+    will play has compute levels (None: not known; the loop then checks what the task takes)."""
     if isinstance(policy, Checked):
-        return policy
+        return policy if levels is None or policy.levels == levels else replace(policy, levels=levels, _twin=None)
     if name is None:
         with users_code(f"policy {type(policy).__name__}: reading spec"):
             name = str(getattr(policy, "spec", type(policy).__name__))
     check_policy(policy, f"policy {' '.join(name.splitlines())}")
-    return Checked(policy, name)
+    return Checked(policy, name, levels=levels)
 
 
 _MISSING = object()
 
 
-def load_user(spec: str) -> Policy:
+def load_user(spec: str, levels: bool | None = None) -> Policy:
     """``py:MODULE:NAME``: ``NAME`` from ``MODULE`` (importable from the working directory or
-    ``sys.path``), called with no arguments if it is a class or a factory, checked."""
+    ``sys.path``), called with no arguments if it is a class or a factory, checked (its answers as a task
+    with compute ``levels``, or without, takes them)."""
     target = spec[len("py:") :]
     module_name, _, name = target.rpartition(":")
     if not module_name or not name:
@@ -143,4 +156,4 @@ def load_user(spec: str) -> Policy:
     with users_code(f"policy {spec}: {name}()"):
         is_factory = isinstance(factory, type) or (callable(factory) and not callable(getattr(factory, "decide", None)))
         policy = factory() if is_factory else factory
-    return checked(policy, spec)
+    return checked(policy, spec, levels)

@@ -22,10 +22,11 @@ from typing import Any, Protocol
 import dm_env
 import numpy as np
 
+from etmpc.common import checks
 from etmpc.common.documents import loads
 from etmpc.common.errors import EtmpcError
 from etmpc.control.plan import Plan
-from etmpc.control.timing import Latency
+from etmpc.control.timing import Latency, checked_latency
 
 
 @dataclass(frozen=True)
@@ -219,16 +220,20 @@ class SystemBase:
     variant_of: str | None = None
 
     # -- time in the loop (etmpc.control.timing): a Config's latency and compute_levels, if it has them ----------
+    # Read here for every task, and checked here once (the registry reads both when it makes a system, so a
+    # bad Config is refused then, not in the middle of an episode): no task's Config checks them itself.
     @cached_property
     def latency(self) -> Latency:
-        """How many control intervals a solve takes (the Config's ``latency``; none by default)."""
-        return getattr(self.config, "latency", Latency())
+        """How many control intervals a solve takes (the Config's ``latency``; none by default): a
+        :class:`Latency` shorter than the horizon (:func:`~etmpc.control.timing.checked_latency`)."""
+        return checked_latency(getattr(self.config, "latency", Latency()), self.horizon)
 
     @cached_property
     def compute_levels(self) -> bool:
         """A decision is one of keep, one SQP iteration, a full solve (the Config's ``compute_levels``);
-        a computation is then priced per SQP iteration. False: keep or solve, priced per solve."""
-        return bool(getattr(self.config, "compute_levels", False))
+        a computation is then priced per SQP iteration. False: keep or solve, priced per solve. A bool,
+        never read by its truth (``"no"`` would turn levels on)."""
+        return checks.argument("compute_levels", checks.flag, getattr(self.config, "compute_levels", False))
 
     @cached_property
     def counts_iterations(self) -> bool:

@@ -12,6 +12,8 @@ from dm_control.rl import control
 from dm_env import specs
 
 Random = np.random.Generator | np.random.RandomState | int | None
+#: A stored episode's bound on a Gaussian's draw, in its standard deviations (beyond it: probability 1.5e-23 a draw).
+GAUSSIAN_BOUND_STD = 10.0
 
 
 def generator(random: Random) -> np.random.Generator:
@@ -46,6 +48,19 @@ def jump_process(rng: np.random.Generator, current: np.ndarray, steps: int, prob
             value = np.asarray(new.pop(0), dtype=float)
         values[j] = value
     return values
+
+
+def outside(values: Any, low: Any, high: Any) -> str | None:
+    """What is outside ``[low, high]`` in ``values`` (bounds broadcast against it; NaN is outside), or None:
+    the first such value, where it is and the range, in words."""
+    values = np.asarray(values)
+    low, high = np.broadcast_to(low, values.shape), np.broadcast_to(high, values.shape)
+    inside = (values >= low) & (values <= high)
+    if inside.all():
+        return None
+    at = np.unravel_index(np.argmin(inside), values.shape)  # the first value outside
+    where = f" at {list(map(int, at))}" if values.ndim else ""
+    return f"{values[at].item()!r}{where} is outside the task's range [{low[at].item()!r}, {high[at].item()!r}]"
 
 
 def steps_for(time_limit: float, interval_s: float) -> int:
@@ -154,7 +169,9 @@ class EpisodeTask(control.Task):
         return self._episode
 
     def use_episode(self, episode: Any) -> None:
-        """Play ``episode`` at the next reset (``None``: draw from ``random`` again)."""
+        """Play ``episode`` at the next reset (``None``: draw from ``random`` again). Its lengths are checked
+        (:meth:`check_episode`), not its values: an episode made by hand may start where no draw does (a pole
+        at 1 rad, to see it fall); a test set's are checked against the task's ranges (:meth:`check_stored`)."""
         if episode is not None:
             self.check_episode(episode)
         self._queued = episode
@@ -172,7 +189,27 @@ class EpisodeTask(control.Task):
         self._episode, self._step = episode, step
 
     def check_episode(self, episode: Any) -> None:
-        """Raise ``ValueError`` if ``episode`` cannot be played by this task."""
+        """Raise ``ValueError`` if ``episode`` cannot be played by this task (its lengths: the task's own check)."""
+
+    def episode_ranges(self) -> dict[str, tuple[Any, Any]]:
+        """The closed range ``(low, high)`` of each field of an episode, by the names of ``Episode.arrays()``:
+        the values the task's draws can give (``low`` and ``high`` broadcast against the field: a vector of
+        bounds for a state's components). {} by default: a task that declares none has only its lengths
+        checked. A task whose distribution has no bound (a Gaussian) declares one no draw reaches. Test sets
+        are checked against them (:meth:`check_stored`)."""
+        return {}
+
+    def check_stored(self, episode: Any) -> None:
+        """Raise ``ValueError`` unless ``episode``, read from a test set, is one this task plays: the task's
+        :meth:`check_episode`, then every field within :meth:`episode_ranges`, the first one outside named. A
+        test set is someone's file: a gust of 2**62 intervals, say, played into a traceback; outside its
+        task's ranges it is no episode of the task, and it is refused before it is played (a test set's
+        episodes all are, by ``TestSet.check_playable``)."""
+        self.check_episode(episode)
+        for name, (low, high) in self.episode_ranges().items():
+            problem = outside(getattr(episode, name), low, high)
+            if problem is not None:
+                raise ValueError(f"{name}: {problem}")
 
     def get_termination(self, physics) -> float | None:
         """A non-finite state (``physics.state()``) ends the episode (discount 0); the control loop reports it."""

@@ -180,8 +180,8 @@ def stored_seed(name: str) -> int | None:
 
 def has_levels(name: str) -> bool:
     """Whether task ``name``'s decisions are compute levels (keep, one SQP iteration, a full solve: its
-    Config's ``compute_levels``), read off the Config class without building the system."""
-    return bool(getattr(system_class(name).Config, "compute_levels", False))
+    Config's ``compute_levels``, a bool as the system checks it), read off the Config class without building the system."""
+    return checks.argument("compute_levels", checks.flag, getattr(system_class(name).Config, "compute_levels", False))
 
 
 def system_class(name: str) -> type:
@@ -207,12 +207,16 @@ class SystemKey:
         return self.task if self.recompute_price is None else f"{self.task}@{self.recompute_price!r}"
 
     def make(self):
-        """The system: the task's class built from its ``Config()``, at this price if one is set."""
+        """The system: the task's class built from its ``Config()``, at this price if one is set. Its time in
+        the loop (``latency``, ``compute_levels``) is read, and so checked, here: a bad Config is refused when
+        the system is made, not in the middle of an episode."""
         cls = system_class(self.task)
         config = cls.Config()
         if self.recompute_price is not None:
             config = replace(config, recompute_price=self.recompute_price)
-        return cls(config)
+        system = cls(config)
+        _ = system.latency, system.compute_levels  # read, and so checked, now
+        return system
 
 
 def system_key(name: str | SystemKey, recompute_price: float | None = None) -> SystemKey:

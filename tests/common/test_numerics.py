@@ -2,6 +2,7 @@
 and the learned policy's decision value built on them."""
 
 import math
+from pathlib import Path
 from decimal import Decimal, localcontext
 from fractions import Fraction
 
@@ -110,6 +111,73 @@ def test_greedy_keeps_at_a_logit_of_exactly_zero():
     assert policy.decision_value(policy.phi(STATE)) == 0.0 and not policy.decide(STATE, None)
     tiny = _policy([0, 0, 0, 0, 0, 0, -1e-300])  # exp rounds this to pi(keep) = 1/2; the logit says recompute
     assert tiny.decide(STATE, None)
+
+
+def _file(tmp_path, **changes) -> Path:
+    """A battery policy file (paper features: 7 weights) with ``changes`` (``normalisation_std=...`` for a
+    normalisation field), written as JSON text (``json.dumps`` writes an int of 400 digits as it is)."""
+    import json
+
+    data = _policy([0.1, -0.2, 0.3, 0.0, 0.5, -0.6, -1.0]).to_json()
+    for name, value in changes.items():
+        if name.startswith("normalisation_"):
+            data["normalisation"][name.removeprefix("normalisation_")] = value
+        else:
+            data[name] = value
+    path = tmp_path / "policy.json"
+    path.write_text(json.dumps(data))
+    return path
+
+
+@pytest.mark.parametrize(
+    "changes, says",
+    [
+        ({"theta": [1e308, -1e308] * 3 + [1e308]}, "theta[0] is 1e+308, beyond the +-1e+06 it may be"),
+        ({"theta": [0.0] * 6 + [-(10**400)]}, "theta[6] is -1000000000000000000..., not a finite number"),
+        ({"theta": [0.0, float("nan")] + [0.0] * 5}, "theta[1] is nan, not a finite number"),
+        ({"theta": [0.0] * 6 + [True]}, "theta[6] is True, not a number"),
+        ({"theta": "0.1"}, "theta is not a list of numbers (str)"),
+        ({"normalisation_std": [1.0, 0.0, 1.0]}, "normalisation.std[1] is 0.0, below the 1e-12 it may be"),
+        ({"normalisation_std_sq": [1e-300, 1.0, 1.0]}, "normalisation.std_sq[0] is 1e-300, below the 1e-12 it may be"),
+        ({"normalisation_mean": [0.0, 0.0, -1e308]}, "normalisation.mean[2] is -1e+308, beyond the +-1e+100 it may be"),
+        ({"normalisation": [1, 2]}, "normalisation is not an object of mean, std, mean_sq and std_sq"),
+    ],
+)
+def test_a_policy_file_of_absurd_or_non_finite_numbers_is_refused_when_read_naming_the_file_and_the_field(
+    tmp_path, capsys, changes, says
+):
+    """Weights of +-1e308 played until a state made their terms +inf and -inf, then stopped the run; an
+    integer too large for a double was an OverflowError traceback. Both are refused when the file is read."""
+    from etmpc.cli import main
+    from etmpc.policies.learned import load_policy
+
+    path = _file(tmp_path, **changes)
+    with pytest.raises(PolicyFileError) as raised:
+        load_policy(path, "battery", nx=1)
+    assert str(raised.value) == f"policy file {path}: {says}"
+    assert main(["evaluate", "battery", "--policy", f"rl:{path}", "--episodes", "1", "--workers", "1"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and says in err and "Traceback" not in err
+
+
+def test_a_policy_file_at_its_bounds_decides_at_every_state_within_1e100(tmp_path):
+    """The bounds leave every term of the logit finite for raw features within +-1e100, so the decision is
+    a probability in [0, 1] there, never an error; and a logit of +-inf is still one."""
+    from etmpc.policies.learned import MAX_SCALE, MAX_WEIGHT, MIN_SCALE, load_policy, sigmoid
+
+    path = _file(
+        tmp_path,
+        theta=[MAX_WEIGHT, -MAX_WEIGHT] * 3 + [MAX_WEIGHT],
+        normalisation_mean=[-MAX_SCALE, MAX_SCALE, -MAX_SCALE],
+        normalisation_std=[MIN_SCALE] * 3,
+        normalisation_mean_sq=[-MAX_SCALE] * 3,
+        normalisation_std_sq=[MIN_SCALE] * 3,
+    )
+    policy = load_policy(path, "battery", nx=1)
+    for raw in ([1e100, -1e100, 1e100], [-1e100, 1e100, 0.0], [0.0, 0.0, 3.0]):
+        logit = policy.decision_value(policy.normalisation.features(np.array(raw)))
+        assert math.isfinite(logit) and 0.0 <= sigmoid(logit) <= 1.0
+    assert [sigmoid(z) for z in (INF, 1e308, -1e308, -INF)] == [1.0, 1.0, 0.0, 0.0]
 
 
 def test_the_battery_gain_is_the_closed_form_riccati_solution_correctly_rounded(battery_system):

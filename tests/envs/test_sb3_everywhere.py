@@ -124,9 +124,13 @@ def test_ppo_load_on_the_documented_environment_decides_as_etmpc_evaluate(direct
     assert any(c[2] > 0 for c in control), "without its normalisation the policy should decide otherwise"
 
 
-def test_the_keyword_refuses_another_tasks_normalisation_in_one_line():
+def test_the_keyword_refuses_another_tasks_normalisation_in_one_line(tmp_path):
     kicks = REPO / "policies" / "cart_pendulum-kicks" / "ppo.json"
+    huge = json.loads((REPO / "policies" / "cart_pendulum" / "ppo.json").read_text())
+    huge["observation_mean"][0] = 10**400  # was an OverflowError traceback
+    (tmp_path / "huge.json").write_text(json.dumps(huge))
     for given, says in [
+        (tmp_path / "huge.json", "huge.json: observation_mean[0] is 10000000000000000000..., not a finite number"),
         (kicks, "its policy was trained on 'cart_pendulum/kicks', not 'cart_pendulum'"),
         (kicks.with_suffix(".zip"), "is a model; give its description, normalize="),
         (kicks.with_name("nosuch.json"), "no such file"),
@@ -136,6 +140,8 @@ def test_the_keyword_refuses_another_tasks_normalisation_in_one_line():
         with pytest.raises(EtmpcError) as refused:
             gym.make("etmpc/cart_pendulum-balance-v0", normalize=given)
         assert says in str(refused.value) and len(str(refused.value).splitlines()) == 1, str(refused.value)
+        if given == 3 or str(given).endswith(".zip"):  # a wrong type, a wrong value: Python's own errors too
+            assert isinstance(refused.value, TypeError if given == 3 else ValueError)
 
 
 def test_the_keyword_composes_with_make_vec_env_and_keeps_the_spaces():

@@ -111,10 +111,16 @@ def test_a_reward_against_a_baseline_is_the_agents_reward_minus_the_baselines_on
     assert env.unwrapped.core.simulated_steps == own.steps + baseline.steps
 
 
-@pytest.mark.parametrize("bad", ["threshold:0.1", "every:0", "rl:x.json", "sometimes", 3])
-def test_a_reward_baseline_must_be_a_fixed_schedule(bad):
-    with pytest.raises(EtmpcError, match="fixed schedule"):
-        TriggerEnv("cart_pendulum", reward_baseline=bad)
+@pytest.mark.parametrize(
+    "bad, error",
+    [("threshold:0.1", ValueError), ("every:0", ValueError), ("rl:x.json", ValueError), ("bogus", ValueError), (3, TypeError)],
+)
+def test_a_reward_baseline_must_be_a_fixed_schedule(bad, error):
+    """A bad argument to the API is an EtmpcError (one line on the command line) and the error Python's own
+    would be: a ValueError for a bad value, a TypeError for a wrong type."""
+    with pytest.raises(EtmpcError, match="reward_baseline: a fixed schedule") as raised:
+        gym.make("etmpc/cart_pendulum-balance-v0", reward_baseline=bad)
+    assert isinstance(raised.value, error)
 
 
 def test_reset_with_a_seed_replays_the_same_episode_and_other_seeds_differ():
@@ -217,10 +223,26 @@ def test_unknown_reset_options_and_bad_test_episodes_are_refused():
     for options in ("test_episode", [("test_episode", 3)], 3):
         with pytest.raises(ValueError, match="reset options are a dict"):
             env.reset(options=options)
+    with pytest.raises(EtmpcError, match="unknown reset options"):  # a ValueError, and one line on the command line
+        env.reset(options={"episode": 3})
     from etmpc.common.errors import TestSetError
 
     with pytest.raises(TestSetError, match="out of range"):
         env.reset(options={"test_episode": 1000})
+
+
+def test_a_test_set_holding_what_its_task_cannot_draw_is_refused_when_the_environment_reads_it(tmp_path):
+    from etmpc.common.errors import TestSetError
+    from etmpc.evaluation import testsets
+
+    stored = testsets.load(testsets.default_path("cart_pendulum", "balance"), "cart_pendulum", "balance")
+    arrays = {name: np.array(values[:2]) for name, values in stored.arrays.items()}
+    arrays["disturbance"][1, 7] = 1e6
+    path = tmp_path / "mine.npz"
+    testsets.write(path, arrays, dict(stored.meta, episodes=2))
+    env = TriggerEnvironment("cart_pendulum", test_set=str(path))
+    with pytest.raises(TestSetError, match=re.escape("episode 1: disturbance: 1000000.0 at [7] is outside the task's range")):
+        env.reset(test_episode=0)  # any episode: the whole set is checked when first read
 
 
 def test_a_dm_env_environment_underneath():
@@ -248,22 +270,25 @@ def test_vectorised_environments_work():
 
 
 @pytest.mark.parametrize(
-    "kwargs, says",
+    "kwargs, says, error",
     [
-        ({"task": 3}, "task: a task name"),
-        ({"task": "cartpole"}, "unknown task 'cartpole'"),
-        ({"recompute_price": -1.0}, "recompute_price: a price of a computation is a finite number >= 0"),
-        ({"recompute_price": "0.1"}, "recompute_price: '0.1' is not a number"),
-        ({"seed": -1}, "seed: a seed is a whole number"),
-        ({"seed": 1.5}, "seed: 1.5 is not a whole number"),
-        ({"test_set": 3}, "test_set: a file path is needed"),
+        ({"task": 3}, "task: a task name", TypeError),
+        ({"task": "cartpole"}, "unknown task 'cartpole'", KeyError),
+        ({"recompute_price": -1.0}, "recompute_price: a price of a computation is a finite number >= 0", ValueError),
+        ({"recompute_price": "0.1"}, "recompute_price: '0.1' is not a number", ValueError),
+        ({"seed": -1}, "seed: a seed is a whole number", ValueError),
+        ({"seed": 1.5}, "seed: 1.5 is not a whole number", ValueError),
+        ({"test_set": 3}, "test_set: a file path is needed", TypeError),
+        ({"reward_baseline": "always:3"}, "reward_baseline: a fixed schedule", ValueError),
     ],
 )
-def test_a_bad_argument_to_an_environment_is_one_clear_error(kwargs, says):
+def test_a_bad_argument_to_an_environment_is_one_clear_error(kwargs, says, error):
+    """Both an EtmpcError (one line on the command line) and the error Python's own would be."""
     from etmpc.common.errors import EtmpcError
 
-    with pytest.raises(EtmpcError, match=re.escape(says)):
+    with pytest.raises(EtmpcError, match=re.escape(says)) as raised:
         TriggerEnvironment(**({"task": "battery"} | kwargs))
+    assert isinstance(raised.value, error)
 
 
 def test_an_older_version_of_a_tasks_id_points_at_the_current_one():

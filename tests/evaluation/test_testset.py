@@ -132,3 +132,38 @@ def test_wrong_task(copy):
 def test_episode_out_of_range(cart_testset):
     with pytest.raises(TestSetError, match="out of range"):
         cart_testset.episode_arrays(100)
+
+
+@pytest.mark.parametrize("name", [name for name in names() if stored_seed(name) is not None])
+def test_every_field_of_a_stored_episode_is_within_the_range_its_task_declares(name, tmp_path):
+    """A test set is someone's file: a value its task cannot draw (a gust of 2**62 intervals ended in a
+    traceback) is refused before any episode is played, naming the episode and the field."""
+    system = make_system(name)
+    task = system.make_env().task
+    stored = testset.load(testset.default_path(system.domain, system.task), system.domain, system.task)
+    ranges = task.episode_ranges()
+    assert sorted(ranges) == sorted(stored.arrays)  # every field has its range
+    stored.check_playable(system, task)  # and the stored episodes are within them
+    for field, (low, high) in ranges.items():
+        arrays = {k: np.array(v[:3]) for k, v in stored.arrays.items()}
+        beyond = 2**62 if arrays[field].dtype.kind in "iu" else float(np.max(high)) + 1.0
+        arrays[field][2, ...].flat[-1] = beyond  # a view of episode 2, also of a field of one number
+        path = tmp_path / f"{field}.npz"
+        testset.write(path, arrays, dict(stored.meta, episodes=3))
+        loaded = testset.load(path, system.domain, system.task)  # the file is whole: only a value is wrong
+        with pytest.raises(TestSetError, match=f"episode 2: {field}: {beyond!r}.* is outside the task's range"):
+            loaded.check_playable(system, task)
+
+
+def test_a_gust_that_never_ends_is_one_line_before_any_episode_is_played(tmp_path, capsys):
+    from etmpc.cli import main
+
+    stored = testset.load(testset.default_path("quadrotor", "waypoints"), "quadrotor", "waypoints")
+    arrays = {k: np.array(v[:2]) for k, v in stored.arrays.items()}
+    arrays["gust_intervals"][1, 5] = 2**62
+    path = tmp_path / "gusts.npz"
+    testset.write(path, arrays, dict(stored.meta, episodes=2))
+    code = main(["evaluate", "quadrotor", "--policy", "every:7", "--test-set", str(path), "--workers", "1"])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "Traceback" not in err
+    assert f"episode 1: gust_intervals: {2**62} at [5] is outside the task's range [0, 16]" in err

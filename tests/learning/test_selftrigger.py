@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import pickle
+import re
 
 import numpy as np
 import pytest
@@ -110,10 +111,12 @@ def _write(tmp_path, **change):
         ({"format": "etmpc-logistic-policy"}, "not a self-trigger policy"),
         ({"domain": "battery"}, "is for 'battery'"),
         ({"theta": [[0.0] * 3] * 11}, "inconsistent"),
-        ({"scale": [1.0, 0.0, 1.0]}, "inconsistent"),
+        ({"scale": [1.0, 0.0, 1.0]}, re.escape("scale[1] is 0.0, below the 1e-12 it may be")),
+        ({"theta": [[1e308] * 4] * 11}, re.escape("self-trigger policy ") + ".*" + re.escape(": theta[0][0] is 1e+308, beyond")),
+        ({"mean": [10**400, 0.0, 0.0]}, re.escape("mean[0] is 10000000000000000000..., not a finite number")),
         ({"candidates": [0] + list(st.CANDIDATES[1:])}, "inconsistent"),
         ({"candidates": [1, 1] + list(st.CANDIDATES[2:])}, "inconsistent"),
-        ({"theta": "many"}, "malformed"),
+        ({"theta": "many"}, re.escape("theta is not a list of numbers (str)")),
     ],
 )
 def test_bad_files_are_one_clear_error(tmp_path, change, message):

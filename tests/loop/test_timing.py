@@ -3,6 +3,7 @@ compute levels price SQP iterations. Checked against a loop written here from th
 predictor, the solver's own optimum and the bookkeeping of work and price."""
 
 import copy
+import re
 from dataclasses import replace
 
 import numpy as np
@@ -196,6 +197,25 @@ def test_a_bad_latency_is_one_line(arguments, says):
     assert "\n" not in str(raised.value)
 
 
+@pytest.mark.parametrize(
+    "arguments, says",
+    [
+        ({"compensate": "no"}, "latency: compensate: must be True or False, got str 'no'"),
+        ({"intervals": 1, "compensate": 1}, "latency: compensate: must be True or False, got int 1"),
+        ({"compensate": None}, "latency: compensate: must be True or False"),
+        ({"platform": 3}, "latency: platform must be a str"),
+        ({"iteration_s": True, "platform": "x"}, "latency: iteration_s must be a finite number"),
+    ],
+)
+def test_a_latencys_flag_and_names_are_of_their_kind_not_read_by_their_truth(arguments, says):
+    """compensate="no" is a true string: read by its truth it turned compensation on."""
+    from etmpc.common.checks import BadValue
+
+    with pytest.raises(BadValue, match=re.escape(says)):
+        Latency(**arguments)
+    assert Latency(intervals=1, compensate=np.bool_(True)).compensate is True  # a numpy bool is a bool
+
+
 def test_a_policy_learned_at_latency_zero_plays_on_its_timing_variant_and_nowhere_else():
     from etmpc.policies.learned import PolicyFileError
 
@@ -226,6 +246,63 @@ def test_a_python_trigger_answers_a_compute_level_as_the_built_in_schedule_does(
     np.testing.assert_array_equal(mine.level, built_in.level)
 
 
+class _Answers:
+    spec, stochastic = "answers", False
+
+    def __init__(self, answer):
+        self.answer = answer
+
+    def decide(self, s, rng):
+        return self.answer
+
+
+@pytest.mark.parametrize("answer", [2, np.int64(2), 1.0, 0.0, "no", None, np.array(1), -1])
+def test_an_answer_a_keep_or_solve_task_does_not_take_is_refused_naming_the_trigger_and_the_answer(answer):
+    """Read by its truth, 2 (a compute level) was a full solve on a task without levels, "no" a solve too."""
+    from etmpc.common.checks import BadValue
+    from etmpc.policies.user import checked
+
+    system = make_system("cart_pendulum/kicks")
+    episode = _episode(system, 0)
+    said = f"it returned {type(answer).__name__} {answer!r}"
+    with pytest.raises(EtmpcError, match="^policy answers: decide must return a bool.*" + re.escape(said)):
+        run_episode(system, system.make_env(), checked(_Answers(answer), levels=False), None, episode)
+    # The loop refuses it too, naming the task, for a policy that is not checked (the one check: level_of).
+    loop = ClosedLoop(system, system.make_env()).reset(episode)
+    loop.step(True)
+    with pytest.raises(BadValue, match=re.escape(f"on task cart_pendulum/kicks, got {type(answer).__name__} {answer!r}")):
+        loop.step(answer)
+
+
+def test_a_trigger_answers_a_bool_or_a_level_by_its_value_python_or_numpy():
+    from etmpc.control.timing import level_of
+
+    for answer, plain, levels in [
+        (False, KEEP, KEEP),
+        (True, SOLVE, SOLVE),
+        (0, KEEP, KEEP),
+        (1, SOLVE, ITERATE),
+        (np.bool_(True), SOLVE, SOLVE),
+        (np.int64(1), SOLVE, ITERATE),
+        (np.uint8(0), KEEP, KEEP),
+        (2, None, SOLVE),
+        (np.int32(2), None, SOLVE),
+        (3, None, None),
+        (2.0, None, None),
+    ]:
+        assert (level_of(answer, False), level_of(answer, True)) == (plain, levels), answer
+    # A user's trigger is checked as its task takes answers (not known: as a task with levels; the loop checks the rest).
+    from types import SimpleNamespace
+
+    from etmpc.policies.user import checked
+
+    s = SimpleNamespace(context=None)
+    assert checked(_Answers(np.int64(2)), levels=True).decide(s, None) == SOLVE
+    assert checked(_Answers(np.int64(2))).decide(s, None) == SOLVE
+    with pytest.raises(EtmpcError, match=r"policy answers: .* on a task without compute levels; it returned int64 np.int64\(2\)"):
+        checked(_Answers(np.int64(2)), levels=False).decide(s, None)
+
+
 def test_the_trajectory_keeps_when_each_plans_computation_started_and_when_it_came_into_force():
     d = 2
     system = _kicks(latency=Latency(intervals=d, compensate=True))
@@ -233,3 +310,38 @@ def test_the_trajectory_keeps_when_each_plans_computation_started_and_when_it_ca
     assert len(traj.starts) == len(traj.plans) == len(traj.arrivals) and traj.starts[0] == 0
     for start, (made, _), arrived in zip(traj.starts[1:], traj.plans[1:], traj.arrivals[1:]):
         assert traj.recompute[start] and made == start + d == arrived  # compensated: made for its arrival
+
+
+@pytest.mark.parametrize(
+    "config, error, says",
+    [
+        ({"latency": 2}, "BadType", "latency: a Latency(...) is needed (etmpc.control.timing.Latency), got int 2"),
+        (
+            {"latency": Latency(intervals=25)},
+            "BadValue",
+            "latency: 25 intervals is not shorter than the MPC's horizon of 20 steps",
+        ),
+        (
+            {"latency": Latency(intervals=20)},
+            "BadValue",
+            "latency: 20 intervals is not shorter than the MPC's horizon of 20 steps",
+        ),
+        ({"compute_levels": "no"}, "BadValue", "compute_levels: must be True or False, got str 'no'"),
+        ({"compute_levels": 1}, "BadValue", "compute_levels: must be True or False, got int 1"),
+    ],
+)
+def test_a_tasks_time_in_the_loop_is_refused_when_its_system_is_made_not_mid_episode(config, error, says, monkeypatch):
+    """One check for every task (SystemBase reads a Config's latency and compute_levels): an int for a Latency
+    failed with an AttributeError mid-episode, compute_levels="no" turned levels on, and a latency as long as the
+    horizon played a whole episode of plans that arrived after they ran out."""
+    from etmpc.common import checks
+    from etmpc.systems.cart_pendulum.timing import KicksLateSystem, LateConfig
+
+    system = _kicks(**config)
+    with pytest.raises(getattr(checks, error), match=re.escape(says)):
+        ClosedLoop(system, system.make_env())  # refused before an episode starts
+    # A task whose Config() holds it is refused by the registry when the system is made.
+    monkeypatch.setattr(KicksLateSystem, "Config", lambda: replace(LateConfig(), **config))
+    with pytest.raises(getattr(checks, error), match=re.escape(says)):
+        make_system("cart_pendulum/kicks_late")
+    assert make_system("cart_pendulum/kicks").latency.instant  # the default is none, and is a Latency

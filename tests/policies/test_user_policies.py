@@ -87,6 +87,11 @@ class Answers:
     def decide(self, s, rng):
         return "yes"
 
+class Two:
+    spec, stochastic = "two", False
+    def decide(self, s, rng):
+        return 2
+
 class Broken:
     def __init__(self):
         raise RuntimeError("cannot build")
@@ -142,6 +147,11 @@ def test_py_targets_evaluate_like_the_same_rule(here, target, capsys):
         ("py:mytriggers:Broken", "Broken() raised RuntimeError: cannot build"),
         ("py:mytriggers:Raises", "decide raised ZeroDivisionError: my bug"),
         ("py:mytriggers:Answers", "decide must return a bool"),
+        (
+            "py:mytriggers:Two",  # a compute level on a task that has none: it was taken as a full solve
+            "policy py:mytriggers:Two: decide must return a bool (True: recompute), or 0 or 1 (keep, a full solve) "
+            "on a task without compute levels; it returned int 2",
+        ),
         ("py:mytriggers", "use py:MODULE:NAME"),
     ],
 )

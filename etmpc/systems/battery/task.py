@@ -44,9 +44,9 @@ from dm_control.rl import control
 from dm_control.utils import containers
 from dm_env import specs
 
-from etmpc.systems.battery.market import Episode, sample_future
-from etmpc.systems.battery.parameters import Battery, Market
-from etmpc.systems.episodes import EpisodeTask, Random, add_task, build_environment
+from etmpc.systems.battery.market import SIGNAL_ARRAYS, Episode, sample_future
+from etmpc.systems.battery.parameters import SECONDS_PER_HOUR, Battery, Market, Signal
+from etmpc.systems.episodes import GAUSSIAN_BOUND_STD, EpisodeTask, Random, add_task, build_environment
 
 SUITE = containers.TaggedTasks()
 
@@ -193,6 +193,21 @@ class Trading(EpisodeTask):
     def episode_parameters(self) -> dict:
         """What the episodes are drawn from (recorded in the test set)."""
         return {"battery": asdict(self.battery), "market": asdict(self.market)}
+
+    def episode_ranges(self) -> dict:
+        """What a stored episode may hold (checked before it is played): the initial charge and the start
+        within the clock hour as drawn; each signal's base between its lowest and highest hourly plus event
+        level, its true value within ``GAUSSIAN_BOUND_STD`` standard deviations of its OU deviation from that,
+        and its forecasts within as many of their noise at the longest lead (or of the OU: lead 0 is the true value)."""
+        market = self.market
+        ranges = {"initial_soc": (market.initial_soc_low, market.initial_soc_high), "start_s": (0.0, SECONDS_PER_HOUR)}
+        for name, (true, base, forecast) in SIGNAL_ARRAYS.items():
+            signal: Signal = getattr(market, name)
+            low, high = signal.hourly_low + signal.event_low, signal.hourly_high + signal.event_high
+            ou = GAUSSIAN_BOUND_STD * signal.ou_std
+            lead = max(ou, GAUSSIAN_BOUND_STD * signal.forecast_std_per_step * (market.forecast_steps - 1))
+            ranges |= {base: (low, high), true: (low - ou, high + ou), forecast: (low - lead, high + lead)}
+        return ranges
 
     def signals(self, episode: Episode) -> dict[str, np.ndarray]:
         """The episode's true prices and net production, per step, for recordings."""

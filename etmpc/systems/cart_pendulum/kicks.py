@@ -54,6 +54,7 @@ INITIAL_STATE_LOW = np.array([-0.5, -0.3, -0.1, -0.3])  # eta, v, beta, omega
 INITIAL_STATE_HIGH = -INITIAL_STATE_LOW
 KICKS_PER_S = 0.3
 KICK_RAD_S = (0.3, 0.8)  # |delta omega| ~ U(low, high), random sign
+MOST_KICKS = 10  # in one interval, for a stored episode's range (a Poisson count of mean 0.03: 11 has probability 4e-25)
 BUMPERS = Bumpers(position_m=2.5, stiffness_n_m=1000.0, damping_n_s_m=40.0)
 REFERENCE_M = 1.0  # the cart's reference ~ U(+-1 m)
 REFERENCE_JUMPS_PER_S = 0.4
@@ -169,6 +170,15 @@ class Kicks(CartPendulumTask):
             "bumpers": asdict(BUMPERS),
             "fall_rad": FALL_RAD,
             "fall_cost": FALL_COST,
+        }
+
+    def episode_ranges(self) -> dict:
+        """What a stored episode may hold (checked before it is played)."""
+        kick = MOST_KICKS * KICK_RAD_S[1]
+        return {
+            "initial_state": (INITIAL_STATE_LOW, INITIAL_STATE_HIGH),
+            "kick": (-kick, kick),
+            "reference": (-REFERENCE_M, REFERENCE_M),
         }
 
     def signals(self, episode: KickEpisode) -> dict[str, np.ndarray]:

@@ -41,7 +41,7 @@ from dm_env import specs
 from etmpc.systems.cart_pendulum.model import NX, STATE_NAMES
 from etmpc.systems.cart_pendulum.physics import Physics, load_model
 from etmpc.systems.plants import PLANTS
-from etmpc.systems.episodes import EpisodeTask, Random, build_environment
+from etmpc.systems.episodes import GAUSSIAN_BOUND_STD, EpisodeTask, Random, build_environment
 
 __all__ = ["PLANTS", "Episode", "Balance", "Physics", "load_model", "make_environment"]
 
@@ -143,6 +143,11 @@ class Balance(CartPendulumTask):
             "disturbance_std_rad_s2": DISTURBANCE_STD_RAD_S2,
             "steps": EPISODE_STEPS,
         }
+
+    def episode_ranges(self) -> dict:
+        """What a stored episode may hold (checked before it is played)."""
+        bound = GAUSSIAN_BOUND_STD * DISTURBANCE_STD_RAD_S2
+        return {"initial_state": (INITIAL_STATE_LOW, INITIAL_STATE_HIGH), "disturbance": (-bound, bound)}
 
     def signals(self, episode: Episode) -> dict[str, np.ndarray]:
         """The episode's exogenous inputs, per step, for recordings."""

@@ -202,6 +202,22 @@ class Waypoints(EpisodeTask):
             "distance_scale_m": DISTANCE_SCALE_M,
         }
 
+    def episode_ranges(self) -> dict:
+        """What a stored episode may hold (checked before it is played): the drone at rest and level but
+        for its yaw, in the box; waypoints in the box; horizontal gusts of at most the largest peak, each
+        lasting at most the longest gust's whole intervals (0: none begins)."""
+        rest = np.zeros(NX - 6)
+        peak, longest = GUST_PEAK_N[1], max(1, round(GUST_DURATION_S[1] / CONTROL_DT_S))
+        return {
+            "initial_state": (
+                np.concatenate([BOX_LOW, [0.0, 0.0, -INITIAL_YAW_RAD], rest]),
+                np.concatenate([BOX_HIGH, [0.0, 0.0, INITIAL_YAW_RAD], rest]),
+            ),
+            "target": (BOX_LOW, BOX_HIGH),
+            "gust_peak": (np.array([-peak, -peak, 0.0]), np.array([peak, peak, 0.0])),
+            "gust_intervals": (0, longest),
+        }
+
     def signals(self, episode: Episode) -> dict[str, np.ndarray]:
         """The episode's waypoints and gusts, per step, for recordings."""
         gusts = episode.gusts()

@@ -133,6 +133,12 @@ class Jumps(EpisodeTask):
             "distance_scale_m": DISTANCE_SCALE_M,
         }
 
+    def episode_ranges(self) -> dict:
+        """What a stored episode may hold (checked before it is played): each target's coordinates within
+        the largest radius."""
+        reach = TARGET_RADIUS_M[1]
+        return {"initial_state": (INITIAL_STATE_LOW, INITIAL_STATE_HIGH), "target": (-reach, reach)}
+
     def signals(self, episode: Episode) -> dict[str, np.ndarray]:
         """The episode's target, per step, for recordings."""
         return {"target_x_m": episode.target[:, 0], "target_y_m": episode.target[:, 1]}

@@ -133,6 +133,10 @@ class Track(EpisodeTask):
             "error_scale_m": ERROR_SCALE_M,
         }
 
+    def episode_ranges(self) -> dict:
+        """What a test set's episode may hold: they are checked against it before they are played."""
+        return {"initial_state": (INITIAL_STATE_LOW, INITIAL_STATE_HIGH), "reference": REFERENCE_RANGE_M}
+
     def signals(self, episode: Episode) -> dict[str, np.ndarray]:
         """The reference, per step, for recordings."""
         return {REFERENCE: episode.reference}
