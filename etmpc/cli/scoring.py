@@ -149,7 +149,7 @@ def run(args) -> None:
     if args.figure is not None:
         import numpy as np
 
-        from etmpc.evaluation.scorecard import profiles
+        from etmpc.evaluation.card import profiles
         from etmpc.views.figures import write_performance_profile_png
 
         thresholds = np.linspace(-100.0, 200.0, 301)

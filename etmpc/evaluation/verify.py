@@ -33,7 +33,7 @@ from etmpc.common.outputs import strict
 from etmpc.evaluation import metrics
 from etmpc.evaluation.evaluate import parse_policies, run_jobs
 from etmpc.evaluation.references import SUITE_VERSION, References, stored
-from etmpc.evaluation.scorecard import TaskScore, aggregate, by_policy
+from etmpc.evaluation.card import TaskScore, aggregate, by_policy
 from etmpc.evaluation.workers import workers_for
 from etmpc.systems import system_key, task_version
 

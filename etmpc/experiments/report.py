@@ -303,7 +303,7 @@ def against_the_paper(results: dict) -> list[str]:
 def scorecard_section(results: dict) -> list[str]:
     """What the run trained, on the suite's scorecard (``etmpc score``): each task's normalized score
     (0: its best periodic schedule, 100: the oracle over it) and the interquartile mean of its episode scores."""
-    from etmpc.evaluation.scorecard import TaskScore, aggregate
+    from etmpc.evaluation.card import TaskScore, aggregate
 
     cards = {task: r.get("scorecard", {}) for task, r in results["systems"].items()}
     tasks = [task for task, card in cards.items() if "rows" in card]
