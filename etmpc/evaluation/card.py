@@ -10,6 +10,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from etmpc.common import checks
 from etmpc.evaluation import metrics
 from etmpc.evaluation.references import SUITE_VERSION, software
 from etmpc.systems import task_version
@@ -46,6 +47,13 @@ class TaskScore:
     # order of episode_scores, so that two triggers' failures can be paired episode by episode.
     failures_ci95: float | None = None
     episode_failures: list[float] | None = None
+    # Each episode's objective (NaN: it ended non-finite), computations and solver failures, in the order of
+    # episode_scores (a stochastic policy's passes: the mean, the mean, the sum), so that every number of the
+    # row can be checked against its episodes, and each against a replay (etmpc verify). None: a row of an
+    # older etmpc.
+    episode_objectives: list[float] | None = None
+    episode_recomputes: list[float] | None = None
+    episode_solver_failures: list[int] | None = None
 
     @property
     def scores(self) -> np.ndarray:
@@ -63,15 +71,19 @@ class TaskScore:
     @classmethod
     def from_json(cls, data: dict) -> TaskScore:
         """A row as :meth:`to_json` gave it and strict JSON kept it (a number not scored is ``null``
-        there, NaN here)."""
+        there, NaN here), every field of its type (else ``ValueError``, ``TypeError`` or ``KeyError``)."""
         fields = dict(data)
         for name in ("objective_mean", "recomputes_mean", "score", "score_ci95", "better_share"):
             fields[name] = _nan(fields[name])
         fields["episode_scores"] = [_nan(v) for v in fields["episode_scores"]]
+        if fields.get("episode_objectives") is not None:
+            fields["episode_objectives"] = [_nan(v) for v in fields["episode_objectives"]]
         fields["cpu_ms"] = {k: _nan(v) for k, v in dict(fields["cpu_ms"]).items()}
         if fields.get("episode_failures") is not None:  # the row counted failures: null is a number not known
             fields["failures_mean"], fields["failures_ci95"] = _nan(fields["failures_mean"]), _nan(fields.get("failures_ci95"))
-        return cls(**fields)
+        row = cls(**fields)
+        checks.typed(row)
+        return row
 
 
 def failed_task(task: str, spec: str, error: str) -> TaskScore:

@@ -80,11 +80,15 @@ def task_score(refs: References, evaluation: Evaluation | dict, spec: str) -> Ta
     data = evaluation.to_json(cpu=True) if isinstance(evaluation, Evaluation) else evaluation
     by_episode: dict[int, list[float]] = {}
     failures: dict[int, list[int | None]] = {}
+    recomputes: dict[int, list[int]] = {}
+    solver_failures: dict[int, int] = {}
     nonfinite = 0
     runs = [r for r in data["runs"] if r["policy"] == spec]
     for r in runs:  # a non-finite episode's objective is null in strict JSON
         by_episode.setdefault(r["episode"], []).append(_nan(r["objective"]))
         failures.setdefault(r["episode"], []).append(r.get("failures"))
+        recomputes.setdefault(r["episode"], []).append(r["recomputes"])
+        solver_failures[r["episode"]] = solver_failures.get(r["episode"], 0) + int(r["solver_failures"])
         nonfinite += not r["finite"]
     if data["test_set"]["sha256"] != refs.test_set_sha256:
         raise EtmpcError(f"{refs.task}: {spec} was evaluated on another test set than the references'")
@@ -102,6 +106,8 @@ def task_score(refs: References, evaluation: Evaluation | dict, spec: str) -> Ta
         parts | {"total": sum(parts.values())} if parts else {},
         # an episode's count, or its mean over a stochastic policy's passes
         [f[0] if len(f) == 1 else float(np.mean(f)) for f in map(failures.get, episodes)] if counted else None,
+        [c[0] if len(c) == 1 else float(np.mean(c)) for c in map(recomputes.get, episodes)],
+        [solver_failures[e] for e in episodes],
     )
 
 
@@ -114,6 +120,8 @@ def _scored(
     summary: dict,
     cpu_ms: dict,
     episode_failures: list[float] | None = None,
+    episode_recomputes: list[float] | None = None,
+    episode_solver_failures: list[int] | None = None,
 ) -> TaskScore:
     if episodes != list(range(refs.episodes)):
         raise EtmpcError(f"{refs.task}: {spec} was not played on each of the references' {refs.episodes} episodes")
@@ -147,6 +155,9 @@ def _scored(
         if episode_failures is None
         else _nan(summary.get("failures_ci95", metrics.mean_ci95(episode_failures))),
         episode_failures=episode_failures,
+        episode_objectives=[float(v) for v in objectives],
+        episode_recomputes=episode_recomputes,
+        episode_solver_failures=episode_solver_failures,
     )
 
 

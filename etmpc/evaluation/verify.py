@@ -6,15 +6,21 @@ against the task's stored references. Anyone with the trigger can check it:
 1. **It is this suite's card**: the suite's version, each task's version and test set are this
    etmpc's, and it was scored against the stored references (a card scored on another test set is
    not a suite result).
-2. **It holds together**: per row, the episode count, the score (the mean of the episode scores),
-   the confidence interval and the share of better episodes follow from its episode scores (the
-   failures' mean and CI from its episodes' failure counts, where the card has them), and the
-   suite's aggregates (IQM, probability of improvement, their bootstrap intervals) follow from the rows,
-   as :mod:`etmpc.evaluation.scorecard` computes them (with :mod:`etmpc.evaluation.metrics`).
+2. **It holds together**: every number the card states follows from the episodes it carries. Per
+   row: each episode's score from its objective and the references (bit for bit); the objective's and
+   the computations' means, the solver failures' total, the score (the mean of the episode scores), its
+   confidence interval and the share of better episodes, the failures' mean and CI from its episodes;
+   the episode count, task version, objective sense, best schedule and no non-finite episode; the CPU
+   time's total from its parts (the CPU time itself is the scorer's machine's measurement: it is checked
+   for consistency, never replayed). Per task, the references the card says it was scored against (best
+   schedule, oracle, gap, price, test set) are the stored ones. The suite's aggregates (IQM, probability of
+   improvement, their bootstrap intervals, the tasks counted) follow from the rows, as
+   :mod:`etmpc.evaluation.scorecard` computes them (with :mod:`etmpc.evaluation.metrics`).
 3. **It replays**: a seeded sample of each row's episodes is played again with the trigger the row
    names (its spec: the handed-in ``py:MODULE:NAME``, ``rl:PATH``, ``sb3:PATH`` must be importable or
-   readable here), and each episode's score (and failure count) must be the card's bit for bit (the
-   loop's numbers do not depend on the machine's kernels or the number of workers: ``docs/using.md``).
+   readable here), and each episode's objective, computations, solver failures, failures and score must
+   be the card's bit for bit (the loop's numbers do not depend on the machine's kernels or the number of
+   workers: ``docs/using.md``). Together: no number of a card can be changed without a line saying which.
 
 Every mismatch is one line; :func:`verify` returns them (an empty list: the card verifies).
 """
@@ -40,6 +46,7 @@ from etmpc.systems import system_key, task_version
 FORMAT = "etmpc-scorecard"
 SAMPLE = 5  # episodes replayed per row by default
 TOLERANCE = 1e-9  # relative: a row's score against the mean of its episode scores (two summations)
+CPU_PARTS = ("solve", "feedback", "decide", "total")
 
 
 @dataclass(frozen=True)
@@ -97,6 +104,18 @@ def _suite(card: dict, where: str) -> dict[str, References]:
     return references
 
 
+def _stated_references(card: dict, references: dict[str, References]) -> list[str]:
+    """Which of the numbers the card states of each task's references are not the stored references' own."""
+    found = []
+    for task, refs in references.items():
+        stated = card["references"][task]
+        own = {"best_periodic": refs.best, "oracle": refs.oracle_spec, "gap": refs.gap, "recompute_price": refs.recompute_price}
+        for key, value in own.items():
+            if not _same(stated.get(key), value):
+                found.append(f"{task}: references' {key} {stated.get(key)!r} in the card, the stored {value!r}")
+    return found
+
+
 def _rows(card: dict, where: str) -> list[TaskScore]:
     try:
         rows = [TaskScore.from_json(row) for row in card["rows"]]
@@ -108,6 +127,10 @@ def _rows(card: dict, where: str) -> list[TaskScore]:
     foreign = [r.task for r in rows if r.task not in card["tasks"]]
     if foreign:
         raise EtmpcError(f"{where} holds a row of {foreign[0]!r}, which is not among its tasks")
+    pairs = [(r.task, r.policy) for r in rows]
+    twice = next((p for p in pairs if pairs.count(p) > 1), None)
+    if twice is not None:
+        raise EtmpcError(f"{where} holds two rows of {twice[1]} on {twice[0]}")
     return rows
 
 
@@ -121,15 +144,24 @@ def _complete(row: TaskScore, refs: References) -> bool:
     return row.episodes == refs.episodes == len(row.episode_scores)
 
 
-def _consistency(row: TaskScore, refs: References) -> list[str]:
-    """What in a complete ``row`` does not follow from its own episode scores."""
+def _consistency(row: TaskScore, refs: References, version) -> list[str]:
+    """What in a complete ``row`` does not follow from its own episodes (``version``: the card's task version)."""
     name = f"{row.task} {row.policy}"
     s = row.scores
     if row.reference != refs.best:
         return [f"{name}: scored against {row.reference}, the references' best schedule is {refs.best}"]
     if not np.all(np.isfinite(s)):
         return [f"{name}: an episode score is not a number"]
-    found = []
+    found = [
+        f"{name}: {what} {mine!r} in the row, {theirs!r} {whose}"
+        for what, mine, theirs, whose in (
+            ("task version", row.task_version, version, "in the card's task versions"),
+            ("objective sense", row.objective_sense, refs.objective_sense, "the task's"),
+            ("non-finite episodes", row.nonfinite_episodes, 0, "in a row that was scored"),
+        )
+        if mine != theirs
+    ]
+    found += _episodes_consistency(row, refs, name) + _cpu_consistency(row, name)
     if not math.isclose(row.score, float(np.mean(s)), rel_tol=TOLERANCE, abs_tol=TOLERANCE):
         found.append(f"{name}: score {row.score!r} in the card, the mean of its episode scores is {float(np.mean(s))!r}")
     ci = metrics.mean_ci95(s)
@@ -139,6 +171,63 @@ def _consistency(row: TaskScore, refs: References) -> list[str]:
     if not _same(row.better_share, better):
         found.append(f"{name}: better in {row.better_share!r} of the episodes in the card, {better!r} from its episode scores")
     return found + _failures_consistency(row, name)
+
+
+def _mean_differs(stated, values) -> bool:
+    return not (
+        isinstance(stated, (int, float)) and math.isclose(stated, float(np.mean(values)), rel_tol=TOLERANCE, abs_tol=TOLERANCE)
+    )
+
+
+def _episodes_consistency(row: TaskScore, refs: References, name: str) -> list[str]:
+    """What of a row's objective, computations, solver failures and episode scores does not follow from the
+    objectives, computations and solver failures it carries per episode."""
+    carried = {
+        "episode_objectives": row.episode_objectives,
+        "episode_recomputes": row.episode_recomputes,
+        "episode_solver_failures": row.episode_solver_failures,
+    }
+    for key, values in carried.items():
+        if values is None:
+            return [f"{name}: no {key} (a row of an older etmpc): score the trigger again to verify its numbers"]
+        if len(values) != row.episodes:
+            return [f"{name}: {len(values)} {key} for {row.episodes} episodes"]
+    objectives = np.asarray(row.episode_objectives, dtype=float)
+    if not np.all(np.isfinite(objectives)):
+        return [f"{name}: an episode objective is not a number in a row that was scored"]
+    found = []
+    best = refs.costs(refs.periodic[refs.best])
+    expected = metrics.normalized_scores(refs.costs(objectives), best, refs.gap)
+    found += [
+        f"{name} episode {e}: score {row.episode_scores[e]!r} in the card, {float(v)!r} from its objective {float(objectives[e])!r}"
+        for e, v in enumerate(expected)
+        if row.episode_scores[e] != float(v)
+    ]
+    if _mean_differs(row.objective_mean, objectives):
+        found.append(f"{name}: objective {row.objective_mean!r} in the card, {float(np.mean(objectives))!r} from its episodes")
+    if _mean_differs(row.recomputes_mean, row.episode_recomputes):
+        mean = float(np.mean(row.episode_recomputes))
+        found.append(f"{name}: computations {row.recomputes_mean!r} per episode in the card, {mean!r} from its episodes")
+    if row.solver_failures != sum(row.episode_solver_failures):
+        total = sum(row.episode_solver_failures)
+        found.append(f"{name}: {row.solver_failures!r} solver failures in the card, {total!r} from its episodes")
+    return found
+
+
+def _cpu_consistency(row: TaskScore, name: str) -> list[str]:
+    """What of a row's CPU time per episode (the scorer's measurement, not replayed) does not hold together:
+    the four parts, each a finite number >= 0, the total their sum (none at all: not measured)."""
+    cpu = row.cpu_ms
+    if not cpu:
+        return []
+    if sorted(cpu) != sorted(CPU_PARTS):
+        return [f"{name}: CPU time of {', '.join(sorted(cpu))} in the card; a row measures {', '.join(CPU_PARTS)}"]
+    if not all(isinstance(v, (int, float)) and math.isfinite(v) and v >= 0 for v in cpu.values()):
+        return [f"{name}: a CPU time in the card is not a finite number >= 0 ({cpu})"]
+    parts = cpu["solve"] + cpu["feedback"] + cpu["decide"]
+    if not math.isclose(cpu["total"], parts, rel_tol=TOLERANCE, abs_tol=TOLERANCE):
+        return [f"{name}: CPU total {cpu['total']!r} ms in the card, its parts sum to {parts!r}"]
+    return []
 
 
 def _failures_consistency(row: TaskScore, name: str) -> list[str]:
@@ -163,7 +252,7 @@ def _aggregates(card: dict, rows: list[TaskScore]) -> list[str]:
     """Which of the card's aggregates do not follow from its rows: each computed again and compared as the
     card stores it (strict JSON: a tuple a list, NaN null), where equal floats are equal bits."""
     given = {a.get("policy"): a for a in card.get("aggregates", []) if isinstance(a, dict)}
-    found = []
+    found = [f"{policy}: an aggregate in the card, but no rows of it" for policy in given if policy not in by_policy(rows)]
     for policy, mine in by_policy(rows).items():
         stated = given.get(policy)
         if stated is None:
@@ -195,14 +284,15 @@ def verify(path: str | Path, size: int = SAMPLE, seed: int = 0, workers: int | N
     mismatches, replayable = [], []
     for index, row in enumerate(rows):
         if _complete(row, references[row.task]):
-            mismatches += [f"{path}: {line}" for line in _consistency(row, references[row.task])]
+            version = card["task_versions"][row.task]
+            mismatches += [f"{path}: {line}" for line in _consistency(row, references[row.task], version)]
             replayable.append(index)
         else:
             mismatches.append(
                 f"{path}: {row.task} {row.policy}: {len(row.episode_scores)} episode scores for "
                 f"{row.episodes} episodes; the references have {references[row.task].episodes}"
             )
-    mismatches += [f"{path}: {line}" for line in _aggregates(card, rows)]
+    mismatches += [f"{path}: {line}" for line in _stated_references(card, references) + _aggregates(card, rows)]
     jobs, expected = [], []
     for index in replayable:
         row, refs = rows[index], references[rows[index].task]
@@ -224,9 +314,16 @@ def verify(path: str | Path, size: int = SAMPLE, seed: int = 0, workers: int | N
                 f"{path}: {row.task} {row.policy} episode {episode}: score {row.episode_scores[episode]!r} "
                 f"in the card, {replayed!r} replayed"
             )
-        if row.episode_failures is not None and row.episode_failures[episode] != result.failures:
-            mismatches.append(
-                f"{path}: {row.task} {row.policy} episode {episode}: {row.episode_failures[episode]!r} failures "
-                f"in the card, {result.failures!r} replayed"
-            )
+        replayed_numbers = {
+            "objective": (row.episode_objectives, result.objective),
+            "computations": (row.episode_recomputes, result.recomputes),
+            "solver failures": (row.episode_solver_failures, result.solver_failures),
+            "failures": (row.episode_failures, result.failures),
+        }
+        for what, (carried, value) in replayed_numbers.items():
+            if carried is not None and not _same(carried[episode], value):
+                mismatches.append(
+                    f"{path}: {row.task} {row.policy} episode {episode}: {what} {carried[episode]!r} in the card, "
+                    f"{value!r} replayed"
+                )
     return Verdict(str(path), len(rows), len(jobs), mismatches)

@@ -41,8 +41,9 @@ def test_a_card_made_by_score_verifies_every_episode_replayed(card, capsys):
     assert "8 episodes replayed give the card's scores bit for bit" in capsys.readouterr().out
 
 
-def test_one_edited_episode_kept_consistent_is_found_by_the_replay(card, tmp_path, capsys):
-    """A careful forger raises one episode's score of threshold:0.02 and every number that follows from it."""
+def test_one_edited_episode_score_kept_consistent_is_found_by_its_objective_and_by_the_replay(card, tmp_path, capsys):
+    """A careful forger raises one episode's score of threshold:0.02 and every number that follows from it: the
+    objective the card carries for that episode gives it away, and so does the replay."""
     from etmpc.evaluation.scorecard import TaskScore, aggregate
 
     def better(data):
@@ -57,15 +58,17 @@ def test_one_edited_episode_kept_consistent_is_found_by_the_replay(card, tmp_pat
 
     forged = _edited(card, tmp_path, better)
     verdict = verify(forged, size=0)
+    row, true_row = json.loads(forged.read_text())["rows"][1], json.loads(card.read_text())["rows"][1]
     assert verdict.mismatches == [
-        f"{forged}: battery threshold:0.02 episode 2: score "
-        f"{json.loads(forged.read_text())['rows'][1]['episode_scores'][2]!r} in the card, "
-        f"{json.loads(card.read_text())['rows'][1]['episode_scores'][2]!r} replayed"
+        f"{forged}: battery threshold:0.02 episode 2: score {row['episode_scores'][2]!r} in the card, "
+        f"{true_row['episode_scores'][2]!r} from its objective {row['episode_objectives'][2]!r}",
+        f"{forged}: battery threshold:0.02 episode 2: score {row['episode_scores'][2]!r} in the card, "
+        f"{true_row['episode_scores'][2]!r} replayed",
     ]
     assert main(["verify", str(forged), "--sample", "0", "--workers", "1"]) == 2
     out, err = capsys.readouterr()
-    assert out.strip() == verdict.mismatches[0]
-    assert err.strip() == f"etmpc: error: card {forged} does not verify: 1 mismatch(es), listed above"
+    assert out.strip().splitlines() == verdict.mismatches
+    assert err.strip() == f"etmpc: error: card {forged} does not verify: 2 mismatch(es), listed above"
 
 
 def test_an_edited_number_that_does_not_follow_from_the_episodes_is_named(card, tmp_path):
@@ -117,7 +120,7 @@ def test_the_failure_counts_are_checked_too_and_a_card_without_them_still_verifi
     original = json.loads(card.read_text())["rows"][0]["episode_failures"]
     forged = _edited(card, tmp_path, fewer)
     assert verify(forged, size=0).mismatches == [
-        f"{forged}: battery every:3 episode 1: {original[1] + 1} failures in the card, {original[1]} replayed"
+        f"{forged}: battery every:3 episode 1: failures {original[1] + 1} in the card, {original[1]} replayed"
     ]
     forged = _edited(card, tmp_path, lambda data: data["rows"][0].update(failures_mean=data["rows"][0]["failures_mean"] + 1))
     (line,) = verify(forged, size=1).mismatches
@@ -128,3 +131,146 @@ def test_the_failure_counts_are_checked_too_and_a_card_without_them_still_verifi
             del row["failures_ci95"], row["episode_failures"]
 
     assert verify(_edited(card, tmp_path, older), size=1).verified
+
+
+def _bump(value):
+    return value + 1 if isinstance(value, int) else value * 1.01 + 0.01
+
+
+def _row_edit(field, index=None, key=None):
+    def edit(data):
+        row = data["rows"][0]
+        if index is not None:
+            row[field][index] = _bump(row[field][index])
+        elif key is not None:
+            row[field][key] = _bump(row[field][key])
+        else:
+            row[field] = _bump(row[field])
+
+    return edit
+
+
+def _aggregate_edit(field, index=None):
+    def edit(data):
+        aggregate = data["aggregates"][0]
+        if index is None:
+            aggregate[field] = _bump(aggregate[field])
+        else:
+            aggregate[field][index] = _bump(aggregate[field][index])
+
+    return edit
+
+
+# Every number a card states, each changed alone, and the words of the line that names it.
+EVERY_NUMBER = [
+    *[
+        (_row_edit(field), says)
+        for field, says in [
+            ("episodes", "episode scores for 5 episodes"),
+            ("objective_mean", "battery every:3: objective"),
+            ("recomputes_mean", "battery every:3: computations"),
+            ("failures_mean", "battery every:3: failures"),
+            ("solver_failures", "battery every:3: 1 solver failures in the card, 0 from its episodes"),
+            ("nonfinite_episodes", "battery every:3: non-finite episodes 1 in the row"),
+            ("score", "battery every:3: score"),
+            ("score_ci95", "battery every:3: 95 % CI"),
+            ("better_share", "battery every:3: better in"),
+            ("failures_ci95", "battery every:3: failures' 95 % CI"),
+            ("task_version", "battery every:3: task version 2 in the row, 1 in the card's task versions"),
+        ]
+    ],
+    *[
+        (_row_edit(field, index=1), says)
+        for field, says in [
+            ("episode_scores", "battery every:3 episode 1: score"),
+            ("episode_failures", "battery every:3: failures"),
+            ("episode_objectives", "battery every:3 episode 1: score"),
+            ("episode_recomputes", "battery every:3: computations"),
+            ("episode_solver_failures", "battery every:3: 0 solver failures in the card, 1 from its episodes"),
+        ]
+    ],
+    *[(_row_edit("cpu_ms", key=key), "battery every:3: CPU total") for key in ("solve", "feedback", "decide", "total")],
+    (lambda d: d["rows"][0].update(objective_sense="min"), "battery every:3: objective sense 'min' in the row, 'max'"),
+    (lambda d: d["rows"][0].update(reference="every:2"), "battery every:3: scored against every:2"),
+    *[
+        (_aggregate_edit(field, index), f"every:3: aggregate {field}")
+        for field, index in [
+            ("tasks", None),
+            ("iqm", None),
+            ("iqm_ci95", 0),
+            ("iqm_ci95", 1),
+            ("probability_of_improvement", None),
+            ("probability_of_improvement_ci95", 0),
+            ("probability_of_improvement_ci95", 1),
+        ]
+    ],
+    (lambda d: d["aggregates"][0].update(policy="every:4"), "every:4: an aggregate in the card, but no rows of it"),
+    *[
+        (lambda d, key=key: d["references"]["battery"].update({key: _bump(d["references"]["battery"][key])}), says)
+        for key, says in [("gap", "battery: references' gap"), ("recompute_price", "battery: references' recompute_price")]
+    ],
+    (lambda d: d["references"]["battery"].update(best_periodic="every:2"), "battery: references' best_periodic 'every:2'"),
+    (lambda d: d["references"]["battery"].update(oracle="oracle:every:2"), "battery: references' oracle 'oracle:every:2'"),
+]
+
+
+@pytest.mark.parametrize("edit, says", EVERY_NUMBER)
+def test_every_number_a_card_states_changed_alone_is_named(card, tmp_path, edit, says):
+    """Not only the scores: the objective, the computations, the failures, the CPU time's total, the
+    aggregates and the references a card states each follow from what it carries, or a line says which."""
+    forged = _edited(card, tmp_path, edit)
+    lines = verify(forged, size=1).mismatches
+    assert any(says in line for line in lines), lines
+
+
+def test_a_replayed_episode_must_give_the_cards_objective_computations_and_solver_failures_bit_for_bit(card, tmp_path):
+    """A forger who changes one episode's objective and every number that follows from it (its score, the
+    row's means, the aggregates) is found by the replay, which names the objective."""
+    from etmpc.evaluation.card import TaskScore, aggregate
+    from etmpc.evaluation.references import stored
+    from etmpc.evaluation import metrics
+
+    refs = stored("battery", 4)
+    original = json.loads(card.read_text())["rows"][0]["episode_objectives"][2]
+
+    def better(data):
+        row = data["rows"][0]
+        row["episode_objectives"][2] = original + 0.01
+        objectives = np.asarray(row["episode_objectives"])
+        best = refs.costs(refs.periodic[refs.best])
+        row["episode_scores"] = [float(v) for v in metrics.normalized_scores(refs.costs(objectives), best, refs.gap)]
+        s = np.asarray(row["episode_scores"])
+        row["objective_mean"], row["score"] = float(np.mean(objectives)), float(np.mean(s))
+        row["score_ci95"], row["better_share"] = metrics.mean_ci95(s), metrics.improvement_share(s)
+        data["aggregates"][0] = {
+            k: list(v) if isinstance(v, tuple) else v for k, v in vars(aggregate([TaskScore.from_json(row)])).items()
+        }
+
+    forged = _edited(card, tmp_path, better)
+    lines = verify(forged, size=0).mismatches
+    assert [line for line in lines if "episode 2: objective" in line] == [
+        f"{forged}: battery every:3 episode 2: objective {original + 0.01!r} in the card, {original!r} replayed"
+    ]
+    assert all("episode 2" in line for line in lines), lines  # nothing else disagrees: only the replay finds it
+
+
+def test_a_row_of_another_type_or_a_card_without_what_verification_needs_is_one_line(card, tmp_path, capsys):
+    for edit, says in [
+        (lambda d: d["rows"][0].update(score="1"), "score must be a number, got '1'"),
+        (lambda d: d["rows"][0].update(episode_scores="abc"), "episode_scores must be a list of a number"),
+        (lambda d: d["rows"][0].update(cpu_ms=[1]), "holds a row that is not a row"),
+        (lambda d: d["rows"].append(d["rows"][0]), "holds two rows of every:3 on battery"),
+    ]:
+        forged = _edited(card, tmp_path, edit)
+        assert main(["verify", str(forged), "--workers", "1"]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and says in err and "Traceback" not in err, err
+
+    def older(data):
+        del data["rows"][0]["episode_objectives"]
+
+    lines = verify(_edited(card, tmp_path, older), size=1).mismatches
+    assert lines == [
+        f"{tmp_path / 'edited.json'}: battery every:3: no episode_objectives (a row of an older etmpc): "
+        "score the trigger again to verify its numbers"
+    ]
