@@ -42,7 +42,7 @@ def build_parser() -> argparse.ArgumentParser:
         action="append",
         required=True,
         metavar="SPEC",
-        help=f"{syntax()} (repeatable; oracle:BASE is an upper bound, not a policy)",
+        help=f"{syntax()} (repeatable; oracle:BASE knows each episode's future: a reference point, not a policy)",
     )
     ev.add_argument("--episodes", type=types.positive_int, default=None, help="first N test-set episodes (default: all)")
     ev.add_argument("--repeats", type=types.positive_int, default=1, help="passes over the test set (for stochastic policies)")
