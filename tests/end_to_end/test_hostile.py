@@ -161,6 +161,21 @@ def _setup(kind: str, d: Path) -> None:
         (d / "r.rrd").write_bytes(b"RRF2" + bytes(range(256)) * 8)
     elif kind == "text-file":
         (d / "r.rrd").write_text("hello\n")
+    elif kind == "deep-files":  # nested past Python's JSON and YAML readers (a RecursionError there)
+        (d / "deep.json").write_text("[" * 100_000 + "]" * 100_000)
+        (d / "deep.yml").write_text("episodes: " + "[" * 100_000 + "]" * 100_000 + "\n")
+    elif kind == "wrong-types":  # a card and an evaluation of this suite's shape, with text where numbers go
+        from etmpc.evaluation.references import SUITE_VERSION, stored
+
+        reference = {"stored": "x", "episodes": 4, "test_set_sha256": stored("battery", 4).test_set_sha256}
+        card = {"format": "etmpc-scorecard", "suite_version": SUITE_VERSION, "tasks": ["battery"]}
+        card |= {"task_versions": {"battery": 1}, "references": {"battery": reference}, "aggregates": []}
+        row = dict(task="battery", policy="always", episodes=4, objective_mean=0.8, objective_sense="max", recomputes_mean=100)
+        row |= dict(failures_mean=0.0, solver_failures=0, nonfinite_episodes=0, score="1", score_ci95=0.0, episode_scores=[0.0])
+        row |= dict(better_share=0.0, cpu_ms={}, reference="every:1")
+        (d / "card.json").write_text(json.dumps(card | {"rows": [row]}))
+        evaluation = {"domain": "cart_pendulum", "task": "balance", "test_set": {"path": "t.npz", "sha256": "0"}, "seed": 0}
+        (d / "ev.json").write_text(json.dumps(evaluation | {"policies": {}, "runs": "every:2"}))
     elif kind.startswith("py-"):
         (d / f"{kind.replace('-', '_')}.py").write_text(TRIGGERS[kind])
     elif kind != "none":
@@ -274,6 +289,28 @@ CASES = [
         "none",
         ["train", "battery", "--out", "run", "--eval-episodes", "1000", "--episodes", "2", "--seeds", "0"],
         "1000",
+    ),
+    # files and settings a user hands in: read by one reader, checked by one check
+    ("settings-nested-too-deep", "deep-files", ["train", "battery", "--out", "run", "--settings", "deep.json"], "nested"),
+    ("settings-yaml-nested-too-deep", "deep-files", ["train", "battery", "--out", "run", "--settings", "deep.yml"], "nested"),
+    ("verify-card-nested-too-deep", "deep-files", ["verify", "deep.json"], "nested too deeply"),
+    ("figure-evaluation-nested-too-deep", "deep-files", ["figure", "bars", "deep.json", "--out", "x.png"], "nested"),
+    ("train-set-nan-ridge", "none", ["train", "battery", "--out", "run", "--set", "ridge=.nan"], "ridge must be a number"),
+    ("train-set-bool-episodes", "none", ["train", "battery", "--out", "run", "--set", "episodes=true"], "got True"),
+    ("train-set-count-overflows", "none", ["train", "battery", "--out", "run", "--set", f"episodes={10**23}"], "in -1e9..1e9"),
+    (
+        "train-ppo-bad-reward-baseline",
+        "none",
+        ["train", "battery", "--out", "run", "--algorithm", "ppo", "--set", "reward_baseline=bogus"],
+        "reward_baseline",
+    ),
+    ("verify-row-text-score", "wrong-types", ["verify", "card.json"], "score must be a number, got '1'"),
+    ("figure-runs-text", "wrong-types", ["figure", "bars", "ev.json", "--out", "x.png"], "ev.json is not an etmpc evaluation"),
+    (
+        "leaderboard-readme-in-policies",
+        "none",
+        ["score", "--leaderboard", "--out", "lb", "--readme", str(CART_POLICY)],
+        "etmpc's data folder",
     ),
     # reproduce
     ("reproduce-out-is-file", "file-parent", ["reproduce", "--out", "afile"], "afile"),
