@@ -33,7 +33,10 @@ import numpy as np
 
 from etmpc.common.errors import EtmpcError
 
-FLAGS = ("-O2", "-fPIC", "-shared")
+# -ffp-contract=off: a compiler that targets a CPU with fused multiply-add (GCC's default on aarch64, or a
+# CC with -march=native) would otherwise fuse a*b+c into one rounding, and the MPC's numbers would depend on
+# the target. x86-64's baseline has no FMA: there, the flag changes no bit.
+FLAGS = ("-O2", "-ffp-contract=off", "-fPIC", "-shared")
 _CASADI_INT = ctypes.c_longlong  # casadi_int in generated code (CasADi's default)
 _DOUBLE_P = ctypes.POINTER(ctypes.c_double)
 
