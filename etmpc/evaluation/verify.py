@@ -195,13 +195,12 @@ def _episodes_consistency(row: TaskScore, refs: References, name: str) -> list[s
     objectives = np.asarray(row.episode_objectives, dtype=float)
     if not np.all(np.isfinite(objectives)):
         return [f"{name}: an episode objective is not a number in a row that was scored"]
-    found = []
     best = refs.costs(refs.periodic[refs.best])
-    expected = metrics.normalized_scores(refs.costs(objectives), best, refs.gap)
-    found += [
-        f"{name} episode {e}: score {row.episode_scores[e]!r} in the card, {float(v)!r} from its objective {float(objectives[e])!r}"
+    expected = [float(v) for v in metrics.normalized_scores(refs.costs(objectives), best, refs.gap)]
+    found = [
+        f"{name} episode {e}: score {row.episode_scores[e]!r} in the card, {v!r} from its objective {float(objectives[e])!r}"
         for e, v in enumerate(expected)
-        if row.episode_scores[e] != float(v)
+        if row.episode_scores[e] != v
     ]
     if _mean_differs(row.objective_mean, objectives):
         found.append(f"{name}: objective {row.objective_mean!r} in the card, {float(np.mean(objectives))!r} from its episodes")
