@@ -8,7 +8,8 @@ comes from:
 * the key: dotted names into the JSON, ``[N]`` for a list's N-th item, ``[field=value]`` for the item of a
   list whose ``field`` is ``value`` (exactly one must be);
 * or, with no space, ``MODULE:ATTRIBUTE``: a module of etmpc (``etmpc`` or ``etmpc.…``; any other is refused,
-  never imported) and a dotted attribute path in it, ``[N]`` for a tuple's or a list's N-th item. A dataclass's
+  never imported) and a dotted attribute path in it, ``[N]`` for a sequence's N-th item, ``[KEY]`` for a dict's
+  item (``TEST_SET_SEEDS[kicks]``). A dataclass's
   field, read off its class, is its default (``Config.horizon``; a ``default_factory``'s value); a task's numbers
   live in its ``Config`` and task module, so a page quotes them from there;
 * after ``|``, options, each ``name=value`` (a bare first one is the format):
@@ -32,6 +33,7 @@ import importlib
 import json
 import re
 import sys
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -108,18 +110,22 @@ def lookup(data, key: str):
 
 
 def attribute(module, key: str):
-    """The value at the dotted attribute path ``key`` (``[N]`` indexes) in ``module``; a dataclass's field
-    read off its class is its default."""
+    """The value at the dotted attribute path ``key`` (``[N]`` indexes a sequence, ``[KEY]`` a dict) in
+    ``module``; a dataclass's field read off its class is its default."""
     value = module
     for index, name in _PART.findall(key):
         if name:
             if name.startswith("__"):
                 raise KeyError(f"{key}: {name!r}: a marker reads no dunder attribute")
             value = _attribute(value, name, key)
+        elif isinstance(value, Mapping) and "=" not in index:
+            if index not in value:
+                raise KeyError(f"{key}: no item {index!r}")
+            value = value[index]
         elif re.fullmatch(r"-?[0-9]+", index):
             value = value[int(index)]
         else:
-            raise KeyError(f"{key}: [{index}]: a Python value is indexed by a number")
+            raise KeyError(f"{key}: [{index}]: a Python value is indexed by a number, a dict by a key")
     return value
 
 

@@ -129,6 +129,7 @@ def test_write_rewrites_every_marked_number_from_its_source(fake):
 # -- a number the code holds: MODULE:ATTRIBUTE ------------------------------------------------------
 def test_a_module_source_reads_a_dataclass_fields_default_an_item_and_a_constant(tmp_path):
     from etmpc.systems.cart_pendulum import kicks_system
+    from etmpc.systems.quadrotor import TEST_SET_SEEDS as seeds
     from etmpc.systems.quadrotor import system, task
 
     config = system.Config()
@@ -144,13 +145,14 @@ def test_a_module_source_reads_a_dataclass_fields_default_an_item_and_a_constant
         f"{config.terminal_angle_weight / config.angle_weight:.2f}<!-- /number --> of it;\n"
         # a constant of a task module, an item of a numpy array
         f"z from <!-- number: etmpc.systems.quadrotor.task:BOX_LOW[2] | g -->{task.BOX_LOW[2]:g}<!-- /number --> m;\n"
-        # a field whose default is a default_factory's
+        # a field whose default is a default_factory's; a dict's item
         f"kicks: <!-- number: etmpc.systems.cart_pendulum.kicks_system:Config.solver.max_iterations | d -->"
-        f"{kicks_system.Config().solver.max_iterations:d}<!-- /number --> iterations\n"
+        f"{kicks_system.Config().solver.max_iterations:d}<!-- /number --> iterations, seed"
+        f" <!-- number: etmpc.systems.quadrotor:TEST_SET_SEEDS[waypoints] | d -->{seeds['waypoints']}<!-- /number -->\n"
     )
     assert doc_numbers.check([page], tmp_path) == []
     found = doc_numbers.numbers(page)
-    assert [n.line for n in found] == [1, 2, 2, 2, 3, 3, 4, 5] and all(n.python for n in found)
+    assert [n.line for n in found] == [1, 2, 2, 2, 3, 3, 4, 5, 5] and all(n.python for n in found)
     assert found[0].source == "etmpc.systems.quadrotor.system" and found[0].key == "Config.angle_weight"
 
 
@@ -172,6 +174,7 @@ def test_a_module_source_that_does_not_hold_the_key_cannot_be_read(tmp_path):
         ("etmpc.systems.quadrotor.system:Config.no_such_weight", "no 'no_such_weight'"),
         ("etmpc.systems.quadrotor.system:Config.feedback_state_weights[12]", "index out of range"),
         ("etmpc.systems.quadrotor.system:Config.feedback_state_weights[name=x]", "indexed by a number"),
+        ("etmpc.systems.quadrotor:TEST_SET_SEEDS[hover]", "no item 'hover'"),
         ("etmpc.systems.quadrotor.system:Config.__init__", "dunder"),
         ("etmpc.systems.no_such_module:Config.horizon", "No module named"),
     ]:
