@@ -16,6 +16,7 @@ comes from:
   ``.1f`` (any Python format; one ending in ``%`` multiplies by 100 and prints ``11.36 %``),
   ``vs=KEY`` (the relative change against another key of the same file or module: ``(value - other) / |other|``),
   ``per=KEY`` (the ratio to another key of the same file or module: ``value / |other|``, a gap as a share of a mean),
+  ``times=KEY`` (the product with another key of the same file or module: a horizon of N intervals in seconds),
   ``scale=X`` (multiplies, after ``vs``: ``scale=-1`` turns a cost's change into a gain, ``scale=100`` a share
   into a count of 100 episodes).
 
@@ -81,12 +82,12 @@ def parse(spec: str) -> tuple[str, str, dict[str, str], bool]:
     options: dict[str, str] = {}
     for i, option in enumerate(rest):
         name, eq, value = option.partition("=")
-        if eq and name in ("fmt", "vs", "per", "scale"):
+        if eq and name in ("fmt", "vs", "per", "times", "scale"):
             options[name] = value.strip()
         elif i == 0 and not eq:
             options["fmt"] = option
         else:
-            raise ValueError(f"unknown option {option!r} in {spec!r} (fmt, vs=KEY, per=KEY, scale=X)")
+            raise ValueError(f"unknown option {option!r} in {spec!r} (fmt, vs=KEY, per=KEY, times=KEY, scale=X)")
     return source, key.strip(), options, bool(python)
 
 
@@ -180,6 +181,8 @@ def source_value(number: Number, root: Path = ROOT, cache: dict | None = None):
         value = (value - other) / abs(other)
     if "per" in number.options:
         value = value / abs(read(data, number.options["per"]))
+    if "times" in number.options:
+        value = value * read(data, number.options["times"])
     if "scale" in number.options:
         value = value * float(number.options["scale"])
     return value

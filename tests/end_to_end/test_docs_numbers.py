@@ -142,7 +142,9 @@ def test_a_module_source_reads_a_dataclass_fields_default_an_item_and_a_constant
         f" at most <!-- number: {quad}.solver.max_iterations | d -->{config.solver.max_iterations:d}<!-- /number --> QPs,\n"
         f"step <!-- number: {quad}.solver.step_tolerance | .1% -->{config.solver.step_tolerance * 100:.1f} %<!-- /number -->,"
         f" terminal <!-- number: {quad}.terminal_angle_weight | .2f | per=Config.angle_weight -->"
-        f"{config.terminal_angle_weight / config.angle_weight:.2f}<!-- /number --> of it;\n"
+        f"{config.terminal_angle_weight / config.angle_weight:.2f}<!-- /number --> of it, over"
+        f" <!-- number: {quad}.horizon | g | times=QuadrotorSystem.control_interval_s -->"
+        f"{config.horizon * system.QuadrotorSystem.control_interval_s:g}<!-- /number --> s;\n"
         # a constant of a task module, an item of a numpy array
         f"z from <!-- number: etmpc.systems.quadrotor.task:BOX_LOW[2] | g -->{task.BOX_LOW[2]:g}<!-- /number --> m;\n"
         # a field whose default is a default_factory's; a dict's item
@@ -152,7 +154,7 @@ def test_a_module_source_reads_a_dataclass_fields_default_an_item_and_a_constant
     )
     assert doc_numbers.check([page], tmp_path) == []
     found = doc_numbers.numbers(page)
-    assert [n.line for n in found] == [1, 2, 2, 2, 3, 3, 4, 5, 5] and all(n.python for n in found)
+    assert [n.line for n in found] == [1, 2, 2, 2, 3, 3, 3, 4, 5, 5] and all(n.python for n in found)
     assert found[0].source == "etmpc.systems.quadrotor.system" and found[0].key == "Config.angle_weight"
 
 
