@@ -18,7 +18,7 @@ comes from:
   ``per=KEY`` (the ratio to another key of the same file or module: ``value / |other|``, a gap as a share of a mean),
   ``times=KEY`` (the product with another key of the same file or module: a horizon of N intervals in seconds),
   ``scale=X`` (multiplies, after ``vs``: ``scale=-1`` turns a cost's change into a gain, ``scale=100`` a share
-  into a count of 100 episodes).
+  into a count of 100 episodes); in a table's row, where ``|`` would end the cell, ``\\|`` separates them.
 
     python scripts/doc_numbers.py            # check: one line per number that disagrees with its source
     python scripts/doc_numbers.py --write    # rewrite every marked number from its source
@@ -69,7 +69,7 @@ class Number:
 def parse(spec: str) -> tuple[str, str, dict[str, str], bool]:
     """``FILE KEY | fmt | name=value ...`` or ``MODULE:ATTRIBUTE | ...`` as (file or module, key, options,
     whether the source is a module). A module outside etmpc raises ``ValueError``: a page names no other."""
-    head, *rest = [part.strip() for part in spec.split("|")]
+    head, *rest = [part.strip() for part in spec.replace("\\|", "|").split("|")]  # \| in a table's row
     python = _PYTHON.fullmatch(head)
     if python:
         source, key = python.group("module"), python.group("key")

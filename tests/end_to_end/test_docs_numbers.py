@@ -158,6 +158,19 @@ def test_a_module_source_reads_a_dataclass_fields_default_an_item_and_a_constant
     assert found[0].source == "etmpc.systems.quadrotor.system" and found[0].key == "Config.angle_weight"
 
 
+def test_a_marker_in_a_tables_row_separates_its_options_by_an_escaped_bar(tmp_path):
+    from etmpc.systems.quadrotor.system import Config
+
+    page = tmp_path / "page.md"
+    row = "| quadrotor | <!-- number: etmpc.systems.quadrotor.system:Config.recompute_price \\| .2f -->{:.2f}<!-- /number --> |\n"
+    page.write_text("| task | price |\n|---|---|\n" + row.format(Config.recompute_price))
+    (number,) = doc_numbers.numbers(page)
+    assert number.options == {"fmt": ".2f"} and doc_numbers.check([page], tmp_path) == []
+    page.write_text("| task | price |\n|---|---|\n" + row.format(Config.recompute_price + 1))
+    assert doc_numbers.write([page], tmp_path) == [page]
+    assert page.read_text().endswith(row.format(Config.recompute_price))
+
+
 def test_the_checker_names_a_module_sources_number_that_disagrees_with_the_code(tmp_path):
     from etmpc.systems.quadrotor.system import Config
 
