@@ -10,7 +10,8 @@ comes from:
 * or, with no space, ``MODULE:ATTRIBUTE``: a module of etmpc (``etmpc`` or ``etmpc.…``; any other is refused,
   never imported) and a dotted attribute path in it, ``[N]`` for a sequence's N-th item, ``[KEY]`` for a dict's
   item (``TEST_SET_SEEDS[kicks]``). A dataclass's
-  field, read off its class, is its default (``Config.horizon``; a ``default_factory``'s value); a task's numbers
+  field, read off its class, is its default (``Config.horizon``; a ``default_factory``'s value), and its property
+  the default instance's (``Battery.trade_limit_kw``); a task's numbers
   live in its ``Config`` and task module, so a page quotes them from there;
 * after ``|``, options, each ``name=value`` (a bare first one is the format):
   ``.1f`` (any Python format; one ending in ``%`` multiplies by 100 and prints ``11.36 %``),
@@ -31,6 +32,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import importlib
+import inspect
 import json
 import re
 import sys
@@ -139,6 +141,8 @@ def _attribute(value, name: str, key: str):
             if field.default_factory is not dataclasses.MISSING:
                 return field.default_factory()
             raise KeyError(f"{key}: {value.__name__}.{name} has no default")
+        if isinstance(inspect.getattr_static(value, name, None), property):  # the default instance's
+            return getattr(value(), name)
     if not hasattr(value, name):
         raise KeyError(f"{key}: no {name!r}")
     return getattr(value, name)

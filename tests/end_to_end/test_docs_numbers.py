@@ -127,7 +127,8 @@ def test_write_rewrites_every_marked_number_from_its_source(fake):
 
 
 # -- a number the code holds: MODULE:ATTRIBUTE ------------------------------------------------------
-def test_a_module_source_reads_a_dataclass_fields_default_an_item_and_a_constant(tmp_path):
+def test_a_module_source_reads_a_dataclass_fields_default_its_property_an_item_and_a_constant(tmp_path):
+    from etmpc.systems.battery.parameters import Battery
     from etmpc.systems.cart_pendulum import kicks_system
     from etmpc.systems.quadrotor import TEST_SET_SEEDS as seeds
     from etmpc.systems.quadrotor import system, task
@@ -151,10 +152,13 @@ def test_a_module_source_reads_a_dataclass_fields_default_an_item_and_a_constant
         f"kicks: <!-- number: etmpc.systems.cart_pendulum.kicks_system:Config.solver.max_iterations | d -->"
         f"{kicks_system.Config().solver.max_iterations:d}<!-- /number --> iterations, seed"
         f" <!-- number: etmpc.systems.quadrotor:TEST_SET_SEEDS[waypoints] | d -->{seeds['waypoints']}<!-- /number -->\n"
+        # a dataclass's property, off its class: the default instance's
+        f"<!-- number: etmpc.systems.battery.parameters:Battery.trade_limit_kw | g -->"
+        f"{Battery().trade_limit_kw:g}<!-- /number --> kW\n"
     )
     assert doc_numbers.check([page], tmp_path) == []
     found = doc_numbers.numbers(page)
-    assert [n.line for n in found] == [1, 2, 2, 2, 3, 3, 3, 4, 5, 5] and all(n.python for n in found)
+    assert [n.line for n in found] == [1, 2, 2, 2, 3, 3, 3, 4, 5, 5, 6] and all(n.python for n in found)
     assert found[0].source == "etmpc.systems.quadrotor.system" and found[0].key == "Config.angle_weight"
 
 
