@@ -1,5 +1,5 @@
-"""Every number the README and the docs quote by hand is under a marker naming the results file it comes
-from, and agrees with it (scripts/doc_numbers.py; `python scripts/doc_numbers.py --write` rewrites them)."""
+"""Every number the README and the docs quote by hand is under a marker naming the results file or the module of
+etmpc it comes from, and agrees with it (scripts/doc_numbers.py; `python scripts/doc_numbers.py --write` rewrites them)."""
 
 from __future__ import annotations
 
@@ -26,7 +26,8 @@ def test_every_marked_number_in_the_readme_and_the_docs_is_its_sources():
 def test_the_docs_quote_numbers_from_the_results_files():
     found = [n for page in doc_numbers.pages() for n in doc_numbers.numbers(page)]
     assert len(found) > 20
-    assert {n.source for n in found} <= {
+    files = {n.source for n in found if not n.python}
+    assert files <= {
         str(p.relative_to(REPO))
         for p in [
             REPO / "docs" / "leaderboard.json",
@@ -35,6 +36,8 @@ def test_the_docs_quote_numbers_from_the_results_files():
             *REPO.glob("policies/*/*.json"),
         ]
     }
+    # and the code's own numbers from its modules (a task's Config, its task module's constants)
+    assert all(n.source == "etmpc" or n.source.startswith("etmpc.") for n in found if n.python)
 
 
 def test_no_page_calls_the_100_point_reference_a_bound_that_knows_the_future():
@@ -121,3 +124,107 @@ def test_write_rewrites_every_marked_number_from_its_source(fake):
     assert doc_numbers.write([page], root) == [page]
     assert page.read_text() == right
     assert doc_numbers.write([page], root) == []
+
+
+# -- a number the code holds: MODULE:ATTRIBUTE ------------------------------------------------------
+def test_a_module_source_reads_a_dataclass_fields_default_its_property_an_item_and_a_constant(tmp_path):
+    from etmpc.systems.battery.parameters import Battery
+    from etmpc.systems.cart_pendulum import kicks_system
+    from etmpc.systems.quadrotor import TEST_SET_SEEDS as seeds
+    from etmpc.systems.quadrotor import system, task
+
+    config = system.Config()
+    quad = "etmpc.systems.quadrotor.system:Config"
+    page = tmp_path / "page.md"
+    page.write_text(
+        f"angles <!-- number: {quad}.angle_weight | g -->{config.angle_weight:g}<!-- /number -->,\n"
+        f"rates in Q <!-- number: {quad}.feedback_state_weights[9] | g -->{config.feedback_state_weights[9]:g}<!-- /number -->"
+        f" (of <!-- number: {quad}.feedback_state_weights[-1] | g -->{config.feedback_state_weights[-1]:g}<!-- /number -->),"
+        f" at most <!-- number: {quad}.solver.max_iterations | d -->{config.solver.max_iterations:d}<!-- /number --> QPs,\n"
+        f"step <!-- number: {quad}.solver.step_tolerance | .1% -->{config.solver.step_tolerance * 100:.1f} %<!-- /number -->,"
+        f" terminal <!-- number: {quad}.terminal_angle_weight | .2f | per=Config.angle_weight -->"
+        f"{config.terminal_angle_weight / config.angle_weight:.2f}<!-- /number --> of it, over"
+        f" <!-- number: {quad}.horizon | g | times=QuadrotorSystem.control_interval_s -->"
+        f"{config.horizon * system.QuadrotorSystem.control_interval_s:g}<!-- /number --> s;\n"
+        # a constant of a task module, an item of a numpy array
+        f"z from <!-- number: etmpc.systems.quadrotor.task:BOX_LOW[2] | g -->{task.BOX_LOW[2]:g}<!-- /number --> m;\n"
+        # a field whose default is a default_factory's; a dict's item
+        f"kicks: <!-- number: etmpc.systems.cart_pendulum.kicks_system:Config.solver.max_iterations | d -->"
+        f"{kicks_system.Config().solver.max_iterations:d}<!-- /number --> iterations, seed"
+        f" <!-- number: etmpc.systems.quadrotor:TEST_SET_SEEDS[waypoints] | d -->{seeds['waypoints']}<!-- /number -->\n"
+        # a dataclass's property, off its class: the default instance's
+        f"<!-- number: etmpc.systems.battery.parameters:Battery.trade_limit_kw | g -->"
+        f"{Battery().trade_limit_kw:g}<!-- /number --> kW\n"
+    )
+    assert doc_numbers.check([page], tmp_path) == []
+    found = doc_numbers.numbers(page)
+    assert [n.line for n in found] == [1, 2, 2, 2, 3, 3, 3, 4, 5, 5, 6] and all(n.python for n in found)
+    assert found[0].source == "etmpc.systems.quadrotor.system" and found[0].key == "Config.angle_weight"
+
+
+def test_a_marker_in_a_tables_row_separates_its_options_by_an_escaped_bar(tmp_path):
+    from etmpc.systems.quadrotor.system import Config
+
+    page = tmp_path / "page.md"
+    row = "| quadrotor | <!-- number: etmpc.systems.quadrotor.system:Config.recompute_price \\| .2f -->{:.2f}<!-- /number --> |\n"
+    page.write_text("| task | price |\n|---|---|\n" + row.format(Config.recompute_price))
+    (number,) = doc_numbers.numbers(page)
+    assert number.options == {"fmt": ".2f"} and doc_numbers.check([page], tmp_path) == []
+    page.write_text("| task | price |\n|---|---|\n" + row.format(Config.recompute_price + 1))
+    assert doc_numbers.write([page], tmp_path) == [page]
+    assert page.read_text().endswith(row.format(Config.recompute_price))
+
+
+def test_the_checker_names_a_module_sources_number_that_disagrees_with_the_code(tmp_path):
+    from etmpc.systems.quadrotor.system import Config
+
+    page = tmp_path / "page.md"
+    right = f"<!-- number: etmpc.systems.quadrotor.system:Config.angle_weight | g -->{Config.angle_weight:g}<!-- /number -->\n"
+    page.write_text("# A page\n\n" + right.replace(f"-->{Config.angle_weight:g}<", "-->0.25<"))
+    (problem,) = doc_numbers.check([page], tmp_path)
+    assert f"{page}:3" in problem and "etmpc.systems.quadrotor.system:Config.angle_weight" in problem
+    assert f"is '{Config.angle_weight:g}'" in problem and "'0.25'" in problem
+    assert doc_numbers.write([page], tmp_path) == [page] and page.read_text() == "# A page\n\n" + right
+
+
+def test_a_module_source_that_does_not_hold_the_key_cannot_be_read(tmp_path):
+    page = tmp_path / "page.md"
+    for spec, why in [
+        ("etmpc.systems.quadrotor.system:Config.no_such_weight", "no 'no_such_weight'"),
+        ("etmpc.systems.quadrotor.system:Config.feedback_state_weights[12]", "index out of range"),
+        ("etmpc.systems.quadrotor.system:Config.feedback_state_weights[name=x]", "indexed by a number"),
+        ("etmpc.systems.quadrotor:TEST_SET_SEEDS[hover]", "no item 'hover'"),
+        ("etmpc.systems.quadrotor.system:Config.__init__", "dunder"),
+        ("etmpc.systems.no_such_module:Config.horizon", "No module named"),
+    ]:
+        page.write_text(f"<!-- number: {spec} | g -->1<!-- /number -->\n")
+        (problem,) = doc_numbers.check([page], tmp_path)
+        assert "cannot be read" in problem and why in problem, problem
+
+
+def test_a_module_outside_etmpc_is_refused_and_never_imported(tmp_path, monkeypatch):
+    (tmp_path / "evil_numbers.py").write_text("import pathlib\npathlib.Path(__file__).with_name('ran').touch()\nX = 1\n")
+    (tmp_path / "etmpc_evil.py").write_text("import pathlib\npathlib.Path(__file__).with_name('ran').touch()\nX = 1\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    page = tmp_path / "page.md"
+    for name in ("evil_numbers", "etmpc_evil", "os.path", "etmpc..systems", "etmpc.systems/x"):
+        page.write_text(f"<!-- number: {name}:X | g -->1<!-- /number -->\n")
+        (problem,) = doc_numbers.check([page], tmp_path)
+        assert "must be etmpc's" in problem, problem
+        with pytest.raises(ValueError, match="must be etmpc's"):
+            doc_numbers.write([page], tmp_path)
+        with pytest.raises(ValueError, match="not a module of etmpc"):
+            doc_numbers.module(name, tmp_path)
+    assert not (tmp_path / "ran").exists() and "evil_numbers" not in sys.modules and "etmpc_evil" not in sys.modules
+
+
+def test_a_module_source_is_read_from_the_checked_repositorys_own_etmpc(tmp_path):
+    """A worktree's check reads its own code: an etmpc imported from elsewhere cannot be read."""
+    from etmpc.systems.quadrotor.system import Config
+
+    (tmp_path / "etmpc").mkdir()
+    page = tmp_path / "page.md"
+    page.write_text(f"<!-- number: etmpc.systems.quadrotor.system:Config.horizon | d -->{Config.horizon}<!-- /number -->\n")
+    (problem,) = doc_numbers.check([page], tmp_path)
+    assert "cannot be read" in problem and f"not from {tmp_path.resolve() / 'etmpc'}" in problem
+    assert doc_numbers.check([page], REPO) == []

@@ -23,10 +23,10 @@ from its plan). Both arrive at random times (Bernoulli per interval).
 * **Observation**: the state (``model.STATE_NAMES``) and the current waypoint ``target_x_m``,
   ``target_y_m``, ``target_z_m``.
 * **Reward** ``-d^2 / (d^2 + 0.5^2)`` per step, ``d`` the drone's distance from the interval's
-  waypoint after the step (-1/2 at 0.5 m, bounded by -1: a waypoint is up to 2.4 m away, and a
-  scale of 0.2 m made every distance beyond 0.5 m cost nearly the same, so that how soon the drone
-  set off after a change hardly counted), and 1 more off on a failure step: so a step's reward is at
-  most -1 exactly when it is a failure (:func:`failure_steps`).
+  waypoint after the step (-1/2 at 0.5 m, bounded by -1: a new waypoint is up to 3 m from the last,
+  the box's diagonal, and a scale of 0.2 m made every distance beyond 0.5 m cost nearly the same, so
+  that how soon the drone set off after a change hardly counted), and 1 more off on a failure step:
+  so a step's reward is at most -1 exactly when it is a failure (:func:`failure_steps`).
 """
 
 from __future__ import annotations
