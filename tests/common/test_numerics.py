@@ -134,7 +134,8 @@ def _file(tmp_path, **changes) -> Path:
     [
         ({"theta": [1e308, -1e308] * 3 + [1e308]}, "theta[0] is 1e+308, beyond the +-1e+06 it may be"),
         ({"theta": [0.0] * 6 + [-(10**400)]}, "theta[6] is -1000000000000000000..., not a finite number"),
-        ({"theta": [0.0, float("nan")] + [0.0] * 5}, "theta[1] is nan, not a finite number"),
+        # NaN is not JSON: the strict reader refuses it before any field is looked at
+        ({"theta": [0.0, float("nan")] + [0.0] * 5}, "cannot be read (NaN is not a JSON number (strict JSON writes null))"),
         ({"theta": [0.0] * 6 + [True]}, "theta[6] is True, not a number"),
         ({"theta": "0.1"}, "theta is not a list of numbers (str)"),
         ({"normalisation_std": [1.0, 0.0, 1.0]}, "normalisation.std[1] is 0.0, below the 1e-12 it may be"),
@@ -154,7 +155,7 @@ def test_a_policy_file_of_absurd_or_non_finite_numbers_is_refused_when_read_nami
     path = _file(tmp_path, **changes)
     with pytest.raises(PolicyFileError) as raised:
         load_policy(path, "battery", nx=1)
-    assert str(raised.value) == f"policy file {path}: {says}"
+    assert str(raised.value).startswith(f"policy file {path}") and str(raised.value).endswith(says)
     assert main(["evaluate", "battery", "--policy", f"rl:{path}", "--episodes", "1", "--workers", "1"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and says in err and "Traceback" not in err

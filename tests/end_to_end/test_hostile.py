@@ -275,7 +275,7 @@ CASES = [
         "train-learning-rate-nan",
         "none",
         ["train", "battery", "--out", "run", "--algorithm", "gpomdp", "--learning-rate", "nan"],
-        "learning rate",
+        "learning_rate must be a number (finite), got nan",
     ),
     (
         "train-dpi-option-with-gpomdp",

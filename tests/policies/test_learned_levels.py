@@ -95,7 +95,7 @@ def test_a_levels_policy_file_round_trips(tmp_path):
         (dict(domain=KICKS), "decides keep, one SQP iteration or a full solve (compute levels), but task cart_pendulum/kicks's"),
         (dict(version=2), "theta_level (compute levels) comes with format version 3"),
         (dict(theta_level=[0.0] * 18), "theta_level is not 19 finite numbers"),
-        (dict(theta_level=[0.0] * 18 + [float("nan")]), "theta_level[18] is nan, not a finite number"),
+        (dict(theta_level=[0.0] * 18 + [float("nan")]), "NaN is not a JSON number (strict JSON writes null)"),
     ],
 )
 def test_a_bad_or_misplaced_levels_file_is_one_line(tmp_path, change, says):
