@@ -167,8 +167,8 @@ def _verify(args) -> None:
     if not verdict.verified:
         raise EtmpcError(f"card {args.card} does not verify: {len(verdict.mismatches)} mismatch(es), listed above")
     print(
-        f"verified: card {args.card}: {verdict.rows} rows; their scores and the aggregates follow from the episodes, "
-        f"and {verdict.replayed} episodes replayed give the card's scores bit for bit"
+        f"verified: card {args.card}: {verdict.rows} rows; every number it states follows from its episodes, "
+        f"and {verdict.replayed} episodes replayed give the card's numbers bit for bit"
     )
 
 

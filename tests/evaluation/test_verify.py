@@ -38,7 +38,9 @@ def test_a_card_made_by_score_verifies_every_episode_replayed(card, capsys):
     verdict = verify(card, size=0)
     assert verdict.verified and verdict.rows == 2 and verdict.replayed == 8
     assert main(["verify", str(card), "--sample", "0", "--workers", "1"]) == 0
-    assert "8 episodes replayed give the card's scores bit for bit" in capsys.readouterr().out
+    assert "every number it states follows from its episodes, and 8 episodes replayed give the card's numbers bit for bit" in (
+        capsys.readouterr().out
+    )
 
 
 def test_one_edited_episode_score_kept_consistent_is_found_by_its_objective_and_by_the_replay(card, tmp_path, capsys):
