@@ -119,8 +119,9 @@ def _stated_references(card: dict, references: dict[str, References]) -> list[st
 def _rows(card: dict, where: str) -> list[TaskScore]:
     try:
         rows = [TaskScore.from_json(row) for row in card["rows"]]
-    except (KeyError, TypeError, ValueError) as exc:
-        raise EtmpcError(f"{where} holds a row that is not a row ({exc!r})") from None
+    except (KeyError, TypeError, ValueError) as exc:  # a field of another type says which (BadValue); the rest as raised
+        said = str(exc) if isinstance(exc, EtmpcError) else repr(exc)
+        raise EtmpcError(f"{where} holds a row that is not a row ({said})") from None
     failed = [f"{r.policy} on {r.task}" for r in rows if r.error is not None]
     if failed:
         raise EtmpcError(f"{where} holds a failed row ({failed[0]}): there is nothing to verify")
