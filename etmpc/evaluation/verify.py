@@ -19,8 +19,9 @@ against the task's stored references. Anyone with the trigger can check it:
 3. **It replays**: a seeded sample of each row's episodes is played again with the trigger the row
    names (its spec: the handed-in ``py:MODULE:NAME``, ``rl:PATH``, ``sb3:PATH`` must be importable or
    readable here), and each episode's objective, computations, solver failures, failures and score must
-   be the card's bit for bit (the loop's numbers do not depend on the machine's kernels or the number of
-   workers: ``docs/using.md``). Together: no number of a card can be changed without a line saying which.
+   be the card's bit for bit (the loop's numbers do not depend on the number of workers, nor on the
+   machine's kernels among x86-64 CPUs with fused multiply-add: ``docs/using.md``). Together: no number
+   of a card can be changed without a line saying which.
 
 Every mismatch is one line; :func:`verify` returns them (an empty list: the card verifies).
 """
