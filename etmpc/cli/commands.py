@@ -162,6 +162,8 @@ def _verify(args) -> None:
     from etmpc.evaluation.verify import verify
 
     verdict = verify(args.card, args.sample, args.seed, args.workers)
+    if verdict.caution is not None:
+        print(f"note: {verdict.caution}")
     for line in verdict.mismatches:
         print(line)
     if not verdict.verified:

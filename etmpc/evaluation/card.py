@@ -11,6 +11,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from etmpc.common import checks
+from etmpc.common.provenance import libm_rounding
 from etmpc.evaluation import metrics
 from etmpc.evaluation.references import SUITE_VERSION, software
 from etmpc.systems import task_version
@@ -178,7 +179,11 @@ class Scorecard:
             "rows": [r.to_json() for r in self.rows],
             "aggregates": [a.to_json() for a in self.aggregates],
             "software": software(),
-            "machine": {"processor": platform.processor() or platform.machine(), "system": platform.platform()},
+            "machine": {
+                "processor": platform.processor() or platform.machine(),
+                "system": platform.platform(),
+                "libm": libm_rounding(),  # which rounding of sin, cos, exp, log the episodes were played with
+            },
         }
 
     @classmethod

@@ -37,6 +37,7 @@ import numpy as np
 from etmpc.common.documents import read_document
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import strict
+from etmpc.common.provenance import LIBM_WORDS, libm_rounding
 from etmpc.evaluation import metrics
 from etmpc.evaluation.evaluate import parse_policies, run_jobs
 from etmpc.evaluation.references import SUITE_VERSION, References, stored
@@ -58,6 +59,7 @@ class Verdict:
     rows: int
     replayed: int  # episodes played again
     mismatches: list[str]
+    caution: str | None = None  # this machine's C library rounds as the card's did not: say so beside the verdict
 
     @property
     def verified(self) -> bool:
@@ -327,4 +329,20 @@ def verify(path: str | Path, size: int = SAMPLE, seed: int = 0, workers: int | N
                     f"{path}: {row.task} {row.policy} episode {episode}: {what} {carried[episode]!r} in the card, "
                     f"{value!r} replayed"
                 )
-    return Verdict(str(path), len(rows), len(jobs), mismatches)
+    return Verdict(str(path), len(rows), len(jobs), mismatches, _caution(card))
+
+
+def _caution(card: dict) -> str | None:
+    """A line, if this machine's libm rounds otherwise than the card's (a card of an older etmpc: otherwise
+    than an x86-64 CPU with FMA): then a replay of the kicks tasks, the reacher or the quadrotor may differ
+    in its last bits from the card's, and the quadrotor's by more, with nothing wrong in the card."""
+    machine = card.get("machine")
+    theirs = machine.get("libm") if isinstance(machine, dict) else None
+    mine = libm_rounding()
+    if mine == (theirs if theirs in LIBM_WORDS else "fma"):
+        return None
+    return (
+        f"this machine's C library rounds sin, cos, exp and log as {LIBM_WORDS[mine]}; the card's was "
+        f"{LIBM_WORDS.get(theirs, 'not recorded (an older etmpc)')}: replays of the kicks tasks, the reacher and "
+        "the quadrotor may differ from the card's with nothing wrong in it; verify it on a machine like the card's"
+    )

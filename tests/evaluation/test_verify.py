@@ -276,3 +276,36 @@ def test_a_row_of_another_type_or_a_card_without_what_verification_needs_is_one_
         f"{tmp_path / 'edited.json'}: battery every:3: no episode_objectives (a row of an older etmpc): "
         "score the trigger again to verify its numbers"
     ]
+
+
+def test_a_card_records_its_machines_libm_and_verify_says_when_this_ones_rounds_otherwise(card, tmp_path, monkeypatch, capsys):
+    """A CPU without FMA makes glibc round sin and cos otherwise (about one argument in 1,500): a replay on such a
+    machine may differ with nothing wrong in the card, and verify says so beside its verdict."""
+    import etmpc.evaluation.verify as verify_module
+    from etmpc.common.provenance import libm_rounding
+
+    assert json.loads(card.read_text())["machine"]["libm"] == libm_rounding()
+    assert verify(card, size=1).caution is None  # made here, verified here
+    monkeypatch.setattr(verify_module, "libm_rounding", lambda: "sse2" if libm_rounding() == "fma" else "fma")
+    verdict = verify(card, size=1)
+    assert verdict.verified and "this machine's C library rounds sin, cos, exp and log as glibc's" in verdict.caution
+    assert main(["verify", str(card), "--workers", "1"]) == 0
+    assert capsys.readouterr().out.startswith("note: this machine's C library rounds")
+
+
+def test_libm_rounding_tells_glibcs_variants_apart_in_a_process_of_each():
+    """The probe is libm's own answer: a process told to use glibc's SSE2 variants (as a CPU without FMA would)
+    answers sse2; this one answers what its CPU makes glibc pick."""
+    import os
+    import subprocess
+    import sys
+
+    from etmpc.common.provenance import libm_rounding
+
+    mine = libm_rounding()
+    if mine == "other":
+        pytest.skip("not glibc on x86-64")
+    code = "from etmpc.common.provenance import libm_rounding; print(libm_rounding())"
+    env = dict(os.environ, GLIBC_TUNABLES="glibc.cpu.hwcaps=-AVX2,-FMA,-AVX512F,-AVX")
+    forced = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout.strip()
+    assert forced == "sse2"
