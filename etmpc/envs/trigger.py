@@ -88,7 +88,7 @@ def check_index(index: Any, what: str = "test_episode") -> int:
     return int(index)
 
 
-def _fixed_schedule(spec: str, system):
+def fixed_schedule(spec: str, system):
     """The baseline of a relative reward: a fixed schedule (it must not depend on what the agent does). A bad
     one is an argument's bad value (:class:`~etmpc.common.checks.BadValue`, a ``ValueError`` too), or of the
     wrong type (:class:`~etmpc.common.checks.BadType`, a ``TypeError``), as Python's own are."""
@@ -151,7 +151,7 @@ class TriggerEnvironment(dm_env.Environment):
         self._test_set = None
         self.info: dict = {}
         self._episode = None  # the episode being played
-        self.reward_baseline = None if reward_baseline is None else _fixed_schedule(reward_baseline, self.system)
+        self.reward_baseline = None if reward_baseline is None else fixed_schedule(reward_baseline, self.system)
         self._shadow = None if reward_baseline is None else ClosedLoop(self.system, self.key.make().make_env())
         self.simulated_steps = 0  # the agent's steps, and the baseline's
 

@@ -45,7 +45,7 @@ from pathlib import Path
 
 import numpy as np
 
-from etmpc.common.documents import loads
+from etmpc.common.documents import loads, read_document
 from etmpc.common.sense import best as best_of
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import refuse_foreign, write_json
@@ -67,6 +67,7 @@ from etmpc.policies.sb3 import metadata_path
 from etmpc.systems import SystemKey, system_key
 
 RESUME, NORMALIZE = "resume.json", "resume_normalize.json"  # in checkpoints/, while the run is under way
+RESUME_FORMAT, FINISHED_FORMAT = "etmpc-ppo-resume", "etmpc-ppo-run"  # resume.json's, training.json's
 _RUNNING = ("obs_rms", "ret_rms")  # VecNormalize's running statistics, each a mean, a var and a count
 
 
@@ -114,9 +115,9 @@ class PpoLearner(Learner):
         self.system = self.key.make()
         s = self.settings
         if s.reward_baseline is not None:  # the environments' own check, before the run's folder is made
-            from etmpc.envs.trigger import _fixed_schedule
+            from etmpc.envs.trigger import fixed_schedule
 
-            _fixed_schedule(s.reward_baseline, self.system)
+            fixed_schedule(s.reward_baseline, self.system)
         # PPO collects n_steps per environment between updates: a budget too small for that shrinks n_steps,
         # and each checkpoint's slice is a whole number of rollouts (so the steps reported are the steps run).
         self.n_steps = min(s.n_steps, max(1, s.timesteps // (s.checkpoints * s.n_envs)))
@@ -140,12 +141,14 @@ class PpoLearner(Learner):
         found = finished if finished.exists() else path if path.exists() else None
         if found is None:
             return None
-        try:
-            state = loads(found.read_text())
-        except (OSError, ValueError) as exc:
-            raise EtmpcError(f"{found} cannot be read ({exc}); start the run again in another --out") from None
-        if not isinstance(state, dict):
-            raise EtmpcError(f"{found} is not a PPO run's state; start the run again in another --out")
+        again = "start the run again in another --out"
+        state = read_document(
+            found,
+            FINISHED_FORMAT if found is finished else RESUME_FORMAT,
+            missing=f"{found} went away while it was read; {again}",
+            unreadable=f"{found} cannot be read ({{error}}); {again}",
+            foreign=f"{found} is not a PPO run's state; {again}",
+        )
         checked_checkpoints(state.get("checkpoints"), str(found))
         if found is finished:
             files = [c["file"] for c in state["checkpoints"]]
@@ -156,7 +159,7 @@ class PpoLearner(Learner):
         return state
 
     def state(self) -> dict:
-        return {"format": "etmpc-ppo-resume", "version": 1, "settings": _json(self.settings), "checkpoints": self.checkpoints}
+        return {"format": RESUME_FORMAT, "version": 1, "settings": _json(self.settings), "checkpoints": self.checkpoints}
 
     def _environments(self):
         from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnvWrapper
@@ -296,7 +299,7 @@ class PpoLearner(Learner):
             dict(meta, validation_objective=pick["validation_objective"], validation_episodes=s.validation_episodes),
         )
         result = {
-            "format": "etmpc-ppo-run",
+            "format": FINISHED_FORMAT,
             "version": 1,
             "task": str(self.key),
             "settings": _json(s),
