@@ -242,25 +242,31 @@ class _Opens:
         return open, (self.marker, "w")
 
 
-def test_a_stopped_ppo_run_resumes_from_data_and_unpickles_nothing_in_its_folder(tmp_path, monkeypatch):
-    pytest.importorskip("stable_baselines3")
-    import base64
-    import pickle
-    import zipfile
-
-    cls, marker = learner_class("ppo"), tmp_path / "ran"
+def _stopped_ppo_run(tmp_path, monkeypatch):
+    """A tiny PPO run in ``tmp_path / "cut"``, stopped after its first milestone with its resume state kept."""
+    cls = learner_class("ppo")
     learn, calls = cls.learn, []
 
     def learn_once(self, budget, callback):
         calls.append(budget)
         if len(calls) > 1:
-            raise KeyboardInterrupt  # stopped after the first milestone, its resume state kept
+            raise KeyboardInterrupt
         learn(self, budget, callback)
 
     monkeypatch.setattr(cls, "learn", learn_once)
     with pytest.raises(KeyboardInterrupt):
         run(tiny("ppo"), "battery", tmp_path / "cut", SEEDS["ppo"], progress=False)
     monkeypatch.setattr(cls, "learn", learn)
+
+
+def test_a_stopped_ppo_run_resumes_from_data_and_unpickles_nothing_in_its_folder(tmp_path, monkeypatch):
+    pytest.importorskip("stable_baselines3")
+    import base64
+    import pickle
+    import zipfile
+
+    marker = tmp_path / "ran"
+    _stopped_ppo_run(tmp_path, monkeypatch)
     checkpoints = tmp_path / "cut" / "checkpoints"
     payload = base64.b64encode(pickle.dumps(_Opens(marker))).decode()
     (last,) = [p for p in checkpoints.glob("step_*.zip")]
@@ -289,19 +295,7 @@ def test_a_ppo_run_folder_handed_to_resume_is_data_its_paths_stay_inside_and_a_p
     import shutil
     import zipfile
 
-    cls = learner_class("ppo")
-    learn, calls = cls.learn, []
-
-    def learn_once(self, budget, callback):
-        calls.append(budget)
-        if len(calls) > 1:
-            raise KeyboardInterrupt
-        learn(self, budget, callback)
-
-    monkeypatch.setattr(cls, "learn", learn_once)
-    with pytest.raises(KeyboardInterrupt):
-        run(tiny("ppo"), "battery", tmp_path / "cut", SEEDS["ppo"], progress=False)
-    monkeypatch.setattr(cls, "learn", learn)
+    _stopped_ppo_run(tmp_path, monkeypatch)
     resume = tmp_path / "cut" / "checkpoints" / "resume.json"
     state = json.loads(resume.read_text())
     (last,) = (tmp_path / "cut" / "checkpoints").glob("step_*.zip")
