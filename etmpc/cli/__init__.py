@@ -66,17 +66,18 @@ def main(argv: list[str] | None = None) -> int:
         os.environ.setdefault(name, "1")
     in_main_thread = threading.current_thread() is threading.main_thread()
     previous = signal.signal(signal.SIGTERM, _terminate) if in_main_thread else None
-    plain = warnings.formatwarning  # etmpc's own warnings (a broken plugin's) as one line each: etmpc: warning: ...
+    plain = warnings.formatwarning  # etmpc's own warnings (a broken plugin's, a deprecated name), one line each
     warnings.formatwarning = lambda message, category, *where: (
         f"etmpc: warning: {' '.join(str(message).removeprefix('etmpc: ').split())}\n"
-        if issubclass(category, RuntimeWarning) and str(message).startswith("etmpc: ")
+        if issubclass(category, (RuntimeWarning, FutureWarning)) and str(message).startswith("etmpc: ")
         else plain(message, category, *where)
     )
     try:
         _check_gl()
-        from etmpc.cli import commands, options  # after the OpenGL check: importing dm-control picks the backend
+        from etmpc.cli import commands, options, tasks  # after the OpenGL check: importing dm-control picks the backend
 
         args = options.build_parser().parse_args(argv)
+        tasks.resolve(args)  # the task given the older way, with its deprecation line
         with interrupts.watching():  # a Ctrl-C is told apart from a trigger that raises KeyboardInterrupt
             commands.COMMANDS[args.command](args)
     except EtmpcError as exc:  # one line, whatever a name in it (a spec, a path) holds

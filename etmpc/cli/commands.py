@@ -145,7 +145,7 @@ def _bench(args) -> None:
     from etmpc.evaluation.bench import format_bench, run_bench
     from etmpc.systems import check_name, names
 
-    domains = args.tasks or list(names())
+    domains = args.task or list(names())
     for domain in domains:  # all names checked before any bench runs
         check_name(domain)
     check_run_outputs({"--json": args.json})

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import time
 
+from etmpc.cli.tasks import task_option
 from etmpc.cli import types
 
 
@@ -15,7 +16,7 @@ def add_parser(sub, tasks: str) -> None:
         help="can triggers be told apart on a task? The event triggers, the clairvoyant "
         "reference and the rollout policy against the periodic front at their rate",
     )
-    di.add_argument("task", help=f"task: {tasks}")
+    task_option(di, tasks)
     di.add_argument(
         "--price",
         type=types.price,

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from etmpc.cli.tasks import task_option
 from etmpc.cli import types
 from etmpc.cli.output import distinct_policies
 from etmpc.policies.specs import syntax
@@ -36,7 +37,7 @@ def add_parser(sub, tasks: str) -> None:
         help="one test-set episode played as evaluate plays it: every state with every "
         "plan's prediction, the recomputes, the inputs and the exogenous signals",
     )
-    tj.add_argument("task", help=f"task: {tasks}")
+    task_option(tj, tasks)
     tj.add_argument("--policy", required=True, metavar="SPEC", help=f"the policy that plays it: {syntax()}")
     tj.add_argument("--episode", type=types.index, default=0, help="test-set episode (default 0)")
     tj.add_argument("--seed", type=types.seed, default=0, help="seed of a stochastic policy's draws, as in evaluate (default 0)")

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from etmpc.cli.tasks import task_option
 from etmpc.cli import types
 from etmpc.cli.output import backend_arguments, check_backend, say, warn
 from etmpc.common.errors import EtmpcError
@@ -87,7 +88,7 @@ def add_self_parser(sub, tasks: str) -> None:
         help="deprecated: etmpc train TASK --algorithm self (a self-triggering policy, "
         "self:PATH: at each solve, how long to keep the plan)",
     )
-    ts.add_argument("task", help=f"system to train on: {tasks}")
+    task_option(ts, tasks, "the task to train on")
     ts.add_argument(
         "--out", type=types.json_path, required=True, metavar="FILE", help="the policy file to write (use it as self:FILE)"
     )

@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from etmpc.cli.tasks import task_option
 from etmpc.cli import discriminate, figures, scoring, training, types
 from etmpc.cli.output import backend_arguments
 from etmpc.common.errors import EtmpcError
@@ -36,7 +37,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     ev = sub.add_parser("evaluate", help="compare recomputation policies on a stored test set")
-    ev.add_argument("task", help=f"system to evaluate: {tasks}")
+    task_option(ev, tasks, "the task to evaluate on")
     ev.add_argument(
         "--policy",
         action="append",
@@ -84,9 +85,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     re_ = sub.add_parser("reproduce", help="the paper's experiments on every task, with REPORT.md and results.json")
     re_.add_argument("--quick", action="store_true", help="the same steps at small sizes (a few minutes)")
-    re_.add_argument(
-        "--task", action="append", default=None, metavar="TASK", help=f"only this task ({tasks}; repeatable; default: every task)"
-    )
+    task_option(re_, tasks, many=True, positional=False)
     re_.add_argument(
         "--sweep",
         action="store_true",
@@ -104,7 +103,7 @@ def build_parser() -> argparse.ArgumentParser:
     backend_arguments(re_)
 
     sw = sub.add_parser("sweep", help="the trade-off curve over prices of a computation: pareto.json, pareto.png, SWEEP.md")
-    sw.add_argument("task", nargs="*", help=f"systems to sweep: {tasks} (default: every system)")
+    task_option(sw, tasks, many=True)
     sw.add_argument(
         "--prices",
         type=types.prices,
@@ -130,9 +129,7 @@ def build_parser() -> argparse.ArgumentParser:
     backend_arguments(sw)
 
     rn = sub.add_parser("render", help="render one test-set episode headless to an MP4 video (a task with a 3-D scene)")
-    rn.add_argument(
-        "task", help=f"task to render: {tasks} (one with a 3-D scene: a task without one, such as the battery, says so)"
-    )
+    task_option(rn, tasks, "the task to render (one with a 3-D scene: a task without one, such as the battery, says so)")
     rn.add_argument("--policy", required=True, metavar="SPEC", help=f"the policy that plays it: {syntax()}")
     rn.add_argument("--episode", type=types.index, default=0, help="test-set episode (default 0)")
     rn.add_argument("--out", type=Path, required=True, metavar="FILE.mp4")
@@ -170,7 +167,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
 
     tst = sub.add_parser("testset", help="draw a test set: N episodes of a task from a seed, with its sha256 (for --test-set)")
-    tst.add_argument("task", help=f"task to draw episodes of: {tasks}")
+    task_option(tst, tasks, "the task to draw episodes of")
     tst.add_argument("--seed", type=types.seed, required=True, help="the seed every draw comes from")
     tst.add_argument("--episodes", type=types.positive_int, default=100, help="episodes (default 100)")
     tst.add_argument("--out", type=Path, required=True, metavar="FILE.npz", help="a new file (never overwritten)")
@@ -181,7 +178,7 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--json", type=types.json_path, default=None, metavar="PATH", help="write every episode's figures as JSON")
 
     be = sub.add_parser("bench", help="time the MPC solve, the rest of a step and whole episodes")
-    be.add_argument("tasks", nargs="*", metavar="TASK", help=f"systems to bench (default: all: {tasks})")
+    task_option(be, tasks, many=True)
     be.add_argument("--episodes", type=types.positive_int, default=10, help="test-set episodes per measurement")
     be.add_argument("--json", type=types.json_path, default=None, metavar="PATH", help="write the figures as JSON")
     be.add_argument(

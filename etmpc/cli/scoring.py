@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from etmpc.cli.tasks import task_option
 from etmpc.cli import types
 from etmpc.cli.output import distinct_policies as _distinct_policies, say as _say
 from etmpc.common.errors import EtmpcError
@@ -40,9 +41,7 @@ def add_parser(sub, tasks: str) -> None:
         metavar="SPEC",
         help="triggers to score: any --policy spec of evaluate (py:MODULE:NAME for your own, sb3:PATH, ...)",
     )
-    sc.add_argument(
-        "--task", action="append", default=None, metavar="TASK", help=f"only this task ({tasks}; repeatable; default: every task)"
-    )
+    task_option(sc, tasks, many=True, positional=False)
     sc.add_argument(
         "--test-set",
         default=None,
@@ -83,7 +82,7 @@ def add_parser(sub, tasks: str) -> None:
         metavar="DIR",
         help=f"with --leaderboard: where the page goes (default {LEADERBOARD_OUT}); finished rows are kept in "
         f"results/leaderboard, so an interrupted run continues. With --references: where the rebuilt "
-        f"files go (default {REFERENCES_OUT}; DIR/DOMAIN/TASK_references.json: copy one over the stored "
+        f"files go (default {REFERENCES_OUT}; DIR/DOMAIN/TASK/references.json: copy one over the stored "
         "file to ship it)",
     )
     sc.add_argument(
@@ -115,7 +114,7 @@ def run(args) -> None:
     from etmpc.evaluation.inputs import check_run_outputs, run_inputs
     from etmpc.evaluation.references import build_references, references_path, write_references
     from etmpc.evaluation.scorecard import format_scorecard, score
-    from etmpc.systems import distinct, make_system, names
+    from etmpc.systems import distinct, folder_name, names
 
     tasks = distinct(args.task or names())
     if args.leaderboard:
@@ -128,9 +127,8 @@ def run(args) -> None:
         out = args.out or REFERENCES_OUT
         check_run_outputs({}, {"--out": out})
         for task in tasks:
-            system = make_system(task)
             path = write_references(
-                build_references(task, workers=args.workers, say=_say), out / system.domain / f"{system.task}_references.json"
+                build_references(task, workers=args.workers, say=_say), out / folder_name(task) / "references.json"
             )
             print(f"wrote {path} (to ship it: copy it over {references_path(task)})")
         return

@@ -12,6 +12,7 @@ import math
 import typing
 from pathlib import Path
 
+from etmpc.cli.tasks import task_option
 from etmpc.cli import legacy, types
 from etmpc.cli.output import backend_arguments, check_backend, say, warn
 from etmpc.common.errors import EtmpcError
@@ -73,7 +74,7 @@ def add_parser(sub, tasks: str) -> None:
         help="train a recomputation policy with any registered learner: DPI (default), "
         "GPOMDP (the paper's), the self-trigger or PPO (Stable-Baselines3, the 'rl' extra)",
     )
-    tr.add_argument("task", help=f"system to train on: {tasks}")
+    task_option(tr, tasks, "the task to train on")
     tr.add_argument("--algorithm", choices=_Registered(), default=DEFAULT, metavar="NAME", help=_AlgorithmHelp("the learner"))
     tr.add_argument(
         "--settings",

@@ -4,15 +4,14 @@ the registry has one, a plugin's too."""
 
 from __future__ import annotations
 
-from etmpc.systems import domains, parse, task_version
+from etmpc.systems import domains, spec
 
 
 def env_id(name: str) -> str:
     """``cart_pendulum`` or ``cart_pendulum/balance`` -> ``etmpc/cart_pendulum-balance-v0``: the task's
     version (:func:`~etmpc.systems.task_version`) is the id's. gymnasium answers an older version's id
     with a pointer to the current one."""
-    domain_name, task = parse(name)
-    return f"etmpc/{domain_name}-{task}-v{task_version(name)}"
+    return spec(name).gym_id
 
 
 def register() -> list[str]:

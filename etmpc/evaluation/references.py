@@ -3,7 +3,7 @@ oracle over the best of them, per episode of its test set (see :mod:`etmpc.evalu
 whole runs of the oracle and of the rollout meter over the best schedule as they were played (the
 leaderboard's rows of both, which it does not play again).
 
-``tasks/<domain>/<task>_references.json`` holds them with the suite's version, the test set's sha256,
+``tasks/<domain>/<task>/references.json`` holds them with the suite's version, the test set's sha256,
 the task's price and the software that computed them, sealed with the SHA-256 of its content. A file
 that does not match what is being scored, was edited after it was written, or does not hold together
 is refused in one line that says how to rebuild it (``etmpc score --references``). Holding together
@@ -33,7 +33,7 @@ from etmpc.common.outputs import write_json
 from etmpc.common.sense import best as best_of, oriented
 from etmpc.evaluation import testsets
 from etmpc.evaluation.evaluate import Evaluation, evaluate
-from etmpc.systems import data_dir, make_system
+from etmpc.systems import make_system, spec
 from etmpc.systems.base import provides
 
 SUITE_VERSION = 3  # what changes it, and what changes a task's version instead: docs/versioning.md
@@ -148,8 +148,8 @@ def rollout_meter_spec(system, best: str) -> str | None:
 
 
 def references_path(task: str) -> Path:
-    system = make_system(task)
-    return data_dir(system.domain) / f"{system.task}_references.json"
+    """Where task ``task``'s references are stored: ``tasks/DOMAIN/TASK/references.json``."""
+    return spec(task).data_file("references.json")
 
 
 def _objectives(evaluation: Evaluation, spec: str) -> list[float]:

@@ -23,7 +23,7 @@ tasks), each with a 95 % stratified bootstrap CI: episodes resampled within each
 (``scipy.stats.bootstrap`` over one sample per task, 2000 resamples, percentile intervals, seeded),
 the references' gap held fixed.
 
-**References** are stored with the tasks (``tasks/<domain>/<task>_references.json``): every periodic
+**References** are stored with the tasks (``tasks/<domain>/<task>/references.json``): every periodic
 schedule's and the oracle's objective per stored episode, with the suite's version, the test set's
 sha256 and the software that computed them, so scoring a trigger plays only that trigger.
 ``etmpc score --references`` rebuilds them; on another test set they are computed for the run.

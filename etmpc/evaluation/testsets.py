@@ -22,7 +22,7 @@ from etmpc.common.documents import loads
 from etmpc.common.frozen import readonly
 from etmpc.common.errors import EtmpcError, TestSetError
 from etmpc.common.outputs import check_outputs, write_bytes
-from etmpc.systems import canonical, data_dir, stored_seed
+from etmpc.systems import canonical, spec, stored_seed
 
 FORMAT_VERSION = 1
 STORED_EPISODES = 100
@@ -33,7 +33,7 @@ def default_path(domain: str, task: str) -> Path:
     """The stored test set of ``domain/task``, in its domain's data folder (:func:`etmpc.systems.data_dir`):
     ``etmpc testset TASK --seed SEED --episodes 100``, SEED its domain's ``TEST_SET_SEEDS[task]``
     (tests/evaluation/test_testset.py regenerates each bit for bit)."""
-    return data_dir(domain) / f"{task}_testset.npz"
+    return spec(f"{domain}/{task}").data_file("testset.npz")
 
 
 def episode_generators(seed: int, episodes: int) -> list[np.random.Generator]:

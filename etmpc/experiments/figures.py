@@ -27,7 +27,8 @@ from etmpc.evaluation.inputs import check_shipped
 from etmpc.evaluation.workers import context, play_test_episode
 from etmpc.loop import run_episode
 from etmpc.policies import parse_policy
-from etmpc.systems import folder_name, make_system
+from etmpc.systems import make_system
+from etmpc.systems import spec as spec_of
 from etmpc.views import figures
 
 RESULTS = Path("results")
@@ -62,7 +63,7 @@ def slug(spec: str) -> str:
 
 def trajectory_path(task: str, spec: str, episode: int) -> Path:
     """Where :func:`trajectory` writes by default: ``results/trajectory_<task>_<policy>_ep<I>.png``."""
-    return RESULTS / f"trajectory_{folder_name(task)}_{slug(spec)}_ep{episode}.png"
+    return RESULTS / f"trajectory_{spec_of(task).slug}_{slug(spec)}_ep{episode}.png"
 
 
 @dataclass(frozen=True)
@@ -109,7 +110,7 @@ def bars_path(evaluations: list[dict], sources: list[str] | None = None) -> Path
     figures.policy_bars(evaluations, sources=sources)  # raises on documents that cannot be drawn together
     doc = evaluations[0]
     try:
-        name = folder_name(f"{doc['domain']}/{doc['task']}")
+        name = spec_of(f"{doc['domain']}/{doc['task']}").slug
     except EtmpcError:  # a task this installation does not have: its documents still draw
         name = f"{doc['domain']}-{doc['task']}"
     return RESULTS / f"figure3_{name}.png"

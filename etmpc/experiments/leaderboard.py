@@ -261,7 +261,7 @@ def _read_kept(path: Path) -> dict | None:
 
 def check_kept(work: Path) -> None:
     """Every row kept in ``work``, checked before any is played (see :func:`_kept`)."""
-    for path in sorted(Path(work).glob("*/*.json")):
+    for path in sorted(Path(work).glob("*/*/*.json")):
         _read_kept(path)
 
 

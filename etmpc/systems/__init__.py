@@ -10,6 +10,8 @@ This package may import ``etmpc.common`` and ``etmpc.control``.
 
 from etmpc.systems.registry import (
     SystemKey,
+    TaskNameDeprecation,
+    TaskSpec,
     canonical,
     check_name,
     data_dir,
@@ -21,6 +23,8 @@ from etmpc.systems.registry import (
     make_system,
     names,
     parse,
+    spec,
+    specs,
     system_class,
     system_key,
     stored_seed,
@@ -29,6 +33,8 @@ from etmpc.systems.registry import (
 
 __all__ = [
     "SystemKey",
+    "TaskNameDeprecation",
+    "TaskSpec",
     "canonical",
     "check_name",
     "data_dir",
@@ -40,6 +46,8 @@ __all__ = [
     "make_system",
     "names",
     "parse",
+    "spec",
+    "specs",
     "system_class",
     "system_key",
     "stored_seed",

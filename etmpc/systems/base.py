@@ -132,7 +132,7 @@ CAPABILITIES: dict[str, tuple[str, ...]] = {
 
 class _StoredBenchmark:
     """The task's :class:`Benchmark`, on the class and its instances: data beside its test set,
-    ``<task>_benchmark.json`` in its domain's data folder (None where there is none), read once."""
+    ``benchmark.json`` in its folder of its domain's data (None where there is none), read once."""
 
     def __get__(self, system, cls) -> Benchmark | None:
         return _benchmark(cls.domain, cls.task)
@@ -140,9 +140,9 @@ class _StoredBenchmark:
 
 @cache
 def _benchmark(domain: str, task: str) -> Benchmark | None:
-    from etmpc.systems.registry import data_dir
+    from etmpc.systems.registry import spec
 
-    path = data_dir(domain) / f"{task}_benchmark.json"
+    path = spec(f"{domain}/{task}").data_file("benchmark.json")
     if not path.is_file():
         return None
     return read_benchmark(path)
@@ -201,7 +201,7 @@ class SystemBase:
     config: Any
 
     # -- optional capabilities (CAPABILITIES): None where the task offers none -----------------------
-    benchmark = _StoredBenchmark()  # <task>_benchmark.json beside its test set
+    benchmark = _StoredBenchmark()  # benchmark.json beside its test set
     exogenous_feature_names: tuple[str, ...] = ()
     exogenous_features: Any = None  # (s) -> array: the values of exogenous_feature_names
     camera: str | None = None  # the MJCF camera that films the scene

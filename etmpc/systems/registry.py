@@ -8,8 +8,8 @@ A *domain* is a package (``etmpc/systems/cart_pendulum/``, or a plugin's own) th
 * ``SUITE`` and ``SYSTEMS`` (loaded when first asked): its dm-control task factories, as a
   ``dm_control.suite`` domain has them, and task -> the :class:`~etmpc.systems.base.System` class
   the control loop plays;
-* optionally ``DATA``: the folder of its stored test sets and references (default: etmpc's
-  ``tasks/<domain>/``);
+* optionally ``DATA``: the folder of its stored test sets and references, one folder per task in it
+  (default: etmpc's ``tasks/<domain>/``, so ``tasks/<domain>/<task>/``);
 * optionally ``VERSIONS``: task -> its version, where it is not 0 (what bumps it: ``docs/versioning.md``);
   it is the ``-vN`` of the task's environment id and is carried by every score made on it.
 
@@ -19,7 +19,9 @@ first asked. A plugin that fails to import (whatever its code raises, ``SystemEx
 Ctrl-C or SIGTERM stops the command), or does not name its tasks, gives one one-line warning naming it;
 every other task still works.
 
-A task's name is ``DOMAIN`` (its default task) or ``DOMAIN/TASK``. A :class:`SystemKey` is a task at a
+Each task has a :class:`TaskSpec`, from which every surface derives its name: the id ``DOMAIN/TASK``
+(``DOMAIN`` alone names its domain's first task), the Gymnasium id ``etmpc/DOMAIN-TASK-vN``, the folder
+``DOMAIN/TASK``. A :class:`SystemKey` is a task at a
 price of a computation, made and checked once at the edge and passed as a value: every worker builds
 the same system from it.
 """
@@ -111,37 +113,128 @@ def domain(name: str) -> ModuleType:
     return packages[name]
 
 
+class TaskNameDeprecation(FutureWarning):
+    """A task named the way an older etmpc named it (``DOMAIN-TASK``, its old folder): still taken, for one
+    release, with one warning line naming the new id."""
+
+
+@dataclass(frozen=True)
+class TaskSpec:
+    """One task of the suite, as :mod:`gymnasium.envs.registration`'s ``EnvSpec`` is one environment: every
+    name a surface shows is derived from it, mechanically.
+
+    * :attr:`id`, ``DOMAIN/TASK``: the command line's (which takes ``DOMAIN`` alone for the domain's first
+      task), the API's, the score cards' and the leaderboard's;
+    * :attr:`gym_id`, ``etmpc/DOMAIN-TASK-vN``: the Gymnasium environment's;
+    * :attr:`folder`, ``DOMAIN/TASK``: the folder under ``tasks/`` (its test set, references and benchmark)
+      and under ``policies/`` (its shipped policies), and of its results in an output directory;
+    * :attr:`slug`, ``DOMAIN-TASK``: the task in one file name, where a folder will not do.
+    """
+
+    domain: str
+    task: str
+    version: int = 0  # what bumps it: docs/versioning.md
+    default: bool = False  # the domain's first task: the one ``DOMAIN`` alone names
+
+    @property
+    def id(self) -> str:
+        return f"{self.domain}/{self.task}"
+
+    @property
+    def gym_id(self) -> str:
+        return f"etmpc/{self.slug}-v{self.version}"
+
+    @property
+    def folder(self) -> str:
+        return self.id
+
+    @property
+    def slug(self) -> str:
+        return f"{self.domain}-{self.task}"
+
+    @property
+    def system_class(self) -> type:
+        """The :class:`~etmpc.systems.base.System` class the control loop plays (its entry point)."""
+        return domain(self.domain).SYSTEMS[self.task]
+
+    def data_file(self, kind: str) -> Path:
+        """The task's stored ``kind`` file (``testset.npz``, ``references.json``, ``benchmark.json``) in its
+        folder of its domain's data, ``tasks/DOMAIN/TASK/``. A plugin's data laid out as an older etmpc laid
+        it out (``DATA/TASK_KIND``) is read, for one release, with one :class:`TaskNameDeprecation` line."""
+        path = data_dir(self.domain) / self.task / kind
+        old = data_dir(self.domain) / f"{self.task}_{kind}"
+        if not path.exists() and old.exists():
+            warnings.warn(f"etmpc: {old} is laid out as an older etmpc's: move it to {path}", TaskNameDeprecation, stacklevel=2)
+            return old
+        return path
+
+    def make(self, recompute_price: float | None = None):
+        """The system, built from the task's ``Config()`` (at ``recompute_price`` if given): the one place a
+        system is made (:meth:`SystemKey.make`)."""
+        return SystemKey(self.id, recompute_price).make()
+
+    def __str__(self) -> str:
+        return self.id
+
+
+@cache
+def _specs() -> dict[str, TaskSpec]:
+    found = {}
+    for domain_name, package in domains().items():
+        for index, task in enumerate(package.TASKS):
+            found[f"{domain_name}/{task}"] = TaskSpec(domain_name, task, _version(domain_name, task), index == 0)
+    return found
+
+
+def specs() -> tuple[TaskSpec, ...]:
+    """Every task's spec, domain by domain, each domain's first task first."""
+    return tuple(_specs().values())
+
+
 def names() -> tuple[str, ...]:
-    """The task names the command line takes: ``DOMAIN`` for a domain's default task, ``DOMAIN/TASK``
-    for the others."""
-    found = []
-    for name, package in domains().items():
-        found += [name] + [f"{name}/{task}" for task in package.TASKS[1:]]
-    return tuple(found)
+    """Every task's id, ``DOMAIN/TASK``, in the registry's order."""
+    return tuple(_specs())
+
+
+def spec(name: str | TaskSpec) -> TaskSpec:
+    """The spec of task ``name``: its id ``DOMAIN/TASK``, or ``DOMAIN`` for the domain's first task. An older
+    etmpc's ``DOMAIN-TASK`` is taken with one :class:`TaskNameDeprecation` line; anything else is an
+    :class:`UnknownNameError` listing the valid ids."""
+    if isinstance(name, TaskSpec):
+        return name
+    known = _specs()
+    if not isinstance(name, str):
+        raise UnknownNameError(f"a task is named by a string, not {type(name).__name__}; valid: {', '.join(known)}")
+    if name in known:
+        return known[name]
+    package = domains().get(name)
+    if package is not None:
+        return known[f"{name}/{package.TASKS[0]}"]
+    old = next((s for s in known.values() if name == s.slug), None)
+    if old is not None:
+        warnings.warn(f"etmpc: task name {name!r} is deprecated: say {old.id!r}", TaskNameDeprecation, stacklevel=2)
+        return old
+    raise UnknownNameError(f"unknown task {name!r}; valid: {', '.join(known)}")
 
 
 def parse(name: str) -> tuple[str, str]:
-    """``(domain, task)`` of a task name (``DOMAIN`` or ``DOMAIN/TASK``)."""
-    domain_name, _, task = name.partition("/")
-    package = domains().get(domain_name)
-    if package is None or (task and task not in package.TASKS):
-        raise UnknownNameError(f"unknown task {name!r}; valid: {', '.join(names())}")
-    return domain_name, task or package.TASKS[0]
+    """``(domain, task)`` of a task name (see :func:`spec`)."""
+    found = spec(name)
+    return found.domain, found.task
 
 
 def check_name(name: str) -> None:
     """Raise :class:`UnknownNameError`, listing the valid names, unless ``name`` is a known task."""
-    parse(name)
+    spec(name)
 
 
 def canonical(name: str) -> str:
-    """``DOMAIN`` for a domain's default task (however it was named), else ``DOMAIN/TASK``."""
-    domain_name, task = parse(name)
-    return domain_name if task == domain(domain_name).TASKS[0] else f"{domain_name}/{task}"
+    """Task ``name``'s id, ``DOMAIN/TASK``, however it was named."""
+    return spec(name).id
 
 
 def distinct(names_given) -> list[str]:
-    """The tasks named, canonical, each once: a task named twice (even as ``battery`` and
+    """The tasks named, as ids, each once: a task named twice (even as ``battery`` and
     ``battery/trading``) is refused, naming it; an unknown name is refused, listing the valid ones."""
     tasks: list[str] = []
     for name in names_given:
@@ -153,8 +246,8 @@ def distinct(names_given) -> list[str]:
 
 
 def folder_name(name: str) -> str:
-    """A task's name as one folder: ``DOMAIN`` for a domain's default task, else ``DOMAIN-TASK``."""
-    return canonical(name).replace("/", "-")
+    """Task ``name``'s folder, relative: ``DOMAIN/TASK`` (:attr:`TaskSpec.folder`)."""
+    return spec(name).folder
 
 
 def data_dir(domain_name: str) -> Path:
@@ -163,13 +256,16 @@ def data_dir(domain_name: str) -> Path:
     return Path(data) if data is not None else tasks_dir() / domain_name
 
 
-def task_version(name: str) -> int:
-    """Task ``name``'s version: its domain's ``VERSIONS`` entry, 0 if it names none."""
-    domain_name, task = parse(name)
+def _version(domain_name: str, task: str) -> int:
     version = getattr(domain(domain_name), "VERSIONS", {}).get(task, 0)
     if not (isinstance(version, int) and not isinstance(version, bool) and version >= 0):
         raise EtmpcError(f"domain {domain_name!r} gives task {task!r} the version {version!r}, not a whole number >= 0")
     return version
+
+
+def task_version(name: str) -> int:
+    """Task ``name``'s version: its domain's ``VERSIONS`` entry, 0 if it names none."""
+    return spec(name).version
 
 
 def stored_seed(name: str) -> int | None:
@@ -185,9 +281,8 @@ def has_levels(name: str) -> bool:
 
 
 def system_class(name: str) -> type:
-    """The :class:`~etmpc.systems.base.System` class of task ``name`` (``DOMAIN`` or ``DOMAIN/TASK``)."""
-    domain_name, task = parse(name)
-    return domain(domain_name).SYSTEMS[task]
+    """The :class:`~etmpc.systems.base.System` class of task ``name`` (:attr:`TaskSpec.system_class`)."""
+    return spec(name).system_class
 
 
 @dataclass(frozen=True)

@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from etmpc.systems import canonical, system_class
+from etmpc.systems import spec, system_class
 
 MAX_EPISODE_TABS = 10  # per policy: each tab adds about 140 kB and 15 ms to a recording
 
@@ -70,9 +70,8 @@ def objective_unit(domain: str, task: str) -> str:
 
 
 def task_part(domain: str, task: str) -> str:
-    """A task's first entity-path part: its name, ``DOMAIN`` for a domain's default task, else
-    ``DOMAIN-TASK`` (one path part)."""
-    return canonical(f"{domain}/{task}").replace("/", "-")
+    """A task's first entity-path part: ``DOMAIN-TASK``, its spec's slug (one path part)."""
+    return spec(f"{domain}/{task}").slug
 
 
 def label(name: str) -> str:

@@ -1,0 +1,46 @@
+"""How every command takes its task: ``--task TASK``, the task's id (``DOMAIN/TASK``, or ``DOMAIN`` alone for
+its domain's first task; :func:`etmpc.systems.spec`). A command of one task requires it; a command that can
+play several repeats it, every task by default.
+
+An older etmpc took the task as the first word after the command (``etmpc evaluate cart_pendulum ...``); that
+form still works for one release, with one deprecation line saying what to write instead."""
+
+from __future__ import annotations
+
+import argparse
+
+from etmpc.cli.output import warn
+from etmpc.common.errors import EtmpcError
+
+_OLD = "given_task"  # where the older form's positional task lands
+
+
+def task_option(parser, tasks: str, what: str = "the task", many: bool = False, positional: bool = True) -> None:
+    """Add ``--task`` to ``parser`` (``many``: repeatable, default every task), and the older positional form
+    where the command had one (``positional``)."""
+    if many:
+        every = f"only this task ({tasks}; repeatable; default: every task)"
+        parser.add_argument("--task", action="append", default=None, metavar="TASK", help=every)
+    else:
+        parser.add_argument("--task", default=None, metavar="TASK", help=f"{what} (required): {tasks}")
+    if positional:
+        parser.add_argument(_OLD, nargs="*" if many else "?", default=None, metavar="TASK", help=argparse.SUPPRESS)
+    parser.set_defaults(task_many=many)
+
+
+def resolve(args) -> None:
+    """Put the task given in the older positional form into ``args.task``, with one deprecation line; refuse a
+    task given both ways, and a one-task command without its task."""
+    if not hasattr(args, "task_many"):
+        return
+    old = getattr(args, _OLD, None)
+    given = bool(old) if args.task_many else old is not None
+    if given:
+        if args.task:
+            raise EtmpcError("give the task once, as --task TASK")
+        words = old if args.task_many else [old]
+        new = " ".join(f"--task {word}" for word in words)
+        warn(f"'etmpc {args.command} {' '.join(words)}' is deprecated: say 'etmpc {args.command} {new}'")
+        args.task = list(words) if args.task_many else old
+    if not args.task_many and args.task is None:
+        raise EtmpcError(f"etmpc {args.command} needs --task TASK")
