@@ -37,10 +37,10 @@ leaderboard: setup
 # A shorter look: compare recomputation policies on the stored 100-episode test set of each system,
 # and draw the paper's Figure 1 (battery forecasts).
 evaluate: setup
-	$(BIN)/etmpc evaluate cart_pendulum --policy always --policy never \
+	$(BIN)/etmpc evaluate --task cart_pendulum --policy always --policy never \
 		--policy every:2 --policy every:5 --policy every:10 \
 		--policy threshold:0.1 --policy threshold:0.3 --json results/cart_pendulum.json
-	$(BIN)/etmpc evaluate battery --policy always --policy never \
+	$(BIN)/etmpc evaluate --task battery --policy always --policy never \
 		--policy every:2 --policy every:5 --policy every:10 \
 		--policy threshold:0.01 --policy threshold:0.02 --json results/battery.json
 	$(BIN)/etmpc figure forecasts --policy every:20 --policy every:5 --out results/figure1_battery_forecasts.png

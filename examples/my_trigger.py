@@ -8,7 +8,7 @@ now). ``s`` is what the loop shows it (``etmpc.loop.AugmentedState``): the state
 plan's prediction for now (``s.x_predicted``), the plan's age (``s.age``), the plan itself and the
 task's observation. The same trigger from the command line, in this folder:
 
-    etmpc evaluate cart_pendulum --policy every:3 --policy threshold:0.3 --policy py:my_trigger:AngleOrAge \\
+    etmpc evaluate --task cart_pendulum --policy every:3 --policy threshold:0.3 --policy py:my_trigger:AngleOrAge \\
         --against every:3
 
 ``DriftOrAge`` below reads nothing task-specific: ``etmpc score py:my_trigger:DriftOrAge`` scores it on

@@ -1,7 +1,7 @@
 """Microseconds per ``sb3:`` decision: Stable-Baselines3's ``predict`` (what ``sb3:`` called before) against
 the numpy network (what it calls now), side by side in one run.
 
-    python scripts/bench_sb3_decide.py [--task cart_pendulum] [--model policies/cart_pendulum/ppo.zip]
+    python scripts/bench_sb3_decide.py [--task cart_pendulum] [--model policies/cart_pendulum/balance/ppo.zip]
                                        [--episodes 20] [--rounds 5]
 
 The augmented states come from real test-set episodes played by the model. Each decision is timed on
@@ -54,7 +54,7 @@ def _timed(decide, inputs) -> tuple[list[float], list[int]]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--task", default="cart_pendulum")
-    parser.add_argument("--model", default="policies/cart_pendulum/ppo.zip")
+    parser.add_argument("--model", default="policies/cart_pendulum/balance/ppo.zip")
     parser.add_argument("--episodes", type=int, default=20)
     parser.add_argument("--rounds", type=int, default=5)
     args = parser.parse_args()

@@ -118,11 +118,11 @@ def digests(episodes: int) -> dict[str, str]:
             "always",
             "every:3",
             "threshold:0.3",
-            f"rl:{ROOT / 'policies/cart_pendulum/learned.json'}",
+            f"rl:{ROOT / 'policies/cart_pendulum/balance/learned.json'}",
             "rollout:every:3:2:5",
         ],
-        "battery": ["every:3", "threshold:0.01", f"rl:{ROOT / 'policies/battery/learned.json'}", "rollout:always:2:5"],
-        "quadrotor": ["every:7", "threshold:0.5", f"rl:{ROOT / 'policies/quadrotor/learned.json'}"],
+        "battery": ["every:3", "threshold:0.01", f"rl:{ROOT / 'policies/battery/trading/learned.json'}", "rollout:always:2:5"],
+        "quadrotor": ["every:7", "threshold:0.5", f"rl:{ROOT / 'policies/quadrotor/waypoints/learned.json'}"],
         # the other tasks: their kicks, jumps, latency and compute levels, with a schedule and the shipped DPI
         **{task: ["every:3", f"rl:{ROOT / 'policies' / folder_name(task) / 'learned.json'}"] for task in OTHER_TASKS},
     }

@@ -1,6 +1,6 @@
 """The quadrotor page's flight figure: one stored test-set episode under two triggers, side by side in time.
 
-    python scripts/quadrotor_flight.py [--episode 3] [--policy every:7 --policy rl:policies/quadrotor/learned.json]
+    python scripts/quadrotor_flight.py [--episode 3] [--policy every:7 --policy rl:policies/quadrotor/waypoints/learned.json]
                                        [--out docs/tasks/quadrotor_flight.png]
 
 Three panels on one time axis: the drone's distance from its waypoint (the waypoint changes drawn as
@@ -27,7 +27,7 @@ COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd")
 
 
 def _short(spec: str) -> str:
-    """A spec with its file's folders dropped (``rl:policies/quadrotor/learned.json`` as ``rl:learned.json``)."""
+    """A spec with its file's folders dropped (``rl:policies/quadrotor/waypoints/learned.json`` as ``rl:learned.json``)."""
     kind, _, rest = spec.partition(":")
     return f"{kind}:{Path(rest).name}" if "/" in rest else spec
 
@@ -38,7 +38,7 @@ def main() -> None:
     parser.add_argument("--policy", action="append", default=None)
     parser.add_argument("--out", type=Path, default=Path("docs/tasks/quadrotor_flight.png"))
     args = parser.parse_args()
-    specs = args.policy or ["every:7", "rl:policies/quadrotor/learned.json"]
+    specs = args.policy or ["every:7", "rl:policies/quadrotor/waypoints/learned.json"]
     if len(specs) > len(COLOURS):
         parser.error(f"at most {len(COLOURS)} policies")
 

@@ -3,7 +3,7 @@ kept for one release so that scripts keep working.
 
 Each old flag sets one setting of the learners it was an option of (:data:`FLAGS`), as ``--set`` does, so
 a run gives the same files either way; ``--hyperparams FILE`` is ``--settings FILE``, and ``etmpc
-train-self TASK --out FILE`` is ``etmpc train TASK --algorithm self`` writing its policy to FILE. A run
+train-self TASK --out FILE`` is ``etmpc train --task TASK --algorithm self`` writing its policy to FILE. A run
 that used one ends with a line on stderr that says what replaces it (at the end: a refused command
 stays one line).
 """
@@ -85,7 +85,7 @@ def given(args, learner: str, known) -> tuple[dict, list[str]]:
 def add_self_parser(sub, tasks: str) -> None:
     ts = sub.add_parser(
         "train-self",
-        help="deprecated: etmpc train TASK --algorithm self (a self-triggering policy, "
+        help="deprecated: etmpc train --task TASK --algorithm self (a self-triggering policy, "
         "self:PATH: at each solve, how long to keep the plan)",
     )
     task_option(ts, tasks, "the task to train on")
@@ -140,7 +140,7 @@ def run_self(args) -> None:
     price = "" if args.price is None else f" --price {args.price:g}"
     sets = "".join(f" --set {name}={value}" for name, value in values.items())
     warn(
-        f"etmpc train-self is deprecated: use etmpc train {args.task} --algorithm self --out DIR{price}{sets} "
+        f"etmpc train-self --task is deprecated: use etmpc train --task {args.task} --algorithm self --out DIR{price}{sets} "
         "(it writes DIR/selected.json)"
     )
-    print(f"wrote {args.out} (evaluate it with: etmpc evaluate {args.task} --policy self:{args.out}{price})")
+    print(f"wrote {args.out} (evaluate it with: etmpc evaluate --task {args.task} --policy self:{args.out}{price})")

@@ -18,7 +18,7 @@ from etmpc.cli.output import backend_arguments, check_backend, say, warn
 from etmpc.common.errors import EtmpcError
 
 DEFAULT = "dpi"
-# What the command line gives a learner that its settings do not say (as etmpc train did before --set, as
+# What the command line gives a learner that its settings do not say (as etmpc train --task did before --set, as
 # the shipped PPO and etmpc reproduce were chosen), where its Settings' own default differs.
 COMMAND_LINE = {"ppo": {"validation_episodes": 50}}
 
@@ -201,4 +201,6 @@ def run(args) -> None:
         )
     written = sorted(f"{p.name}/" if p.is_dir() else p.name for p in Path(args.out).iterdir())
     price = "" if args.price is None else f" --price {args.price:g}"
-    print(f"wrote {args.out}: {', '.join(written)} (evaluate it with: etmpc evaluate {args.task} --policy {done.policy}{price})")
+    print(
+        f"wrote {args.out}: {', '.join(written)} (evaluate it with: etmpc evaluate --task {args.task} --policy {done.policy}{price})"
+    )

@@ -3,7 +3,7 @@
 A test set is one ``.npz`` file in ``tasks/<domain>/`` with a ``.sha256`` file beside it. Each
 named array has the episode index as its first axis; ``meta`` holds a JSON description (task,
 seed, generator). The file is written with fixed zip timestamps so that regenerating it from its
-seed (``etmpc testset TASK --seed S --out FILE``; each domain's ``TEST_SET_SEEDS`` holds its stored sets' seeds) gives
+seed (``etmpc testset --task TASK --seed S --out FILE``; each domain's ``TEST_SET_SEEDS`` holds its stored sets' seeds) gives
 the same bytes, hence the same checksum.
 """
 
@@ -31,7 +31,7 @@ _ZIP_EPOCH = (1980, 1, 1, 0, 0, 0)
 
 def default_path(domain: str, task: str) -> Path:
     """The stored test set of ``domain/task``, in its domain's data folder (:func:`etmpc.systems.data_dir`):
-    ``etmpc testset TASK --seed SEED --episodes 100``, SEED its domain's ``TEST_SET_SEEDS[task]``
+    ``etmpc testset --task TASK --seed SEED --episodes 100``, SEED its domain's ``TEST_SET_SEEDS[task]``
     (tests/evaluation/test_testset.py regenerates each bit for bit)."""
     return spec(f"{domain}/{task}").data_file("testset.npz")
 
@@ -116,7 +116,7 @@ def load(path: Path, domain: str, task: str) -> TestSet:
     # Only the stored test set is regenerated from its seed; someone else's file is theirs to fix.
     name = canonical(f"{domain}/{task}")
     advice = (
-        f"regenerate it with: etmpc testset {name} --seed {stored_seed(name) or 'SEED'} --out {path}"
+        f"regenerate it with: etmpc testset --task {name} --seed {stored_seed(name) or 'SEED'} --out {path}"
         if stored
         else "use the stored test set (drop --test-set) or a complete one"
     )

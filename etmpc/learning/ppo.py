@@ -1,6 +1,6 @@
 """A trigger trained by a standard RL library: Stable-Baselines3's PPO on the trigger environment.
 
-``etmpc train TASK --algorithm ppo --out DIR`` trains PPO (an MLP policy) on ``etmpc.envs.gym.TriggerEnv``
+``etmpc train --task TASK --algorithm ppo --out DIR`` trains PPO (an MLP policy) on ``etmpc.envs.gym.TriggerEnv``
 with the task's hyperparameters (``policies/<task>/ppo.yml``, rl-zoo3's layout, see
 :mod:`etmpc.learning.hyperparams`; ``--settings FILE`` for others, ``--set timesteps=N`` to change the
 budget): ``n_envs`` environments, stepped in ``--workers`` processes (the numbers do not depend on
@@ -14,7 +14,7 @@ on ``validation_episodes`` training-distribution episodes, drawn as ``etmpc trai
 (never the test set). The best becomes ``selected.zip`` / ``selected.json``; ``training.json`` keeps
 the settings, the validation scores, the environment and simulated steps and the wall time.
 
-Evaluate it like any policy: ``etmpc evaluate TASK --policy sb3:DIR/selected.zip``. PyTorch runs on
+Evaluate it like any policy: ``etmpc evaluate --task TASK --policy sb3:DIR/selected.zip``. PyTorch runs on
 one thread per process, on the CPU. Stable-Baselines3 and PyTorch are the optional extra ``rl``.
 
 On a task with compute levels (``cart_pendulum/kicks_levels``) the environment's actions are

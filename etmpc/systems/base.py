@@ -123,7 +123,7 @@ CAPABILITIES: dict[str, tuple[str, ...]] = {
     "experiments": ("benchmark",),  # etmpc reproduce, sweep and the leaderboard's rows: prices, thresholds, lookahead
     "rollouts": ("sample_future",),  # rollout:, DPI and the self-trigger's training: futures the controller cannot know
     "exogenous features": ("exogenous_features",),  # what the learned policy's "error" features add
-    "render": ("camera",),  # a 3-D scene for etmpc render and the recordings' video (with show)
+    "render": ("camera",),  # a 3-D scene for etmpc render --task and the recordings' video (with show)
     "bench": ("plan_cost",),  # what etmpc bench compares the MPC with (with reference_solvers and interpreted)
     "failures": ("failures",),  # how often an episode failed (falls, ...), reported beside the mean objective
     "time in the loop": ("iterate", "predict"),  # compute levels, work-priced solves, delay compensation

@@ -177,8 +177,7 @@ class TaskSpec:
         return self.id
 
 
-@cache
-def _specs() -> dict[str, TaskSpec]:
+def _specs() -> dict[str, TaskSpec]:  # made anew each time (a few records): a plugin installed later joins
     found = {}
     for domain_name, package in domains().items():
         for index, task in enumerate(package.TASKS):

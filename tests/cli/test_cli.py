@@ -12,18 +12,18 @@ from etmpc.cli import main
 @pytest.mark.parametrize(
     "argv, message",
     [
-        (["evaluate", "cartpole", "--policy", "always"], "unknown task 'cartpole'"),
-        (["evaluate", "cart_pendulum", "--policy", "sometimes"], "unknown policy 'sometimes'"),
-        (["evaluate", "cart_pendulum", "--policy", "every:0"], "period"),
-        (["evaluate", "cart_pendulum", "--policy", "threshold:-1"], "threshold"),
-        (["evaluate", "cart_pendulum", "--policy", "always", "--test-set", "/no/such.npz"], "not found"),
-        (["evaluate", "cart_pendulum", "--policy", "always", "--episodes", "0"], "--episodes"),
-        (["evaluate", "cart_pendulum", "--policy", "always", "--episodes", "101"], "1..100"),
-        (["evaluate", "cart_pendulum", "--policy", "always", "--json", "/"], "directory"),
-        (["evaluate", "cart_pendulum"], "--policy"),
+        (["evaluate", "--task", "cartpole", "--policy", "always"], "unknown task 'cartpole'"),
+        (["evaluate", "--task", "cart_pendulum", "--policy", "sometimes"], "unknown policy 'sometimes'"),
+        (["evaluate", "--task", "cart_pendulum", "--policy", "every:0"], "period"),
+        (["evaluate", "--task", "cart_pendulum", "--policy", "threshold:-1"], "threshold"),
+        (["evaluate", "--task", "cart_pendulum", "--policy", "always", "--test-set", "/no/such.npz"], "not found"),
+        (["evaluate", "--task", "cart_pendulum", "--policy", "always", "--episodes", "0"], "--episodes"),
+        (["evaluate", "--task", "cart_pendulum", "--policy", "always", "--episodes", "101"], "1..100"),
+        (["evaluate", "--task", "cart_pendulum", "--policy", "always", "--json", "/"], "directory"),
+        (["evaluate", "--task", "cart_pendulum"], "--policy"),
         (["frobnicate"], "invalid choice"),
-        (["evaluate", "battery", "--policy", "every:x"], "every"),
-        (["evaluate", "battery", "--policy", "always", "--episodes", "101"], "1..100"),
+        (["evaluate", "--task", "battery", "--policy", "every:x"], "every"),
+        (["evaluate", "--task", "battery", "--policy", "always", "--episodes", "101"], "1..100"),
         (["bench", "battery", "pendulum"], "unknown task 'pendulum'"),
         (["bench", "--episodes", "0"], "--episodes"),
     ],
@@ -41,6 +41,7 @@ def test_evaluate_writes_table_and_json(tmp_path, capsys):
         main(
             [
                 "evaluate",
+                "--task",
                 "cart_pendulum",
                 "--policy",
                 "never",
@@ -64,14 +65,19 @@ def test_evaluate_writes_table_and_json(tmp_path, capsys):
 
 
 def test_evaluate_battery_reports_profit(capsys):
-    assert main(["evaluate", "battery", "--policy", "always", "--policy", "never", "--episodes", "2", "--workers", "1"]) == 0
+    assert (
+        main(["evaluate", "--task", "battery", "--policy", "always", "--policy", "never", "--episodes", "2", "--workers", "1"])
+        == 0
+    )
     out = capsys.readouterr().out
     assert "battery/trading: objective (higher is better)" in out and "never" in out
 
 
 def test_console_script_error_has_no_traceback():
     result = subprocess.run(
-        [sys.executable, "-m", "etmpc.cli", "evaluate", "cart_pendulum", "--policy", "every:0"], capture_output=True, text=True
+        [sys.executable, "-m", "etmpc.cli", "evaluate", "--task", "cart_pendulum", "--policy", "every:0"],
+        capture_output=True,
+        text=True,
     )
     assert result.returncode == 2 and "Traceback" not in result.stderr and result.stderr.count("\n") == 1
 

@@ -1,4 +1,4 @@
-"""`etmpc train TASK --algorithm NAME [--settings FILE] [--set KEY=VALUE ...]`: every registered learner,
+"""`etmpc train --task TASK --algorithm NAME [--settings FILE] [--set KEY=VALUE ...]`: every registered learner,
 its settings from a file and the command line; the old flags and `etmpc train-self` as the --set they
 stand for, with a note; the seeds a learner cannot take refused; one-line errors."""
 
@@ -73,15 +73,20 @@ def test_the_new_form_trains_every_built_in_learner_and_says_how_to_evaluate_it(
         (tmp_path / "s.yml").write_text(text)
         settings = ["--settings", str(tmp_path / "s.yml")]
     out = tmp_path / "run"
-    assert main(["train", task, "--algorithm", name, *settings, *_sets(pairs), *seeds, "--workers", "1", "--out", str(out)]) == 0
+    assert (
+        main(
+            ["train", "--task", task, "--algorithm", name, *settings, *_sets(pairs), *seeds, "--workers", "1", "--out", str(out)]
+        )
+        == 0
+    )
     captured = capsys.readouterr()
     assert "warning" not in captured.err
     kind = learner_class(name).policy_kind
     last = captured.out.strip().splitlines()[-1]
-    assert last.startswith(f"wrote {out}: ") and f"(evaluate it with: etmpc evaluate {task} --policy {kind}:{out}/" in last
+    assert last.startswith(f"wrote {out}: ") and f"(evaluate it with: etmpc evaluate --task {task} --policy {kind}:{out}/" in last
     spec = last.split("--policy ", 1)[1].rstrip(")")
     assert Path(spec.split(":", 1)[1]).is_file()
-    assert main(["evaluate", task, "--policy", spec, "--episodes", "1", "--workers", "1"]) == 0
+    assert main(["evaluate", "--task", task, "--policy", spec, "--episodes", "1", "--workers", "1"]) == 0
 
 
 def test_an_old_flag_gives_the_files_of_its_set_and_says_so_once(tmp_path, capsys):
@@ -89,6 +94,7 @@ def test_an_old_flag_gives_the_files_of_its_set_and_says_so_once(tmp_path, capsy
         main(
             [
                 "train",
+                "--task",
                 "battery",
                 "--algorithm",
                 "gpomdp",
@@ -120,7 +126,20 @@ def test_an_old_flag_gives_the_files_of_its_set_and_says_so_once(tmp_path, capsy
     ]
     assert (
         main(
-            ["train", "battery", "--algorithm", "gpomdp", "--seeds", "0", *new, "--workers", "1", "--out", str(tmp_path / "new")]
+            [
+                "train",
+                "--task",
+                "battery",
+                "--algorithm",
+                "gpomdp",
+                "--seeds",
+                "0",
+                *new,
+                "--workers",
+                "1",
+                "--out",
+                str(tmp_path / "new"),
+            ]
         )
         == 0
     )
@@ -142,6 +161,7 @@ def test_train_self_is_the_self_learner_with_a_note(tmp_path, capsys):
         main(
             [
                 "train-self",
+                "--task",
                 "cart_pendulum",
                 "--out",
                 str(tmp_path / "p.json"),
@@ -161,7 +181,7 @@ def test_train_self_is_the_self_learner_with_a_note(tmp_path, capsys):
     captured = capsys.readouterr()
     (note,) = [line for line in captured.err.splitlines() if "warning" in line]
     assert note == (
-        "etmpc: warning: etmpc train-self is deprecated: use etmpc train cart_pendulum --algorithm self --out DIR "
+        "etmpc: warning: etmpc train-self --task is deprecated: use etmpc train --task cart_pendulum --algorithm self --out DIR "
         "--price 0.0005 --set episodes=2 --set solves_per_episode=2 --set futures=1 --set validation_episodes=2 "
         "(it writes DIR/selected.json)"
     )
@@ -170,6 +190,7 @@ def test_train_self_is_the_self_learner_with_a_note(tmp_path, capsys):
         main(
             [
                 "train",
+                "--task",
                 "cart_pendulum",
                 "--algorithm",
                 "self",
@@ -232,7 +253,7 @@ def test_train_self_is_the_self_learner_with_a_note(tmp_path, capsys):
 )
 def test_bad_settings_and_seeds_are_one_line_and_exit_2(argv, message, tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    assert main(["train", "battery", "--out", str(tmp_path / "run"), *argv]) == 2
+    assert main(["train", "--task", "battery", "--out", str(tmp_path / "run"), *argv]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith("etmpc: error: ") and message in err, err
     assert list(tmp_path.iterdir()) == []
@@ -247,7 +268,7 @@ def test_set_reads_yaml_values_over_the_file_and_ppo_keeps_its_command_line_vali
     assert (settings.episodes, settings.futures, settings.bases, settings.eval_episodes) == (6, 3, ("always", "every:4"), None)
     assert configure(learner_class("gpomdp"), None, "battery", {"learning_rate": "3e-4"}).learning_rate == 3e-4  # YAML 1.1's text
     ppo = learner_class("ppo")
-    assert configure(ppo, None, "battery", {}).validation_episodes == 50  # as etmpc train and the shipped PPO chose
+    assert configure(ppo, None, "battery", {}).validation_episodes == 50  # as etmpc train --task and the shipped PPO chose
     assert configure(ppo, None, "battery", {"validation_episodes": 3}).validation_episodes == 3
     with pytest.raises(EtmpcError, match="unknown setting 'n_timesteps' for ppo; known: timesteps, seed"):
         configure(ppo, None, "battery", {"n_timesteps": 3})
@@ -312,6 +333,7 @@ def test_a_registered_learner_is_a_choice_of_algorithm_and_trains(new_learner, t
         main(
             [
                 "train",
+                "--task",
                 "battery",
                 "--algorithm",
                 "fixed-period-test",
@@ -326,9 +348,17 @@ def test_a_registered_learner_is_a_choice_of_algorithm_and_trains(new_learner, t
         == 0
     )
     assert "--policy every:4)" in capsys.readouterr().out
-    assert main(["train", "battery", "--algorithm", "fixed-period-test", "--set", "period=0", "--out", str(tmp_path / "x")]) == 2
+    assert (
+        main(
+            ["train", "--task", "battery", "--algorithm", "fixed-period-test", "--set", "period=0", "--out", str(tmp_path / "x")]
+        )
+        == 2
+    )
     assert "period must be >= 1, got 0" in capsys.readouterr().err
-    assert main(["train", "battery", "--algorithm", "fixed-period-test", "--episodes", "3", "--out", str(tmp_path / "x")]) == 2
+    assert (
+        main(["train", "--task", "battery", "--algorithm", "fixed-period-test", "--episodes", "3", "--out", str(tmp_path / "x")])
+        == 2
+    )
     assert "--episodes is a setting of gpomdp and dpi and self only, not of fixed-period-test" in capsys.readouterr().err
 
 

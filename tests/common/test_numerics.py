@@ -156,7 +156,7 @@ def test_a_policy_file_of_absurd_or_non_finite_numbers_is_refused_when_read_nami
     with pytest.raises(PolicyFileError) as raised:
         load_policy(path, "battery", nx=1)
     assert str(raised.value).startswith(f"policy file {path}") and str(raised.value).endswith(says)
-    assert main(["evaluate", "battery", "--policy", f"rl:{path}", "--episodes", "1", "--workers", "1"]) == 2
+    assert main(["evaluate", "--task", "battery", "--policy", f"rl:{path}", "--episodes", "1", "--workers", "1"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and says in err and "Traceback" not in err
 

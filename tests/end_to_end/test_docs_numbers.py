@@ -32,7 +32,7 @@ def test_the_docs_quote_numbers_from_the_results_files():
         for p in [
             REPO / "docs" / "leaderboard.json",
             *REPO.glob("docs/results/*.json"),  # cards and pages made by etmpc's commands (etmpc score --json, ...)
-            *REPO.glob("tasks/*/*_references.json"),
+            *REPO.glob("tasks/*/*/references.json"),
             *REPO.glob("policies/*/*.json"),
         ]
     }

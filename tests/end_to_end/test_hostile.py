@@ -203,10 +203,10 @@ TRIGGERS = {
 
 
 # -- the in-process cases: (id, setup, argv, what the line must name) -------------------------------
-EV = ["evaluate", "cart_pendulum"]
+EV = ["evaluate", "--task", "cart_pendulum"]
 CASES = [
     # names and policies
-    ("unknown-task", "none", ["evaluate", "cartpole", "--policy", "always"], "cartpole"),
+    ("unknown-task", "none", ["evaluate", "--task", "cartpole", "--policy", "always"], "cartpole"),
     ("unknown-policy", "none", [*EV, "--policy", "sometimes"], "sometimes"),
     ("every-zero", "none", [*EV, "--policy", "every:0"], "every:0"),
     ("every-text", "none", [*EV, "--policy", "every:x"], "every:x"),
@@ -265,43 +265,63 @@ CASES = [
     ("unknown-command", "none", ["evalute"], "evalute"),
     ("unknown-option", "none", [*EV, "--policy", "always", "--fast"], "--fast"),
     # train
-    ("train-unknown-task", "none", ["train", "pendulum", "--out", "run"], "pendulum"),
-    ("train-out-is-file", "file-parent", ["train", "battery", "--out", "afile"], "afile"),
-    ("train-into-user-directory", "user-dir", ["train", "battery", "--out", "run", "--episodes", "2"], "notes.txt"),
-    ("train-resume-into-reproduce", "reproduce-dir", ["train", "battery", "--out", "run", "--resume"], "settings.json"),
-    ("train-seeds-reversed", "none", ["train", "battery", "--out", "run", "--seeds", "4-1"], "--seeds"),
-    ("train-seeds-absurd", "none", ["train", "battery", "--out", "run", "--seeds", "0-100000000000"], "--seeds"),
+    ("train-unknown-task", "none", ["train", "--task", "pendulum", "--out", "run"], "pendulum"),
+    ("train-out-is-file", "file-parent", ["train", "--task", "battery", "--out", "afile"], "afile"),
+    ("train-into-user-directory", "user-dir", ["train", "--task", "battery", "--out", "run", "--episodes", "2"], "notes.txt"),
+    ("train-resume-into-reproduce", "reproduce-dir", ["train", "--task", "battery", "--out", "run", "--resume"], "settings.json"),
+    ("train-seeds-reversed", "none", ["train", "--task", "battery", "--out", "run", "--seeds", "4-1"], "--seeds"),
+    ("train-seeds-absurd", "none", ["train", "--task", "battery", "--out", "run", "--seeds", "0-100000000000"], "--seeds"),
     (
         "train-learning-rate-nan",
         "none",
-        ["train", "battery", "--out", "run", "--algorithm", "gpomdp", "--learning-rate", "nan"],
+        ["train", "--task", "battery", "--out", "run", "--algorithm", "gpomdp", "--learning-rate", "nan"],
         "learning_rate must be a number (finite), got nan",
     ),
     (
         "train-dpi-option-with-gpomdp",
         "none",
-        ["train", "battery", "--out", "run", "--algorithm", "gpomdp", "--futures", "3"],
+        ["train", "--task", "battery", "--out", "run", "--algorithm", "gpomdp", "--futures", "3"],
         "--futures",
     ),
-    ("train-record-negative", "none", ["train", "battery", "--out", "run", "--record", "-1"], "--record"),
+    ("train-record-negative", "none", ["train", "--task", "battery", "--out", "run", "--record", "-1"], "--record"),
     (
         "train-eval-episodes-too-many",
         "none",
-        ["train", "battery", "--out", "run", "--eval-episodes", "1000", "--episodes", "2", "--seeds", "0"],
+        ["train", "--task", "battery", "--out", "run", "--eval-episodes", "1000", "--episodes", "2", "--seeds", "0"],
         "1000",
     ),
     # files and settings a user hands in: read by one reader, checked by one check
-    ("settings-nested-too-deep", "deep-files", ["train", "battery", "--out", "run", "--settings", "deep.json"], "nested"),
-    ("settings-yaml-nested-too-deep", "deep-files", ["train", "battery", "--out", "run", "--settings", "deep.yml"], "nested"),
+    (
+        "settings-nested-too-deep",
+        "deep-files",
+        ["train", "--task", "battery", "--out", "run", "--settings", "deep.json"],
+        "nested",
+    ),
+    (
+        "settings-yaml-nested-too-deep",
+        "deep-files",
+        ["train", "--task", "battery", "--out", "run", "--settings", "deep.yml"],
+        "nested",
+    ),
     ("verify-card-nested-too-deep", "deep-files", ["verify", "deep.json"], "nested too deeply"),
     ("figure-evaluation-nested-too-deep", "deep-files", ["figure", "bars", "deep.json", "--out", "x.png"], "nested"),
-    ("train-set-nan-ridge", "none", ["train", "battery", "--out", "run", "--set", "ridge=.nan"], "ridge must be a number"),
-    ("train-set-bool-episodes", "none", ["train", "battery", "--out", "run", "--set", "episodes=true"], "got True"),
-    ("train-set-count-overflows", "none", ["train", "battery", "--out", "run", "--set", f"episodes={10**23}"], "in -1e9..1e9"),
+    (
+        "train-set-nan-ridge",
+        "none",
+        ["train", "--task", "battery", "--out", "run", "--set", "ridge=.nan"],
+        "ridge must be a number",
+    ),
+    ("train-set-bool-episodes", "none", ["train", "--task", "battery", "--out", "run", "--set", "episodes=true"], "got True"),
+    (
+        "train-set-count-overflows",
+        "none",
+        ["train", "--task", "battery", "--out", "run", "--set", f"episodes={10**23}"],
+        "in -1e9..1e9",
+    ),
     (
         "train-ppo-bad-reward-baseline",
         "none",
-        ["train", "battery", "--out", "run", "--algorithm", "ppo", "--set", "reward_baseline=bogus"],
+        ["train", "--task", "battery", "--out", "run", "--algorithm", "ppo", "--set", "reward_baseline=bogus"],
         "reward_baseline",
     ),
     ("verify-row-text-score", "wrong-types", ["verify", "card.json"], "score must be a number, got '1'"),
@@ -318,39 +338,54 @@ CASES = [
     ("reproduce-into-user-directory", "user-dir", ["reproduce", "--quick", "--out", "run"], "notes.txt"),
     ("reproduce-unreadable-settings", "bad-settings", ["reproduce", "--quick", "--out", "run"], "settings.json"),
     # render
-    ("render-battery", "none", ["render", "battery", "--policy", "always", "--out", "v.mp4"], "battery"),
-    ("render-not-mp4", "none", ["render", "cart_pendulum", "--policy", "always", "--out", "v.avi"], ".mp4"),
+    ("render-battery", "none", ["render", "--task", "battery", "--policy", "always", "--out", "v.mp4"], "battery"),
+    ("render-not-mp4", "none", ["render", "--task", "cart_pendulum", "--policy", "always", "--out", "v.avi"], ".mp4"),
     (
         "render-episode-negative",
         "none",
-        ["render", "cart_pendulum", "--policy", "always", "--out", "v.mp4", "--episode", "-1"],
+        ["render", "--task", "cart_pendulum", "--policy", "always", "--out", "v.mp4", "--episode", "-1"],
         "--episode",
     ),
     (
         "render-episode-out-of-range",
         "none",
-        ["render", "cart_pendulum", "--policy", "always", "--out", "v.mp4", "--episode", "100"],
+        ["render", "--task", "cart_pendulum", "--policy", "always", "--out", "v.mp4", "--episode", "100"],
         "100",
     ),
-    ("render-odd-width", "none", ["render", "cart_pendulum", "--policy", "always", "--out", "v.mp4", "--width", "641"], "641"),
-    ("render-fps-absurd", "none", ["render", "cart_pendulum", "--policy", "always", "--out", "v.mp4", "--fps", "1e9"], "--fps"),
-    ("render-fps-zero", "none", ["render", "cart_pendulum", "--policy", "always", "--out", "v.mp4", "--fps", "0"], "--fps"),
+    (
+        "render-odd-width",
+        "none",
+        ["render", "--task", "cart_pendulum", "--policy", "always", "--out", "v.mp4", "--width", "641"],
+        "641",
+    ),
+    (
+        "render-fps-absurd",
+        "none",
+        ["render", "--task", "cart_pendulum", "--policy", "always", "--out", "v.mp4", "--fps", "1e9"],
+        "--fps",
+    ),
+    (
+        "render-fps-zero",
+        "none",
+        ["render", "--task", "cart_pendulum", "--policy", "always", "--out", "v.mp4", "--fps", "0"],
+        "--fps",
+    ),
     (
         "render-seed-negative",
         "none",
-        ["render", "cart_pendulum", "--policy", "always", "--out", "v.mp4", "--seed", "-1"],
+        ["render", "--task", "cart_pendulum", "--policy", "always", "--out", "v.mp4", "--seed", "-1"],
         "--seed",
     ),
     (
         "render-out-parent-is-file",
         "file-parent",
-        ["render", "cart_pendulum", "--policy", "always", "--out", "afile/v.mp4"],
+        ["render", "--task", "cart_pendulum", "--policy", "always", "--out", "afile/v.mp4"],
         "afile",
     ),
     # sweep, and prices
     ("price-negative", "none", [*EV, "--policy", "always", "--price", "-1"], "--price"),
     ("price-infinite", "none", [*EV, "--policy", "always", "--price", "inf"], "--price"),
-    ("train-price-nan", "none", ["train", "battery", "--out", "run", "--price", "nan"], "--price"),
+    ("train-price-nan", "none", ["train", "--task", "battery", "--out", "run", "--price", "nan"], "--price"),
     ("sweep-price-nan", "none", ["sweep", "battery", "--prices", "0,nan"], "--prices"),
     ("sweep-price-text", "none", ["sweep", "battery", "--prices", "1e-4,cheap"], "cheap"),
     ("sweep-price-twice", "none", ["sweep", "battery", "--prices", "1e-4,0.0001"], "twice"),
@@ -363,9 +398,9 @@ CASES = [
     ("self-given-a-logistic-policy", "none", [*EV, "--policy", f"self:{CART_POLICY}"], "not a self-trigger policy"),
     ("self-corrupt", "corrupt-policy", [*EV, "--policy", "self:p.json"], "p.json"),
     ("self-no-path", "none", [*EV, "--policy", "self:"], "self:PATH"),
-    ("train-self-out-is-a-directory", "a-dir", ["train-self", "cart_pendulum", "--out", "out.json"], "out.json"),
-    ("train-self-unknown-task", "none", ["train-self", "cartpole", "--out", "p.json"], "cartpole"),
-    ("train-self-negative-price", "none", ["train-self", "battery", "--out", "p.json", "--price", "-1"], "--price"),
+    ("train-self-out-is-a-directory", "a-dir", ["train-self", "--task", "cart_pendulum", "--out", "out.json"], "out.json"),
+    ("train-self-unknown-task", "none", ["train-self", "--task", "cartpole", "--out", "p.json"], "cartpole"),
+    ("train-self-negative-price", "none", ["train-self", "--task", "battery", "--out", "p.json", "--price", "-1"], "--price"),
     ("sweep-other-settings", "other-sweep", ["sweep", "battery", "--out", "run", "--quick"], "other settings"),
     # replay and bench
     ("replay-missing", "none", ["replay", "none.rrd"], "none.rrd"),
@@ -412,7 +447,7 @@ CASES = [
     (
         "py-writes-into-observation",
         "py-writes-into-observation",
-        ["evaluate", "battery", "--policy", "py:py_writes_into_observation:T", "--episodes", "1", "--workers", "1"],
+        ["evaluate", "--task", "battery", "--policy", "py:py_writes_into_observation:T", "--episodes", "1", "--workers", "1"],
         "read-only",
     ),
     (
@@ -425,7 +460,7 @@ CASES = [
     (
         "render-beyond-the-framebuffer",
         "none",
-        ["render", "reacher", "--policy", "always", "--out", "v.mp4", "--width", "2560", "--height", "1440"],
+        ["render", "--task", "reacher", "--policy", "always", "--out", "v.mp4", "--width", "2560", "--height", "1440"],
         "framebuffer",
     ),
     (
@@ -485,11 +520,18 @@ def _etmpc(args: list[str], cwd: Path, env: dict | None = None, file_size_limit:
 @pytest.mark.parametrize(
     "args, names",
     [
-        (["evaluate", "battery", "--policy", "always", "--episodes", "2", "--workers", "1", "--json", "ev.json"], "ev.json"),
-        (["evaluate", "battery", "--policy", "always", "--episodes", "2", "--workers", "1", "--record", "new.rrd"], "new.rrd"),
+        (
+            ["evaluate", "--task", "battery", "--policy", "always", "--episodes", "2", "--workers", "1", "--json", "ev.json"],
+            "ev.json",
+        ),
+        (
+            ["evaluate", "--task", "battery", "--policy", "always", "--episodes", "2", "--workers", "1", "--record", "new.rrd"],
+            "new.rrd",
+        ),
         (
             [
                 "train",
+                "--task",
                 "battery",
                 "--out",
                 "run",
@@ -537,7 +579,7 @@ def test_a_full_disk_is_one_line_and_leaves_the_old_files(args, names, tmp_path,
 @pytest.mark.parametrize("backend, names", [("bogus", "MUJOCO_GL=bogus"), ("glfw", "DISPLAY")])
 def test_a_rendering_backend_that_cannot_work_is_one_line(backend, names, tmp_path):
     env = {"MUJOCO_GL": backend}
-    proc = _etmpc(["render", "cart_pendulum", "--policy", "never", "--out", "v.mp4"], tmp_path, env=env)
+    proc = _etmpc(["render", "--task", "cart_pendulum", "--policy", "never", "--out", "v.mp4"], tmp_path, env=env)
     _, err = proc.communicate(timeout=120)
     assert proc.returncode == 2, err
     _assert_one_line(err, names)
@@ -550,6 +592,7 @@ def test_a_truncated_recording_is_an_error(tmp_path):
         main(
             [
                 "evaluate",
+                "--task",
                 "battery",
                 "--policy",
                 "always",
@@ -581,7 +624,8 @@ def test_stopping_a_parallel_run_leaves_no_worker_and_no_file(how, code, line, t
     _setup("existing-json", tmp_path)
     before = _files(tmp_path)
     proc = _etmpc(
-        ["evaluate", "cart_pendulum", "--policy", "always", "--workers", "2", "--json", "ev.json", "--record", "r.rrd"], tmp_path
+        ["evaluate", "--task", "cart_pendulum", "--policy", "always", "--workers", "2", "--json", "ev.json", "--record", "r.rrd"],
+        tmp_path,
     )
     deadline = time.monotonic() + 120
     workers = []
@@ -673,7 +717,7 @@ def test_the_python_api_refuses_what_the_command_line_refuses_with_the_same_mess
     assert says in message and "\n" not in message
     assert _files(tmp_path) == {}
     if cli is not None:  # the command line's line ends with the same words
-        assert main(["evaluate", "battery", "--policy", "always", *cli]) == 2
+        assert main(["evaluate", "--task", "battery", "--policy", "always", *cli]) == 2
         line = capsys.readouterr().err.strip()
         assert line.endswith(message.split(": ", 1)[1]), (line, message)
 
@@ -685,7 +729,9 @@ def test_a_real_ctrl_c_inside_a_triggers_decide_still_stops_the_command(tmp_path
         "import time\nclass T:\n    spec = 'slow'\n    stochastic = False\n"
         "    def decide(self, s, rng):\n        time.sleep(0.2)\n        return s.age >= 3\n"
     )
-    proc = _etmpc(["evaluate", "battery", "--policy", "py:slow_trigger:T", "--workers", "1", "--json", "ev.json"], tmp_path)
+    proc = _etmpc(
+        ["evaluate", "--task", "battery", "--policy", "py:slow_trigger:T", "--workers", "1", "--json", "ev.json"], tmp_path
+    )
     time.sleep(8)  # imports, then deciding: a Ctrl-C now lands inside decide almost surely (it sleeps 0.2 s of each step)
     os.killpg(proc.pid, signal.SIGINT)
     _, err = proc.communicate(timeout=60)
@@ -695,8 +741,8 @@ def test_a_real_ctrl_c_inside_a_triggers_decide_still_stops_the_command(tmp_path
 
 
 # -- nothing a user types destroys a file: an output is never an input nor in etmpc's data ----------
-STORED_REFERENCES = REPO / "tasks" / "battery" / "trading_references.json"
-STORED_TESTSET = REPO / "tasks" / "cart_pendulum" / "balance_testset.npz"
+STORED_REFERENCES = REPO / "tasks" / "battery" / "trading" / "references.json"
+STORED_TESTSET = REPO / "tasks" / "cart_pendulum" / "balance" / "testset.npz"
 SHIPPED_PPO = REPO / "policies" / "cart_pendulum" / "ppo.zip"
 
 
@@ -760,15 +806,20 @@ OWN_CASES = [  # (id, setup, argv, what the one line must name)
     (
         "render-out-into-the-data",
         "none",
-        ["render", "cart_pendulum", "--policy", "always", "--out", str(REPO / "tasks" / "cart_pendulum" / "v.mp4")],
+        ["render", "--task", "cart_pendulum", "--policy", "always", "--out", str(REPO / "tasks" / "cart_pendulum" / "v.mp4")],
         "data folder",
     ),
-    ("train-into-the-shipped-policies", "none", ["train", "battery", "--out", str(REPO / "policies" / "battery")], "data folder"),
-    ("train-out-holds-the-data", "none", ["train", "battery", "--out", str(REPO)], "data folder"),
+    (
+        "train-into-the-shipped-policies",
+        "none",
+        ["train", "--task", "battery", "--out", str(REPO / "policies" / "battery")],
+        "data folder",
+    ),
+    ("train-out-holds-the-data", "none", ["train", "--task", "battery", "--out", str(REPO)], "data folder"),
     (
         "testset-into-the-data",
         "none",
-        ["testset", "battery", "--seed", "1", "--out", str(REPO / "tasks" / "battery" / "new.npz")],
+        ["testset", "--task", "battery", "--seed", "1", "--out", str(REPO / "tasks" / "battery" / "new.npz")],
         "data folder",
     ),
     (

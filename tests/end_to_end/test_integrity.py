@@ -139,6 +139,7 @@ def test_on_the_command_line_too(tmp_path, monkeypatch, capsys):
     code = main(
         [
             "evaluate",
+            "--task",
             "reacher",
             "--policy",
             "py:naive_vandal_module:Naive",
@@ -212,6 +213,6 @@ def test_whatever_a_trigger_raises_is_one_line_of_bounded_length():
 
 
 def test_a_spec_with_a_line_break_is_still_one_line_on_the_command_line(capsys):
-    assert main(["evaluate", "battery", "--policy", "every:\n3"]) == 2
+    assert main(["evaluate", "--task", "battery", "--policy", "every:\n3"]) == 2
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and "every:" in err

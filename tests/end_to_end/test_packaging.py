@@ -18,7 +18,20 @@ import pytest
 
 from tests.conftest import REPO
 
-COMMANDS = ("evaluate", "score", "train", "train-self", "reproduce", "sweep", "render", "replay", "bench")
+COMMANDS = (
+    "evaluate",
+    "--task",
+    "score",
+    "train",
+    "--task",
+    "train-self",
+    "reproduce",
+    "sweep",
+    "render",
+    "--task",
+    "replay",
+    "bench",
+)
 # The caches too: other tests (running beside this one) write into them while the tree is copied.
 _LEFT_OUT = shutil.ignore_patterns(
     ".git",
@@ -70,9 +83,9 @@ def test_the_wheel_holds_every_module_and_the_data_and_nothing_else(wheel):
     modules = {p.relative_to(REPO).as_posix() for p in (REPO / "etmpc").rglob("*.py")}
     assert modules and modules <= names, sorted(modules - names)
     data = {f"etmpc/_data/models/{p.name}" for p in (REPO / "models").glob("*.xml")}
-    data |= {f"etmpc/_data/tasks/{p.relative_to(REPO / 'tasks').as_posix()}" for p in (REPO / "tasks").glob("*/*_testset.npz*")}
+    data |= {f"etmpc/_data/tasks/{p.relative_to(REPO / 'tasks').as_posix()}" for p in (REPO / "tasks").glob("*/*/testset.npz*")}
     data |= {
-        f"etmpc/_data/tasks/{p.relative_to(REPO / 'tasks').as_posix()}" for p in (REPO / "tasks").glob("*/*_references.json")
+        f"etmpc/_data/tasks/{p.relative_to(REPO / 'tasks').as_posix()}" for p in (REPO / "tasks").glob("*/*/references.json")
     }
     data |= {f"etmpc/_data/policies/{p.relative_to(REPO / 'policies').as_posix()}" for p in (REPO / "policies").glob("*/ppo.yml")}
     assert len(data) > 12 and data <= names, sorted(data - names)
@@ -110,6 +123,7 @@ def test_the_installed_commands_work_outside_the_checkout(wheel, tmp_path):
     shipped = REPO / "policies" / "cart_pendulum" / "learned.json"
     result = run(
         "evaluate",
+        "--task",
         "cart_pendulum",
         "--policy",
         f"rl:{shipped}",
@@ -130,7 +144,7 @@ def test_the_installed_commands_work_outside_the_checkout(wheel, tmp_path):
     assert installed["runs"] == here["runs"] and installed["test_set"]["sha256"] == here["test_set"]["sha256"]
 
     result = run("score", "every:3", "--task", "battery", "--workers", "2")  # the stored references are installed
-    best = json.loads((REPO / "tasks" / "battery" / "trading_references.json").read_text())["best"]
+    best = json.loads((REPO / "tasks" / "battery" / "trading" / "references.json").read_text())["best"]
     assert result.returncode == 0 and f"references: battery: {best} and oracle:{best}" in result.stdout, result.stderr
     result = run("score", "every:3", "--task", "battery", "--episodes", "2", "--workers", "1")  # references computed
     assert result.returncode == 0 and "references: battery: " in result.stdout, result.stderr
@@ -172,7 +186,7 @@ def test_the_sdist_holds_what_the_wheel_is_built_from_and_twine_check_passes(sdi
     needed = {"pyproject.toml", "setup.py", "README.md", "CITATION.cff", *LICENCE_FILES}
     needed |= {p.relative_to(REPO).as_posix() for p in (REPO / "etmpc").rglob("*.py")}
     needed |= {p.relative_to(REPO).as_posix() for p in (REPO / "models").glob("*.xml")}
-    for pattern in ("*/*.npz", "*/*.sha256", "*/*_references.json"):  # the package data of pyproject.toml
+    for pattern in ("*/*.npz", "*/*.sha256", "*/*/references.json"):  # the package data of pyproject.toml
         needed |= {p.relative_to(REPO).as_posix() for p in (REPO / "tasks").glob(pattern)}
     needed |= {p.relative_to(REPO).as_posix() for p in (REPO / "policies").glob("*/ppo.yml")}
     assert not needed - names, sorted(needed - names)  # CITATION.cff: `include CITATION.cff` in MANIFEST.in

@@ -96,6 +96,7 @@ def test_an_installed_plugin_adds_its_task_and_kind_everywhere_and_uninstalling_
         "-m",
         "etmpc.cli",
         "evaluate",
+        "--task",
         "slider",
         "--policy",
         "every:3",
@@ -119,7 +120,7 @@ def test_an_installed_plugin_adds_its_task_and_kind_everywhere_and_uninstalling_
     pip("uninstall", "-y", "etmpc-slider")
     gone = run("-c", SEES)
     assert gone.returncode == 0 and gone.stdout == before.stdout, gone.stderr
-    refused = run("-m", "etmpc.cli", "evaluate", "slider", "--policy", "every:3", "--episodes", "1")
+    refused = run("-m", "etmpc.cli", "evaluate", "--task", "slider", "--policy", "every:3", "--episodes", "1")
     assert refused.returncode == 2
     assert refused.stderr.strip() == (
         "etmpc: error: unknown task 'slider'; valid: cart_pendulum, cart_pendulum/kicks, cart_pendulum/kicks_late, "

@@ -69,7 +69,7 @@ def test_joins_an_existing_cluster_by_address(tmp_path):
         timeout=120,
     )
     try:
-        argv = ["evaluate", "battery", *(a for p in POLICIES for a in ("--policy", p)), "--episodes", "3"]
+        argv = ["evaluate", "--task", "battery", *(a for p in POLICIES for a in ("--policy", p)), "--episodes", "3"]
         done = subprocess.run(
             [
                 sys.executable,

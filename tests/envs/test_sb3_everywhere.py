@@ -1,6 +1,6 @@
 """A shipped policy plays the same everywhere: loaded the standard way (``PPO.load``) and stepped by
 Stable-Baselines3's own loop on the documented environment with its ``normalize=`` keyword, it makes
-exactly the decisions ``etmpc evaluate TASK --policy sb3:…`` makes, step by step; without the keyword
+exactly the decisions ``etmpc evaluate --task TASK --policy sb3:…`` makes, step by step; without the keyword
 (what a user measured) it is another policy. And ``sb3:`` scores a model saved by a plain
 ``model.save()``, on the raw observation, or refuses in one line when its normalisation is unknown.
 
@@ -59,7 +59,7 @@ def sb3_plays(model, env, episode: int) -> dict:
 
 
 def evaluate_plays(task: str, spec: str, episodes: int, tmp_path: Path, monkeypatch) -> dict[int, dict]:
-    """``etmpc evaluate TASK --policy SPEC``: per episode its per-step recompute and forced flags (caught as
+    """``etmpc evaluate --task TASK --policy SPEC``: per episode its per-step recompute and forced flags (caught as
     it plays them) and the objective and recomputations it reports."""
     caught, original = {}, evaluate_module.play_test_episode
 
@@ -71,7 +71,10 @@ def evaluate_plays(task: str, spec: str, episodes: int, tmp_path: Path, monkeypa
 
     monkeypatch.setattr(evaluate_module, "play_test_episode", catching)
     out = tmp_path / f"{task.replace('/', '-')}.json"
-    assert main(["evaluate", task, "--policy", spec, "--episodes", str(episodes), "--workers", "1", "--json", str(out)]) == 0
+    assert (
+        main(["evaluate", "--task", task, "--policy", spec, "--episodes", str(episodes), "--workers", "1", "--json", str(out)])
+        == 0
+    )
     monkeypatch.undo()
     for run in json.loads(out.read_text())["runs"]:
         caught[run["episode"]] |= {"objective": run["objective"], "recomputes": run["recomputes"]}
@@ -211,7 +214,9 @@ def test_a_model_trained_behind_vecnormalize_needs_its_statistics_which_save_nor
     model = PPO("MlpPolicy", vec, seed=0, n_steps=128, batch_size=64, n_epochs=1, device="cpu").learn(total_timesteps=256)
     model.save(tmp_path / "n.zip")
     # Nothing in its zip says how it normalised, but that it did: refused, saying what writes the statistics.
-    assert main(["evaluate", "battery", "--policy", f"sb3:{tmp_path / 'n.zip'}", "--episodes", "1", "--workers", "1"]) == 2
+    assert (
+        main(["evaluate", "--task", "battery", "--policy", f"sb3:{tmp_path / 'n.zip'}", "--episodes", "1", "--workers", "1"]) == 2
+    )
     err = capsys.readouterr().err
     assert "has no n.json beside it" in err and "trained behind VecNormalize" in err and "save_normalization(" in err
     assert len(err.strip().splitlines()) == 1 and "Traceback" not in err, err

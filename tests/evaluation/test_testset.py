@@ -21,6 +21,7 @@ def test_stored_test_set_is_etmpc_testset_with_its_documented_seed(domain, tmp_p
             "-m",
             "etmpc.cli",
             "testset",
+            "--task",
             domain,
             "--seed",
             str(stored_seed(domain)),
@@ -43,13 +44,13 @@ def test_a_drawn_test_set_is_what_evaluate_takes_and_never_overwrites(tmp_path, 
     from etmpc.cli import main
 
     out = tmp_path / "mine.npz"
-    assert main(["testset", "battery", "--seed", "7", "--episodes", "3", "--out", str(out)]) == 0
+    assert main(["testset", "--task", "battery", "--seed", "7", "--episodes", "3", "--out", str(out)]) == 0
     loaded = testset.load(out, "battery", "trading")
     assert loaded.episodes == 3 and loaded.meta["seed"] == 7
-    assert main(["evaluate", "battery", "--policy", "every:3", "--test-set", str(out), "--workers", "1"]) == 0
+    assert main(["evaluate", "--task", "battery", "--policy", "every:3", "--test-set", str(out), "--workers", "1"]) == 0
     assert "3 episodes x 1 repeats" in capsys.readouterr().out
     before = out.read_bytes()
-    assert main(["testset", "battery", "--seed", "8", "--out", str(out)]) == 2
+    assert main(["testset", "--task", "battery", "--seed", "8", "--out", str(out)]) == 2
     assert "never overwritten" in capsys.readouterr().err and out.read_bytes() == before
 
 
@@ -76,7 +77,7 @@ def test_missing_test_set(tmp_path, monkeypatch):
     assert "etmpc testset" not in str(info.value)
     # The stored one (here: where the stored one is looked for) is regenerated from its seed.
     monkeypatch.setattr(testset, "default_path", lambda domain, task: tmp_path / "stored.npz")
-    with pytest.raises(TestSetError, match="not found.*etmpc testset cart_pendulum --seed 20210601"):
+    with pytest.raises(TestSetError, match="not found.*etmpc testset --task cart_pendulum --seed 20210601"):
         testset.load(tmp_path / "stored.npz", "cart_pendulum", "balance")
 
 
@@ -163,7 +164,7 @@ def test_a_gust_that_never_ends_is_one_line_before_any_episode_is_played(tmp_pat
     arrays["gust_intervals"][1, 5] = 2**62
     path = tmp_path / "gusts.npz"
     testset.write(path, arrays, dict(stored.meta, episodes=2))
-    code = main(["evaluate", "quadrotor", "--policy", "every:7", "--test-set", str(path), "--workers", "1"])
+    code = main(["evaluate", "--task", "quadrotor", "--policy", "every:7", "--test-set", str(path), "--workers", "1"])
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1 and "Traceback" not in err
     assert f"episode 1: gust_intervals: {2**62} at [5] is outside the task's range [0, 16]" in err

@@ -14,7 +14,21 @@ def test_discriminate_picks_the_best_periodic_schedule_and_compares_at_equal_rat
     out = tmp_path / "sub" / "discriminate.json"
     price = 1e-3
     assert (
-        main(["discriminate", "cart_pendulum", "--episodes", "2", "--price", str(price), "--workers", "1", "--json", str(out)])
+        main(
+            [
+                "discriminate",
+                "--task",
+                "cart_pendulum",
+                "--episodes",
+                "2",
+                "--price",
+                str(price),
+                "--workers",
+                "1",
+                "--json",
+                str(out),
+            ]
+        )
         == 0
     )
     printed = capsys.readouterr().out
@@ -54,10 +68,10 @@ def test_discriminate_picks_the_best_periodic_schedule_and_compares_at_equal_rat
 
 
 def test_discriminate_refuses_bad_input_before_playing(tmp_path, capsys):
-    assert main(["discriminate", "pendulum"]) == 2
+    assert main(["discriminate", "--task", "pendulum"]) == 2
     assert "unknown task 'pendulum'" in capsys.readouterr().err
-    assert main(["discriminate", "battery", "--episodes", "0"]) == 2
+    assert main(["discriminate", "--task", "battery", "--episodes", "0"]) == 2
     assert "--episodes" in capsys.readouterr().err
-    assert main(["discriminate", "battery", "--json", str(tmp_path)]) == 2
+    assert main(["discriminate", "--task", "battery", "--json", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "is a directory" in err

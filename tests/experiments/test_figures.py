@@ -188,7 +188,18 @@ def test_trajectory_command_plays_the_episode_as_evaluate_does(tmp_path, capsys)
     """A stochastic policy, seed 3, episode 2: the command's objective is evaluate's for that run."""
     spec = _learned_policies(tmp_path / "run", "battery", 1, biases=(0.5,))[0]
     code, stdout, err = _figure(
-        capsys, "trajectory", "battery", "--policy", spec, "--episode", 2, "--seed", 3, "--out", tmp_path / "out" / "traj.png"
+        capsys,
+        "trajectory",
+        "--task",
+        "battery",
+        "--policy",
+        spec,
+        "--episode",
+        2,
+        "--seed",
+        3,
+        "--out",
+        tmp_path / "out" / "traj.png",
     )
     assert code == 0, err
     run = evaluate("battery", [spec], episodes=3, workers=1, seed=3, progress=False).runs[2]
@@ -200,7 +211,7 @@ def test_trajectory_command_plays_the_episode_as_evaluate_does(tmp_path, capsys)
 
 def test_trajectory_command_default_path(tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    code, stdout, err = _figure(capsys, "trajectory", "cart_pendulum", "--policy", "threshold:0.3")
+    code, stdout, err = _figure(capsys, "trajectory", "--task", "cart_pendulum", "--policy", "threshold:0.3")
     assert code == 0, err
     out = Path("results") / "trajectory_cart_pendulum_threshold-0.3_ep0.png"
     assert stdout.endswith(f"wrote {out}\n") and matplotlib.image.imread(tmp_path / out).shape[1] > 800
@@ -211,7 +222,7 @@ def test_trajectory_command_plays_a_task_of_a_domain_with_its_shipped_policy(tmp
     task): the task's name, not its domain's, checks the policy; the default file is named by the task."""
     spec = f"rl:{REPO / 'policies' / 'cart_pendulum-kicks' / 'learned.json'}"
     monkeypatch.chdir(tmp_path)
-    code, stdout, err = _figure(capsys, "trajectory", "cart_pendulum/kicks", "--policy", spec, "--episode", 1)
+    code, stdout, err = _figure(capsys, "trajectory", "--task", "cart_pendulum/kicks", "--policy", spec, "--episode", 1)
     assert code == 0, err
     run = evaluate("cart_pendulum/kicks", [spec], episodes=2, workers=1, progress=False).runs[1]
     assert f"objective {run.objective!r}, {run.recomputes} computations" in stdout

@@ -106,7 +106,20 @@ def test_policy_files_keep_their_feature_set_and_old_files_read_as_paper(tmp_pat
     bad = dict(policy.to_json(), features="telepathy")
     (tmp_path / "bad.json").write_text(json.dumps(bad))
     assert (
-        main(["evaluate", "cart_pendulum", "--policy", f"rl:{tmp_path / 'bad.json'}", "--episodes", "1", "--workers", "1"]) == 2
+        main(
+            [
+                "evaluate",
+                "--task",
+                "cart_pendulum",
+                "--policy",
+                f"rl:{tmp_path / 'bad.json'}",
+                "--episodes",
+                "1",
+                "--workers",
+                "1",
+            ]
+        )
+        == 2
     )
 
 
@@ -121,7 +134,7 @@ def test_policy_files_keep_their_feature_set_and_old_files_read_as_paper(tmp_pat
     ],
 )
 def test_bad_learner_options_are_one_line_errors(capsys, tmp_path, argv, message):
-    assert main(["train", "cart_pendulum", "--out", str(tmp_path / "run"), *argv]) == 2
+    assert main(["train", "--task", "cart_pendulum", "--out", str(tmp_path / "run"), *argv]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and message in err
     assert not (tmp_path / "run").exists()

@@ -70,7 +70,7 @@ def test_the_first_schedules_include_real_time_iterations_on_a_task_with_levels_
 
 @pytest.mark.parametrize("algorithm", ["gpomdp", "self"])
 def test_learners_of_keep_or_solve_refuse_a_task_with_levels_in_one_line(tmp_path, capsys, algorithm):
-    assert main(["train", LEVELS, "--algorithm", algorithm, "--out", str(tmp_path / "run")]) == 2
+    assert main(["train", "--task", LEVELS, "--algorithm", algorithm, "--out", str(tmp_path / "run")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and f"{algorithm} needs a task whose decisions are keep or solve" in err
     assert not (tmp_path / "run").exists()
@@ -120,7 +120,7 @@ def test_a_tiny_dpi_run_on_a_task_with_levels_learns_a_policy_that_iterates(tiny
     agree = [(policy.level_value(p) <= 0) == w for p, w, c in zip(phi, iterate_wins, computes) if c]
     assert not agree or np.mean(agree) >= 0.75
     # It plays its task (etmpc evaluate's rl:PATH), answering levels, and iterates at some of its decisions.
-    traj = play_test_episode(LEVELS, policy, 0, 0, 0).trajectory  # as etmpc evaluate plays it
+    traj = play_test_episode(LEVELS, policy, 0, 0, 0).trajectory  # as etmpc evaluate --task plays it
     asked = ~(traj.forced[: traj.steps] | traj.in_flight[: traj.steps])
     assert traj.steps == system.episode_steps and np.any(traj.level[: traj.steps][asked] == ITERATE)
     assert set(np.unique(traj.level[: traj.steps][asked])) <= {KEEP, ITERATE, SOLVE}

@@ -110,7 +110,9 @@ def test_a_value_out_of_its_range_is_one_line_naming_the_file_the_key_and_the_ra
 
     path = tmp_path / "ppo.yml"
     path.write_text(HEAD + f"  {entry}\n")
-    code = main(["train", "cart_pendulum", "--algorithm", "ppo", "--hyperparams", str(path), "--out", str(tmp_path / "run")])
+    code = main(
+        ["train", "--task", "cart_pendulum", "--algorithm", "ppo", "--hyperparams", str(path), "--out", str(tmp_path / "run")]
+    )
     captured = capsys.readouterr()
     assert code == 2 and captured.out == ""
     assert captured.err.startswith(f"etmpc: error: {path}: {message}") and captured.err.count("\n") == 1, captured.err
@@ -163,7 +165,7 @@ def test_the_checks_hold_for_the_python_api_and_the_command_lines_overrides_too(
         (["--timesteps", "6"], "checkpoints must be at most timesteps // max(2, n_envs) = 3, got 4"),
         (["--seeds", "4294967296"], "seed must be an integer in [0, 4294967295], got 4294967296"),
     ):
-        assert main(["train", "cart_pendulum", "--algorithm", "ppo", *option, "--out", str(tmp_path / "run")]) == 2
+        assert main(["train", "--task", "cart_pendulum", "--algorithm", "ppo", *option, "--out", str(tmp_path / "run")]) == 2
         err = capsys.readouterr().err
         assert err.startswith(f"etmpc: error: {message}") and err.count("\n") == 1, err
     assert list(tmp_path.iterdir()) == []

@@ -66,11 +66,11 @@ def test_it_evaluates_like_any_policy(run):
 
 def test_a_model_for_another_task_or_without_its_description_is_one_line(run, tmp_path, capsys):
     out, _ = run
-    assert main(["evaluate", "cart_pendulum", "--policy", f"sb3:{out / 'selected.zip'}", "--episodes", "1"]) == 2
+    assert main(["evaluate", "--task", "cart_pendulum", "--policy", f"sb3:{out / 'selected.zip'}", "--episodes", "1"]) == 2
     assert "trained on 'battery', not 'cart_pendulum'" in capsys.readouterr().err
     lone = tmp_path / "lone.zip"
     lone.write_bytes((out / "selected.zip").read_bytes())
-    assert main(["evaluate", "battery", "--policy", f"sb3:{lone}", "--episodes", "1"]) == 2
+    assert main(["evaluate", "--task", "battery", "--policy", f"sb3:{lone}", "--episodes", "1"]) == 2
     assert "has no lone.json beside it" in capsys.readouterr().err
     with pytest.raises(Exception, match="not found"):
         load_sb3(str(tmp_path / "missing.zip"), "battery")
@@ -119,7 +119,21 @@ def test_a_file_that_is_not_a_model_is_one_line_before_any_work(run, case, says,
     model = _beside_a_valid_description(run, tmp_path, case, data.get(case, model_bytes), edit)
     spec = f"sb3:{model.with_suffix('.json') if case == 'the-description-itself' else model}"
     assert (
-        main(["evaluate", "battery", "--policy", spec, "--episodes", "2", "--workers", "2", "--json", str(tmp_path / "ev.json")])
+        main(
+            [
+                "evaluate",
+                "--task",
+                "battery",
+                "--policy",
+                spec,
+                "--episodes",
+                "2",
+                "--workers",
+                "2",
+                "--json",
+                str(tmp_path / "ev.json"),
+            ]
+        )
         == 2
     )
     err = capsys.readouterr().err
@@ -169,6 +183,7 @@ def test_two_processes_save_the_same_training_byte_for_byte(tmp_path):
                 "-m",
                 "etmpc.cli",
                 "train",
+                "--task",
                 "cart_pendulum",
                 "--algorithm",
                 "ppo",

@@ -91,6 +91,7 @@ CMD = [
     "-m",
     "etmpc.cli",
     "train",
+    "--task",
     "cart_pendulum",
     "--seeds",
     "0-1",
@@ -134,11 +135,27 @@ def test_kill_9_then_resume_ends_bit_for_bit_like_an_uninterrupted_run(tmp_path)
 def test_an_existing_run_is_never_overwritten(tmp_path, capsys):
     train(TrainConfig("battery", **TINY), tmp_path, workers=1, progress=False)
     before = files(tmp_path)
-    assert main(["train", "battery", "--seeds", "0-1", "--episodes", "4", "--out", str(tmp_path), "--algorithm", "gpomdp"]) == 2
+    assert (
+        main(["train", "--task", "battery", "--seeds", "0-1", "--episodes", "4", "--out", str(tmp_path), "--algorithm", "gpomdp"])
+        == 2
+    )
     assert "--resume" in capsys.readouterr().err
     assert (
         main(
-            ["train", "battery", "--seeds", "0-2", "--episodes", "4", "--out", str(tmp_path), "--resume", "--algorithm", "gpomdp"]
+            [
+                "train",
+                "--task",
+                "battery",
+                "--seeds",
+                "0-2",
+                "--episodes",
+                "4",
+                "--out",
+                str(tmp_path),
+                "--resume",
+                "--algorithm",
+                "gpomdp",
+            ]
         )
         == 2
     )
@@ -146,7 +163,22 @@ def test_an_existing_run_is_never_overwritten(tmp_path, capsys):
     (tmp_path / "checkpoint.json").write_text('{"format": "etmpc-train-checkpoint", "version": 1, "config": {')
     corrupt = files(tmp_path)
     assert (
-        main(["train", "battery", "--seeds", "0-1", "--episodes", "4", "--eval-every", "2", "--out", str(tmp_path), "--resume"])
+        main(
+            [
+                "train",
+                "--task",
+                "battery",
+                "--seeds",
+                "0-1",
+                "--episodes",
+                "4",
+                "--eval-every",
+                "2",
+                "--out",
+                str(tmp_path),
+                "--resume",
+            ]
+        )
         == 2
     )
     assert "corrupt" in capsys.readouterr().err
@@ -159,15 +191,18 @@ def test_an_existing_run_is_never_overwritten(tmp_path, capsys):
 @pytest.mark.parametrize(
     "argv, message",
     [
-        (["train", "battery", "--seeds", "3-1", "--out", "x"], "--seeds"),
-        (["train", "battery", "--seeds", "a", "--out", "x"], "--seeds"),
-        (["train", "pendulum", "--out", "x"], "unknown task"),
-        (["train", "battery", "--baseline", "median", "--out", "x"], "invalid choice"),
-        (["train", "battery", "--algorithm", "gpomdp", "--learning-rate", "-1", "--out", "x"], "learning rate"),
-        (["train", "battery", "--learning-rate", "0.1", "--out", "x"], "--learning-rate is a setting of gpomdp only, not of dpi"),
-        (["train", "battery", "--address", "ray://h:10001", "--out", "x"], "--backend ray"),
-        (["train", "battery", "--backend", "ray", "--address", "nonsense", "--out", "x"], "bad --address"),
-        (["train", "battery", "--backend", "ray", "--address", "127.0.0.1:1", "--out", "x"], "cannot reach"),
+        (["train", "--task", "battery", "--seeds", "3-1", "--out", "x"], "--seeds"),
+        (["train", "--task", "battery", "--seeds", "a", "--out", "x"], "--seeds"),
+        (["train", "--task", "pendulum", "--out", "x"], "unknown task"),
+        (["train", "--task", "battery", "--baseline", "median", "--out", "x"], "invalid choice"),
+        (["train", "--task", "battery", "--algorithm", "gpomdp", "--learning-rate", "-1", "--out", "x"], "learning rate"),
+        (
+            ["train", "--task", "battery", "--learning-rate", "0.1", "--out", "x"],
+            "--learning-rate is a setting of gpomdp only, not of dpi",
+        ),
+        (["train", "--task", "battery", "--address", "ray://h:10001", "--out", "x"], "--backend ray"),
+        (["train", "--task", "battery", "--backend", "ray", "--address", "nonsense", "--out", "x"], "bad --address"),
+        (["train", "--task", "battery", "--backend", "ray", "--address", "127.0.0.1:1", "--out", "x"], "cannot reach"),
     ],
 )
 def test_bad_train_input_is_one_line_and_exit_2(capsys, tmp_path, argv, message):
@@ -214,7 +249,7 @@ def test_bad_policy_files_are_one_line_errors(tmp_path, capsys, content, message
         make_policy("battery", nx=4).save(path)
     else:
         path.write_text(content)
-    assert main(["evaluate", "cart_pendulum", "--policy", f"rl:{path}", "--episodes", "1", "--workers", "1"]) == 2
+    assert main(["evaluate", "--task", "cart_pendulum", "--policy", f"rl:{path}", "--episodes", "1", "--workers", "1"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and message in err
 

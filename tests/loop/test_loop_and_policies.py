@@ -129,7 +129,7 @@ def test_bad_specs(spec, error):
 
 
 def test_parse_policy_takes_the_system_or_its_name_and_the_old_form_warns(cart_system):
-    shipped = "rl:policies/cart_pendulum-kicks/learned.json"
+    shipped = "rl:policies/cart_pendulum/kicks/learned.json"
     # the task's name, as a figure script gives it: a kicks policy is the kicks task's, not the domain's
     assert parse_policy(shipped, "cart_pendulum/kicks").spec == "rl:cart_pendulum/kicks"  # a shipped policy, by its name
     with pytest.raises(EtmpcError, match="cart_pendulum/kicks"):

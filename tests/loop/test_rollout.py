@@ -49,9 +49,9 @@ def _returns_from(traj, step: int, price: float) -> float:
         ("cart_pendulum", "never", 5),
         ("cart_pendulum", "threshold:0.3", 21),
         ("battery", "threshold:0.02", 40),
-        ("cart_pendulum", "rl:policies/cart_pendulum/learned.json", 12),
-        ("battery", "rl:policies/battery/learned.json", 30),
-        ("battery", "rl:policies/battery/learned.json+sample", 30),
+        ("cart_pendulum", "rl:policies/cart_pendulum/balance/learned.json", 12),
+        ("battery", "rl:policies/battery/trading/learned.json", 30),
+        ("battery", "rl:policies/battery/trading/learned.json+sample", 30),
     ],
 )
 def test_the_fast_path_replays_the_dm_env_loop_bit_for_bit(
@@ -222,6 +222,7 @@ def test_the_oracle_is_labelled_an_upper_bound_in_the_table_json_and_figure(tmp_
         main(
             [
                 "evaluate",
+                "--task",
                 "battery",
                 "--policy",
                 "every:10",

@@ -219,7 +219,7 @@ def test_a_latencys_flag_and_names_are_of_their_kind_not_read_by_their_truth(arg
 def test_a_policy_learned_at_latency_zero_plays_on_its_timing_variant_and_nowhere_else():
     from etmpc.policies.learned import PolicyFileError
 
-    path = f"rl:{REPO}/policies/cart_pendulum-kicks/learned.json"
+    path = f"rl:{REPO}/policies/cart_pendulum/kicks/learned.json"
     late = make_system("cart_pendulum/kicks_late")
     policy = parse_policy(path, late)
     assert policy.domain == "cart_pendulum/kicks"

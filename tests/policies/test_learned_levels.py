@@ -115,7 +115,10 @@ def test_a_keep_or_solve_file_for_a_task_with_levels_is_refused_and_version_3_ne
         PolicyFileError, match="decides keep or solve, but task cart_pendulum/kicks_levels's decisions are keep, one"
     ):
         load_policy(tmp_path / "binary.json", LEVELS, nx=4)
-    assert main(["evaluate", LEVELS, "--policy", f"rl:{tmp_path / 'binary.json'}", "--episodes", "1", "--workers", "1"]) == 2
+    assert (
+        main(["evaluate", "--task", LEVELS, "--policy", f"rl:{tmp_path / 'binary.json'}", "--episodes", "1", "--workers", "1"])
+        == 2
+    )
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "decides keep or solve" in err
     (tmp_path / "v3.json").write_text(json.dumps(dict(binary, version=3)))

@@ -160,7 +160,7 @@ def test_a_model_whose_actions_are_not_its_tasks_is_refused_in_one_line(tmp_path
     )
     says = _one_line(lambda: load_sb3(str(two), LEVELS))
     assert "and '2' actions; the trigger environment has (18,) and 3 (keep, one SQP iteration, a full solve) on " in says
-    assert main(["evaluate", KICKS, "--policy", f"sb3:{three}", "--episodes", "1", "--workers", "1"]) == 2
+    assert main(["evaluate", "--task", KICKS, "--policy", f"sb3:{three}", "--episodes", "1", "--workers", "1"]) == 2
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and "and '3' actions" in err and "Traceback" not in err, err
     # With a description: a levels model plays on its own task alone; a two-action one that says it

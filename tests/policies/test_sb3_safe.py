@@ -144,7 +144,19 @@ def test_a_payload_in_a_policy_file_never_runs(entry, tmp_path, capsys):
         assert says in str(refused.value) and len(str(refused.value).splitlines()) == 1
     out = tmp_path / "ev.json"
     code = main(
-        ["evaluate", "cart_pendulum", "--policy", f"sb3:{model}", "--episodes", "1", "--workers", "1", "--json", str(out)]
+        [
+            "evaluate",
+            "--task",
+            "cart_pendulum",
+            "--policy",
+            f"sb3:{model}",
+            "--episodes",
+            "1",
+            "--workers",
+            "1",
+            "--json",
+            str(out),
+        ]
     )
     err = capsys.readouterr().err
     if says is None:
@@ -168,6 +180,7 @@ def test_nor_in_worker_processes(entry, tmp_path, capsys):
     code = main(
         [
             "evaluate",
+            "--task",
             "cart_pendulum",
             "--policy",
             f"sb3:{model}",
@@ -189,6 +202,7 @@ def test_nor_in_worker_processes(entry, tmp_path, capsys):
         main(
             [
                 "evaluate",
+                "--task",
                 "cart_pendulum",
                 "--policy",
                 f"sb3:{CART}",

@@ -118,6 +118,7 @@ def test_py_targets_evaluate_like_the_same_rule(here, target, capsys):
         main(
             [
                 "evaluate",
+                "--task",
                 "battery",
                 "--policy",
                 "every:5",
@@ -156,7 +157,9 @@ def test_py_targets_evaluate_like_the_same_rule(here, target, capsys):
     ],
 )
 def test_a_bad_py_target_is_one_line_exit_2_and_writes_nothing(here, target, message, capsys):
-    code = main(["evaluate", "cart_pendulum", "--policy", target, "--episodes", "1", "--workers", "1", "--json", "out.json"])
+    code = main(
+        ["evaluate", "--task", "cart_pendulum", "--policy", target, "--episodes", "1", "--workers", "1", "--json", "out.json"]
+    )
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1 and message in err and "Traceback" not in err
     assert not (here / "out.json").exists()
@@ -178,6 +181,7 @@ def test_the_examples_trigger_runs_and_its_table_is_etmpc_evaluates(tmp_path):
             "-m",
             "etmpc.cli",
             "evaluate",
+            "--task",
             "cart_pendulum",
             "--policy",
             "every:3",

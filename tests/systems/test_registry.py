@@ -327,9 +327,9 @@ def test_on_the_command_line_a_hostile_plugin_is_one_line_and_the_rest_works(plu
     plugins("etmpc.tasks", "hostile", "fake_hostile", "raise SystemExit(0)")
     plugins("etmpc.policies", "boom", "fake_boom:KIND", BOOM)
     with pytest.warns(RuntimeWarning, match="'hostile' .fake_hostile. failed to import .SystemExit.0.."):
-        assert main(["evaluate", "battery", "--policy", "boom:div", "--episodes", "1", "--workers", "1"]) == 2
+        assert main(["evaluate", "--task", "battery", "--policy", "boom:div", "--episodes", "1", "--workers", "1"]) == 2
     assert capsys.readouterr().err.splitlines() == [
         "etmpc: error: bad policy 'boom:div': the 'boom' plugin (fake_boom:KIND) failed: ZeroDivisionError: division by zero"
     ]
-    assert main(["evaluate", "battery", "--policy", "every:3", "--episodes", "1", "--workers", "1"]) == 0
+    assert main(["evaluate", "--task", "battery", "--policy", "every:3", "--episodes", "1", "--workers", "1"]) == 0
     assert "every:3" in capsys.readouterr().out

@@ -401,13 +401,13 @@ def test_an_episode_tab_per_episode_up_to_the_limit(tmp_path):
 
 def test_policies_are_named_for_people(tmp_path):
     assert look.policy_label("rl:results/x/seed0/last.json") == "rl:last"
-    assert look.policy_label("rollout:rl:policies/battery/learned.json:4:20") == "rollout:rl:learned:4:20"
+    assert look.policy_label("rollout:rl:policies/battery/trading/learned.json:4:20") == "rollout:rl:learned:4:20"
     assert look.policy_label("threshold:0.3") == "threshold:0.3"
     assert look.label("pole_angle") == "pole angle [rad]" and look.label("inflow_kw") == "inflow [kW]"
     # Two learned policies with the same file stem stay apart; the identity keeps each exact spec.
     copy = tmp_path / "learned.json"
-    shutil.copy("policies/battery/learned.json", copy)
-    specs = ["rl:policies/battery/learned.json", f"rl:{copy}"]
+    shutil.copy("policies/battery/trading/learned.json", copy)
+    specs = ["rl:policies/battery/trading/learned.json", f"rl:{copy}"]
     path = tmp_path / "rl.rrd"
     live = evaluate("battery", specs, episodes=1, workers=1, progress=False, record=path)
     entities = chunks_by_entity(path)
@@ -431,7 +431,10 @@ def test_an_interrupted_recording_leaves_no_file(tmp_path, monkeypatch):
 
 def test_replay_cli_prints_the_figures_and_refuses_bad_files(tmp_path, capsys):
     path = tmp_path / "b.rrd"
-    assert main(["evaluate", "battery", "--policy", "every:5", "--episodes", "2", "--workers", "1", "--record", str(path)]) == 0
+    assert (
+        main(["evaluate", "--task", "battery", "--policy", "every:5", "--episodes", "2", "--workers", "1", "--record", str(path)])
+        == 0
+    )
     capsys.readouterr()
     assert main(["replay", str(path), "--per-episode"]) == 0
     out = capsys.readouterr().out
@@ -440,7 +443,7 @@ def test_replay_cli_prints_the_figures_and_refuses_bad_files(tmp_path, capsys):
     for argv in (
         ["replay", str(tmp_path / "missing.rrd")],
         ["replay", str(tmp_path / "junk.rrd")],
-        ["evaluate", "battery", "--policy", "always", "--record", str(tmp_path / "x.txt")],
+        ["evaluate", "--task", "battery", "--policy", "always", "--record", str(tmp_path / "x.txt")],
     ):
         assert main(argv) == 2
         err = capsys.readouterr().err
@@ -451,6 +454,7 @@ def test_render_puts_the_video_frames_into_the_recording(tmp_path, capsys):
     out, rec = tmp_path / "v.mp4", tmp_path / "v.rrd"
     argv = [
         "render",
+        "--task",
         "cart_pendulum",
         "--policy",
         "every:5",
@@ -481,7 +485,7 @@ def test_render_puts_the_video_frames_into_the_recording(tmp_path, capsys):
     (replayed,) = replay_summary(rec)
     live = evaluate("cart_pendulum", ["every:5"], episodes=4, workers=1, progress=False).runs[3]
     assert (replayed.episode, replayed.objective, replayed.recomputes) == (3, live.objective, live.recomputes)
-    assert main(["render", "cart_pendulum", "--policy", "every:5", "--out", str(tmp_path / "v.avi")]) == 2
+    assert main(["render", "--task", "cart_pendulum", "--policy", "every:5", "--out", str(tmp_path / "v.avi")]) == 2
 
 
 def test_train_records_its_evaluations_without_changing_any_result(tmp_path):

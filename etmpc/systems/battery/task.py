@@ -30,7 +30,7 @@ docs/paper.md). Higher is better.
 both for the next 20 intervals (the first value of each is the current true value).
 
 There is no scene to render: ``physics.render`` raises ``NotImplementedError``; record a run to
-Rerun instead (``etmpc evaluate battery --record FILE.rrd``).
+Rerun instead (``etmpc evaluate --task battery --record FILE.rrd``).
 """
 
 from __future__ import annotations
@@ -125,7 +125,7 @@ class Physics(control.Physics):
 
     def render(self, *args, **kwargs):
         raise NotImplementedError(
-            "the battery has no scene to render; record the run to Rerun instead (etmpc evaluate battery --record FILE.rrd)"
+            "the battery has no scene to render; record the run to Rerun instead (etmpc evaluate --task battery --record FILE.rrd)"
         )
 
     def step(self, n_sub_steps: int = 1) -> None:

@@ -12,7 +12,7 @@ from etmpc.systems.registry import lazy
 # Its tasks, the default first: what etmpc.systems lists without loading MuJoCo or dm-control (which
 # pick their OpenGL backend on import). SYSTEMS and SUITE load the domain's modules when first asked.
 TASKS = ("balance", "kicks", "kicks_late", "kicks_levels")
-# The seed of each task's stored test set (tasks/cart_pendulum/<task>_testset.npz: etmpc testset TASK --seed SEED).
+# The seed of each task's stored test set (tasks/cart_pendulum/<task>/testset.npz: etmpc testset --task TASK --seed SEED).
 # The timing variants play kicks' episodes (the same seed): their scores pair with kicks' episode by episode.
 TEST_SET_SEEDS = {"balance": 20210601, "kicks": 20261126, "kicks_late": 20261126, "kicks_levels": 20261126}
 

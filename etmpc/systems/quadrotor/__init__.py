@@ -10,7 +10,7 @@ from etmpc.systems.registry import lazy
 # Its tasks, the default first: what etmpc.systems lists without loading MuJoCo or dm-control (which
 # pick their OpenGL backend on import). SYSTEMS and SUITE load the domain's modules when first asked.
 TASKS = ("waypoints",)
-# The seed of each task's stored test set (tasks/quadrotor/<task>_testset.npz: etmpc testset TASK --seed SEED).
+# The seed of each task's stored test set (tasks/quadrotor/<task>/testset.npz: etmpc testset --task TASK --seed SEED).
 TEST_SET_SEEDS = {"waypoints": 20261127}
 # Version 1: the MPC flies the condensed route (etmpc.control.condensed) instead of sqpmethod; version 2: at
 # most 10 of its QPs, and the plant's arithmetic the same on any CPU with FMA (docs/versioning.md).

@@ -10,7 +10,7 @@ from etmpc.systems.registry import lazy
 # Its tasks, the default first: what etmpc.systems lists without loading MuJoCo or dm-control (which
 # pick their OpenGL backend on import). SYSTEMS and SUITE load the domain's modules when first asked.
 TASKS = ("jumps", "jumps_late")
-# The seed of each task's stored test set (tasks/reacher/<task>_testset.npz: etmpc testset TASK --seed SEED).
+# The seed of each task's stored test set (tasks/reacher/<task>/testset.npz: etmpc testset --task TASK --seed SEED).
 # jumps_late plays jumps' episodes (the same seed): its scores pair with jumps' episode by episode.
 TEST_SET_SEEDS = {"jumps": 20261125, "jumps_late": 20261125}
 

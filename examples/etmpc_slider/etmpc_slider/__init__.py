@@ -13,7 +13,7 @@ from pathlib import Path
 # Its tasks, the default first: what etmpc lists without loading MuJoCo, dm-control or CasADi (the
 # first two pick their OpenGL backend on import). SYSTEMS and SUITE load the modules when first asked.
 TASKS = ("track",)
-# The seed of each task's stored test set (data/<task>_testset.npz: etmpc testset slider --seed SEED).
+# The seed of each task's stored test set (data/<task>_testset.npz: etmpc testset --task slider --seed SEED).
 TEST_SET_SEEDS = {"track": 20261201}
 # The folder of the stored test sets and references (package data).
 DATA = Path(__file__).resolve().with_name("data")

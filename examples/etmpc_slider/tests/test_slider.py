@@ -125,7 +125,7 @@ def test_the_system_has_every_member_etmpc_asks_for(system):
 
     assert isinstance(system, SystemBase) and [m for m in REQUIRED + DERIVED if not hasattr(system, m)] == []
     offered = {f for f in CAPABILITIES if provides(system, f)}
-    assert offered == {"experiments", "rollouts", "exogenous features", "render", "bench", "time in the loop", "failures"}
+    assert offered == {"experiments", "rollouts", "exogenous features", "render", "--task", "bench", "time in the loop", "failures"}
     assert (system.name, system.objective_sense, system.horizon, system.recompute_price) == ("slider", "min", 10, 0.13)
     assert system.u_min.shape == system.u_max.shape == (1,) and system.error_weights.shape == (2,)
 
