@@ -201,6 +201,5 @@ def run(args) -> None:
         )
     written = sorted(f"{p.name}/" if p.is_dir() else p.name for p in Path(args.out).iterdir())
     price = "" if args.price is None else f" --price {args.price:g}"
-    print(
-        f"wrote {args.out}: {', '.join(written)} (evaluate it with: etmpc evaluate --task {args.task} --policy {done.policy}{price})"
-    )
+    evaluate = f"etmpc evaluate --task {args.task} --policy {done.policy}{price}"
+    print(f"wrote {args.out}: {', '.join(written)} (evaluate it with: {evaluate})")

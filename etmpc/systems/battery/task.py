@@ -125,7 +125,8 @@ class Physics(control.Physics):
 
     def render(self, *args, **kwargs):
         raise NotImplementedError(
-            "the battery has no scene to render; record the run to Rerun instead (etmpc evaluate --task battery --record FILE.rrd)"
+            "the battery has no scene to render; record the run to Rerun instead "
+            "(etmpc evaluate --task battery --record FILE.rrd)"
         )
 
     def step(self, n_sub_steps: int = 1) -> None:
