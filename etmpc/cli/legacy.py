@@ -140,7 +140,7 @@ def run_self(args) -> None:
     price = "" if args.price is None else f" --price {args.price:g}"
     sets = "".join(f" --set {name}={value}" for name, value in values.items())
     warn(
-        f"etmpc train-self --task is deprecated: use etmpc train --task {args.task} --algorithm self --out DIR{price}{sets} "
+        f"etmpc train-self is deprecated: use etmpc train --task {args.task} --algorithm self --out DIR{price}{sets} "
         "(it writes DIR/selected.json)"
     )
     print(f"wrote {args.out} (evaluate it with: etmpc evaluate --task {args.task} --policy self:{args.out}{price})")

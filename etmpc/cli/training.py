@@ -18,7 +18,7 @@ from etmpc.cli.output import backend_arguments, check_backend, say, warn
 from etmpc.common.errors import EtmpcError
 
 DEFAULT = "dpi"
-# What the command line gives a learner that its settings do not say (as etmpc train --task did before --set, as
+# What the command line gives a learner that its settings do not say (as etmpc train did before --set, as
 # the shipped PPO and etmpc reproduce were chosen), where its Settings' own default differs.
 COMMAND_LINE = {"ppo": {"validation_episodes": 50}}
 

@@ -36,7 +36,7 @@ from etmpc.loop import Snapshot, play_on, run_episode
 from etmpc.loop.closed import cpu_clock
 from etmpc.policies import parse_policy
 from etmpc.systems import make_system
-from etmpc.systems.base import provides
+from etmpc.systems.capabilities import Bench, offers
 
 
 def _stats(values_s) -> dict:
@@ -226,7 +226,7 @@ def run_bench(domain: str = "cart_pendulum", episodes: int = 10, references: boo
     problems = _problems(system, env, testset, reference_solves)
     if references:
         figures["references"] = [_compare_reference(system, ref, problems) for ref in system.reference_solvers()]
-    if provides(system, "bench"):  # a task that offers plan_cost and interpreted()
+    if offers(system, Bench):  # a task that offers plan_cost and interpreted()
         figures["interpreted"] = _compare_interpreted(system, problems)
     return figures
 

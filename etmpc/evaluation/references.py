@@ -34,7 +34,7 @@ from etmpc.common.sense import best as best_of, oriented
 from etmpc.evaluation import testsets
 from etmpc.evaluation.evaluate import Evaluation, evaluate
 from etmpc.systems import make_system, spec
-from etmpc.systems.base import provides
+from etmpc.systems.capabilities import Experiments, Rollouts, offers
 
 SUITE_VERSION = 3  # what changes it, and what changes a task's version instead: docs/versioning.md
 FORMAT = "etmpc-references"
@@ -142,7 +142,7 @@ def periodic_schedules(system) -> list[str]:
 def rollout_meter_spec(system, best: str) -> str | None:
     """The rollout meter over ``best``: ``rollout:BEST:4:H``, the one-step lookahead over sampled futures with
     the task's lookahead ``H``; None for a task without rollouts or a benchmark's lookahead."""
-    if not (provides(system, "rollouts") and provides(system, "experiments")):
+    if not (offers(system, Rollouts) and offers(system, Experiments)):
         return None
     return f"rollout:{best}:{ROLLOUT_FUTURES}:{system.benchmark.lookahead}"
 

@@ -69,7 +69,7 @@ from etmpc.evaluation.card import (  # noqa: F401  (the card's records, here bef
 from etmpc.evaluation.mainscript import UnguardedScript
 from etmpc.evaluation.scoretable import format_scorecard  # noqa: F401  (the card as text)
 from etmpc.evaluation.workers import shared_pools
-from etmpc.systems import distinct, make_system, names, task_version
+from etmpc.systems import distinct, folder_name, make_system, names, task_version
 
 
 # -- scores ----------------------------------------------------------------------------------------
@@ -207,7 +207,7 @@ def score(
     check_run_outputs({"--json": json_path}, inputs=run_inputs(policies, test_set))
     if test_set is None:  # every task's references checked before any trigger is played
         references = {task: stored(task, episodes) for task in tasks}
-        shown = {task: {"stored": references_path(task).name} for task in tasks}
+        shown = {task: {"stored": f"{folder_name(task)}/{references_path(task).name}"} for task in tasks}
     else:
         (task,) = tasks
         system = make_system(task)

@@ -68,7 +68,7 @@ from etmpc.learning.config import VALIDATION_ENTROPY
 from etmpc.learning.jobs import mean_scores
 from etmpc.loop.closed import cpu_clock
 from etmpc.systems import distinct, folder_name, make_system, names, task_version
-from etmpc.systems.base import require
+from etmpc.systems.capabilities import Experiments, require
 from etmpc.views.figures import write_performance_profile_png
 
 FORMAT = "etmpc-leaderboard"
@@ -118,7 +118,7 @@ def shipped_policy(task: str, file: str = "learned.json") -> Path | None:
 def best_threshold(task: str, workers: int, say: Callable[[str], None]) -> str:
     """The ``threshold:X`` of the task's grid with the best mean objective on training-distribution episodes."""
     system = make_system(task)
-    require(system, "experiments", "the leaderboard's best threshold")
+    require(system, Experiments, "the leaderboard's best threshold")
     specs = system.benchmark.threshold_specs()
     with make_backend("local", workers) as pool:
         means = mean_scores(pool, system.name, specs, VALIDATION_ENTROPY, VALIDATION_EPISODES)

@@ -61,7 +61,7 @@ from etmpc.learning.runner import cost_path, timed  # noqa: F401 (cost_path: rep
 from etmpc.learning.train import TrainConfig, curve_summary, load_checkpoint, train
 from etmpc.policies.learned import write_json_atomically
 from etmpc.systems import folder_name, make_system, names
-from etmpc.systems.base import provides, require
+from etmpc.systems.capabilities import Experiments, Scene, offers, require
 from etmpc.views import figures
 from etmpc.views.curves import write_efficiency_png
 from etmpc.experiments.stages import (  # noqa: F401 (evaluated_once: reproduce's API)
@@ -206,7 +206,7 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
     The paper's own tasks also get the paper's learner (GPOMDP, its protocol); every task gets the
     fixed policies, the default learner, the headroom, PPO, figures, a recording and, with a scene, a video."""
     system = make_system(domain)
-    require(system, "experiments", "etmpc reproduce")
+    require(system, Experiments, "etmpc reproduce")
     folder.mkdir(parents=True, exist_ok=True)
     common = dict(
         task=domain,
@@ -349,7 +349,7 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
         if system.name == "battery":  # the paper's Figure 1: forecasts of the battery's prices and production
             _forecasts_png(folder / "figure1_forecasts.png", system)
             files["figure1"] = "figure1_forecasts.png"
-        if provides(system, "render"):
+        if offers(system, Scene):
             if not (folder / "episode.mp4").exists():
                 render_rollout(
                     domain, best, 0, folder / "episode.mp4", width=settings.video_size[0], height=settings.video_size[1]

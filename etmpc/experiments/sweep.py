@@ -51,7 +51,7 @@ from etmpc.learning.config import TrainConfig
 from etmpc.learning.selftrigger import SelfSettings, train_self
 from etmpc.learning.train import train
 from etmpc.systems import SystemKey, distinct, make_system, names, system_key
-from etmpc.systems.base import require
+from etmpc.systems.capabilities import Experiments, require
 from etmpc.views.curves import draw_pareto
 from etmpc.views.figures import save_png_atomically
 
@@ -116,7 +116,7 @@ class SweepSettings:
     @classmethod
     def default(cls, domain: str, prices=None, episodes: int | None = None, quick: bool = False) -> SweepSettings:
         system = make_system(domain)
-        require(system, "experiments", "etmpc sweep")
+        require(system, Experiments, "etmpc sweep")
         benchmark = system.benchmark  # the task's prices and threshold levels
         prices = benchmark.prices if prices is None else tuple(prices)
         if not 1 <= len(prices) <= MAX_PRICES:

@@ -14,7 +14,7 @@ A learner is one class::
         def learn(self, budget, callback): ...   # train until `budget` (cumulative); callback(n): n units done
         def candidates(self): ...     # {name: policy spec or JSON} chosen among on validation episodes
         def choose(self, scores): ... # keep the best (the runner scored them), write the answer
-        def policy(self): ...         # the run's answer as a spec etmpc evaluate --task scores
+        def policy(self): ...         # the run's answer as a spec etmpc evaluate scores
         def state(self): ...          # everything resume needs, JSON (None: not resumable)
         def load_state(self, state): ...
 

@@ -34,7 +34,7 @@ class Run:
     """What :func:`run` returns: the trained learner, its answer and what it cost."""
 
     learner: Learner
-    policy: str  # the spec etmpc evaluate --task scores
+    policy: str  # the spec etmpc evaluate scores
     wall_seconds: float  # this invocation's
     simulated_steps: int | None
 

@@ -48,7 +48,7 @@ from etmpc.common.outputs import dumps, write_text
 from etmpc.control.timing import ITERATE, KEEP, SOLVE
 from etmpc.loop import AugmentedState
 from etmpc.policies.features import FEATURE_SETS, feature_size, raw_features
-from etmpc.systems import has_levels
+from etmpc.systems import has_levels, same_task
 
 FORMAT = "etmpc-logistic-policy"
 VERSION = 2
@@ -319,7 +319,7 @@ def load_policy(path: str | Path, domain: str | None = None, nx: int | None = No
     except (OSError, ValueError) as exc:  # UnicodeDecodeError and JSONDecodeError are ValueErrors
         raise PolicyFileError(f"policy file {path} cannot be read ({exc})") from None
     policy = LogisticPolicy.from_json(data, where=f"policy file {path}")
-    if domain is not None and policy.domain != domain:
+    if domain is not None and not same_task(policy.domain, domain):
         raise PolicyFileError(f"policy file {path} was trained on {policy.domain!r}, not {domain!r}")
     if domain is not None and policy.levels != has_levels(domain):
         raise PolicyFileError(

@@ -31,6 +31,7 @@ from etmpc.common.errors import EtmpcError
 from etmpc.common.numerics import fsum
 from etmpc.control.timing import ITERATE, KEEP, SOLVE
 from etmpc.loop import AugmentedState, Continuation, DecisionContext, Policy, Snapshot, play_on
+from etmpc.systems.capabilities import Rollouts, require
 
 DEFAULT_FUTURES = 8
 MAX_FUTURES = 1000
@@ -56,8 +57,8 @@ def q_values(
     answers, and is given the plays made here.
     """
     system = context.system
-    if not oracle and system.sample_future is None:
-        raise EtmpcError(f"rollouts need sampled futures (sample_future), which task {system.name} does not offer")
+    if not oracle:
+        require(system, Rollouts, "a rollout over sampled futures")
     snapshot = Snapshot.take(context)
     episodes = [None] if oracle else [system.sample_future(snapshot.episode, context.step, rng) for _ in range(futures)]
     seeds = rng.integers(2**63, size=len(episodes)) if (base.stochastic and rng is not None) else [None] * len(episodes)

@@ -28,6 +28,7 @@ from etmpc.common.documents import loads
 from etmpc.common.errors import EtmpcError
 from etmpc.common.numerics import matvec
 from etmpc.loop import AugmentedState
+from etmpc.systems import same_task
 
 FORMAT = "etmpc-self-trigger"
 CANDIDATES = (1, 2, 3, 4, 5, 6, 8, 10, 12, 15, 20)
@@ -114,7 +115,7 @@ def from_json(data: Any, path: str, domain: str | None) -> SelfTrigger:
     """A self-triggering policy from its JSON (``path``: its name in messages and its spec)."""
     if not isinstance(data, dict) or data.get("format") != FORMAT:
         raise EtmpcError(f"{path} is not a self-trigger policy (format {FORMAT!r})")
-    if domain is not None and data.get("domain") != domain:
+    if domain is not None and not same_task(data.get("domain"), domain):
         raise EtmpcError(f"self-trigger policy {path} is for {data.get('domain')!r}, not {domain!r}")
     try:
         candidates = tuple(int(c) for c in data["candidates"])

@@ -5,8 +5,8 @@ MPC that makes plans, the feedback that corrects them, and the objective. :class
 members every task writes (:data:`REQUIRED`, eleven). :class:`SystemBase`, which every system
 subclasses, derives the rest from them with defaults a task may override (:data:`DERIVED`), and holds
 each optional capability as an attribute that is ``None`` when the task does not offer it
-(:data:`CAPABILITIES`: a 3-D scene, sampled futures for rollouts, failures, ...): a feature that needs
-one says so in one line. ``docs/adding-a-task.md`` says in which order a newcomer writes them.
+(:mod:`etmpc.systems.capabilities`: a 3-D scene, sampled futures for rollouts, failures, ...): a feature
+that needs one says so in one line. ``docs/adding-a-task.md`` says in which order a newcomer writes them.
 
 This module may import ``etmpc.common`` and ``etmpc.control``.
 """
@@ -118,16 +118,6 @@ DERIVED = (
     "truncation_value",
     "show",
 )
-#: Optional capabilities, by the feature that needs them: ``None`` on a task that does not offer it.
-CAPABILITIES: dict[str, tuple[str, ...]] = {
-    "experiments": ("benchmark",),  # etmpc reproduce, sweep and the leaderboard's rows: prices, thresholds, lookahead
-    "rollouts": ("sample_future",),  # rollout:, DPI and the self-trigger's training: futures the controller cannot know
-    "exogenous features": ("exogenous_features",),  # what the learned policy's "error" features add
-    "render": ("camera",),  # a 3-D scene for etmpc render --task and the recordings' video (with show)
-    "bench": ("plan_cost",),  # what etmpc bench compares the MPC with (with reference_solvers and interpreted)
-    "failures": ("failures",),  # how often an episode failed (falls, ...), reported beside the mean objective
-    "time in the loop": ("iterate", "predict"),  # compute levels, work-priced solves, delay compensation
-}
 
 
 class _StoredBenchmark:
@@ -178,8 +168,8 @@ def read_benchmark(path: Path) -> Benchmark:
 
 
 class _Name:
-    """``DOMAIN`` for a domain's default task, else ``DOMAIN/TASK``, on the class and its instances (asked
-    of the registry once per task: the trigger environment reads it at every step)."""
+    """The task's id, ``DOMAIN/TASK`` (:class:`~etmpc.systems.registry.TaskSpec`), on the class and its
+    instances (asked of the registry once per task: the trigger environment reads it at every step)."""
 
     def __get__(self, system, cls) -> str:
         return _canonical(cls.domain, cls.task)
@@ -194,13 +184,13 @@ def _canonical(domain: str, task: str) -> str:
 
 class SystemBase:
     """The base of every system: what :data:`DERIVED` lists, from the members a task writes, and every
-    capability of :data:`CAPABILITIES` as ``None``. A task overrides what differs for it."""
+    capability of :mod:`~etmpc.systems.capabilities` as ``None``. A task overrides what differs for it."""
 
     name = _Name()  # how files, folders and commands name the task
     objective_sense = "min"  # "min": the objective is a cost; "max": a profit
     config: Any
 
-    # -- optional capabilities (CAPABILITIES): None where the task offers none -----------------------
+    # -- optional capabilities (etmpc.systems.capabilities): None where the task offers none -----------------------
     benchmark = _StoredBenchmark()  # benchmark.json beside its test set
     exogenous_feature_names: tuple[str, ...] = ()
     exogenous_features: Any = None  # (s) -> array: the values of exogenous_feature_names
@@ -327,15 +317,3 @@ class SystemBase:
     def reference_solvers(self) -> list:
         """Other solvers of the same OCP, for etmpc bench."""
         return []
-
-
-def provides(system: Any, feature: str) -> bool:
-    """Whether ``system`` (an instance or its class) offers the capability ``feature`` needs."""
-    return all(getattr(system, member, None) is not None for member in CAPABILITIES[feature])
-
-
-def require(system: Any, feature: str, what: str) -> None:
-    """Raise :class:`EtmpcError` in one line unless ``system`` offers ``feature``, which ``what`` needs."""
-    if not provides(system, feature):
-        missing = ", ".join(CAPABILITIES[feature])
-        raise EtmpcError(f"{what} needs {feature} ({missing}), which task {system.name} does not offer")

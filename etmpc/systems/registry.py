@@ -232,6 +232,15 @@ def canonical(name: str) -> str:
     return spec(name).id
 
 
+def same_task(a, b) -> bool:
+    """Whether ``a`` and ``b`` name the same task, however each is named (a file of an older etmpc says
+    ``quadrotor`` where one of today's says ``quadrotor/waypoints``); a name of no task is no match."""
+    try:
+        return isinstance(a, str) and isinstance(b, str) and spec(a) == spec(b)
+    except UnknownNameError:
+        return False
+
+
 def distinct(names_given) -> list[str]:
     """The tasks named, as ids, each once: a task named twice (even as ``battery`` and
     ``battery/trading``) is refused, naming it; an unknown name is refused, listing the valid ones."""
@@ -309,7 +318,10 @@ class SystemKey:
         if self.recompute_price is not None:
             config = replace(config, recompute_price=self.recompute_price)
         system = cls(config)
-        _ = system.latency, system.compute_levels  # read, and so checked, now
+        if not system.latency.instant or system.compute_levels:  # read, and so checked, now
+            from etmpc.systems.capabilities import TimeInTheLoop, require
+
+            require(system, TimeInTheLoop, "time in the loop (a Config's latency or compute_levels)")
         return system
 
 

@@ -181,7 +181,7 @@ def test_train_self_is_the_self_learner_with_a_note(tmp_path, capsys):
     captured = capsys.readouterr()
     (note,) = [line for line in captured.err.splitlines() if "warning" in line]
     assert note == (
-        "etmpc: warning: etmpc train-self --task is deprecated: use etmpc train --task cart_pendulum --algorithm self --out DIR "
+        "etmpc: warning: etmpc train-self is deprecated: use etmpc train --task cart_pendulum --algorithm self --out DIR "
         "--price 0.0005 --set episodes=2 --set solves_per_episode=2 --set futures=1 --set validation_episodes=2 "
         "(it writes DIR/selected.json)"
     )
@@ -268,7 +268,7 @@ def test_set_reads_yaml_values_over_the_file_and_ppo_keeps_its_command_line_vali
     assert (settings.episodes, settings.futures, settings.bases, settings.eval_episodes) == (6, 3, ("always", "every:4"), None)
     assert configure(learner_class("gpomdp"), None, "battery", {"learning_rate": "3e-4"}).learning_rate == 3e-4  # YAML 1.1's text
     ppo = learner_class("ppo")
-    assert configure(ppo, None, "battery", {}).validation_episodes == 50  # as etmpc train --task and the shipped PPO chose
+    assert configure(ppo, None, "battery", {}).validation_episodes == 50  # as etmpc train and the shipped PPO chose
     assert configure(ppo, None, "battery", {"validation_episodes": 3}).validation_episodes == 3
     with pytest.raises(EtmpcError, match="unknown setting 'n_timesteps' for ppo; known: timesteps, seed"):
         configure(ppo, None, "battery", {"n_timesteps": 3})

@@ -120,7 +120,7 @@ def test_a_tiny_dpi_run_on_a_task_with_levels_learns_a_policy_that_iterates(tiny
     agree = [(policy.level_value(p) <= 0) == w for p, w, c in zip(phi, iterate_wins, computes) if c]
     assert not agree or np.mean(agree) >= 0.75
     # It plays its task (etmpc evaluate's rl:PATH), answering levels, and iterates at some of its decisions.
-    traj = play_test_episode(LEVELS, policy, 0, 0, 0).trajectory  # as etmpc evaluate --task plays it
+    traj = play_test_episode(LEVELS, policy, 0, 0, 0).trajectory  # as etmpc evaluate plays it
     asked = ~(traj.forced[: traj.steps] | traj.in_flight[: traj.steps])
     assert traj.steps == system.episode_steps and np.any(traj.level[: traj.steps][asked] == ITERATE)
     assert set(np.unique(traj.level[: traj.steps][asked])) <= {KEEP, ITERATE, SOLVE}

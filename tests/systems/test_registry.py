@@ -64,18 +64,19 @@ TWIN = """
 def test_a_task_plugin_joins_the_registry_the_suite_and_gymnasium(plugins):
     plugins("etmpc.tasks", "twin", "fake_twin", TWIN)
     assert registry.names() == (
-        "cart_pendulum",
+        "cart_pendulum/balance",
         "cart_pendulum/kicks",
         "cart_pendulum/kicks_late",
         "cart_pendulum/kicks_levels",
-        "battery",
-        "reacher",
+        "battery/trading",
+        "reacher/jumps",
         "reacher/jumps_late",
-        "quadrotor",
-        "twin",
+        "quadrotor/waypoints",
+        "twin/balance",
     )
     system = registry.make_system(registry.SystemKey("twin/balance", 0.5))
-    assert (system.name, system.domain, system.recompute_price, registry.stored_seed("twin")) == ("twin", "twin", 0.5, 20210601)
+    seed = registry.stored_seed("twin")
+    assert (system.name, system.domain, system.recompute_price, seed) == ("twin/balance", "twin", 0.5, 20210601)
     assert registry.data_dir("twin") == registry.data_dir("cart_pendulum")
     from etmpc import suite
     from etmpc.envs.registration import register
@@ -104,22 +105,22 @@ def test_a_broken_task_plugin_is_one_warning_naming_it_and_every_other_task_stil
         names = registry.names()
     assert [str(w.message) for w in caught] == [f"etmpc: task plugin 'broken' (fake_broken) {problem}; its tasks are left out"]
     assert names == (
-        "cart_pendulum",
+        "cart_pendulum/balance",
         "cart_pendulum/kicks",
         "cart_pendulum/kicks_late",
         "cart_pendulum/kicks_levels",
-        "battery",
-        "reacher",
+        "battery/trading",
+        "reacher/jumps",
         "reacher/jumps_late",
-        "quadrotor",
+        "quadrotor/waypoints",
     )
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # read once: no second warning
-        assert registry.make_system("battery").name == "battery"
+        assert registry.make_system("battery").name == "battery/trading"
     with pytest.raises(
         UnknownNameError,
-        match="valid: cart_pendulum, cart_pendulum/kicks, cart_pendulum/kicks_late, cart_pendulum/kicks_levels, "
-        "battery, reacher, reacher/jumps_late, quadrotor",
+        match="valid: cart_pendulum/balance, cart_pendulum/kicks, cart_pendulum/kicks_late, cart_pendulum/kicks_levels, "
+        "battery/trading, reacher/jumps, reacher/jumps_late, quadrotor/waypoints",
     ):
         registry.check_name("broken")
 
@@ -240,16 +241,16 @@ def test_a_task_plugin_whose_import_exits_or_raises_anything_is_one_warning(plug
         f"etmpc: task plugin 'hostile' (fake_hostile) failed to import ({raised}); its tasks are left out"
     ]
     assert names == (
-        "cart_pendulum",
+        "cart_pendulum/balance",
         "cart_pendulum/kicks",
         "cart_pendulum/kicks_late",
         "cart_pendulum/kicks_levels",
-        "battery",
-        "reacher",
+        "battery/trading",
+        "reacher/jumps",
         "reacher/jumps_late",
-        "quadrotor",
+        "quadrotor/waypoints",
     )
-    assert registry.make_system("battery").name == "battery"
+    assert registry.make_system("battery").name == "battery/trading"
 
 
 @pytest.mark.parametrize("source, raised", HOSTILE_IMPORTS)

@@ -1,0 +1,103 @@
+"""What a task may offer beyond what every task writes, as protocols a type checker sees.
+
+Each capability is a :class:`~typing.Protocol` whose annotated members a system sets (on
+:class:`~etmpc.systems.base.SystemBase` they are ``None``: a task that does not offer it leaves them so).
+:func:`offers` asks whether a system offers one, and narrows its type where it does; :func:`require` says in
+one line which task lacks what a feature needs::
+
+    if offers(system, Rollouts):
+        future = system.sample_future(episode, step, rng)  # a type checker knows it is there
+    require(system, Experiments, "etmpc sweep").benchmark.prices
+
+A capability's name in messages is its class name in words (``TimeInTheLoop``: "time in the loop").
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable
+from typing import Any, Protocol, TypeGuard, TypeVar
+
+import numpy as np
+
+from etmpc.common.errors import EtmpcError
+from etmpc.systems.base import Benchmark
+
+
+class Experiments(Protocol):
+    """etmpc reproduce, sweep and the leaderboard's rows: prices, thresholds, lookahead (``benchmark.json``)."""
+
+    benchmark: Benchmark
+
+
+class Rollouts(Protocol):
+    """rollout:, DPI and the self-trigger's training: ``(episode, step, rng) -> episode``, with what a controller
+    cannot know at the decision of ``step`` redrawn."""
+
+    sample_future: Callable[[Any, int, np.random.Generator], Any]
+
+
+class ExogenousFeatures(Protocol):
+    """What the learned policy's "error" features add: ``(s) -> array``, the values of
+    ``exogenous_feature_names``."""
+
+    exogenous_features: Callable[[Any], np.ndarray]
+
+
+class Scene(Protocol):
+    """A 3-D scene for etmpc render and the recordings' video: the MJCF camera that films it (with ``show``)."""
+
+    camera: str
+
+
+class Bench(Protocol):
+    """What etmpc bench compares the MPC with: ``(x, u_prev, timestep, inputs) -> the OCP's objective of an input
+    sequence`` (with ``reference_solvers`` and ``interpreted``)."""
+
+    plan_cost: Callable[..., float]
+
+
+class Failures(Protocol):
+    """How often an episode failed (falls, ...), reported beside the mean objective: ``(trajectory, episode) ->
+    int``, counted from what it played, never decreasing as the episode goes on; ``failure_name`` says what one
+    is called."""
+
+    failures: Callable[[Any, Any], int]
+
+
+class TimeInTheLoop(Protocol):
+    """Compute levels, work-priced solves and delay compensation: one SQP iteration (``iterate``, a Plan with
+    ``iterations`` 1) and the predictor's states under given inputs (``predict``)."""
+
+    iterate: Callable[..., Any]
+    predict: Callable[[np.ndarray, np.ndarray], np.ndarray]
+
+
+#: Every capability, in the order tests and docs list them.
+CAPABILITIES: tuple[type, ...] = (Experiments, Rollouts, ExogenousFeatures, Scene, Bench, Failures, TimeInTheLoop)
+
+C = TypeVar("C")
+
+
+def members(capability: type) -> tuple[str, ...]:
+    """The members a system sets to offer ``capability`` (its annotated names)."""
+    return tuple(capability.__annotations__)
+
+
+def feature(capability: type) -> str:
+    """``capability``'s name in messages: ``TimeInTheLoop`` -> ``time in the loop``."""
+    return re.sub(r"(?<!^)(?=[A-Z])", " ", capability.__name__).lower()
+
+
+def offers(system: Any, capability: type[C]) -> TypeGuard[C]:
+    """Whether ``system`` (an instance or its class) offers ``capability``: every member set, none ``None``."""
+    return all(getattr(system, member, None) is not None for member in members(capability))
+
+
+def require(system: Any, capability: type[C], what: str) -> C:
+    """``system``, if it offers ``capability``, which ``what`` needs; else one line naming the task and what it lacks."""
+    if not offers(system, capability):
+        raise EtmpcError(
+            f"{what} needs {feature(capability)} ({', '.join(members(capability))}), which task {system.name} does not offer"
+        )
+    return system
