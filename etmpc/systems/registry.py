@@ -318,7 +318,8 @@ class SystemKey:
         if self.recompute_price is not None:
             config = replace(config, recompute_price=self.recompute_price)
         system = cls(config)
-        if not system.latency.instant or system.compute_levels:  # read, and so checked, now
+        latency, levels = system.latency, system.compute_levels  # read, and so checked, now
+        if not latency.instant or levels:
             from etmpc.systems.capabilities import TimeInTheLoop, require
 
             require(system, TimeInTheLoop, "time in the loop (a Config's latency or compute_levels)")

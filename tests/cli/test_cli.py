@@ -24,7 +24,7 @@ from etmpc.cli import main
         (["frobnicate"], "invalid choice"),
         (["evaluate", "--task", "battery", "--policy", "every:x"], "every"),
         (["evaluate", "--task", "battery", "--policy", "always", "--episodes", "101"], "1..100"),
-        (["bench", "battery", "pendulum"], "unknown task 'pendulum'"),
+        (["bench", "--task", "battery", "--task", "pendulum"], "unknown task 'pendulum'"),
         (["bench", "--episodes", "0"], "--episodes"),
     ],
 )

@@ -28,8 +28,8 @@ from etmpc.cli import main
 
 from tests.conftest import REPO
 
-CART_POLICY = REPO / "policies" / "cart_pendulum" / "learned.json"
-BATTERY_POLICY = REPO / "policies" / "battery" / "learned.json"
+CART_POLICY = REPO / "policies" / "cart_pendulum" / "balance" / "learned.json"
+BATTERY_POLICY = REPO / "policies" / "battery" / "trading" / "learned.json"
 
 
 # -- what every case checks -----------------------------------------------------------------------
@@ -743,7 +743,7 @@ def test_a_real_ctrl_c_inside_a_triggers_decide_still_stops_the_command(tmp_path
 # -- nothing a user types destroys a file: an output is never an input nor in etmpc's data ----------
 STORED_REFERENCES = REPO / "tasks" / "battery" / "trading" / "references.json"
 STORED_TESTSET = REPO / "tasks" / "cart_pendulum" / "balance" / "testset.npz"
-SHIPPED_PPO = REPO / "policies" / "cart_pendulum" / "ppo.zip"
+SHIPPED_PPO = REPO / "policies" / "cart_pendulum" / "balance" / "ppo.zip"
 
 
 def _data_files() -> dict[str, bytes | None]:
@@ -812,7 +812,7 @@ OWN_CASES = [  # (id, setup, argv, what the one line must name)
     (
         "train-into-the-shipped-policies",
         "none",
-        ["train", "--task", "battery", "--out", str(REPO / "policies" / "battery")],
+        ["train", "--task", "battery", "--out", str(REPO / "policies" / "battery" / "trading")],
         "data folder",
     ),
     ("train-out-holds-the-data", "none", ["train", "--task", "battery", "--out", str(REPO)], "data folder"),
@@ -905,7 +905,7 @@ def test_a_shipped_policy_changed_in_place_is_never_scored_under_its_name(tmp_pa
     for folder in ("tasks", "models"):
         (root / folder).symlink_to(REPO / folder)
     monkeypatch.setattr(inputs, "data_root", lambda: root)
-    changed = root / "policies" / "cart_pendulum" / "learned.json"
+    changed = root / "policies" / "cart_pendulum" / "balance" / "learned.json"
     data = json.loads(changed.read_text())
     data["theta"][0] += 1.0
     changed.write_text(json.dumps(data))
@@ -915,7 +915,18 @@ def test_a_shipped_policy_changed_in_place_is_never_scored_under_its_name(tmp_pa
     mine.write_bytes(changed.read_bytes())
     assert main([*EV, "--policy", f"rl:{mine}", "--episodes", "1", "--workers", "1"]) == 0
     assert (
-        main([*EV, "--policy", f"rl:{root / 'policies' / 'battery' / 'learned.json'}", "--episodes", "1", "--workers", "1"]) == 2
+        main(
+            [
+                *EV,
+                "--policy",
+                f"rl:{root / 'policies' / 'battery' / 'trading' / 'learned.json'}",
+                "--episodes",
+                "1",
+                "--workers",
+                "1",
+            ]
+        )
+        == 2
     )  # untouched, but for another task: its own line, not the checksum's
     assert "not the policy etmpc ships" not in capsys.readouterr().err
 

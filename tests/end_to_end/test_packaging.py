@@ -120,7 +120,7 @@ def test_the_installed_commands_work_outside_the_checkout(wheel, tmp_path):
         result = run(command, "--help")
         assert result.returncode == 0 and "usage: etmpc " + command in result.stdout, (command, result.stderr)
 
-    shipped = REPO / "policies" / "cart_pendulum" / "learned.json"
+    shipped = REPO / "policies" / "cart_pendulum" / "balance" / "learned.json"
     result = run(
         "evaluate",
         "--task",

@@ -128,8 +128,8 @@ def test_ppo_load_on_the_documented_environment_decides_as_etmpc_evaluate(direct
 
 
 def test_the_keyword_refuses_another_tasks_normalisation_in_one_line(tmp_path):
-    kicks = REPO / "policies" / "cart_pendulum-kicks" / "ppo.json"
-    huge = json.loads((REPO / "policies" / "cart_pendulum" / "ppo.json").read_text())
+    kicks = REPO / "policies" / "cart_pendulum" / "kicks" / "ppo.json"
+    huge = json.loads((REPO / "policies" / "cart_pendulum" / "balance" / "ppo.json").read_text())
     huge["observation_mean"][0] = 10**400  # was an OverflowError traceback
     (tmp_path / "huge.json").write_text(json.dumps(huge))
     for given, says in [
@@ -137,7 +137,7 @@ def test_the_keyword_refuses_another_tasks_normalisation_in_one_line(tmp_path):
         (kicks, "its policy was trained on 'cart_pendulum/kicks', not 'cart_pendulum'"),
         (kicks.with_suffix(".zip"), "is a model; give its description, normalize="),
         (kicks.with_name("nosuch.json"), "no such file"),
-        (REPO / "policies" / "cart_pendulum" / "learned.json", "is not an etmpc Stable-Baselines3 policy"),
+        (REPO / "policies" / "cart_pendulum" / "balance" / "learned.json", "is not an etmpc Stable-Baselines3 policy"),
         (3, "the path of a policy's .json is needed"),
     ]:
         with pytest.raises(EtmpcError) as refused:
@@ -150,7 +150,7 @@ def test_the_keyword_refuses_another_tasks_normalisation_in_one_line(tmp_path):
 def test_the_keyword_composes_with_make_vec_env_and_keeps_the_spaces():
     from stable_baselines3.common.env_util import make_vec_env
 
-    sidecar = str(REPO / "policies" / "battery" / "ppo.json")
+    sidecar = str(REPO / "policies" / "battery" / "trading" / "ppo.json")
     vec = make_vec_env(BATTERY, n_envs=1, env_kwargs={"normalize": sidecar})
     plain = gym.make(BATTERY)
     normalised = gym.make(BATTERY, normalize=sidecar)

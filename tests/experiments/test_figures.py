@@ -220,7 +220,7 @@ def test_trajectory_command_default_path(tmp_path, capsys, monkeypatch):
 def test_trajectory_command_plays_a_task_of_a_domain_with_its_shipped_policy(tmp_path, capsys, monkeypatch):
     """The kicks task with its shipped policy (trained on cart_pendulum/kicks, not on the domain's default
     task): the task's name, not its domain's, checks the policy; the default file is named by the task."""
-    spec = f"rl:{REPO / 'policies' / 'cart_pendulum-kicks' / 'learned.json'}"
+    spec = f"rl:{REPO / 'policies' / 'cart_pendulum' / 'kicks' / 'learned.json'}"
     monkeypatch.chdir(tmp_path)
     code, stdout, err = _figure(capsys, "trajectory", "--task", "cart_pendulum/kicks", "--policy", spec, "--episode", 1)
     assert code == 0, err
@@ -237,11 +237,14 @@ def test_trajectory_command_plays_a_task_of_a_domain_with_its_shipped_policy(tmp
         (("cart_pendulum", "--policy", "every:0"), "bad policy 'every:0'"),
         (("battery", "--policy", "always", "--episode", "100"), "out of range"),
         (("battery", "--policy", "always", "--episode", "one"), "'one' is not a whole number"),
-        (("cart_pendulum", "--policy", f"rl:{REPO / 'policies' / 'battery' / 'learned.json'}"), "was trained on 'battery'"),
+        (
+            ("cart_pendulum", "--policy", f"rl:{REPO / 'policies' / 'battery' / 'trading' / 'learned.json'}"),
+            "was trained on 'battery'",
+        ),
     ],
 )
 def test_trajectory_command_rejects_bad_input(tmp_path, capsys, args, message):
-    code, _, err = _figure(capsys, "trajectory", *args, "--out", tmp_path / "x.png")
+    code, _, err = _figure(capsys, "trajectory", "--task", *args, "--out", tmp_path / "x.png")
     assert code == 2 and message in err, err
     assert err.count("\n") == 1 and "Traceback" not in err
     assert not list(tmp_path.iterdir())

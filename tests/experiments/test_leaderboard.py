@@ -129,9 +129,9 @@ def test_the_readmes_headline_table_is_the_generated_leaderboards():
 
 def test_a_row_is_played_again_when_the_policy_file_behind_its_spec_changed(tmp_path, monkeypatch):
     # A shipped policy retrained in place keeps its path, so its spec; its finished row must not stand.
-    policy = tmp_path / "policies" / "cart_pendulum" / "learned.json"
+    policy = tmp_path / "policies" / "cart_pendulum" / "balance" / "learned.json"
     policy.parent.mkdir(parents=True)
-    policy.write_bytes((REPO / "policies" / "cart_pendulum" / "learned.json").read_bytes())
+    policy.write_bytes((REPO / "policies" / "cart_pendulum" / "balance" / "learned.json").read_bytes())
     entry = leaderboard.Entry("DPI (shipped)", "learned", {"cart_pendulum": f"rl:{policy}"})
     refs = leaderboard.stored("cart_pendulum")
     played = []

@@ -131,7 +131,7 @@ def test_shipped_keep_or_solve_policies_read_and_decide_as_before():
     passes the levels check on kicks_late (keep or solve, as kicks)."""
     assert not has_levels(KICKS) and not has_levels(LATE) and has_levels(LEVELS)
     rng = np.random.default_rng(9)
-    for path in sorted((REPO / "policies").glob("*/learned.json")):
+    for path in sorted((REPO / "policies").glob("*/*/learned.json")):
         data = json.loads(path.read_text())
         if has_levels(data["domain"]):  # a levels task's own policy: format 3 (the other tests)
             assert data["version"] == 3 and "theta_level" in data
@@ -142,8 +142,8 @@ def test_shipped_keep_or_solve_policies_read_and_decide_as_before():
         phi = np.concatenate([rng.normal(size=policy.theta.size - 1), [1.0]])
         policy.phi = lambda s, phi=phi: phi
         assert policy.decide(None, None) is (policy.decision_value(phi) < 0.0)
-    kicks = load_policy(REPO / "policies" / "cart_pendulum-kicks" / "learned.json", KICKS, nx=4)
+    kicks = load_policy(REPO / "policies" / "cart_pendulum" / "kicks" / "learned.json", KICKS, nx=4)
     assert (
         not kicks.levels
-        and parse_policy(f"rl:{REPO / 'policies' / 'cart_pendulum-kicks' / 'learned.json'}", LATE).domain == KICKS
+        and parse_policy(f"rl:{REPO / 'policies' / 'cart_pendulum' / 'kicks' / 'learned.json'}", LATE).domain == KICKS
     )

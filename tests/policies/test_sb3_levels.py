@@ -29,7 +29,7 @@ from tests.conftest import REPO
 
 KICKS, LATE, LEVELS = "cart_pendulum/kicks", "cart_pendulum/kicks_late", "cart_pendulum/kicks_levels"
 SIZE = 18  # the kicks tasks' observation
-KICKS_MODEL = REPO / "policies" / "cart_pendulum-kicks" / "ppo.zip"  # two actions, trained on kicks
+KICKS_MODEL = REPO / "policies" / "cart_pendulum" / "kicks" / "ppo.zip"  # two actions, trained on kicks
 
 
 class _Spaces(gymnasium.Env):

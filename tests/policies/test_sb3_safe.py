@@ -35,12 +35,12 @@ from etmpc.policies.sb3 import TOLERANCE, Network, SB3Policy, load_sb3, pickled_
 from tests.conftest import REPO
 
 SHIPPED = {
-    "cart_pendulum": "cart_pendulum",
-    "cart_pendulum-kicks": "cart_pendulum/kicks",
-    "battery": "battery",
-    "reacher": "reacher",
-}  # policies/<directory>: its task
-CART = REPO / "policies" / "cart_pendulum" / "ppo.zip"
+    "cart_pendulum/balance": "cart_pendulum",
+    "cart_pendulum/kicks": "cart_pendulum/kicks",
+    "battery/trading": "battery",
+    "reacher/jumps": "reacher",
+}  # policies/<directory>: its task (named as a user may name it)
+CART = REPO / "policies" / "cart_pendulum" / "balance" / "ppo.zip"
 EPISODES = int(os.environ.get("ETMPC_SB3_EPISODES", "3"))
 
 
@@ -426,7 +426,7 @@ def test_nor_when_a_swapped_shipped_model_is_on_the_leaderboard(tmp_path, monkey
         (root / folder).symlink_to(REPO / folder)
     marker = tmp_path / "ran"
     poisoned = _poisoned(tmp_path, "lr_schedule", marker)
-    shutil.copy(poisoned, root / "policies" / "cart_pendulum" / "ppo.zip")
+    shutil.copy(poisoned, root / "policies" / "cart_pendulum" / "balance" / "ppo.zip")
     monkeypatch.setattr(inputs, "data_root", lambda: root)
     monkeypatch.setattr(leaderboard, "data_root", lambda: root)
     monkeypatch.setattr(leaderboard, "play_and_score", lambda *a, **k: pytest.fail("a row was played"))
