@@ -55,7 +55,7 @@ import numpy as np
 
 from etmpc.control.compiled import CompiledFunction, CompileError, compile_functions
 from etmpc.control.plan import Plan
-from etmpc.control.riccati import FeedbackWeights, gains_along
+from etmpc.control.riccati import gains_along
 
 ARMIJO = 1e-4  # sufficient decrease: f(U + t d) <= f(U) + ARMIJO t g'd
 SMALLEST_STEP = 2.0**-20  # the line search gives up below this fraction of the QP's step
@@ -85,31 +85,21 @@ def _sx_function(name: str, sparsities, body) -> ca.Function:
 
 
 class CondensedGaussNewton:
-    """The SQP of the module's docstring for one OCP. ``model(x, u) -> x+``, the residuals as
-    :class:`~etmpc.control.mpc.GaussNewtonMPC` takes them, ``parameters`` the OCP's other
-    parameters (given last to both residuals), ``settings`` a ``SolverSettings``."""
+    """The SQP of the module's docstring for the OCP of ``ocp``, a
+    :class:`~etmpc.control.mpc.GaussNewtonMPC`: its predictor ``model(x, u) -> x+``, its residuals, horizon,
+    input bounds, ``parameters`` (the OCP's other parameters, given last to both residuals), its
+    ``SolverSettings`` and its feedback weights, as it was given them; ``name`` names the compiled code."""
 
-    def __init__(
-        self,
-        model: ca.Function,
-        stage_residual: ca.Function,
-        terminal_residual: ca.Function,
-        horizon: int,
-        u_min: np.ndarray,
-        u_max: np.ndarray,
-        parameters: int,
-        settings,
-        name: str,
-        feedback: FeedbackWeights | None,
-    ):
-        nx, nu, N = model.size1_in(0), model.size1_in(1), horizon
-        self.nx, self.nu, self.horizon, self.settings, self.feedback = nx, nu, N, settings, feedback
-        self._lower, self._upper = np.tile(u_min, N), np.tile(u_max, N)
+    def __init__(self, ocp, name: str):
+        model, N, settings = ocp._model, ocp.horizon, ocp.settings
+        nx, nu = model.size1_in(0), model.size1_in(1)
+        self.nx, self.nu, self.horizon, self.settings, self.feedback = nx, nu, N, settings, ocp.feedback
+        self._lower, self._upper = np.tile(ocp.u_min, N), np.tile(ocp.u_max, N)
         span = self._upper - self._lower
         bounded = np.isfinite(span) & (span > 0)
         self._step_scale = np.where(bounded, 1.0 / np.where(bounded, span, 1.0), 1.0)  # per input: 1 / its range (1: unbounded)
         self._no_constraints = np.zeros((0, N * nu))
-        functions = self._functions(model, stage_residual, terminal_residual, parameters, name)
+        functions = self._functions(model, ocp.stage_residual, ocp.terminal_residual, ocp.parameters, name)
         self._compiled = self._linearisers = None
         if settings.compiled:
             try:

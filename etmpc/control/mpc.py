@@ -81,9 +81,7 @@ class GaussNewtonMPC:
         self.stage_residual, self.terminal_residual = stage_residual, terminal_residual
         self._condensed = self._compiled = self._step = None
         if settings.route == "condensed":
-            self._condensed = CondensedGaussNewton(
-                model, stage_residual, terminal_residual, horizon, self.u_min, self.u_max, parameters, settings, name, feedback
-            )
+            self._condensed = CondensedGaussNewton(self, name)
         else:
             self._transcribe(name)
 

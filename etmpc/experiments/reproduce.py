@@ -58,7 +58,7 @@ from etmpc.experiments.summary import (
 )
 from etmpc.learning.dpi import Settings as DpiSettings
 from etmpc.learning.runner import cost_path, timed  # noqa: F401 (cost_path: reproduce's API)
-from etmpc.learning.train import TrainConfig, curve_summary, load_checkpoint, train
+from etmpc.learning.train import TrainConfig, curve_summary, load_checkpoint
 from etmpc.policies.learned import write_json_atomically
 from etmpc.systems import folder_name, make_system, names
 from etmpc.systems.capabilities import Experiments, Scene, offers, require
@@ -74,6 +74,7 @@ from etmpc.experiments.stages import (  # noqa: F401 (evaluated_once: reproduce'
     _stored_best,
     _trajectory_png,
     evaluated_once,
+    trained,
 )
 
 
@@ -231,15 +232,7 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
         )  # the paper's learner on the paper's features, as the report says
         train_dir = folder / "train"
         with clock.stage("GPOMDP training", cost_path(train_dir)), timed(train_dir, run["workers"]):
-            train(
-                config,
-                train_dir,
-                run["workers"],
-                resume=(train_dir / "checkpoint.json").exists(),
-                backend=run["backend"],
-                address=run["address"],
-                progress=progress,
-            )
+            trained(config, train_dir, run, progress)
         state = load_checkpoint(train_dir / "checkpoint.json")
 
         _say(f"{domain}: the learned policies, {settings.repeats} passes")
@@ -265,15 +258,7 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
     )
     dpi_dir = folder / "train_dpi"
     with clock.stage("DPI training", cost_path(dpi_dir)), timed(dpi_dir, run["workers"]):
-        train(
-            dpi_config,
-            dpi_dir,
-            run["workers"],
-            resume=(dpi_dir / "checkpoint.json").exists(),
-            backend=run["backend"],
-            address=run["address"],
-            progress=progress,
-        )
+        trained(dpi_config, dpi_dir, run, progress)
     shipped = folder.parent / "policies" / folder_name(system.name) / "learned.json"
     if not shipped.exists():
         write_json_atomically(shipped, loads((dpi_dir / "selected.json").read_text()))

@@ -23,6 +23,7 @@ from etmpc.learning import hyperparams
 from etmpc.learning.ppo import PpoSettings, train_ppo
 from etmpc.learning.base import BUILT_IN, learners
 from etmpc.learning.runner import cost_path, run, timed
+from etmpc.learning.train import train
 from etmpc.policies import parse_policy
 from etmpc.policies.learned import write_json_atomically
 from etmpc.systems import folder_name
@@ -40,6 +41,13 @@ def evaluated_once(path: Path, timed: int | None = None, **kwargs) -> dict:
         data["cost"] = {"wall_seconds": time.perf_counter() - started, "workers": timed}
     write_json_atomically(path, data)
     return data
+
+
+def trained(config, out: Path, run_options: dict, progress: bool) -> None:
+    """``config`` (a :class:`~etmpc.learning.config.TrainConfig`) trained into ``out`` on the run's ``workers``,
+    ``backend`` and ``address``, continuing from the checkpoint an interrupted invocation left there."""
+    workers, backend, address = run_options["workers"], run_options["backend"], run_options["address"]
+    train(config, out, workers, resume=(out / "checkpoint.json").exists(), backend=backend, address=address, progress=progress)
 
 
 def _stored_best(system) -> str:

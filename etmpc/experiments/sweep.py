@@ -45,11 +45,11 @@ from etmpc.common.outputs import refuse_foreign, what_differs, write_json, write
 from etmpc.evaluation.evaluate import evaluate
 from etmpc.evaluation.testsets import default_path, load
 from etmpc.evaluation.workers import shared_pools
+from etmpc.experiments.stages import trained
 from etmpc.experiments.pareto import best_periodic, build_pareto, report_section
 from etmpc.learning import dpi
 from etmpc.learning.config import TrainConfig
 from etmpc.learning.selftrigger import SelfSettings, train_self
-from etmpc.learning.train import train
 from etmpc.systems import SystemKey, distinct, make_system, names, system_key
 from etmpc.systems.capabilities import Experiments, require
 from etmpc.views.curves import draw_pareto
@@ -271,15 +271,7 @@ def _learned(out: Path, i: int, domain: str, price: float, learner: LearnerSetti
     path, train_dir = out / f"learned_{i}.json", out / f"train_{i}"
     if path.exists():
         return loads(path.read_text())
-    train(
-        learner.config(domain, price),
-        train_dir,
-        run["workers"],
-        resume=(train_dir / "checkpoint.json").exists(),
-        backend=run["backend"],
-        address=run["address"],
-        progress=run["progress"],
-    )
+    trained(learner.config(domain, price), train_dir, run, run["progress"])
     return _stage(path, policies=[f"rl:{train_dir / 'selected.json'}"], recompute_price=price, **run)
 
 

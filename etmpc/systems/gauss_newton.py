@@ -37,6 +37,25 @@ TRACKING_SOLVER = SolverSettings(
 )
 
 
+def system_mpc(system, stage_residual: ca.Function, terminal_residual: ca.Function, name: str, **options) -> GaussNewtonMPC:
+    """``system``'s Gauss-Newton MPC: its predictor over one interval (``system.model.discrete``), its
+    Config's horizon and solver settings and its input bounds, with the residuals given and the
+    compiled solver named ``name``; ``options`` are :class:`GaussNewtonMPC`'s others (``parameters``,
+    ``feedback``)."""
+    config = system.config
+    return GaussNewtonMPC(
+        system.model.discrete,
+        stage_residual,
+        terminal_residual,
+        config.horizon,
+        system.u_min,
+        system.u_max,
+        config.solver,
+        name=name,
+        **options,
+    )
+
+
 def tracked_change(s, tracked: tuple[str, ...]) -> np.ndarray:
     """Exogenous features of a tracking task at augmented state ``s`` (it carries the kept plan and the
     current observation): the ``tracked`` values now, the ones the kept plan was made for, their
@@ -78,18 +97,7 @@ class GaussNewtonSystem(SystemBase):
     @cached_property
     def mpc(self) -> GaussNewtonMPC:
         stage, terminal = self.residuals()
-        return GaussNewtonMPC(
-            self.model.discrete,
-            stage,
-            terminal,
-            self.config.horizon,
-            self.u_min,
-            self.u_max,
-            self.config.solver,
-            name=self.mpc_name,
-            parameters=len(self.tracked),
-            feedback=self.feedback_weights(),
-        )
+        return system_mpc(self, stage, terminal, self.mpc_name, parameters=len(self.tracked), feedback=self.feedback_weights())
 
     def observed(self, timestep: dm_env.TimeStep) -> np.ndarray:
         """The tracked values now, as observed: the OCP's parameter vector."""

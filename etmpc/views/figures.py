@@ -125,6 +125,10 @@ def draw_trajectory(system, traj: Trajectory, title: str | None = None, signals:
     decided = np.flatnonzero(traj.recompute[:steps] & ~traj.forced[:steps])
     forced = np.flatnonzero(traj.forced[:steps])
     colors = [plt.cm.viridis(i / max(1, len(traj.plans) - 1)) for i in range(len(traj.plans))]
+    recomputes = (  # the steps marked on the realised state: (steps, gid, legend label, marker style)
+        (decided, "recompute", "recompute (policy)", dict(marker="o", mfc="none", mec="tab:blue")),
+        (forced, "forced", "recompute (forced: no plan left)", dict(marker="s", color="tab:red")),
+    )
 
     for i, name in enumerate(system.state_names):
         ax = axes[i]
@@ -141,34 +145,12 @@ def draw_trajectory(system, traj: Trajectory, title: str | None = None, signals:
                 gid="plan",
                 label="plan's prediction (one per computation)" if p == 0 else None,
             )
-        markers = [
-            *ax.plot(
-                decided * dt,
-                traj.states[decided, i],
-                ls="none",
-                marker="o",
-                ms=4.5,
-                mfc="none",
-                mec="tab:blue",
-                label="recompute (policy)" if decided.size else None,
-                gid="recompute",
-                zorder=4,
-            ),
-            *ax.plot(
-                forced * dt,
-                traj.states[forced, i],
-                ls="none",
-                marker="s",
-                ms=4.5,
-                color="tab:red",
-                label="recompute (forced: no plan left)" if forced.size else None,
-                gid="forced",
-                zorder=4,
-            ),
-        ]
-        for line in markers:  # whole at the axes' edges, and no part of the layout (an empty one would upset it)
-            line.set_clip_on(False)
-            line.set_in_layout(False)
+        for at, gid, label, style in recomputes:
+            for line in ax.plot(
+                at * dt, traj.states[at, i], ls="none", ms=4.5, label=label if at.size else None, gid=gid, zorder=4, **style
+            ):  # whole at the axes' edges, and no part of the layout (an empty one would upset it)
+                line.set_clip_on(False)
+                line.set_in_layout(False)
         ax.set_ylabel(axis_label(name))
 
     for i, name in enumerate(system.input_names):

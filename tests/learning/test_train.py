@@ -263,14 +263,15 @@ def test_rl_spec_needs_a_path():
 
 
 def test_training_benchmark_script_measures_both_ends(tmp_path):
-    """`scripts/bench_training.py`: the policy that mostly keeps its plan recomputes less and runs
+    """`scripts/bench.py training`: the policy that mostly keeps its plan recomputes less and runs
     faster than the initial one, every worker's memory is measured, and the projection is the
     protocol's episode counts over the measured rates."""
     out = tmp_path / "bench.json"
     done = subprocess.run(
         [
             sys.executable,
-            str(ROOT / "scripts" / "bench_training.py"),
+            str(ROOT / "scripts" / "bench.py"),
+            "training",
             "battery",
             "--episodes",
             "3",

@@ -17,6 +17,7 @@ from etmpc.control.lqr import ErrorFeedback, discrete_lqr_gain
 from etmpc.control.mpc import GaussNewtonMPC, SolverSettings
 from etmpc.control.plan import Plan
 from etmpc.systems.base import SystemBase
+from etmpc.systems.gauss_newton import system_mpc
 
 
 @dataclass(frozen=True)
@@ -66,16 +67,7 @@ class CartPendulumSystem(SystemBase):
         sqrt_d = np.sqrt(self.config.input_change_weight)
         stage = ca.Function("stage_residual", [x, u, du], [ca.vertcat(x[2], sqrt_d * du)])
         terminal = ca.Function("terminal_residual", [x], [x[2]])
-        return GaussNewtonMPC(
-            self.model.discrete,
-            stage,
-            terminal,
-            self.config.horizon,
-            self.u_min,
-            self.u_max,
-            self.config.solver,
-            name="cart_pendulum_mpc",
-        )
+        return system_mpc(self, stage, terminal, "cart_pendulum_mpc")
 
     def make_env(self, random=None):
         return cp_env.make_environment(random=random, plant=self.config.plant)
