@@ -28,7 +28,7 @@ import os
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 __version__ = "0.2.0"
-__all__ = ["evaluate", "--task", "score"]
+__all__ = ["evaluate", "score"]
 
 
 def _register_environments() -> None:

@@ -210,7 +210,7 @@ def training(args) -> int:
     jobs = [
         (kind, args.task, policy, seed, args.episodes)
         for policy in policies.values()
-        for kind in ("train", "--task", "evaluate")
+        for kind in ("train", "evaluate")
         for seed in range(args.workers)
     ]
     started = time.perf_counter()
@@ -228,7 +228,7 @@ def training(args) -> int:
         mine = results[i * 2 * args.workers : (i + 1) * 2 * args.workers]
         rate = {
             kind: sum(r["episodes"] for r in mine if r["kind"] == kind) / sum(r["seconds"] for r in mine if r["kind"] == kind)
-            for kind in ("train", "--task", "evaluate")
+            for kind in ("train", "evaluate")
         }
         recomputes = np.mean([r["recomputes"] for r in mine if r["kind"] == "train"])
         rates[name] = dict(rate, recomputes=float(recomputes))

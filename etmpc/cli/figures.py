@@ -10,7 +10,7 @@ from etmpc.cli import types
 from etmpc.cli.output import distinct_policies
 from etmpc.policies.specs import syntax
 
-KINDS = ("forecasts", "trajectory", "--task", "bars")
+KINDS = ("forecasts", "trajectory", "bars")
 
 
 def add_parser(sub, tasks: str) -> None:
