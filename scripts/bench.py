@@ -6,7 +6,8 @@ else the machine does falls on both sides.
     python scripts/bench.py training [TASK] [--policy PATH ...] [--episodes 20] [--workers 2] [--backend ray] [--json PATH]
     python scripts/bench.py versus REV [TASK ...] [--episodes 5] [--rounds 3]
     python scripts/bench.py lookahead [--episodes 5] [--json PATH] | --compare OLD.json NEW.json
-    python scripts/bench.py sb3 [--task cart_pendulum] [--model policies/cart_pendulum/balance/ppo.zip] [--episodes 20] [--rounds 5]
+    python scripts/bench.py sb3 [--task cart_pendulum] [--model policies/cart_pendulum/balance/ppo.zip]
+                                [--episodes 20] [--rounds 5]
 
 ``python scripts/bench.py COMMAND --help`` says what each one measures. Every command imports etmpc only
 when it runs, so that ``PYTHONPATH=OTHER_TREE`` measures another tree (``lookahead``) and a worker process
