@@ -2,7 +2,7 @@
 
 A *system* is one task as the control loop sees it: the dm-control environment (plant and task), the
 MPC that makes plans, the feedback that corrects them, and the objective. :class:`System` lists the
-members every task writes (:data:`REQUIRED`, eleven). :class:`SystemBase`, which every system
+members every task writes (:data:`REQUIRED`, eight). :class:`SystemBase`, which every system
 subclasses, derives the rest from them with defaults a task may override (:data:`DERIVED`), and holds
 each optional capability as an attribute that is ``None`` when the task does not offer it
 (:mod:`etmpc.systems.capabilities`: a 3-D scene, sampled futures for rollouts, failures, ...): a feature
@@ -74,34 +74,22 @@ class System(Protocol):
     Config: type  # the frozen settings it is built from; Config() is the default, with fields horizon and recompute_price
     domain: str  # the domain's name in the registry (etmpc.systems.registry)
     task: str  # the task's name in its domain's SUITE and SYSTEMS
-    episode_steps: int
-    control_interval_s: float
     state_names: tuple[str, ...]  # x, with units in the names (etmpc.views.blueprint reads them)
     input_names: tuple[str, ...]  # u, likewise
     feedback: Any  # ErrorFeedback or PlanFeedback: the correction added to the planned input while a plan is kept
-    Episode: type  # everything random about an episode: Episode.draw(rng), .arrays(), Episode.from_arrays(arrays)
 
     def make_env(self, random: Any = None) -> dm_env.Environment: ...  # the dm-control environment (plant and task)
     def plan(self, x: np.ndarray, u_prev: np.ndarray, warm: Plan | None, age: int, timestep: dm_env.TimeStep) -> Plan: ...
 
 
 #: The members every task writes (:class:`System`).
-REQUIRED = (
-    "Config",
-    "domain",
-    "task",
-    "episode_steps",
-    "control_interval_s",
-    "state_names",
-    "input_names",
-    "feedback",
-    "Episode",
-    "make_env",
-    "plan",
-)
+REQUIRED = ("Config", "domain", "task", "state_names", "input_names", "feedback", "make_env", "plan")
 #: What :class:`SystemBase` derives from them, each a default a task may override.
 DERIVED = (
     "name",
+    "episode_steps",  # the three from the task's suite entry (add_task): declared once, there
+    "control_interval_s",
+    "Episode",
     "horizon",
     "recompute_price",
     "objective_sense",
@@ -182,11 +170,35 @@ def _canonical(domain: str, task: str) -> str:
     return canonical(f"{domain}/{task}")
 
 
+class _Declared:
+    """What a task declares once, where its dm-control factory is added to its domain's suite
+    (:func:`~etmpc.systems.episodes.add_task`): ``steps``, ``interval_s`` or ``episode``, on the class and its
+    instances. A system that sets its own (an older plugin's, the battery's from its parameters) keeps it."""
+
+    def __init__(self, attribute: str):
+        self.attribute = attribute
+
+    def __set_name__(self, owner, name: str):
+        self.name = name
+
+    def __get__(self, system, cls):
+        from etmpc.systems.registry import domain
+
+        value = getattr(domain(cls.domain).SUITE[cls.task], self.attribute, None)
+        if value is None:
+            where = f"task {cls.domain}/{cls.task}"
+            raise AttributeError(f"{where} declares no {self.attribute} (add_task's), and its system no {self.name}")
+        return value
+
+
 class SystemBase:
     """The base of every system: what :data:`DERIVED` lists, from the members a task writes, and every
     capability of :mod:`~etmpc.systems.capabilities` as ``None``. A task overrides what differs for it."""
 
     name = _Name()  # how files, folders and commands name the task
+    episode_steps = _Declared("steps")  # the episode, as the task's suite entry declares it
+    control_interval_s = _Declared("interval_s")
+    Episode = _Declared("episode")
     objective_sense = "min"  # "min": the objective is a cost; "max": a profit
     config: Any
 

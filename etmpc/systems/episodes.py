@@ -97,12 +97,23 @@ def build_environment(physics, task, steps: int, interval_s: float, environment_
 
 
 def add_task(
-    suite, name: str, make_environment, steps: int, interval_s: float, summary: str, tags: tuple[str, ...] = ("benchmarking",)
+    suite,
+    name: str,
+    make_environment,
+    steps: int,
+    interval_s: float,
+    summary: str,
+    tags: tuple[str, ...] = ("benchmarking",),
+    episode: type | None = None,
 ):
     """Add task ``name`` to ``suite`` (a ``containers.TaggedTasks``) as ``dm_control.suite``'s factories
     are: ``name(time_limit=steps * interval_s, random=None, environment_kwargs=None, **settings)`` returns
     ``make_environment(random=..., steps=..., environment_kwargs=..., **settings)``, ``settings`` being
-    the task's own (the cart pendulum's ``plant``). ``summary`` is the factory's docstring."""
+    the task's own (the cart pendulum's ``plant``). ``summary`` is the factory's docstring.
+
+    The one place a task declares its episode: ``steps`` control intervals of ``interval_s``, drawn as
+    ``episode`` (its ``Episode`` class). The factory carries them (``.steps``, ``.interval_s``,
+    ``.episode``), and the task's system reads them from it (:class:`~etmpc.systems.base.SystemBase`)."""
 
     def factory(time_limit: float = steps * interval_s, random: Any = None, environment_kwargs: dict | None = None, **settings):
         return make_environment(
@@ -111,6 +122,7 @@ def add_task(
 
     factory.__name__ = factory.__qualname__ = name
     factory.__doc__ = summary
+    factory.steps, factory.interval_s, factory.episode = steps, interval_s, episode
     return suite.add(*tags)(factory)
 
 

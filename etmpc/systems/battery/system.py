@@ -103,7 +103,6 @@ class BatterySystem(SystemBase):
     objective_sense = "max"  # the objective is the profit, EUR
     state_names = ("state_of_charge",)
     input_names = ("trade_kw",)
-    Episode = battery_env.Episode
     failure_name = "curtailed"  # intervals whose commanded trade the empty or full battery cut by > 1 % of the limit
 
     def __init__(self, config: Config = Config()):

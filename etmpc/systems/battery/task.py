@@ -276,4 +276,5 @@ add_task(
     Battery().episode_steps,
     Battery().interval_s,
     "Trade a 10 kWh battery on the balance market: 100 intervals of 10 s by default.",
+    episode=Episode,
 )

@@ -92,11 +92,8 @@ class KicksSystem(GaussNewtonSystem):
     Config = Config
     domain = "cart_pendulum"
     task = "kicks"
-    episode_steps = kicks.EPISODE_STEPS
-    control_interval_s = kicks.CONTROL_DT_S
     state_names = STATE_NAMES
     input_names = ("force_n",)
-    Episode = kicks.KickEpisode
     tracked = (REFERENCE,)  # the cart's current reference (m), as observed: the OCP's parameter
     mpc_name = "cart_pendulum_kicks_mpc"
     make_environment = staticmethod(kicks.make_environment)

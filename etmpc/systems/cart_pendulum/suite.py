@@ -15,6 +15,7 @@ add_task(
     task.EPISODE_STEPS,
     task.CONTROL_DT_S,
     "Balance the pole under the angular disturbance: 100 control intervals of 0.1 s by default (plant=...).",
+    episode=task.Episode,
 )
 add_task(
     SUITE,
@@ -23,6 +24,7 @@ add_task(
     kicks.EPISODE_STEPS,
     kicks.CONTROL_DT_S,
     "Keep the pole up on a 5 m rail through random kicks: 150 control intervals of 0.1 s by default (plant=...).",
+    episode=kicks.KickEpisode,
 )
 for name, what in (
     ("kicks_late", "solves take one control interval"),
@@ -36,4 +38,5 @@ for name, what in (
         kicks.CONTROL_DT_S,
         f"The kicks world, for the task whose {what} (they are the controller's).",
         tags=("benchmarking", "timing"),
+        episode=kicks.KickEpisode,
     )

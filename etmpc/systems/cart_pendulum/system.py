@@ -39,11 +39,8 @@ class CartPendulumSystem(SystemBase):
     Config = Config  # the settings it is built from (etmpc.systems.make_system)
     domain = "cart_pendulum"
     task = "balance"
-    episode_steps = cp_env.EPISODE_STEPS
-    control_interval_s = cp_env.CONTROL_DT_S
     state_names = STATE_NAMES
     input_names = ("force_n",)
-    Episode = cp_env.Episode  # the objective is sum(beta^2) + price * computations (a cost)
     failure_name = "off balance"  # steps ending with the pole > 0.1 rad from upright, but the initial recovery (task.py)
 
     def __init__(self, config: Config = Config()):

@@ -107,11 +107,8 @@ class QuadrotorSystem(GaussNewtonSystem):
     Config = Config
     domain = "quadrotor"
     task = "waypoints"
-    episode_steps = quadrotor_task.EPISODE_STEPS
-    control_interval_s = quadrotor_task.CONTROL_DT_S
     state_names = STATE_NAMES
     input_names = INPUT_NAMES
-    Episode = quadrotor_task.Episode
     tracked = TARGET  # the current waypoint (m), as observed: the OCP's parameters
     mpc_name = "quadrotor_waypoints_mpc"
     make_environment = staticmethod(quadrotor_task.make_environment)

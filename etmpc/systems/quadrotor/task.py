@@ -286,4 +286,5 @@ add_task(
     EPISODE_STEPS,
     CONTROL_DT_S,
     "Hold a quadrotor on changing waypoints under gusts, inside a geofence: 100 control intervals of 0.05 s (plant=...).",
+    episode=Episode,
 )

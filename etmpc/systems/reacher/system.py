@@ -92,11 +92,8 @@ class ReacherSystem(GaussNewtonSystem):
     Config = Config
     domain = "reacher"
     task = "jumps"
-    episode_steps = reacher_task.EPISODE_STEPS
-    control_interval_s = reacher_task.CONTROL_DT_S
     state_names = STATE_NAMES
     input_names = INPUT_NAMES
-    Episode = reacher_task.Episode
     tracked = TARGET  # the current target (m), as observed: the OCP's parameters
     mpc_name = "reacher_jumps_mpc"
     make_environment = staticmethod(reacher_task.make_environment)

@@ -190,6 +190,7 @@ add_task(
     EPISODE_STEPS,
     CONTROL_DT_S,
     "Keep the fingertip on a jumping target: 100 control intervals of 0.1 s by default (plant=...).",
+    episode=Episode,
 )
 add_task(
     SUITE,
@@ -199,4 +200,5 @@ add_task(
     CONTROL_DT_S,
     "The jumps world, for the task whose solves take one control interval (the latency is the controller's).",
     tags=("benchmarking", "timing"),
+    episode=Episode,
 )

@@ -80,11 +80,8 @@ class SliderSystem(GaussNewtonSystem):
     Config = Config
     domain = "slider"
     task = "track"
-    episode_steps = slider_task.EPISODE_STEPS
-    control_interval_s = slider_task.CONTROL_DT_S
     state_names = STATE_NAMES
     input_names = INPUT_NAMES
-    Episode = slider_task.Episode
     tracked = (REFERENCE,)  # the current reference (m), as observed: the OCP's parameter
     mpc_name = "slider_track_mpc"
     make_environment = staticmethod(slider_task.make_environment)

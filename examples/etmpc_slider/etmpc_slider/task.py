@@ -187,4 +187,5 @@ add_task(
     EPISODE_STEPS,
     CONTROL_DT_S,
     "Keep the block on a jumping reference: 60 control intervals of 0.05 s by default (plant=...).",
+    episode=Episode,
 )
