@@ -24,7 +24,7 @@ from etmpc.common.sense import higher_or_lower, oriented
 from etmpc.policies import parse_policy
 from etmpc.policies.specs import names_a_kind
 from etmpc.policies.user import checked
-from etmpc.views.record import EpisodeRecord
+from etmpc.loop.records import EpisodeRecord
 from etmpc.views.recording import Recorder
 from etmpc.systems import SystemKey, has_levels, system_key
 from etmpc.evaluation.inputs import check_run_outputs, check_shipped, run_inputs

@@ -1,6 +1,6 @@
 """What people look at, drawn from what the other floors produce; views only receive. Rerun
-recordings (:mod:`~etmpc.views.record`: what is kept of an episode; :mod:`~etmpc.views.recording`:
-the writer; :mod:`~etmpc.views.blueprint`: how it reads in the viewer; :mod:`~etmpc.views.replay`:
+recordings (:mod:`~etmpc.views.recording`: the writer, of what :class:`etmpc.loop.records.EpisodeRecord`
+keeps of an episode; :mod:`~etmpc.views.blueprint`: how it reads in the viewer; :mod:`~etmpc.views.replay`:
 reading it back; :mod:`~etmpc.views.solves`: each solve's start and arrival, the plan in force),
 figures (:mod:`~etmpc.views.figures`, :mod:`~etmpc.views.curves`) and video (:mod:`~etmpc.views.video`).
 

@@ -55,7 +55,7 @@ from etmpc.views import blueprint as look
 from etmpc.common.errors import EtmpcError
 from etmpc.common.sense import sign as sense_sign
 from etmpc.loop import computation_cost
-from etmpc.views.record import EpisodeRecord
+from etmpc.loop.records import EpisodeRecord
 from etmpc.views.layout import _about, _fan, _slots, _solve_series, _timeline
 from etmpc.views.solves import solve_log
 from etmpc.views.space import log_space

@@ -14,7 +14,7 @@ from etmpc.cli import main
 from etmpc.evaluation.evaluate import evaluate
 from etmpc.loop import run_episode
 from etmpc.policies import parse_policy
-from etmpc.views.record import prediction_errors
+from etmpc.loop.records import prediction_errors
 from etmpc.views.replay import read_recording, replay_summary
 from etmpc.evaluation.workers import context, policy_rng
 

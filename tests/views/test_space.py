@@ -11,7 +11,7 @@ from etmpc.evaluation.workers import play_test_episode
 from etmpc.policies import parse_policy
 from etmpc.systems import make_system
 from etmpc.systems.space import Space
-from etmpc.views.record import EpisodeRecord
+from etmpc.loop.records import EpisodeRecord
 from tests.views.test_recording import chunks_by_entity, column_chunk, read_blueprint, views_of
 
 ROOT = "/quadrotor/every\\:5/episode_000/repeat_0"
