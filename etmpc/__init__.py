@@ -52,12 +52,17 @@ _register_environments()
 
 
 def __getattr__(name: str):
-    """``etmpc.evaluate`` is :func:`etmpc.evaluation.evaluate.evaluate`, imported when first asked for
-    (so ``import etmpc`` loads neither MuJoCo nor CasADi)."""
+    """``etmpc.evaluate`` is :func:`etmpc.evaluation.evaluate.evaluate` with its recordings (``record=PATH.rrd``)
+    written by :class:`etmpc.views.recording.Recorder`, imported when first asked for (so ``import etmpc``
+    loads neither MuJoCo nor CasADi)."""
     if name == "evaluate":
-        from etmpc.evaluation.evaluate import evaluate
+        from functools import partial, update_wrapper
 
-        return evaluate
+        from etmpc.evaluation.evaluate import evaluate
+        from etmpc.views.recording import Recorder
+
+        globals()["evaluate"] = update_wrapper(partial(evaluate, recorder=Recorder), evaluate)
+        return globals()["evaluate"]
     if name == "score":
         from etmpc.evaluation.scorecard import score
 

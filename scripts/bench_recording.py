@@ -15,7 +15,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from etmpc.evaluation.evaluate import evaluate
+from etmpc import evaluate
 
 
 def main(argv=None) -> int:

@@ -63,7 +63,8 @@ from etmpc.policies.learned import write_json_atomically
 from etmpc.systems import folder_name, make_system, names
 from etmpc.systems.base import provides, require
 from etmpc.views import figures
-from etmpc.views.curves import write_efficiency_png
+from etmpc.views.curves import write_curve_png, write_efficiency_png
+from etmpc.views.recording import Recorder
 from etmpc.experiments.stages import (  # noqa: F401 (evaluated_once: reproduce's API)
     _cost,
     _efficiency,
@@ -239,6 +240,7 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
                 backend=run["backend"],
                 address=run["address"],
                 progress=progress,
+                curve_png=write_curve_png,
             )
         state = load_checkpoint(train_dir / "checkpoint.json")
 
@@ -273,6 +275,7 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
             backend=run["backend"],
             address=run["address"],
             progress=progress,
+            curve_png=write_curve_png,
         )
     shipped = folder.parent / "policies" / folder_name(system.name) / "learned.json"
     if not shipped.exists():
@@ -344,6 +347,7 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
                 workers=run["workers"],
                 progress=False,
                 record=folder / "episodes.rrd",
+                recorder=Recorder,
             )
         _trajectory_png(folder / "trajectory.png", system, best)
         if system.name == "battery":  # the paper's Figure 1: forecasts of the battery's prices and production

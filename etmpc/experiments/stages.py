@@ -27,6 +27,8 @@ from etmpc.policies import parse_policy
 from etmpc.policies.learned import write_json_atomically
 from etmpc.systems import folder_name
 from etmpc.views import figures
+from etmpc.views.curves import write_curve_png
+from etmpc.views.recording import Recorder
 
 
 def evaluated_once(path: Path, timed: int | None = None, **kwargs) -> dict:
@@ -133,6 +135,8 @@ def _other_learners(folder: Path, domain: str, settings, run_options: dict, comm
                     address=run_options["address"],
                     progress=common["progress"],
                     say=_say,
+                    recorder=Recorder,
+                    curve_png=write_curve_png,
                 )
             found[name] = (evaluated_once(folder / f"learned_{name}.json", policies=[trained.policy], **common), trained.policy)
     return found

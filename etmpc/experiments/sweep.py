@@ -52,7 +52,7 @@ from etmpc.learning.selftrigger import SelfSettings, train_self
 from etmpc.learning.train import train
 from etmpc.systems import SystemKey, distinct, make_system, names, system_key
 from etmpc.systems.base import require
-from etmpc.views.curves import draw_pareto
+from etmpc.views.curves import draw_pareto, write_curve_png
 from etmpc.views.figures import save_png_atomically
 
 MAX_PRICES = 50
@@ -279,6 +279,7 @@ def _learned(out: Path, i: int, domain: str, price: float, learner: LearnerSetti
         backend=run["backend"],
         address=run["address"],
         progress=run["progress"],
+        curve_png=write_curve_png,
     )
     return _stage(path, policies=[f"rl:{train_dir / 'selected.json'}"], recompute_price=price, **run)
 

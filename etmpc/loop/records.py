@@ -6,6 +6,7 @@ that played the episode and sent to the process that writes the file, such as
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 
@@ -250,3 +251,20 @@ def prediction_errors(traj, error_weights, shift: int = 0) -> np.ndarray:
             k, plan = current
             errors[i] = norm(w * (traj.states[i] - plan.state_at(i - k)))  # the threshold policy's measure
     return errors
+
+
+class EpisodeSink(Protocol):
+    """What receives the episodes a run records: a recording being written (a Rerun file,
+    :class:`etmpc.views.recording.Recorder`). Evaluation and learning are given what opens one at a path,
+    a ``Callable[[Path], EpisodeSink]`` (``recorder=``), and know nothing of what it draws."""
+
+    def log_episode(self, record: EpisodeRecord) -> object:
+        """Write one episode."""
+
+    def close(self, keep: bool = True) -> None:
+        """Finish the file (``keep``), or remove what was written of it."""
+
+    def __enter__(self) -> EpisodeSink: ...
+
+    def __exit__(self, exc_type, *exc) -> None:
+        """Close it, keeping the file only if nothing was raised."""

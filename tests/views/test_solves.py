@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from etmpc.common.sense import oriented
-from etmpc.evaluation.evaluate import evaluate
+from etmpc import evaluate
 from etmpc.evaluation.workers import context, play_test_episode
 from etmpc.loop import computation_cost
 from etmpc.policies import parse_policy

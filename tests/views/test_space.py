@@ -6,7 +6,7 @@ import pickle
 import numpy as np
 import pytest
 
-from etmpc.evaluation.evaluate import evaluate
+from etmpc import evaluate
 from etmpc.evaluation.workers import play_test_episode
 from etmpc.policies import parse_policy
 from etmpc.systems import make_system
