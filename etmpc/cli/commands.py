@@ -110,7 +110,7 @@ def _sweep(args) -> None:
 
 
 def _render(args) -> None:
-    from etmpc.evaluation.render import render_rollout
+    from etmpc.views.render import render_rollout
     from etmpc.systems import check_name
     from etmpc.views.video import check_display
 

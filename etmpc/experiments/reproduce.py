@@ -44,7 +44,7 @@ from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import refuse_foreign, what_differs, write_text
 from etmpc.common.provenance import commit_and_date
 from etmpc.evaluation.evaluate import evaluate
-from etmpc.evaluation.render import render_rollout
+from etmpc.views.render import render_rollout
 from etmpc.evaluation.workers import shared_pools
 from etmpc.experiments import sweep as sweeps
 from etmpc.experiments.clock import StageClock
