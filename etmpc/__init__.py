@@ -9,10 +9,10 @@ it (docs/architecture.md; import-linter checks it):
 * ``etmpc.systems``: the tasks: one folder per domain, the registry, what a system provides;
 * ``etmpc.loop``: Algorithm 1, the closed loop that plays a system under a policy;
 * ``etmpc.policies``: when to recompute: fixed, threshold, learned, self-triggering, rollout;
-* ``etmpc.views``: recordings, figures and video, drawn from what the floors below produce;
-* ``etmpc.evaluation``: test sets, workers, ``evaluate``, ``render``, ``bench``;
+* ``etmpc.evaluation``: test sets, workers, ``evaluate``, ``bench``;
 * ``etmpc.envs``: the trigger problem as a ``dm_env`` and ``gymnasium`` environment, for any learner;
 * ``etmpc.learning``: GPOMDP, DPI, training runs, the self-trigger's training;
+* ``etmpc.views``: recordings, figures, video and ``render``, drawn from what the floors below produce;
 * ``etmpc.experiments``: ``reproduce`` and its report, the price ``sweep``;
 * ``etmpc.cli``: the ``etmpc`` command.
 
