@@ -9,10 +9,10 @@ it (docs/architecture.md; import-linter checks it):
 * ``etmpc.systems``: the tasks: one folder per domain, the registry, what a system provides;
 * ``etmpc.loop``: Algorithm 1, the closed loop that plays a system under a policy;
 * ``etmpc.policies``: when to recompute: fixed, threshold, learned, self-triggering, rollout;
-* ``etmpc.views``: recordings, figures and video, drawn from what the floors below produce;
-* ``etmpc.evaluation``: test sets, workers, ``evaluate``, ``render``, ``bench``;
+* ``etmpc.evaluation``: test sets, workers, ``evaluate``, ``bench``;
 * ``etmpc.envs``: the trigger problem as a ``dm_env`` and ``gymnasium`` environment, for any learner;
 * ``etmpc.learning``: GPOMDP, DPI, training runs, the self-trigger's training;
+* ``etmpc.views``: recordings, figures, video and ``render``, drawn from what the floors below produce;
 * ``etmpc.experiments``: ``reproduce`` and its report, the price ``sweep``;
 * ``etmpc.cli``: the ``etmpc`` command.
 
@@ -52,12 +52,17 @@ _register_environments()
 
 
 def __getattr__(name: str):
-    """``etmpc.evaluate`` is :func:`etmpc.evaluation.evaluate.evaluate`, imported when first asked for
-    (so ``import etmpc`` loads neither MuJoCo nor CasADi)."""
+    """``etmpc.evaluate`` is :func:`etmpc.evaluation.evaluate.evaluate` with its recordings (``record=PATH.rrd``)
+    written by :class:`etmpc.views.recording.Recorder`, imported when first asked for (so ``import etmpc``
+    loads neither MuJoCo nor CasADi)."""
     if name == "evaluate":
-        from etmpc.evaluation.evaluate import evaluate
+        from functools import partial, update_wrapper
 
-        return evaluate
+        from etmpc.evaluation.evaluate import evaluate
+        from etmpc.views.recording import Recorder
+
+        globals()["evaluate"] = update_wrapper(partial(evaluate, recorder=Recorder), evaluate)
+        return globals()["evaluate"]
     if name == "score":
         from etmpc.evaluation.scorecard import score
 

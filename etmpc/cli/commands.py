@@ -29,6 +29,7 @@ def run_inputs(policies, test_set=None) -> dict:
 def _evaluate(args) -> None:
     from etmpc.evaluation.evaluate import evaluate, format_table
     from etmpc.systems import system_key
+    from etmpc.views.recording import Recorder
 
     _check_backend(args)
     _distinct_policies(args.policy)
@@ -49,6 +50,7 @@ def _evaluate(args) -> None:
         backend=args.backend,
         address=args.address,
         record=args.record,
+        recorder=Recorder,
     )
     print(format_table(result))
     if args.against is not None:
@@ -108,7 +110,7 @@ def _sweep(args) -> None:
 
 
 def _render(args) -> None:
-    from etmpc.evaluation.render import render_rollout
+    from etmpc.views.render import render_rollout
     from etmpc.systems import check_name
     from etmpc.views.video import check_display
 

@@ -172,6 +172,8 @@ def run(args) -> None:
     from etmpc.learning.base import learner_class
     from etmpc.learning.runner import run as train
     from etmpc.systems import check_name, system_key
+    from etmpc.views.curves import write_curve_png
+    from etmpc.views.recording import Recorder
 
     check_name(args.task)
     check_backend(args)
@@ -182,9 +184,9 @@ def run(args) -> None:
     key = system_key(args.task, args.price)
     seeds = _seeds(args.seeds, cls)
     settings = configure(cls, path, key.task, {**values, **dict(args.set or [])})
-    done = train(
-        cls(settings), key, args.out, seeds, args.workers or default_workers(), args.resume, args.backend, args.address, say=say
-    )
+    workers = args.workers or default_workers()
+    views = dict(recorder=Recorder, curve_png=write_curve_png)  # what the run's recordings and curve are drawn with
+    done = train(cls(settings), key, args.out, seeds, workers, args.resume, args.backend, args.address, say=say, **views)
     for note in notes:
         warn(note)
     learner = done.learner

@@ -1,8 +1,9 @@
 """Measuring policies on stored episodes: test sets (:mod:`~etmpc.evaluation.testsets`), where
 episodes run and how their draws are seeded (:mod:`~etmpc.evaluation.workers`: local processes or
-Ray), ``etmpc evaluate`` (:mod:`~etmpc.evaluation.evaluate`), ``etmpc render``
-(:mod:`~etmpc.evaluation.render`) and ``etmpc bench`` (:mod:`~etmpc.evaluation.bench`).
+Ray), ``etmpc evaluate`` (:mod:`~etmpc.evaluation.evaluate`) and ``etmpc bench``
+(:mod:`~etmpc.evaluation.bench`).
 
-This package may import ``etmpc.common``, ``etmpc.control``, ``etmpc.systems``, ``etmpc.loop``,
-``etmpc.policies`` and ``etmpc.views``.
+This package may import ``etmpc.common``, ``etmpc.control``, ``etmpc.systems``, ``etmpc.loop`` and
+``etmpc.policies``; not ``etmpc.views``, which stands above it: a recording is written by the recorder its
+caller gives ``evaluate`` (``recorder=``; :func:`etmpc.evaluate` gives Rerun's).
 """

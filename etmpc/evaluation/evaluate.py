@@ -13,6 +13,7 @@ import io
 import os
 import pickle
 from pathlib import Path
+from typing import Callable
 
 from tqdm import tqdm
 
@@ -24,8 +25,7 @@ from etmpc.common.sense import higher_or_lower, oriented
 from etmpc.policies import parse_policy
 from etmpc.policies.specs import names_a_kind
 from etmpc.policies.user import checked
-from etmpc.views.record import EpisodeRecord
-from etmpc.views.recording import Recorder
+from etmpc.loop.records import EpisodeRecord, EpisodeSink
 from etmpc.systems import SystemKey, has_levels, system_key
 from etmpc.evaluation.inputs import check_run_outputs, check_shipped, run_inputs
 from etmpc.evaluation.mainscript import refuse_in_rerun_main, unimportable_main
@@ -95,6 +95,7 @@ def evaluate(
     recompute_price: float | None = None,
     *,
     domain: str | SystemKey | None = None,
+    recorder: Callable[[Path], EpisodeSink] | None = None,
 ) -> Evaluation:
     """Run every policy on the first ``episodes`` test-set episodes, ``repeats`` times each, on
     ``workers`` processes of ``backend`` (see ``etmpc.evaluation.workers.make_backend``).
@@ -104,16 +105,17 @@ def evaluate(
     (``every:3``, ``rl:PATH``, ``py:MODULE:NAME``, ...) and policy objects (anything with ``spec``,
     ``stochastic`` and ``decide(s, rng)``, see :mod:`etmpc.policies.user`), side by side; each is
     named by its spec in the results, and every one meets the same episodes with the same draws.
-    With ``record``, also write every episode into that Rerun recording (``.rrd``).
+    With ``record``, also write every episode into that Rerun recording (``.rrd``), opened by ``recorder``
+    (:class:`etmpc.views.recording.Recorder`, which :func:`etmpc.evaluate` gives).
     ``recompute_price``: the price of a computation, if not the system's own (it enters every
     objective, and what rollouts optimise).
 
     Bad arguments, policies and files raise :class:`EtmpcError` with the command line's messages
     (:func:`check_arguments`), before any work; so does a policy's own failure, naming it."""
-    task = checks.renamed("task", task, "domain", domain)
+    task, price = checks.renamed("task", task, "domain", domain), recompute_price
     with interrupts.watching():  # a trigger that raises KeyboardInterrupt is its failure, not a Ctrl-C
         return _evaluate(
-            task, policies, episodes, repeats, workers, seed, testset_path, progress, backend, address, record, recompute_price
+            task, policies, episodes, repeats, workers, seed, testset_path, progress, backend, address, record, price, recorder
         )
 
 
@@ -231,13 +233,13 @@ def parse_policies(system, policies: list) -> dict:
 
 
 def _evaluate(
-    domain, policies, episodes, repeats, workers, seed, testset_path, progress, backend, address, record, recompute_price
+    domain, policies, episodes, repeats, workers, seed, testset_path, progress, backend, address, record, price, recorder
 ) -> Evaluation:
     refuse_in_rerun_main()  # a worker spawned from a script without a __main__ guard, re-running it: not again
-    check_arguments(
-        domain, policies, episodes, repeats, workers, seed, testset_path, progress, backend, address, record, recompute_price
-    )
-    key = system_key(domain, recompute_price)  # the task and the price, checked once: every worker builds from it
+    check_arguments(domain, policies, episodes, repeats, workers, seed, testset_path, progress, backend, address, record, price)
+    if record is not None and recorder is None:  # the recording's writer is the caller's (etmpc.evaluate gives one)
+        raise EtmpcError("record: nothing to write it with: pass recorder=etmpc.views.recording.Recorder, or call etmpc.evaluate")
+    key = system_key(domain, price)  # the task and the price, checked once: every worker builds from it
     system = key.make()
     # Parsed (or checked) once here, so a bad policy fails before any work starts, then sent with each job.
     parsed = parse_policies(system, policies)
@@ -264,24 +266,24 @@ def _evaluate(
             workers = 1
     # Workers find the stored test set themselves (a cluster node's install may live elsewhere) and
     # check that its digest is the one verified here.
-    recorder = Recorder(record) if record is not None else None  # a bad path fails before any work
+    sink = recorder(Path(record)) if record is not None else None  # a bad path fails before any work
     jobs = [
-        (key, testset_path, testset.sha256, spec, parsed[spec], r, e, seed, recorder is not None)
+        (key, testset_path, testset.sha256, spec, parsed[spec], r, e, seed, sink is not None)
         for spec in policies
         for r in range(repeats)
         for e in range(episodes)
     ]
     try:
         outcomes = run_jobs(jobs, workers, progress, backend, address)
-        if recorder is not None:
+        if sink is not None:
             for _, kept, _ in outcomes:
-                recorder.log_episode(kept)
+                sink.log_episode(kept)
     except BaseException:
-        if recorder is not None:
-            recorder.close(keep=False)
+        if sink is not None:
+            sink.close(keep=False)
         raise
-    if recorder is not None:
-        recorder.close()
+    if sink is not None:
+        sink.close()
     runs = [result for result, _, _ in outcomes]
     summaries = [
         summarise(

@@ -39,7 +39,7 @@ from etmpc.common.errors import EtmpcError
 from etmpc.common.interrupts import described
 from etmpc.evaluation.mainscript import UNGUARDED, UNGUARDED_EXIT, UnguardedScript, missing_main_script, refuse_in_rerun_main
 from etmpc.loop import Trajectory, run_episode
-from etmpc.views.record import EpisodeRecord
+from etmpc.loop.records import EpisodeRecord
 from etmpc.systems import make_system
 
 _CONTEXTS: dict = {}

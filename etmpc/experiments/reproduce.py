@@ -44,7 +44,7 @@ from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import refuse_foreign, what_differs, write_text
 from etmpc.common.provenance import commit_and_date
 from etmpc.evaluation.evaluate import evaluate
-from etmpc.evaluation.render import render_rollout
+from etmpc.views.render import render_rollout
 from etmpc.evaluation.workers import shared_pools
 from etmpc.experiments import sweep as sweeps
 from etmpc.experiments.clock import StageClock
@@ -64,6 +64,7 @@ from etmpc.systems import folder_name, make_system, names
 from etmpc.systems.capabilities import Experiments, Scene, offers, require
 from etmpc.views import figures
 from etmpc.views.curves import write_efficiency_png
+from etmpc.views.recording import Recorder
 from etmpc.experiments.stages import (  # noqa: F401 (evaluated_once: reproduce's API)
     _cost,
     _efficiency,
@@ -329,6 +330,7 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
                 workers=run["workers"],
                 progress=False,
                 record=folder / "episodes.rrd",
+                recorder=Recorder,
             )
         _trajectory_png(folder / "trajectory.png", system, best)
         if system.name == "battery":  # the paper's Figure 1: forecasts of the battery's prices and production

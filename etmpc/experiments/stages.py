@@ -28,6 +28,8 @@ from etmpc.policies import parse_policy
 from etmpc.policies.learned import write_json_atomically
 from etmpc.systems import folder_name
 from etmpc.views import figures
+from etmpc.views.curves import write_curve_png
+from etmpc.views.recording import Recorder
 
 
 def evaluated_once(path: Path, timed: int | None = None, **kwargs) -> dict:
@@ -45,9 +47,11 @@ def evaluated_once(path: Path, timed: int | None = None, **kwargs) -> dict:
 
 def trained(config, out: Path, run_options: dict, progress: bool) -> None:
     """``config`` (a :class:`~etmpc.learning.config.TrainConfig`) trained into ``out`` on the run's ``workers``,
-    ``backend`` and ``address``, continuing from the checkpoint an interrupted invocation left there."""
+    ``backend`` and ``address``, continuing from the checkpoint an interrupted invocation left there; its
+    learning curve drawn as ``curve.png``."""
     workers, backend, address = run_options["workers"], run_options["backend"], run_options["address"]
-    train(config, out, workers, resume=(out / "checkpoint.json").exists(), backend=backend, address=address, progress=progress)
+    resume = (out / "checkpoint.json").exists()
+    train(config, out, workers, resume=resume, backend=backend, address=address, progress=progress, curve_png=write_curve_png)
 
 
 def _stored_best(system) -> str:
@@ -141,6 +145,8 @@ def _other_learners(folder: Path, domain: str, settings, run_options: dict, comm
                     address=run_options["address"],
                     progress=common["progress"],
                     say=_say,
+                    recorder=Recorder,
+                    curve_png=write_curve_png,
                 )
             found[name] = (evaluated_once(folder / f"learned_{name}.json", policies=[trained.policy], **common), trained.policy)
     return found

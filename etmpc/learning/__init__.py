@@ -11,5 +11,6 @@ from Stable-Baselines3 (:mod:`~etmpc.learning.ppo`, :mod:`~etmpc.learning.ppo_se
 :mod:`~etmpc.learning.hyperparams`).
 
 This package may import ``etmpc.common``, ``etmpc.control``, ``etmpc.systems``, ``etmpc.loop``,
-``etmpc.policies``, ``etmpc.views``, ``etmpc.evaluation`` and ``etmpc.envs``.
+``etmpc.policies``, ``etmpc.evaluation`` and ``etmpc.envs``; not ``etmpc.views``, which stands above it: a
+run's recordings and learning curve are drawn by what its caller gives it (``recorder``, ``curve_png``).
 """

@@ -35,6 +35,7 @@ from typing import Any, Callable, ClassVar
 from etmpc.common.documents import loads, yaml_loads
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import refuse_foreign
+from etmpc.loop.records import EpisodeSink
 
 LEARNERS: dict[str, type[Learner]] = {}  # name -> class, filled as classes are defined
 BUILT_IN = {
@@ -47,8 +48,11 @@ BUILT_IN = {
 
 class Learner(ABC):
     """A learner of a trigger; see the module docstring. The runner sets :attr:`key` (the task at its
-    price), :attr:`seeds`, :attr:`out` (the run's directory), :attr:`pool` (the worker backend) and
-    :attr:`say` and :attr:`tick` (the progress bar) before it calls :meth:`setup` or :meth:`load_state`."""
+    price), :attr:`seeds`, :attr:`out` (the run's directory), :attr:`pool` (the worker backend),
+    :attr:`say` and :attr:`tick` (the progress bar), and what its caller draws with, or None:
+    :attr:`recorder` (opens a recording at a path: :class:`etmpc.views.recording.Recorder`) and
+    :attr:`curve_png` (draws the learning curve: :func:`etmpc.views.curves.write_curve_png`), before it
+    calls :meth:`setup` or :meth:`load_state`."""
 
     name: ClassVar[str] = ""
     Settings: ClassVar[type]
@@ -74,6 +78,8 @@ class Learner(ABC):
         self.workers = 1  # the run's worker processes (the runner sets it)
         self.tick: Callable[[int], None] = lambda n: None
         self.say: Callable[[str], None] = lambda line: None
+        self.recorder: Callable[[Path], EpisodeSink] | None = None
+        self.curve_png: Callable[[Path, dict, int], None] | None = None
 
     # What the runner calls, in this order.
 

@@ -7,6 +7,7 @@ import re
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -15,7 +16,6 @@ from etmpc.common.sense import best as best_of
 from etmpc.learning.config import CHECKPOINT_FORMAT, TrainConfig
 from etmpc.policies.learned import LogisticPolicy, PolicyFileError, write_json_atomically
 from etmpc.systems import make_system
-from etmpc.views.curves import write_curve_png
 
 
 @dataclass
@@ -104,9 +104,9 @@ def policy_of(state: RunState, params: dict) -> dict:
     return policy_at(state, params["theta"], params.get("theta_level"))
 
 
-def save(out: Path, state: RunState) -> dict:
-    """Policies and curve first, the checkpoint last: the checkpoint never points past the files.
-    Returns the curve's summary."""
+def save(out: Path, state: RunState, curve_png: Callable[[Path, dict, int], None] | None = None) -> dict:
+    """Policies and curve first (``curve_png`` draws ``curve.png``: :func:`etmpc.views.curves.write_curve_png`),
+    the checkpoint last: the checkpoint never points past the files. Returns the curve's summary."""
     for seed in state.config.seeds:
         key = str(seed)
         hyper = dict(state.policy["hyperparameters"], seed=seed)
@@ -132,7 +132,8 @@ def save(out: Path, state: RunState) -> dict:
         write_json_atomically(out / "selected.json", dict(policy_of(state, state.learners[str(pick)]), hyperparameters=hyper))
     summary = curve_summary(state)
     write_json_atomically(out / "curve.json", summary)
-    write_curve_png(out / "curve.png", summary, len(state.config.seeds))
+    if curve_png is not None:
+        curve_png(out / "curve.png", summary, len(state.config.seeds))
     write_json_atomically(out / "checkpoint.json", state.to_json())
     return summary
 

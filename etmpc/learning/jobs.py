@@ -16,7 +16,7 @@ from etmpc.loop import run_episode
 from etmpc.policies import parse_policy, selftrigger
 from etmpc.policies.features import raw_features
 from etmpc.policies.learned import LogisticPolicy
-from etmpc.views.record import EpisodeRecord
+from etmpc.loop.records import EpisodeRecord
 
 
 class _Coin:

@@ -24,7 +24,6 @@ from etmpc.learning.jobs import _call, _learner_to_json, mean_scores
 from etmpc.policies.features import DEFAULT_FEATURES, check_features
 from etmpc.policies.learned import LogisticPolicy, Normalisation
 from etmpc.systems import SystemKey, has_levels, make_system
-from etmpc.views.recording import Recorder
 
 
 @dataclass(frozen=True)
@@ -144,6 +143,8 @@ class _Phased(Learner):
         ):
             raise EtmpcError("the learner's configuration is for another task, price or seeds")
         refuse_foreign(self.out, ours, "training run")
+        if self.settings.record_episodes and self.recorder is None:
+            raise EtmpcError("record episodes: nothing to write them with: pass recorder=etmpc.views.recording.Recorder")
         _, _, testset = context(config.domain)
         n = testset.episodes if config.eval_episodes is None else config.eval_episodes
         if not 1 <= n <= testset.episodes:
@@ -223,7 +224,7 @@ class _Phased(Learner):
         self._evaluate()
 
     def save(self) -> None:
-        self._summary = save(self.out, self.run_state)
+        self._summary = save(self.out, self.run_state, self.curve_png)
 
     def report(self) -> str:
         point, state = self._summary["points"][-1], self.run_state
@@ -279,9 +280,9 @@ class _Phased(Learner):
         results = once_each(self.pool, _call, jobs, self._tick)
         records = [c[3] for c in results if c[3] is not None]
         if records:
-            with Recorder(self.out / "recordings" / f"eval_{done:05d}.rrd") as recorder:
+            with self.recorder(self.out / "recordings" / f"eval_{done:05d}.rrd") as sink:
                 for record in records:
-                    recorder.log_episode(record)
+                    sink.log_episode(record)
         per_seed = config.eval_repeats * testset_n
         sense = state.objective_sense
         for i, seed in enumerate(config.seeds):

@@ -25,6 +25,7 @@ from etmpc.evaluation.workers import make_backend
 from etmpc.learning.base import Learner, check_decisions, learner_class
 from etmpc.learning.config import VALIDATION_ENTROPY
 from etmpc.learning.jobs import mean_scores
+from etmpc.loop.records import EpisodeSink
 from etmpc.policies.learned import write_json_atomically
 from etmpc.systems import SystemKey, system_key
 
@@ -51,12 +52,17 @@ def run(
     progress: bool = True,
     say: Callable[[str], None] = lambda line: None,
     settings=None,
+    recorder: Callable[[Path], EpisodeSink] | None = None,
+    curve_png: Callable[[Path, dict, int], None] | None = None,
 ) -> Run:
-    """Train ``learner`` (an instance, or a registered name with ``settings``) on ``task`` into ``out``."""
+    """Train ``learner`` (an instance, or a registered name with ``settings``) on ``task`` into ``out``.
+    ``recorder`` and ``curve_png``: what the run's recordings and learning curve are drawn with
+    (:class:`etmpc.views.recording.Recorder`, :func:`etmpc.views.curves.write_curve_png`; None: not drawn)."""
     if isinstance(learner, str):
         learner = learner_class(learner)(settings)
     started = time.perf_counter()
     learner.key, learner.seeds, learner.out, learner.say = system_key(task), _seeds(learner, seeds), Path(out), say
+    learner.recorder, learner.curve_png = recorder, curve_png
     learner.workers = workers
     check_decisions(learner, learner.key.task)
     learner.check()

@@ -31,18 +31,21 @@ deviation over seeds, the paper's Figure 2), ``seed<S>/last.json`` and ``seed<S>
 best point of the test-set curve: a look back, not a model choice), ``selected.json`` (the final
 policy of the seed that did best on the validation episodes: the run's answer); with
 ``--record N``, ``recordings/eval_<episodes>.rrd``: the first N test-set episodes of every seed's
-evaluation, as Rerun recordings (see ``etmpc.views.recording``).
+evaluation, as Rerun recordings. The caller gives what draws the curve and writes the recordings
+(``etmpc train`` gives ``etmpc.views.curves.write_curve_png`` and ``etmpc.views.recording.Recorder``).
 """
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Callable
 
 from etmpc.common.sense import higher_or_lower
 from etmpc.learning.checkpoint import RunState, curve_summary, load_checkpoint
 from etmpc.learning.config import ALGORITHMS, TrainConfig, parse_seeds
 from etmpc.learning.phased import _Phased, once_each
 from etmpc.learning.runner import run
+from etmpc.loop.records import EpisodeSink
 
 __all__ = ["ALGORITHMS", "TrainConfig", "curve_summary", "format_summary", "load_checkpoint", "once_each", "parse_seeds", "train"]
 
@@ -56,15 +59,30 @@ def train(
     address: str | None = None,
     progress: bool = True,
     record_episodes: int = 0,
+    recorder: Callable[[Path], EpisodeSink] | None = None,
+    curve_png: Callable[[Path, dict, int], None] | None = None,
 ) -> RunState:
     """Train ``config`` into ``out`` (see the module docstring). With ``record_episodes``, each
     evaluation also writes that many test-set episodes per seed into a Rerun recording,
-    ``out/recordings/eval_<episodes>.rrd`` (not part of the config: it changes no result).
+    ``out/recordings/eval_<episodes>.rrd``, opened by ``recorder`` (not part of the config: it changes no
+    result). With ``curve_png``, the learning curve is drawn into ``out/curve.png`` at each checkpoint.
 
     The learner of ``config.algorithm`` (:mod:`etmpc.learning.phased`) driven by
     :func:`etmpc.learning.runner.run`; returns its state."""
     learner = _Phased.from_config(config, record_episodes)
-    run(learner, config.system, out, config.seeds, workers, resume, backend, address, progress)
+    run(
+        learner,
+        config.system,
+        out,
+        config.seeds,
+        workers,
+        resume,
+        backend,
+        address,
+        progress,
+        recorder=recorder,
+        curve_png=curve_png,
+    )
     return learner.run_state
 
 

@@ -4,7 +4,7 @@ stay in. A system that has one declares it as a class attribute, ``space = Space
 without one (``getattr(system, "space", None)`` is None) is drawn in time series only.
 
 It names states and signals (``System.state_names``, ``System.signals``) rather than holding arrays,
-so it is small and picklable: the recording's :class:`~etmpc.views.record.EpisodeRecord` carries it.
+so it is small and picklable: the recording's :class:`~etmpc.loop.records.EpisodeRecord` carries it.
 """
 
 from __future__ import annotations

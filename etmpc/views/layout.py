@@ -8,7 +8,7 @@ import numpy as np
 
 from etmpc.common.sense import cost_or_profit, higher_or_lower
 from etmpc.views import blueprint as look
-from etmpc.views.record import EpisodeRecord
+from etmpc.loop.records import EpisodeRecord
 from etmpc.views.solves import in_force, solves
 
 

@@ -2,7 +2,7 @@
 the same formulas as the live run.
 
 ``read_recording`` reads a ``.rrd`` with Rerun's own reader (``rerun.chunk.RrdReader``); a file
-without the end marker :data:`etmpc.views.recording.END_MARKER` was cut short and is refused.
+without the end marker :data:`etmpc.views.schema.END_MARKER` was cut short and is refused.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ import numpy as np
 from etmpc.common.errors import EtmpcError
 from etmpc.common.sense import higher_or_lower, oriented
 from etmpc.loop import computation_cost
-from etmpc.views.recording import COMPUTE_SERIES, DECISION_SERIES, END_MARKER, OBJECTIVE_SERIES
+from etmpc.views.schema import COMPUTE_SERIES, DECISION_SERIES, END_MARKER, OBJECTIVE_SERIES
 from etmpc.systems import canonical
 
 _ROOT = re.compile(r"^(.*/episode_\d+/repeat_\d+)/(.+)$")

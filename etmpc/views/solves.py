@@ -4,12 +4,12 @@ the step its plan came into force (:func:`solves`), which plan is in force at ea
 
 The loop's trajectory keeps each plan put in force with the step it was made for and the step it
 arrived (``Trajectory.plans``, ``Trajectory.arrivals``), and each step's computation (``recompute``,
-``level``, ``work``, ``in_flight``); :func:`plan_starts` pairs each plan with the step its solve
-started. Without delay compensation a plan is made for the step its solve started; with it, for the
-step its prediction starts from (``Latency.intervals`` later), except a plan made before the
-interval (the episode's first, or after a restart: the decision was forced and the plan arrived at
-once). A solve whose plan was never put in force (it failed while the plan in force still had steps
-left, a restart cancelled it, or the episode ended first) ends where its steps in flight end.
+``level``, ``work``, ``in_flight``); :func:`etmpc.loop.records.plan_starts` pairs each plan with the
+step its solve started. Without delay compensation a plan is made for the step its solve started;
+with it, for the step its prediction starts from (``Latency.intervals`` later), except a plan made
+before the interval (the episode's first, or after a restart: the decision was forced and the plan
+arrived at once). A solve whose plan was never put in force (it failed while the plan in force still
+had steps left, a restart cancelled it, or the episode ended first) ends where its steps in flight end.
 
 Views only receive: this module reads arrays, and imports nothing of etmpc.
 """
@@ -41,26 +41,6 @@ class Solve:
         return "one SQP iteration" if self.level == 1 else "full solve"
 
 
-def plan_starts(made, arrivals, forced, shift: int = 0) -> np.ndarray:
-    """The step each plan's solve started at, from the step it was made for (``made``), the step it came
-    into force (``arrivals``) and the forced steps. ``shift``: the latency's intervals if the
-    controller compensates the delay, else 0."""
-    made = np.asarray(made, dtype=np.int64)
-    if shift == 0 or len(made) == 0:
-        return made.copy()
-    arrivals, forced = np.asarray(arrivals, dtype=np.int64), np.asarray(forced, bool)
-    at = np.minimum(made, len(forced) - 1)
-    instant = (arrivals == made) & (made < len(forced)) & forced[at]  # made before the interval
-    return np.where(instant, made, made - shift)
-
-
-def seen_from(starts, arrivals) -> np.ndarray:
-    """The first step whose decision sees each plan: a late plan arrives before the decision of its
-    arrival step, one made at the decision (no latency) is seen from the next step on."""
-    starts, arrivals = np.asarray(starts, dtype=np.int64), np.asarray(arrivals, dtype=np.int64)
-    return arrivals + (starts == arrivals)
-
-
 def in_force(arrivals, made, steps: int) -> np.ndarray:
     """The step the plan in force at each of steps ``0..steps-1`` was made for (its input is applied
     then; -1 where no plan is)."""
@@ -70,7 +50,7 @@ def in_force(arrivals, made, steps: int) -> np.ndarray:
 
 
 def solves(record) -> list[Solve]:
-    """Every computation of an episode (an :class:`etmpc.views.record.EpisodeRecord`), in order."""
+    """Every computation of an episode (an :class:`etmpc.loop.records.EpisodeRecord`), in order."""
     n = record.steps
     made = [int(k) for k, *_ in record.plans]
     plan_of = {int(s): j for j, s in enumerate(record.starts)}

@@ -1,5 +1,5 @@
 """A recorded episode in 3-D, for a system that declares where its scene sits
-(:class:`etmpc.systems.space.Space`, carried by :attr:`EpisodeRecord.space <etmpc.views.record.EpisodeRecord>`).
+(:class:`etmpc.systems.space.Space`, carried by :attr:`EpisodeRecord.space <etmpc.loop.records.EpisodeRecord>`).
 
 Under the episode's root, in ``space/`` (z up; each entity in metres):
 
@@ -23,7 +23,7 @@ import numpy as np
 
 from etmpc.views import blueprint as look
 from etmpc.views.layout import _timeline
-from etmpc.views.record import EpisodeRecord
+from etmpc.loop.records import EpisodeRecord
 
 TARGET = (230, 40, 40)  # red
 FORCE = (240, 200, 40)  # yellow

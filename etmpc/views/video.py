@@ -1,6 +1,6 @@
 """Video of a played episode: each state drawn from the MuJoCo scene, encoded as an MP4 (H.264).
 
-Views only receive: this module draws states it is given (``etmpc.evaluation.render`` plays the
+Views only receive: this module draws states it is given (``etmpc.views.render`` plays the
 episode). It may import ``etmpc.common``.
 
 A system with a 3-D scene names its ``camera`` and puts a state back into its physics with ``show``

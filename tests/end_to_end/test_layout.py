@@ -19,13 +19,13 @@ TESTS = REPO / "tests"
 
 
 def test_the_import_contracts_hold():
-    """Floors (cli > experiments > learning > envs > evaluation > views > policies > loop | suite > systems >
-    control > common: pyproject.toml's [tool.importlinter]), no cycles among siblings at any depth, the spec
-    registry above the policies, domains apart."""
+    """Floors (cli > experiments > views > learning > envs > evaluation > policies > loop | suite > systems >
+    control > common: pyproject.toml's [tool.importlinter]), evaluation and learning apart from views, no
+    cycles among siblings at any depth, the spec registry above the policies, domains apart."""
     lint = Path(sys.executable).with_name("lint-imports")
     result = subprocess.run([str(lint), "--config", str(REPO / "pyproject.toml")], cwd=REPO, capture_output=True, text=True)
     assert result.returncode == 0, result.stdout[-3000:]
-    assert "BROKEN" not in result.stdout and result.stdout.count("KEPT") >= 4
+    assert "BROKEN" not in result.stdout and result.stdout.count("KEPT") >= 5
 
 
 def _strongly_connected(graph: grimp.ImportGraph) -> list[set[str]]:

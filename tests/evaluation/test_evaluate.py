@@ -103,6 +103,35 @@ def test_the_table_shows_the_failures_per_episode_with_their_95_percent_ci(seria
         assert f"{fmean(counts):.2f} ± {1.96 * stdev(counts) / 2:.2f}" in line  # n = 4 episodes
 
 
+def test_a_recording_is_written_by_the_recorder_it_is_given(tmp_path):
+    """Evaluation draws nothing itself: with ``record`` it opens the recording with the recorder it is given
+    (etmpc.evaluate gives Rerun's), hands it what each run kept, in the runs' order, and closes it keeping
+    the file; without a recorder, a record path is refused before any work."""
+    opened = []
+
+    class Sink:  # an EpisodeSink that keeps what it is given
+        def __init__(self, path):
+            self.path, self.records, self.kept = path, [], None
+            opened.append(self)
+
+        def log_episode(self, record):
+            self.records.append(record)
+
+        def close(self, keep=True):
+            self.kept = keep
+
+    path = tmp_path / "r.rrd"
+    result = evaluate("battery", ["every:5", "never"], episodes=2, workers=1, progress=False, record=path, recorder=Sink)
+    (sink,) = opened
+    assert sink.path == path and sink.kept is True
+    kept = [(r.identity["policy"], r.identity["episode"], int(r.recompute.sum())) for r in sink.records]
+    assert kept == [(run.policy, run.episode, run.recomputes) for run in result.runs]
+    assert list(tmp_path.iterdir()) == []  # nothing written but by the recorder
+    with pytest.raises(EtmpcError, match="^record: nothing to write it with: pass recorder="):
+        evaluate("battery", ["never"], episodes=1, workers=1, progress=False, record=path)
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_the_task_is_called_task_and_the_old_keyword_domain_still_works_with_a_warning():
     new = evaluate(task="cart_pendulum", policies=["every:5"], episodes=1, workers=1, progress=False)
     with pytest.warns(DeprecationWarning, match="domain= is deprecated: call it task="):

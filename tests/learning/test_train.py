@@ -12,10 +12,12 @@ import pytest
 
 from tests.conftest import REPO
 from etmpc.cli import main
+from etmpc.common.errors import EtmpcError
 from etmpc.learning.gpomdp import Settings
 from etmpc.policies.learned import INITIAL_KEEP_LOGIT, LogisticPolicy, Normalisation, load_policy, sigmoid
 from etmpc.policies import AugmentedState, parse_policy
 from etmpc.learning.train import TrainConfig, once_each, train
+from etmpc.views.curves import write_curve_png
 
 ROOT = REPO
 TINY = dict(seeds=(0, 1), episodes=4, eval_every=2, eval_episodes=3, normalisation_episodes=2, validation_episodes=2)
@@ -27,11 +29,24 @@ def files(out):
 
 def test_results_do_not_depend_on_the_number_of_workers(tmp_path):
     config = TrainConfig("battery", **TINY)
-    train(config, tmp_path / "one", workers=1, progress=False)
-    train(config, tmp_path / "two", workers=2, progress=False)
-    assert files(tmp_path / "one") == files(tmp_path / "two")
+    train(config, tmp_path / "one", workers=1, progress=False, curve_png=write_curve_png)
+    train(config, tmp_path / "two", workers=2, progress=False, curve_png=write_curve_png)
+    assert files(tmp_path / "one") == files(tmp_path / "two") and "curve.png" in files(tmp_path / "one")
     curve = json.loads((tmp_path / "one" / "curve.json").read_text())
     assert [p["episodes"] for p in curve["points"]] == [0, 2, 4] and curve["objective_sense"] == "max"
+
+
+def test_the_run_draws_with_what_it_is_given(tmp_path):
+    """Learning draws nothing itself: the curve is drawn by the ``curve_png`` it is given, from the summary
+    in curve.json, into curve.png's place; recording episodes with no recorder is refused before any work."""
+    drawn = []
+    out = tmp_path / "run"
+    train(TrainConfig("battery", **TINY), out, workers=1, progress=False, curve_png=lambda *args: drawn.append(args))
+    assert drawn[-1] == (out / "curve.png", json.loads((out / "curve.json").read_text()), 2)
+    assert not (out / "curve.png").exists()
+    with pytest.raises(EtmpcError, match="^record episodes: nothing to write them with: pass recorder="):
+        train(TrainConfig("battery", **TINY), tmp_path / "rec", workers=1, progress=False, record_episodes=1)
+    assert not (tmp_path / "rec").exists()
 
 
 def test_curve_points_are_what_evaluate_reports(tmp_path):

@@ -11,10 +11,10 @@ from rerun.chunk import RrdReader
 import etmpc.evaluation.evaluate as evaluate_mod
 from etmpc.views import blueprint as look
 from etmpc.cli import main
-from etmpc.evaluation.evaluate import evaluate
+from etmpc import evaluate
 from etmpc.loop import run_episode
 from etmpc.policies import parse_policy
-from etmpc.views.record import prediction_errors
+from etmpc.loop.records import prediction_errors
 from etmpc.views.replay import read_recording, replay_summary
 from etmpc.evaluation.workers import context, policy_rng
 
@@ -490,12 +490,15 @@ def test_render_puts_the_video_frames_into_the_recording(tmp_path, capsys):
 
 def test_train_records_its_evaluations_without_changing_any_result(tmp_path):
     from etmpc.learning.train import TrainConfig, train
+    from etmpc.views.curves import write_curve_png
+    from etmpc.views.recording import Recorder
 
     config = TrainConfig(
         "battery", seeds=(0, 1), episodes=4, eval_every=2, eval_episodes=3, normalisation_episodes=2, validation_episodes=2
     )
-    train(config, tmp_path / "plain", workers=1, progress=False)
-    train(config, tmp_path / "rec", workers=1, progress=False, record_episodes=2)
+    views = dict(recorder=Recorder, curve_png=write_curve_png)
+    train(config, tmp_path / "plain", workers=1, progress=False, **views)
+    train(config, tmp_path / "rec", workers=1, progress=False, record_episodes=2, **views)
     plain = {p.relative_to(tmp_path / "plain"): p.read_bytes() for p in (tmp_path / "plain").rglob("*") if p.is_file()}
     recorded = {p.relative_to(tmp_path / "rec"): p.read_bytes() for p in (tmp_path / "rec").rglob("*") if p.is_file()}
     assert {k: v for k, v in recorded.items() if k.parts[0] != "recordings"} == plain

@@ -6,12 +6,13 @@ import numpy as np
 import pytest
 
 from etmpc.common.sense import oriented
-from etmpc.evaluation.evaluate import evaluate
+from etmpc import evaluate
 from etmpc.evaluation.workers import context, play_test_episode
 from etmpc.loop import computation_cost
 from etmpc.policies import parse_policy
+from etmpc.loop.records import plan_starts
 from etmpc.views.replay import read_recording, replay_summary
-from etmpc.views.solves import frame_captions, plan_starts
+from etmpc.views.solves import frame_captions
 from tests.views.test_recording import chunks_by_entity, column_chunk, read_blueprint, series, views_of
 
 LATE, LEVELS = "cart_pendulum/kicks_late", "cart_pendulum/kicks_levels"

@@ -6,12 +6,12 @@ import pickle
 import numpy as np
 import pytest
 
-from etmpc.evaluation.evaluate import evaluate
+from etmpc import evaluate
 from etmpc.evaluation.workers import play_test_episode
 from etmpc.policies import parse_policy
 from etmpc.systems import make_system
 from etmpc.systems.space import Space
-from etmpc.views.record import EpisodeRecord
+from etmpc.loop.records import EpisodeRecord
 from tests.views.test_recording import chunks_by_entity, column_chunk, read_blueprint, views_of
 
 ROOT = "/quadrotor/every\\:5/episode_000/repeat_0"

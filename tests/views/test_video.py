@@ -4,8 +4,8 @@ flight, a plan coming into force), read back from the encoded video."""
 import av
 import numpy as np
 
-import etmpc.evaluation.render as render_mod
-from etmpc.evaluation.render import render_rollout
+import etmpc.views.render as render_mod
+from etmpc.views.render import render_rollout
 from etmpc.views.solves import PLAIN, SOLVING
 from etmpc.views.video import caption_frames
 

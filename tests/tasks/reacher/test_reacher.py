@@ -323,7 +323,7 @@ def test_a_stored_episode_replays_exactly(system, stored):
 
 def test_an_episode_is_recorded_with_both_torques_bounds(system, stored):
     """The first task with two inputs: a recording keeps each input's bounds (and the plan's target)."""
-    from etmpc.views.record import EpisodeRecord
+    from etmpc.loop.records import EpisodeRecord
 
     episode = system.episode_from_arrays(stored.episode_arrays(1))
     traj = run_episode(system, system.make_env(), parse_policy("every:4", system), None, episode)

@@ -9,7 +9,7 @@ from etmpc.systems.cart_pendulum.model import Parameters
 from etmpc.common.errors import EtmpcError
 from etmpc.loop import run_episode
 from etmpc.policies import parse_policy
-from etmpc.evaluation.render import render_rollout
+from etmpc.views.render import render_rollout
 from etmpc.views.video import render_frames, write_video
 from etmpc.evaluation.workers import policy_rng
 
