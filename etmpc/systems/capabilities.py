@@ -21,7 +21,7 @@ from typing import Any, Protocol, TypeGuard, TypeVar
 import numpy as np
 
 from etmpc.common.errors import EtmpcError
-from etmpc.systems.base import Benchmark
+from etmpc.systems.benchmark import Benchmark
 
 
 class Experiments(Protocol):
