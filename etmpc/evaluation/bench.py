@@ -10,7 +10,7 @@ episodes per second and the side-by-side solver comparisons below are wall time.
 * Rest of a step on the ``dm_env`` path (:func:`etmpc.loop.run_episode`, what ``evaluate`` plays):
   step time minus the solve (plant, LQR, policy, bookkeeping), under ``always``, ``every:3``
   and ``never`` together.
-* Rollout step: a step of :func:`etmpc.loop.play_on` (the fast path rollouts and the oracle bound
+* Rollout step: a step of :func:`etmpc.loop.play_on` (the fast path rollouts and the oracle
   simulate futures with) under ``never``, forced solves taken out; and the steps per second that
   makes.
 * Episodes per second, single process, for ``always``, ``every:3`` and ``never``.
@@ -162,7 +162,7 @@ class _Snapshotter:
 def _rollout_steps(system, env, testset, episodes: int, repeats: int = 5) -> dict:
     """CPU time per step of :func:`etmpc.loop.play_on` under ``never`` from step 1 of each
     episode (the plan made at step 0 kept, forced solves every N steps excluded): a rollout step
-    without a solve, the fast path rollouts and the oracle bound simulate with."""
+    without a solve, the fast path rollouts and the oracle simulate with."""
     never, twin = parse_policy("never", system), system.make_env()
     per_step, solve_s, steps = [], [0.0], 0
 

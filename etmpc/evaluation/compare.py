@@ -73,7 +73,7 @@ def against(evaluation: dict, reference: str) -> dict[str, dict]:
         spec: dict(
             paired(per_episode(evaluation, {spec}), base, sense),
             recomputes_mean=row["recomputes_mean"],
-            upper_bound=row.get("upper_bound", False),
+            clairvoyant=row.get("clairvoyant", row.get("upper_bound", False)),  # upper_bound: an older etmpc's name
             failures=None
             if base_failures is None
             else paired_failures(per_episode(evaluation, {spec}, "failures"), base_failures),
@@ -101,7 +101,7 @@ def format_against(evaluation: dict, reference: str) -> str:
         "-" * len(head),
     ]
     for spec, r in rows.items():
-        label = spec + (" (bound)" if r["upper_bound"] else "")
+        label = spec + (" (oracle)" if r["clairvoyant"] else "")
         failures = f"{r['failures']['difference']:>+11.2f} ± {r['failures']['ci95']:<5.2f}" if counted else ""
         lines.append(
             f"{label:<{width}}{r['objective_mean']:>12.5f}{r['mean_difference']:>+13.5f}{r['ci95']:>11.5f}"

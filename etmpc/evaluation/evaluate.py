@@ -62,7 +62,7 @@ def _run(job: tuple) -> tuple[RunResult, EpisodeRecord | None, dict[str, float]]
             failures=None if played.system.failures is None else played.system.failures(traj, played.episode),
         ),
         (
-            played.record(spec, getattr(policy, "announce", None), upper_bound=bool(getattr(policy, "upper_bound", False)))
+            played.record(spec, getattr(policy, "announce", None), clairvoyant=bool(getattr(policy, "clairvoyant", False)))
             if record
             else None
         ),
@@ -293,7 +293,7 @@ def _evaluate(
             episodes,
             repeats,
             system.failure_name,
-            bool(getattr(parsed[spec], "upper_bound", False)),
+            bool(getattr(parsed[spec], "clairvoyant", False)),
         )
         for spec in policies
     ]
@@ -312,7 +312,7 @@ def _evaluate(
 
 def format_table(evaluation: Evaluation) -> str:
     sense = evaluation.summaries[0].objective_sense if evaluation.summaries else "min"
-    names = {s.policy: s.policy + (" (upper bound)" if s.upper_bound else "") for s in evaluation.summaries}
+    names = {s.policy: s.policy + (" (oracle)" if s.clairvoyant else "") for s in evaluation.summaries}
     width = max([16] + [len(name) + 2 for name in names.values()])  # long rl:PATH specs stay aligned
     task_failures = next((s.failure_name for s in evaluation.summaries if s.failure_name), None)
     failures_width = max(len(task_failures) + 10, 16) if task_failures else 0
@@ -342,8 +342,6 @@ def format_table(evaluation: Evaluation) -> str:
     )
     if task_failures:
         lines.append(f"{task_failures}/episode: the task's failures, mean ± 95 % CI over the episodes (1.96 sd / √n)")
-    if any(s.upper_bound for s in evaluation.summaries):
-        lines.append(
-            "(upper bound): an oracle knows each episode's future; it bounds what a trigger can gain and is not a policy"
-        )
+    if any(s.clairvoyant for s in evaluation.summaries):
+        lines.append("(oracle): it knows each episode's future, a reference and not a policy; a policy can do better than it")
     return "\n".join(lines)

@@ -49,7 +49,7 @@ class PolicySummary:
     nonfinite_episodes: int  # runs that ended on a non-finite state; excluded from the means
     episodes: int
     repeats: int
-    upper_bound: bool = False  # an oracle: it knows the episode's future; a bound, not a policy
+    clairvoyant: bool = False  # an oracle: it knows the episode's future; a reference, not a policy
     failures_mean: float | None = None  # the task's failures per episode (failure_name), if it counts them
     failure_name: str | None = None
     failures_ci95: float | None = None  # 1.96 sd / sqrt(n) of the failures over the episodes (NaN below two)
@@ -62,10 +62,10 @@ def summarise(
     episodes: int,
     repeats: int,
     failure_name: str | None = None,
-    upper_bound: bool = False,
+    clairvoyant: bool = False,
 ) -> PolicySummary:
-    """Means over the runs that stayed finite; the others are counted, never averaged in. ``upper_bound``:
-    the policy knows each episode's future (an oracle's ``upper_bound``)."""
+    """Means over the runs that stayed finite; the others are counted, never averaged in. ``clairvoyant``:
+    the policy knows each episode's future (an oracle's ``clairvoyant``)."""
     finite = [r for r in runs if r.finite]
     by_episode: dict[int, list[float]] = {}
     by_repeat: dict[int, list[float]] = {}
@@ -89,7 +89,7 @@ def summarise(
         nonfinite_episodes=len(runs) - len(finite),
         episodes=episodes,
         repeats=repeats,
-        upper_bound=upper_bound,
+        clairvoyant=clairvoyant,
         failures_mean=mean([r.failures for r in finite]) if counted else None,
         failure_name=failure_name,
         # over the episodes, each averaged over its repeats (as objective_std)
@@ -195,6 +195,8 @@ def _row(kind: type, data: dict):
     """A :class:`RunResult` or :class:`PolicySummary` from its JSON: a float field that strict JSON wrote as
     ``null`` is NaN again (a field that may be None stays None)."""
     values = {f.name: data[f.name] for f in fields(kind) if f.name in data}
+    if "upper_bound" in data and "clairvoyant" not in data and any(f.name == "clairvoyant" for f in fields(kind)):
+        values["clairvoyant"] = data["upper_bound"]  # an older etmpc's name for it
     for f in fields(kind):
         if f.type == "float" and values.get(f.name, 0.0) is None:
             values[f.name] = math.nan

@@ -11,7 +11,7 @@ future). With the reference gap ``D = mean_e (B_e - O_e)``, a trigger ``P`` scor
 per episode ``s_e = 100 (B_e - P_e) / D`` (its mean is the score): 0 is the best periodic schedule,
 100 the oracle, exactly. Dividing by the *mean* gap, not each episode's own, keeps an episode whose
 two references nearly tie from dominating. Above 100 is possible: the oracle is a one-step lookahead
-over that schedule, not a bound on every trigger. The 95 % CI is ``1.96 sd(s_e) / sqrt(n)`` (as
+over that schedule, not a bound on every policy. The 95 % CI is ``1.96 sd(s_e) / sqrt(n)`` (as
 ``etmpc evaluate --against``). An episode that ends on a non-finite state leaves the task unscored.
 
 **The suite's aggregate**, over the tasks scored, as rliable computes it (Agarwal et al. 2021) with

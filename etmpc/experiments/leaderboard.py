@@ -82,7 +82,7 @@ class Entry:
     """A row of the leaderboard: a name, what kind of trigger it is, and its spec on each task."""
 
     name: str
-    kind: str  # reference | baseline | learned | meter | bound | submitted (a verified card's)
+    kind: str  # reference | baseline | learned | meter | oracle | submitted (a verified card's)
     specs: dict[str, str]
     note: str = ""
 
@@ -185,7 +185,7 @@ def entries(
             {t: rollout_meter_spec(make_system(t), best[t]) for t in tasks},
             "one-step lookahead over sampled futures: a real policy",
         ),
-        Entry(LAST[1], "bound", {t: references[t].oracle_spec for t in tasks}, ORACLE_NOTE),
+        Entry(LAST[1], "oracle", {t: references[t].oracle_spec for t in tasks}, ORACLE_NOTE),
     ]
     return found
 

@@ -84,7 +84,7 @@ def above_the_oracle(data: dict, task: str) -> list[str]:
     objective (the objective without that price). Every number is the JSON's."""
     ref = data["references"][task]
     price, sense = ref["recompute_price"], ref["objective_sense"]
-    oracle = next((r for e in data["entries"] if e["kind"] == "bound" for r in e["rows"] if r["task"] == task), None)
+    oracle = next((r for e in data["entries"] if e["kind"] in ("oracle", "bound") for r in e["rows"] if r["task"] == task), None)
     if oracle is None or not _finite(oracle["objective_mean"]):
         return []
     lines = []
@@ -171,8 +171,8 @@ def page(data: dict) -> str:
             if len(distinct_specs) == 1
             else ", ".join(f"{t}: `{spec}`" for t, spec in entry["specs"].items())
         )
-        note = ORACLE_NOTE if entry["kind"] == "bound" else entry["note"]  # a page from an older JSON says it too
-        kind = "clairvoyant reference" if entry["kind"] == "bound" else entry["kind"]
+        note = ORACLE_NOTE if entry["kind"] in ("oracle", "bound") else entry["note"]  # a page from an older JSON says it too
+        kind = "clairvoyant reference" if entry["kind"] in ("oracle", "bound") else entry["kind"]
         lines.append(f"* **{entry['name']}** ({kind}): {note}; {specs}.")
     lines += ["", "## Per task", ""]
     for task in data["tasks"]:

@@ -147,7 +147,7 @@ def build_pareto(
                 "policy": spec,
                 "kind": kind,
                 "price": price,
-                "upper_bound": kind == "oracle",
+                "clairvoyant": kind == "oracle",
                 "episodes": len(cells),
                 "computations": float(np.mean([n for _, n in cells])),
                 "control_objective": float(np.mean([c for c, _ in cells])),
@@ -174,7 +174,7 @@ def build_pareto(
 
 def _answer(price: float, rows: dict, best: str) -> dict:
     """At ``price``: the gain over the periodic front at equal rates of the rollout, learned and
-    self-triggering policies, of the best event trigger, and of the oracle (the bound)."""
+    self-triggering policies, of the best event trigger, and of the oracle (a reference)."""
 
     def best_of(kind):
         candidates = [r for r in rows.values() if r["kind"] == kind and r["versus_periodic_front"] is not None]
@@ -220,12 +220,12 @@ def report_section(pareto: dict) -> list[str]:
         "",
         f"First {pareto['episodes']} test-set episodes, paired per episode; the periodic front interpolated at "
         f"each policy's mean rate; gains in control objective ({sense} is better), > 0 = better than the front, "
-        "95 % CI. The oracle is an upper bound, not a policy. The best event trigger is the best of "
+        "95 % CI. The oracle knows the future: a reference, not a policy. The best event trigger is the best of "
         f"{len(pareto['settings']['thresholds'])} levels, so its gain is biased upwards (a maximum over noisy "
         "estimates).",
         "",
         "| price | best periodic | rollout | learned (DPI, trained at the price) | self-trigger (trained at the price) "
-        "| best event trigger | oracle bound |",
+        "| best event trigger | oracle |",
         "|---|---|---|---|---|---|---|",
     ]
     for a in pareto["answers"]:

@@ -126,7 +126,7 @@ def headroom_section(r: dict, smoke: bool) -> list[str]:
     h, d = r["headroom"], r["default_learner"]
     best = h["reference"]
     names = {
-        "oracle": "upper bound on a one-step lookahead over it, **not a policy**: knows the episode's future",
+        "oracle": "a one-step lookahead over it that knows the episode's future: a reference, **not a policy**",
         "rollout": "rollout policy",
         "learned_default": "learned, default learner (DPI, error features)",
         "learned_paper": "learned, the paper's (GPOMDP, paper features)",
@@ -136,8 +136,8 @@ def headroom_section(r: dict, smoke: bool) -> list[str]:
         f"### Headroom over `{best}`",
         "",
         f"Paired over test-set episodes 0–{h['episodes'] - 1} (the rollout policies are expensive); "
-        "gain > 0 is better than the best fixed policy; 95 % CIs. The oracle bounds what a one-step lookahead "
-        f"over `{best}` can gain, not every trigger: one that also saves computations can beat it.",
+        "gain > 0 is better than the best fixed policy; 95 % CIs. The oracle is what a one-step lookahead "
+        f"over `{best}` can gain knowing the future, not what every policy can: one that also saves recomputes can beat it.",
         "",
         "| | policies | recomputes | objective | gain over best fixed | gain % |",
         "|---|---|---|---|---|---|",

@@ -11,7 +11,7 @@ Per system, in ``DIR/<domain>/``:
    chosen on validation episodes (``selected.json``) is copied to ``DIR/policies/<domain>/learned.json``
    (the project ships the full run's copy in ``policies/``) and evaluated on the test set
    (``learned_default.json``);
-3c. ``headroom.json``: the rollout policy over the best fixed one and the ``oracle:`` upper bound on
+3c. ``headroom.json``: the rollout policy over the best fixed one and the ``oracle:`` reference on
    the first ``rollout_episodes`` test-set episodes (rollouts are expensive);
 3d. ``train_ppo/``: PPO from Stable-Baselines3 on the trigger environment (with the 'rl' extra), with
    the task's hyperparameters (``policies/<task>/ppo.yml``); its chosen network is copied with them to

@@ -1,6 +1,6 @@
 """The numbers of ``etmpc reproduce``'s report, from the evaluation JSONs alone: per system, the best
 fixed policy, the learned policies against it (paired over test-set episodes, 95 % CIs), the default
-learner and the headroom (rollout and the oracle bound)."""
+learner and the headroom (rollout and the oracle)."""
 
 from __future__ import annotations
 
@@ -91,8 +91,8 @@ def summarise_default(system, baselines: dict, default: dict, state) -> dict:
 
 
 def summarise_headroom(system, best: str, baselines: dict, learned: dict, default: dict, rollout: dict, oracle: dict) -> dict:
-    """Every contender and the oracle bound against the best fixed policy, paired on the episodes the
-    rollout policy played. Rows, in order: the oracle (an upper bound, not a policy), the rollout
+    """Every contender and the oracle against the best fixed policy, paired on the episodes the
+    rollout policy played. Rows, in order: the oracle (a reference, not a policy), the rollout
     policy, the default learner, the paper's learner, the best fixed policy."""
     sense = system.objective_sense
     reference = per_episode(baselines, {best})

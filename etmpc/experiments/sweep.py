@@ -14,7 +14,7 @@ price ``p``,
 
 * the rollout policy ``rollout:BEST:K:H`` over the best periodic schedule at ``p``, which optimises
   the objective at ``p`` (see :mod:`etmpc.policies.rollout`);
-* the oracle ``oracle:BEST``: an upper bound on what any trigger could gain at ``p``, not a policy;
+* the oracle ``oracle:BEST``: the reference for what a one-step lookahead could gain at ``p``, not a policy;
 * a learned policy trained at ``p`` with the default learner (DPI on the ``error`` features, see
   :mod:`etmpc.learning.dpi`), chosen among its seeds on training-distribution episodes, never the test set;
 * a self-triggering policy ``self:PATH`` trained at ``p`` (see :mod:`etmpc.policies.selftrigger`): at each

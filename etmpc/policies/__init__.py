@@ -4,7 +4,7 @@
 * :mod:`~etmpc.policies.threshold`: the event trigger ``threshold:X``;
 * :mod:`~etmpc.policies.learned`: the logistic policy ``rl:PATH`` and its features;
 * :mod:`~etmpc.policies.selftrigger`: the self-triggering policy ``self:PATH``;
-* :mod:`~etmpc.policies.rollout`: ``rollout:BASE[:K[:H]]`` and the bound ``oracle:BASE``, which
+* :mod:`~etmpc.policies.rollout`: ``rollout:BASE[:K[:H]]`` and the oracle ``oracle:BASE``, which
   simulate both answers with the loop;
 * :mod:`~etmpc.policies.specs`: ``parse_policy``, which builds any of them from its spec.
 

@@ -15,7 +15,7 @@ the rollout property it does at least as well as ``BASE`` in expectation (up to 
 of ``K`` futures). It measures how much a state-dependent trigger can gain over ``BASE``.
 
 ``oracle:BASE`` is the same one-step lookahead with the episode's **stored** future, which no
-controller knows: an **upper bound** on what such a trigger can gain, never a contender. Its spec
+controller knows: a **reference** for what such a policy can gain, never a contender. Its spec
 and every table, JSON file, figure and recording that show it carry the word ``oracle``.
 """
 
@@ -173,8 +173,8 @@ class Rollout:
         return not self.oracle or self.base.stochastic
 
     @property
-    def upper_bound(self) -> bool:
-        """The oracle knows each episode's future: it bounds what a trigger can gain, and is not one."""
+    def clairvoyant(self) -> bool:
+        """The oracle knows each episode's future: a reference, not a policy."""
         return self.oracle
 
     @property

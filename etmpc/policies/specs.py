@@ -1,7 +1,7 @@
 """The registry of policy kinds, and the parser it makes: a spec is ``KIND`` or ``KIND:ARG``.
 
 Each kind is a :class:`Kind`: its name (the text before the spec's first colon), its syntax and a
-line of help, whether it is an upper bound (an oracle: it knows each episode's future), and a builder
+line of help, whether it is clairvoyant (an oracle: it knows each episode's future), and a builder
 that turns the argument into a policy. :data:`BUILT_IN` holds etmpc's own; other installed packages
 add theirs through the ``etmpc.policies`` entry point group (``name = "module:KIND"``, the name being
 the kind's), read once when first asked. A plugin that fails to load (whatever its code raises,
@@ -66,7 +66,7 @@ class Kind:
     syntax: str  # how a spec of this kind is written, for the help and errors ("every:T")
     summary: str  # one line: what it does
     build: Callable[[str, str, Context], Policy]
-    upper_bound: bool = False  # True: it knows each episode's future; it bounds triggers and is not one
+    clairvoyant: bool = False  # True: it knows each episode's future; a reference, not a policy
     family: str = "other"  # periodic, event, learned, self, rollout, oracle, users, other: how tables group it
     path: bool = False  # its argument is a file (rl:PATH): tables shorten it
     simulates: bool = False  # it simulates the loop itself, so it may not be another such kind's base
@@ -199,9 +199,9 @@ BUILT_IN: tuple[Kind, ...] = (
     Kind(
         "oracle",
         "oracle:BASE",
-        "the same with the episode's own future: an upper bound, not a policy",
+        "the same with the episode's own future: the oracle, a reference and not a policy",
         _rollout,
-        upper_bound=True,
+        clairvoyant=True,
         family="oracle",
         simulates=True,
     ),

@@ -37,7 +37,7 @@ class Bar:
     recomputes: float  # mean per episode (over seeds for a group)
     policies: tuple[str, ...]  # the specs drawn by this bar
     stochastic: bool
-    bound: bool = False  # an oracle: an upper bound that knows the future, not a policy
+    clairvoyant: bool = False  # an oracle: a reference that knows the future, not a policy
 
 
 def _check_evaluations(evaluations: Sequence[dict], sources: Sequence[str] | None) -> list[str]:
@@ -112,26 +112,26 @@ def policy_bars(evaluations: Sequence[dict], group_learned: bool = True, sources
             kind = find(spec)  # None: a policy object's own name
             learned = kind is not None and kind.name == "rl"
             label = f"rl:{_short_path(spec.partition(':')[2])}" if learned else spec
-            bound = is_upper_bound(spec)
+            clairvoyant = is_clairvoyant(spec)
             bars.append(
                 Bar(
-                    label + ("\n(upper bound)" if bound else ""),
+                    label + ("\n(oracle)" if clairvoyant else ""),
                     float(summary["objective_mean"]),
                     float(summary["objective_std_repeats"]),
                     float(summary["recomputes_mean"]),
                     (spec,),
                     learned,
-                    bound,
+                    clairvoyant,
                 )
             )
             drawn.add(spec)
     return bars
 
 
-def is_upper_bound(spec: str) -> bool:
-    """Whether ``spec`` is an upper bound's (``oracle:``): it knows the episode's future, never a contender."""
+def is_clairvoyant(spec: str) -> bool:
+    """Whether ``spec`` is an oracle's (``oracle:``): it knows the episode's future, never a contender."""
     kind = find(spec)
-    return kind is not None and kind.upper_bound
+    return kind is not None and kind.clairvoyant
 
 
 def _short_path(path: str, parts: int = 3) -> str:
@@ -157,7 +157,7 @@ def draw_policy_bars(evaluations: Sequence[dict], group_learned: bool = True, so
     errors = np.array([b.error for b in bars])
     x = np.arange(len(bars))
     fig, ax = plt.subplots(figsize=(max(7.0, 1.45 * len(bars) + 3.0), 4.8))
-    colors = ["tab:gray" if b.bound else "tab:orange" if b.stochastic else "tab:blue" for b in bars]
+    colors = ["tab:gray" if b.clairvoyant else "tab:orange" if b.stochastic else "tab:blue" for b in bars]
     container = ax.bar(x, np.nan_to_num(means), width=0.65, color=colors, alpha=0.85, gid="policy_bars")
     for rect, bar in zip(container.patches, bars):
         rect.set_gid(bar.label)
@@ -203,11 +203,11 @@ def draw_policy_bars(evaluations: Sequence[dict], group_learned: bool = True, so
     ax.grid(axis="y", alpha=0.3)
     ax.set_axisbelow(True)
     handles = []
-    if any(not b.stochastic and not b.bound for b in bars):
+    if any(not b.stochastic and not b.clairvoyant for b in bars):
         handles.append(Patch(color="tab:blue", alpha=0.85, label="fixed policy"))
-    if any(b.bound for b in bars):
-        handles.append(Patch(color="tab:gray", alpha=0.85, label="oracle: upper bound\n(knows the future; not a policy)"))
-    if any(b.stochastic and not b.bound for b in bars):
+    if any(b.clairvoyant for b in bars):
+        handles.append(Patch(color="tab:gray", alpha=0.85, label="oracle: a reference\n(knows the future; not a policy)"))
+    if any(b.stochastic and not b.clairvoyant for b in bars):
         handles.append(Patch(color="tab:orange", alpha=0.85, label="learned (stochastic) policy"))
     if spread.any():
         grouped = any(len(b.policies) > 1 for b in bars)

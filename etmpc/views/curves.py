@@ -34,7 +34,7 @@ def draw_pareto(pareto: dict):
     """Control objective against computations per episode: every periodic schedule as a grey dot and
     the periodic front (the schedules no other beats) as a line, the event triggers as a dashed line
     of points; at each price, coloured by price, the rollout (diamond), learned (square) and
-    self-triggering (triangle) policies as filled points and the oracle bound as a hollow circle."""
+    self-triggering (triangle) policies as filled points and the oracle as a hollow circle."""
     import matplotlib.pyplot as plt
 
     points, sense = pareto["points"], pareto["objective_sense"]
@@ -63,7 +63,7 @@ def draw_pareto(pareto: dict):
             ("rollout", "D", colour, "rollout"),
             ("learned", "s", colour, "learned (DPI)"),
             ("self", "^", colour, "self-trigger"),
-            ("oracle", "o", "none", "oracle bound"),
+            ("oracle", "o", "none", "oracle"),
         ):
             rows = [p for p in points if p["price"] == price and p["kind"] == kind]
             if not rows:
@@ -83,7 +83,7 @@ def draw_pareto(pareto: dict):
             )
     ax.set_xlabel("computations per episode")
     ax.set_ylabel(f"control objective ({higher_or_lower(sense)} is better)")
-    ax.set_title(f"{pareto['domain']}: the trade-off, {pareto['episodes']} test-set episodes (oracle: an upper bound)")
+    ax.set_title(f"{pareto['domain']}: the trade-off, {pareto['episodes']} test-set episodes (oracle: knows the future)")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7, ncols=2, loc="best")
     return fig

@@ -31,7 +31,7 @@ from etmpc.views.png import save_png_atomically  # noqa: E402
 from etmpc.views.bars import (  # noqa: E402, F401 (the paper's Figure 3, re-exported)
     Bar,
     draw_policy_bars,
-    is_upper_bound,
+    is_clairvoyant,
     policy_bars,
     write_policy_bars_png,
 )

@@ -16,7 +16,8 @@ def _about(name: str, record: EpisodeRecord, objective: float) -> str:
     """The episode's title line (Markdown)."""
     identity = record.identity
     spec = identity["policy"]
-    bound = " (an upper bound, not a policy)" if identity.get("upper_bound") else ""
+    clairvoyant = identity.get("clairvoyant", identity.get("upper_bound"))  # upper_bound: an older etmpc's
+    bound = " (the oracle: knows the future, not a policy)" if clairvoyant else ""
     sense = f"{cost_or_profit(identity['objective_sense'])}: {higher_or_lower(identity['objective_sense'])}"
     forced = int(record.forced[1:].sum())
     task = look.task_part(identity["domain"], identity["task"])

@@ -178,7 +178,7 @@ class Impostor:
 def test_a_trigger_cannot_take_a_built_in_policys_name():
     with pytest.raises(EtmpcError, match="Impostor has the spec 'every:3', a built-in policy's"):
         etmpc.evaluate("battery", [Impostor()], episodes=1, workers=1, progress=False)
-    Impostor.spec = "oracle:every:3"  # and so cannot be shown as an upper bound
+    Impostor.spec = "oracle:every:3"  # and so cannot be shown as the oracle
     with pytest.raises(EtmpcError, match="a built-in policy's"):
         etmpc.evaluate("battery", ["every:3", Impostor()], episodes=1, workers=1, progress=False)
     built_in = etmpc.evaluate("battery", [Every(3)], episodes=1, workers=1, progress=False)  # etmpc's own objects are

@@ -171,9 +171,9 @@ def test_a_sweep_writes_every_point_and_continues_without_redoing_work(tiny_swee
     # A point's objective is its control objective plus the price of its computations (a cost).
     for point in pareto["points"]:
         assert point["objective"] == pytest.approx(point["control_objective"] + point["price"] * point["computations"])
-    # The oracle is marked a bound wherever it appears.
-    assert all(p["upper_bound"] == (p["kind"] == "oracle") for p in pareto["points"])
-    assert "upper bound" in (out / "SWEEP.md").read_text()
+    # The oracle is marked as one wherever it appears: a reference that knows the future.
+    assert all(p["clairvoyant"] == (p["kind"] == "oracle") for p in pareto["points"])
+    assert "The oracle knows the future: a reference, not a policy." in (out / "SWEEP.md").read_text()
     before = {p.name: p.read_bytes() for p in out.iterdir() if p.suffix == ".json" and p.name != "pareto.json"}
     again = sw.sweep("cart_pendulum", out, TINY, workers=1, progress=False)
     assert {p.name: p.read_bytes() for p in out.iterdir() if p.name in before} == before  # reused, not redone
@@ -228,8 +228,8 @@ def test_the_figure_draws_the_points_of_the_json(tiny_sweep):
             rows = [p for p in pareto["points"] if p["price"] == price and p["kind"] == kind]
             np.testing.assert_allclose(dots.get_offsets(), [[p["computations"], p["control_objective"]] for p in rows])
     oracle = [c for c in ax.collections if c.get_gid().startswith("oracle@")]
-    assert all(np.all(c.get_facecolors()[:, 3] == 0) for c in oracle)  # hollow: drawn as a bound
-    assert "upper bound" in ax.get_title()
+    assert all(np.all(c.get_facecolors()[:, 3] == 0) for c in oracle)  # hollow: drawn as a reference
+    assert "oracle: knows the future" in ax.get_title()
     import matplotlib.pyplot as plt
 
     plt.close(fig)

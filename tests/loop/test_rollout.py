@@ -211,7 +211,7 @@ def test_unknown_policy_lists_the_rollouts(cart_system):
         parse_policy("rollouts:always", cart_system)
 
 
-def test_the_oracle_is_labelled_an_upper_bound_in_the_table_json_and_figure(tmp_path, capsys):
+def test_the_oracle_is_labelled_clairvoyant_in_the_table_json_and_figure(tmp_path, capsys):
     import json
 
     from etmpc.cli import main
@@ -239,11 +239,11 @@ def test_the_oracle_is_labelled_an_upper_bound_in_the_table_json_and_figure(tmp_
         == 0
     )
     table = capsys.readouterr().out
-    assert "oracle:every:10 (upper bound)" in table and "not a policy" in table
+    assert "oracle:every:10 (oracle)" in table and "not a policy" in table
     data = json.loads(out.read_text())
-    assert data["policies"]["oracle:every:10"]["upper_bound"] is True and data["policies"]["every:10"]["upper_bound"] is False
+    assert data["policies"]["oracle:every:10"]["clairvoyant"] is True and data["policies"]["every:10"]["clairvoyant"] is False
     bars = {b.policies[0]: b for b in policy_bars([data])}
-    assert bars["oracle:every:10"].bound and "(upper bound)" in bars["oracle:every:10"].label
+    assert bars["oracle:every:10"].clairvoyant and "(oracle)" in bars["oracle:every:10"].label
     assert not bars["every:10"].bound
     # With the stored future, the bound is never below its base (profit: higher is better).
     assert data["policies"]["oracle:every:10"]["objective_mean"] >= data["policies"]["every:10"]["objective_mean"]

@@ -148,7 +148,7 @@ def test_a_policy_kind_plugin_is_parsed_listed_in_the_help_and_scored_as_its_kin
     policy = specs.parse_policy("twice:2", TASK)
     assert policy.period == 4
     assert specs.syntax().endswith("oracle:BASE | twice:T")
-    assert specs.kind_of("twice:2").family == "periodic" and not specs.kind_of("twice:2").upper_bound
+    assert specs.kind_of("twice:2").family == "periodic" and not specs.kind_of("twice:2").clairvoyant
     assert specs.names_a_kind("twice:9")
     from etmpc.cli.options import build_parser
 
@@ -191,12 +191,12 @@ def test_a_policy_kind_plugin_may_not_replace_a_built_in_kind(plugins):
 def test_every_spec_reader_asks_the_registry():
     """The kinds' flags drive what tables, figures and the sweep say of a spec."""
     from etmpc.experiments.pareto import short_name
-    from etmpc.views.figures import is_upper_bound
+    from etmpc.views.figures import is_clairvoyant
 
-    assert [is_upper_bound(s) for s in ("oracle:every:3", "rollout:every:3", "every:3", "my-own")] == [True, False, False, False]
+    assert [is_clairvoyant(s) for s in ("oracle:every:3", "rollout:every:3", "every:3", "my-own")] == [True, False, False, False]
     assert short_name("rl:runs/a/seed0/best.json") == "rl:seed0/best.json" and short_name("self:x/y.json") == "self:y.json"
-    assert specs.parse_policy("oracle:every:3", TASK).upper_bound
-    assert not specs.parse_policy("rollout:every:3", TASK).upper_bound
+    assert specs.parse_policy("oracle:every:3", TASK).clairvoyant
+    assert not specs.parse_policy("rollout:every:3", TASK).clairvoyant
     with pytest.raises(EtmpcError, match="the base policy must not simulate"):
         specs.parse_policy("rollout:oracle:every:3", TASK)
 

@@ -21,7 +21,7 @@ feedback that follows the plan, and the price of a computation.
   0.1^2)`` over 100 steps, about 29 for a controller that re-plans every step) plus 0.1 per
   computation: there ``every:3`` is the best periodic schedule (30 test-set episodes; ``every:2``
   up to 0.05, ``every:3`` from 0.07 to 0.12, ``every:4`` at 0.15 and 0.2, ``every:5`` from 0.25 to
-  0.4). At 0.1 the oracle bound gains 9.6 % +- 3.3 % over the periodic front at its own rate and
+  0.4). At 0.1 the oracle gains 9.6 % +- 3.3 % over the periodic front at its own rate and
   ``rollout:every:3:4:10`` 12.8 % +- 3.0 % (95 % CI; ``etmpc discriminate --task reacher``); every
   ``threshold:X`` level does worse than the front (by 4 to 39 %): a state error does not show a jump.
 * **Lookahead** 10 steps (``Benchmark.lookahead``) for the rollout meter and DPI's labels. With 20,
