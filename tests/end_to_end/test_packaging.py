@@ -87,7 +87,9 @@ def test_the_wheel_holds_every_module_and_the_data_and_nothing_else(wheel):
     data |= {
         f"etmpc/_data/tasks/{p.relative_to(REPO / 'tasks').as_posix()}" for p in (REPO / "tasks").glob("*/*/references.json")
     }
-    data |= {f"etmpc/_data/policies/{p.relative_to(REPO / 'policies').as_posix()}" for p in (REPO / "policies").glob("*/ppo.yml")}
+    data |= {
+        f"etmpc/_data/policies/{p.relative_to(REPO / 'policies').as_posix()}" for p in (REPO / "policies").glob("*/*/ppo.yml")
+    }
     assert len(data) > 12 and data <= names, sorted(data - names)
     assert not {n for n in names if n.startswith("etmpc/_data/policies/") and not n.endswith("/ppo.yml")}  # no policy ships in it
     top_level = {name.split("/")[0] for name in names}
@@ -186,9 +188,14 @@ def test_the_sdist_holds_what_the_wheel_is_built_from_and_twine_check_passes(sdi
     needed = {"pyproject.toml", "setup.py", "README.md", "CITATION.cff", *LICENCE_FILES}
     needed |= {p.relative_to(REPO).as_posix() for p in (REPO / "etmpc").rglob("*.py")}
     needed |= {p.relative_to(REPO).as_posix() for p in (REPO / "models").glob("*.xml")}
-    for pattern in ("*/*.npz", "*/*.sha256", "*/*/references.json"):  # the package data of pyproject.toml
+    for pattern in (
+        "*/*/*.npz",
+        "*/*/*.sha256",
+        "*/*/references.json",
+        "*/*/benchmark.json",
+    ):  # the package data of pyproject.toml
         needed |= {p.relative_to(REPO).as_posix() for p in (REPO / "tasks").glob(pattern)}
-    needed |= {p.relative_to(REPO).as_posix() for p in (REPO / "policies").glob("*/ppo.yml")}
+    needed |= {p.relative_to(REPO).as_posix() for p in (REPO / "policies").glob("*/*/ppo.yml")}
     assert not needed - names, sorted(needed - names)  # CITATION.cff: `include CITATION.cff` in MANIFEST.in
     assert not {n for n in names if n.startswith("policies/") and not n.endswith("/ppo.yml")}  # no policy ships
     checked = subprocess.run(
