@@ -18,20 +18,7 @@ import pytest
 
 from tests.conftest import REPO
 
-COMMANDS = (
-    "evaluate",
-    "--task",
-    "score",
-    "train",
-    "--task",
-    "train-self",
-    "reproduce",
-    "sweep",
-    "render",
-    "--task",
-    "replay",
-    "bench",
-)
+COMMANDS = ("evaluate", "score", "train", "train-self", "reproduce", "sweep", "render", "replay", "bench")
 # The caches too: other tests (running beside this one) write into them while the tree is copied.
 _LEFT_OUT = shutil.ignore_patterns(
     ".git",
