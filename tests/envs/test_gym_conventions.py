@@ -1,18 +1,27 @@
 """gymnasium's conventions on the trigger environments: each spec's ``max_episode_steps`` is the task's
 episode length, read without making ``import etmpc`` heavy, and ``gymnasium.make``'s ``TimeLimit``
-truncates at the very step the environment does."""
+truncates at the very step the environment does; ``render_mode`` draws the step (``rgb_array``) or shows
+it (``human``, where there is a screen) and changes nothing else."""
 
+import os
 import subprocess
 import sys
+import warnings
 
 import gymnasium as gym
+import numpy as np
 import pytest
+from gymnasium.utils.env_checker import check_env
 from gymnasium.wrappers import TimeLimit
 
 import etmpc  # noqa: F401  (registers the environments)
+from etmpc.common.errors import EtmpcError
+from etmpc.envs.gym import TriggerEnv
 from etmpc.envs.registration import env_id
+from etmpc.envs.rendering import display
 from etmpc.envs.trigger import TriggerEnvironment
 from etmpc.systems import make_system, names
+from etmpc.views.video import render_frames
 
 from tests.conftest import REPO
 
@@ -60,3 +69,142 @@ def test_an_episode_has_exactly_the_tasks_steps_and_is_truncated_once(task):
             env.step(0)  # no step beyond the end
     # Without the wrapper, the environment ends its episode at that same step by itself.
     assert _ends(gym.make(env_id(task), max_episode_steps=-1), 0, played) == last
+
+
+# -- render_mode ----------------------------------------------------------------------------------------
+CART, BATTERY = env_id("cart_pendulum"), env_id("battery")
+W, H = 160, 120
+
+
+def _frame(env: gym.Env) -> np.ndarray:
+    """``env.render()``, or a skip where this machine has no OpenGL for MuJoCo (etmpc says so in one line)."""
+    try:
+        return env.render()
+    except EtmpcError as exc:
+        if str(exc).startswith("cannot render with MUJOCO_GL"):
+            pytest.skip(str(exc))
+        raise
+
+
+def test_a_scenes_frame_is_the_size_asked_and_shows_the_plants_state_as_etmpc_render_draws_it():
+    env = gym.make(CART, render_mode="rgb_array", width=W, height=H)
+    assert env.metadata["render_fps"] == 10.0  # one frame per control interval of 0.1 s
+    env.reset(options={"test_episode": 34})
+    loop = env.unwrapped.core.loop
+    first, first_x = _frame(env), np.array(loop.x)
+    assert first.shape == (H, W, 3) and first.dtype == np.uint8 and first.std() > 10  # not blank
+    for _ in range(25):  # each plan kept as long as it lasts: the pole swings
+        env.step(0)
+    late = _frame(env)
+    assert np.abs(late.astype(int) - first.astype(int)).max() > 100
+    # The picture etmpc render draws of the loop's state, put into a physics of its own (system.show).
+    system = env.unwrapped.core.system
+    scene = system.make_env()
+    scene.reset()
+    drawn = render_frames(system, scene, np.array([first_x, loop.x]), W, H)
+    for shown, expected in zip((first, late), drawn):
+        assert np.abs(expected.astype(int) - shown.astype(int)).mean() < 1
+    env.close()
+    env.close()  # closing twice does nothing
+
+
+def test_a_task_without_a_scene_draws_a_chart_of_its_episode_so_far():
+    env = gym.make(BATTERY, render_mode="rgb_array", width=W * 2, height=H * 2)
+    assert env.metadata["render_fps"] == 0.1  # its control interval is 10 s
+    env.reset(seed=0)
+    first = env.render()
+    assert first.shape == (2 * H, 2 * W, 3) and first.dtype == np.uint8 and first.std() > 10
+    for _ in range(20):
+        env.step(1)
+    later = env.render()
+    assert (later != first).mean() > 0.01  # the curves grew
+    env.reset(seed=0)
+    np.testing.assert_array_equal(env.render(), first)  # the same episode at its start: the same picture
+
+
+@pytest.mark.parametrize("task", ["cart_pendulum", "battery"])
+def test_drawing_every_step_changes_nothing_the_environment_hands_out(task):
+    def play(env):
+        out = [env.reset(seed=7)[0]]
+        for k in range(15):
+            obs, reward, terminated, truncated, info = env.step(k % 4 == 0)
+            out += [obs, reward, info["control_reward"]]
+            if env.render_mode is not None:
+                assert _frame(env).shape == (H, W, 3)
+        return out
+
+    drawn = play(gym.make(env_id(task), render_mode="rgb_array", width=W, height=H))
+    plain = play(gym.make(env_id(task)))
+    assert all(np.array_equal(a, b) for a, b in zip(drawn, plain, strict=True))
+
+
+@pytest.mark.parametrize("task", ["cart_pendulum", "battery"])
+def test_gymnasiums_checker_passes_with_its_render_checks(task):
+    """check_env draws the environment made with rgb_array, then makes one of each mode the environment
+    offers here and draws it: a frame of the wrong kind is a warning of gymnasium's, so none may come."""
+    env = gym.make(env_id(task), render_mode="rgb_array", width=W, height=H)
+    if task == "cart_pendulum":
+        env.reset(seed=0)
+        _frame(env)  # skips where there is no OpenGL
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        check_env(env.unwrapped)
+    assert [str(w.message) for w in caught if "WARN" in str(w.message)] == []
+    env.close()
+
+
+def test_human_rendering_without_a_screen_is_one_clear_error(monkeypatch):
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    if sys.platform in ("darwin", "win32"):
+        pytest.skip("there is always a screen")
+    env = gym.make(BATTERY)
+    assert env.metadata["render_modes"] == ["rgb_array"]  # human is not offered here
+    with pytest.raises(EtmpcError, match=r"^render_mode='human' needs a display, and DISPLAY is not set") as raised:
+        gym.make(BATTERY, render_mode="human")
+    assert "\n" not in str(raised.value)
+    with pytest.raises(ValueError, match="render_mode must be None, 'rgb_array' or 'human', got 'ansi'"):
+        TriggerEnv("battery", render_mode="ansi")
+    with pytest.raises(ValueError, match="width: a frame's size in pixels is at least 1, got 0"):
+        TriggerEnv("battery", render_mode="rgb_array", width=0)
+    with pytest.raises(ValueError, match=r"width=2000, height=120 is larger than this scene's offscreen framebuffer \(1280x720"):
+        TriggerEnv("cart_pendulum", render_mode="rgb_array", width=2000, height=120)
+    with pytest.warns(UserWarning, match="render\\(\\) was called without a render_mode"):
+        assert env.unwrapped.render() is None
+
+
+def test_human_rendering_where_no_window_opens_is_one_clear_error(monkeypatch):
+    pytest.importorskip("tkinter")
+    if sys.platform in ("darwin", "win32") or os.path.exists("/tmp/.X11-unix/X97"):
+        pytest.skip("display :97 may be real here")
+    monkeypatch.setenv("DISPLAY", ":97")  # named, but no server behind it
+    env = gym.make(BATTERY, render_mode="human")
+    assert env.metadata["render_modes"] == ["rgb_array", "human"]
+    with pytest.raises(EtmpcError, match=r"^render_mode='human' cannot open a window: couldn't connect to display \":97\""):
+        env.reset(seed=0)
+    env.close()
+
+
+@pytest.mark.skipif(not display(), reason="no screen here")
+def test_human_rendering_shows_each_step_in_a_window():
+    """Where there is a screen (under Xvfb, e.g.): the window shows the step's frame, what rgb_array draws."""
+    env = gym.make(BATTERY, render_mode="human", width=W * 2, height=H * 2)
+    env.reset(seed=0)
+    for _ in range(3):
+        env.step(1)
+    assert env.render() is None  # shown, as gymnasium has it
+    window = env.unwrapped._window._label
+    assert window.winfo_ismapped() and (window.winfo_width(), window.winfo_height()) >= (2 * W, 2 * H)
+    if os.environ.get("DISPLAY"):  # what the screen shows where the window is
+        from PIL import ImageGrab
+
+        x, y = window.winfo_rootx(), window.winfo_rooty()
+        pad = (window.winfo_width() - 2 * W) // 2, (window.winfo_height() - 2 * H) // 2
+        shown = np.asarray(ImageGrab.grab((x + pad[0], y + pad[1], x + pad[0] + 2 * W, y + pad[1] + 2 * H), xdisplay=None))
+        drawn = TriggerEnv("battery", render_mode="rgb_array", width=W * 2, height=H * 2)
+        drawn.reset(seed=0)
+        for _ in range(3):
+            drawn.step(1)
+        assert (shown[..., :3] != drawn.render()).any(axis=2).mean() < 0.005  # one step before differs at 4 % of them
+    env.close()
+    assert env.unwrapped._window._root is None  # closed
