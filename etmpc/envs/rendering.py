@@ -21,6 +21,7 @@ from __future__ import annotations
 import os
 import sys
 import time
+import warnings
 
 import numpy as np
 
@@ -200,7 +201,9 @@ class ChartFrames:
                 ax.set_ylim(0.0, 1.0, auto=True)
         made = f"{computed.size} computation" + ("" if computed.size == 1 else "s")
         self._title.set_text(f"{system.name}: step {k} of {system.episode_steps}, {made}")
-        self._canvas.draw()
+        with warnings.catch_warnings():  # a frame too small for the panels' labels is drawn without the layout
+            warnings.filterwarnings("ignore", "constrained_layout not applied", UserWarning)
+            self._canvas.draw()
         return np.asarray(self._canvas.buffer_rgba())[..., :3].copy()
 
     def close(self) -> None:
