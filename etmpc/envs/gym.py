@@ -16,6 +16,13 @@ every task that counts them). See :mod:`etmpc.envs.trigger` for the rest.
 saw it (:class:`~etmpc.envs.normalization.Normalization`: ``VecNormalize``'s statistics, frozen, read
 from JSON): ``PPO.load`` of the shipped ``ppo.zip`` then decides on it as ``sb3:`` does. The spaces
 stay the same (so ``PPO.load(path, env=env)`` takes it); ``info["observation"]`` is the raw one then.
+
+gymnasium's conventions: ``gymnasium.make(ID)`` wraps it in a ``TimeLimit`` of the task's episode length
+(the spec's ``max_episode_steps``), which truncates at the very step the environment does; an episode
+has exactly that many steps. ``render_mode="rgb_array"`` draws each step (``width`` x ``height``, 640 x 480
+by default) and ``"human"`` shows it in a window where there is a screen (:mod:`etmpc.envs.rendering`:
+the 3-D scene, or the battery's chart); ``metadata["render_fps"]`` is one frame per control interval.
+It works in ``gymnasium.make_vec`` and ``AsyncVectorEnv``: ``reset(seed=S)`` seeds copy ``i`` with ``S + i``.
 """
 
 from __future__ import annotations
@@ -29,6 +36,7 @@ from gymnasium import spaces
 
 from etmpc.common.checks import BadValue
 from etmpc.envs.normalization import Normalization
+from etmpc.envs.rendering import HEIGHT, RENDER_MODES, WIDTH, Window, check_render, frames_for, render_modes
 from etmpc.envs.trigger import TriggerEnvironment
 from etmpc.systems import SystemKey
 
@@ -44,7 +52,9 @@ def trigger_spaces(size: int, actions: int = 2) -> tuple[spaces.Box, spaces.Disc
 class TriggerEnv(gymnasium.Env):
     """``gymnasium`` face of :class:`~etmpc.envs.trigger.TriggerEnvironment` (the same loop)."""
 
-    metadata = {"render_modes": []}
+    # Every mode some environment offers, for gymnasium.make; each environment's own metadata says what it offers
+    # here ("human" only where there is a screen) and its render_fps.
+    metadata = {"render_modes": list(RENDER_MODES)}
 
     def __init__(
         self,
@@ -53,11 +63,21 @@ class TriggerEnv(gymnasium.Env):
         test_set: str | None = None,
         reward_baseline: str | None = None,
         normalize: str | os.PathLike | None = None,
+        render_mode: str | None = None,
+        width: int = WIDTH,
+        height: int = HEIGHT,
     ):
+        check_render(render_mode, width, height)  # before the MPC is built
         self.normalization = None if normalize is None else Normalization.read(normalize, task)  # before the MPC is built
         self.core = TriggerEnvironment(task, recompute_price=recompute_price, test_set=test_set, reward_baseline=reward_baseline)
         self.observation_names = self.core.observation_names
         self.observation_space, self.action_space = trigger_spaces(len(self.observation_names), self.core.actions)
+        system = self.core.system
+        self.metadata = {"render_modes": render_modes(), "render_fps": 1.0 / system.control_interval_s}
+        self.render_mode = render_mode
+        physics = getattr(self.core.loop.env, "physics", None)  # the plant's, on a task with a 3-D scene
+        self._frames = None if render_mode is None else frames_for(system, physics, int(width), int(height))
+        self._window = Window(f"etmpc: {system.name}", self.metadata["render_fps"]) if render_mode == "human" else None
 
     @property
     def simulated_steps(self) -> int:
@@ -74,6 +94,8 @@ class TriggerEnv(gymnasium.Env):
         if options:
             raise BadValue(f"unknown reset options {sorted(options)}; known: test_episode")
         timestep = self.core.reset(test_episode=test_episode)
+        if self._window is not None:
+            self._window.show(self._frames.frame(self.core))
         return self._observed(timestep.observation)
 
     def step(self, action):
@@ -83,7 +105,32 @@ class TriggerEnv(gymnasium.Env):
         terminated = timestep.last() and timestep.discount == 0.0
         truncated = timestep.last() and not terminated
         obs, info = self._observed(timestep.observation)
+        if self._window is not None:
+            self._window.show(self._frames.frame(self.core))
         return obs, float(timestep.reward), terminated, truncated, info
+
+    def render(self):
+        """The current step drawn: an RGB frame, uint8 ``(height, width, 3)``, with ``render_mode="rgb_array"``;
+        with ``"human"`` it is shown at every step already (and None is returned, as gymnasium has it)."""
+        if self.render_mode is None:
+            gymnasium.logger.warn(
+                "render() was called without a render_mode: make the environment with render_mode='rgb_array' "
+                f"(gymnasium.make({self.core.gym_id!r}, render_mode='rgb_array'))"
+            )
+            return None
+        if self.core.episode is None:
+            raise RuntimeError("nothing to draw before the first reset(): call reset()")
+        frame = self._frames.frame(self.core)
+        if self._window is None:
+            return frame
+        self._window.show(frame)
+        return None
+
+    def close(self) -> None:
+        """The frames' OpenGL context and the window, if any, are let go; closing again does nothing."""
+        for part in (self._frames, self._window):
+            if part is not None:
+                part.close()
 
     def _observed(self, obs: np.ndarray) -> tuple[np.ndarray, dict]:
         """The observation handed out (normalised with ``normalize``) and the step's ``info``."""

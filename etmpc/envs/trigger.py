@@ -257,6 +257,11 @@ class TriggerEnvironment(dm_env.Environment):
         return finite_observation(observation(self.system.name, self.loop.observed_state(), self._size))
 
     @property
+    def episode(self):
+        """The episode being played (None before the first reset)."""
+        return self._episode
+
+    @property
     def episode_return(self) -> float:
         """The return of the episode so far, as ``evaluate`` computes an objective's sum."""
         traj = self.loop.trajectory
