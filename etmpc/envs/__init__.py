@@ -2,7 +2,7 @@
 step, keep (0) or recompute (1). :mod:`~etmpc.envs.trigger` is the ``dm_env.Environment``;
 :mod:`~etmpc.envs.gym` its ``gymnasium.Env``, registered for every task on ``import etmpc`` as
 ``etmpc/<domain>-<task>-v0`` (:mod:`~etmpc.envs.registration`, which loads nothing heavy; each spec's
-``max_episode_steps``, the task's episode length, is read when first asked: :mod:`~etmpc.envs.taskspec`).
+``max_episode_steps``, the task's episode length, is read when first asked: :mod:`~etmpc.envs.envspec`).
 :mod:`~etmpc.envs.rendering` draws a step (``render_mode="rgb_array"``) or shows it (``"human"``).
 :mod:`~etmpc.envs.normalization` carries a trained policy's frozen observation normalisation as JSON
 (``gymnasium.make(ID, normalize="policies/<task>/ppo.json")``, and :func:`save_normalization`, which

@@ -1,12 +1,12 @@
 """The trigger environments' gymnasium ids, registered on ``import etmpc`` without loading MuJoCo,
 CasADi or the environment itself (gymnasium imports ``etmpc.envs.gym`` when one is made). Every task of
 the registry has one, a plugin's too. Each spec's ``max_episode_steps`` is the task's episode length,
-read when first asked (:class:`~etmpc.envs.taskspec.TaskSpec`): ``gymnasium.make`` puts a ``TimeLimit``
+read when first asked (:class:`~etmpc.envs.envspec.TaskEnvSpec`): ``gymnasium.make`` puts a ``TimeLimit``
 of that length around the environment, which ends its episodes at that same step."""
 
 from __future__ import annotations
 
-from etmpc.systems import domains, spec
+from etmpc.systems import spec, specs
 
 
 def env_id(name: str) -> str:
@@ -22,14 +22,13 @@ def register() -> list[str]:
 
     import gymnasium
 
-    from etmpc.envs.taskspec import TaskSpec
+    from etmpc.envs.envspec import TaskEnvSpec
 
     ids = []
-    for domain_name, package in domains().items():
-        for task in package.TASKS:
-            ids.append(env_id(f"{domain_name}/{task}"))
-            if ids[-1] not in gymnasium.registry:
-                gymnasium.register(ids[-1], entry_point="etmpc.envs.gym:TriggerEnv", kwargs={"task": f"{domain_name}/{task}"})
-                spec = gymnasium.registry[ids[-1]]  # gymnasium's checks, then the same spec with the task's time limit
-                gymnasium.registry[ids[-1]] = TaskSpec(**{f.name: getattr(spec, f.name) for f in fields(spec) if f.init})
+    for task in specs():  # the id is the task spec's, mechanically: etmpc/DOMAIN-TASK-vN
+        ids.append(task.gym_id)
+        if task.gym_id not in gymnasium.registry:
+            gymnasium.register(task.gym_id, entry_point="etmpc.envs.gym:TriggerEnv", kwargs={"task": task.id})
+            found = gymnasium.registry[task.gym_id]  # gymnasium's checks, then the same spec with the task's time limit
+            gymnasium.registry[task.gym_id] = TaskEnvSpec(**{f.name: getattr(found, f.name) for f in fields(found) if f.init})
     return ids

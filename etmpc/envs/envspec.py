@@ -1,12 +1,11 @@
 """The ``EnvSpec`` of a task's environment: gymnasium's own, whose ``max_episode_steps`` is the task's
-episode length (its System's ``episode_steps``), read when first asked rather than when the
-environments are registered.
+episode length, read when first asked rather than when the environments are registered.
 
 ``import etmpc`` registers every task's environment and must load neither MuJoCo nor CasADi; a task's
-episode length is declared where they are loaded (its task module's ``EPISODE_STEPS``, or its Config's,
-as the battery's ``Battery.episode_steps``) and only building its System says it for every task, a
-plugin's too. So ``gymnasium.spec(ID).max_episode_steps`` builds the System once per process (about a
-second) and keeps the answer; ``gymnasium.make(ID)`` reads it to put its ``TimeLimit`` around the
+episode length is declared once, where its dm-control factory joins its domain's suite (``add_task``),
+which loads them. So ``gymnasium.spec(ID).max_episode_steps`` reads it from the task's System class
+(:attr:`etmpc.systems.TaskSpec.system_class`) once per process and keeps the answer;
+``gymnasium.make(ID)`` reads it to put its ``TimeLimit`` around the
 environment, which ends each episode itself at that same step (:class:`etmpc.envs.gym.TriggerEnv`).
 
 Setting ``max_episode_steps`` on the spec replaces the task's (``None``: no ``TimeLimit``), as on any
@@ -20,19 +19,19 @@ from functools import cache
 from gymnasium.envs.registration import EnvSpec
 
 from etmpc.common.errors import EtmpcError
-from etmpc.systems import make_system
+from etmpc.systems import spec
 
 
 @cache
 def episode_steps(task: str) -> int:
-    """Task ``task``'s episode length: its System's ``episode_steps`` (builds the System, once per process)."""
-    steps = make_system(task).episode_steps
+    """Task ``task``'s episode length: its System class's ``episode_steps``, as its suite entry declares it."""
+    steps = spec(task).system_class.episode_steps
     if isinstance(steps, bool) or not isinstance(steps, int) or steps < 1:
         raise EtmpcError(f"task {task}'s episode_steps is {steps!r}, not a whole number >= 1")
     return steps
 
 
-class TaskSpec(EnvSpec):
+class TaskEnvSpec(EnvSpec):
     """An ``EnvSpec`` whose ``max_episode_steps``, when none is given, is the episode length of the task
     its environment plays (``kwargs["task"]`` when registered), read when first asked."""
 
