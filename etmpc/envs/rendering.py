@@ -25,6 +25,7 @@ import warnings
 
 import numpy as np
 
+from etmpc.common.display import check_display
 from etmpc.common.checks import BadType, BadValue
 from etmpc.common.errors import EtmpcError
 
@@ -76,8 +77,6 @@ class SceneFrames:
     """A task's 3-D scene from its camera: the plant's state copied into a physics of its own, then drawn."""
 
     def __init__(self, camera: str, physics, width: int, height: int):
-        from etmpc.views.video import check_display
-
         check_display()  # an on-screen MUJOCO_GL without a screen: said now, in one line
         limits = physics.model.vis.global_
         if width > limits.offwidth or height > limits.offheight:

@@ -27,6 +27,7 @@ import av
 import mujoco
 import numpy as np
 
+from etmpc.common.display import check_display  # noqa: F401 (the video's API too)
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import atomic_path
 
@@ -53,14 +54,6 @@ def check_framebuffer(physics, width: int, height: int) -> None:
             f"({limits.offwidth}x{limits.offheight}, set by <global offwidth offheight> in its model file): "
             f"render at most {limits.offwidth}x{limits.offheight}"
         )
-
-
-def check_display() -> None:
-    """An on-screen backend without a screen cannot render: said before any work (GLFW would
-    print warnings, then fail deep in MuJoCo)."""
-    backend = os.environ.get("MUJOCO_GL", "").lower().strip()
-    if backend in ("glfw", "glx") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
-        raise EtmpcError(f"MUJOCO_GL={backend} needs a display and DISPLAY is not set: render headless with MUJOCO_GL=egl")
 
 
 def _render(physics, height: int, width: int, camera: str) -> np.ndarray:
