@@ -62,9 +62,9 @@ def test_one_edited_episode_score_kept_consistent_is_found_by_its_objective_and_
     verdict = verify(forged, size=0)
     row, true_row = json.loads(forged.read_text())["rows"][1], json.loads(card.read_text())["rows"][1]
     assert verdict.mismatches == [
-        f"{forged}: battery threshold:0.02 episode 2: score {row['episode_scores'][2]!r} in the card, "
+        f"{forged}: battery/trading threshold:0.02 episode 2: score {row['episode_scores'][2]!r} in the card, "
         f"{true_row['episode_scores'][2]!r} from its objective {row['episode_objectives'][2]!r}",
-        f"{forged}: battery threshold:0.02 episode 2: score {row['episode_scores'][2]!r} in the card, "
+        f"{forged}: battery/trading threshold:0.02 episode 2: score {row['episode_scores'][2]!r} in the card, "
         f"{true_row['episode_scores'][2]!r} replayed",
     ]
     assert main(["verify", str(forged), "--sample", "0", "--workers", "1"]) == 2
@@ -76,7 +76,7 @@ def test_one_edited_episode_score_kept_consistent_is_found_by_its_objective_and_
 def test_an_edited_number_that_does_not_follow_from_the_episodes_is_named(card, tmp_path):
     forged = _edited(card, tmp_path, lambda data: data["rows"][0].update(score=data["rows"][0]["score"] + 5))
     lines = verify(forged, size=1).mismatches
-    assert len(lines) == 1 and "battery every:3: score" in lines[0] and "the mean of its episode scores" in lines[0]
+    assert len(lines) == 1 and "battery/trading every:3: score" in lines[0] and "the mean of its episode scores" in lines[0]
     forged = _edited(card, tmp_path, lambda data: data["aggregates"][0].update(iqm=99.0))
     assert [line for line in verify(forged, size=1).mismatches if "aggregate iqm 99.0" in line]
 
@@ -85,9 +85,9 @@ def test_an_edited_number_that_does_not_follow_from_the_episodes_is_named(card, 
     "edit, says",
     [
         (lambda d: d.update(suite_version=d["suite_version"] + 1), "suite version"),
-        (lambda d: d["task_versions"].update(battery=0), "scored battery at version 0"),
-        (lambda d: d["references"]["battery"].update(stored=None), "another test set"),
-        (lambda d: d["references"]["battery"].update(test_set_sha256="0" * 64), "on test set 000000000000"),
+        (lambda d: d["task_versions"].update({"battery/trading": 0}), "scored battery/trading at version 0"),
+        (lambda d: d["references"]["battery/trading"].update(stored=None), "another test set"),
+        (lambda d: d["references"]["battery/trading"].update(test_set_sha256="0" * 64), "on test set 000000000000"),
         (lambda d: d["rows"][0].update(policy="evry:3"), "cannot replay evry:3 on battery"),
         (lambda d: d.update(format="something"), "is not an etmpc scorecard"),
     ],
@@ -122,11 +122,11 @@ def test_the_failure_counts_are_checked_too_and_a_card_without_them_still_verifi
     original = json.loads(card.read_text())["rows"][0]["episode_failures"]
     forged = _edited(card, tmp_path, fewer)
     assert verify(forged, size=0).mismatches == [
-        f"{forged}: battery every:3 episode 1: failures {original[1] + 1} in the card, {original[1]} replayed"
+        f"{forged}: battery/trading every:3 episode 1: failures {original[1] + 1} in the card, {original[1]} replayed"
     ]
     forged = _edited(card, tmp_path, lambda data: data["rows"][0].update(failures_mean=data["rows"][0]["failures_mean"] + 1))
     (line,) = verify(forged, size=1).mismatches
-    assert "battery every:3: failures" in line and "per episode in the card" in line
+    assert "battery/trading every:3: failures" in line and "per episode in the card" in line
 
     def older(data):
         for row in data["rows"]:
@@ -169,31 +169,31 @@ EVERY_NUMBER = [
         (_row_edit(field), says)
         for field, says in [
             ("episodes", "episode scores for 5 episodes"),
-            ("objective_mean", "battery every:3: objective"),
-            ("recomputes_mean", "battery every:3: computations"),
-            ("failures_mean", "battery every:3: failures"),
-            ("solver_failures", "battery every:3: 1 solver failures in the card, 0 from its episodes"),
-            ("nonfinite_episodes", "battery every:3: non-finite episodes 1 in the row"),
-            ("score", "battery every:3: score"),
-            ("score_ci95", "battery every:3: 95 % CI"),
-            ("better_share", "battery every:3: better in"),
-            ("failures_ci95", "battery every:3: failures' 95 % CI"),
-            ("task_version", "battery every:3: task version 2 in the row, 1 in the card's task versions"),
+            ("objective_mean", "battery/trading every:3: objective"),
+            ("recomputes_mean", "battery/trading every:3: computations"),
+            ("failures_mean", "battery/trading every:3: failures"),
+            ("solver_failures", "battery/trading every:3: 1 solver failures in the card, 0 from its episodes"),
+            ("nonfinite_episodes", "battery/trading every:3: non-finite episodes 1 in the row"),
+            ("score", "battery/trading every:3: score"),
+            ("score_ci95", "battery/trading every:3: 95 % CI"),
+            ("better_share", "battery/trading every:3: better in"),
+            ("failures_ci95", "battery/trading every:3: failures' 95 % CI"),
+            ("task_version", "battery/trading every:3: task version 2 in the row, 1 in the card's task versions"),
         ]
     ],
     *[
         (_row_edit(field, index=1), says)
         for field, says in [
-            ("episode_scores", "battery every:3 episode 1: score"),
-            ("episode_failures", "battery every:3: failures"),
-            ("episode_objectives", "battery every:3 episode 1: score"),
-            ("episode_recomputes", "battery every:3: computations"),
-            ("episode_solver_failures", "battery every:3: 0 solver failures in the card, 1 from its episodes"),
+            ("episode_scores", "battery/trading every:3 episode 1: score"),
+            ("episode_failures", "battery/trading every:3: failures"),
+            ("episode_objectives", "battery/trading every:3 episode 1: score"),
+            ("episode_recomputes", "battery/trading every:3: computations"),
+            ("episode_solver_failures", "battery/trading every:3: 0 solver failures in the card, 1 from its episodes"),
         ]
     ],
-    *[(_row_edit("cpu_ms", key=key), "battery every:3: CPU total") for key in ("solve", "feedback", "decide", "total")],
-    (lambda d: d["rows"][0].update(objective_sense="min"), "battery every:3: objective sense 'min' in the row, 'max'"),
-    (lambda d: d["rows"][0].update(reference="every:2"), "battery every:3: scored against every:2"),
+    *[(_row_edit("cpu_ms", key=key), "battery/trading every:3: CPU total") for key in ("solve", "feedback", "decide", "total")],
+    (lambda d: d["rows"][0].update(objective_sense="min"), "battery/trading every:3: objective sense 'min' in the row, 'max'"),
+    (lambda d: d["rows"][0].update(reference="every:2"), "battery/trading every:3: scored against every:2"),
     *[
         (_aggregate_edit(field, index), f"every:3: aggregate {field}")
         for field, index in [
@@ -208,11 +208,23 @@ EVERY_NUMBER = [
     ],
     (lambda d: d["aggregates"][0].update(policy="every:4"), "every:4: an aggregate in the card, but no rows of it"),
     *[
-        (lambda d, key=key: d["references"]["battery"].update({key: _bump(d["references"]["battery"][key])}), says)
-        for key, says in [("gap", "battery: references' gap"), ("recompute_price", "battery: references' recompute_price")]
+        (
+            lambda d, key=key: d["references"]["battery/trading"].update({key: _bump(d["references"]["battery/trading"][key])}),
+            says,
+        )
+        for key, says in [
+            ("gap", "battery/trading: references' gap"),
+            ("recompute_price", "battery/trading: references' recompute_price"),
+        ]
     ],
-    (lambda d: d["references"]["battery"].update(best_periodic="every:2"), "battery: references' best_periodic 'every:2'"),
-    (lambda d: d["references"]["battery"].update(oracle="oracle:every:2"), "battery: references' oracle 'oracle:every:2'"),
+    (
+        lambda d: d["references"]["battery/trading"].update(best_periodic="every:2"),
+        "battery/trading: references' best_periodic 'every:2'",
+    ),
+    (
+        lambda d: d["references"]["battery/trading"].update(oracle="oracle:every:2"),
+        "battery/trading: references' oracle 'oracle:every:2'",
+    ),
 ]
 
 
@@ -251,7 +263,7 @@ def test_a_replayed_episode_must_give_the_cards_objective_computations_and_solve
     forged = _edited(card, tmp_path, better)
     lines = verify(forged, size=0).mismatches
     assert [line for line in lines if "episode 2: objective" in line] == [
-        f"{forged}: battery every:3 episode 2: objective {original + 0.01!r} in the card, {original!r} replayed"
+        f"{forged}: battery/trading every:3 episode 2: objective {original + 0.01!r} in the card, {original!r} replayed"
     ]
     assert all("episode 2" in line for line in lines), lines  # nothing else disagrees: only the replay finds it
 
@@ -273,7 +285,7 @@ def test_a_row_of_another_type_or_a_card_without_what_verification_needs_is_one_
 
     lines = verify(_edited(card, tmp_path, older), size=1).mismatches
     assert lines == [
-        f"{tmp_path / 'edited.json'}: battery every:3: no episode_objectives (a row of an older etmpc): "
+        f"{tmp_path / 'edited.json'}: battery/trading every:3: no episode_objectives (a row of an older etmpc): "
         "score the trigger again to verify its numbers"
     ]
 

@@ -213,7 +213,7 @@ def test_trajectory_command_default_path(tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
     code, stdout, err = _figure(capsys, "trajectory", "--task", "cart_pendulum", "--policy", "threshold:0.3")
     assert code == 0, err
-    out = Path("results") / "trajectory_cart_pendulum_threshold-0.3_ep0.png"
+    out = Path("results") / "trajectory_cart_pendulum-balance_threshold-0.3_ep0.png"
     assert stdout.endswith(f"wrote {out}\n") and matplotlib.image.imread(tmp_path / out).shape[1] > 800
 
 
@@ -358,11 +358,11 @@ def test_bars_command_end_to_end(tmp_path, capsys, monkeypatch, cart_evaluations
     (tmp_path / "learned.json").write_text(json.dumps(learned))
     monkeypatch.chdir(tmp_path)
     code, stdout, err = _figure(capsys, "bars", "fixed.json", "learned.json")
-    assert code == 0 and stdout == f"wrote {Path('results') / 'figure3_cart_pendulum.png'}\n", err
-    out = tmp_path / "results" / "figure3_cart_pendulum.png"
+    assert code == 0 and stdout == f"wrote {Path('results') / 'figure3_cart_pendulum-balance.png'}\n", err
+    out = tmp_path / "results" / "figure3_cart_pendulum-balance.png"
     image = matplotlib.image.imread(out)
     assert image.shape[0] > 400 and image.shape[1] > 800 and image.std() > 0.05
-    assert [p.name for p in out.parent.iterdir()] == ["figure3_cart_pendulum.png"]
+    assert [p.name for p in out.parent.iterdir()] == ["figure3_cart_pendulum-balance.png"]
     again = figures.write_policy_bars_png(tmp_path / "again.png", [fixed, learned], sources=["fixed.json", "learned.json"])
     assert out.read_bytes() == again.read_bytes()  # the evaluations' bars, drawn as draw_policy_bars draws them
 
