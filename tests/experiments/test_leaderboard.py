@@ -102,8 +102,8 @@ def test_the_best_threshold_is_chosen_once_and_chosen_again_when_its_task_change
     out, data = board
     work = tmp_path / "work"
     shutil.copytree(out / "work", work)
-    path = work / "best-threshold" / "battery.choice.json"
-    chosen = data["entries"][2]["specs"]["battery"]
+    path = work / "best-threshold" / "battery" / "trading.choice.json"
+    chosen = data["entries"][2]["specs"]["battery/trading"]
     assert json.loads(path.read_text())["chosen"] == chosen
     monkeypatch.setattr(leaderboard, "best_threshold", lambda *a: pytest.fail("chosen again"))
     assert leaderboard.kept_threshold("battery", work, 1, lambda line: None) == chosen
@@ -158,7 +158,7 @@ def test_a_verified_card_joins_as_a_row_and_a_forged_one_is_refused_before_any_r
     monkeypatch.setattr(leaderboard, "best_threshold", lambda task, workers, say: data["entries"][2]["specs"][task])
     joined = build(tmp_path / "docs", out / "work", ["battery"], episodes=2, workers=1, cards=[card])
     entry = next(e for e in joined["entries"] if e["name"] == "every:2 (submitted)")
-    assert entry["kind"] == "submitted" and entry["specs"] == {"battery": "every:2"}
+    assert entry["kind"] == "submitted" and entry["specs"] == {"battery/trading": "every:2"}
     assert entry["rows"][0]["episode_scores"] == json.loads(card.read_text())["rows"][0]["episode_scores"]
     forged = json.loads(card.read_text())
     forged["rows"][0]["score"] += 10.0
@@ -177,7 +177,7 @@ def test_a_row_timed_on_the_wall_clock_is_played_again(board, tmp_path):
     from etmpc.common.documents import SEAL, sealed
 
     out, _ = board
-    (kept,) = (out / "work" / "always").glob("*.json")
+    (kept,) = (out / "work" / "always").glob("*/*.json")
     current = json.loads(kept.read_text())
     assert current["key"]["cpu_clock"] == "thread_time" and leaderboard._kept(kept, current["key"]) is not None
     wall = {k: v for k, v in current.items() if k != SEAL}
@@ -197,7 +197,7 @@ def test_the_failures_column_is_mean_and_ci_and_an_older_row_or_page_without_the
     assert always["episode_failures"] == [0, 0] and always["failures_ci95"] == 0.0  # a plan every step is never cut
     assert _failures_cell(page(data), "always") == "0.00 ± 0.00" and "Failures (curtailed): per episode" in page(data)
     # A row kept by an etmpc that counted no failures is played again; the row kept now is kept.
-    (kept,) = (out / "work" / "always").glob("*.json")
+    (kept,) = (out / "work" / "always").glob("*/*.json")
     current = json.loads(kept.read_text())
     assert current["key"]["failures"] == "curtailed"
     assert leaderboard._kept(kept, current["key"]) is not None
