@@ -256,7 +256,7 @@ CASES = [
     ("json-and-record-same", "existing-json", [*EV, "--policy", "always", "--record", "ev.rrd", "--json", "ev.rrd"], "same file"),
     ("json-overwrites-testset", "ts-no-sha", [*EV, "--policy", "always", "--test-set", "ts.npz", "--json", "ts.npz"], "ts.npz"),
     ("replay-json-overwrites-recording", "rrd-garbage", ["replay", "r.rrd", "--json", "r.rrd"], "r.rrd"),
-    ("bench-json-parent-is-file", "file-parent", ["bench", "battery", "--json", "afile/b.json"], "afile"),
+    ("bench-json-parent-is-file", "file-parent", ["bench", "--task", "battery", "--json", "afile/b.json"], "afile"),
     # backends
     ("backend-unknown", "none", [*EV, "--policy", "always", "--backend", "slurm"], "--backend"),
     ("address-without-ray", "none", [*EV, "--policy", "always", "--address", "auto"], "--address"),
@@ -386,13 +386,18 @@ CASES = [
     ("price-negative", "none", [*EV, "--policy", "always", "--price", "-1"], "--price"),
     ("price-infinite", "none", [*EV, "--policy", "always", "--price", "inf"], "--price"),
     ("train-price-nan", "none", ["train", "--task", "battery", "--out", "run", "--price", "nan"], "--price"),
-    ("sweep-price-nan", "none", ["sweep", "battery", "--prices", "0,nan"], "--prices"),
-    ("sweep-price-text", "none", ["sweep", "battery", "--prices", "1e-4,cheap"], "cheap"),
-    ("sweep-price-twice", "none", ["sweep", "battery", "--prices", "1e-4,0.0001"], "twice"),
-    ("sweep-task-twice", "none", ["sweep", "battery", "battery"], "twice"),
-    ("sweep-unknown-task", "none", ["sweep", "cartpole"], "cartpole"),
-    ("sweep-episodes-too-many", "none", ["sweep", "battery", "--episodes", "1000"], "1000"),
-    ("sweep-into-user-directory", "user-task-dir", ["sweep", "cart_pendulum", "battery", "--out", "run"], "notes.txt"),
+    ("sweep-price-nan", "none", ["sweep", "--task", "battery", "--prices", "0,nan"], "--prices"),
+    ("sweep-price-text", "none", ["sweep", "--task", "battery", "--prices", "1e-4,cheap"], "cheap"),
+    ("sweep-price-twice", "none", ["sweep", "--task", "battery", "--prices", "1e-4,0.0001"], "twice"),
+    ("sweep-task-twice", "none", ["sweep", "--task", "battery", "--task", "battery"], "twice"),
+    ("sweep-unknown-task", "none", ["sweep", "--task", "cartpole"], "cartpole"),
+    ("sweep-episodes-too-many", "none", ["sweep", "--task", "battery", "--episodes", "1000"], "1000"),
+    (
+        "sweep-into-user-directory",
+        "user-task-dir",
+        ["sweep", "--task", "cart_pendulum", "--task", "battery", "--out", "run"],
+        "notes.txt",
+    ),
     # self-triggering policies
     ("self-missing", "none", [*EV, "--policy", "self:no/such.json"], "no/such.json"),
     ("self-given-a-logistic-policy", "none", [*EV, "--policy", f"self:{CART_POLICY}"], "not a self-trigger policy"),
@@ -401,14 +406,14 @@ CASES = [
     ("train-self-out-is-a-directory", "a-dir", ["train-self", "--task", "cart_pendulum", "--out", "out.json"], "out.json"),
     ("train-self-unknown-task", "none", ["train-self", "--task", "cartpole", "--out", "p.json"], "cartpole"),
     ("train-self-negative-price", "none", ["train-self", "--task", "battery", "--out", "p.json", "--price", "-1"], "--price"),
-    ("sweep-other-settings", "other-sweep", ["sweep", "battery", "--out", "run", "--quick"], "other settings"),
+    ("sweep-other-settings", "other-sweep", ["sweep", "--task", "battery", "--out", "run", "--quick"], "other settings"),
     # replay and bench
     ("replay-missing", "none", ["replay", "none.rrd"], "none.rrd"),
     ("replay-garbage", "rrd-garbage", ["replay", "r.rrd"], "r.rrd"),
     ("replay-text", "text-file", ["replay", "r.rrd"], "r.rrd"),
     ("replay-json-is-directory", "a-dir", ["replay", "r.rrd", "--json", "out.json"], "directory"),
-    ("bench-unknown-task", "none", ["bench", "cartpole"], "cartpole"),
-    ("bench-episodes-too-many", "none", ["bench", "battery", "--episodes", "1000", "--no-reference"], "1000"),
+    ("bench-unknown-task", "none", ["bench", "--task", "cartpole"], "cartpole"),
+    ("bench-episodes-too-many", "none", ["bench", "--task", "battery", "--episodes", "1000", "--no-reference"], "1000"),
     # a trigger's own code cannot end the command, silently or otherwise, nor change its own run
     (
         "py-exit-in-decide",
@@ -469,8 +474,8 @@ CASES = [
         ["reproduce", "--quick", "--task", "battery", "--task", "battery/trading", "--out", "run"],
         "twice",
     ),
-    ("sweep-task-twice-by-two-names", "none", ["sweep", "battery", "battery/trading"], "twice"),
-    ("sweep-other-settings-named", "other-sweep", ["sweep", "battery", "--out", "run", "--quick"], "settings.episodes"),
+    ("sweep-task-twice-by-two-names", "none", ["sweep", "--task", "battery", "--task", "battery/trading"], "twice"),
+    ("sweep-other-settings-named", "other-sweep", ["sweep", "--task", "battery", "--out", "run", "--quick"], "settings.episodes"),
 ]
 
 
