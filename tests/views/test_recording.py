@@ -119,7 +119,7 @@ def battery_recording(tmp_path_factory):
     return path
 
 
-CART = "/cart_pendulum/every\\:5/episode_001/repeat_0"  # entity paths escape the ':' of a policy's name
+CART = "/cart_pendulum-balance/every\\:5/episode_001/repeat_0"  # entity paths escape the ':' of a policy's name
 
 
 def test_the_recording_holds_what_happened_and_identity(cart_recording, cart_system, cart_testset):
@@ -149,7 +149,7 @@ def test_the_recording_holds_what_happened_and_identity(cart_recording, cart_sys
     )  # applied, then the bounds
     _, correction = series(entities, f"{CART}/correction/force_n")
     np.testing.assert_array_equal(correction[:, 0], traj.correction[: traj.steps, 0])
-    assert any(e.startswith("/cart_pendulum/every\\:5/episode_000/") for e in entities)  # episodes stay apart
+    assert any(e.startswith("/cart_pendulum-balance/every\\:5/episode_000/") for e in entities)  # episodes stay apart
 
 
 def plans_in_fan(steps, values, made, predicted):
@@ -185,7 +185,7 @@ def test_every_plan_is_a_time_series_from_the_step_it_was_made(cart_recording, c
         cart_system.episode_from_arrays(cart_testset.episode_arrays(episode)),
     )
     entities = chunks_by_entity(cart_recording)
-    root = f"/cart_pendulum/{spec.replace(':', chr(92) + ':')}/episode_{episode:03d}/repeat_0"
+    root = f"/cart_pendulum-balance/{spec.replace(':', chr(92) + ':')}/episode_{episode:03d}/repeat_0"
     assert [k for k, _ in traj.plans] == made
     for j, name in enumerate(cart_system.state_names):
         batch = column_chunk(entities, f"{root}/plan/state/{name}", "Scalars:scalars")
@@ -213,7 +213,7 @@ def test_every_plan_is_a_time_series_from_the_step_it_was_made(cart_recording, c
 def test_always_draws_every_plan(cart_recording):
     """``always`` keeps 21 plans in flight: more than the 20 series the viewer shows by default."""
     entities = chunks_by_entity(cart_recording)
-    entity = "/cart_pendulum/always/episode_000/repeat_0/plan/state/pole_angle"
+    entity = "/cart_pendulum-balance/always/episode_000/repeat_0/plan/state/pole_angle"
     _, values = series(entities, entity)
     (style,) = [b for b in entities[entity] if "SeriesLines:visible_series" in b.schema.names]
     visible = style.column("SeriesLines:visible_series").to_pylist()[0]
@@ -223,7 +223,7 @@ def test_always_draws_every_plan(cart_recording):
 
 def test_battery_recording_holds_prices_production_and_each_plans_forecasts(battery_recording, battery_testset):
     entities = chunks_by_entity(battery_recording)
-    root = "/battery/never/episode_000/repeat_0"
+    root = "/battery-trading/never/episode_000/repeat_0"
     episode = battery_testset.episode_arrays(0)
     _, price = series(entities, f"{root}/realised/signal/price_eur_kwh")
     _, production = series(entities, f"{root}/realised/signal/net_production_kw")
@@ -237,7 +237,7 @@ def test_battery_recording_holds_prices_production_and_each_plans_forecasts(batt
 
 def test_recomputes_are_points_of_their_kind_and_log_lines_with_their_detail(battery_recording):
     entities = chunks_by_entity(battery_recording)
-    root = "/battery/never/episode_000/repeat_0"
+    root = "/battery-trading/never/episode_000/repeat_0"
     decision_steps, decision = series(entities, f"{root}/decision")
     recompute, forced = decision[:, 0] > 0, decision[:, 1] > 0
     assert list(np.flatnonzero(recompute)) == [0, 20, 40, 60, 80] and list(np.flatnonzero(forced)) == [0, 20, 40, 60, 80]
@@ -252,7 +252,7 @@ def test_recomputes_are_points_of_their_kind_and_log_lines_with_their_detail(bat
     for i, line in zip(steps[1:], text[1:]):
         assert line[0] == f"FORCED, the plan ran out: plan age 20, ‖W (x − x̂)‖ {errors[error_steps == i, 0][0]:.4g}"
 
-    root = "/battery/threshold\\:0.01/episode_000/repeat_0"
+    root = "/battery-trading/threshold\\:0.01/episode_000/repeat_0"
     steps, kinds = series(entities, f"{root}/recompute")
     _, decision = series(entities, f"{root}/decision")
     chosen = np.flatnonzero((decision[:, 0] > 0) & (decision[:, 1] == 0))
@@ -325,7 +325,7 @@ def test_the_blueprint_has_a_tab_per_policy_and_episode_of_time_series_of_entiti
         episodes = tabs_of(policy_tab)
         assert list(episodes) == ["episode 0", "episode 1"]
         for e, (name, tab) in enumerate(episodes.items()):
-            episode_root = f"/cart_pendulum/{policy.replace(':', chr(92) + ':')}/episode_{e:03d}/repeat_0"
+            episode_root = f"/cart_pendulum-balance/{policy.replace(':', chr(92) + ':')}/episode_{e:03d}/repeat_0"
             views = views_of(tab)
             assert {v["class"] for v in views} == {"TimeSeries", "TextDocument", "TextLog"}  # no 2-D ("2D") views
             for view in views:
@@ -363,7 +363,7 @@ def test_the_battery_forecast_panels_show_the_signal_they_forecast(battery_recor
     root, _ = read_blueprint(battery_recording)
     written = set(chunks_by_entity(battery_recording))
     for policy, tab in tabs_of(root).items():
-        episode_root = f"/battery/{policy.replace(':', chr(92) + ':')}/episode_000/repeat_0"
+        episode_root = f"/battery-trading/{policy.replace(':', chr(92) + ':')}/episode_000/repeat_0"
         views = views_of(tab)
         for view in views:
             assert all(q.replace("$origin", view["origin"]).removesuffix("/**") in written for q in view["contents"])
@@ -380,7 +380,7 @@ def test_the_battery_forecast_panels_show_the_signal_they_forecast(battery_recor
 def test_an_episode_tab_per_episode_up_to_the_limit(tmp_path):
     layouts = [
         look.EpisodeLayout(
-            root=f"/battery/always/episode_{e:03d}/repeat_0",
+            root=f"/battery-trading/always/episode_{e:03d}/repeat_0",
             domain="battery",
             policy="always",
             episode=e,
@@ -412,7 +412,7 @@ def test_policies_are_named_for_people(tmp_path):
     live = evaluate("battery", specs, episodes=1, workers=1, progress=False, record=path)
     entities = chunks_by_entity(path)
     for spec, part in zip(specs, ["rl\\:learned", "rl\\:learned\\ \\(2\\)"]):
-        identity = entities[f"/battery/{part}/episode_000/repeat_0/identity"][0].to_pydict()
+        identity = entities[f"/battery-trading/{part}/episode_000/repeat_0/identity"][0].to_pydict()
         assert identity["policy"] == [[spec]]
     replayed = {r.policy: r.objective for r in replay_summary(path)}
     assert replayed == {r.policy: r.objective for r in live.runs}
@@ -481,7 +481,7 @@ def test_render_puts_the_video_frames_into_the_recording(tmp_path, capsys):
     steps = sorted(s for b in images for s in b.column("step").to_pylist())
     assert steps == list(range(101))
     spatial = [v["origin"] for v in views_of(read_blueprint(rec)[0]) if v["class"] == "2D"]
-    assert spatial == ["/cart_pendulum/every\\:5/episode_003/repeat_0/camera"]  # the only 2-D view: the video
+    assert spatial == ["/cart_pendulum-balance/every\\:5/episode_003/repeat_0/camera"]  # the only 2-D view: the video
     (replayed,) = replay_summary(rec)
     live = evaluate("cart_pendulum", ["every:5"], episodes=4, workers=1, progress=False).runs[3]
     assert (replayed.episode, replayed.objective, replayed.recomputes) == (3, live.objective, live.recomputes)
@@ -534,7 +534,7 @@ def test_a_self_trigger_records_what_it_announced_at_each_solve(tmp_path, cart_s
     path = tmp_path / "s.rrd"
     evaluate("cart_pendulum", [f"self:{policy_file}"], episodes=1, workers=1, progress=False, record=path)
     entities = chunks_by_entity(path)
-    root = "/cart_pendulum/self\\:announcing/episode_000/repeat_0"
+    root = "/cart_pendulum-balance/self\\:announcing/episode_000/repeat_0"
     _, decision = series(entities, f"{root}/decision")
     solves = np.flatnonzero(decision[:, 0] > 0)
     steps, announced = series(entities, f"{root}/announced")

@@ -14,7 +14,7 @@ from etmpc.systems.space import Space
 from etmpc.loop.records import EpisodeRecord
 from tests.views.test_recording import chunks_by_entity, column_chunk, read_blueprint, views_of
 
-ROOT = "/quadrotor/every\\:5/episode_000/repeat_0"
+ROOT = "/quadrotor-waypoints/every\\:5/episode_000/repeat_0"
 SPACE = f"{ROOT}/space"
 
 
