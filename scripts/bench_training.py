@@ -30,7 +30,8 @@ import numpy as np
 from etmpc.learning.gpomdp import Learner, Settings
 from etmpc.policies.learned import INITIAL_KEEP_LOGIT, LogisticPolicy, Normalisation, load_policy
 from etmpc.learning.jobs import evaluate_theta, normalisation_states, train_block, _learner_to_json
-from etmpc.evaluation.workers import context, make_backend
+from etmpc.evaluation.backends import make_backend
+from etmpc.evaluation.workers import context
 
 
 def peak_rss_mib() -> float:

@@ -19,7 +19,7 @@ def warn(line: str) -> None:
 
 
 def backend_arguments(parser) -> None:
-    from etmpc.evaluation.workers import BACKENDS
+    from etmpc.evaluation.backends import BACKENDS
 
     parser.add_argument(
         "--backend",

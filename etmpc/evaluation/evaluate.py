@@ -29,7 +29,8 @@ from etmpc.views.recording import Recorder
 from etmpc.systems import SystemKey, has_levels, system_key
 from etmpc.evaluation.inputs import check_run_outputs, check_shipped, run_inputs
 from etmpc.evaluation.mainscript import refuse_in_rerun_main, unimportable_main
-from etmpc.evaluation.workers import BACKENDS, make_backend, play_test_episode, workers_for
+from etmpc.evaluation.backends import BACKENDS, make_backend
+from etmpc.evaluation.workers import play_test_episode, workers_for
 from etmpc.evaluation.results import Evaluation, PolicySummary, RunResult, failures_cell, summarise  # noqa: F401 (re-exported)
 
 
@@ -97,7 +98,7 @@ def evaluate(
     domain: str | SystemKey | None = None,
 ) -> Evaluation:
     """Run every policy on the first ``episodes`` test-set episodes, ``repeats`` times each, on
-    ``workers`` processes of ``backend`` (see ``etmpc.evaluation.workers.make_backend``).
+    ``workers`` processes of ``backend`` (see ``etmpc.evaluation.backends.make_backend``).
 
     ``task``: a task's name (``DOMAIN`` or ``DOMAIN/TASK``), or a :class:`~etmpc.systems.SystemKey`
     (``domain=``, its old name, works for this release with a ``DeprecationWarning``). ``policies``: spec strings

@@ -68,7 +68,7 @@ from etmpc.evaluation.card import (  # noqa: F401  (the card's records, here bef
 )
 from etmpc.evaluation.mainscript import UnguardedScript
 from etmpc.evaluation.scoretable import format_scorecard  # noqa: F401  (the card as text)
-from etmpc.evaluation.workers import shared_pools
+from etmpc.evaluation.backends import shared_pools
 from etmpc.systems import distinct, make_system, names, task_version
 
 

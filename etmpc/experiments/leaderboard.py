@@ -52,7 +52,7 @@ from etmpc.evaluation.evaluate import parse_policies
 from etmpc.evaluation.inputs import policy_files
 from etmpc.evaluation.scorecard import Scorecard, TaskScore, aggregate, play_and_score, profiles, task_score
 from etmpc.evaluation.verify import read_card, verify
-from etmpc.evaluation.workers import make_backend, shared_pools
+from etmpc.evaluation.backends import make_backend, shared_pools
 from etmpc.experiments.leaderboard_page import (  # noqa: F401
     BEGIN,
     END,

@@ -45,7 +45,7 @@ from etmpc.common.outputs import refuse_foreign, what_differs, write_text
 from etmpc.common.provenance import commit_and_date
 from etmpc.evaluation.evaluate import evaluate
 from etmpc.evaluation.render import render_rollout
-from etmpc.evaluation.workers import shared_pools
+from etmpc.evaluation.backends import shared_pools
 from etmpc.experiments import sweep as sweeps
 from etmpc.experiments.clock import StageClock
 from etmpc.experiments.report import PAPER, machine, report, software_versions

@@ -44,7 +44,7 @@ from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import refuse_foreign, what_differs, write_json, write_text
 from etmpc.evaluation.evaluate import evaluate
 from etmpc.evaluation.testsets import default_path, load
-from etmpc.evaluation.workers import shared_pools
+from etmpc.evaluation.backends import shared_pools
 from etmpc.experiments.pareto import best_periodic, build_pareto, report_section
 from etmpc.learning import dpi
 from etmpc.learning.config import TrainConfig

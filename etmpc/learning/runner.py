@@ -21,7 +21,7 @@ import numpy as np
 
 from etmpc.common.sense import oriented
 from etmpc.common.errors import EtmpcError
-from etmpc.evaluation.workers import make_backend
+from etmpc.evaluation.backends import make_backend
 from etmpc.learning.base import Learner, check_decisions, learner_class
 from etmpc.learning.config import VALIDATION_ENTROPY
 from etmpc.learning.jobs import mean_scores
