@@ -190,6 +190,13 @@ class Progress:
         elif self._lines:
             self._print(line)
 
+    def result(self, text: str) -> None:
+        """``text`` on stdout (a result, printed whether progress shows or not), the bar cleared around it."""
+        if self._bar is not None:
+            self._bar.write(text, file=sys.stdout)
+        else:
+            print(text, flush=True)
+
     def _elapsed(self) -> float:
         return self._clock() - self._started
 

@@ -14,10 +14,9 @@ import os
 import pickle
 from pathlib import Path
 
-from tqdm import tqdm
-
 from etmpc.evaluation import testsets as ts_mod
 from etmpc.common import checks, interrupts
+from etmpc.common.progress import Progress
 from etmpc.common.errors import EtmpcError
 from etmpc.common.interrupts import described, genuine
 from etmpc.common.sense import higher_or_lower, oriented
@@ -74,10 +73,7 @@ def _run(job: tuple) -> tuple[RunResult, EpisodeRecord | None, dict[str, float]]
 # -- driver side ---------------------------------------------------------------------------------
 def run_jobs(jobs: list, workers: int, progress: bool, backend: str = "local", address: str | None = None) -> list[tuple]:
     chunk = max(1, min(8, len(jobs) // (4 * workers)))
-    with (
-        tqdm(total=len(jobs), desc="episodes", unit="ep", disable=None if progress else True, leave=False) as bar,
-        make_backend(backend, workers, address) as backend,
-    ):
+    with Progress(len(jobs), enabled=progress) as bar, make_backend(backend, workers, address) as backend:
         return backend.map(_run, jobs, on_result=lambda job: bar.update(), chunksize=chunk)
 
 

@@ -48,6 +48,7 @@ import numpy as np
 
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import write_json
+from etmpc.common.progress import Progress
 from etmpc.evaluation import metrics
 from etmpc.evaluation import testsets as ts_mod
 from etmpc.common import checks
@@ -225,7 +226,9 @@ def score(
             "recompute_price": refs.recompute_price,
             "gap": refs.gap,
         }
-    with shared_pools():  # each trigger played on its own (a failing one fails its row only), one pool for all
+    total = len(policies) * sum(refs.episodes for refs in references.values())  # the whole card's episodes, up front
+    # each trigger played on its own (a failing one fails its row only), one pool for all, one estimate for all
+    with shared_pools(), Progress(total, enabled=progress, whole=True):
         rows = [
             play_and_score(task, references[task], policy, test_set, workers, progress) for task in tasks for policy in policies
         ]

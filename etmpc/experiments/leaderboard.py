@@ -44,6 +44,7 @@ import numpy as np
 
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import write_json, write_text
+from etmpc.common.progress import Progress
 from etmpc.common.provenance import commit_and_date
 from etmpc.evaluation.references import SUITE_VERSION, software, stored
 from etmpc.evaluation.evaluate import parse_policies
@@ -152,27 +153,32 @@ def _build(
     result = []
     rows_all: list[TaskScore] = []
     played: dict[str, dict] = {}
-    for entry in board:
-        rows = []
-        for task in [t for t in tasks if t in entry.specs]:
-            if (entry.name, task) in given:  # a verified card's row: not played here
-                rows.append(given[entry.name, task])
-                continue
-            row, at = _row(entry, task, references[task], work, n, workers, say)
-            rows.append(row)
-            played[f"{at['commit']}{' (with uncommitted changes)' if at['uncommitted_changes'] else ''}"] = at
-        named = [replace(r, policy=entry.name) for r in rows]
-        rows_all += named
-        result.append(
-            {
-                "name": entry.name,
-                "kind": entry.kind,
-                "note": entry.note,
-                "specs": entry.specs,
-                "rows": [r.to_json() for r in rows],
-                "aggregate": aggregate(named).to_json(),
-            }
-        )
+    to_play = [(entry, task) for entry in board for task in tasks if task in entry.specs and (entry.name, task) not in given]
+    with Progress(n * len(to_play), whole=True) as bar:  # every row's episodes: one estimate for the whole table
+        for entry in board:
+            rows = []
+            for task in [t for t in tasks if t in entry.specs]:
+                if (entry.name, task) in given:  # a verified card's row: not played here
+                    rows.append(given[entry.name, task])
+                    continue
+                before = bar.n
+                row, at = _row(entry, task, references[task], work, n, workers, say)
+                if bar.n == before:  # kept, or from the references: no episode played, none to estimate from
+                    bar.skip(n)
+                rows.append(row)
+                played[f"{at['commit']}{' (with uncommitted changes)' if at['uncommitted_changes'] else ''}"] = at
+            named = [replace(r, policy=entry.name) for r in rows]
+            rows_all += named
+            result.append(
+                {
+                    "name": entry.name,
+                    "kind": entry.kind,
+                    "note": entry.note,
+                    "specs": entry.specs,
+                    "rows": [r.to_json() for r in rows],
+                    "aggregate": aggregate(named).to_json(),
+                }
+            )
     data = {
         "format": FORMAT,
         "suite_version": SUITE_VERSION,

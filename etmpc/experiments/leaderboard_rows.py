@@ -15,6 +15,7 @@ from pathlib import Path
 from etmpc.common.documents import SEAL, check_seal, loads, sealed
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import write_json
+from etmpc.common.progress import Progress
 from etmpc.common.provenance import commit_and_date
 from etmpc.common.resources import data_root
 from etmpc.evaluation import metrics
@@ -76,8 +77,9 @@ def best_threshold(task: str, workers: int, say: Callable[[str], None]) -> str:
     system = make_system(task)
     require(system, "experiments", "the leaderboard's best threshold")
     specs = system.benchmark.threshold_specs()
-    with make_backend("local", workers) as pool:
-        means = mean_scores(pool, system.name, specs, VALIDATION_ENTROPY, VALIDATION_EPISODES)
+    jobs = len(specs) * VALIDATION_EPISODES
+    with make_backend("local", workers) as pool, Progress(jobs, f"{task}: best threshold") as bar:
+        means = mean_scores(pool, system.name, specs, VALIDATION_ENTROPY, VALIDATION_EPISODES, lambda job: bar.update())
     chosen = metrics.best(zip(specs, means), system.objective_sense, key=lambda pair: pair[1])[0]
     say(f"{task}: best threshold on {VALIDATION_EPISODES} training-distribution episodes: {chosen}")
     return chosen

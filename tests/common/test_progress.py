@@ -143,3 +143,11 @@ def test_an_interrupted_run_says_no_done_line():
 
 def test_times_read_as_a_clock():
     assert [clock_time(s) for s in (0, 9.6, 83, 600, 3723)] == ["0:00", "0:10", "1:23", "10:00", "1:02:03"]
+
+
+def test_a_result_goes_to_stdout_whole_with_the_bar_cleared_around_it(capsys):
+    tty = io.StringIO()
+    with Progress(2, stream=tty, terminal=True) as bar:
+        bar.result("cart_pendulum: 10 test-set episodes")
+        bar.update()
+    assert capsys.readouterr().out == "cart_pendulum: 10 test-set episodes\n" and "/2 [" in tty.getvalue()

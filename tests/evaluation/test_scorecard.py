@@ -186,6 +186,23 @@ def test_a_card_row_of_an_older_etmpc_without_the_failures_ci_and_counts_still_l
     assert " 0.50 " in line and "0.50 ±" not in line  # the mean alone
 
 
+def test_a_suite_score_in_a_log_counts_the_whole_cards_episodes_on_stderr_and_keeps_stdout_for_results(monkeypatch, capsys):
+    import re
+
+    from etmpc.common import progress
+
+    for name in ("FIRST_LINE_AFTER", "EVERY", "CLOSEST"):  # a line at every episode: the cadence is test_progress's
+        monkeypatch.setattr(progress, name, 0.0)
+    argv = ["score", "every:3", "every:5", "--task", "battery", "--task", "cart_pendulum", "--episodes", "2", "--workers", "1"]
+    assert main(argv) == 0
+    out, err = capsys.readouterr()
+    lines = [line for line in err.splitlines() if line.startswith("etmpc score: ")]
+    line = re.compile(r"etmpc score: (\d+)/8 episodes, \d+:\d\d elapsed, about \d+:\d\d left$")
+    counts = [int(m[1]) for m in map(line.match, lines) if m]
+    assert counts == list(range(1, 8)) and re.fullmatch(r"etmpc score: 8/8 episodes, done in \d+:\d\d", lines[-1])
+    assert "elapsed" not in out and "references: battery" in out
+
+
 @pytest.mark.parametrize("task", names())
 def test_the_stored_references_are_what_playing_the_episodes_again_gives(task):
     system = make_system(task)
