@@ -203,6 +203,21 @@ def test_a_suite_score_in_a_log_counts_the_whole_cards_episodes_on_stderr_and_ke
     assert "elapsed" not in out and "references: battery" in out
 
 
+def test_a_score_over_fewer_episodes_than_its_ci_needs_says_so_in_one_line_and_the_card_is_the_same():
+    from etmpc.evaluation.metrics import CI_EPISODES
+    from etmpc.evaluation.scorecard import Scorecard, failed_task
+    from etmpc.evaluation.scoretable import format_scorecard
+
+    enough = _row("battery", range(CI_EPISODES))
+    few = _row("reacher", range(CI_EPISODES - 1))
+    whole = Scorecard(["battery"], {}, [enough], [aggregate([enough])])
+    assert not any(line.startswith("note:") for line in format_scorecard(whole).splitlines())
+    card = Scorecard(["battery", "reacher"], {}, [enough, few, failed_task("battery", "other", "it failed")], [])
+    (note,) = [line for line in format_scorecard(card).splitlines() if line.startswith("note:")]
+    assert f"reacher on {CI_EPISODES - 1} episode(s), fewer than the {CI_EPISODES}" in note and "battery" not in note
+    assert "note:" not in json.dumps(card.to_json())  # the human-readable output only: the card's fields are its own
+
+
 @pytest.mark.parametrize("task", names())
 def test_the_stored_references_are_what_playing_the_episodes_again_gives(task):
     system = make_system(task)
