@@ -72,8 +72,10 @@ def test_work_done_before_is_counted_but_does_not_make_the_estimate_faster():
     bar.skip(50)  # kept from an earlier run
     assert bar.left() is None
     clock.now += 10.0
-    bar.update(10)
-    assert bar.n == 60 and bar.left() == pytest.approx(40.0) and bar.times() == "0:10 elapsed, about 0:40 left"
+    bar.update(5)
+    clock.now += 5.0
+    bar.update(5)
+    assert bar.n == 60 and bar.left() == pytest.approx(40.0) and bar.times() == "0:15 elapsed, about 0:40 left"
 
 
 def test_the_bar_is_off_when_stderr_is_not_a_terminal_and_on_when_it_is():
@@ -125,18 +127,20 @@ def test_a_stage_is_named_in_the_lines_of_its_trackers():
     clock, stream = Clock(), io.StringIO()
     with command("etmpc reproduce"), stage("cart_pendulum: DPI training"):
         with Progress(4, "", stream=stream, clock=clock, unit="steps") as bar:
-            clock.now += 20.0
-            bar.update()
+            for _ in range(2):
+                clock.now += 10.0
+                bar.update()
     assert stream.getvalue().splitlines()[0] == (
-        "etmpc reproduce: cart_pendulum: DPI training: 1/4 steps, 0:20 elapsed, about 1:00 left"
+        "etmpc reproduce: cart_pendulum: DPI training: 2/4 steps, 0:20 elapsed, about 0:20 left"
     )
 
 
 def test_an_interrupted_run_says_no_done_line():
     clock, stream = Clock(), io.StringIO()
     with pytest.raises(KeyboardInterrupt), Progress(10, stream=stream, clock=clock) as bar:
-        clock.now += 20.0
-        bar.update()
+        for _ in range(2):
+            clock.now += 10.0
+            bar.update()
         raise KeyboardInterrupt
     assert len(stream.getvalue().splitlines()) == 1 and "done" not in stream.getvalue()
 
@@ -151,3 +155,16 @@ def test_a_result_goes_to_stdout_whole_with_the_bar_cleared_around_it(capsys):
         bar.result("cart_pendulum: 10 test-set episodes")
         bar.update()
     assert capsys.readouterr().out == "cart_pendulum: 10 test-set episodes\n" and "/2 [" in tty.getvalue()
+
+
+def test_the_time_to_the_first_episode_a_pool_starting_is_not_taken_for_the_rate():
+    clock, stream = Clock(), io.StringIO()
+    with command("etmpc score"), Progress(40, stream=stream, clock=clock) as bar:
+        clock.now += 17.0  # the workers start
+        bar.update()
+        assert bar.left() is None  # one episode: no rate yet, no line
+        for _ in range(3):
+            clock.now += 1.0
+            bar.update()
+    first = stream.getvalue().splitlines()[0]
+    assert first == "etmpc score: 2/40 episodes, 0:18 elapsed, about 0:38 left"  # 38 episodes at one a second
