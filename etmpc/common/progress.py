@@ -12,7 +12,8 @@
 
 The time left is the work left at the rate of the work done since the first unit (the time to the first one, a
 pool of workers starting, is paid once: counted in, it made a verify of 40 episodes whose workers took 17 s to
-start say "about 10:46 left" at its first episode, for 10 s of work). :meth:`Progress.skip` counts work that was
+start say "about 10:46 left" at its first episode, for 10 s of work), once that work spans :data:`MEASURED`
+seconds (results come in chunks: two units in the same instant are no rate). :meth:`Progress.skip` counts work that was
 already done (a kept row, a resumed run) without making the estimate faster.
 
 **Whole commands.** A tracker made with ``whole=True`` counts a command's units of work up front (a suite
@@ -37,6 +38,7 @@ FIRST_LINE_AFTER = 10.0  # seconds of work before the first line: an estimate fr
 EVERY = 30.0  # seconds between lines, at the least
 LONGEST = 600.0  # ... and at the most, however long the run
 CLOSEST = 5.0  # a quarter's line waits this long after the last line
+MEASURED = 5.0  # seconds of work since the first unit before there is a rate (results come in chunks)
 
 _COMMAND: ContextVar[str] = ContextVar("etmpc_progress_command", default="etmpc")
 _STAGES: ContextVar[tuple[str, ...]] = ContextVar("etmpc_progress_stages", default=())
@@ -185,8 +187,8 @@ class Progress:
 
     def left(self) -> float | None:
         """Seconds left at the rate of the work done here since its first unit (the time to the first, the
-        workers' start, is not the rate: it is paid once); None before there is such a rate."""
-        if self._first is None or self._rated <= 0:
+        workers' start, is not the rate: it is paid once); None before it spans :data:`MEASURED` seconds."""
+        if self._first is None or self._rated <= 0 or self._clock() - self._first < MEASURED:
             return None
         return max(0, self.total - self.n) * (self._clock() - self._first) / self._rated
 
