@@ -17,7 +17,7 @@ import sys
 import threading
 import warnings
 
-from etmpc.common import interrupts
+from etmpc.common import interrupts, progress
 from etmpc.common.errors import EtmpcError, Terminated
 
 # MuJoCo's OpenGL backends on Linux (mujoco/rendering/classic/gl_context.py): anything else makes
@@ -78,7 +78,8 @@ def main(argv: list[str] | None = None) -> int:
 
         args = options.build_parser().parse_args(argv)
         tasks.resolve(args)  # the task given the older way, with its deprecation line
-        with interrupts.watching():  # a Ctrl-C is told apart from a trigger that raises KeyboardInterrupt
+        # a Ctrl-C is told apart from a trigger that raises KeyboardInterrupt; progress lines name the command
+        with interrupts.watching(), progress.command(f"etmpc {args.command}"):
             commands.COMMANDS[args.command](args)
     except EtmpcError as exc:  # one line, whatever a name in it (a spec, a path) holds
         print(f"etmpc: error: {' '.join(str(exc).splitlines())}", file=sys.stderr)

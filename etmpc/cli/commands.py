@@ -10,6 +10,7 @@ from pathlib import Path
 from etmpc.cli import discriminate, figures, legacy, scoring, training
 from etmpc.cli.output import check_backend as _check_backend, distinct_policies as _distinct_policies, say as _say
 from etmpc.common.errors import EtmpcError
+from etmpc.common.progress import Progress
 from etmpc.common.outputs import write_json
 
 
@@ -152,9 +153,12 @@ def _bench(args) -> None:
         check_name(domain)
     check_run_outputs({"--json": args.json})
     figures = {}
-    for domain in domains:
-        figures[domain] = run_bench(domain, episodes=args.episodes, references=not args.no_reference)
-        print(format_bench(figures[domain]), flush=True)
+    # counted between the tasks' measurements, never inside one: the bar costs no measured time
+    with Progress(len(domains), unit="tasks") as bar:
+        for domain in domains:
+            figures[domain] = run_bench(domain, episodes=args.episodes, references=not args.no_reference)
+            bar.result(format_bench(figures[domain]))
+            bar.update()
     if args.json is not None:
         write_json(args.json, figures)
         print(f"wrote {args.json}")
@@ -163,7 +167,7 @@ def _bench(args) -> None:
 def _verify(args) -> None:
     from etmpc.evaluation.verify import verify
 
-    verdict = verify(args.card, args.sample, args.seed, args.workers)
+    verdict = verify(args.card, args.sample, args.seed, args.workers, progress=True)
     if verdict.caution is not None:
         print(f"note: {verdict.caution}")
     for line in verdict.mismatches:

@@ -136,6 +136,7 @@ def run_self(args) -> None:
         args.backend,
         args.address,
         say=say,
+        progress=True,
     )
     price = "" if args.price is None else f" --price {args.price:g}"
     sets = "".join(f" --set {name}={value}" for name, value in values.items())

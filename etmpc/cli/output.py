@@ -5,12 +5,13 @@ from __future__ import annotations
 
 import sys
 
+from etmpc.common import progress
 from etmpc.common.errors import EtmpcError
 
 
 def say(line: str) -> None:
-    """Progress of a long stage, on stderr (stdout keeps the results)."""
-    print(line, file=sys.stderr, flush=True)
+    """Progress of a long stage, on stderr (stdout keeps the results), above the progress bar if one shows."""
+    progress.say(line)
 
 
 def warn(line: str) -> None:
@@ -19,7 +20,7 @@ def warn(line: str) -> None:
 
 
 def backend_arguments(parser) -> None:
-    from etmpc.evaluation.workers import BACKENDS
+    from etmpc.evaluation.backends import BACKENDS
 
     parser.add_argument(
         "--backend",

@@ -18,11 +18,11 @@ LEADERBOARD_OUT = Path("docs")
 
 
 class _LeaderboardHelp(str):
-    """``--leaderboard``'s help, naming the leaderboard's rows from :mod:`etmpc.experiments.leaderboard` (imported
+    """``--leaderboard``'s help, naming the leaderboard's rows from :mod:`etmpc.experiments.leaderboard_rows` (imported
     only when the help is shown: it is a heavy import)."""
 
     def __mod__(self, params):
-        from etmpc.experiments.leaderboard import row_names
+        from etmpc.experiments.leaderboard_rows import row_names
 
         rows = ", ".join(row_names()).replace("%", "%%")
         return (

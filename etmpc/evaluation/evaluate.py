@@ -15,10 +15,9 @@ import pickle
 from pathlib import Path
 from typing import Callable
 
-from tqdm import tqdm
-
 from etmpc.evaluation import testsets as ts_mod
 from etmpc.common import checks, interrupts
+from etmpc.common.progress import Progress
 from etmpc.common.errors import EtmpcError
 from etmpc.common.interrupts import described, genuine
 from etmpc.common.sense import higher_or_lower, oriented
@@ -29,7 +28,8 @@ from etmpc.loop.records import EpisodeRecord, EpisodeSink
 from etmpc.systems import SystemKey, has_levels, system_key
 from etmpc.evaluation.inputs import check_run_outputs, check_shipped, run_inputs
 from etmpc.evaluation.mainscript import refuse_in_rerun_main, unimportable_main
-from etmpc.evaluation.workers import BACKENDS, make_backend, play_test_episode, workers_for
+from etmpc.evaluation.backends import BACKENDS, make_backend
+from etmpc.evaluation.workers import play_test_episode, workers_for
 from etmpc.evaluation.results import Evaluation, PolicySummary, RunResult, failures_cell, summarise  # noqa: F401 (re-exported)
 
 
@@ -73,10 +73,7 @@ def _run(job: tuple) -> tuple[RunResult, EpisodeRecord | None, dict[str, float]]
 # -- driver side ---------------------------------------------------------------------------------
 def run_jobs(jobs: list, workers: int, progress: bool, backend: str = "local", address: str | None = None) -> list[tuple]:
     chunk = max(1, min(8, len(jobs) // (4 * workers)))
-    with (
-        tqdm(total=len(jobs), desc="episodes", unit="ep", disable=None if progress else True, leave=False) as bar,
-        make_backend(backend, workers, address) as backend,
-    ):
+    with Progress(len(jobs), enabled=progress) as bar, make_backend(backend, workers, address) as backend:
         return backend.map(_run, jobs, on_result=lambda job: bar.update(), chunksize=chunk)
 
 
@@ -98,7 +95,7 @@ def evaluate(
     recorder: Callable[[Path], EpisodeSink] | None = None,
 ) -> Evaluation:
     """Run every policy on the first ``episodes`` test-set episodes, ``repeats`` times each, on
-    ``workers`` processes of ``backend`` (see ``etmpc.evaluation.workers.make_backend``).
+    ``workers`` processes of ``backend`` (see ``etmpc.evaluation.backends.make_backend``).
 
     ``task``: a task's name (``DOMAIN`` or ``DOMAIN/TASK``), or a :class:`~etmpc.systems.SystemKey`
     (``domain=``, its old name, works for this release with a ``DeprecationWarning``). ``policies``: spec strings

@@ -30,6 +30,7 @@ from etmpc.common.documents import check_seal, read_document, sealed
 from etmpc.common.errors import EtmpcError
 from etmpc.common.numerics import fsum
 from etmpc.common.outputs import write_json
+from etmpc.common.progress import stage
 from etmpc.common.sense import best as best_of, oriented
 from etmpc.evaluation import testsets
 from etmpc.evaluation.evaluate import Evaluation, evaluate
@@ -173,12 +174,16 @@ def build_references(
     system = make_system(task)
     periodic = periodic_schedules(system)
     say(f"{system.name}: references: {len(periodic)} periodic schedules, then the oracle and the rollout meter over the best")
-    fixed = evaluate(system.name, periodic, workers=workers, testset_path=testset_path, progress=progress)
+    run = dict(workers=workers, testset_path=testset_path, progress=progress)
+    with stage(f"{system.name}: references: {len(periodic)} periodic schedules"):  # each named in the progress lines
+        fixed = evaluate(system.name, periodic, **run)
     table = {spec: _objectives(fixed, spec) for spec in periodic}
     best = best_schedule(table, system.objective_sense)
-    oracle = evaluate(system.name, [f"oracle:{best}"], workers=workers, testset_path=testset_path, progress=progress)
+    with stage(f"{system.name}: references: the oracle"):
+        oracle = evaluate(system.name, [f"oracle:{best}"], **run)
     meter = rollout_meter_spec(system, best)
-    rollout = meter and evaluate(system.name, [meter], workers=workers, testset_path=testset_path, progress=progress)
+    with stage(f"{system.name}: references: the rollout meter"):
+        rollout = meter and evaluate(system.name, [meter], **run)
     refs = References(
         system.name,
         fixed.testset_sha256,

@@ -48,6 +48,7 @@ import numpy as np
 
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import write_json
+from etmpc.common.progress import Progress
 from etmpc.evaluation import metrics
 from etmpc.evaluation import testsets as ts_mod
 from etmpc.common import checks
@@ -68,7 +69,7 @@ from etmpc.evaluation.card import (  # noqa: F401  (the card's records, here bef
 )
 from etmpc.evaluation.mainscript import UnguardedScript
 from etmpc.evaluation.scoretable import format_scorecard  # noqa: F401  (the card as text)
-from etmpc.evaluation.workers import shared_pools
+from etmpc.evaluation.backends import shared_pools
 from etmpc.systems import distinct, folder_name, make_system, names, task_version
 
 
@@ -225,7 +226,9 @@ def score(
             "recompute_price": refs.recompute_price,
             "gap": refs.gap,
         }
-    with shared_pools():  # each trigger played on its own (a failing one fails its row only), one pool for all
+    total = len(policies) * sum(refs.episodes for refs in references.values())  # the whole card's episodes, up front
+    # each trigger played on its own (a failing one fails its row only), one pool for all, one estimate for all
+    with shared_pools(), Progress(total, enabled=progress, whole=True):
         rows = [
             play_and_score(task, references[task], policy, test_set, workers, progress) for task in tasks for policy in policies
         ]

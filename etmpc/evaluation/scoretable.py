@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 
+from etmpc.evaluation.metrics import CI_EPISODES
 from etmpc.evaluation.results import failures_cell
 
 _CPU = (("total", 11), ("solve", 9), ("feedback", 10), ("decide", 10))  # a row's CPU columns and their widths
@@ -58,4 +59,10 @@ def format_scorecard(card) -> str:
         for t, r in card.references.items()
     )
     lines.append(f"references: {refs}")
+    few = {r.task: r.episodes for r in card.rows if r.error is None and r.episodes < CI_EPISODES}
+    if few:
+        lines.append(
+            f"note: {', '.join(f'{t} on {n}' for t, n in few.items())} episode(s), fewer than the {CI_EPISODES} a 95 % CI "
+            "needs to cover about 95 % (episode scores are skewed): read these CIs as too narrow, or score more episodes"
+        )
     return "\n".join(lines)

@@ -22,6 +22,7 @@ from etmpc.common.documents import loads
 from etmpc.common.frozen import readonly
 from etmpc.common.errors import EtmpcError, TestSetError
 from etmpc.common.outputs import check_outputs, write_bytes
+from etmpc.common.progress import Progress
 from etmpc.systems import canonical, spec, stored_seed
 
 FORMAT_VERSION = 1
@@ -160,9 +161,14 @@ def load(path: Path, domain: str, task: str) -> TestSet:
     return TestSet(path=path, sha256=actual, meta=meta, arrays=arrays)
 
 
-def generate(system, seed: int, episodes: int) -> tuple[dict[str, np.ndarray], dict]:
-    """Draw ``episodes`` episodes of ``system`` from ``seed``: the arrays and metadata of a test set."""
-    drawn = [system.draw_episode(rng).arrays() for rng in episode_generators(seed, episodes)]
+def generate(system, seed: int, episodes: int, progress: bool = False) -> tuple[dict[str, np.ndarray], dict]:
+    """Draw ``episodes`` episodes of ``system`` from ``seed``: the arrays and metadata of a test set
+    (``progress``: the time left, on stderr)."""
+    drawn = []
+    with Progress(episodes, enabled=progress) as bar:
+        for rng in episode_generators(seed, episodes):
+            drawn.append(system.draw_episode(rng).arrays())
+            bar.update()
     arrays = {name: np.stack([episode[name] for episode in drawn]) for name in drawn[0]}
     meta = {
         "format": FORMAT_VERSION,
@@ -188,5 +194,5 @@ def draw(system, seed: int, episodes: int, out: Path) -> str:
         if path.exists():
             raise EtmpcError(f"{path} exists: a test set is never overwritten; choose another --out")
     check_outputs({"--out": out, "its checksum": checksum_path(out)})
-    arrays, meta = generate(system, seed, episodes)
+    arrays, meta = generate(system, seed, episodes, progress=True)
     return write(out, arrays, meta)

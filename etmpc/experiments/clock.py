@@ -15,6 +15,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
+from etmpc.common import progress
 from etmpc.common.documents import loads
 from etmpc.policies.learned import write_json_atomically
 
@@ -37,7 +38,8 @@ def _in(group: str, stage: str) -> bool:
 
 class StageClock:
     """The stage times of one task's folder: ``with clock.stage(name, *outputs): ...`` times the block,
-    unless ``name`` was timed already; ``outputs`` are the files that show the stage was done before."""
+    unless ``name`` was timed already; ``outputs`` are the files that show the stage was done before. The
+    block's progress lines name the stage (:func:`etmpc.common.progress.stage`)."""
 
     def __init__(self, folder: Path):
         self.path = Path(folder) / FILE
@@ -49,11 +51,13 @@ class StageClock:
     @contextmanager
     def stage(self, name: str, *outputs: Path) -> Iterator[None]:
         if name in self.read():
-            yield
+            with progress.stage(name):
+                yield
             return
         made_before = bool(outputs) and all(Path(p).exists() for p in outputs)
         started = time.perf_counter()
-        yield
+        with progress.stage(name):
+            yield
         seconds = None if made_before else time.perf_counter() - started
         write_json_atomically(self.path, self.read() | {name: seconds})
 

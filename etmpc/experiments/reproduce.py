@@ -42,10 +42,11 @@ from pathlib import Path
 from etmpc.common.documents import loads
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import refuse_foreign, what_differs, write_text
+from etmpc.common.progress import stage
 from etmpc.common.provenance import commit_and_date
 from etmpc.evaluation.evaluate import evaluate
 from etmpc.views.render import render_rollout
-from etmpc.evaluation.workers import shared_pools
+from etmpc.evaluation.backends import shared_pools
 from etmpc.experiments import sweep as sweeps
 from etmpc.experiments.clock import StageClock
 from etmpc.experiments.report import PAPER, machine, report, software_versions
@@ -163,8 +164,9 @@ def _reproduce(
     _check_settings(out, settings, domains)
     run = dict(workers=workers, backend=backend, address=address)
     systems = {}
-    for domain in domains:
-        systems[domain] = _system(out / folder_name(domain), domain, settings, run, progress)
+    for i, domain in enumerate(domains, 1):
+        with stage(f"{domain} ({i}/{len(domains)})"):  # named in the progress lines, with each stage's name
+            systems[domain] = _system(out / folder_name(domain), domain, settings, run, progress)
     paretos = {}
     for domain, chosen in sweep_settings.items():
         paretos[domain] = sweeps.sweep(
@@ -338,9 +340,8 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
             files["figure1"] = "figure1_forecasts.png"
         if offers(system, Scene):
             if not (folder / "episode.mp4").exists():
-                render_rollout(
-                    domain, best, 0, folder / "episode.mp4", width=settings.video_size[0], height=settings.video_size[1]
-                )
+                size = dict(width=settings.video_size[0], height=settings.video_size[1])
+                render_rollout(domain, best, 0, folder / "episode.mp4", **size, progress=progress)
             files["video"] = "episode.mp4"
     summary["files"] = {k: f"{folder.name}/{v}" for k, v in files.items()}
     summary["stage_seconds"] = clock.read()

@@ -84,7 +84,7 @@ def _ppo(
             if ppo_dir.exists():
                 shutil.rmtree(ppo_dir)  # an interrupted run starts again
             with timed(ppo_dir, run["workers"]):
-                train_ppo(domain, ppo_dir, chosen, run["workers"], say=_say)
+                train_ppo(domain, ppo_dir, chosen, run["workers"], say=_say, progress=common["progress"])
     training = loads((ppo_dir / "training.json").read_text())
     shipped = folder.parent / "policies" / folder_name(domain)
     if not (shipped / "ppo.zip").exists():

@@ -42,9 +42,10 @@ from pathlib import Path
 from etmpc.common.documents import loads
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import refuse_foreign, what_differs, write_json, write_text
+from etmpc.common.progress import stage
 from etmpc.evaluation.evaluate import evaluate
 from etmpc.evaluation.testsets import default_path, load
-from etmpc.evaluation.workers import shared_pools
+from etmpc.evaluation.backends import shared_pools
 from etmpc.experiments.stages import trained
 from etmpc.experiments.pareto import best_periodic, build_pareto, report_section
 from etmpc.learning import dpi
@@ -244,17 +245,22 @@ def _sweep(
     periodic = [f"every:{t}" for t in range(1, system.horizon + 1)]
     events = [f"threshold:{x:g}" for x in settings.thresholds]
     say(f"{domain}: {len(periodic)} periodic schedules and {len(events)} event triggers")
-    fixed = _stage(out / "fixed.json", policies=periodic + events, **run)
+    with stage(f"{domain}: fixed policies"):  # each stage named in the progress lines
+        fixed = _stage(out / "fixed.json", policies=periodic + events, **run)
     priced = []
     for i, price in enumerate(settings.prices):
         best = best_periodic(fixed, periodic, price, system.objective_sense)
         say(f"{domain}: price {price:g}: rollout and oracle over {best}")
         specs = [f"rollout:{best}:{settings.futures}:{settings.horizon}", f"oracle:{best}"]
-        evaluation = _stage(out / f"price_{i}.json", policies=specs, recompute_price=price, **run)
+        at = f"{domain}: price {price:g} ({i + 1}/{len(settings.prices)})"
+        with stage(f"{at}: rollout and oracle"):
+            evaluation = _stage(out / f"price_{i}.json", policies=specs, recompute_price=price, **run)
         if settings.learner is not None:
-            evaluation = _merge(evaluation, _learned(out, i, domain, price, settings.learner, run))
+            with stage(f"{at}: the default learner"):
+                evaluation = _merge(evaluation, _learned(out, i, domain, price, settings.learner, run))
         if settings.self_trigger is not None:
-            evaluation = _merge(evaluation, _self(out, i, domain, price, settings.self_trigger, run, say))
+            with stage(f"{at}: the self-trigger"):
+                evaluation = _merge(evaluation, _self(out, i, domain, price, settings.self_trigger, run, say))
         priced.append(evaluation)
     pareto = build_pareto(domain, system.objective_sense, settings, fixed, periodic, events, priced)
     pareto["wall_seconds_this_invocation"] = time.perf_counter() - started
@@ -282,7 +288,8 @@ def _self(out: Path, i: int, domain: str, price: float, settings: SelfSettings, 
     if path.exists():
         return loads(path.read_text())
     if not policy.exists():
-        train_self(system_key(domain, price), policy, settings, run["workers"], run["backend"], run["address"], say=say)
+        key = system_key(domain, price)
+        train_self(key, policy, settings, run["workers"], run["backend"], run["address"], say=say, progress=run["progress"])
     return _stage(path, policies=[f"self:{policy}"], recompute_price=price, **run)
 
 

@@ -338,6 +338,7 @@ def train_ppo(
     recompute_price: float | None = None,
     say=lambda line: None,
     resume: bool = False,
+    progress: bool = False,
 ) -> dict:
     """Train on ``task`` (a name, at ``recompute_price`` if given, or a :class:`SystemKey`), checkpoint,
     choose on validation episodes; returns ``training.json``'s content. A stopped run in ``out`` starts
@@ -353,7 +354,7 @@ def train_ppo(
     if not resume:
         (out / "checkpoints" / RESUME).unlink(missing_ok=True)  # a stopped run starts again
     learner = PpoLearner(settings, workers)
-    run(learner, key, out, (settings.seed,), workers, resume, progress=False, say=say)
+    run(learner, key, out, (settings.seed,), workers, resume, progress=progress, say=say)
     return learner.result
 
 

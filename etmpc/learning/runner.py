@@ -11,7 +11,6 @@ keep the best (:func:`best`). It returns a :class:`Run`: the learner, its policy
 
 from __future__ import annotations
 
-import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,9 +18,10 @@ from typing import Callable
 
 import numpy as np
 
+from etmpc.common.progress import Progress
 from etmpc.common.sense import oriented
 from etmpc.common.errors import EtmpcError
-from etmpc.evaluation.workers import make_backend
+from etmpc.evaluation.backends import make_backend
 from etmpc.learning.base import Learner, check_decisions, learner_class
 from etmpc.learning.config import VALIDATION_ENTROPY
 from etmpc.learning.jobs import mean_scores
@@ -70,7 +70,7 @@ def run(
         raise EtmpcError(f"{out} already holds a training run; pass --resume to continue it, or choose another --out")
     saved = learner.saved_state()
     total = learner.work()
-    with make_backend(backend, workers, address) as pool, Progress(total, f"train {learner.key.task}", progress) as bar:
+    with make_backend(backend, workers, address) as pool, Progress(total, enabled=progress, unit=learner.unit) as bar:
         learner.pool, learner.tick = pool, bar.update
         try:
             if saved is None:
@@ -79,8 +79,7 @@ def run(
                 learner.save()
             else:
                 learner.load_state(saved)
-                bar.update(learner.work_done())
-            resumed_from = bar.n
+                bar.skip(learner.work_done())  # done before: not in the estimate's rate
             for milestone in learner.milestones():
                 if milestone <= learner.done:
                     continue
@@ -88,7 +87,7 @@ def run(
                 learner.save()
                 line = learner.report()
                 if line is not None:
-                    bar.write(f"{line}; {_eta(started, bar, resumed_from)}")
+                    bar.write(f"{line}; {bar.times()}")
             if not learner.chosen:
                 scores = learner.scores(
                     lambda policies: validate(
@@ -125,38 +124,6 @@ def validate(pool, key: SystemKey, policies: list, episodes: int, on_result=None
 def best(scores: list[float], sense: str) -> int:
     """The index of the best score (``sense``: ``"max"`` or ``"min"``); the first wins a tie."""
     return int(np.argmax(oriented(np.asarray(scores, dtype=float), sense)))
-
-
-class Progress:
-    """A tqdm bar (on a terminal) with its own count, so the ETA line works when the bar is off."""
-
-    def __init__(self, total: int, desc: str, enabled: bool):
-        from tqdm import tqdm
-
-        self.n, self.total = 0, total
-        self._bar = tqdm(total=total, unit="ep", desc=desc, disable=None if enabled else True)
-        self._quiet = not enabled
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self._bar.close()
-
-    def update(self, n: int) -> None:
-        self.n += n
-        self._bar.update(n)
-
-    def write(self, line: str) -> None:
-        if not self._quiet:
-            self._bar.write(line, file=sys.stderr)
-
-
-def _eta(started: float, bar: Progress, resumed_from: int) -> str:
-    elapsed = time.perf_counter() - started
-    done_here, left = bar.n - resumed_from, bar.total - bar.n
-    eta = elapsed * left / done_here if done_here > 0 else float("nan")
-    return f"elapsed {elapsed:.0f} s, ETA {eta:.0f} s"
 
 
 def cost_path(stage: Path) -> Path:

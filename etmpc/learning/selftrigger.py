@@ -213,8 +213,8 @@ class SelfLearner(Learner):
 
     def learn(self, budget: int, callback) -> None:
         settings, system, candidates, out = self.settings, self.system, self.candidate_lengths, self.policy_file
-        labelled = self.pool.map(_label_job, [(self.key, self.base, candidates, settings, i) for i in range(budget)])
-        callback(budget)
+        jobs = [(self.key, self.base, candidates, settings, i) for i in range(budget)]
+        labelled = self.pool.map(_label_job, jobs, lambda job: callback(1))  # each labelled episode counted as it ends
         self.rows = [row for episode in labelled for row in episode]
         if not self.rows:
             raise EtmpcError("no solves were labelled; give more episodes")
@@ -271,6 +271,7 @@ def train_self(
     backend: str = "local",
     address: str | None = None,
     say=lambda line: None,
+    progress: bool = False,
 ) -> SelfTrigger:
     """Choose the base, label, fit, validate and write ``out`` (the policy file); returns the
     policy. ``key``: a :class:`~etmpc.systems.SystemKey` (a task at a price), or a task's name.
@@ -278,7 +279,7 @@ def train_self(
     from etmpc.learning.runner import run
 
     learner = SelfLearner(settings, Path(out))
-    run(learner, system_key(key), Path(out).parent, None, workers, False, backend, address, progress=False, say=say)
+    run(learner, system_key(key), Path(out).parent, None, workers, False, backend, address, progress=progress, say=say)
     return learner.written
 
 

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from etmpc.common.progress import Progress
 from etmpc.evaluation.workers import context, play_test_episode
 from etmpc.loop import Trajectory
 from etmpc.policies import parse_policy
@@ -38,10 +39,12 @@ def render_rollout(
     fps: float | None = None,
     testset_path: str | None = None,
     record: str | Path | None = None,
+    progress: bool = True,
 ) -> RenderResult:
     """Play test-set ``episode`` under ``policy_spec`` exactly as ``etmpc evaluate`` does (repeat 0
     of ``seed``) and write its video to ``out``, at one frame per control interval by default.
-    With ``record``, also write the episode, its frames included, into that Rerun recording."""
+    With ``record``, also write the episode, its frames included, into that Rerun recording. ``progress``:
+    the frames drawn and the time left, on stderr."""
     check_display()  # before any domain is imported: an on-screen backend warns without a display
     check_name(domain)
     check_scene(system_class(domain))
@@ -57,14 +60,15 @@ def render_rollout(
     states = traj.states[: traj.steps + 1]
     states = states[np.all(np.isfinite(states), axis=1)]  # an episode that diverged ends on a NaN row
     kept = played.record(policy_spec, getattr(policy, "announce", None))
-    frames = iter_frames(system, env, states, width, height)
-    if kept.timed:  # time in the loop: each frame says which plan is in force, and which solve is in flight
-        frames = caption_frames(frames, frame_captions(kept, bool(system.compute_levels)))
-    if record is None:  # frames go straight into the encoder
-        count = write_video(frames, out, fps)
-    else:
-        frames = list(frames)
-        count = write_video(frames, out, fps)
-        with Recorder(record) as recorder:
-            recorder.log_episode(kept, frames)
+    with Progress(len(states), enabled=progress, unit="frames") as bar:  # the frames drawn, as the encoder takes them
+        frames = (bar.update() or frame for frame in iter_frames(system, env, states, width, height))
+        if kept.timed:  # time in the loop: each frame says which plan is in force, and which solve is in flight
+            frames = caption_frames(frames, frame_captions(kept, bool(system.compute_levels)))
+        if record is None:  # frames go straight into the encoder
+            count = write_video(frames, out, fps)
+        else:
+            frames = list(frames)
+            count = write_video(frames, out, fps)
+            with Recorder(record) as recorder:
+                recorder.log_episode(kept, frames)
     return RenderResult(path=Path(out), frames=count, fps=fps, trajectory=traj)

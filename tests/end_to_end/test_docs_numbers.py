@@ -48,12 +48,12 @@ def test_no_page_calls_the_100_point_reference_a_bound_that_knows_the_future():
 
 def test_score_help_names_the_leaderboards_rows(capsys):
     from etmpc.cli import main
-    from etmpc.experiments import leaderboard
+    from etmpc.experiments import leaderboard_rows
 
     with pytest.raises(SystemExit):
         main(["score", "--help"])
     text = " ".join(capsys.readouterr().out.split())
-    assert all(name in text for name in leaderboard.row_names()) and "GPOMDP (shipped)" in text and "PPO (shipped)" in text
+    assert all(name in text for name in leaderboard_rows.row_names()) and "GPOMDP (shipped)" in text and "PPO (shipped)" in text
 
 
 # -- the checker itself, on a small fake page --------------------------------------------------------

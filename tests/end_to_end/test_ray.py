@@ -105,7 +105,7 @@ def test_a_worker_with_another_test_set_refuses_with_the_same_one_line_error(bac
     same one-line EtmpcError on either backend (not wrapped in Ray's remote traceback)."""
     from etmpc.common.errors import EtmpcError
     from etmpc.learning.jobs import _call
-    from etmpc.evaluation.workers import make_backend
+    from etmpc.evaluation.backends import make_backend
 
     job = ("evaluate", ("battery", "0" * 64, {}, 0, 0))
     with make_backend(backend, 2) as pool, pytest.raises(EtmpcError) as caught:

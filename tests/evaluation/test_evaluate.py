@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from etmpc.common.errors import EtmpcError
-from etmpc.evaluation import workers
+from etmpc.evaluation import backends
 from etmpc.evaluation.evaluate import evaluate
 from etmpc.loop import run_episode
 from etmpc.policies import parse_policy
@@ -28,20 +28,20 @@ def test_stages_in_shared_pools_use_one_pool_and_give_the_same_numbers(serial):
     """Inside ``shared_pools`` two stages run on the same worker processes, with the numbers of a
     serial run; a stage that fails ends its pool (the next stage starts another), and leaving the
     block ends every worker."""
-    with workers.shared_pools():
+    with backends.shared_pools():
         first = evaluate("cart_pendulum", POLICIES, episodes=4, workers=2, progress=False)
-        pool = workers._SHARED_POOLS[2]
+        pool = backends._SHARED_POOLS[2]
         processes = list(pool._processes.values())
         second = evaluate("cart_pendulum", POLICIES, episodes=4, workers=2, progress=False)
-        assert workers._SHARED_POOLS[2] is pool and list(pool._processes.values()) == processes
+        assert backends._SHARED_POOLS[2] is pool and list(pool._processes.values()) == processes
         with pytest.raises(RuntimeError, match="a stage failed"):
-            with workers.make_backend("local", 2):
+            with backends.make_backend("local", 2):
                 raise RuntimeError("a stage failed")
-        assert 2 not in workers._SHARED_POOLS
-        with workers.make_backend("local", 2) as backend:
-            assert backend._pool is not pool and workers._SHARED_POOLS[2] is backend._pool
-        last = workers._SHARED_POOLS[2]
-    assert workers._SHARED_POOLS is None
+        assert 2 not in backends._SHARED_POOLS
+        with backends.make_backend("local", 2) as backend:
+            assert backend._pool is not pool and backends._SHARED_POOLS[2] is backend._pool
+        last = backends._SHARED_POOLS[2]
+    assert backends._SHARED_POOLS is None
     for result in (first, second):
         assert json.dumps(serial.to_json(), sort_keys=True) == json.dumps(result.to_json(), sort_keys=True)
     for process in processes:

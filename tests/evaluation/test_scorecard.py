@@ -186,6 +186,38 @@ def test_a_card_row_of_an_older_etmpc_without_the_failures_ci_and_counts_still_l
     assert " 0.50 " in line and "0.50 ±" not in line  # the mean alone
 
 
+def test_a_suite_score_in_a_log_counts_the_whole_cards_episodes_on_stderr_and_keeps_stdout_for_results(monkeypatch, capsys):
+    import re
+
+    from etmpc.common import progress
+
+    for name in ("FIRST_LINE_AFTER", "EVERY", "CLOSEST", "MEASURED"):  # a line at every episode from the second (a rate)
+        monkeypatch.setattr(progress, name, 0.0)
+    argv = ["score", "every:3", "every:5", "--task", "battery", "--task", "cart_pendulum", "--episodes", "2", "--workers", "1"]
+    assert main(argv) == 0
+    out, err = capsys.readouterr()
+    lines = [line for line in err.splitlines() if line.startswith("etmpc score: ")]
+    line = re.compile(r"etmpc score: (\d+)/8 episodes, \d+:\d\d elapsed, about \d+:\d\d left$")
+    counts = [int(m[1]) for m in map(line.match, lines) if m]
+    assert counts == list(range(2, 8)) and re.fullmatch(r"etmpc score: 8/8 episodes, done in \d+:\d\d", lines[-1])
+    assert "elapsed" not in out and "references: battery" in out
+
+
+def test_a_score_over_fewer_episodes_than_its_ci_needs_says_so_in_one_line_and_the_card_is_the_same():
+    from etmpc.evaluation.metrics import CI_EPISODES
+    from etmpc.evaluation.scorecard import Scorecard, failed_task
+    from etmpc.evaluation.scoretable import format_scorecard
+
+    enough = _row("battery", range(CI_EPISODES))
+    few = _row("reacher", range(CI_EPISODES - 1))
+    whole = Scorecard(["battery"], {}, [enough], [aggregate([enough])])
+    assert not any(line.startswith("note:") for line in format_scorecard(whole).splitlines())
+    card = Scorecard(["battery", "reacher"], {}, [enough, few, failed_task("battery", "other", "it failed")], [])
+    (note,) = [line for line in format_scorecard(card).splitlines() if line.startswith("note:")]
+    assert f"reacher on {CI_EPISODES - 1} episode(s), fewer than the {CI_EPISODES}" in note and "battery" not in note
+    assert "note:" not in json.dumps(card.to_json())  # the human-readable output only: the card's fields are its own
+
+
 @pytest.mark.parametrize("task", names())
 def test_the_stored_references_are_what_playing_the_episodes_again_gives(task):
     system = make_system(task)

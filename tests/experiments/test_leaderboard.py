@@ -7,7 +7,7 @@ import json
 
 import pytest
 
-from etmpc.experiments import leaderboard
+from etmpc.experiments import leaderboard_rows
 from etmpc.experiments.leaderboard import BEGIN, END, build, headline, table_in
 from etmpc.systems import names as suite_tasks
 
@@ -26,7 +26,8 @@ def board(tmp_path_factory):
 def test_the_references_score_0_and_100_and_every_row_says_what_it_cost(board):
     _, data = board
     rows = {e["name"]: e["rows"][0] for e in data["entries"]}
-    shipped = {name for name, file, _, _ in leaderboard.shipped_learners() if leaderboard.shipped_policy("battery", file)}
+    learners = leaderboard_rows.shipped_learners()
+    shipped = {name for name, file, _, _ in learners if leaderboard_rows.shipped_policy("battery", file)}
     assert "DPI (shipped)" in shipped
     assert set(rows) == {"always", "best periodic", "best threshold", "rollout meter", "oracle"} | shipped
     assert rows["best periodic"]["score"] == 0.0 and rows["oracle"]["score"] == 100.0
@@ -51,8 +52,8 @@ def test_an_interrupted_run_continues_without_playing_a_finished_row_again(board
     def no_play(*args, **kwargs):
         raise AssertionError("played again")
 
-    monkeypatch.setattr(leaderboard, "play_and_score", no_play)
-    monkeypatch.setattr(leaderboard, "best_threshold", no_play)  # its choice is kept too
+    monkeypatch.setattr(leaderboard_rows, "play_and_score", no_play)
+    monkeypatch.setattr(leaderboard_rows, "best_threshold", no_play)  # its choice is kept too
     again = build(out / "again", out / "work", ["battery"], episodes=2, workers=1)
     assert headline(again) == headline(data)
 
@@ -71,16 +72,16 @@ def test_the_costliest_rows_come_from_references_that_kept_their_runs_and_are_th
     refs = replace(stored("cart_pendulum").head(2), oracle_evaluation=None, rollout_evaluation=None)
     spec = refs.oracle_spec if kind == "oracle" else rollout_meter_spec(make_system("cart_pendulum"), refs.best)
     played = evaluate("cart_pendulum", [spec], episodes=2, workers=1, progress=False)
-    expected = leaderboard.play_and_score("cart_pendulum", refs, spec, workers=1, progress=False)
+    expected = leaderboard_rows.play_and_score("cart_pendulum", refs, spec, workers=1, progress=False)
 
     def no_play(*args, **kwargs):
         raise AssertionError("played again")
 
-    monkeypatch.setattr(leaderboard, "play_and_score", no_play)
-    entry = leaderboard.Entry(kind, "bound", {"cart_pendulum": spec})
+    monkeypatch.setattr(leaderboard_rows, "play_and_score", no_play)
+    entry = leaderboard_rows.Entry(kind, "bound", {"cart_pendulum": spec})
     field = "oracle_evaluation" if kind == "oracle" else "rollout_evaluation"
     kept = replace(refs, **{field: played.to_json(cpu=True)})
-    row, _ = leaderboard._row(entry, "cart_pendulum", kept, tmp_path, 2, 1, lambda line: None)
+    row, _ = leaderboard_rows._row(entry, "cart_pendulum", kept, tmp_path, 2, 1, lambda line: None)
     assert row.episode_scores == expected.episode_scores and (kind != "oracle" or row.score == 100.0)
     assert (row.objective_mean, row.recomputes_mean, row.solver_failures, row.failures_mean) == (
         expected.objective_mean,
@@ -91,7 +92,7 @@ def test_the_costliest_rows_come_from_references_that_kept_their_runs_and_are_th
     assert getattr(kept.head(1), field) is None  # a part of the test set: its row is played
     other = replace(entry, specs={"cart_pendulum": spec.replace(refs.best, "every:2")})
     with pytest.raises(AssertionError, match="played again"):  # a row of another spec is not taken from them
-        leaderboard._row(other, "cart_pendulum", kept, tmp_path / "other", 2, 1, lambda line: None)
+        leaderboard_rows._row(other, "cart_pendulum", kept, tmp_path / "other", 2, 1, lambda line: None)
 
 
 def test_the_best_threshold_is_chosen_once_and_chosen_again_when_its_task_changes(board, monkeypatch, tmp_path):
@@ -105,17 +106,17 @@ def test_the_best_threshold_is_chosen_once_and_chosen_again_when_its_task_change
     path = work / "best-threshold" / "battery" / "trading.choice.json"
     chosen = data["entries"][2]["specs"]["battery/trading"]
     assert json.loads(path.read_text())["chosen"] == chosen
-    monkeypatch.setattr(leaderboard, "best_threshold", lambda *a: pytest.fail("chosen again"))
-    assert leaderboard.kept_threshold("battery", work, 1, lambda line: None) == chosen
+    monkeypatch.setattr(leaderboard_rows, "best_threshold", lambda *a: pytest.fail("chosen again"))
+    assert leaderboard_rows.kept_threshold("battery", work, 1, lambda line: None) == chosen
     calls = []
-    monkeypatch.setattr(leaderboard, "best_threshold", lambda task, workers, say: calls.append(task) or "threshold:0.01")
-    monkeypatch.setattr(leaderboard, "task_version", lambda task: 99)  # the task changed: its choice does not stand
-    assert leaderboard.kept_threshold("battery", work, 1, lambda line: None) == "threshold:0.01" and calls == ["battery"]
+    monkeypatch.setattr(leaderboard_rows, "best_threshold", lambda task, workers, say: calls.append(task) or "threshold:0.01")
+    monkeypatch.setattr(leaderboard_rows, "task_version", lambda task: 99)  # the task changed: its choice does not stand
+    assert leaderboard_rows.kept_threshold("battery", work, 1, lambda line: None) == "threshold:0.01" and calls == ["battery"]
     edited = json.loads(path.read_text())
     edited["chosen"] = "threshold:0.02"  # by hand: refused, never used
     path.write_text(json.dumps(edited))
     with pytest.raises(EtmpcError, match="kept leaderboard row"):
-        leaderboard.kept_threshold("battery", work, 1, lambda line: None)
+        leaderboard_rows.kept_threshold("battery", work, 1, lambda line: None)
 
 
 def test_the_readmes_headline_table_is_the_generated_leaderboards():
@@ -129,21 +130,23 @@ def test_the_readmes_headline_table_is_the_generated_leaderboards():
 
 def test_a_row_is_played_again_when_the_policy_file_behind_its_spec_changed(tmp_path, monkeypatch):
     # A shipped policy retrained in place keeps its path, so its spec; its finished row must not stand.
-    policy = tmp_path / "policies" / "cart_pendulum" / "balance" / "learned.json"
+    policy = tmp_path / "policies" / "cart_pendulum" / "learned.json"
     policy.parent.mkdir(parents=True)
-    policy.write_bytes((REPO / "policies" / "cart_pendulum" / "balance" / "learned.json").read_bytes())
-    entry = leaderboard.Entry("DPI (shipped)", "learned", {"cart_pendulum": f"rl:{policy}"})
-    refs = leaderboard.stored("cart_pendulum")
+    policy.write_bytes((REPO / "policies" / "cart_pendulum" / "learned.json").read_bytes())
+    entry = leaderboard_rows.Entry("DPI (shipped)", "learned", {"cart_pendulum": f"rl:{policy}"})
+    from etmpc.evaluation.references import stored
+
+    refs = stored("cart_pendulum")
     played = []
-    real = leaderboard.play_and_score
-    monkeypatch.setattr(leaderboard, "play_and_score", lambda *a, **k: played.append(a[2]) or real(*a, **k))
-    first, _ = leaderboard._row(entry, "cart_pendulum", refs, tmp_path / "work", 1, 1, lambda line: None)
-    again, _ = leaderboard._row(entry, "cart_pendulum", refs, tmp_path / "work", 1, 1, lambda line: None)
+    real = leaderboard_rows.play_and_score
+    monkeypatch.setattr(leaderboard_rows, "play_and_score", lambda *a, **k: played.append(a[2]) or real(*a, **k))
+    first, _ = leaderboard_rows._row(entry, "cart_pendulum", refs, tmp_path / "work", 1, 1, lambda line: None)
+    again, _ = leaderboard_rows._row(entry, "cart_pendulum", refs, tmp_path / "work", 1, 1, lambda line: None)
     assert len(played) == 1 and again == first  # unchanged: kept
     data = json.loads(policy.read_text())
     data["theta"] = [0.0] * (len(data["theta"]) - 1) + [5.0]  # keeps every plan it may
     policy.write_text(json.dumps(data))
-    changed, _ = leaderboard._row(entry, "cart_pendulum", refs, tmp_path / "work", 1, 1, lambda line: None)
+    changed, _ = leaderboard_rows._row(entry, "cart_pendulum", refs, tmp_path / "work", 1, 1, lambda line: None)
     assert len(played) == 2 and changed.episode_scores != first.episode_scores
 
 
@@ -154,8 +157,8 @@ def test_a_verified_card_joins_as_a_row_and_a_forged_one_is_refused_before_any_r
     out, data = board
     card = tmp_path / "card.json"
     assert main(["score", "every:2", "--task", "battery", "--episodes", "2", "--workers", "1", "--json", str(card)]) == 0
-    monkeypatch.setattr(leaderboard, "play_and_score", lambda *a, **k: pytest.fail("a row was played"))
-    monkeypatch.setattr(leaderboard, "best_threshold", lambda task, workers, say: data["entries"][2]["specs"][task])
+    monkeypatch.setattr(leaderboard_rows, "play_and_score", lambda *a, **k: pytest.fail("a row was played"))
+    monkeypatch.setattr(leaderboard_rows, "best_threshold", lambda task, workers, say: data["entries"][2]["specs"][task])
     joined = build(tmp_path / "docs", out / "work", ["battery"], episodes=2, workers=1, cards=[card])
     entry = next(e for e in joined["entries"] if e["name"] == "every:2 (submitted)")
     assert entry["kind"] == "submitted" and entry["specs"] == {"battery/trading": "every:2"}
@@ -179,11 +182,11 @@ def test_a_row_timed_on_the_wall_clock_is_played_again(board, tmp_path):
     out, _ = board
     (kept,) = (out / "work" / "always").glob("*/*.json")
     current = json.loads(kept.read_text())
-    assert current["key"]["cpu_clock"] == "thread_time" and leaderboard._kept(kept, current["key"]) is not None
+    assert current["key"]["cpu_clock"] == "thread_time" and leaderboard_rows._kept(kept, current["key"]) is not None
     wall = {k: v for k, v in current.items() if k != SEAL}
     wall["key"] = {k: v for k, v in current["key"].items() if k != "cpu_clock"}  # as an etmpc that timed the wall kept it
     (tmp_path / "wall.json").write_text(json.dumps(sealed(wall)))
-    assert leaderboard._kept(tmp_path / "wall.json", current["key"]) is None
+    assert leaderboard_rows._kept(tmp_path / "wall.json", current["key"]) is None
 
 
 def test_the_failures_column_is_mean_and_ci_and_an_older_row_or_page_without_them_still_works(board, tmp_path):
@@ -200,12 +203,12 @@ def test_the_failures_column_is_mean_and_ci_and_an_older_row_or_page_without_the
     (kept,) = (out / "work" / "always").glob("*/*.json")
     current = json.loads(kept.read_text())
     assert current["key"]["failures"] == "curtailed"
-    assert leaderboard._kept(kept, current["key"]) is not None
+    assert leaderboard_rows._kept(kept, current["key"]) is not None
     older = {k: v for k, v in current.items() if k != SEAL}
     older["key"] = {k: v for k, v in current["key"].items() if k != "failures"}
     older["row"] = {k: v for k, v in current["row"].items() if k not in ("failures_ci95", "episode_failures")}
     (tmp_path / "older.json").write_text(json.dumps(sealed(older)))
-    assert leaderboard._kept(tmp_path / "older.json", current["key"]) is None
+    assert leaderboard_rows._kept(tmp_path / "older.json", current["key"]) is None
     # A page made from an older JSON (rows without the CI, references without failure names) shows the mean alone.
     data = copy.deepcopy(data)
     for entry in data["entries"]:

@@ -223,7 +223,7 @@ def test_a_new_learner_is_one_class_and_the_runner_trains_chooses_and_resumes_it
     done = run("best-period-test", "battery", tmp_path / "run", workers=1, progress=False, settings=settings)
     assert done.policy in ("every:3", "every:5") and done.learner.seen == [3, 5]
     from etmpc.learning.runner import validate
-    from etmpc.evaluation.workers import make_backend
+    from etmpc.evaluation.backends import make_backend
 
     with make_backend("local", 1) as pool:
         means = validate(pool, done.learner.key, ["every:3", "every:5"], 2)

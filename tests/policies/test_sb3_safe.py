@@ -418,7 +418,7 @@ def test_nor_when_a_swapped_shipped_model_is_on_the_leaderboard(tmp_path, monkey
     import shutil
 
     from etmpc.evaluation import inputs
-    from etmpc.experiments import leaderboard
+    from etmpc.experiments import leaderboard, leaderboard_rows
 
     root = tmp_path / "root"
     shutil.copytree(REPO / "policies", root / "policies")
@@ -428,8 +428,8 @@ def test_nor_when_a_swapped_shipped_model_is_on_the_leaderboard(tmp_path, monkey
     poisoned = _poisoned(tmp_path, "lr_schedule", marker)
     shutil.copy(poisoned, root / "policies" / "cart_pendulum" / "balance" / "ppo.zip")
     monkeypatch.setattr(inputs, "data_root", lambda: root)
-    monkeypatch.setattr(leaderboard, "data_root", lambda: root)
-    monkeypatch.setattr(leaderboard, "play_and_score", lambda *a, **k: pytest.fail("a row was played"))
+    monkeypatch.setattr(leaderboard_rows, "data_root", lambda: root)
+    monkeypatch.setattr(leaderboard_rows, "play_and_score", lambda *a, **k: pytest.fail("a row was played"))
     with pytest.raises(EtmpcError, match="is not the policy etmpc ships"):
         leaderboard.build(tmp_path / "docs", tmp_path / "work", ["cart_pendulum"], episodes=2, workers=1)
     assert not marker.exists()
