@@ -13,7 +13,7 @@ def add_parser(sub, tasks: str) -> None:
     """The ``discriminate`` subcommand's options, on the command line's subparsers ``sub``."""
     di = sub.add_parser(
         "discriminate",
-        help="can triggers be told apart on a task? The event triggers, the clairvoyant "
+        help="can policies be told apart on a task? The event-triggered policies, the clairvoyant "
         "reference and the rollout policy against the periodic front at their rate",
     )
     task_option(di, tasks)
@@ -22,7 +22,7 @@ def add_parser(sub, tasks: str) -> None:
         type=types.price,
         default=None,
         metavar="P",
-        help="price of a computation that chooses the best periodic schedule and prices the oracle and the "
+        help="price of a recompute that chooses the best periodic schedule and prices the oracle and the "
         "rollout (default: the task's)",
     )
     di.add_argument("--episodes", type=types.positive_int, default=30, help="first N test-set episodes (default 30)")

@@ -23,7 +23,7 @@ def add_parser(sub, tasks: str) -> None:
     fc = kinds.add_parser(
         "forecasts",
         help="the paper's Figure 1: a battery test-set episode's true production and price "
-        "with the forecasts each MPC computation was given, one column per policy",
+        "with the forecasts each MPC solve was given, one column per policy",
     )
     fc.add_argument("--policy", action="append", default=None, metavar="SPEC", help=f"{syntax()} (repeatable; default every:20)")
     fc.add_argument("--episode", type=types.index, default=0, help="test-set episode (default 0)")

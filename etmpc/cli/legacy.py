@@ -97,7 +97,7 @@ def add_self_parser(sub, tasks: str) -> None:
         type=types.price,
         default=None,
         metavar="P",
-        help="train for this price of a computation (default: the system's; see evaluate --price)",
+        help="train for this price of a recompute (default: the task's; see evaluate --price)",
     )
     ts.add_argument("--episodes", type=types.positive_int, default=None, help="labelled training episodes (default 40)")
     ts.add_argument("--solves", type=types.positive_int, default=None, help="labelled solves per episode (default 8)")

@@ -36,7 +36,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"etmpc {_version()}")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
-    ev = sub.add_parser("evaluate", help="compare recomputation policies on a stored test set")
+    ev = sub.add_parser("evaluate", help="compare policies on a stored test set")
     task_option(ev, tasks, "the task to evaluate on")
     ev.add_argument(
         "--policy",
@@ -59,7 +59,7 @@ def build_parser() -> argparse.ArgumentParser:
         type=types.price,
         default=None,
         metavar="P",
-        help="price of a computation in the objective (default: the system's, 5e-5 for the cart "
+        help="price of a recompute in the objective (default: the task's, 5e-5 for the cart "
         "pendulum, 0 for the battery, whose computer draws eta_c from the battery)",
     )
     ev.add_argument("--test-set", default=None, metavar="PATH", help="test set file (default: the stored one)")
@@ -89,7 +89,7 @@ def build_parser() -> argparse.ArgumentParser:
     re_.add_argument(
         "--sweep",
         action="store_true",
-        help="also sweep the price of a computation (etmpc sweep) and answer the equal-rate question in the "
+        help="also sweep the price of a recompute (etmpc sweep) and answer the equal-rate question in the "
         "report; on a finished run's directory only the sweeps run (make sweep)",
     )
     re_.add_argument(
@@ -102,14 +102,14 @@ def build_parser() -> argparse.ArgumentParser:
     re_.add_argument("--workers", type=types.workers, default=None, help="worker processes (default: one per core)")
     backend_arguments(re_)
 
-    sw = sub.add_parser("sweep", help="the trade-off curve over prices of a computation: pareto.json, pareto.png, SWEEP.md")
+    sw = sub.add_parser("sweep", help="the trade-off curve over prices of a recompute: pareto.json, pareto.png, SWEEP.md")
     task_option(sw, tasks, many=True)
     sw.add_argument(
         "--prices",
         type=types.prices,
         default=None,
         metavar="P1,P2,...",
-        help="prices of a computation (default: a log grid per system, up to where `never` wins)",
+        help="prices of a recompute (default: a log grid per task, up to where `never` wins)",
     )
     sw.add_argument(
         "--episodes",
@@ -123,7 +123,7 @@ def build_parser() -> argparse.ArgumentParser:
         type=Path,
         default=None,
         metavar="DIR",
-        help="run directory, a folder per system (default results/sweep, or results/sweep-quick with --quick)",
+        help="run directory, a folder per task (default results/sweep, or results/sweep-quick with --quick)",
     )
     sw.add_argument("--workers", type=types.workers, default=None, help="worker processes (default: one per core)")
     backend_arguments(sw)

@@ -26,7 +26,7 @@ class _LeaderboardHelp(str):
 
         rows = ", ".join(row_names()).replace("%", "%%")
         return (
-            f"score every built-in trigger ({rows}; a shipped learner where policies/<task>/ holds it; the oracle "
+            f"score every built-in policy ({rows}; a shipped learner where policies/<task>/ holds it; the oracle "
             "is the clairvoyant reference, 100) and write DIR/leaderboard.md, .json and the profile figure (make "
             "leaderboard)"
         ) % params
@@ -34,12 +34,12 @@ class _LeaderboardHelp(str):
 
 def add_parser(sub, tasks: str) -> None:
     """The ``score`` subcommand's options, on the command line's subparsers ``sub``."""
-    sc = sub.add_parser("score", help="score triggers on every task against the suite's fixed references: the scorecard")
+    sc = sub.add_parser("score", help="score policies on every task against the suite's fixed references: the scorecard")
     sc.add_argument(
         "policy",
         nargs="*",
         metavar="SPEC",
-        help="triggers to score: any --policy spec of evaluate (py:MODULE:NAME for your own, sb3:PATH, ...)",
+        help="policies to score: any --policy spec of evaluate (py:MODULE:NAME for your own, sb3:PATH, ...)",
     )
     task_option(sc, tasks, many=True, positional=False)
     sc.add_argument(
@@ -60,7 +60,7 @@ def add_parser(sub, tasks: str) -> None:
         type=types.png_path,
         default=None,
         metavar="PATH.png",
-        help="also draw the triggers' performance profiles (share of episodes above each score)",
+        help="also draw the policies' performance profiles (share of episodes above each score)",
     )
     sc.add_argument(
         "--workers",
@@ -72,7 +72,7 @@ def add_parser(sub, tasks: str) -> None:
         "--leaderboard",
         action="store_true",
         help=_LeaderboardHelp(
-            "score every built-in trigger and write DIR/leaderboard.md, .json and the profile figure (make leaderboard)"
+            "score every built-in policy and write DIR/leaderboard.md, .json and the profile figure (make leaderboard)"
         ),
     )
     sc.add_argument(
@@ -91,7 +91,7 @@ def add_parser(sub, tasks: str) -> None:
         action="append",
         default=None,
         metavar="CARD.json",
-        help="with --leaderboard: add the triggers of a scorecard made elsewhere (etmpc score --json, every "
+        help="with --leaderboard: add the policies of a score card made elsewhere (etmpc score --json, every "
         "task on its whole test set) as rows, once it verifies (etmpc verify; repeatable)",
     )
     sc.add_argument(

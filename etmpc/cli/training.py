@@ -71,7 +71,7 @@ def add_parser(sub, tasks: str) -> None:
     """The ``train`` subcommand's options (and ``train-self``'s), on the command line's subparsers ``sub``."""
     tr = sub.add_parser(
         "train",
-        help="train a recomputation policy with any registered learner: DPI (default), "
+        help="train a policy with any registered learner: DPI (default), "
         "GPOMDP (the paper's), the self-trigger or PPO (Stable-Baselines3, the 'rl' extra)",
     )
     task_option(tr, tasks, "the task to train on")
@@ -108,7 +108,7 @@ def add_parser(sub, tasks: str) -> None:
         type=types.price,
         default=None,
         metavar="P",
-        help="train for this price of a computation (default: the system's; see evaluate --price)",
+        help="train for this price of a recompute (default: the task's; see evaluate --price)",
     )
     tr.add_argument("--workers", type=types.workers, default=None, help="worker processes (default: one per core)")
     backend_arguments(tr)
