@@ -92,13 +92,7 @@ def add_self_parser(sub, tasks: str) -> None:
     ts.add_argument(
         "--out", type=types.json_path, required=True, metavar="FILE", help="the policy file to write (use it as self:FILE)"
     )
-    ts.add_argument(
-        "--price",
-        type=types.price,
-        default=None,
-        metavar="P",
-        help="train for this price of a recompute (default: the task's; see evaluate --price)",
-    )
+    training_price(ts)
     ts.add_argument("--episodes", type=types.positive_int, default=None, help="labelled training episodes (default 40)")
     ts.add_argument("--solves", type=types.positive_int, default=None, help="labelled solves per episode (default 8)")
     ts.add_argument(
@@ -145,3 +139,14 @@ def run_self(args) -> None:
         "(it writes DIR/selected.json)"
     )
     print(f"wrote {args.out} (evaluate it with: etmpc evaluate --task {args.task} --policy self:{args.out}{price})")
+
+
+def training_price(parser) -> None:
+    """``--price``, as ``train`` and ``train-self`` take it."""
+    parser.add_argument(
+        "--price",
+        type=types.price,
+        default=None,
+        metavar="P",
+        help="train for this price of a recompute (default: the task's; see evaluate --price)",
+    )

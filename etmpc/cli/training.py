@@ -103,13 +103,7 @@ def add_parser(sub, tasks: str) -> None:
         help="seeds: a range 0-4 or a list 0,2,5 (default: the learner's own, 0-4 for gpomdp and dpi, the "
         "settings' seed for ppo; how many each takes: --algorithm)",
     )
-    tr.add_argument(
-        "--price",
-        type=types.price,
-        default=None,
-        metavar="P",
-        help="train for this price of a recompute (default: the task's; see evaluate --price)",
-    )
+    legacy.training_price(tr)
     tr.add_argument("--workers", type=types.workers, default=None, help="worker processes (default: one per core)")
     backend_arguments(tr)
     tr.add_argument("--resume", action="store_true", help="continue the run in DIR from its last checkpoint")

@@ -13,7 +13,7 @@ This module may import ``etmpc.common`` and ``etmpc.control``.
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from functools import cached_property
 
 import casadi as ca
@@ -66,6 +66,31 @@ def tracked_change(s, tracked: tuple[str, ...]) -> np.ndarray:
     planned = np.array([float(forecasts[name][j]) for name in tracked])
     change = now - planned
     return np.array([*now, *planned, *change, float(np.hypot.reduce(change))])
+
+
+@dataclass(frozen=True)
+class TrackedFeatures:
+    """What a tracking task's exogenous features are (the learned policy's "error" set adds them): for
+    ``tracked`` ``("target_x_m", "target_y_m")``, the names ``target_x_m, target_y_m`` (now),
+    ``planned_target_x_m, ...`` (what the kept plan was made for), ``target_change_x_m, ...`` (now minus the
+    plan's) and ``target_change_m`` (its length: 0 until the tracked values change); called on an augmented
+    state, their values (:func:`tracked_change`). A system sets ``exogenous_features`` to it and
+    ``exogenous_feature_names`` to its :attr:`names`."""
+
+    tracked: tuple[str, ...]
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        parts = [name.split("_", 1) for name in self.tracked]  # target | x_m
+        return (
+            *self.tracked,
+            *(f"planned_{name}" for name in self.tracked),
+            *(f"{first}_change_{rest}" for first, rest in parts),
+            f"{parts[0][0]}_change_m",
+        )
+
+    def __call__(self, s) -> np.ndarray:
+        return tracked_change(s, self.tracked)
 
 
 class GaussNewtonSystem(SystemBase):

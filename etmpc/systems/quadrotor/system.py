@@ -30,7 +30,7 @@ import numpy as np
 
 from etmpc.control.mpc import FeedbackWeights, SolverSettings
 from etmpc.control.timing import Latency
-from etmpc.systems.gauss_newton import GaussNewtonSystem, tracked_change
+from etmpc.systems.gauss_newton import GaussNewtonSystem, TrackedFeatures
 from etmpc.systems.quadrotor import task as quadrotor_task
 from etmpc.systems.quadrotor.model import INPUT_NAMES, NU, NX, STATE_NAMES, AnalyticModel, Parameters
 from etmpc.systems.space import Space
@@ -48,24 +48,10 @@ SPACE = Space(
     force_scale=0.5 / max(quadrotor_task.GUST_PEAK_N),
 )
 
-# What the learned policy's default ("error") feature set adds for the quadrotor (etmpc.policies.learned).
-EXOGENOUS_FEATURES = (
-    "target_x_m",  # the waypoint now
-    "target_y_m",
-    "target_z_m",
-    "planned_target_x_m",  # the waypoint the kept plan flies to
-    "planned_target_y_m",
-    "planned_target_z_m",
-    "target_change_x_m",  # the waypoint now minus the plan's
-    "target_change_y_m",
-    "target_change_z_m",
-    "target_change_m",  # its length: 0 until the waypoint changes
-)
-
-
-def exogenous_features(s) -> np.ndarray:
-    """The values of :data:`EXOGENOUS_FEATURES` at augmented state ``s``."""
-    return tracked_change(s, TARGET)
+# What the learned policy's default ("error") feature set adds for the quadrotor (etmpc.policies.learned): the
+# waypoint now, the one the kept plan flies to, their difference and its length.
+EXOGENOUS = TrackedFeatures(TARGET)
+EXOGENOUS_FEATURES = EXOGENOUS.names
 
 
 @dataclass(frozen=True)
@@ -113,7 +99,7 @@ class QuadrotorSystem(GaussNewtonSystem):
     mpc_name = "quadrotor_waypoints_mpc"
     make_environment = staticmethod(quadrotor_task.make_environment)
     exogenous_feature_names = EXOGENOUS_FEATURES  # what the learned policy's "error" features add
-    exogenous_features = staticmethod(exogenous_features)
+    exogenous_features = EXOGENOUS
     failure_name = "outside geofence"  # steps ending outside the geofence or on the ground, per episode
     camera = "arena"
     space = SPACE  # the recordings' 3-D view of the flight

@@ -43,27 +43,16 @@ import numpy as np
 
 from etmpc.control.mpc import FeedbackWeights, SolverSettings
 from etmpc.control.timing import Latency
-from etmpc.systems.gauss_newton import TRACKING_SOLVER, GaussNewtonSystem, tracked_change
+from etmpc.systems.gauss_newton import TRACKING_SOLVER, GaussNewtonSystem, TrackedFeatures
 from etmpc.systems.reacher import task as reacher_task
 from etmpc.systems.reacher.model import INPUT_NAMES, NU, NX, STATE_NAMES, AnalyticModel, fingertip
 
 TARGET = ("target_x_m", "target_y_m")  # the observation's current target, and the plan's forecasts of it
 
-# What the learned policy's default ("error") feature set adds for the reacher (etmpc.policies.learned).
-EXOGENOUS_FEATURES = (
-    "target_x_m",  # the target now
-    "target_y_m",
-    "planned_target_x_m",  # the target the kept plan reaches for
-    "planned_target_y_m",
-    "target_change_x_m",  # the target now minus the plan's
-    "target_change_y_m",
-    "target_change_m",  # its length: 0 until the target jumps
-)
-
-
-def exogenous_features(s) -> np.ndarray:
-    """The values of :data:`EXOGENOUS_FEATURES` at augmented state ``s``."""
-    return tracked_change(s, TARGET)
+# What the learned policy's default ("error") feature set adds for the reacher (etmpc.policies.learned): the
+# target now, the one the kept plan reaches for, their difference and its length.
+EXOGENOUS = TrackedFeatures(TARGET)
+EXOGENOUS_FEATURES = EXOGENOUS.names
 
 
 @dataclass(frozen=True)
@@ -98,7 +87,7 @@ class ReacherSystem(GaussNewtonSystem):
     mpc_name = "reacher_jumps_mpc"
     make_environment = staticmethod(reacher_task.make_environment)
     exogenous_feature_names = EXOGENOUS_FEATURES  # what the learned policy's "error" features add
-    exogenous_features = staticmethod(exogenous_features)
+    exogenous_features = EXOGENOUS
     failure_name = "far from target"  # steps ending > 0.1 m from the target, per episode
     camera = "top"  # the scene shows the arm; the target stays where the physics has it
 
