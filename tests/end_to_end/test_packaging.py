@@ -134,9 +134,9 @@ def test_the_installed_commands_work_outside_the_checkout(wheel, tmp_path):
 
     result = run("score", "every:3", "--task", "battery", "--workers", "2")  # the stored references are installed
     best = json.loads((REPO / "tasks" / "battery" / "trading" / "references.json").read_text())["best"]
-    assert result.returncode == 0 and f"references: battery: {best} and oracle:{best}" in result.stdout, result.stderr
+    assert result.returncode == 0 and f"references: battery/trading: {best} and oracle:{best}" in result.stdout, result.stderr
     result = run("score", "every:3", "--task", "battery", "--episodes", "2", "--workers", "1")  # references computed
-    assert result.returncode == 0 and "references: battery: " in result.stdout, result.stderr
+    assert result.returncode == 0 and "references: battery/trading: " in result.stdout, result.stderr
 
     # `pip show` as this pip prints it (the venv's own, from ensurepip, may be too old to print License-Expression)
     shown = subprocess.run(

@@ -245,7 +245,7 @@ def test_scoring_plays_only_the_trigger_and_says_what_it_costs(tmp_path):
     best = json.loads(references_path("battery").read_text())["best"]
     card = etmpc.score([best, "threshold:0.01"], tasks=["battery"], workers=1, progress=False, json_path=tmp_path / "card.json")
     rows = {r.policy: r for r in card.rows}
-    assert rows[best].score == 0.0 and card.references["battery"]["best_periodic"] == best
+    assert rows[best].score == 0.0 and card.references["battery/trading"]["best_periodic"] == best
     assert all(r.cpu_ms["solve"] > 0 and r.cpu_ms["total"] >= r.cpu_ms["solve"] for r in card.rows)
     assert json.loads((tmp_path / "card.json").read_text())["rows"][1]["policy"] == "threshold:0.01"
 
@@ -254,8 +254,8 @@ def test_on_another_test_set_the_references_are_computed_and_said_so(small_batte
     path, refs = small_battery
     assert main(["score", refs.best, refs.oracle_spec, "--task", "battery", "--test-set", str(path), "--workers", "1"]) == 0
     out, err = capsys.readouterr()
-    assert f"battery: no stored references for test set {path}: computing them for this run" in err
-    assert f"references: battery: {refs.best} and {refs.oracle_spec} (computed)" in out
+    assert f"battery/trading: no stored references for test set {path}: computing them for this run" in err
+    assert f"references: battery/trading: {refs.best} and {refs.oracle_spec} (computed)" in out
     figure = path.with_name("profile.png")
     assert main(["score", "always", "--task", "battery", "--test-set", str(path), "--workers", "1", "--figure", str(figure)]) == 0
     assert figure.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
@@ -276,15 +276,15 @@ def test_a_trigger_that_fails_on_one_task_has_that_row_say_so_and_the_others_sco
     assert "failed: policy py:picky_trigger:T: decide raised RuntimeError: not for batteries" in out
     assert err.strip().splitlines()[-1] == (
         "etmpc: error: not every trigger could be scored on every task: "
-        "py:picky_trigger:T on battery (see its row); card.json not written (a card "
+        "py:picky_trigger:T on battery/trading (see its row); card.json not written (a card "
         "with a failed row never is)"
     )
     assert not (tmp_path / "card.json").exists() and "wrote card.json" not in out  # nor said to be
     card = etmpc.score(["py:picky_trigger:T"], tasks=["battery", "cart_pendulum"], workers=1, progress=False)
     rows = {r.task: r for r in card.rows}
-    assert not card.complete and rows["battery"].error and rows["cart_pendulum"].error is None
+    assert not card.complete and rows["battery/trading"].error and rows["cart_pendulum/balance"].error is None
     assert json.loads(references_path("cart_pendulum").read_text())["best"] == "every:3"
-    assert rows["cart_pendulum"].score == 0.0  # it plays every:3, the cart pendulum's best periodic schedule
+    assert rows["cart_pendulum/balance"].score == 0.0  # it plays every:3, the cart pendulum's best periodic schedule
 
 
 @pytest.mark.parametrize(

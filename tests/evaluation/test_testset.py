@@ -77,7 +77,7 @@ def test_missing_test_set(tmp_path, monkeypatch):
     assert "etmpc testset" not in str(info.value)
     # The stored one (here: where the stored one is looked for) is regenerated from its seed.
     monkeypatch.setattr(testset, "default_path", lambda domain, task: tmp_path / "stored.npz")
-    with pytest.raises(TestSetError, match="not found.*etmpc testset --task cart_pendulum --seed 20210601"):
+    with pytest.raises(TestSetError, match="not found.*etmpc testset --task cart_pendulum/balance --seed 20210601"):
         testset.load(tmp_path / "stored.npz", "cart_pendulum", "balance")
 
 
