@@ -1,8 +1,8 @@
 """etmpc: a benchmark for event-triggered model predictive control.
 
-An MPC makes plans, an LQR corrects prediction errors while a plan is kept, and a recomputation
-policy decides when to re-plan. The package is built in floors, each importing only the ones below
-it (docs/architecture.md; import-linter checks it):
+An MPC makes plans, an LQR corrects prediction errors while a plan is kept, and a policy (the paper's
+recomputation policy) decides when to recompute. The package is built in floors, each importing only the
+ones below it (docs/architecture.md; import-linter checks it):
 
 * ``etmpc.common``: errors, safe file writing, where the data lives, exact sums;
 * ``etmpc.control``: the parts of a controller: plan, MPC, compiled code, LQR;
@@ -10,13 +10,13 @@ it (docs/architecture.md; import-linter checks it):
 * ``etmpc.loop``: Algorithm 1, the closed loop that plays a system under a policy;
 * ``etmpc.policies``: when to recompute: fixed, threshold, learned, self-triggering, rollout;
 * ``etmpc.evaluation``: test sets, workers, ``evaluate``, ``bench``;
-* ``etmpc.envs``: the trigger problem as a ``dm_env`` and ``gymnasium`` environment, for any learner;
+* ``etmpc.envs``: the recompute decision as a ``dm_env`` and ``gymnasium`` environment, for any learner;
 * ``etmpc.learning``: GPOMDP, DPI, training runs, the self-trigger's training;
 * ``etmpc.views``: recordings, figures, video and ``render``, drawn from what the floors below produce;
 * ``etmpc.experiments``: ``reproduce`` and its report, the price ``sweep``;
 * ``etmpc.cli``: the ``etmpc`` command.
 
-The Python surface: :func:`etmpc.evaluate` (policies on a stored test set), :func:`etmpc.score` (triggers
+The Python surface: :func:`etmpc.evaluate` (policies on a stored test set), :func:`etmpc.score` (policies
 on every task against the suite's references: the scorecard), :mod:`etmpc.suite` (the
 tasks as dm-control environments) and :mod:`etmpc.systems` (the tasks as the loop plays them).
 """
@@ -32,7 +32,7 @@ __all__ = ["evaluate", "score"]
 
 
 def _register_environments() -> None:
-    """The trigger problem of every task as a gymnasium environment, ``etmpc/<domain>-<task>-v0``."""
+    """The recompute decision of every task as a gymnasium environment, ``etmpc/<domain>-<task>-v0``."""
     from importlib.util import find_spec
 
     if find_spec("gymnasium") is None:  # a dependency; an install without it still imports

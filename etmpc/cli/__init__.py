@@ -78,7 +78,7 @@ def main(argv: list[str] | None = None) -> int:
 
         args = options.build_parser().parse_args(argv)
         tasks.resolve(args)  # the task given the older way, with its deprecation line
-        # a Ctrl-C is told apart from a trigger that raises KeyboardInterrupt; progress lines name the command
+        # a Ctrl-C is told apart from a policy that raises KeyboardInterrupt; progress lines name the command
         with interrupts.watching(), progress.command(f"etmpc {args.command}"):
             commands.COMMANDS[args.command](args)
     except EtmpcError as exc:  # one line, whatever a name in it (a spec, a path) holds

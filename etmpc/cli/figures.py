@@ -91,7 +91,7 @@ def _trajectory(args) -> None:
     _check({"--out": out}, run_inputs([args.policy]))
     drawn = figures.trajectory(out, args.task, args.policy, args.episode, args.seed)
     print(
-        f"episode {args.episode} under {args.policy}: objective {drawn.objective!r}, {drawn.recomputes} computations, "
+        f"episode {args.episode} under {args.policy}: objective {drawn.objective!r}, {drawn.recomputes} recomputes, "
         f"{drawn.solver_failures} solver failures"
     )
     print(f"wrote {out}")

@@ -135,7 +135,7 @@ def run(args) -> None:
     if args.out is not None:
         raise EtmpcError("--out is --leaderboard's and --references'")
     if not args.policy:
-        raise EtmpcError("give at least one trigger to score (a SPEC such as every:3 or py:MODULE:NAME)")
+        raise EtmpcError("give at least one policy to score (a SPEC such as every:3 or py:MODULE:NAME)")
     _distinct_policies(args.policy)
     if args.test_set is not None and not Path(args.test_set).is_file():
         raise EtmpcError(f"test set {args.test_set} not found")
@@ -156,7 +156,7 @@ def run(args) -> None:
     if not card.complete:
         failed = sorted({f"{r.policy} on {r.task}" for r in card.rows if r.error is not None})
         unwritten = "" if args.json is None else f"; {args.json} not written (a card with a failed row never is)"
-        raise EtmpcError(f"not every trigger could be scored on every task: {', '.join(failed)} (see its row){unwritten}")
+        raise EtmpcError(f"not every policy could be scored on every task: {', '.join(failed)} (see its row){unwritten}")
 
 
 def _leaderboard(args, tasks: list[str]) -> None:
@@ -166,7 +166,7 @@ def _leaderboard(args, tasks: list[str]) -> None:
 
     if args.policy or args.references or args.test_set is not None or args.json is not None or args.figure is not None:
         raise EtmpcError(
-            "--leaderboard scores the built-in triggers on the stored test sets: no SPEC, --references, "
+            "--leaderboard scores the built-in policies on the stored test sets: no SPEC, --references, "
             "--test-set, --json or --figure with it"
         )
     out = args.out or LEADERBOARD_OUT

@@ -71,11 +71,11 @@ def seed(value: Any) -> int:
 
 
 def price(value: Any) -> float:
-    """A price of a computation: a finite number >= 0."""
+    """A price of a recompute: a finite number >= 0."""
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
         raise BadValue(f"{value!r} is not a number")
     if not (math.isfinite(value) and value >= 0):
-        raise BadValue(f"a price of a computation is a finite number >= 0, got {value}")
+        raise BadValue(f"a price of a recompute is a finite number >= 0, got {value}")
     return float(value)
 
 

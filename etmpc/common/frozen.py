@@ -1,4 +1,4 @@
-"""Values a trigger is shown and cannot write through: read-only array views and a read-only mapping.
+"""Values a policy is shown and cannot write through: read-only array views and a read-only mapping.
 
 The control loop hands a recomputation policy its own memory (the measured state, the kept plan, the
 task's observation). A policy under test must not be able to change what the loop then does with

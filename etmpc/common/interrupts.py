@@ -1,8 +1,8 @@
 """A real Ctrl-C or SIGTERM, told apart from the same exceptions raised by someone's code.
 
-A trigger under test runs inside etmpc's loop. If its code raises ``KeyboardInterrupt`` or
+A policy under test runs inside etmpc's loop. If its code raises ``KeyboardInterrupt`` or
 ``SystemExit``, that must not end the command as if the user had stopped it (silently, with the
-trigger's own exit code): it is the trigger's failure, reported as one line naming it. A Ctrl-C the
+policy's own exit code): it is the policy's failure, reported as one line naming it. A Ctrl-C the
 user typed must still stop the command (exit 130). Within :func:`watching`, SIGINT is noted before
 it raises ``KeyboardInterrupt``, so :func:`genuine` can tell the two apart.
 """
@@ -72,7 +72,7 @@ def described(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
 
 
-READ_ONLY_HINT = "what a trigger is shown is read-only: copy what you change, e.g. np.array(s.x)"
+READ_ONLY_HINT = "what a policy is shown is read-only: copy what you change, e.g. np.array(s.x)"
 
 
 def failed(what: str, exc: BaseException) -> EtmpcError:
@@ -88,7 +88,7 @@ def failed(what: str, exc: BaseException) -> EtmpcError:
 
 @contextlib.contextmanager
 def users_code(what: str):
-    """Run someone's code (a trigger's import, factory, members, pickling): whatever it raises, short of
+    """Run someone's code (a policy's import, factory, members, pickling): whatever it raises, short of
     a real Ctrl-C or SIGTERM, becomes one :class:`EtmpcError` line, ``what raised Name: message``."""
     try:
         yield

@@ -7,7 +7,7 @@ for two terms that overflow to ``+inf`` and ``-inf``, ``OPENBLAS_CORETYPE=Haswel
 and ``SkylakeX`` gives ``-inf`` (a fused multiply-add adds the exact product ``1e318`` to ``-inf``);
 an LQR correction computed with ``@`` moved every cart-pendulum trajectory in its last bits.
 
-Wherever a sum decides something (a feedback input, a trigger's decision value, a policy's choice),
+Wherever a sum decides something (a feedback input, an event trigger's decision value, a learned policy's choice),
 it is computed here instead: each product is rounded as IEEE-754 multiplication rounds it (the same
 everywhere), and the products are added *exactly* and rounded once (:func:`math.fsum`), so the result
 does not depend on the order of the terms, on the vector width or on the number of threads.

@@ -17,7 +17,7 @@ seconds (results come in chunks: two units in the same instant are no rate). :me
 already done (a kept row, a resumed run) without making the estimate faster.
 
 **Whole commands.** A tracker made with ``whole=True`` counts a command's units of work up front (a suite
-score: every task's episodes of every trigger); trackers opened inside it (each evaluation's) count into
+score: every task's episodes of every policy); trackers opened inside it (each evaluation's) count into
 it and show nothing of their own, so the estimate is the whole command's. Inside any other open tracker a
 new one shows nothing (no bar over a bar). :func:`stage` names the part of a command that runs (``with
 stage("cart_pendulum: DPI training"): ...``) in the lines of the trackers opened inside it, and

@@ -3,7 +3,7 @@
 Calling a CasADi function from Python costs about 100 µs of argument conversion, whatever the
 function does; the cart pendulum's whole MPC solve takes about as long in C. So the MPC is generated
 as C (``casadi.CodeGenerator``: the SQP, its QP solver and the model's derivatives in one file),
-compiled into a shared library by the system's C compiler, and called through ``ctypes`` with
+compiled into a shared library by the machine's C compiler, and called through ``ctypes`` with
 preallocated NumPy buffers (a few µs).
 
 The cache (``$ETMPC_CACHE_DIR``, else ``$XDG_CACHE_HOME/etmpc``, else ``~/.cache/etmpc``) holds one

@@ -22,7 +22,7 @@ class Plan:
     ``gains`` the feedback gains along the plan, ``u = u_j - K_j (x - x_j)``, when its MPC computes them.
 
     A plan is a value: its arrays are read-only views and its forecasts a frozen mapping, so nothing
-    it is handed to (a trigger under test above all) can change what the loop applies.
+    it is handed to (a policy under test above all) can change what the loop applies.
     """
 
     inputs: np.ndarray  # (N, nu)

@@ -1,11 +1,11 @@
-"""Time in the control loop: how long a solve takes (:class:`Latency`) and how much a trigger may compute at a
+"""Time in the control loop: how long a solve takes (:class:`Latency`) and how much a policy may compute at a
 decision (:data:`KEEP`, :data:`ITERATE`, :data:`SOLVE`).
 
-The paper's loop re-plans instantly and all or nothing. A task whose ``Config`` has a ``latency``
+The paper's loop solves instantly and all or nothing. A task whose ``Config`` has a ``latency``
 delivers each plan ``d`` control intervals after the solve started, from the state measured then:
-the kept plan and its feedback run meanwhile, one solve is in flight at a time (the trigger is not
+the kept plan and its feedback run meanwhile, one solve is in flight at a time (the policy is not
 asked then), and the late plan comes into force at its own time index (its age is ``d`` when it
-arrives). A task with ``compute_levels`` lets the trigger choose, at a decision, between keeping the
+arrives). A task with ``compute_levels`` lets the policy choose, at a decision, between keeping the
 plan, one SQP iteration from the shifted last plan (a real-time iteration) and a full solve; each is
 priced by its work, SQP iterations, and the latency applies to each.
 
@@ -24,11 +24,11 @@ import numpy as np
 
 from etmpc.common.checks import BadType, BadValue, argument, flag
 
-#: What a trigger may ask for at a decision on a task with compute levels (``Discrete(3)``); on any other
+#: What a policy may ask for at a decision on a task with compute levels (``Discrete(3)``); on any other
 #: task a decision is a yes or no, and a yes is a full solve.
 KEEP, ITERATE, SOLVE = 0, 1, 2
 LEVEL_NAMES = ("keep", "iterate", "solve")
-#: What a trigger may answer, on a task without compute levels (False) and with them (True).
+#: What a policy may answer, on a task without compute levels (False) and with them (True).
 ANSWERS = {
     False: "False or 0 (keep) or True or 1 (a full solve)",
     True: f"{KEEP} ({LEVEL_NAMES[0]}), {ITERATE} ({LEVEL_NAMES[1]}) or {SOLVE} ({LEVEL_NAMES[2]}), or False/True (keep/solve)",
@@ -36,9 +36,9 @@ ANSWERS = {
 
 
 def level_of(answer: Any, levels: bool) -> int | None:
-    """The level a trigger's ``answer`` asks for (:data:`KEEP`, :data:`ITERATE`, :data:`SOLVE`), or None if it
+    """The level a policy's ``answer`` asks for (:data:`KEEP`, :data:`ITERATE`, :data:`SOLVE`), or None if it
     is no answer on a task with compute ``levels`` (or without): the one check of an answer, shared by the
-    loop and the check of a user's trigger. A bool (Python's or numpy's) is keep or a full solve; an integer
+    loop and the check of a user's policy. A bool (Python's or numpy's) is keep or a full solve; an integer
     (Python's or numpy's) is a level by its value: 0 or 1 (keep, a full solve) on a task without levels, 0, 1
     or 2 with them. Anything else is no answer, never read by its truth: 2 on a keep-or-solve task was taken
     as a solve, and a float, a string or None as whatever its truth said. Asked at every decision: the

@@ -1,4 +1,4 @@
-"""The trigger problem as an environment, for any learner: one control interval of the loop per
+"""The recompute decision as an environment, for any learner: one control interval of the loop per
 step, keep (0) or recompute (1). :mod:`~etmpc.envs.trigger` is the ``dm_env.Environment``;
 :mod:`~etmpc.envs.gym` its ``gymnasium.Env``, registered for every task on ``import etmpc`` as
 ``etmpc/<domain>-<task>-v0`` (:mod:`~etmpc.envs.registration`, which loads nothing heavy; each spec's

@@ -9,7 +9,7 @@ current step, and the window ``"human"`` shows it in.
 * A task without one (the battery) is drawn as a chart of the episode so far (:class:`ChartFrames`,
   matplotlib's Agg canvas): each state as measured and as the plan in force predicts it, each input
   applied, the task's exogenous signals (the battery's price and production), and a tick at every
-  computation.
+  recompute.
 
 ``"human"`` shows the same frames in a window (Tk), in real time (one frame per control interval),
 but at least :data:`HUMAN_MIN_FPS` frames a second (the battery's interval is 10 s). It needs a screen:
@@ -158,7 +158,7 @@ class ChartFrames:
                     ax,
                     ax.plot([], [], color="C0", linewidth=1.2, drawstyle="steps-post" if kind == "input" else "default")[0],
                     ax.plot([], [], color="C1", linewidth=1.0, linestyle="--")[0],  # the plan in force (a state's)
-                    ax.plot([], [], color="C3", linewidth=0.8, transform=ticks)[0],  # a tick at each computation
+                    ax.plot([], [], color="C3", linewidth=0.8, transform=ticks)[0],  # a tick at each recompute
                 )
             )
         axes[-1].set_xlabel("control interval", fontsize=7)
@@ -198,7 +198,7 @@ class ChartFrames:
                 ax.autoscale_view(scalex=False)
             else:  # none yet (the first step's input): an empty panel's limits, whatever the last episode's were
                 ax.set_ylim(0.0, 1.0, auto=True)
-        made = f"{computed.size} computation" + ("" if computed.size == 1 else "s")
+        made = f"{computed.size} recompute" + ("" if computed.size == 1 else "s")
         self._title.set_text(f"{system.name}: step {k} of {system.episode_steps}, {made}")
         with warnings.catch_warnings():  # a frame too small for the panels' labels is drawn without the layout
             warnings.filterwarnings("ignore", "constrained_layout not applied", UserWarning)

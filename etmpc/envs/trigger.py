@@ -1,8 +1,8 @@
-"""The trigger problem as a ``dm_env.Environment``: one control interval of the loop per step, and the
+"""The recompute decision as a ``dm_env.Environment``: one control interval of the loop per step, and the
 action says whether to keep the plan (0) or to recompute it now (1).
 
 It is the loop of ``etmpc evaluate``, not a copy: each step is one :meth:`etmpc.loop.ClosedLoop.step`.
-An agent that answers as ``always`` or ``every:3`` gets exactly the rewards, computations and
+An agent that answers as ``always`` or ``every:3`` gets exactly the rewards, recomputes and
 trajectory that ``evaluate`` reports for them (``tests/envs/test_trigger_env.py``).
 
 * **Observation**: a float32 vector, :data:`TriggerEnvironment.observation_names`: the ``error``
@@ -16,7 +16,7 @@ trajectory that ``evaluate`` reports for them (``tests/envs/test_trigger_env.py`
   (``Discrete(3)``). On a task with a latency, an action while a solve is in flight is ignored:
   :attr:`info` says ``in_flight`` (and ``pending``: one is still under way after the step), ``level``
   and ``work`` (what was computed and its priced work).
-* **Reward**: the task's reward for the interval minus the price of a computation when one was made,
+* **Reward**: the task's reward for the interval minus the price of a recompute when one was made,
   forced ones included (:attr:`info` has both parts). Higher is better on every task: the cart
   pendulum's reward is ``-beta^2``.
 * **Failures**: :attr:`info` ``["failures"]`` is the episode's failures so far (an int: the task's
@@ -122,8 +122,8 @@ class NotPicklable(EtmpcError, TypeError):
 
 
 class TriggerEnvironment(dm_env.Environment):
-    """The trigger problem of task ``task`` (``DOMAIN`` or ``DOMAIN/TASK``, or a
-    :class:`~etmpc.systems.SystemKey`), at ``recompute_price`` per computation (default: the task's own).
+    """The recompute decision of task ``task`` (``DOMAIN`` or ``DOMAIN/TASK``, or a
+    :class:`~etmpc.systems.SystemKey`), at ``recompute_price`` per recompute (default: the task's own).
     See the module's docstring."""
 
     def __init__(
@@ -182,9 +182,7 @@ class TriggerEnvironment(dm_env.Environment):
         asked = check_action(action, self.actions)
         loop = self.loop
         forced, in_flight = loop.forced, loop.in_flight
-        reward = loop.step(
-            asked if self.actions == 3 else asked == RECOMPUTE
-        )  # the task's reward, net of the computation's price
+        reward = loop.step(asked if self.actions == 3 else asked == RECOMPUTE)  # the task's reward, net of the recompute's price
         self.info = {
             "step": loop.step_index,
             "recompute": loop.recomputed,
@@ -213,7 +211,7 @@ class TriggerEnvironment(dm_env.Environment):
         return {"failures": int(self.system.failures(self.loop.trajectory, self._episode))}
 
     def _baseline_step(self) -> float:
-        """One interval of the baseline's loop (its reward net of its computations; 0 once it is over)."""
+        """One interval of the baseline's loop (its reward net of its recomputes; 0 once it is over)."""
         shadow = self._shadow
         if shadow.done:
             return 0.0

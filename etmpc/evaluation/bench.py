@@ -1,6 +1,6 @@
 """``etmpc bench``: where the time of a step goes, measured on real episodes of the test set.
 
-For each system, through the :class:`etmpc.loop.System` protocol only, in one process:
+For each task, through the :class:`etmpc.loop.System` protocol only, in one process:
 
 The step times are CPU seconds of the thread that plays (:data:`etmpc.loop.closed.cpu_clock`); the
 episodes per second and the side-by-side solver comparisons below are wall time.

@@ -1,5 +1,5 @@
 """The scorecard's records (:mod:`etmpc.evaluation.scorecard` says what the numbers mean): a
-:class:`TaskScore` per task and trigger (a card's row), an :class:`Aggregate` per trigger over the tasks,
+:class:`TaskScore` per task and policy (a card's row), an :class:`Aggregate` per policy over the tasks,
 and the :class:`Scorecard`, each with the JSON ``etmpc score --json`` writes and ``etmpc verify`` reads."""
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ def _nan(value):
 
 @dataclass(frozen=True)
 class TaskScore:
-    """One trigger on one task. Its JSON (:meth:`to_json`, :meth:`from_json`) is a card's row."""
+    """One policy on one task. Its JSON (:meth:`to_json`, :meth:`from_json`) is a card's row."""
 
     task: str
     policy: str
@@ -45,10 +45,10 @@ class TaskScore:
     task_version: int = 0  # the task's version it was scored on (docs/versioning.md)
     # The task's failures, if it counts them (None: it does not, or a row of an older etmpc): the 95 % CI of
     # failures_mean, 1.96 sd / sqrt(n) over the episodes (NaN below two), and each episode's count, in the
-    # order of episode_scores, so that two triggers' failures can be paired episode by episode.
+    # order of episode_scores, so that two policies' failures can be paired episode by episode.
     failures_ci95: float | None = None
     episode_failures: list[float] | None = None
-    # Each episode's objective (NaN: it ended non-finite), computations and solver failures, in the order of
+    # Each episode's objective (NaN: it ended non-finite), recomputes and solver failures, in the order of
     # episode_scores (a stochastic policy's passes: the mean, the mean, the sum), so that every number of the
     # row can be checked against its episodes, and each against a replay (etmpc verify). None: a row of an
     # older etmpc.
@@ -94,7 +94,7 @@ def failed_task(task: str, spec: str, error: str) -> TaskScore:
 
 @dataclass(frozen=True)
 class Aggregate:
-    """A trigger over the suite's tasks scored (see the module's docstring)."""
+    """A policy over the suite's tasks scored (see the module's docstring)."""
 
     policy: str
     tasks: int
@@ -142,7 +142,7 @@ def profile(rows: list[TaskScore], thresholds: np.ndarray) -> np.ndarray:
 
 
 def by_policy(rows: list[TaskScore]) -> dict[str, list[TaskScore]]:
-    """``rows`` grouped by trigger, in the order the triggers first appear."""
+    """``rows`` grouped by policy, in the order the policies first appear."""
     groups: dict[str, list[TaskScore]] = {}
     for row in rows:
         groups.setdefault(row.policy, []).append(row)
@@ -150,7 +150,7 @@ def by_policy(rows: list[TaskScore]) -> dict[str, list[TaskScore]]:
 
 
 def profiles(card: Scorecard, thresholds: np.ndarray) -> dict[str, np.ndarray]:
-    """Each trigger's :func:`profile` over the tasks it was scored on."""
+    """Each policy's :func:`profile` over the tasks it was scored on."""
     return {policy: profile(rows, thresholds) for policy, rows in by_policy(card.rows).items()}
 
 
@@ -166,7 +166,7 @@ class Scorecard:
 
     @property
     def complete(self) -> bool:
-        """Every trigger was played on every task (none failed)."""
+        """Every policy was played on every task (none failed)."""
         return all(r.error is None for r in self.rows)
 
     def to_json(self) -> dict:

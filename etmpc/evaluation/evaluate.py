@@ -104,13 +104,13 @@ def evaluate(
     named by its spec in the results, and every one meets the same episodes with the same draws.
     With ``record``, also write every episode into that Rerun recording (``.rrd``), opened by ``recorder``
     (:class:`etmpc.views.recording.Recorder`, which :func:`etmpc.evaluate` gives).
-    ``recompute_price``: the price of a computation, if not the system's own (it enters every
+    ``recompute_price``: the price of a recompute, if not the task's own (it enters every
     objective, and what rollouts optimise).
 
     Bad arguments, policies and files raise :class:`EtmpcError` with the command line's messages
     (:func:`check_arguments`), before any work; so does a policy's own failure, naming it."""
     task, price = checks.renamed("task", task, "domain", domain), recompute_price
-    with interrupts.watching():  # a trigger that raises KeyboardInterrupt is its failure, not a Ctrl-C
+    with interrupts.watching():  # a policy that raises KeyboardInterrupt is its failure, not a Ctrl-C
         return _evaluate(
             task, policies, episodes, repeats, workers, seed, testset_path, progress, backend, address, record, price, recorder
         )
@@ -322,7 +322,7 @@ def format_table(evaluation: Evaluation) -> str:
     lines = [
         f"{evaluation.domain}/{evaluation.task}: objective ({higher_or_lower(sense)} is better), "
         f"test set {evaluation.testset_sha256[:12]}, {evaluation.recompute_price:g} per "
-        + ("SQP iteration (recomputes: solves and iterations started)" if levels else "computation"),
+        + ("SQP iteration (recomputes: solves and iterations started)" if levels else "recompute"),
         head,
         "-" * len(head),
     ]

@@ -47,7 +47,7 @@ UNGUARDED = (
 
 
 class UnguardedScript(EtmpcError):
-    """Workers were started from a script without a ``__main__`` guard: the run's error, never a trigger's."""
+    """Workers were started from a script without a ``__main__`` guard: the run's error, never a policy's."""
 
 
 def rerunning_main() -> bool:

@@ -2,14 +2,14 @@
 
 No playing, no files, no formatting: every function here takes numbers and gives numbers, and the same
 numbers give the same bits (the bootstrap is seeded). :mod:`etmpc.evaluation.scorecard` holds the
-results and plays the triggers; :mod:`etmpc.evaluation.compare` pairs evaluations episode by episode.
+results and plays the policies; :mod:`etmpc.evaluation.compare` pairs evaluations episode by episode.
 
 **The sense.** An objective is a cost (``"min"``: lower is better) or a profit (``"max"``). Which way is
 better is decided in one place, :mod:`etmpc.common.sense` (re-exported here, and usable by the views):
 :func:`oriented` turns objectives into values where higher is better, :func:`best` picks the best of
 candidates, :func:`higher_or_lower` says it in words.
 
-**The normalized score** of a trigger with per-episode costs ``c_e`` (lower is better) between a
+**The normalized score** of a policy with per-episode costs ``c_e`` (lower is better) between a
 baseline ``B_e`` (0) and a reference with the mean gap ``D = mean_e (B_e - O_e)`` (100):
 ``s_e = 100 (B_e - c_e) / D`` per episode, and the task's score ``100 mean_e (B_e - c_e) / D`` (the
 mean summed exactly, :func:`exact_mean`).

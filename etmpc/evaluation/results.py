@@ -2,7 +2,7 @@
 (:class:`PolicySummary`), and the whole :class:`Evaluation`, which is saved and loaded as the JSON
 ``etmpc evaluate --json`` writes (:meth:`Evaluation.to_json`, :meth:`Evaluation.from_json`,
 :meth:`Evaluation.save`, :meth:`Evaluation.load`), and gives a policy's objectives as an array
-(:meth:`Evaluation.objectives`). The costs of computations are inside every objective; the sense
+(:meth:`Evaluation.objectives`). The price of the recomputes is inside every objective; the sense
 (a cost or a profit) is the task's, kept for display and for :mod:`etmpc.common.sense`."""
 
 from __future__ import annotations
@@ -27,8 +27,8 @@ class RunResult:
     policy: str
     repeat: int
     episode: int
-    objective: float  # sense-aware: cost (min) or profit (max), computations included
-    control_objective: float  # the objective without the price of computations (sense-aware)
+    objective: float  # sense-aware: cost (min) or profit (max), recomputes included
+    control_objective: float  # the objective without the price of its recomputes (sense-aware)
     recomputes: int
     solver_failures: int
     steps: int
@@ -117,7 +117,7 @@ class Evaluation:
     seed: int
     summaries: list[PolicySummary]
     runs: list[RunResult]
-    recompute_price: float = math.nan  # the price of a computation in every objective here
+    recompute_price: float = math.nan  # the price of a recompute in every objective here
     # Per run, in the order of ``runs``: the controller's CPU seconds (solve, feedback, decide). Measured
     # wall time, so it depends on the machine and its load: kept out of ``to_json`` unless asked for.
     cpu: list[dict[str, float]] | None = None

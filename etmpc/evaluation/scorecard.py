@@ -1,40 +1,40 @@
-"""The suite's scorecard: how good is a trigger, on every task, against fixed reference points?
+"""The suite's scorecard: how good is a policy, on every task, against fixed reference points?
 
 **Normalized score, per task.** On a task's test set, with costs ``c`` (the objective where lower is
 better; a profit is negated), the task's references per episode ``e`` are its *best periodic
 schedule* ``B_e`` (the ``every:T``, ``T = 1..N``, with the best mean objective on that test set) and
 the *oracle* over that schedule ``O_e`` (``oracle:every:T``, the one-step lookahead with the stored
-future). With the reference gap ``D = mean_e (B_e - O_e)``, a trigger ``P`` scores
+future). With the reference gap ``D = mean_e (B_e - O_e)``, a policy ``P`` scores
 
     score = 100 * mean_e (B_e - P_e) / D,
 
 per episode ``s_e = 100 (B_e - P_e) / D`` (its mean is the score): 0 is the best periodic schedule,
 100 the oracle, exactly. Dividing by the *mean* gap, not each episode's own, keeps an episode whose
 two references nearly tie from dominating. Above 100 is possible: the oracle is a one-step lookahead
-over that schedule, not a bound on every policy. The 95 % CI is ``1.96 sd(s_e) / sqrt(n)`` (as
+over that schedule, not a bound. The 95 % CI is ``1.96 sd(s_e) / sqrt(n)`` (as
 ``etmpc evaluate --against``). An episode that ends on a non-finite state leaves the task unscored.
 
 **The suite's aggregate**, over the tasks scored, as rliable computes it (Agarwal et al. 2021) with
 a task's episodes as its runs: the interquartile mean of every episode score of every task together
 (``scipy.stats.trim_mean(scores, 0.25)``: the middle half of the episodes, so neither a few extreme
 episodes nor one task decides it), and the probability of improvement over the best periodic schedule
-(per task, the share of episodes where the trigger's cost is lower, ties counting half; averaged over
+(per task, the share of episodes where the policy's cost is lower, ties counting half; averaged over
 tasks), each with a 95 % stratified bootstrap CI: episodes resampled within each task
 (``scipy.stats.bootstrap`` over one sample per task, 2000 resamples, percentile intervals, seeded),
 the references' gap held fixed.
 
 **References** are stored with the tasks (``tasks/<domain>/<task>/references.json``): every periodic
 schedule's and the oracle's objective per stored episode, with the suite's version, the test set's
-sha256 and the software that computed them, so scoring a trigger plays only that trigger.
+sha256 and the software that computed them, so scoring a policy plays only that policy.
 ``etmpc score --references`` rebuilds them; on another test set they are computed for the run.
 
-**Compute.** Beside the count of computations, each episode's measured CPU time of the MPC's solves,
-the feedback (the LQR) and the trigger's own decisions (a rollout's simulations included), so that a
-saving is shown net of what the trigger itself costs. These are wall-clock figures of this machine.
+**Compute.** Beside the count of recomputes, each episode's measured CPU time of the MPC's solves,
+the feedback (the LQR) and the policy's own decisions (a rollout's simulations included), so that a
+saving is shown net of what the policy itself costs. These are wall-clock figures of this machine.
 
 **Where.** The statistics are pure functions of score arrays in :mod:`etmpc.evaluation.metrics`; this
-module holds the results (a :class:`TaskScore` per task and trigger, an :class:`Aggregate` per trigger, the
-:class:`Scorecard`, each with its JSON) and plays the triggers; :mod:`etmpc.evaluation.scoretable`
+module holds the results (a :class:`TaskScore` per task and policy, an :class:`Aggregate` per policy, the
+:class:`Scorecard`, each with its JSON) and plays the policies; :mod:`etmpc.evaluation.scoretable`
 writes the card as text.
 """
 
@@ -173,17 +173,17 @@ def score(
     say: Callable[[str], None] = lambda line: None,
     episodes: int | None = None,
 ) -> Scorecard:
-    """Score every trigger of ``policies`` (spec strings or policy objects, as :func:`etmpc.evaluate`
+    """Score every policy of ``policies`` (spec strings or policy objects, as :func:`etmpc.evaluate`
     takes) on every task of ``tasks`` (default: the whole suite), each on its stored test set at its
     own price, against the stored references (see the module's docstring). ``test_set``: another test
     set, for one task; its references are computed for the run. ``episodes``: the first N episodes
-    only (each task's references then of those episodes: 0 and 100 stay exact). A trigger that fails
+    only (each task's references then of those episodes: 0 and 100 stay exact). A policy that fails
     on a task has that task's row say so; the others are still scored (:attr:`Scorecard.complete` is
     then False, and ``json_path`` is not written: a card with a failed row never is).
 
-    Every argument, every trigger on every task, and the outputs are checked before any episode is
+    Every argument, every policy on every task, and the outputs are checked before any episode is
     played, with the command line's messages (:class:`EtmpcError`): a spec that does not parse, a
-    trigger given twice, an empty or repeated task, an output that is one of the run's inputs."""
+    policy given twice, an empty or repeated task, an output that is one of the run's inputs."""
     check_policies(policies)
     if tasks is not None and (isinstance(tasks, (str, bytes)) or not isinstance(tasks, (list, tuple))):
         raise EtmpcError(f"tasks: a list of task names is needed, got {type(tasks).__name__} {tasks!r}")
@@ -200,13 +200,13 @@ def score(
         raise EtmpcError("--test-set belongs to one task: give exactly one --task with it")
     if test_set is not None and not Path(test_set).is_file():
         raise EtmpcError(f"test set {test_set} not found")
-    for task in tasks:  # each trigger parsed (or checked) on each task: a bad one fails before any episode
+    for task in tasks:  # each policy parsed (or checked) on each task: a bad one fails before any episode
         try:
             parse_policies(make_system(task), policies)
         except EtmpcError as exc:
             raise EtmpcError(f"{task}: {exc}") from None
     check_run_outputs({"--json": json_path}, inputs=run_inputs(policies, test_set))
-    if test_set is None:  # every task's references checked before any trigger is played
+    if test_set is None:  # every task's references checked before any policy is played
         references = {task: stored(task, episodes) for task in tasks}
         shown = {task: {"stored": f"{folder_name(task)}/{references_path(task).name}"} for task in tasks}
     else:
@@ -227,7 +227,7 @@ def score(
             "gap": refs.gap,
         }
     total = len(policies) * sum(refs.episodes for refs in references.values())  # the whole card's episodes, up front
-    # each trigger played on its own (a failing one fails its row only), one pool for all, one estimate for all
+    # each policy played on its own (a failing one fails its row only), one pool for all, one estimate for all
     with shared_pools(), Progress(total, enabled=progress, whole=True):
         rows = [
             play_and_score(task, references[task], policy, test_set, workers, progress) for task in tasks for policy in policies
@@ -249,7 +249,7 @@ def play_and_score(
     fails (bad spec, its own error) gives a row that says so."""
     try:
         evaluation = evaluate(task, [policy], refs.episodes, workers=workers, testset_path=test_set, progress=progress)
-    except UnguardedScript:  # the script's error, not the trigger's: no row can be played
+    except UnguardedScript:  # the script's error, not the policy's: no row can be played
         raise
     except EtmpcError as exc:  # the row says so (the table shows it): the command's own line says which rows failed
         return failed_task(task, _name(policy), str(exc))

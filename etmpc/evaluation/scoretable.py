@@ -1,4 +1,4 @@
-"""The scorecard as text (``etmpc score``'s table): per task and trigger, then the suite's aggregate per trigger.
+"""The scorecard as text (``etmpc score``'s table): per task and policy, then the suite's aggregate per policy.
 The card itself, and what its numbers mean, is :mod:`etmpc.evaluation.scorecard`'s."""
 
 from __future__ import annotations
@@ -12,13 +12,13 @@ _CPU = (("total", 11), ("solve", 9), ("feedback", 10), ("decide", 10))  # a row'
 
 
 def format_scorecard(card) -> str:
-    """The scorecard as text: per task and trigger, then the suite's aggregate per trigger. ``card``: a
+    """The scorecard as text: per task and policy, then the suite's aggregate per policy. ``card``: a
     :class:`~etmpc.evaluation.scorecard.Scorecard` (which imports this module, so it is not imported here)."""
     width = max([18] + [len(r.policy) + 2 for r in card.rows])
     task_width = max([14] + [len(t) + 2 for t in card.tasks])
     head = (
-        f"{'task':<{task_width}}{'policy':<{width}}{'objective':>11}{'computations':>14}{'failures ± CI':>16}"
-        f"{'score':>9}{'± 95 % CI':>11}{'CPU ms/ep':>11}{'(solve':>9}{'feedback':>10}{'trigger)':>10}"
+        f"{'task':<{task_width}}{'policy':<{width}}{'objective':>11}{'recomputes':>14}{'failures ± CI':>16}"
+        f"{'score':>9}{'± 95 % CI':>11}{'CPU ms/ep':>11}{'(solve':>9}{'feedback':>10}{'policy)':>10}"
     )
     lines = [
         "normalized score per task: 0 = its best periodic schedule, 100 = the oracle over it (a one-step "

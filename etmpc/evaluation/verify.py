@@ -1,14 +1,14 @@
 """``etmpc verify CARD``: check somebody's scorecard by replaying it.
 
-A scorecard (``etmpc score --json``) holds, per task and trigger, every episode's normalised score
-against the task's stored references. Anyone with the trigger can check it:
+A scorecard (``etmpc score --json``) holds, per task and policy, every episode's normalised score
+against the task's stored references. Anyone with the policy can check it:
 
 1. **It is this suite's card**: the suite's version, each task's version and test set are this
    etmpc's, and it was scored against the stored references (a card scored on another test set is
    not a suite result).
 2. **It holds together**: every number the card states follows from the episodes it carries. Per
    row: each episode's score from its objective and the references (bit for bit); the objective's and
-   the computations' means, the solver failures' total, the score (the mean of the episode scores), its
+   the recomputes' means, the solver failures' total, the score (the mean of the episode scores), its
    confidence interval and the share of better episodes, the failures' mean and CI from its episodes;
    the episode count, task version, objective sense, best schedule and no non-finite episode; the CPU
    time's total from its parts (the CPU time itself is the scorer's machine's measurement: it is checked
@@ -16,9 +16,9 @@ against the task's stored references. Anyone with the trigger can check it:
    schedule, oracle, gap, price, test set) are the stored ones. The suite's aggregates (IQM, probability of
    improvement, their bootstrap intervals, the tasks counted) follow from the rows, as
    :mod:`etmpc.evaluation.scorecard` computes them (with :mod:`etmpc.evaluation.metrics`).
-3. **It replays**: a seeded sample of each row's episodes is played again with the trigger the row
+3. **It replays**: a seeded sample of each row's episodes is played again with the policy the row
    names (its spec: the handed-in ``py:MODULE:NAME``, ``rl:PATH``, ``sb3:PATH`` must be importable or
-   readable here), and each episode's objective, computations, solver failures, failures and score must
+   readable here), and each episode's objective, recomputes, solver failures, failures and score must
    be the card's bit for bit (the loop's numbers do not depend on the number of workers, nor on the
    machine's kernels among x86-64 CPUs with fused multiply-add: ``docs/using.md``). Together: no number
    of a card can be changed without a line saying which.
@@ -184,8 +184,8 @@ def _mean_differs(stated, values) -> bool:
 
 
 def _episodes_consistency(row: TaskScore, refs: References, name: str) -> list[str]:
-    """What of a row's objective, computations, solver failures and episode scores does not follow from the
-    objectives, computations and solver failures it carries per episode."""
+    """What of a row's objective, recomputes, solver failures and episode scores does not follow from the
+    objectives, recomputes and solver failures it carries per episode."""
     carried = {
         "episode_objectives": row.episode_objectives,
         "episode_recomputes": row.episode_recomputes,
@@ -193,7 +193,7 @@ def _episodes_consistency(row: TaskScore, refs: References, name: str) -> list[s
     }
     for key, values in carried.items():
         if values is None:
-            return [f"{name}: no {key} (a row of an older etmpc): score the trigger again to verify its numbers"]
+            return [f"{name}: no {key} (a row of an older etmpc): score the policy again to verify its numbers"]
         if len(values) != row.episodes:
             return [f"{name}: {len(values)} {key} for {row.episodes} episodes"]
     objectives = np.asarray(row.episode_objectives, dtype=float)
@@ -210,7 +210,7 @@ def _episodes_consistency(row: TaskScore, refs: References, name: str) -> list[s
         found.append(f"{name}: objective {row.objective_mean!r} in the card, {float(np.mean(objectives))!r} from its episodes")
     if _mean_differs(row.recomputes_mean, row.episode_recomputes):
         mean = float(np.mean(row.episode_recomputes))
-        found.append(f"{name}: computations {row.recomputes_mean!r} per episode in the card, {mean!r} from its episodes")
+        found.append(f"{name}: recomputes {row.recomputes_mean!r} per episode in the card, {mean!r} from its episodes")
     if row.solver_failures != sum(row.episode_solver_failures):
         total = sum(row.episode_solver_failures)
         found.append(f"{name}: {row.solver_failures!r} solver failures in the card, {total!r} from its episodes")
@@ -319,7 +319,7 @@ def verify(path: str | Path, size: int = SAMPLE, seed: int = 0, workers: int | N
             )
         replayed_numbers = {
             "objective": (row.episode_objectives, result.objective),
-            "computations": (row.episode_recomputes, result.recomputes),
+            "recomputes": (row.episode_recomputes, result.recomputes),
             "solver failures": (row.episode_solver_failures, result.solver_failures),
             "failures": (row.episode_failures, result.failures),
         }

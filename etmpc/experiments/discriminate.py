@@ -1,4 +1,4 @@
-"""``etmpc discriminate``: can triggers be told apart on a task? The clairvoyant reference and the rollout
+"""``etmpc discriminate``: can policies be told apart on a task? The clairvoyant reference and the rollout
 policy against the periodic front, on the first stored test-set episodes.
 
 Every periodic schedule ``every:1`` … ``every:N`` (``N`` the MPC's horizon) and the task's event triggers
@@ -6,7 +6,7 @@ Every periodic schedule ``every:1`` … ``every:N`` (``N`` the MPC's horizon) an
 periodic schedule at the price (by default the task's own) is chosen; then ``oracle:BEST`` (the clairvoyant
 reference, not a policy) and ``rollout:BEST:4:H`` (``H`` 20, or the task's shorter
 ``Benchmark.lookahead``) play them at that price. Each state-dependent policy is compared with the
-periodic front interpolated to its own mean rate of computations, per episode
+periodic front interpolated to its own mean rate of recomputes, per episode
 (:func:`etmpc.experiments.pareto.versus_front`, as ``etmpc sweep`` does): the gain in control objective,
 its 95 % CI and the episodes it wins. A task discriminates when the oracle gains clearly, with a CI that
 excludes 0 (docs/adding-a-task.md, step 8).
@@ -51,7 +51,7 @@ def format_discrimination(task: str, found: dict, episodes: int, seconds: float)
     lines = [
         f"{task}: best periodic schedule at price {found['price']:g}: {found['best_periodic']}; {episodes} episodes, "
         f"{seconds:.0f} s",
-        f"{'policy':28s} {'computations':>12s}  {'gain over the front at its rate':>31s}  better in",
+        f"{'policy':28s} {'recomputes':>12s}  {'gain over the front at its rate':>31s}  better in",
     ]
     for spec, row in found["rows"].items():
         if row is None:

@@ -2,7 +2,7 @@
 written as PNGs (the drawing is :mod:`etmpc.views.figures`'s).
 
 * :func:`forecasts`: Figure 1, the battery's true production and price over a test-set episode with the
-  forecasts each MPC computation was given, under one or more policies;
+  forecasts each MPC solve was given, under one or more policies;
 * :func:`trajectory`: one test-set episode of any task under a policy, played exactly as ``etmpc evaluate``
   plays it (repeat 0 of the seed): every state with every plan's prediction, the recompute steps, the
   applied and planned inputs with their bounds, and the episode's exogenous signals;
@@ -87,7 +87,7 @@ def trajectory(out: str | Path, task: str, spec: str, episode: int = 0, seed: in
     what = cost_or_profit(system.objective_sense)
     title = (
         f"{system.name} test-set episode {episode}, policy {spec}: {what} {objective:.5g} "
-        f"({control:.5g} without computations), {traj.recomputes} computations"
+        f"({control:.5g} without their price), {traj.recomputes} recomputes"
     )
     path = figures.write_trajectory_png(out, system, traj, title, system.signals(played.episode))
     return Drawn(path, objective, control, traj.recomputes, traj.solver_failures)

@@ -1,4 +1,4 @@
-"""``etmpc score --leaderboard``: every built-in trigger scored on the suite, written as a generated page.
+"""``etmpc score --leaderboard``: every built-in policy scored on the suite, written as a generated page.
 
 The entries, each one spec per task (:func:`entries`):
 
@@ -13,9 +13,8 @@ The entries, each one spec per task (:func:`entries`):
 * **rollout meter**: ``rollout:BEST:4:H``, the one-step lookahead over sampled futures with the task's
   lookahead ``H``: a real policy, and the costliest to run (its CPU column shows it);
 * **oracle**: ``oracle:BEST`` (its reference: 100), the clairvoyant reference: a one-step lookahead over the best
-  periodic schedule with each episode's future known. Not a policy, and no bound on every trigger: it bounds a
-  one-step lookahead over that schedule, so a trigger that saves computations it spends can score above 100 (the
-  page says, per task, where and why).
+  periodic schedule with each episode's future known. Not a policy, and not a bound: a policy that saves
+  recomputes the oracle's lookahead spends can score above 100 (the page says, per task, where and why).
 
 The rollout meter's and the oracle's rows are scored from the runs the task's sealed references kept when they
 were built (:meth:`References.kept_evaluation`), not played again: they are the two costliest rows, and the
@@ -94,7 +93,7 @@ def build(
 ) -> dict:
     """Score every entry on every task and write ``docs/leaderboard.{md,json}`` and the profile figure;
     with ``readme``, rewrite its headline table between the markers. Each of ``cards`` (an external
-    scorecard, ``etmpc score --json``) is verified first (:mod:`etmpc.evaluation.verify`) and its triggers
+    scorecard, ``etmpc score --json``) is verified first (:mod:`etmpc.evaluation.verify`) and its policies
     join as rows, not played here. Returns the JSON."""
     with shared_pools():  # one pool of workers for every row (a row is one evaluation)
         return _build(docs, work, distinct(tasks or names()), episodes, workers, readme, say, list(cards))
@@ -103,7 +102,7 @@ def build(
 def submitted(
     cards: list[Path], tasks: list[str], episodes: int, workers: int, say: Callable[[str], None]
 ) -> tuple[list[Entry], dict[tuple[str, str], TaskScore]]:
-    """Each card's triggers as entries, and their rows by (entry, task): a card must verify (a seeded
+    """Each card's policies as entries, and their rows by (entry, task): a card must verify (a seeded
     sample of each row replayed bit for bit) and be scored on the leaderboard's tasks and episodes."""
     found, rows = [], {}
     for card in cards:

@@ -16,8 +16,8 @@ from etmpc.evaluation.results import failures_cell
 
 BEGIN, END = "<!-- leaderboard:begin -->", "<!-- leaderboard:end -->"
 ORACLE_NOTE = (
-    "a one-step lookahead over the best periodic schedule with each episode's future known, not a policy; "
-    "it bounds that lookahead, not every trigger"
+    "a one-step lookahead over the best periodic schedule with each episode's future known: a reference, not a "
+    "policy, and not a bound"
 )
 
 
@@ -79,7 +79,7 @@ def table_in(text: str) -> str:
 
 
 def above_the_oracle(data: dict, task: str) -> list[str]:
-    """Lines saying, for each learner and meter that scores above 100 on ``task``, why: the computations it
+    """Lines saying, for each learner and meter that scores above 100 on ``task``, why: the recomputes it
     saves against the oracle's, what they are worth at the task's price, and what it gives up in control
     objective (the objective without that price). Every number is the JSON's."""
     ref = data["references"][task]
@@ -104,24 +104,24 @@ def above_the_oracle(data: dict, task: str) -> list[str]:
         better = -oriented(oracle["objective_mean"] - row["objective_mean"], sense)  # > 0: its objective is the better
         control_loss = worth - better  # what it gives up in control objective, against the oracle's
         head = (
-            f"* **{entry['name']}** scores {row['score']:.1f}: {row['recomputes_mean']:.2f} computations per episode "
+            f"* **{entry['name']}** scores {row['score']:.1f}: {row['recomputes_mean']:.2f} recomputes per episode "
             f"against the oracle's {oracle['recomputes_mean']:.2f}"
         )
         if saved > 0 and price > 0:
             lines.append(
-                f"{head}. The {saved:.2f} it saves are worth {worth:.4g} at {price:g} per computation; it gives "
+                f"{head}. The {saved:.2f} it saves are worth {worth:.4g} at {price:g} per recompute; it gives "
                 f"up {control_loss:.4g} in control objective to the oracle, so its objective is {better:.4g} "
                 "better than the oracle's."
             )
         else:
             lines.append(
-                f"{head}, saving none the price counts ({price:g} per computation): its control objective "
+                f"{head}, saving none the price counts ({price:g} per recompute): its control objective "
                 f"itself is {better:.4g} better than the oracle's."
             )
     if lines:
         lines = [
             f"Above 100 on {task}: the oracle is a one-step lookahead over `{ref['best_periodic']}` and spends about "
-            "as many computations as that schedule; these save some of them:",
+            "as many recomputes as that schedule; these save some of them:",
             "",
             *lines,
             "",
@@ -143,16 +143,16 @@ def page(data: dict) -> str:
         "",
         f"Each task's normalized score on its stored test set ({data['episodes']} episodes, at the task's price): "
         "0 is its best periodic schedule, 100 the clairvoyant reference: the oracle over that schedule, a one-step "
-        "lookahead with each episode's future known (not a policy). It bounds what a one-step lookahead over the best "
-        "periodic schedule can gain, not every trigger: a learner that saves computations the oracle spends can score "
-        "above 100 (each task's section says where, and what the saved computations are worth). ± is the 95 % CI "
+        "lookahead with each episode's future known (not a policy, and not a bound): a learner that saves recomputes "
+        "the oracle spends can score above 100 (each task's section says where, and what the saved recomputes are "
+        "worth). ± is the 95 % CI "
         "over episodes; the suite's "
         "interquartile mean (of every task's episode scores together, as rliable computes it) and the probability of "
         "improving on the best periodic schedule carry 95 % stratified "
         "bootstrap CIs. The oracle scores exactly 100 on every task, yet its IQM is lower: the IQM trims the quarter "
         "of episodes at each end, and the oracle's episode scores are skewed (a few episodes gain far more than the "
         "mean). CPU is the controller's CPU time per episode on this machine (solves, feedback and the "
-        "trigger's own decisions, on the thread that runs the loop), averaged over the tasks. See `etmpc score --help` "
+        "policy's own decisions, on the thread that runs the loop), averaged over the tasks. See `etmpc score --help` "
         "and the README.",
         "",
         BEGIN,
@@ -182,14 +182,14 @@ def page(data: dict) -> str:
             f"### {task}",
             "",
             f"References: `{ref['best_periodic']}` and `{ref['oracle']}` (mean gap {ref['gap']:.5g}); objective: "
-            f"{sense} is better, at {ref['recompute_price']:g} per computation."
+            f"{sense} is better, at {ref['recompute_price']:g} per recompute."
             + (
                 f" Failures ({ref['failure_name']}): per episode, mean ± 95 % CI ([what counts](scorecard.md#failures))."
                 if ref.get("failure_name")
                 else ""
             ),
             "",
-            "| trigger | spec | objective | computations | failures | score | CPU ms/ep (solve / feedback / trigger) |",
+            "| policy | spec | objective | recomputes | failures | score | CPU ms/ep (solve / feedback / policy) |",
             "|---|---|---:|---:|---:|---:|---:|",
         ]
         for entry in data["entries"]:

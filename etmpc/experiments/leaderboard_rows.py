@@ -36,7 +36,7 @@ VALIDATION_EPISODES = 20  # training-distribution episodes that choose the best 
 
 @dataclass(frozen=True)
 class Entry:
-    """A row of the leaderboard: a name, what kind of trigger it is, and its spec on each task."""
+    """A row of the leaderboard: a name, what kind of policy it is, and its spec on each task."""
 
     name: str
     kind: str  # reference | baseline | learned | meter | oracle | submitted (a verified card's)

@@ -3,7 +3,7 @@
 Comparisons are paired per episode. *At an equal rate*: the periodic front (the schedules no other
 schedule beats in both rate and control objective) is interpolated per episode between the two of its
 schedules whose mean rates bracket the policy's, with the weights that make the front's mean rate the
-policy's. Against the *nearest periodic schedule*: the objective at the price, computations included.
+policy's. Against the *nearest periodic schedule*: the objective at the price, recomputes included.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from etmpc.policies.specs import find, kind_of
 
 
 def episode_table(evaluation: dict) -> dict[str, dict[int, tuple[float, float]]]:
-    """policy -> episode -> (control objective, computations), over finite runs (repeats averaged)."""
+    """policy -> episode -> (control objective, recomputes), over finite runs (repeats averaged)."""
     values: dict[str, dict[int, list[tuple[float, float]]]] = {}
     for r in evaluation["runs"]:
         if r["finite"]:
@@ -27,7 +27,7 @@ def episode_table(evaluation: dict) -> dict[str, dict[int, tuple[float, float]]]
 
 
 def objective(control: float, computations: float, price: float, sense: str) -> float:
-    """The objective at ``price``: the control objective and the price of the computations, which counts
+    """The objective at ``price``: the control objective and the price of the recomputes, which counts
     against it whatever its sense (added to a cost, taken from a profit)."""
     return control - metrics.oriented(computation_cost(computations, price), sense)
 
@@ -209,14 +209,14 @@ def _pct(row: dict | None) -> str:
     if row is None:
         return "outside the periodic range"
     ci = "(one episode: no CI)" if row["gain_percent_ci95"] is None else f"± {row['gain_percent_ci95']:.2f} %"
-    return f"`{short_name(row['policy'])}` {row['computations']:.1f} computations: {row['gain_percent']:+.2f} % {ci}"
+    return f"`{short_name(row['policy'])}` {row['computations']:.1f} recomputes: {row['gain_percent']:+.2f} % {ci}"
 
 
 def report_section(pareto: dict) -> list[str]:
     """A Markdown section: at equal rates, each state-dependent policy against the periodic front."""
     sense = metrics.higher_or_lower(pareto["objective_sense"])
     lines = [
-        f"## {pareto['domain']}: state-dependent against periodic at equal computation rates",
+        f"## {pareto['domain']}: state-dependent against periodic at equal recompute rates",
         "",
         f"First {pareto['episodes']} test-set episodes, paired per episode; the periodic front interpolated at "
         f"each policy's mean rate; gains in control objective ({sense} is better), > 0 = better than the front, "

@@ -122,7 +122,7 @@ def _pct(row: dict) -> str:
 
 
 def headroom_section(r: dict, smoke: bool) -> list[str]:
-    """What any trigger could gain over the best fixed policy, and what the learners reach."""
+    """What any policy could gain over the best fixed policy, and what the learners reach."""
     h, d = r["headroom"], r["default_learner"]
     best = h["reference"]
     names = {
@@ -271,10 +271,10 @@ def against_the_paper(results: dict) -> list[str]:
         holds = le["recomputes_mean"] < 25.0 and le["control_objective_mean"] <= always["control_objective_mean"] * 1.01
         out.append(
             "- *On the cart pendulum the learned policy reaches virtually the control performance of standard MPC "
-            "(`always`) with less than a quarter of its computations.* "
+            "(`always`) with less than a quarter of its recomputes.* "
             f"{'Holds' if holds else 'Does not hold'} for the learned policy: control {_f(le['control_objective_mean'])} "
-            f"with {le['recomputes_mean']:.1f} computations, against `always` {_f(always['control_objective_mean'])} with "
-            f"100. Fixed policies that do (control within 1 % of `always`, at most 25 computations): "
+            f"with {le['recomputes_mean']:.1f} recomputes, against `always` {_f(always['control_objective_mean'])} with "
+            f"100. Fixed policies that do (control within 1 % of `always`, at most 25 recomputes): "
             + (
                 ", ".join(f"`{s}` ({_f(v['control_objective_mean'])}, {v['recomputes_mean']:.0f})" for s, v in cheap.items())
                 or "none"
@@ -286,9 +286,9 @@ def against_the_paper(results: dict) -> list[str]:
         best = r["best_fixed"]
         always = r["fixed"]["always"]
         out.append(
-            "- *On the battery the saving comes from keeping larger parts of one plan, not from the computation's "
-            f"energy.* Here the best policy is `{best['policy']}` ({_f(best['objective_mean'])}, "
-            f"{best['recomputes_mean']:.0f} computations); `always` earns {_f(always['objective_mean'])} and `never` "
+            "- *On the battery the saving comes from keeping larger parts of one plan, not from the energy its "
+            f"recomputes draw.* Here the best policy is `{best['policy']}` ({_f(best['objective_mean'])}, "
+            f"{best['recomputes_mean']:.0f} recomputes); `always` earns {_f(always['objective_mean'])} and `never` "
             f"{_f(r['fixed']['never']['objective_mean'])}. "
             + (
                 "Keeping plans does not pay on this benchmark's forecast model: a new plan trades at the true current "

@@ -1,4 +1,4 @@
-"""``etmpc reproduce``: the paper's experiments on both systems, one command, with a report.
+"""``etmpc reproduce``: the paper's experiments on every task, one command, with a report.
 
 Per system, in ``DIR/<domain>/``:
 
@@ -147,7 +147,7 @@ def reproduce(
     sweep: bool = False,
 ) -> dict:
     """Run (or continue) every stage into ``out``; returns ``results.json``'s content. With
-    ``sweep``, also the price sweep of each system (``out/sweep/<task>``, see
+    ``sweep``, also the price sweep of each task (``out/sweep/<task>``, see
     :mod:`etmpc.experiments.sweep`) and its equal-rate answer in the report."""
     with shared_pools():  # one pool of workers for every stage
         return _reproduce(Path(out), settings, workers, backend, address, domains, progress, sweep)

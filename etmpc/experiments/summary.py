@@ -1,4 +1,4 @@
-"""The numbers of ``etmpc reproduce``'s report, from the evaluation JSONs alone: per system, the best
+"""The numbers of ``etmpc reproduce``'s report, from the evaluation JSONs alone: per task, the best
 fixed policy, the learned policies against it (paired over test-set episodes, 95 % CIs), the default
 learner and the headroom (rollout and the oracle)."""
 

@@ -1,15 +1,15 @@
-"""The whole trade-off curve: control objective against computations, over prices of a computation.
+"""The whole trade-off curve: control objective against recomputes, over prices of a recompute.
 
 ``etmpc sweep TASK`` answers the classic question of event-triggered control: *at an equal number of
-computations, does a state-dependent trigger beat a periodic one, and by how much?* On the same
+recomputes, does a state-dependent policy beat a periodic one, and by how much?* On the same
 test-set episodes it plays
 
 * every periodic schedule ``every:T``, T = 1 … N (``every:1`` is ``always``, ``every:N`` is
   ``never``): the **periodic front**;
-* a grid of event triggers ``threshold:X`` spanning the same range of computation rates;
+* a grid of event triggers ``threshold:X`` spanning the same range of recompute rates;
 
 once (their decisions do not depend on the price: only their objective does, and it is recomputed
-for every price from the control objective and the computations of each episode), and, for every
+for every price from the control objective and the recomputes of each episode), and, for every
 price ``p``,
 
 * the rollout policy ``rollout:BEST:K:H`` over the best periodic schedule at ``p``, which optimises
@@ -24,8 +24,8 @@ Comparisons are paired per episode. *At an equal rate*: the periodic front (the 
 schedule beats in both rate and control objective) is interpolated per episode between the two
 of its schedules whose mean rates bracket the policy's, with the weights that make
 the front's mean rate the policy's, so the difference of control objectives is a difference at the
-same mean number of computations (and so at the same mean price paid). Against the *nearest
-periodic schedule*: the objective at ``p``, computations included.
+same mean number of recomputes (and so at the same mean price paid). Against the *nearest
+periodic schedule*: the objective at ``p``, recomputes included.
 
 Outputs (all written atomically; a directory is resumable and never written into by another run):
 ``settings.json``, ``fixed.json``, ``price_<i>.json``, ``learned_<i>.json`` and ``self_<i>.json``
@@ -150,7 +150,7 @@ class SweepSettings:
 
 
 def plan(tasks: list[str] | None, prices=None, episodes: int | None = None, quick: bool = False) -> dict[str, SweepSettings]:
-    """The settings of a sweep of ``tasks`` (default: every system), each checked before any work:
+    """The settings of a sweep of ``tasks`` (default: every task), each checked before any work:
     known, given once, priced sensibly, and asking no more episodes than its stored test set has."""
     tasks = distinct(tasks or names())
     settings = {task: SweepSettings.default(task, prices, episodes, quick) for task in tasks}
@@ -179,7 +179,7 @@ def _ours(name: str) -> bool:
 
 def check_directory(out: Path, domain: str, settings: SweepSettings) -> bool:
     """Raise unless ``out`` can hold this sweep: new, empty, or the same sweep (then True: it
-    continues). Writes nothing, so every system's directory is checked before any work."""
+    continues). Writes nothing, so every task's directory is checked before any work."""
     path = out / "settings.json"
     if not path.exists():
         refuse_foreign(out, lambda name: False, "sweep")

@@ -1,4 +1,4 @@
-"""Learning triggers. Every learner is a :class:`~etmpc.learning.base.Learner` (one interface: setup,
+"""Learning policies. Every learner is a :class:`~etmpc.learning.base.Learner` (one interface: setup,
 learn with a budget and a callback, the policy, state for resume), registered by name in
 :data:`~etmpc.learning.base.LEARNERS` (``learners()``: gpomdp, dpi, self, ppo, then any other defined),
 and trained by one runner (:func:`etmpc.learning.runner.run`: seeds, checkpoints and resume,

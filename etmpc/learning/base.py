@@ -47,7 +47,7 @@ BUILT_IN = {
 
 
 class Learner(ABC):
-    """A learner of a trigger; see the module docstring. The runner sets :attr:`key` (the task at its
+    """A learner of a policy; see the module docstring. The runner sets :attr:`key` (the task at its
     price), :attr:`seeds`, :attr:`out` (the run's directory), :attr:`pool` (the worker backend),
     :attr:`say` and :attr:`tick` (the progress bar), and what its caller draws with, or None:
     :attr:`recorder` (opens a recording at a path: :class:`etmpc.views.recording.Recorder`) and
@@ -168,7 +168,7 @@ class Learner(ABC):
 
 
 def check_decisions(learner: Learner | type[Learner], task: str) -> None:
-    """Refuse, in one line, a learner that trains only keep-or-solve triggers on a task with compute levels."""
+    """Refuse, in one line, a learner that trains only keep-or-solve policies on a task with compute levels."""
     from etmpc.systems import has_levels
 
     if learner.keep_or_solve_only and has_levels(task):

@@ -38,7 +38,7 @@ class TrainConfig:
     algorithm: str = "gpomdp"  # "gpomdp" or "dpi"
     dpi: dpi.Settings = field(default_factory=dpi.Settings)  # used when algorithm == "dpi" (levels: dpi.level_bases)
     validation_episodes: int = 50  # training-distribution episodes that choose selected.json
-    recompute_price: float | None = None  # the price of a computation to train for (None: the system's)
+    recompute_price: float | None = None  # the price of a recompute to train for (None: the task's)
 
     def __post_init__(self):
         checks.typed(self, finite=True, most=checks.MAX_SEED)  # a checkpoint's too: read from a file

@@ -192,7 +192,7 @@ def fit(features: np.ndarray, keep_advantage: np.ndarray, ridge: float, theta0: 
 def fit_labels(rows: list, ridge: float, theta0: np.ndarray | None = None) -> np.ndarray:
     """:func:`fit` on :func:`label_episode`'s rows ``(phi, q_keep, q_recompute, ...)``: the advantage of
     keeping is ``q_keep - q_recompute``; with compute levels (rows ``(phi, q_keep, q_solve, step,
-    q_iterate)``) ``q_keep - max(q_iterate, q_solve)``, keeping against the better computation."""
+    q_iterate)``) ``q_keep - max(q_iterate, q_solve)``, keeping against the better of the two."""
     return fit(np.array([row[0] for row in rows]), np.array([keep_advantage(row) for row in rows]), ridge, theta0)
 
 

@@ -1,7 +1,7 @@
 """GPOMDP (Baxter & Bartlett 2001) for the logistic recomputation policy, one episode per update.
 
 For an episode with per-step rewards ``r_t`` (the environment's reward minus the price of a
-computation, so higher is better for both systems) and the policy's decisions at steps ``t`` in
+recompute, so higher is better on both tasks) and the policy's decisions at steps ``t`` in
 ``D`` (steps where the plan had not run out; forced recomputes are not the policy's doing)::
 
     G_t = sum_{tau >= t} gamma^(tau - t) r_tau                       (discounted reward to go)

@@ -207,7 +207,7 @@ class _Phased(Learner):
             "features": config.features,
             "normalisation_episodes": config.normalisation_episodes,
         }
-        if config.recompute_price is not None:  # trained for another price than the system's own
+        if config.recompute_price is not None:  # trained for another price than the task's own
             hyper["recompute_price"] = config.recompute_price
         hyper.update(self._hyperparameters(config))
         greedy, levels = config.algorithm == "dpi", has_levels(config.domain)

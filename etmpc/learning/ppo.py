@@ -1,4 +1,4 @@
-"""A trigger trained by a standard RL library: Stable-Baselines3's PPO on the trigger environment.
+"""A policy trained by a standard RL library: Stable-Baselines3's PPO on the trigger environment.
 
 ``etmpc train --task TASK --algorithm ppo --out DIR`` trains PPO (an MLP policy) on ``etmpc.envs.gym.TriggerEnv``
 with the task's hyperparameters (``policies/<task>/ppo.yml``, rl-zoo3's layout, see

@@ -144,7 +144,7 @@ def save_model(model, path: Path) -> None:
 
     fresh = trigger_spaces(model.observation_space.shape[0], int(model.action_space.n))
     if fresh != (model.observation_space, model.action_space):
-        raise EtmpcError(f"a trigger model's spaces are {fresh}, not {(model.observation_space, model.action_space)}")
+        raise EtmpcError(f"a policy model's spaces are {fresh}, not {(model.observation_space, model.action_space)}")
     model.observation_space, model.action_space = fresh
     raw = path.with_name(path.stem + ".unpacked.zip")
     model.save(str(raw), exclude=["start_time", "ep_info_buffer", "ep_success_buffer"])

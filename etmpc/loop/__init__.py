@@ -6,10 +6,10 @@ the plant back in the last step (``task.restarted``: a fallen pole re-erected), 
 (``-K (x_i - x_hat_i)``, with a fixed LQR gain or one along the plan), clipped to the input bounds.
 If a solve fails, the previous plan is kept while it has steps left (the feedback keeps correcting
 around it) and the failure is counted; a forced solve that fails is used as it is (the solver's last
-iterate). Every recompute attempt counts as a computation (``a_i = 1``).
+iterate). Every recompute attempt counts (``a_i = 1``).
 
 With time in the loop (a task's ``Config.latency`` and ``compute_levels``, :mod:`etmpc.control.timing`)
-a solve started at step ``k`` delivers its plan at ``k + d`` while the kept plan runs, the trigger is
+a solve started at step ``k`` delivers its plan at ``k + d`` while the kept plan runs, the policy is
 not asked meanwhile, and a decision may be one SQP iteration instead of a full solve, priced by its
 iterations. Latency 0 is the loop above, bit for bit.
 

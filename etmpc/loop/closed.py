@@ -21,7 +21,7 @@ from etmpc.loop.state import AugmentedState, DecisionContext, Policy, Snapshot
 from etmpc.systems.base import System
 
 # The clock of the trajectory's timings: the CPU time of the thread that runs the loop (the solve, MuJoCo,
-# the feedback and the trigger all run in it), so a step played while other processes share the cores
+# the feedback and the policy all run in it), so a step played while other processes share the cores
 # does not count the time it waited for a core. Their competition for caches and memory still slows it
 # (measured in docs/scorecard.md): compare CPU figures played on an idle machine.
 cpu_clock = time.thread_time
@@ -63,9 +63,9 @@ class ClosedLoop:
     (:meth:`resume`); a plant that fails sets :attr:`failed`.
 
     Time in the loop (:mod:`etmpc.control.timing`): on a task with a latency, a solve started at step
-    ``k`` is :attr:`pending` until ``k + d``; the trigger is not asked meanwhile (:attr:`in_flight`)
+    ``k`` is :attr:`pending` until ``k + d``; the policy is not asked meanwhile (:attr:`in_flight`)
     and the plan comes into force with age ``d``. On a task with compute levels a decision is
-    ``KEEP``, ``ITERATE`` or ``SOLVE`` (``True``/``False`` are a full solve/keep), and a computation
+    ``KEEP``, ``ITERATE`` or ``SOLVE`` (``True``/``False`` are a full solve/keep), and a recompute
     costs its SQP iterations.
     """
 
@@ -118,7 +118,7 @@ class ClosedLoop:
 
     @property
     def in_flight(self) -> bool:
-        """A solve is under way: its plan is not in force yet, and no other starts (the trigger is not asked)."""
+        """A solve is under way: its plan is not in force yet, and no other starts (the policy is not asked)."""
         return self.pending is not None
 
     @property
@@ -134,7 +134,7 @@ class ClosedLoop:
         """What a policy sees at this step's decision; ``None`` when the decision is forced. With
         ``context``, the loop's whole state too (for policies that simulate); without ``observes``,
         no observation (a policy that never reads it: the light mode then does not make it). Also
-        ``None`` while a solve is in flight: the trigger is not asked then."""
+        ``None`` while a solve is in flight: the policy is not asked then."""
         return None if (self.forced or self.pending is not None) else self.observed_state(context, observes)
 
     def observed_state(self, context: bool = False, observes: bool = True) -> AugmentedState | None:
@@ -148,11 +148,11 @@ class ClosedLoop:
     def step(self, recompute: bool | int, started: float | None = None, solved: Plan | None = None) -> float:
         """Play this control interval: compute a new plan if ``recompute`` (or if forced; on a task
         with compute levels ``recompute`` is the level), apply the plan in force's input plus the LQR
-        correction, clipped, and step the plant. Returns the trigger's reward for it: the task's
-        (:attr:`reward`) minus the price of the computation started, if one was (:attr:`cost`). A plant
+        correction, clipped, and step the plant. Returns the policy's reward for it: the task's
+        (:attr:`reward`) minus the price of the recompute started, if one was (:attr:`cost`). A plant
         that fails (non-finite) ends the episode; the step's reward is then 0. ``started``: when the
         step's decision began, on :data:`cpu_clock` (the step's time counts from there). ``solved``: the
-        plan this step's computation gives, when the caller has it already. While a solve is in flight the
+        plan this step's recompute gives, when the caller has it already. While a solve is in flight the
         answer is ignored (recorded as :attr:`in_flight` in the trajectory)."""
         if self.done:
             raise RuntimeError("the episode is over: reset the loop")
@@ -233,7 +233,7 @@ class ClosedLoop:
         return level
 
     def _deliver(self, new: Plan, made: int, expired: bool, now: int | None = None, started: int | None = None) -> None:
-        """Put ``new`` (made for step ``made``, its computation started at ``started``) in force now, unless
+        """Put ``new`` (made for step ``made``, its recompute started at ``started``) in force now, unless
         it failed and the plan in force still has steps left (``expired``: it has none, or there is no plan)."""
         if new.success or expired or self.plan is None:
             now = made if now is None else now
@@ -330,7 +330,7 @@ def play_on(
 ) -> float:
     """Continue ``snapshot`` in ``env`` (a twin of the one it was taken in) and return the policy's
     return from the snapshot's step on: the sum of :meth:`ClosedLoop.step`'s rewards (the price of
-    each computation taken off), plus ``system.truncation_value`` of the last state when the play
+    each recompute taken off), plus ``system.truncation_value`` of the last state when the play
     stops before the episode's end.
 
     The first decision is ``first`` (recompute or keep; a level on a task with compute levels), the

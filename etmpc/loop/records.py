@@ -16,7 +16,7 @@ from etmpc.control.plan import Plan
 
 def computation_cost(computations, price: float):
     """The price of ``computations`` (a count, a flag, or an array of either, elementwise) at ``price``
-    each: the one place etmpc prices a computation. A trigger's reward is the task's minus this."""
+    each: the one place etmpc prices a recompute. A policy's reward is the task's minus this."""
     return price * computations
 
 
@@ -31,20 +31,20 @@ class Trajectory:
     correction: np.ndarray  # (T, nu) LQR correction before clipping
     predicted: np.ndarray  # (T, nx) the plan's prediction x_hat_i
     plan_age: np.ndarray  # (T,) i - k at the decision
-    recompute: np.ndarray  # (T,) a_i: a computation was started (includes forced ones)
+    recompute: np.ndarray  # (T,) a_i: a recompute was started (includes forced ones)
     forced: np.ndarray  # (T,) the plan had run out (or there was none)
     level: np.ndarray  # (T,) what was computed: 0 keep, 1 one SQP iteration, 2 a full solve (etmpc.control.timing)
-    work: np.ndarray  # (T,) the computation's priced work: 1 per solve, or its SQP iterations on a task with levels
-    in_flight: np.ndarray  # (T,) a solve was under way at the decision: the trigger was not asked
+    work: np.ndarray  # (T,) the recompute's priced work: 1 per solve, or its SQP iterations on a task with levels
+    in_flight: np.ndarray  # (T,) a solve was under way at the decision: the policy was not asked
     rewards: np.ndarray  # (T,) the environment's reward for the step
     # The timings are CPU seconds of the loop's thread (etmpc.loop.closed.cpu_clock), not wall time.
-    solve_time_s: np.ndarray  # (T,) CPU time of the MPC computation (NaN where none happened)
+    solve_time_s: np.ndarray  # (T,) CPU time of the MPC's solve (NaN where none happened)
     step_time_s: np.ndarray  # (T,) CPU time of the whole step, solve included
     feedback_time_s: np.ndarray  # (T,) CPU time of the input: the plan's, plus the LQR correction, clipped
     decide_time_s: np.ndarray  # (T,) CPU time of the policy's decision (0 where the loop did not ask it)
     plans: list[tuple[int, Plan]] = field(default_factory=list)  # (step made for, plan), successful or used
     arrivals: list[int] = field(default_factory=list)  # the step each of plans came into force (its made step + latency)
-    starts: list[int] = field(default_factory=list)  # the step each of plans' computation started (its made step, or earlier)
+    starts: list[int] = field(default_factory=list)  # the step each of plans' recompute started (its made step, or earlier)
     steps: int = 0
     solver_failures: int = 0
     nonfinite: bool = False  # the episode ended early on a non-finite state
@@ -75,7 +75,7 @@ class Trajectory:
         """The controller's CPU time in this episode, summed over its steps (the loop thread's: a
         machine-dependent figure, which other processes sharing the cores inflate less than wall time, but still
         inflate: compare figures played on an idle machine): the MPC's
-        ``solve``s, the ``feedback`` (the LQR), the trigger's ``decide``s (a rollout's simulations included)."""
+        ``solve``s, the ``feedback`` (the LQR), the policy's ``decide``s (a rollout's simulations included)."""
         n = self.steps
         return {
             "solve": float(np.nansum(self.solve_time_s[:n])),
@@ -89,15 +89,15 @@ class Trajectory:
 
     @property
     def total_work(self) -> float:
-        """The work priced over the episode: the computations, or their SQP iterations on a task with levels."""
+        """The work priced over the episode: the recomputes, or their SQP iterations on a task with levels."""
         return float(self.work[: self.steps].sum())
 
     def policy_rewards(self, recompute_price: float) -> np.ndarray:
-        """Per-step rewards the policy maximises: the environment's, minus the price of a computation."""
+        """Per-step rewards the policy maximises: the environment's, minus the price of each recompute's work."""
         return self.rewards[: self.steps] - computation_cost(self.work[: self.steps], recompute_price)
 
     def policy_return(self, recompute_price: float) -> float:
-        """The policy's return: rewards minus the price of every computation."""
+        """The policy's return: rewards minus the price of every recompute's work."""
         return float(self.rewards[: self.steps].sum() - computation_cost(self.total_work, recompute_price))
 
 
@@ -160,7 +160,7 @@ class EpisodeRecord:
     rewards: np.ndarray  # (S,)
     prediction_error: np.ndarray  # (S,), NaN at step 0
     level: np.ndarray  # (S,) int8: what was computed, 0 keep, 1 one SQP iteration, 2 a full solve
-    work: np.ndarray  # (S,) the computation's priced work: 1 per solve, or its SQP iterations (compute levels)
+    work: np.ndarray  # (S,) the recompute's priced work: 1 per solve, or its SQP iterations (compute levels)
     in_flight: np.ndarray  # (S,) bool: a solve was under way at the step's decision
     plans: list = field(default_factory=list)  # (step made for, states (N+1, nx), inputs (N, nu), forecasts {name: (N,)})
     arrivals: tuple = ()  # parallel to plans: the step each came into force
@@ -228,7 +228,7 @@ def _arrivals(traj) -> list[int]:
 
 
 def _starts(traj, arrivals, shift: int) -> list[int]:
-    """The step each plan's computation started: the loop's record of it (``Trajectory.starts``), or, for
+    """The step each plan's recompute started: the loop's record of it (``Trajectory.starts``), or, for
     a trajectory without one, :func:`plan_starts`' inference."""
     if len(getattr(traj, "starts", ())) == len(traj.plans):
         return list(traj.starts)

@@ -1,4 +1,4 @@
-"""What a trigger sees, as numbers: the feature sets of the learned policy, and the observation of the
+"""What a policy sees, as numbers: the feature sets of the learned policy, and the observation of the
 trigger environment (``etmpc.envs``) and of the policies trained on it (``sb3:PATH``).
 
 A feature set defines a raw vector ``r`` of the augmented state ``s``:

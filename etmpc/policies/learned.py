@@ -9,7 +9,7 @@ of a raw vector ``r`` chosen by the policy's *feature set*:
 
 * ``error`` (the default for training): ``r = [x_i - x_hat_i, i - k, exogenous]``, the prediction
   error per state (its square comes with ``r^2``) and the plan's age, as the authors' own
-  environment feeds its policy; for the battery also the exogenous information a good trigger needs
+  environment feeds its policy; for the battery also the exogenous information a good policy needs
   (its system's ``exogenous_features``; the battery's: the price and net production now, what the plan
   assumed for them, their differences, and the value at today's price of the trade the plan makes now);
 * ``paper``: ``r = s = [x_i, x_k, i - k]``, the augmented state as the paper's text defines it.
@@ -54,7 +54,7 @@ FORMAT = "etmpc-logistic-policy"
 VERSION = 2
 LEVELS_VERSION = 3  # a policy with compute levels (theta_level)
 INITIAL_KEEP_LOGIT = -3.0  # sigma(-3) = 0.047: at first the policy recomputes 95 % of the time
-INITIAL_SOLVE_LOGIT = 3.0  # with levels, a computation is at first a full solve 95 % of the time
+INITIAL_SOLVE_LOGIT = 3.0  # with levels, a recompute is at first a full solve 95 % of the time
 # What a policy file's numbers may be (see LogisticPolicy.from_json for why), checked when it is read: the
 # size of a weight (theta, theta_level), of a normalisation's mean or scale, and the smallest scale
 # (Normalisation.fit writes a smaller standard deviation as 1). The self-trigger's files share them.

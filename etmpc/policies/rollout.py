@@ -6,13 +6,13 @@ the plan for this step, once recomputing now, then following the fixed policy ``
 does so over ``K`` futures sampled by the task's own generators from what the controller knows at
 that step (``system.sample_future``: never the stored future), with the same futures and the same
 draws of ``BASE`` for both answers (common random numbers), and picks the answer whose mean return
-(rewards minus the price of computations) is higher; on a tie it keeps the plan. ``H`` stops each
+(rewards minus the price of the recomputes) is higher; on a tie it keeps the plan. ``H`` stops each
 simulation ``H`` steps ahead and adds ``system.truncation_value`` of the state it ends in
 (default: play to the episode's end).
 
 A rollout policy is a real, if expensive, policy: it uses only what the controller knows, and by
 the rollout property it does at least as well as ``BASE`` in expectation (up to the sampling noise
-of ``K`` futures). It measures how much a state-dependent trigger can gain over ``BASE``.
+of ``K`` futures). It measures how much a state-dependent policy can gain over ``BASE``.
 
 ``oracle:BASE`` is the same one-step lookahead with the episode's **stored** future, which no
 controller knows: a **reference** for what such a policy can gain, never a contender. Its spec
@@ -86,7 +86,7 @@ def q_values(
 
 
 def answers(system) -> tuple:
-    """What a trigger may answer at a decision of ``system``: keep or recompute (``False``, ``True``), or,
+    """What a policy may answer at a decision of ``system``: keep or recompute (``False``, ``True``), or,
     on a task with compute levels, keep, one SQP iteration, a full solve (``0``, ``1``, ``2``)."""
     return (KEEP, ITERATE, SOLVE) if system.compute_levels else (False, True)
 

@@ -1,4 +1,4 @@
-"""``sb3:PATH``: a trigger trained with Stable-Baselines3 on the trigger environment (``etmpc.envs``).
+"""``sb3:PATH``: a policy trained with Stable-Baselines3 on the trigger environment (``etmpc.envs``).
 
 ``PATH`` is the model's ``.zip`` (``stable_baselines3.PPO.save``); beside it, ``PATH`` with the suffix
 ``.json`` says what it was trained on: the task, the observation's names, and the running mean and

@@ -2,7 +2,7 @@
 :mod:`etmpc.policies.sb3`): the zip's ``data`` entry as JSON, the policy class's pickle listed by
 ``pickletools`` and never run, the weights through torch's weights-only reader, checked against
 the architecture; :class:`Network` evaluates the tanh layers and the action logits, and decides a
-near tie again with exact sums. A trigger's model has two actions (keep, recompute) or, on a task with
+near tie again with exact sums. A policy's model has two actions (keep, recompute) or, on a task with
 compute levels, three (keep, one SQP iteration, a full solve)."""
 
 from __future__ import annotations
@@ -27,8 +27,8 @@ POLICY_CLASS = "stable_baselines3.common.policies.ActorCriticPolicy"  # what PPO
 BOX, DISCRETE = "<class 'gymnasium.spaces.box.Box'>", "<class 'gymnasium.spaces.discrete.Discrete'>"
 DEFAULT_NET_ARCH = [64, 64]  # ActorCriticPolicy's policy layers when policy_kwargs has no net_arch
 ALGORITHMS = ("a2c", "ddpg", "dqn", "ppo", "sac", "td3")  # Stable-Baselines3's
-MEANINGS = {2: "keep, recompute", 3: "keep, one SQP iteration, a full solve"}  # a trigger's actions, by their number
-MAX_ENTRY = 64 << 20  # bytes of 'data' or 'policy.pth': far above a trigger's network, far below a zip bomb
+MEANINGS = {2: "keep, recompute", 3: "keep, one SQP iteration, a full solve"}  # a policy's actions, by their number
+MAX_ENTRY = 64 << 20  # bytes of 'data' or 'policy.pth': far above a policy's network, far below a zip bomb
 
 _STRINGS = {"STRING", "BINSTRING", "SHORT_BINSTRING", "UNICODE", "BINUNICODE", "SHORT_BINUNICODE", "BINUNICODE8"}
 _MEMO = {"MEMOIZE", "PUT", "BINPUT", "LONG_BINPUT"}

@@ -176,7 +176,7 @@ BUILT_IN: tuple[Kind, ...] = (
     Kind(
         "py",
         "py:MODULE:NAME",
-        "your own trigger (a class or factory)",
+        "your own policy (a class or factory)",
         lambda arg, spec, c: load_user(spec, c.levels),
         family="users",
     ),

@@ -15,7 +15,7 @@ from etmpc.loop import AugmentedState
 class Threshold:
     """Event trigger: recompute when ``|W (x_i - x_hat_i)|_2 > X``.
 
-    ``weights`` is the diagonal of ``W``, chosen per system (for the cart pendulum the square root
+    ``weights`` is the diagonal of ``W``, chosen per task (for the cart pendulum the square root
     of the LQR's state weights, so the norm is the LQR's own measure of the error).
     """
 

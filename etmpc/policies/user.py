@@ -1,4 +1,4 @@
-"""Triggers of your own: a policy object handed to :func:`etmpc.evaluate`, or ``py:MODULE:NAME`` on the
+"""Policies of your own: a policy object handed to :func:`etmpc.evaluate`, or ``py:MODULE:NAME`` on the
 command line (a class or factory, importable from where you run etmpc).
 
 A policy is anything with ``spec`` (its name, a string), ``stochastic`` (a bool: does ``decide`` draw
@@ -9,8 +9,8 @@ from the generator it is given?) and ``decide(s, rng) -> bool`` (True: recompute
 it: a ``decide`` that raises anything (``SystemExit`` and ``KeyboardInterrupt`` included: only a real
 Ctrl-C stops the command) or answers what its task does not take (a bool, 0 or 1; 0, 1 or 2 with compute levels).
 
-A trigger cannot change the run it is scored on: what it is shown is read-only (see
-:class:`etmpc.loop.AugmentedState`), and a trigger that simulates (``simulates = True``) is handed a
+A policy cannot change the run it is scored on: what it is shown is read-only (see
+:class:`etmpc.loop.AugmentedState`), and a policy that simulates (``simulates = True``) is handed a
 context whose environment is a twin of the loop's, set to the same state at each decision, never the
 loop's own.
 

@@ -137,7 +137,7 @@ class SystemBase:
     camera: str | None = None  # the MJCF camera that films the scene
     failure_name: str | None = None  # what a failure is called ("falls")
     # (trajectory, episode) -> int: the failures of an episode so far, counted from what it played (the loop's
-    # Trajectory, its first trajectory.steps rows: rewards, states, inputs, computations) and the episode it
+    # Trajectory, its first trajectory.steps rows: rewards, states, inputs, recomputes) and the episode it
     # played; each step judged on the steps up to it, so that the count never decreases as the episode goes on
     failures: Any = None
     plan_cost: Any = None  # (x, u_prev, timestep, inputs) -> the OCP's objective of an input sequence
@@ -161,7 +161,7 @@ class SystemBase:
     @cached_property
     def compute_levels(self) -> bool:
         """A decision is one of keep, one SQP iteration, a full solve (the Config's ``compute_levels``);
-        a computation is then priced per SQP iteration. False: keep or solve, priced per solve. A bool,
+        a recompute is then priced per SQP iteration (its work). False: keep or solve, priced per solve. A bool,
         never read by its truth (``"no"`` would turn levels on)."""
         return checks.argument("compute_levels", checks.flag, getattr(self.config, "compute_levels", False))
 
@@ -178,7 +178,7 @@ class SystemBase:
 
     @cached_property
     def recompute_price(self) -> float:
-        """Charged per computation in the policy's objective."""
+        """Charged per recompute (per SQP iteration on a task with compute levels) in the policy's objective."""
         return self.config.recompute_price
 
     @cached_property

@@ -18,7 +18,7 @@ from etmpc.common.errors import EtmpcError
 class Benchmark:
     """How the experiments measure a task (``etmpc reproduce`` and ``etmpc sweep``), kept with it."""
 
-    prices: tuple[float, ...]  # the sweep's prices of a computation, in the objective's unit
+    prices: tuple[float, ...]  # the sweep's prices of a recompute, in the objective's unit
     sweep_thresholds: tuple[float, ...]  # threshold:X levels that span the periodic schedules' rates
     report_thresholds: tuple[float, ...]  # the few threshold:X levels in reproduce's table of fixed policies
     periods: tuple[int, ...] = (2, 3, 4, 5, 7, 10, 15)  # every:T in that table, beside always and never
@@ -30,7 +30,7 @@ class Benchmark:
     sweep_self_trigger: bool = True
     # The most steps a rollout looks ahead (the rollout meter's H and the DPI labels'): on a task whose
     # events come often, a long lookahead sums their random timing, the same for both answers only in
-    # distribution, into noise that swamps the price of a computation.
+    # distribution, into noise that swamps the price of a recompute.
     lookahead: int = 20
 
     def capped(self, horizon: int | None) -> int:

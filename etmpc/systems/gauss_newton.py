@@ -4,7 +4,7 @@ each plan while it is kept (:class:`PlanFeedback`). The kicks task and the reach
 writes its residuals, its feedback weights and the names of what it tracks, and gets the rest:
 
 * ``plan``: the OCP solved at the observed parameters; the plan carries them as its forecasts (one
-  value per step), so recordings draw what it was made for and a trigger compares it with now;
+  value per step), so recordings draw what it was made for and a policy compares it with now;
 * ``plan_cost`` and ``interpreted`` for ``etmpc bench``;
 * ``feedback``: :class:`PlanFeedback`, the gains each plan carries.
 

@@ -22,7 +22,7 @@ every other task still works.
 Each task has a :class:`TaskSpec`, from which every surface derives its name: the id ``DOMAIN/TASK``
 (``DOMAIN`` alone names its domain's first task), the Gymnasium id ``etmpc/DOMAIN-TASK-vN``, the folder
 ``DOMAIN/TASK``. A :class:`SystemKey` is a task at a
-price of a computation, made and checked once at the edge and passed as a value: every worker builds
+price of a recompute, made and checked once at the edge and passed as a value: every worker builds
 the same system from it.
 """
 
@@ -295,7 +295,7 @@ def system_class(name: str) -> type:
 
 @dataclass(frozen=True)
 class SystemKey:
-    """A task (its canonical name) at a price of a computation (``None``: the task's own), checked when
+    """A task (its canonical name) at a price of a recompute (``None``: the task's own), checked when
     made. ``str(key)`` is how files and messages show it: ``DOMAIN[/TASK]``, ``@PRICE`` when priced."""
 
     task: str

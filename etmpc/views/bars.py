@@ -147,7 +147,7 @@ def draw_policy_bars(evaluations: Sequence[dict], group_learned: bool = True, so
     stochastic policy evaluated with ``--repeats`` > 1). With ``group_learned``, the policies
     ``rl:…/seed<S>/last.json`` of one training run are one bar "learned (N seeds)": the mean over
     seeds, with the std over seeds as its error bar. Each bar is annotated with its mean and its mean
-    computations per episode. ``sources`` names the documents in error messages.
+    recomputes per episode. ``sources`` names the documents in error messages.
     """
     bars = policy_bars(evaluations, group_learned, sources)
     first = evaluations[0]

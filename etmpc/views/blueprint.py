@@ -2,7 +2,7 @@
 
 The blueprint has a tab per policy and, inside it, a tab per recorded episode (the first
 ``MAX_EPISODE_TABS`` of each policy; the others are in the file too, in the entity tree). An
-episode's tab holds a title line (the policy, the episode, its objective and computations, how to
+episode's tab holds a title line (the policy, the episode, its objective and recomputes, how to
 read the plots) over three columns of time-series views, all on the same time axis, the whole
 episode wide, on the ``step`` timeline:
 
@@ -12,7 +12,7 @@ episode wide, on the ``step`` timeline:
 - the inputs (applied, every plan's inputs, the bounds), the LQR correction, the other exogenous
   signals, and the prediction error ``‖W (x − x̂)‖`` (with a ``threshold:X`` policy's threshold);
 - the recomputes (the age of the plan each one replaced, by kind), on a task with time in the loop
-  the plan in force (with each solve's start and arrival) and each step's computation (level, work,
+  the plan in force (with each solve's start and arrival) and each step's recompute (level, work,
   in flight), the reward per step, the running objective, and the recompute log (with each solve's
   start and arrival there);
 - before them, for a system with a 3-D scene, a 3-D view of it (:mod:`etmpc.views.space`).
@@ -113,7 +113,7 @@ CHOSEN = (66, 133, 244)  # a recompute the policy chose: blue
 FORCED = (219, 68, 55)  # a recompute forced because the plan ran out: red
 FIRST = (140, 140, 140)
 ANNOUNCED = (15, 157, 88)  # what a self-trigger announced at a solve, a plan that came into force: green
-ITERATION = (150, 90, 220)  # a computation of one SQP iteration (compute levels): violet
+ITERATION = (150, 90, 220)  # a recompute of one SQP iteration (compute levels): violet
 # A plan's colour says when it was made: blue (episode start) -> violet -> teal -> green (end).
 _PLAN_ANCHORS = np.array([(70, 110, 235), (150, 90, 220), (0, 165, 190), (70, 185, 60)], float)
 PLAN_ALPHA = 210
@@ -219,9 +219,9 @@ def episode_container(layout: EpisodeLayout):
             "plan in force: the step it was made for [step] · ● solve started ▲ plan in force ✕ no plan",
             ["solve/in_force", "solve/started", "solve/arrived"],
         ),
-        view("computation per step: level (1 one SQP iteration, 2 full solve), work, in flight", ["compute"]),
+        view("recompute per step: level (1 one SQP iteration, 2 full solve), work, in flight", ["compute"]),
         view(f"reward per step [{units}]", ["objective/reward"]),
-        view(f"running objective [{units}], computations included", ["objective/running"]),
+        view(f"running objective [{units}], recomputes included", ["objective/running"]),
     ]
     panels = [v for v in panels if v is not None]
     if "camera" in layout.entities:

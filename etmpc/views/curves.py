@@ -1,5 +1,5 @@
 """Curves: the learning curve of a training run (the paper's Figure 2) and the trade-off curve of a
-sweep (control objective against computations), drawn from their JSON summaries."""
+sweep (control objective against recomputes), drawn from their JSON summaries."""
 
 from __future__ import annotations
 
@@ -31,7 +31,7 @@ def write_curve_png(path: Path, summary: dict, seeds: int) -> None:
 
 
 def draw_pareto(pareto: dict):
-    """Control objective against computations per episode: every periodic schedule as a grey dot and
+    """Control objective against recomputes per episode: every periodic schedule as a grey dot and
     the periodic front (the schedules no other beats) as a line, the event triggers as a dashed line
     of points; at each price, coloured by price, the rollout (diamond), learned (square) and
     self-triggering (triangle) policies as filled points and the oracle as a hollow circle."""
@@ -81,7 +81,7 @@ def draw_pareto(pareto: dict):
                 gid=f"{kind}@{price!r}",
                 zorder=3,
             )
-    ax.set_xlabel("computations per episode")
+    ax.set_xlabel("recomputes per episode")
     ax.set_ylabel(f"control objective ({higher_or_lower(sense)} is better)")
     ax.set_title(f"{pareto['domain']}: the trade-off, {pareto['episodes']} test-set episodes (oracle: knows the future)")
     ax.grid(alpha=0.3)

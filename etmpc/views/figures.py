@@ -1,7 +1,7 @@
 """Figures drawn from trajectories (matplotlib, headless Agg backend). Controllers never import this.
 
 * :func:`forecast_figure`: the paper's Figure 1 for the battery: true production and price over an
-  episode, with the forecasts each MPC computation was given (dashed, from the computation's cross
+  episode, with the forecasts each MPC solve was given (dashed, from the solve's cross
   onward), one column per policy.
 * :func:`draw_trajectory` / :func:`write_trajectory_png`: one episode, as in the paper's reference
   implementation: every state with every plan's prediction (dashed) and the recompute steps, the
@@ -54,19 +54,14 @@ def forecast_figure(episode, runs: Sequence[tuple[str, Trajectory]], dt_s: float
                 lead = np.arange(forecast.size)
                 color = plt.cm.viridis(i / max(1, len(traj.plans) - 1))
                 ax.plot(
-                    (k + lead) * dt_s,
-                    forecast,
-                    ls="--",
-                    lw=0.9,
-                    color=color,
-                    label="forecast at a computation" if i == 0 else None,
+                    (k + lead) * dt_s, forecast, ls="--", lw=0.9, color=color, label="forecast at a solve" if i == 0 else None
                 )
                 ax.plot(k * dt_s, forecast[0], marker="x", ms=6, color=color)
             if key == "price_eur_kwh" and mean_price is not None:
                 ax.axhline(mean_price, color="grey", lw=0.8, ls=":", label="mean price (value of storage)")
             ax.set_ylabel(label)
             ax.grid(alpha=0.3)
-        axes[0, col].set_title(f"{name}: {traj.recomputes} computations")
+        axes[0, col].set_title(f"{name}: {traj.recomputes} recomputes")
         axes[-1, col].set_xlabel("time (s)")
     axes[0, 0].legend(loc="best", fontsize=8)
     axes[-1, 0].legend(loc="best", fontsize=8)
@@ -143,7 +138,7 @@ def draw_trajectory(system, traj: Trajectory, title: str | None = None, signals:
                 color=colors[p],
                 alpha=0.85,
                 gid="plan",
-                label="plan's prediction (one per computation)" if p == 0 else None,
+                label="plan's prediction (one per recompute)" if p == 0 else None,
             )
         for at, gid, label, style in recomputes:
             for line in ax.plot(
@@ -194,7 +189,7 @@ def draw_trajectory(system, traj: Trajectory, title: str | None = None, signals:
     axes[-1].set_xlabel("time (s)")
     axes[-1].set_xlim(0, max(steps, 1) * dt)
     if title is None:
-        title = f"{system.domain}: {steps} steps, {traj.recomputes} computations ({forced.size} forced)"
+        title = f"{system.domain}: {steps} steps, {traj.recomputes} recomputes ({forced.size} forced)"
     fig.suptitle(title, fontsize=11)
     fig.tight_layout()
     return fig
@@ -208,7 +203,7 @@ def write_trajectory_png(
 
 
 def draw_performance_profile(curves: Mapping[str, np.ndarray], thresholds: np.ndarray, tasks: Sequence[str]):
-    """The scorecard's performance profiles: per trigger, the share of episodes (averaged over tasks)
+    """The scorecard's performance profiles: per policy, the share of episodes (averaged over tasks)
     whose normalized score exceeds each threshold, with the two references' scores marked."""
     fig, ax = plt.subplots(figsize=(7.5, 4.5), layout="constrained")
     for policy, curve in curves.items():

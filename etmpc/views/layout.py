@@ -26,7 +26,7 @@ def _about(name: str, record: EpisodeRecord, objective: float) -> str:
         f"**{name}**{bound} · {task} · **test-set episode {identity['episode']}**"
         + (f", repeat {identity['repeat']}" if identity["repeat"] else "")
         + f" · objective **{objective:.5g}** {unit if unit != '-' else ''} ({sense} is better)"
-        f" · {int(record.recompute.sum())} computations, {forced} forced · seed {identity['seed']}"
+        f" · {int(record.recompute.sum())} recomputes, {forced} forced · seed {identity['seed']}"
         + (f" · policy `{spec}`" if spec != name else "")
         + (f" · latency: {identity['latency']}" if "latency" in identity else "")
         + (f" · work {record.work.sum():g} SQP iterations" if identity.get("compute_levels") else "")
@@ -39,7 +39,7 @@ def _about(name: str, record: EpisodeRecord, objective: float) -> str:
 
 def _solve_series(record: EpisodeRecord) -> list[tuple]:
     """A task with time in the loop: ``(path, steps, values, names, kind, style)`` of the series that show
-    each step's computation (``compute``: level, work, in flight, in the order ``replay`` reads them),
+    each step's recompute (``compute``: level, work, in flight, in the order ``replay`` reads them),
     the plan in force (``solve/in_force``: the step it was made for) and, on the same axis, each
     solve's start (``solve/started``, at the step it started) and arrival (``solve/arrived``, at the
     step it was made for; one that gave no plan, at the step it started)."""
@@ -53,7 +53,7 @@ def _solve_series(record: EpisodeRecord) -> list[tuple]:
             "compute",
             steps,
             compute,
-            ["level (0 keep, 1 one SQP iteration, 2 full solve)", f"work [{work_unit}]", "in flight (trigger not asked)"],
+            ["level (0 keep, 1 one SQP iteration, 2 full solve)", f"work [{work_unit}]", "in flight (policy not asked)"],
             "SeriesLines",
             dict(colors=[look.FORCED, look.REALISED, look.BOUND], widths=[1.5, 2.0, 1.0]),
         ),

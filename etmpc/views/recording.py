@@ -275,14 +275,14 @@ class Recorder:
                 widths=[1.0],
             )
 
-        if record.timed:  # time in the loop: each step's computation, the plan in force, each solve's start and arrival
+        if record.timed:  # time in the loop: each step's recompute, the plan in force, each solve's start and arrival
             for path, steps, values, names, kind, style in _solve_series(record):
                 series(path, _timeline(steps, dt), values, names, kind=kind, **style)
             steps, text, levels = solve_log(record, bool(identity.get("compute_levels")))
             stream.send_columns(f"{root}/events/solves", _timeline(steps, dt), rr.TextLog.columns(text=text, level=levels))
             written.append("events/solves")
 
-        # The objective: each computation priced by its work (1 per solve, or its SQP iterations).
+        # The objective: each recompute priced by its work (1 per solve, or its SQP iterations).
         sign = sense_sign(identity["objective_sense"])
         running = sign * np.cumsum(record.rewards - computation_cost(record.work, identity["recompute_price"]))
         series("objective/reward", self._steps(n, dt), record.rewards, ["reward"], **realised)

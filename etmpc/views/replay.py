@@ -125,7 +125,7 @@ def replay_summary(path: str | Path) -> list[ReplayedEpisode]:
         steps_err, errors = data.get("prediction_error", (np.zeros(0, int), np.zeros(0)))
         recomputes = int(recompute.sum())
         # The same expressions as Trajectory.policy_return and evaluate.scores, on the same floats: each
-        # computation priced by its work (a file without ``work``: one per recompute, the same floats).
+        # each recompute priced by its work (a file without ``work``: one per recompute, the same floats).
         work = float(data["work"][1].sum()) if "work" in data else recomputes
         ret = float(rewards.sum() - computation_cost(work, identity["recompute_price"]))
         control = float(rewards.sum())

@@ -9,8 +9,8 @@ is a Rerun time series on two timelines, ``step`` (sequence) and ``time`` (secon
 episode started), and every series name carries its unit:
 
 - ``identity``: static values: domain, task, policy (its exact spec), test-set episode, repeat,
-  seed, test-set sha256, objective sense, price of a computation, control interval; ``about``: a
-  static title line (policy, episode, objective, computations, how to read the plots);
+  seed, test-set sha256, objective sense, price of a recompute, control interval; ``about``: a
+  static title line (policy, episode, objective, recomputes, how to read the plots);
 - ``realised/state/<name>``: the state, steps ``0..S``; ``realised/input/<name>``: the applied
   input, with its lower and upper bounds as two more series; ``realised/signal/<name>``: the
   episode's exogenous inputs (disturbance, or price and net production); ``correction/<name>``:
@@ -21,7 +21,7 @@ episode started), and every series name carries its unit:
   series are "slots": a plan takes the first slot whose last plan ended two steps before it
   starts, so the plans of a slot never overlap and a NaN row parts them. Each point is coloured
   by when its plan was made (``etmpc.views.blueprint.plan_colours``);
-- ``decision``: ``recompute`` (1 where a computation was spent) and ``forced``, every step;
+- ``decision``: ``recompute`` (1 where a recompute was started) and ``forced``, every step;
   ``recompute``: the recomputes only, as points at the age of the plan each one replaced, a
   series per kind (chosen by the policy, forced because the plan ran out, the first plan);
   ``events``: a log line per recompute (why, the plan's age, the prediction error);
@@ -29,7 +29,7 @@ episode started), and every series name carries its unit:
   (what the threshold policy compares; none at step 0, where there is no plan yet);
   ``threshold``: the threshold of a ``threshold:X`` policy;
 - ``objective/reward`` (the environment's, per step) and ``objective/running`` (the running
-  objective, computations included, in its own sense; a computation's price is the identity's
+  objective, recomputes included, in its own sense; a recompute's price is the identity's
   ``recompute_price`` times its work: ``compute``'s ``work`` where written, else ``decision``'s ``recompute``);
 - a task with time in the loop (its identity has ``latency`` and ``compute_levels``): ``compute`` (each
   step's level, work and in flight), ``solve/in_force``, ``solve/started``, ``solve/arrived`` (the plan

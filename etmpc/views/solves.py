@@ -1,9 +1,9 @@
-"""Time in the loop, as the views show it: each computation of an episode with the step it started and
+"""Time in the loop, as the views show it: each recompute of an episode with the step it started and
 the step its plan came into force (:func:`solves`), which plan is in force at each step
 (:func:`in_force`), and a caption per video frame (:func:`frame_captions`).
 
 The loop's trajectory keeps each plan put in force with the step it was made for and the step it
-arrived (``Trajectory.plans``, ``Trajectory.arrivals``), and each step's computation (``recompute``,
+arrived (``Trajectory.plans``, ``Trajectory.arrivals``), and each step's recompute (``recompute``,
 ``level``, ``work``, ``in_flight``); :func:`etmpc.loop.records.plan_starts` pairs each plan with the
 step its solve started. Without delay compensation a plan is made for the step its solve started;
 with it, for the step its prediction starts from (``Latency.intervals`` later), except a plan made
@@ -26,7 +26,7 @@ PLAIN, NEW, SOLVING, UNUSED = (235, 235, 235), (120, 220, 110), (250, 200, 60), 
 
 @dataclass(frozen=True)
 class Solve:
-    """One computation: started at step ``start`` (from the state measured then), its plan in force
+    """One recompute: started at step ``start`` (from the state measured then), its plan in force
     from step ``due`` (``due == start``: made before the interval, in force at once)."""
 
     start: int
@@ -50,7 +50,7 @@ def in_force(arrivals, made, steps: int) -> np.ndarray:
 
 
 def solves(record) -> list[Solve]:
-    """Every computation of an episode (an :class:`etmpc.loop.records.EpisodeRecord`), in order."""
+    """Every recompute of an episode (an :class:`etmpc.loop.records.EpisodeRecord`), in order."""
     n = record.steps
     made = [int(k) for k, *_ in record.plans]
     plan_of = {int(s): j for j, s in enumerate(record.starts)}

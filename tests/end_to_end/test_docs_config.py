@@ -203,7 +203,7 @@ def kicks_system_rows():
         ),
         (f"Input weight {g(c.input_weight)}", "the input's weight"),
         (f"``Q = diag({', '.join(g(w) for w in q)})``, ``R = {g(c.feedback_input_weight)}``", "the feedback's Q and R"),
-        (f"plus {g(c.recompute_price)} per computation", "the price"),
+        (f"plus {g(c.recompute_price)} per recompute", "the price"),
         (f"**Lookahead** {kicks_system.KicksSystem.benchmark.lookahead} steps", "the benchmark's lookahead"),
         (f"a jump every {g(1 / t.REFERENCE_JUMPS_PER_S)} s on average", "the reference's jump rate"),
     ]
@@ -337,7 +337,7 @@ def reacher_system_rows():
         ),
         (f"``Q = diag({', '.join(g(w) for w in q)})``, ``R = diag({', '.join(g(w) for w in r)})``", "the feedback's Q and R"),
         (f"``d^2 / (d^2 + {g(t.DISTANCE_SCALE_M)}^2)`` over {t.EPISODE_STEPS} steps", "the cost and the episode"),
-        (f"plus {g(c.recompute_price)} per computation", "the price"),
+        (f"plus {g(c.recompute_price)} per recompute", "the price"),
         (f"At {g(c.recompute_price)} the oracle gains", "the price"),
         (f"**Lookahead** {reacher_system.ReacherSystem.benchmark.lookahead} steps", "the benchmark's lookahead"),
         (f"(every {g(1 / t.JUMPS_PER_S)} s on average)", "the target's jump rate"),

@@ -688,7 +688,7 @@ API_CASES = [  # (id, keyword arguments, what the message says, the command line
     (
         "price-nan",
         {"recompute_price": float("nan")},
-        "a price of a computation is a finite number >= 0, got nan",
+        "a price of a recompute is a finite number >= 0, got nan",
         ["--price", "nan"],
     ),
     ("price-text", {"recompute_price": "0.1"}, "recompute_price: '0.1' is not a number", None),

@@ -274,7 +274,7 @@ def test_vectorised_environments_work():
     [
         ({"task": 3}, "task: a task name", TypeError),
         ({"task": "cartpole"}, "unknown task 'cartpole'", KeyError),
-        ({"recompute_price": -1.0}, "recompute_price: a price of a computation is a finite number >= 0", ValueError),
+        ({"recompute_price": -1.0}, "recompute_price: a price of a recompute is a finite number >= 0", ValueError),
         ({"recompute_price": "0.1"}, "recompute_price: '0.1' is not a number", ValueError),
         ({"seed": -1}, "seed: a seed is a whole number", ValueError),
         ({"seed": 1.5}, "seed: 1.5 is not a whole number", ValueError),

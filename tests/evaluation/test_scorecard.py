@@ -275,7 +275,7 @@ def test_a_trigger_that_fails_on_one_task_has_that_row_say_so_and_the_others_sco
     assert code == 2
     assert "failed: policy py:picky_trigger:T: decide raised RuntimeError: not for batteries" in out
     assert err.strip().splitlines()[-1] == (
-        "etmpc: error: not every trigger could be scored on every task: "
+        "etmpc: error: not every policy could be scored on every task: "
         "py:picky_trigger:T on battery/trading (see its row); card.json not written (a card "
         "with a failed row never is)"
     )
@@ -291,7 +291,7 @@ def test_a_trigger_that_fails_on_one_task_has_that_row_say_so_and_the_others_sco
     "argv, says",
     [
         (["score", "every:3", "--task", "cartpole"], "unknown task 'cartpole'"),
-        (["score", "--task", "battery"], "give at least one trigger"),
+        (["score", "--task", "battery"], "give at least one policy"),
         (["score", "every:3", "every:3"], "given twice"),
         (["score", "every:3", "--task", "battery", "--task", "reacher", "--test-set", "x.npz"], "x.npz not found"),
         (["score", "every:3", "--references"], "--references rebuilds the stored references only"),

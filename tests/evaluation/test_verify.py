@@ -170,7 +170,7 @@ EVERY_NUMBER = [
         for field, says in [
             ("episodes", "episode scores for 5 episodes"),
             ("objective_mean", "battery/trading every:3: objective"),
-            ("recomputes_mean", "battery/trading every:3: computations"),
+            ("recomputes_mean", "battery/trading every:3: recomputes"),
             ("failures_mean", "battery/trading every:3: failures"),
             ("solver_failures", "battery/trading every:3: 1 solver failures in the card, 0 from its episodes"),
             ("nonfinite_episodes", "battery/trading every:3: non-finite episodes 1 in the row"),
@@ -187,7 +187,7 @@ EVERY_NUMBER = [
             ("episode_scores", "battery/trading every:3 episode 1: score"),
             ("episode_failures", "battery/trading every:3: failures"),
             ("episode_objectives", "battery/trading every:3 episode 1: score"),
-            ("episode_recomputes", "battery/trading every:3: computations"),
+            ("episode_recomputes", "battery/trading every:3: recomputes"),
             ("episode_solver_failures", "battery/trading every:3: 0 solver failures in the card, 1 from its episodes"),
         ]
     ],
@@ -286,7 +286,7 @@ def test_a_row_of_another_type_or_a_card_without_what_verification_needs_is_one_
     lines = verify(_edited(card, tmp_path, older), size=1).mismatches
     assert lines == [
         f"{tmp_path / 'edited.json'}: battery/trading every:3: no episode_objectives (a row of an older etmpc): "
-        "score the trigger again to verify its numbers"
+        "score the policy again to verify its numbers"
     ]
 
 

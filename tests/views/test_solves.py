@@ -176,7 +176,7 @@ def test_the_blueprint_shows_the_plan_in_force_on_timed_tasks_only(recorded, tmp
     assert {"latency", "compute_levels"}.isdisjoint(
         entities[f"{root_of('cart_pendulum/kicks', 'every:3')}/identity"][0].schema.names
     )
-    assert not [v for v in views_of(read_blueprint(path)[0]) if v["name"].startswith(("plan in force", "computation"))]
+    assert not [v for v in views_of(read_blueprint(path)[0]) if v["name"].startswith(("plan in force", "recompute per step"))]
     assert "work" not in read_recording(path)[root_of("cart_pendulum/kicks", "every:3")]
 
 

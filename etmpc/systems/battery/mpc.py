@@ -5,7 +5,7 @@ Over the horizon ``j = 0..N-1``, with forecasts ``P_j`` (kW) and ``lambda_j`` (E
     maximise    sum_j lambda_j u_j delta  +  lambda_bar C x_N                 (profit, EUR)
     subject to  x_{j+1} = x_j - delta/C (u_j - P_j),   0 <= x_{j+1} <= 1,   |u_j| <= 0.1 C / delta
 
-The computer's own draw is not in the model (the plant draws it; the LQR and the replanning absorb it: docs/paper.md). The
+The computer's own draw is not in the model (the plant draws it; the LQR and the recomputes absorb it: docs/paper.md). The
 states are eliminated (``x_{j+1} = x_0 + delta/C sum_{i<=j} (P_i - u_i)``), which leaves ``N``
 inputs, ``N`` two-sided cumulative-sum rows and the objective ``sum_j (lambda_j - lambda_bar) delta
 u_j`` plus a constant. The inputs are scaled to ``[-1, 1]`` (the trade limit) so the LP's numbers

@@ -7,7 +7,7 @@ only the executed trade is paid), by more than ``CURTAILMENT_TOLERANCE`` of the 
 delivered. The tolerance leaves out the computer's own draw (0.1 kW), which the MPC does not predict,
 so a plan that empties the battery exactly falls short by that much whenever it computes. The
 executed trade is the battery's charge balance, ``u = P - eta_c a + (x - x+) C / delta``: from the
-played trajectory's charges and computations and the episode's net production.
+played trajectory's charges and recomputes and the episode's net production.
 """
 
 from __future__ import annotations
@@ -89,7 +89,7 @@ class Config:
     horizon: int = 20  # N
     lqr_state_weight: float = 1.0  # Q on the state-of-charge error (dimensionless)
     lqr_input_weight: float = 0.1  # R on the correction, per kW^2
-    recompute_price: float = 0.0  # the computation's cost is physical: eta_c is drawn from the battery
+    recompute_price: float = 0.0  # a recompute's cost is physical: eta_c is drawn from the battery
     battery: Battery = Battery()
     market: Market = Market()
 

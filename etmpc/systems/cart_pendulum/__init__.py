@@ -3,7 +3,7 @@
 ``system.py``: the Gauss-Newton MPC and the LQR on the prediction error) and ``kicks`` (the pole
 kicked at random times on a rail with bumpers: ``kicks.py``, ``kicks_system.py``), and kicks with time in
 the loop (``timing.py``: ``kicks_late``, whose solves take an interval, and ``kicks_levels``, whose
-trigger chooses how much to compute). ``mismatch.py`` measures the model
+policy chooses how much to compute). ``mismatch.py`` measures the model
 against the plant; ``dompc.py`` solves the same OCP with do-mpc, the paper's stack, for ``etmpc bench``.
 """
 

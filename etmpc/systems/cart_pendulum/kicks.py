@@ -1,10 +1,10 @@
 """The cart pendulum's ``kicks`` task: keep the pole up and the cart on a reference that jumps, on a
 rail, while kicks arrive at random times.
 
-Where ``balance`` shakes the pole a little at every interval (Gaussian noise: no trigger gains 1 %
+Where ``balance`` shakes the pole a little at every interval (Gaussian noise: no policy gains 1 %
 over a periodic schedule there), ``kicks`` leaves the loop alone until something happens at a
 random time: the cart's reference jumps, which a kept plan does not follow, or the pole is kicked.
-The moment to re-plan is right after it. Event-based sampling pays in proportion to how bursty the
+The moment to recompute is right after it. Event-based sampling pays in proportion to how bursty the
 disturbance is (Åström and Bernhardsson 2002); this task makes it bursty.
 
 * **Plant**: the cart pendulum of ``physics.py`` (``mismatched`` by default), on a rail with bumpers
@@ -27,9 +27,9 @@ disturbance is (Åström and Bernhardsson 2002); this task makes it bursty.
   mean.
 * **Tried first** (12 to 30 episodes each, before the reference existed): kicks alone, rate 0.5 per
   second of ``U(0.5, 1.2)`` rad/s. The periodic schedules then were not ordered by their rate (an
-  aggressive re-plan under mismatch did worse after a kick than the kept plan and its feedback), and
-  falls (0.3 per episode even re-planning every step) ruled the variance: the rollout policy's gain
-  had a CI including 0. Gentler kicks removed the falls and with them anything for a trigger to gain.
+  aggressive new plan under mismatch did worse after a kick than the kept plan and its feedback), and
+  falls (0.3 per episode even recomputing every step) ruled the variance: the rollout policy's gain
+  had a CI including 0. Gentler kicks removed the falls and with them anything for a policy to gain.
 """
 
 from __future__ import annotations
@@ -208,7 +208,7 @@ class Kicks(CartPendulumTask):
         """A fall: the pole is caught and put back upright, at rest, where the cart is. The marker
         moves to the next interval's reference, as the observation shows it."""
         physics.set_reference(self.current_reference())
-        self._fell = self.restarted = abs(physics.pole_angle()) > FALL_RAD  # restarted: the loop re-plans
+        self._fell = self.restarted = abs(physics.pole_angle()) > FALL_RAD  # restarted: the loop recomputes
         if self._fell:
             physics.set_state_vector(np.array([physics.cart_position(), 0.0, 0.0, 0.0]))
             mujoco.mj_forward(physics.model.ptr, physics.data.ptr)

@@ -1,12 +1,12 @@
 """The ``kicks`` task as the control loop sees it: an MPC that follows the cart's current reference and
-knows the rail, a feedback that follows the plan, and the price of a computation.
+knows the rail, a feedback that follows the plan, and the price of a recompute.
 
 * **MPC** (Gauss-Newton SQP, full multiple shooting, N = 20, compiled): the paper's analytic model
   (RK4, 2 steps per interval), the reference ``r`` as the OCP's parameter, and the residuals
   ``[3 sin(beta/2), eta - r, 0.03 omega, 0.03 u, 0.01 du, 5 max(0, |eta| - 2)]`` per stage (the last
   keeps the plan 0.5 m from the bumpers), ``[9 sin(beta/2), 3 (eta - r), 0.3 omega, 0.3 v,
   5 max(0, |eta| - 2)]`` at the end; ``|u| <= 25`` N. The plan carries the reference it was made for
-  as ``Plan.forecasts`` (``cart_reference_m``), so recordings draw it and a learned trigger compares
+  as ``Plan.forecasts`` (``cart_reference_m``), so recordings draw it and a learned policy compares
   it with the current one. A solve counts as converged at constraint violation <= 1e-5 and
   Lagrangian gradient <= 1e-3 (the SQP's tolerances 1e-6 and 1e-4, times 10). Warm started from the
   kept plan; a cold start (the first plan, after a fall, or after a plan kept to its end) begins
@@ -16,12 +16,12 @@ knows the rail, a feedback that follows the plan, and the price of a computation
 * **Feedback** while a plan is kept: a time-varying LQR along the plan (``PlanFeedback``), from the
   predictor's linearisation at each planned step, ``Q = diag(1, 1, 10, 1)``, ``R = 0.1``. The pole is
   kicked far from upright, where one gain linearised at upright would not do.
-* **Objective** (lower is better): the episode's cost (``kicks.py``) plus 0.1 per computation.
+* **Objective** (lower is better): the episode's cost (``kicks.py``) plus 0.1 per recompute.
 * **Lookahead** 10 steps (``Benchmark.lookahead``) for the rollout meter and DPI's labels: with 20 (2
   s, a jump every 2.5 s on average) the random timing of later jumps made the two answers' sampled
   returns differ by more than the price, and the rollout recomputed at about half its decisions.
-* **Exogenous features** for the learned trigger: the reference now, the kept plan's, their
-  difference and its size. A state-error trigger sees a jump only once the cart lags; these see it
+* **Exogenous features** for the learned policy: the reference now, the kept plan's, their
+  difference and its size. An event trigger on the state error sees a jump only once the cart lags; these see it
   at once.
 """
 

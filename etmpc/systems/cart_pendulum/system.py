@@ -29,7 +29,7 @@ class Config:
     force_limit_n: float = 25.0
     lqr_state_weights: tuple[float, ...] = (0.0, 1.0, 10.0, 10.0)  # diag Q
     lqr_input_weight: float = 0.1  # R
-    recompute_price: float = 5e-5  # per computation, in the policy cost R_k
+    recompute_price: float = 5e-5  # per recompute, in the policy cost R_k
     rk4_substeps: int = 1  # RK4 steps of the MPC's predictor per 0.1 s interval (the paper: step 0.1 s)
     plant: str = "mismatched"  # or "matched"
     solver: SolverSettings = SolverSettings()

@@ -20,7 +20,7 @@ growing worse after the pole falls rather than rewarding a pole that swings over
 
 **Failures**, "off balance" (:func:`off_balance_steps`): the steps that end with the pole more than
 ``OFF_BALANCE_RAD`` = 0.1 rad (5.7 degrees) from upright, but for the recovery from the drawn initial
-tilt (up to 0.78 rad), which the first plan answers whatever the trigger: the steps before the pole
+tilt (up to 0.78 rad), which the first plan answers whatever the policy: the steps before the pole
 first comes within 0.1 rad, for at most ``RECOVERY_STEPS`` (10 steps, 1 s). A fall (the kicks task's
 1.2 rad) does not happen on the test set under any periodic schedule: the LQR holds the pole between
 plans, and a plan is re-made at least every N steps. The line is drawn where a pole kept well stays,

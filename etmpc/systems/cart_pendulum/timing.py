@@ -3,14 +3,14 @@ MPC as ``kicks``, with a controller whose solves take time.
 
 * ``kicks_late``: every solve delivers its plan one control interval (0.1 s) after it started, from
   the state measured then; the kept plan and its feedback run meanwhile. The price stays 0.1 per solve.
-* ``kicks_levels``: at a decision the trigger keeps the plan, makes one SQP iteration from the shifted
+* ``kicks_levels``: at a decision the policy keeps the plan, makes one SQP iteration from the shifted
   plan (a real-time iteration) or solves to convergence. Each is priced 0.05 per SQP iteration and
   takes ``ceil(iterations x 30 ms / 0.1 s)`` intervals, on a notional embedded target where one
   Gauss-Newton SQP iteration of this OCP (N = 20, four states, full multiple shooting) takes 30 ms.
   That figure is an assumption of the task, not a measurement (a desktop core is two orders of
   magnitude faster). A full solve takes more iterations after a jump or from a cold start.
 
-Their test sets are ``kicks``' episodes (the same seed), so a trigger's score with and without
+Their test sets are ``kicks``' episodes (the same seed), so a policy's score with and without
 latency is paired episode by episode.
 """
 

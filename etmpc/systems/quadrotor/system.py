@@ -1,5 +1,5 @@
 """The ``waypoints`` task as the control loop sees it: an MPC that flies to the current waypoint, a
-feedback that follows the plan, and the price of a computation. The numbers are the ``Config``'s below.
+feedback that follows the plan, and the price of a recompute. The numbers are the ``Config``'s below.
 
 * **MPC** (N = 20 (1 s), compiled): the condensed Gauss-Newton SQP (:mod:`etmpc.control.condensed`:
   the thrusts alone are the variables, each QP dense and solved by DAQP), the analytic rigid body
@@ -14,10 +14,10 @@ feedback that follows the plan, and the price of a computation. The numbers are 
   predictor's linearisation at each planned step, ``Q = diag(10 I3, 3 I3, 1 I3, 0.3 I3)``
   (position, angles, velocity, rates), ``R = 5000 I4`` (N^-2). ``threshold:X`` weighs the prediction
   error by ``sqrt(Q)``.
-* **Objective** (lower is better): the episode's cost (``task.py``) plus the price per computation.
-* **Exogenous features** for the learned trigger: the waypoint now, the kept plan's, their
+* **Objective** (lower is better): the episode's cost (``task.py``) plus the price per recompute.
+* **Exogenous features** for the learned policy: the waypoint now, the kept plan's, their
   difference and its length (:func:`etmpc.systems.gauss_newton.tracked_change`). Gusts are not
-  observed: a trigger sees them only as the drone's drift from its plan.
+  observed: a policy sees them only as the drone's drift from its plan.
 """
 
 from __future__ import annotations
@@ -84,7 +84,7 @@ class Config:
     # The condensed Gauss-Newton SQP (etmpc.control.condensed): converged when a step moves no thrust by more
     # than 0.3 % of its range, and at most 10 QPs by DAQP (a plan that has not converged by then is flown: each
     # iterate descends from the warm start); the Gauss-Newton Hessian regularised by 1e-3 I. Against solving to
-    # 0.1 % with up to 100 QPs, the closed loop's objective is 0.01 % higher and the slowest re-plans 3x faster
+    # 0.1 % with up to 100 QPs, the closed loop's objective is 0.01 % higher and the slowest solves 3x faster
     # (docs/solvers.md).
     solver: SolverSettings = SolverSettings(route="condensed", max_iterations=10, regularisation=1e-3, step_tolerance=3e-3)
 

@@ -1,16 +1,16 @@
 """The ``jumps`` task as the control loop sees it: an MPC that reaches for the current target, a
-feedback that follows the plan, and the price of a computation.
+feedback that follows the plan, and the price of a recompute.
 
 * **MPC** (Gauss-Newton SQP, full multiple shooting, N = 20, compiled): the analytic arm
   (``model.py``, RK4, 2 steps per interval) and the target ``p`` as the OCP's parameter; residuals
   ``[e / 0.3, 0.02 qdot, 0.01 u, 0.02 du]`` per stage, ``e = fingertip - p`` (m), and
   ``[2 e / 0.3, 0.1 qdot]`` at the end; ``|u_i| <= 2`` N m. The plan carries the target it was made
   for as ``Plan.forecasts`` (``target_x_m``, ``target_y_m``, N values each), so recordings draw it
-  and a learned trigger compares it with the current one. A Levenberg-Marquardt term ``1e-3 I`` in
+  and a learned policy compares it with the current one. A Levenberg-Marquardt term ``1e-3 I`` in
   the Gauss-Newton Hessian (it changes the path, not the optimum), the Lagrangian gradient's
   tolerance 1e-5 and at most 300 iterations: with ``1e-4``, 1e-4 and 150 (first tried), 70 of 3780
   closed-loop solves (``every:1`` and ``every:4`` on 30 test-set episodes) did not converge, mostly
-  re-plans for a far target after a jump; now 2 of 3751. The damping slows the last iterations near
+  solves for a far target after a jump; now 2 of 3751. The damping slows the last iterations near
   a small optimum, hence the tighter gradient tolerance (at 1e-4 the objective stopped up to 3e-6
   from Ipopt's, relative). A solve counts as converged at constraint violation <= 1e-5 and
   Lagrangian gradient <= 1e-4 (10 times the SQP's tolerances).
@@ -18,8 +18,8 @@ feedback that follows the plan, and the price of a computation.
   predictor's linearisation at each planned step, ``Q = diag(10, 10, 1, 1)``, ``R = diag(0.1, 0.1)``.
   ``threshold:X`` weighs the prediction error by ``sqrt(Q)``.
 * **Objective** (lower is better): the episode's cost (``task.py``: the sum of ``d^2 / (d^2 +
-  0.1^2)`` over 100 steps, about 29 for a controller that re-plans every step) plus 0.1 per
-  computation: there ``every:3`` is the best periodic schedule (30 test-set episodes; ``every:2``
+  0.1^2)`` over 100 steps, about 29 for a controller that recomputes every step) plus 0.1 per
+  recompute: there ``every:3`` is the best periodic schedule (30 test-set episodes; ``every:2``
   up to 0.05, ``every:3`` from 0.07 to 0.12, ``every:4`` at 0.15 and 0.2, ``every:5`` from 0.25 to
   0.4). At 0.1 the oracle gains 9.6 % +- 3.3 % over the periodic front at its own rate and
   ``rollout:every:3:4:10`` 12.8 % +- 3.0 % (95 % CI; ``etmpc discriminate --task reacher``); every
@@ -29,8 +29,8 @@ feedback that follows the plan, and the price of a computation.
   timing of those later jumps adds noise to both answers' returns: ``rollout:every:3:4:20`` gained
   6.7 % +- 2.1 % where the 10-step rollout gains 12.8 % +- 3.0 %, and each decision costs twice as
   many simulated steps, mostly MPC solves for a far target.
-* **Exogenous features** for the learned trigger: the target now, the target of the kept plan,
-  their difference and its length. A state-error trigger cannot see a jump; these can.
+* **Exogenous features** for the learned policy: the target now, the target of the kept plan,
+  their difference and its length. An event trigger on the state error cannot see a jump; these can.
 """
 
 from __future__ import annotations

@@ -1,10 +1,10 @@
 """The reacher's ``jumps`` task: keep the fingertip on a target that jumps at random times, and the
 domain's suite of tasks.
 
-A state-error trigger sees the arm drift from its plan, but not the target move: after a jump the
-kept plan still reaches for the old target, and the moment to re-plan is right then. The jumps come
-at random times (Bernoulli per interval), so a trigger that knows when to re-plan beats any periodic
-schedule at the same rate of computations.
+An event trigger on the state error sees the arm drift from its plan, but not the target move: after a
+jump the kept plan still reaches for the old target, and the moment to recompute is right then. The jumps
+come at random times (Bernoulli per interval), so a policy that knows when to recompute beats any
+periodic schedule at the same rate of recomputes.
 
 * **Plant**: the two-link arm of ``physics.py`` (``mismatched`` by default) in a horizontal plane,
   torques ``|u_i| <= 2`` N m (MuJoCo clamps to the actuators' ``ctrlrange``), integrated by RK4 at
