@@ -49,7 +49,7 @@ def headline(data: dict) -> str:
     """The headline table (markdown): each entry's normalized score per task and the suite's aggregate."""
     tasks = data["tasks"]
     lines = [
-        "| trigger | " + " | ".join(tasks) + " | IQM [95 % CI] | P(improve) | CPU ms/episode |",
+        "| policy | " + " | ".join(tasks) + " | IQM [95 % CI] | P(improve) | CPU ms/episode |",
         "|---|" + "---:|" * len(tasks) + "---:|---:|---:|",
     ]
     for entry in data["entries"]:

@@ -132,7 +132,7 @@ def test_a_row_is_played_again_when_the_policy_file_behind_its_spec_changed(tmp_
     # A shipped policy retrained in place keeps its path, so its spec; its finished row must not stand.
     policy = tmp_path / "policies" / "cart_pendulum" / "learned.json"
     policy.parent.mkdir(parents=True)
-    policy.write_bytes((REPO / "policies" / "cart_pendulum" / "learned.json").read_bytes())
+    policy.write_bytes((REPO / "policies" / "cart_pendulum" / "balance" / "learned.json").read_bytes())
     entry = leaderboard_rows.Entry("DPI (shipped)", "learned", {"cart_pendulum": f"rl:{policy}"})
     from etmpc.evaluation.references import stored
 
