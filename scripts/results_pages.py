@@ -18,7 +18,7 @@ import shutil
 import sys
 from pathlib import Path
 
-from etmpc.experiments.report import report
+from etmpc.experiments.report import of_task, report
 
 IMAGE = re.compile(r"!\[([^\]]*)\]\(([^)\s]+)\)")
 
@@ -33,7 +33,7 @@ def restate(body: str, results: dict) -> str:
     """The report, with its verdict on keeping battery plans checked against the run's own default learner: no
     fixed schedule keeps plans profitably, but when the learner beats `always` (its CI excluding 0) keeping
     plans does pay, and the page says so with the learner's numbers."""
-    battery = results.get("systems", {}).get("battery", {})
+    battery = of_task(results.get("systems", {}), "battery/trading") or {}
     learner = battery.get("default_learner")
     if KEEPING not in body or not learner or "paired" not in learner:
         return body

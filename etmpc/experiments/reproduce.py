@@ -61,7 +61,7 @@ from etmpc.learning.dpi import Settings as DpiSettings
 from etmpc.learning.runner import cost_path, timed  # noqa: F401 (cost_path: reproduce's API)
 from etmpc.learning.train import TrainConfig, curve_summary, load_checkpoint
 from etmpc.policies.learned import write_json_atomically
-from etmpc.systems import folder_name, make_system, names
+from etmpc.systems import distinct, folder_name, make_system, names, same_task
 from etmpc.systems.capabilities import Experiments, Scene, offers, require
 from etmpc.views import figures
 from etmpc.views.curves import write_efficiency_png
@@ -156,7 +156,7 @@ def reproduce(
 def _reproduce(
     out: Path, settings: Settings, workers: int, backend: str, address: str | None, domains, progress: bool, sweep: bool
 ) -> dict:
-    domains = list(names()) if domains is None else list(domains)  # every task (its name: DOMAIN or DOMAIN/TASK)
+    domains = list(names()) if domains is None else distinct(domains)  # every task, by its id (DOMAIN/TASK)
     started = time.perf_counter()
     sweep_settings = {d: sweeps.SweepSettings.default(d, quick=settings.smoke) for d in domains} if sweep else {}
     for domain, chosen in sweep_settings.items():  # checked before any work
@@ -335,7 +335,7 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
                 recorder=Recorder,
             )
         _trajectory_png(folder / "trajectory.png", system, best)
-        if system.name == "battery":  # the paper's Figure 1: forecasts of the battery's prices and production
+        if same_task(system.name, "battery"):  # the paper's Figure 1: forecasts of the battery's prices and production
             _forecasts_png(folder / "figure1_forecasts.png", system)
             files["figure1"] = "figure1_forecasts.png"
         if offers(system, Scene):
