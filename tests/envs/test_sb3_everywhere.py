@@ -191,7 +191,7 @@ def test_a_model_saved_by_plain_model_save_is_scored_on_the_raw_observation(tmp_
     model.save(tmp_path / "m.zip")
     assert not (tmp_path / "m.json").exists()
     policy = load_sb3(str(tmp_path / "m.zip"), "battery")
-    assert not policy.normalises and policy.task == "battery"
+    assert not policy.normalises and policy.task == "battery/trading"
     compared = _decisions_match(tmp_path / "m.zip", env, 2, tmp_path, monkeypatch)
     assert compared > 100
     # Its observation size is the battery's: on the cart pendulum it is refused in one line.

@@ -187,13 +187,13 @@ def test_each_price_has_its_own_learned_policy_trained_and_played_at_that_price(
     out, pareto = tiny_sweep
     for i, price in enumerate(TINY.prices):
         policy = json.loads((out / f"train_{i}" / "selected.json").read_text())
-        assert policy["hyperparameters"]["recompute_price"] == price and policy["domain"] == "cart_pendulum"
+        assert policy["hyperparameters"]["recompute_price"] == price and policy["domain"] == "cart_pendulum/balance"
         checkpoint = json.loads((out / f"train_{i}" / "checkpoint.json").read_text())
         assert checkpoint["config"]["recompute_price"] == price and checkpoint["config"]["algorithm"] == "dpi"
         learned = json.loads((out / f"learned_{i}.json").read_text())
         assert learned["recompute_price"] == price and list(learned["policies"]) == [f"rl:{out / f'train_{i}' / 'selected.json'}"]
         own = json.loads((out / f"self_policy_{i}.json").read_text())
-        assert own["hyperparameters"]["recompute_price"] == price and own["domain"] == "cart_pendulum"
+        assert own["hyperparameters"]["recompute_price"] == price and own["domain"] == "cart_pendulum/balance"
         played = json.loads((out / f"self_{i}.json").read_text())
         assert played["recompute_price"] == price and list(played["policies"]) == [f"self:{out / f'self_policy_{i}.json'}"]
 

@@ -32,7 +32,7 @@ def test_a_run_keeps_the_checkpoint_best_on_validation_episodes(run):
     assert result["selected"] == best["file"]
     assert (out / "selected.zip").read_bytes() == (out / best["file"]).read_bytes()
     meta = json.loads((out / "selected.json").read_text())
-    assert meta["task"] == "battery" and meta["validation_objective"] == best["validation_objective"]
+    assert meta["task"] == "battery/trading" and meta["validation_objective"] == best["validation_objective"]
 
 
 def test_the_policy_decides_as_the_network_does_on_the_environments_normalised_observation(run):
