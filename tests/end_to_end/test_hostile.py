@@ -123,12 +123,13 @@ def _setup(kind: str, d: Path) -> None:
     elif kind == "bad-settings":
         (d / "run").mkdir()
         (d / "run" / "settings.json").write_text("{not json")
-    elif kind == "user-task-dir":
-        (d / "run" / "battery").mkdir(parents=True)
-        (d / "run" / "battery" / "notes.txt").write_text("my notes\n")
+    elif kind == "user-task-dir":  # a task's folder in a run directory: DOMAIN/TASK
+        (d / "run" / "battery" / "trading").mkdir(parents=True)
+        (d / "run" / "battery" / "trading" / "notes.txt").write_text("my notes\n")
     elif kind == "other-sweep":
-        (d / "run" / "battery").mkdir(parents=True)
-        (d / "run" / "battery" / "settings.json").write_text('{"format": "etmpc-sweep", "domain": "battery", "settings": {}}\n')
+        (d / "run" / "battery" / "trading").mkdir(parents=True)
+        settings = '{"format": "etmpc-sweep", "domain": "battery/trading", "settings": {}}\n'
+        (d / "run" / "battery" / "trading" / "settings.json").write_text(settings)
     elif kind == "corrupt-policy":
         (d / "p.json").write_text('{"format": "etmpc-logistic-policy", "theta": [1, 2')
     elif kind == "huge-theta":
