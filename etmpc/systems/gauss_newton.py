@@ -116,8 +116,9 @@ class GaussNewtonSystem(SystemBase):
         raise NotImplementedError
 
     def feedback_weights(self) -> FeedbackWeights:
-        """Q and R of the LQR along each plan (the gains ``PlanFeedback`` applies)."""
-        raise NotImplementedError
+        """Q and R of the LQR along each plan (the gains ``PlanFeedback`` applies): the Config's
+        ``feedback_state_weights`` and ``feedback_input_weights``, unless the task says otherwise."""
+        return FeedbackWeights(self.config.feedback_state_weights, self.config.feedback_input_weights)
 
     @cached_property
     def mpc(self) -> GaussNewtonMPC:

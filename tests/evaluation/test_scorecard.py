@@ -235,7 +235,8 @@ def test_the_stored_references_are_what_playing_the_episodes_again_gives(task):
         assert kept == json.loads(json.dumps(again))  # objective, computations, failures, solver failures
     meter = rollout_meter_spec(system, refs.best)
     assert refs.kept_evaluation(meter) is refs.rollout_evaluation and (refs.rollout_evaluation is None) == (meter is None)
-    if meter is not None and task in ("cart_pendulum/balance", "battery/trading", "quadrotor/waypoints"):  # one per domain: a rollout costs seconds
+    one_per_domain = ("cart_pendulum/balance", "battery/trading", "quadrotor/waypoints")  # a rollout costs seconds
+    if meter is not None and task in one_per_domain:
         kept = next(r for r in refs.rollout_evaluation["runs"] if r["episode"] == 0)
         again = evaluate(task, [meter], episodes=1, workers=1, progress=False).to_json()["runs"][0]
         assert kept == json.loads(json.dumps(again))

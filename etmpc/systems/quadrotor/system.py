@@ -25,10 +25,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import casadi as ca
-import dm_env
 import numpy as np
 
-from etmpc.control.mpc import FeedbackWeights, SolverSettings
+from etmpc.control.mpc import SolverSettings
 from etmpc.control.timing import Latency
 from etmpc.systems.gauss_newton import GaussNewtonSystem, TrackedFeatures
 from etmpc.systems.quadrotor import task as quadrotor_task
@@ -148,13 +147,6 @@ class QuadrotorSystem(GaussNewtonSystem):
             ],
         )
         return stage, terminal
-
-    def feedback_weights(self) -> FeedbackWeights:
-        return FeedbackWeights(self.config.feedback_state_weights, self.config.feedback_input_weights)
-
-    def target(self, timestep: dm_env.TimeStep) -> np.ndarray:
-        """The current waypoint ``(x, y, z)`` (m), as observed."""
-        return self.observed(timestep)
 
     # -- failures (episodes are drawn, resampled and described by the task: task.Waypoints) --------------
     def failures(self, trajectory, episode) -> int:

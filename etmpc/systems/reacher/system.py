@@ -38,10 +38,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import casadi as ca
-import dm_env
 import numpy as np
 
-from etmpc.control.mpc import FeedbackWeights, SolverSettings
+from etmpc.control.mpc import SolverSettings
 from etmpc.control.timing import Latency
 from etmpc.systems.gauss_newton import TRACKING_SOLVER, GaussNewtonSystem, TrackedFeatures
 from etmpc.systems.reacher import task as reacher_task
@@ -111,13 +110,6 @@ class ReacherSystem(GaussNewtonSystem):
             "terminal_residual", [x, target], [ca.vertcat(c.terminal_distance_factor * e, c.terminal_velocity_weight * x[2:])]
         )
         return stage, terminal
-
-    def feedback_weights(self) -> FeedbackWeights:
-        return FeedbackWeights(self.config.feedback_state_weights, self.config.feedback_input_weights)
-
-    def target(self, timestep: dm_env.TimeStep) -> np.ndarray:
-        """The current target ``(x, y)`` (m), as observed."""
-        return self.observed(timestep)
 
     # -- failures (episodes are drawn, resampled and described by the task: task.Jumps) -----------------
     def failures(self, trajectory, episode) -> int:

@@ -240,7 +240,7 @@ def test_a_plan_carries_its_target_and_follows_the_predictor(system):
     x = system.state(timestep)
     plan = system.plan(x, np.zeros(2), None, 0, timestep)
     assert plan.success and plan.gains.shape == (20, 2, 4)
-    target = system.target(timestep)
+    target = system.observed(timestep)
     for name, value in zip(("target_x_m", "target_y_m"), target):
         np.testing.assert_array_equal(plan.forecasts[name], np.full(20, value))
     np.testing.assert_allclose(plan.states, system.mpc.rollout(x, plan.inputs), atol=1e-7)
@@ -339,7 +339,7 @@ def test_the_observation_shows_the_target_of_the_interval_about_to_be_played(sys
     env.task.use_episode(episode)
     timestep = env.reset()
     for i in range(5):
-        np.testing.assert_array_equal(system.target(timestep), episode.target[i])
+        np.testing.assert_array_equal(system.observed(timestep), episode.target[i])
         timestep = env.step(np.zeros(2))
         d = np.linalg.norm(env.physics.fingertip() - episode.target[i])  # the reward is for interval i's target
         assert timestep.reward == pytest.approx(-(d**2) / (d**2 + 0.01), rel=1e-12)
