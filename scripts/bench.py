@@ -192,7 +192,8 @@ def training(args) -> int:
     """
     import numpy as np
 
-    from etmpc.evaluation.workers import context, make_backend
+    from etmpc.evaluation.backends import make_backend
+    from etmpc.evaluation.workers import context
     from etmpc.learning.jobs import normalisation_states
     from etmpc.policies.learned import INITIAL_KEEP_LOGIT, LogisticPolicy, Normalisation, load_policy
 

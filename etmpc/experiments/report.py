@@ -7,7 +7,7 @@ import platform
 from importlib import metadata
 from pathlib import Path
 
-from etmpc.systems import same_task
+from etmpc.systems import folder_name, same_task
 from etmpc.experiments.clock import time_table
 from etmpc.evaluation.metrics import higher_or_lower, oriented
 from etmpc.experiments.pareto import report_section
@@ -101,7 +101,7 @@ def report(results: dict) -> str:
     if results.get("sweep"):
         lines += ["# Beyond the paper: the trade-off curve", ""]
         for domain, pareto in results["sweep"].items():
-            lines += report_section(pareto) + ["", f"![trade-off](sweep/{domain.replace('/', '-')}/pareto.png)", ""]
+            lines += report_section(pareto) + ["", f"![trade-off](sweep/{folder_name(domain)}/pareto.png)", ""]
     lines += ["## Against the paper", ""]
     lines += (["No verdicts in a smoke run."] if s.get("smoke") else against_the_paper(results)) + [""]
     lines += time_table(results["systems"])

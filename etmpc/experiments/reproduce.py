@@ -76,6 +76,7 @@ from etmpc.experiments.stages import (  # noqa: F401 (evaluated_once: reproduce'
     _stored_best,
     _trajectory_png,
     evaluated_once,
+    run_root,
     trained,
 )
 
@@ -262,7 +263,7 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
     dpi_dir = folder / "train_dpi"
     with clock.stage("DPI training", cost_path(dpi_dir)), timed(dpi_dir, run["workers"]):
         trained(dpi_config, dpi_dir, run, progress)
-    shipped = folder.parent / "policies" / folder_name(system.name) / "learned.json"
+    shipped = run_root(folder, system.name) / "policies" / folder_name(system.name) / "learned.json"
     if not shipped.exists():
         write_json_atomically(shipped, loads((dpi_dir / "selected.json").read_text()))
     with clock.stage("DPI evaluation", folder / "learned_default.json"):
@@ -343,6 +344,6 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
                 size = dict(width=settings.video_size[0], height=settings.video_size[1])
                 render_rollout(domain, best, 0, folder / "episode.mp4", **size, progress=progress)
             files["video"] = "episode.mp4"
-    summary["files"] = {k: f"{folder.name}/{v}" for k, v in files.items()}
+    summary["files"] = {k: f"{folder_name(domain)}/{v}" for k, v in files.items()}
     summary["stage_seconds"] = clock.read()
     return summary

@@ -45,6 +45,11 @@ def evaluated_once(path: Path, timed: int | None = None, **kwargs) -> dict:
     return data
 
 
+def run_root(folder: Path, task: str) -> Path:
+    """The run directory that task ``task``'s folder (``DIR/DOMAIN/TASK``, :func:`etmpc.systems.folder_name`) is in."""
+    return folder.parents[len(Path(folder_name(task)).parts) - 1]
+
+
 def trained(config, out: Path, run_options: dict, progress: bool) -> None:
     """``config`` (a :class:`~etmpc.learning.config.TrainConfig`) trained into ``out`` on the run's ``workers``,
     ``backend`` and ``address``, continuing from the checkpoint an interrupted invocation left there; its
@@ -86,7 +91,7 @@ def _ppo(
             with timed(ppo_dir, run["workers"]):
                 train_ppo(domain, ppo_dir, chosen, run["workers"], say=_say, progress=common["progress"])
     training = loads((ppo_dir / "training.json").read_text())
-    shipped = folder.parent / "policies" / folder_name(domain)
+    shipped = run_root(folder, domain) / "policies" / folder_name(domain)
     if not (shipped / "ppo.zip").exists():
         shipped.mkdir(parents=True, exist_ok=True)
         source = hyperparams.shipped_path(domain)

@@ -768,15 +768,15 @@ def _own_setup(kind: str, d: Path) -> None:
     elif kind == "readme-no-end":
         (d / "R.md").write_text("# mine\n\n<!-- leaderboard:begin -->\n| a table |\n")
     elif kind == "kept-row-a-list":
-        (d / "results" / "leaderboard" / "always").mkdir(parents=True)
-        (d / "results" / "leaderboard" / "always" / "battery.json").write_text("[1, 2, 3]\n")
+        (d / "results" / "leaderboard" / "always" / "battery").mkdir(parents=True)
+        (d / "results" / "leaderboard" / "always" / "battery" / "trading.json").write_text("[1, 2, 3]\n")
     elif kind == "kept-row-edited":
         from etmpc.common.documents import sealed
 
         row = sealed({"key": {"spec": "always"}, "row": {"score": -275.8}, "played": {"commit": "abc"}})
         row["row"]["score"] = 99.9  # a better number, typed by hand
-        (d / "results" / "leaderboard" / "always").mkdir(parents=True)
-        (d / "results" / "leaderboard" / "always" / "battery.json").write_text(json.dumps(row))
+        (d / "results" / "leaderboard" / "always" / "battery").mkdir(parents=True)
+        (d / "results" / "leaderboard" / "always" / "battery" / "trading.json").write_text(json.dumps(row))
     else:
         _setup(kind, d)
 
@@ -943,7 +943,7 @@ def test_every_shipped_policy_file_is_in_the_manifest_with_its_checksum():
     from etmpc.evaluation.inputs import shipped_digests
 
     digests = shipped_digests()
-    files = {p.resolve() for p in (REPO / "policies").glob("*/*") if p.is_file()}
+    files = {p.resolve() for p in (REPO / "policies").glob("*/*/*") if p.is_file()}
     assert set(digests) == files
     assert all(hashlib.sha256(p.read_bytes()).hexdigest() == digests[p] for p in files)
 
@@ -952,7 +952,7 @@ def test_every_shipped_policy_file_is_in_the_manifest_with_its_checksum():
 SCORE_API_CASES = [
     ("the-same-spec-twice", {"policies": ["every:3", "every:3"]}, "policy every:3 is given twice"),
     ("no-task", {"tasks": []}, "tasks: the list is empty"),
-    ("a-task-twice", {"tasks": ["battery", "battery/trading"]}, "task battery is given twice"),
+    ("a-task-twice", {"tasks": ["battery", "battery/trading"]}, "task battery/trading is given twice"),
     ("episodes-fraction", {"episodes": 1.5}, "episodes: 1.5 is not a whole number"),
     ("episodes-zero", {"episodes": 0}, "episodes: must be >= 1, got 0"),
     ("workers-zero", {"workers": 0}, "workers: must be >= 1, got 0"),

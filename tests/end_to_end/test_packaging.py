@@ -152,7 +152,7 @@ def test_the_installed_commands_work_outside_the_checkout(wheel, tmp_path):
     result = run("sweep", "cart_pendulum", "--quick", "--prices", "5e-5", "--out", "sweep", "--workers", "2")
     assert result.returncode == 0, result.stderr
     for name in ("pareto.json", "pareto.png", "SWEEP.md"):
-        assert (outside / "sweep" / "cart_pendulum" / name).is_file()
+        assert (outside / "sweep" / "cart_pendulum" / "balance" / name).is_file()
 
 
 def test_the_wheel_carries_the_licence_in_its_metadata_and_dist_info(wheel):

@@ -76,8 +76,8 @@ def test_an_installed_plugin_adds_its_task_and_kind_everywhere_and_uninstalling_
     before = run("-c", SEES)
     assert before.returncode == 0, before.stderr
     assert before.stdout.splitlines() == [
-        "tasks cart_pendulum cart_pendulum/kicks cart_pendulum/kicks_late cart_pendulum/kicks_levels battery reacher "
-        "reacher/jumps_late quadrotor",
+        "tasks cart_pendulum/balance cart_pendulum/kicks cart_pendulum/kicks_late cart_pendulum/kicks_levels battery/trading "
+        "reacher/jumps reacher/jumps_late quadrotor/waypoints",
         "kinds always never every iterate threshold rl self py sb3 rollout oracle",
     ]
 
@@ -85,8 +85,8 @@ def test_an_installed_plugin_adds_its_task_and_kind_everywhere_and_uninstalling_
     after = run("-c", SEES)
     assert after.returncode == 0, after.stderr
     assert after.stdout.splitlines() == [
-        "tasks cart_pendulum cart_pendulum/kicks cart_pendulum/kicks_late cart_pendulum/kicks_levels battery reacher "
-        "reacher/jumps_late quadrotor slider",
+        "tasks cart_pendulum/balance cart_pendulum/kicks cart_pendulum/kicks_late cart_pendulum/kicks_levels battery/trading "
+        "reacher/jumps reacher/jumps_late quadrotor/waypoints slider/track",
         "kinds always never every iterate threshold rl self py sb3 rollout oracle driftage",
         "suite () (1,)",
         "gym (12,)",

@@ -83,9 +83,10 @@ def evaluate_plays(task: str, spec: str, episodes: int, tmp_path: Path, monkeypa
 
 
 def test_every_shipped_network_is_compared():
-    """No ``policies/*/ppo.zip`` escapes the comparison below (a folder no task of the suite names would)."""
-    assert sorted(SHIPPED) == sorted(p.parent.name for p in (REPO / "policies").glob("*/ppo.zip"))
-    assert {"cart_pendulum", "battery", "reacher", "quadrotor"} <= set(SHIPPED)
+    """No ``policies/*/*/ppo.zip`` escapes the comparison below (a folder no task of the suite names would)."""
+    shipped = (REPO / "policies").glob("*/*/ppo.zip")
+    assert sorted(SHIPPED) == sorted(p.parent.relative_to(REPO / "policies").as_posix() for p in shipped)
+    assert {"cart_pendulum/balance", "battery/trading", "reacher/jumps", "quadrotor/waypoints"} <= set(SHIPPED)
 
 
 @pytest.mark.parametrize("directory", list(SHIPPED))
@@ -134,7 +135,7 @@ def test_the_keyword_refuses_another_tasks_normalisation_in_one_line(tmp_path):
     (tmp_path / "huge.json").write_text(json.dumps(huge))
     for given, says in [
         (tmp_path / "huge.json", "huge.json: observation_mean[0] is 10000000000000000000..., not a finite number"),
-        (kicks, "its policy was trained on 'cart_pendulum/kicks', not 'cart_pendulum'"),
+        (kicks, "its policy was trained on 'cart_pendulum/kicks', not 'cart_pendulum/balance'"),
         (kicks.with_suffix(".zip"), "is a model; give its description, normalize="),
         (kicks.with_name("nosuch.json"), "no such file"),
         (REPO / "policies" / "cart_pendulum" / "balance" / "learned.json", "is not an etmpc Stable-Baselines3 policy"),

@@ -155,7 +155,7 @@ def test_make_sweep_adds_the_trade_off_curves_to_a_finished_run(tmp_path, monkey
     assert "sweep" not in first and second["systems"] == first["systems"]
     pareto = json.loads((tmp_path / "sweep" / "battery" / "trading" / "pareto.json").read_text())
     assert second["sweep"]["battery/trading"]["points"] == pareto["points"]
-    assert "![trade-off](sweep/battery/pareto.png)" in (tmp_path / "REPORT.md").read_text()
+    assert "![trade-off](sweep/battery/trading/pareto.png)" in (tmp_path / "REPORT.md").read_text()
 
 
 @pytest.mark.slow
@@ -200,7 +200,7 @@ def test_the_learners_row_of_ppo_is_its_network_evaluated_against_the_best_fixed
     out, results = run
     r = results["systems"]["battery/trading"]
     row, best = r["learners"]["ppo"], r["learners"]["reference"]
-    spec = f"sb3:{out / 'battery' / 'train_ppo' / 'selected.zip'}"
+    spec = f"sb3:{out / 'battery' / 'trading' / 'train_ppo' / 'selected.zip'}"
     direct = evaluate("battery", [spec, best], episodes=3, workers=1, progress=False)
     by = {(x.policy, x.episode): x.objective for x in direct.runs}
     assert row["policies"] == [spec] and row["episodes"] == 3

@@ -67,7 +67,7 @@ def test_it_evaluates_like_any_policy(run):
 def test_a_model_for_another_task_or_without_its_description_is_one_line(run, tmp_path, capsys):
     out, _ = run
     assert main(["evaluate", "--task", "cart_pendulum", "--policy", f"sb3:{out / 'selected.zip'}", "--episodes", "1"]) == 2
-    assert "trained on 'battery', not 'cart_pendulum'" in capsys.readouterr().err
+    assert "trained on 'battery/trading', not 'cart_pendulum/balance'" in capsys.readouterr().err
     lone = tmp_path / "lone.zip"
     lone.write_bytes((out / "selected.zip").read_bytes())
     assert main(["evaluate", "--task", "battery", "--policy", f"sb3:{lone}", "--episodes", "1"]) == 2

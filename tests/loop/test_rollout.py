@@ -244,6 +244,6 @@ def test_the_oracle_is_labelled_clairvoyant_in_the_table_json_and_figure(tmp_pat
     assert data["policies"]["oracle:every:10"]["clairvoyant"] is True and data["policies"]["every:10"]["clairvoyant"] is False
     bars = {b.policies[0]: b for b in policy_bars([data])}
     assert bars["oracle:every:10"].clairvoyant and "(oracle)" in bars["oracle:every:10"].label
-    assert not bars["every:10"].bound
+    assert not bars["every:10"].clairvoyant
     # With the stored future, the bound is never below its base (profit: higher is better).
     assert data["policies"]["oracle:every:10"]["objective_mean"] >= data["policies"]["every:10"]["objective_mean"]
