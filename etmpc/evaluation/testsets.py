@@ -1,6 +1,6 @@
 """Test sets: episodes whose random variables are all drawn in advance and stored.
 
-A test set is one ``.npz`` file in ``tasks/<domain>/`` with a ``.sha256`` file beside it. Each
+A test set is one ``.npz`` file, ``tasks/<domain>/<task>/testset.npz``, with a ``.sha256`` file beside it. Each
 named array has the episode index as its first axis; ``meta`` holds a JSON description (task,
 seed, generator). The file is written with fixed zip timestamps so that regenerating it from its
 seed (``etmpc testset --task TASK --seed S --out FILE``; each domain's ``TEST_SET_SEEDS`` holds its stored sets' seeds) gives

@@ -1,7 +1,7 @@
 """Where ``etmpc reproduce``'s time goes: the wall time of each of a task's stages, kept in the task's folder.
 
 A run is long and continues after an interruption, so each stage's time is written when the stage
-finishes (``DIR/<task>/stage_seconds.json``, atomically) and read back by later invocations: the
+finishes (``DIR/<domain>/<task>/stage_seconds.json``, atomically) and read back by later invocations: the
 report's table of where the time went (:func:`time_table`) covers every stage, whichever invocation
 played it. A stage whose files an earlier invocation made before its time was kept is recorded as not
 timed (``None``), never as the instant it takes to find them; a stage an interruption cut short is

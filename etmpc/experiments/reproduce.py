@@ -1,6 +1,6 @@
 """``etmpc reproduce``: the paper's experiments on every task, one command, with a report.
 
-Per system, in ``DIR/<domain>/``:
+Per task, in ``DIR/<domain>/<task>/`` (its folder, :func:`etmpc.systems.folder_name`):
 
 1. ``baselines.json``: the fixed policies (``always``, ``never``, ``every:T`` for every T that
    matters, thresholds) on the test set;
@@ -24,7 +24,7 @@ Per system, in ``DIR/<domain>/``:
 5. ``episodes.rrd``: a Rerun recording of representative episodes (the best fixed policy and
    the first seed's learned policy); ``episode.mp4``: a rendered video (cart pendulum).
 
-Each stage's wall time is kept in ``DIR/<domain>/stage_seconds.json`` as it finishes
+Each stage's wall time is kept in ``DIR/<domain>/<task>/stage_seconds.json`` as it finishes
 (:mod:`etmpc.experiments.clock`): the report's table of where the time went.
 
 Then ``DIR/results.json`` (everything the report says, machine-readable) and ``DIR/REPORT.md``,
