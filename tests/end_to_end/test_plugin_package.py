@@ -62,7 +62,7 @@ from etmpc.policies.specs import kinds
 from etmpc.systems import names
 print("tasks", *names())
 print("kinds", *kinds())
-if "slider" in names():
+if "slider/track" in names():
     env = suite.load("slider", "track", task_kwargs={"random": 0})
     print("suite", env.reset().observation["reference_m"].shape, env.action_spec().shape)
     gym = gymnasium.make("etmpc/slider-track-v0")

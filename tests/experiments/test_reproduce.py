@@ -252,7 +252,7 @@ def test_the_run_ships_ppo_with_its_hyperparameters_and_draws_every_learners_sam
         assert row["simulated_steps_per_seed"] == curves["dpi"][-1]["simulated_steps"] and row["wall_seconds"] > 0
         assert (out / r["files"]["efficiency"]).read_bytes()[:4] == b"\x89PNG"
     report = (out / "REPORT.md").read_text()
-    assert "simulated steps per run" in report and "![sample efficiency](battery/efficiency.png)" in report
+    assert "simulated steps per run" in report and "![sample efficiency](battery/trading/efficiency.png)" in report
 
 
 @pytest.mark.slow
