@@ -111,7 +111,7 @@ def test_an_installed_plugin_adds_its_task_and_kind_everywhere_and_uninstalling_
     assert "slider/track: objective (lower is better)" in evaluated.stdout and "driftage:0.05:4" in evaluated.stdout
     scored = run("-m", "etmpc.cli", "score", "driftage:0.05:4", "--task", "slider", "--episodes", "3", "--workers", "1")
     assert scored.returncode == 0, scored.stderr
-    assert "references: slider: every:3 and oracle:every:3" in scored.stdout  # the plugin's stored references
+    assert "references: slider/track: every:3 and oracle:every:3" in scored.stdout  # the plugin's stored references
     own = run("-m", "pytest", "-q", "-p", "no:cacheprovider", str(source / "tests"))  # the plugin's tests, installed
     assert own.returncode == 0, own.stdout[-2000:]
     helped = run("-m", "etmpc.cli", "evaluate", "--help")
@@ -123,6 +123,6 @@ def test_an_installed_plugin_adds_its_task_and_kind_everywhere_and_uninstalling_
     refused = run("-m", "etmpc.cli", "evaluate", "--task", "slider", "--policy", "every:3", "--episodes", "1")
     assert refused.returncode == 2
     assert refused.stderr.strip() == (
-        "etmpc: error: unknown task 'slider'; valid: cart_pendulum, cart_pendulum/kicks, cart_pendulum/kicks_late, "
-        "cart_pendulum/kicks_levels, battery, reacher, reacher/jumps_late, quadrotor"
+        "etmpc: error: unknown task 'slider'; valid: cart_pendulum/balance, cart_pendulum/kicks, cart_pendulum/kicks_late, "
+        "cart_pendulum/kicks_levels, battery/trading, reacher/jumps, reacher/jumps_late, quadrotor/waypoints"
     )
