@@ -263,7 +263,7 @@ def test_a_sampled_future_keeps_what_was_seen_and_redraws_the_rest_by_the_task_l
 
 def test_the_stored_test_set_regenerates_bit_for_bit(system):
     path = testsets.default_path("slider", "track")
-    assert path.parent == etmpc_slider.DATA
+    assert path == etmpc_slider.DATA / "track" / "testset.npz"
     stored = testsets.load(path, "slider", "track")
     assert stored.episodes == 100
     arrays, meta = testsets.generate(system, etmpc_slider.TEST_SET_SEEDS["track"], 100)
