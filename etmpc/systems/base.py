@@ -110,13 +110,20 @@ class _Declared:
         self.name = name
 
     def __get__(self, system, cls):
-        from etmpc.systems.registry import domain
-
-        value = getattr(domain(cls.domain).SUITE[cls.task], self.attribute, None)
+        value = getattr(_suite_entry(cls.domain, cls.task), self.attribute, None)
         if value is None:
             where = f"task {cls.domain}/{cls.task}"
             raise AttributeError(f"{where} declares no {self.attribute} (add_task's), and its system no {self.name}")
         return value
+
+
+@cache
+def _suite_entry(domain: str, task: str):
+    """Task ``domain/task``'s dm-control factory, asked of its domain's suite once (the loop reads the episode's
+    length at every step)."""
+    from etmpc.systems.registry import domain as domain_of
+
+    return domain_of(domain).SUITE[task]
 
 
 class SystemBase:
