@@ -29,7 +29,9 @@ class RunState:
     best: dict = field(default_factory=dict)  # seed (str) -> {"episodes", "objective", "theta"[, "theta_level"]}
     training: list = field(default_factory=list)  # per-episode stats, all seeds
     base: str | None = None  # DPI: the fixed schedule iteration 0 rolls out over (chosen on training episodes)
-    validation: dict = field(default_factory=dict)  # seed (str) -> final policy's objective on the validation episodes
+    # candidate (str) -> its objective on the validation episodes: a seed's final policy ("SEED"), or, for a learner
+    # that keeps every iteration's policy (DPI's history), the policy after EPISODES episodes ("SEED@EPISODES")
+    validation: dict = field(default_factory=dict)
 
     @cached_property
     def objective_sense(self) -> str:
@@ -82,7 +84,8 @@ def state_from_json(data: dict, where: str = "checkpoint") -> RunState:
         if sorted(state.learners) != sorted(str(s) for s in config.seeds):
             raise ValueError("learners do not match the seeds")
         levels = "theta_level" in data["policy"]
-        for learner in (*state.learners.values(), *state.best.values()):
+        history = [entry for learner in state.learners.values() for entry in learner.get("history", [])]
+        for learner in (*state.learners.values(), *state.best.values(), *history):
             if len(learner["theta"]) != len(data["policy"]["theta"]):
                 raise ValueError("feature size differs between learners and policy")
             if levels != ("theta_level" in learner) or (levels and len(learner["theta_level"]) != len(learner["theta"])):
@@ -104,6 +107,29 @@ def policy_of(state: RunState, params: dict) -> dict:
     return policy_at(state, params["theta"], params.get("theta_level"))
 
 
+def candidates(state: RunState) -> dict[str, dict]:
+    """The policies validation chooses among, by name: each seed's final policy (``"SEED"``), or, where a
+    learner kept every iteration's (DPI), each of them (``"SEED@EPISODES"``)."""
+    found = {}
+    for seed in state.config.seeds:
+        learner = state.learners[str(seed)]
+        if learner.get("history"):
+            found.update({f"{seed}@{entry['episodes']}": policy_of(state, entry) for entry in learner["history"]})
+        else:
+            found[str(seed)] = policy_of(state, learner)
+    return found
+
+
+def candidate(state: RunState, name: str) -> tuple[int, int, dict]:
+    """``(seed, episodes, parameters)`` of a candidate named as :func:`candidates` names it."""
+    seed, _, episodes = name.partition("@")
+    learner = state.learners[seed]
+    if not episodes:
+        return int(seed), state.done, learner
+    entry = next(entry for entry in learner["history"] if entry["episodes"] == int(episodes))
+    return int(seed), int(episodes), entry
+
+
 def save(out: Path, state: RunState, curve_png: Callable[[Path, dict, int], None] | None = None) -> dict:
     """Policies and curve first (``curve_png`` draws ``curve.png``: :func:`etmpc.views.curves.write_curve_png`),
     the checkpoint last: the checkpoint never points past the files. Returns the curve's summary."""
@@ -121,15 +147,23 @@ def save(out: Path, state: RunState, curve_png: Callable[[Path, dict, int], None
         )
     if state.validation:
         sense = state.objective_sense
-        pick = best_of(state.config.seeds, sense, key=lambda seed: state.validation[str(seed)])
-        hyper = dict(
-            state.policy["hyperparameters"],
-            seed=pick,
-            episodes=state.done,
-            validation_objective=state.validation[str(pick)],
-            validation_episodes=state.config.validation_episodes,
-        )
-        write_json_atomically(out / "selected.json", dict(policy_of(state, state.learners[str(pick)]), hyperparameters=hyper))
+
+        def chosen(names: list[str]) -> dict:  # the best of names on validation, with what chose it
+            pick = best_of(names, sense, key=state.validation.get)
+            seed, episodes, params = candidate(state, pick)
+            hyper = dict(
+                state.policy["hyperparameters"],
+                seed=seed,
+                episodes=episodes,
+                validation_objective=state.validation[pick],
+                validation_episodes=state.config.validation_episodes,
+            )
+            return dict(policy_of(state, params), hyperparameters=hyper)
+
+        for seed in state.config.seeds:  # each seed's own choice: a learner is a distribution of runs
+            own = [name for name in state.validation if name.partition("@")[0] == str(seed)]
+            write_json_atomically(out / f"seed{seed}" / "selected.json", chosen(own))
+        write_json_atomically(out / "selected.json", chosen(list(state.validation)))
     summary = curve_summary(state)
     write_json_atomically(out / "curve.json", summary)
     if curve_png is not None:

@@ -52,7 +52,7 @@ class TrainConfig:
             raise EtmpcError(f"unknown algorithm {self.algorithm!r}; valid: {', '.join(ALGORITHMS)}")
         object.__setattr__(self, "domain", canonical(self.domain))  # the task's own name; a bad one fails here
         self.system  # a bad price fails here
-        # On a task with compute levels DPI's default first schedules include iterate:2..5, written out here
+        # On a task with compute levels DPI's default first schedules include iterate:1..5, written out here
         # (so the checkpoint and the policy's hyperparameters say which it chose among).
         object.__setattr__(self, "dpi", dpi.level_bases(self.dpi, has_levels(self.domain)))
 

@@ -24,6 +24,12 @@ Then each iteration, for the current policy ``pi_t``:
 4. **The next policy** (:func:`iteration`). ``pi_{t+1}(keep | s) = sigma(theta . phi(s))``, for
    every seed of the run.
 
+**Which policy is shipped.** Policy iteration with an approximate classifier need not improve at every
+iteration (on ``kicks_late`` one run's policies computed 127, 55, then 24 times an episode). Every
+iteration's policy of every seed is kept (the learner's ``history``), and the run's ``selected.json`` is
+the best of them all on the validation episodes (training distribution, never the test set), not the last
+iteration of the best seed.
+
 **Compute levels.** On a task whose decisions are keep, one SQP iteration or a full solve, the policy
 has a second stage, ``pi(solve | compute, s) = sigma(theta_level . phi(s))`` (see
 :mod:`etmpc.policies.learned`), and DPI labels the three answers: ``q_values`` gives each one's
@@ -32,7 +38,8 @@ returns, and a labelled decision's row holds their means, ``(phi, q_keep, q_solv
 above with the advantage of keeping ``q_keep - max(q_iterate, q_solve)``; stage 2 by :func:`fit_level`:
 label *iterate* where ``q_iterate >= q_solve``, weight ``|q_iterate - q_solve|``, on the labelled decisions
 where the just-fitted stage 1 computes (:func:`fit_level_labels` says why). ``pi_0``'s candidates then
-include the real-time iterations ``iterate:2..5`` (:func:`level_bases`).
+include the real-time iterations ``iterate:1..5`` (:func:`level_bases`; ``iterate:1``, one iteration at
+every step, is the best schedule of ``kicks_levels``).
 
 :func:`label_episode` is a worker's job (a pure function of its arguments, as those of
 :mod:`etmpc.learning.jobs`); the rest runs in the driver, :func:`etmpc.learning.train.train`.
@@ -57,7 +64,7 @@ from etmpc.policies.rollout import q_values
 
 DPI_ENTROPY = 0x6470_6921  # "dpi!"
 BASES = ("always", "every:2", "every:3", "every:4", "every:5")  # pi_0's candidates by default
-LEVEL_BASES = ("iterate:2", "iterate:3", "iterate:4", "iterate:5")  # and on a task with compute levels
+LEVEL_BASES = ("iterate:1", "iterate:2", "iterate:3", "iterate:4", "iterate:5")  # and on a task with compute levels
 
 
 @dataclass(frozen=True)
@@ -85,7 +92,7 @@ class Settings:
 
 def level_bases(settings: Settings, levels: bool) -> Settings:
     """``settings`` for a task with compute levels (``levels``): the default candidates for ``pi_0``
-    grow the real-time iterations ``iterate:2..5``; candidates someone chose are kept as they are, and a
+    grow the real-time iterations ``iterate:1..5``; candidates someone chose are kept as they are, and a
     keep-or-solve task's settings are returned unchanged."""
     return replace(settings, bases=BASES + LEVEL_BASES) if levels and settings.bases == BASES else settings
 
@@ -254,6 +261,9 @@ def iteration(state, pool, tick, start: int, stop: int) -> None:
             learner["theta_level"] = fit_level_labels(learner["data"], config.dpi.ridge, learner["theta"]).tolist()
         learner["iterations"] += 1
         learner["episodes"] = stop
+        # every iteration's policy, for the validation that chooses among them (checkpoint.candidates)
+        kept = {name: learner[name] for name in ("theta", "theta_level") if name in learner}
+        learner.setdefault("history", []).append({"episodes": stop, **kept})
         state.training += [
             {"episode": e, "seed": seed, "labels": len(rows)}
             for e, rows in zip(range(start, stop), results[k * per_seed : (k + 1) * per_seed])

@@ -18,7 +18,7 @@ from etmpc.common.outputs import refuse_foreign
 from etmpc.evaluation.workers import context
 from etmpc.learning import dpi, gpomdp
 from etmpc.learning.base import Learner
-from etmpc.learning.checkpoint import RunState, load_checkpoint, ours, policy_of, save, state_from_json
+from etmpc.learning.checkpoint import RunState, candidates, load_checkpoint, ours, policy_of, save, state_from_json
 from etmpc.learning.config import SELECTION_ENTROPY, TrainConfig
 from etmpc.learning.jobs import _call, _learner_to_json, mean_scores
 from etmpc.policies.features import DEFAULT_FEATURES, check_features
@@ -233,7 +233,7 @@ class _Phased(Learner):
             f"{point['objective_mean']:.5f} ± {point['objective_std']:.5f}, {point['recomputes_mean']:.1f} recomputes"
         )
 
-    # Validation: every seed's final policy; the best becomes selected.json (written by save).
+    # Validation: every seed's final policy (DPI: every iteration's); the best becomes selected.json (written by save).
 
     @property
     def chosen(self) -> bool:
@@ -243,11 +243,10 @@ class _Phased(Learner):
         return self.config().validation_episodes
 
     def candidates(self) -> dict:
-        state = self.run_state
-        return {str(s): policy_of(state, state.learners[str(s)]) for s in state.config.seeds}
+        return candidates(self.run_state)
 
     def choose(self, scores: list[float]) -> None:
-        self.run_state.validation = {str(s): mean for s, mean in zip(self.run_state.config.seeds, scores)}
+        self.run_state.validation = dict(zip(candidates(self.run_state), scores, strict=True))
 
     def policy(self) -> str:
         return f"rl:{self.out / 'selected.json'}"

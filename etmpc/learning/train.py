@@ -22,14 +22,16 @@ would, because every random draw is keyed by ``(seed, episode)`` and never by hi
   policy that recomputes with probability 1/2 (so plan ages vary), from ``NORMALISATION_ENTROPY``;
 * DPI: training episode ``e`` of seed ``s`` and its rollouts from ``SeedSequence(DPI_ENTROPY,
   spawn_key=(s, e, k))``; its iteration-0 schedule is chosen on episodes from ``SELECTION_ENTROPY``;
-* the choice of the run's policy (``selected.json``): every seed's final policy on
-  ``validation_episodes`` training-distribution episodes from ``VALIDATION_ENTROPY`` (never the
-  test set), the best one.
+* the choice of the run's policy (``selected.json``): every seed's final policy (DPI: every
+  iteration's policy of every seed) on ``validation_episodes`` training-distribution episodes from
+  ``VALIDATION_ENTROPY`` (never the test set), the best one; ``seed<S>/selected.json`` is the best of
+  seed ``S``'s own.
 
 Outputs in ``DIR``: ``checkpoint.json``, ``curve.json`` and ``curve.png`` (mean and standard
 deviation over seeds, the paper's Figure 2), ``seed<S>/last.json`` and ``seed<S>/best.json`` (the
-best point of the test-set curve: a look back, not a model choice), ``selected.json`` (the final
-policy of the seed that did best on the validation episodes: the run's answer); with
+best point of the test-set curve: a look back, not a model choice), ``seed<S>/selected.json`` (the seed's
+best on the validation episodes), ``selected.json`` (the best of all on the validation episodes: the
+run's answer); with
 ``--record N``, ``recordings/eval_<episodes>.rrd``: the first N test-set episodes of every seed's
 evaluation, as Rerun recordings. The caller gives what draws the curve and writes the recordings
 (``etmpc train`` gives ``etmpc.views.curves.write_curve_png`` and ``etmpc.views.recording.Recorder``).

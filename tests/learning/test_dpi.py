@@ -162,6 +162,17 @@ def test_a_dpi_run_does_not_depend_on_the_number_of_workers_and_chooses_on_valid
     assert one.base in ("always", "every:3") and all(learner["iterations"] == 2 for learner in one.learners.values())
     assert all(len(learner["data"]) > 0 for learner in one.learners.values())
     selected = json.loads((tmp_path / "one" / "selected.json").read_text())
+    # every iteration of every seed was a candidate, named SEED@EPISODES; the best on validation is shipped
+    assert sorted(one.validation) == ["0@1", "0@2", "1@1", "1@2"]
     best = max(one.validation, key=one.validation.get)  # profit: higher is better
-    assert selected["hyperparameters"]["seed"] == int(best) and selected["decision"] == "greedy"
-    assert selected["theta"] == one.learners[best]["theta"]
+    seed, episodes = map(int, best.split("@"))
+    assert selected["hyperparameters"]["seed"] == seed and selected["hyperparameters"]["episodes"] == episodes
+    assert selected["decision"] == "greedy" and selected["hyperparameters"]["validation_objective"] == one.validation[best]
+    (entry,) = [e for e in one.learners[str(seed)]["history"] if e["episodes"] == episodes]
+    assert selected["theta"] == entry["theta"]
+    assert one.learners[str(seed)]["history"][-1]["theta"] == one.learners[str(seed)]["theta"]  # the last is the final one
+    for s in (0, 1):  # each seed's own choice: the best of its iterations
+        own = json.loads((tmp_path / "one" / f"seed{s}" / "selected.json").read_text())
+        pick = max((name for name in one.validation if name.startswith(f"{s}@")), key=one.validation.get)
+        assert own["hyperparameters"]["seed"] == s and own["hyperparameters"]["validation_objective"] == one.validation[pick]
+        assert own["hyperparameters"]["episodes"] == int(pick.split("@")[1])

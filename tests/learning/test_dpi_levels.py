@@ -61,7 +61,8 @@ def test_stage_two_is_fitted_where_stage_one_computes():
 
 def test_the_first_schedules_include_real_time_iterations_on_a_task_with_levels_only():
     assert TrainConfig("cart_pendulum/kicks", algorithm="dpi").dpi.bases == dpi.BASES
-    assert TrainConfig(LEVELS, algorithm="dpi").dpi.bases == dpi.BASES + ("iterate:2", "iterate:3", "iterate:4", "iterate:5")
+    levels = ("iterate:1", "iterate:2", "iterate:3", "iterate:4", "iterate:5")
+    assert TrainConfig(LEVELS, algorithm="dpi").dpi.bases == dpi.BASES + levels
     chosen = dpi.Settings(bases=("always", "iterate:3"))
     assert TrainConfig(LEVELS, algorithm="dpi", dpi=chosen).dpi == chosen  # chosen candidates stay as they are
     config = TrainConfig(LEVELS, algorithm="dpi")
@@ -109,7 +110,7 @@ def test_a_tiny_dpi_run_on_a_task_with_levels_learns_a_policy_that_iterates(tiny
     selected = json.loads((out / "selected.json").read_text())
     assert selected["version"] == 3 and selected["theta_level"] == learner["theta_level"]
     assert selected["hyperparameters"]["bases"] == list(TINY.dpi.bases) and state.base in TINY.dpi.bases
-    assert TINY.dpi.bases[-4:] == dpi.LEVEL_BASES
+    assert TINY.dpi.bases[-5:] == dpi.LEVEL_BASES
     # Where a labelled computation's iteration did at least as well as the full solve, and the fitted
     # policy computes, it iterates there (stage 2 follows its labels on the states it was fitted on).
     system = context(LEVELS)[0]
