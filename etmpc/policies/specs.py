@@ -110,10 +110,18 @@ def _iterate(arg: str, spec: str, context: Context) -> Policy:
 
 
 def _threshold(arg: str, spec: str, context: Context) -> Policy:
-    level = _number(arg, float, spec)
+    text, _, answer = arg.partition(":")
+    level = _number(text, float, spec)
     if not (math.isfinite(level) and level >= 0):
         raise EtmpcError(f"bad policy {spec!r}: the threshold must be a finite number >= 0")
-    return Threshold(level, np.asarray(context.error_weights, dtype=float))
+    if answer not in ("", "iterate"):
+        raise EtmpcError(f"bad policy {spec!r}: after the threshold only ':iterate' may follow (one SQP iteration)")
+    if answer and not context.levels:
+        raise EtmpcError(
+            f"bad policy {spec!r}: one SQP iteration is a compute level, and task {context.task} has none "
+            "(its decisions are keep or solve): write threshold:X"
+        )
+    return Threshold(level, np.asarray(context.error_weights, dtype=float), iterate=bool(answer))
 
 
 def _learned(path: str, context: Context) -> Policy:
@@ -163,7 +171,13 @@ BUILT_IN: tuple[Kind, ...] = (
         _iterate,
         family="periodic",
     ),
-    Kind("threshold", "threshold:X", "recompute when the weighted prediction error exceeds X", _threshold, family="event"),
+    Kind(
+        "threshold",
+        "threshold:X[:iterate]",
+        "recompute when the weighted prediction error exceeds X (:iterate: one SQP iteration, with compute levels)",
+        _threshold,
+        family="event",
+    ),
     Kind("rl", "rl:PATH", "a learned policy (etmpc train)", _file(_learned, "policy"), family="learned", path=True),
     Kind(
         "self",

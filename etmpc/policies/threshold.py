@@ -1,4 +1,6 @@
-"""The classic event trigger ``threshold:X``: recompute when the weighted prediction error exceeds ``X``."""
+"""The classic event trigger ``threshold:X``: recompute when the weighted prediction error exceeds ``X``; on a
+task with compute levels, ``threshold:X:iterate`` makes one SQP iteration from the shifted plan there instead
+of a full solve (an event-triggered real-time iteration: the answer that arrives soonest)."""
 
 from __future__ import annotations
 
@@ -8,6 +10,7 @@ from typing import ClassVar
 import numpy as np
 
 from etmpc.common.numerics import norm
+from etmpc.control.timing import ITERATE, KEEP
 from etmpc.loop import AugmentedState
 
 
@@ -22,11 +25,15 @@ class Threshold:
     level: float
     weights: np.ndarray
     stochastic: bool = False
+    iterate: bool = False  # on a task with compute levels: one SQP iteration, not a full solve
     observes: ClassVar[bool] = False
 
     @property
     def spec(self) -> str:
-        return f"threshold:{self.level:g}"
+        return f"threshold:{self.level:g}" + (":iterate" if self.iterate else "")
 
-    def decide(self, s: AugmentedState, rng: np.random.Generator) -> bool:
-        return norm(self.weights * (s.x - s.x_predicted)) > self.level
+    def decide(self, s: AugmentedState, rng: np.random.Generator) -> bool | int:
+        fired = norm(self.weights * (s.x - s.x_predicted)) > self.level
+        if self.iterate:
+            return ITERATE if fired else KEEP
+        return fired
