@@ -181,9 +181,9 @@ class _Phased(Learner):
 
     def work(self) -> int:
         config = self.config()
-        return len(config.seeds) * (
-            config.episodes + len(config.milestones) * config.eval_repeats * self._testset[0] + config.validation_episodes
-        )
+        candidates = len(config.milestones) - 1 if config.algorithm == "dpi" else 1  # DPI: every iteration's policy
+        evaluations = len(config.milestones) * config.eval_repeats * self._testset[0]
+        return len(config.seeds) * (config.episodes + evaluations + candidates * config.validation_episodes)
 
     def work_done(self) -> int:
         config, done = self.config(), self.done
@@ -341,7 +341,8 @@ class DpiLearner(_Phased):
     shipped = ("DPI (shipped)", "learned.json", "the default learner, chosen on validation episodes")
 
     def _hyperparameters(self, config: TrainConfig) -> dict:
-        return dict(asdict(config.dpi), bases=list(config.dpi.bases))
+        # eval_every: the episodes of one policy iteration (each phase ends in one), so the recipe is whole
+        return dict(asdict(config.dpi), bases=list(config.dpi.bases), eval_every=config.eval_every)
 
     def _start(self, config: TrainConfig, initial: LogisticPolicy) -> tuple[dict, str]:
         learner = {"theta": initial.theta.tolist()}
