@@ -105,11 +105,18 @@ def evaluate_theta(
 def training_return(domain: str, policy, entropy: int, index: int) -> float:
     """The policy's objective (sense-aware) on training-distribution episode ``index`` of ``entropy``'s
     stream (``policy``: a spec or a policy's JSON): how models are chosen without the test set."""
+    return training_outcome(domain, policy, entropy, index)[0]
+
+
+def training_outcome(domain: str, policy, entropy: int, index: int) -> tuple[float, float, float]:
+    """:func:`training_return`'s episode: ``(objective, failures, recomputes)`` (failures NaN on a task that
+    counts none)."""
     system, env, _ = context(domain)
     policy = _policy(system, policy)
     episode = system.draw_episode(np.random.default_rng(np.random.SeedSequence(entropy, spawn_key=(index, 0))))
     traj = run_episode(system, env, policy, np.random.default_rng(np.random.SeedSequence(entropy, spawn_key=(index, 1))), episode)
-    return scores(system, traj)[0]
+    failures = float(system.failures(traj, episode)) if system.failures is not None else float("nan")
+    return scores(system, traj)[0], failures, float(traj.recomputes)
 
 
 def _policy(system, policy):
@@ -124,9 +131,8 @@ def _policy(system, policy):
 
 def _call(job):
     name, args = job
-    return {"normalisation": normalisation_states, "train": train_block, "evaluate": evaluate_theta, "score": training_return}[
-        name
-    ](*args)
+    jobs = {"normalisation": normalisation_states, "train": train_block, "evaluate": evaluate_theta, "score": training_return}
+    return {**jobs, "outcome": training_outcome}[name](*args)
 
 
 def _learner_to_json(learner: Learner) -> dict:
@@ -156,6 +162,13 @@ def episode_scores(pool, domain: str, policies: list, entropy: int, episodes: in
     jobs = [("score", (domain, policy, entropy, i)) for policy in policies for i in range(episodes)]
     values = pool.map(_call, jobs, on_result)
     return [np.array(values[k * episodes : (k + 1) * episodes]) for k in range(len(policies))]
+
+
+def episode_outcomes(pool, domain: str, policies: list, entropy: int, episodes: int, on_result=None) -> list[np.ndarray]:
+    """Each policy's ``(objective, failures, recomputes)`` rows on the first ``episodes`` episodes of ``entropy``'s stream."""
+    jobs = [("outcome", (domain, policy, entropy, i)) for policy in policies for i in range(episodes)]
+    values = pool.map(_call, jobs, on_result)
+    return [np.array(values[k * episodes : (k + 1) * episodes], dtype=float) for k in range(len(policies))]
 
 
 def mean_scores(pool, domain: str, policies: list, entropy: int, episodes: int, on_result=None) -> list[float]:

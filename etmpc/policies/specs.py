@@ -36,9 +36,11 @@ from etmpc.policies.learned import load_policy
 from etmpc.policies.rollout import parse_rollout
 from etmpc.policies.sb3 import load_sb3
 from etmpc.policies.selftrigger import load_self
+from etmpc.policies.shield import Shield
 from etmpc.policies.threshold import Threshold
 from etmpc.policies.user import load_user
 from etmpc.systems import SystemKey, make_system
+from etmpc.systems.capabilities import ShieldRule
 
 ENTRY_POINTS = "etmpc.policies"
 
@@ -55,6 +57,8 @@ class Context:
     parse: Callable[[str], Policy]
     levels: bool = False  # the task's decisions are compute levels (keep, one SQP iteration, a full solve)
     variant_of: str | None = None  # the task whose world this one plays with time in the loop: its rl: files fit
+    shield: ShieldRule | None = None  # the task's own shield rule (shield:BASE)
+    safety_margin: Callable[[np.ndarray], float] | None = None  # the task's margin to a safety failure
 
 
 @dataclass(frozen=True)
@@ -67,7 +71,7 @@ class Kind:
     summary: str  # one line: what it does
     build: Callable[[str, str, Context], Policy]
     clairvoyant: bool = False  # True: it knows each episode's future; a reference, not a policy
-    family: str = "other"  # periodic, event, learned, self, rollout, oracle, users, other: how tables group it
+    family: str = "other"  # periodic, event, learned, shielded, self, rollout, oracle, users, other: how tables group it
     path: bool = False  # its argument is a file (rl:PATH): tables shorten it
     simulates: bool = False  # it simulates the loop itself, so it may not be another such kind's base
 
@@ -156,6 +160,41 @@ def _simulates(spec: str) -> bool:
     return kind is not None and kind.simulates
 
 
+def _shield(arg: str, spec: str, context: Context) -> Policy:
+    """``shield:BASE`` (the task's rule) or ``shield:AGE[:MARGIN]:BASE``: numbers first, then the base's spec."""
+    parts, numbers = arg.split(":"), []
+    while parts and len(numbers) < 2 and _numeric(parts[0]):
+        numbers.append(parts.pop(0))
+    base = ":".join(parts)
+    if not base:
+        raise EtmpcError(f"bad policy {spec!r}: give the policy to shield, shield:BASE or shield:AGE[:MARGIN]:BASE")
+    if (kind := find(base)) is not None and kind.clairvoyant:
+        raise EtmpcError(f"bad policy {spec!r}: {base} is an oracle, a reference and not a policy: shield a policy")
+    if numbers:
+        age = _number(numbers[0], int, spec)
+        try:
+            rule = ShieldRule(age, _number(numbers[1], float, spec) if len(numbers) > 1 else None)
+        except EtmpcError as exc:
+            raise EtmpcError(f"bad policy {spec!r}: {exc}") from None
+    elif context.shield is None:
+        raise EtmpcError(f"bad policy {spec!r}: task {context.task} declares no shield rule: write shield:AGE[:MARGIN]:BASE")
+    else:
+        rule = context.shield
+    if rule.margin is not None and context.safety_margin is None:
+        raise EtmpcError(
+            f"bad policy {spec!r}: task {context.task} has no safety margin: shield it by age alone, shield:AGE:BASE"
+        )
+    return Shield(context.parse(base), rule.max_age, rule.margin, context.safety_margin, context.levels)
+
+
+def _numeric(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
 def _rollout(arg: str, spec: str, context: Context) -> Policy:
     return parse_rollout(spec, context.parse, context.steps, simulating=_simulates)
 
@@ -201,6 +240,13 @@ BUILT_IN: tuple[Kind, ...] = (
         _file(lambda path, c: load_sb3(path, c.task), "model"),
         family="learned",
         path=True,
+    ),
+    Kind(
+        "shield",
+        "shield:[AGE[:MARGIN]:]BASE",
+        "BASE, but compute when the plan is AGE steps old or the safety margin is below MARGIN (default: the task's rule)",
+        _shield,
+        family="shielded",
     ),
     Kind(
         "rollout",
@@ -297,7 +343,8 @@ def parse_policy(spec: str, system, *legacy) -> Policy:
         )
         return _parse(spec, Context(np.asarray(system), *(legacy + (None, 100)[len(legacy) :]), None))
     levels, variant_of = bool(getattr(system, "compute_levels", False)), getattr(system, "variant_of", None)
-    return _parse(spec, Context(system.error_weights, system.name, system.episode_steps, None, levels, variant_of))
+    safety = (getattr(system, "shield", None), getattr(system, "safety_margin", None))
+    return _parse(spec, Context(system.error_weights, system.name, system.episode_steps, None, levels, variant_of, *safety))
 
 
 def _parse(spec: str, context: Context) -> Policy:

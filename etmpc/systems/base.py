@@ -147,6 +147,11 @@ class SystemBase:
     # Trajectory, its first trajectory.steps rows: rewards, states, inputs, recomputes) and the episode it
     # played; each step judged on the steps up to it, so that the count never decreases as the episode goes on
     failures: Any = None
+    # (x) -> the state's margin to a safety failure one interval on (at most 0: a failure), and the task's own
+    # shield rule (capabilities.ShieldRule): what shield: plays around a policy
+    safety_margin: Any = None
+    margin_unit: str | None = None
+    shield: Any = None
     plan_cost: Any = None  # (x, u_prev, timestep, inputs) -> the OCP's objective of an input sequence
     interpreted: Any = None  # () -> the same system with its MPC not compiled (None: it has no other way to run)
     # (x, u_prev, warm, age, timestep) -> a Plan from one SQP iteration (Plan.iterations: 1), for compute levels

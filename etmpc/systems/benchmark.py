@@ -37,9 +37,11 @@ class Benchmark:
         """A rollout's horizon ``horizon`` (None: to the episode's end) within the task's ``lookahead``."""
         return self.lookahead if horizon is None else min(horizon, self.lookahead)
 
-    def threshold_specs(self) -> list[str]:
-        """``threshold:X`` for each of the sweep's levels: the grid a best threshold is chosen from."""
-        return [f"threshold:{x:g}" for x in self.sweep_thresholds]
+    def threshold_specs(self, levels: bool = False) -> list[str]:
+        """``threshold:X`` for each of the sweep's levels: the grid a best threshold is chosen from; with compute
+        ``levels``, ``threshold:X:iterate`` too (the event trigger that answers one SQP iteration)."""
+        solves = [f"threshold:{x:g}" for x in self.sweep_thresholds]
+        return solves + [f"{spec}:iterate" for spec in solves] if levels else solves
 
     def baselines(self, levels: bool = False) -> list[str]:
         """Reproduce's fixed policies: always, never, every:T and threshold:X; with compute ``levels``,

@@ -14,8 +14,10 @@ A capability's name in messages is its class name in words (``TimeInTheLoop``: "
 
 from __future__ import annotations
 
+import math
 import re
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any, Protocol, TypeGuard, TypeVar
 
 import numpy as np
@@ -65,6 +67,35 @@ class Failures(Protocol):
     failures: Callable[[Any, Any], int]
 
 
+class SafetyMargin(Protocol):
+    """How near a safety failure a state is, for shields (``shield:``): ``(x) -> float``, the margin (in
+    ``margin_unit``) the state keeps one control interval on at its current rate: at most 0 is a failure.
+    ``shield`` is the task's own rule (a :class:`ShieldRule`), chosen on training-distribution episodes."""
+
+    safety_margin: Callable[[np.ndarray], float]
+    shield: ShieldRule
+
+
+@dataclass(frozen=True)
+class ShieldRule:
+    """A shield's rule: compute when the kept plan is ``max_age`` steps old, or when the state's safety margin
+    is below ``margin`` (None: by age alone)."""
+
+    max_age: int
+    margin: float | None = None
+
+    def __post_init__(self):
+        if not isinstance(self.max_age, int) or self.max_age < 1:
+            raise EtmpcError(f"a shield's age must be a whole number of steps >= 1, got {self.max_age!r}")
+        if self.margin is not None and not (isinstance(self.margin, (int, float)) and math.isfinite(self.margin)):
+            raise EtmpcError(f"a shield's margin must be a finite number, got {self.margin!r}")
+
+    @property
+    def text(self) -> str:
+        """How a spec writes it: ``AGE`` or ``AGE:MARGIN``."""
+        return str(self.max_age) if self.margin is None else f"{self.max_age}:{self.margin:g}"
+
+
 class TimeInTheLoop(Protocol):
     """Compute levels, work-priced solves and delay compensation: one SQP iteration (``iterate``, a Plan with
     ``iterations`` 1) and the predictor's states under given inputs (``predict``)."""
@@ -74,7 +105,7 @@ class TimeInTheLoop(Protocol):
 
 
 #: Every capability, in the order tests and docs list them.
-CAPABILITIES: tuple[type, ...] = (Experiments, Rollouts, ExogenousFeatures, Scene, Bench, Failures, TimeInTheLoop)
+CAPABILITIES: tuple[type, ...] = (Experiments, Rollouts, ExogenousFeatures, Scene, Bench, Failures, SafetyMargin, TimeInTheLoop)
 
 C = TypeVar("C")
 

@@ -125,6 +125,12 @@ def step_cost(angle_rad: float, position_error_m: float, on_bumper: bool) -> flo
     return 0.5 * angle + 0.5 * d2 / (d2 + POSITION_SCALE_M**2)
 
 
+def fall_margin(x: np.ndarray) -> float:
+    """How far (rad) the pole keeps from a fall one control interval on at its current rate:
+    ``FALL_RAD - |beta + omega dt|`` (at most 0: it would fall). A shield's reading (``shield:``)."""
+    return FALL_RAD - abs(float(x[2]) + float(x[3]) * CONTROL_DT_S)
+
+
 def falls(rewards: np.ndarray) -> int:
     """The falls of an episode, from its rewards (a fall's step costs ``FALL_COST``; no other reaches it)."""
     return int(np.sum(np.asarray(rewards) <= -FALL_COST))

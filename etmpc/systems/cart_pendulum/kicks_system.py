@@ -35,6 +35,7 @@ import numpy as np
 
 from etmpc.control.mpc import FeedbackWeights, SolverSettings
 from etmpc.control.timing import Latency
+from etmpc.systems.capabilities import ShieldRule
 from etmpc.systems.gauss_newton import GaussNewtonSystem
 from etmpc.systems.cart_pendulum import kicks
 from etmpc.systems.cart_pendulum.model import NU, NX, STATE_NAMES, AnalyticModel
@@ -100,6 +101,12 @@ class KicksSystem(GaussNewtonSystem):
     exogenous_feature_names = EXOGENOUS_FEATURES  # what the learned policy's "error" features add
     exogenous_features = staticmethod(exogenous_features)
     failure_name = "falls"  # per episode, beside the mean objective
+    safety_margin = staticmethod(kicks.fall_margin)  # rad before a fall, one interval on (shield:)
+    margin_unit = "rad"
+    # shield:BASE's rule, chosen on validation episodes (scripts/shields.py, docs/results/shields.md). Here the
+    # safest rule never acts (a plan runs out at 20 steps anyway): a recompute forced near a fall made falls no
+    # rarer under this model mismatch, and one forced by age no rarer than the learners' own choices
+    shield = ShieldRule(20)
     camera = "track"
 
     def __init__(self, config: Config | None = None):

@@ -19,6 +19,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from etmpc.control.timing import Latency
+from etmpc.systems.capabilities import ShieldRule
 from etmpc.systems.cart_pendulum.kicks_system import Config, KicksSystem
 
 #: The target platform of ``kicks_levels``: the time one SQP iteration takes there (an assumption).
@@ -41,9 +42,11 @@ class KicksLateSystem(KicksSystem):
     Config = LateConfig
     task = "kicks_late"
     variant_of = "cart_pendulum/kicks"  # its world, episodes and rl: policies are kicks'
+    shield = ShieldRule(5, 1.0)  # chosen on validation episodes: scripts/shields.py
 
 
 class KicksLevelsSystem(KicksSystem):
     Config = LevelsConfig
     task = "kicks_levels"
     variant_of = "cart_pendulum/kicks"
+    shield = ShieldRule(5, 1.0)  # chosen on validation episodes: scripts/shields.py (a forced iteration arrives soonest)

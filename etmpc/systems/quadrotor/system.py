@@ -29,6 +29,7 @@ import numpy as np
 
 from etmpc.control.mpc import SolverSettings
 from etmpc.control.timing import Latency
+from etmpc.systems.capabilities import ShieldRule
 from etmpc.systems.gauss_newton import GaussNewtonSystem, TrackedFeatures
 from etmpc.systems.quadrotor import task as quadrotor_task
 from etmpc.systems.quadrotor.model import INPUT_NAMES, NU, NX, STATE_NAMES, AnalyticModel, Parameters
@@ -100,6 +101,9 @@ class QuadrotorSystem(GaussNewtonSystem):
     exogenous_feature_names = EXOGENOUS_FEATURES  # what the learned policy's "error" features add
     exogenous_features = EXOGENOUS
     failure_name = "outside geofence"  # steps ending outside the geofence or on the ground, per episode
+    safety_margin = staticmethod(quadrotor_task.fence_margin)  # m to the fence or the ground, one interval on (shield:)
+    margin_unit = "m"
+    shield = ShieldRule(15, 0.25)  # shield:BASE's rule, chosen on validation episodes: scripts/shields.py
     camera = "arena"
     space = SPACE  # the recordings' 3-D view of the flight
 

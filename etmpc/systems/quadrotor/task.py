@@ -153,6 +153,13 @@ def outside(position_m: np.ndarray) -> bool:
     return bool(abs(x) > FENCE_HALF_WIDTH_M or abs(y) > FENCE_HALF_WIDTH_M or z > FENCE_HEIGHT_M or z < GROUND_M)
 
 
+def fence_margin(x: np.ndarray) -> float:
+    """How far (m) the drone keeps from the geofence, the ceiling and the ground one control interval on at
+    its current velocity (at most 0: outside, or on the ground). A shield's reading (``shield:``)."""
+    px, py, pz = np.asarray(x[:3], dtype=float) + np.asarray(x[6:9], dtype=float) * CONTROL_DT_S
+    return float(min(FENCE_HALF_WIDTH_M - abs(px), FENCE_HALF_WIDTH_M - abs(py), FENCE_HEIGHT_M - pz, pz - GROUND_M))
+
+
 def failure_steps(rewards: np.ndarray) -> int:
     """The steps of an episode that ended outside the geofence or on the ground (reward at most -1)."""
     return int(np.sum(np.asarray(rewards) <= -FAILURE_PENALTY))

@@ -1,0 +1,83 @@
+"""Choosing a task's shield rule (``shield:``, :mod:`etmpc.policies.shield`) on training-distribution episodes.
+
+Every rule of a grid (a maximum plan age, a safety margin, or both) is played around each given policy on
+the first ``episodes`` episodes of the validation stream (``VALIDATION_ENTROPY``: never the test set),
+beside the best fixed schedule on the same episodes. A shield is there for safety, so the chosen rule is
+the safest: the one under which the policy that fails most often fails least per episode; among rules as
+safe, the one whose shielded policies give the best mean objective. Whether the chosen rule is as safe
+as the schedule on these episodes is said beside it (``safe``). The unshielded policies are played too,
+as the row the choice is measured against.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from etmpc.common.sense import oriented
+from etmpc.learning.config import VALIDATION_ENTROPY
+from etmpc.learning.jobs import episode_outcomes
+from etmpc.systems import make_system
+from etmpc.systems.capabilities import ShieldRule
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """A policy's means over the validation episodes."""
+
+    objective: float
+    failures: float
+    recomputes: float
+
+
+def _mean(rows: np.ndarray) -> Outcome:
+    return Outcome(*(float(v) for v in rows.mean(axis=0)))
+
+
+def rules(ages: Sequence[int], margins: Sequence[float | None]) -> list[ShieldRule]:
+    """The grid: every age with every margin (``None``: by age alone)."""
+    return [ShieldRule(age, margin) for age in ages for margin in margins]
+
+
+def choose(
+    task: str,
+    policies: Sequence[str],
+    schedule: str,
+    grid: Sequence[ShieldRule],
+    episodes: int,
+    pool,
+    tick: Callable | None = None,
+) -> dict:
+    """Play ``policies`` unshielded and under each rule of ``grid``, and ``schedule``, on ``episodes`` validation
+    episodes; return the table and the chosen rule (see the module's docstring)."""
+    system = make_system(task)
+    specs = [schedule, *policies] + [f"shield:{rule.text}:{p}" for rule in grid for p in policies]
+    played = dict(
+        zip(specs, (_mean(rows) for rows in episode_outcomes(pool, system.name, specs, VALIDATION_ENTROPY, episodes, tick)))
+    )
+    limit = played[schedule].failures
+
+    def summary(prefix: str) -> dict:
+        outcomes = [played[prefix + p] for p in policies]
+        return {
+            "objective": float(np.mean([o.objective for o in outcomes])),
+            "worst_failures": max(o.failures for o in outcomes),
+            "policies": {p: vars(played[prefix + p]) for p in policies},
+        }
+
+    table = [{"rule": rule.text, **summary(f"shield:{rule.text}:")} for rule in grid]
+    sense = system.objective_sense
+    chosen = min(table, key=lambda row: (row["worst_failures"], -oriented(row["objective"], sense)))
+    return {
+        "task": system.name,
+        "episodes": episodes,
+        "validation_entropy": VALIDATION_ENTROPY,
+        "schedule": {"spec": schedule, **vars(played[schedule])},
+        "unshielded": summary(""),
+        "rules": table,
+        "chosen": chosen["rule"],
+        "safe": chosen["worst_failures"] <= limit,
+        "margin_unit": system.margin_unit,
+    }

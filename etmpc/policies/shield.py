@@ -1,0 +1,62 @@
+"""A shield around any policy: ``shield:BASE`` (the task's own rule) or ``shield:AGE[:MARGIN]:BASE``.
+
+Runtime assurance (a "shield", Alshiekh et al. 2018, "Safe reinforcement learning via shielding"): the
+base policy decides, and the shield overrides a *keep* with a recompute when keeping is no longer safe
+to trust to a learner:
+
+* the kept plan is ``AGE`` steps old (a plan kept long on the way down is how a learner crashes a drone);
+* the state's safety margin (the task's ``safety_margin``: radians before the pole falls, metres to the
+  geofence or the ground, one control interval on at the current rate) is below ``MARGIN``.
+
+It never turns a recompute into a keep, so the shielded policy computes at least as often as its base,
+and the base is asked at every decision (its own draws stay the ones it makes unshielded). On a task with
+compute levels the forced answer is one SQP iteration from the shifted plan (the real-time iteration,
+the answer that arrives soonest); elsewhere a solve.
+
+Why a shield and not a failure cost in learning: it holds for every policy (PPO's, DPI's, a user's) and
+every version of it without training again, and its two numbers are read in the task's own units. Each
+task that offers a margin declares its rule (:class:`etmpc.systems.capabilities.ShieldRule`), chosen on
+training-distribution episodes (``scripts/shields.py``), never the test set.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from etmpc.control.timing import ITERATE
+from etmpc.loop import AugmentedState, Policy
+
+
+@dataclass(eq=False)
+class Shield:
+    """``base`` under a shield: compute when the plan is ``max_age`` steps old or the margin of the state
+    (``margin_of(x)``) is below ``margin`` (``None``: by age alone)."""
+
+    base: Policy
+    max_age: int
+    margin: float | None = None
+    margin_of: object = None  # the task's safety_margin, (x) -> float; needed when margin is set
+    levels: bool = False  # the task's decisions are compute levels: force one SQP iteration
+
+    def __post_init__(self):
+        rule = str(self.max_age) if self.margin is None else f"{self.max_age}:{self.margin:g}"
+        self.spec = f"shield:{rule}:{self.base.spec}"
+        self.stochastic = self.base.stochastic
+        self.simulates = getattr(self.base, "simulates", False)
+        self.observes = getattr(self.base, "observes", True)
+        self.overrides = 0  # decisions the shield turned from a keep into a recompute
+
+    def unsafe(self, s: AugmentedState) -> bool:
+        """Whether keeping is not left to the base at ``s``."""
+        if s.age >= self.max_age:
+            return True
+        return self.margin is not None and float(self.margin_of(np.asarray(s.x))) < self.margin
+
+    def decide(self, s: AugmentedState, rng: np.random.Generator):
+        choice = self.base.decide(s, rng)
+        if not choice and self.unsafe(s):  # a keep (False, or the level KEEP = 0) where keeping is not safe
+            self.overrides += 1
+            return ITERATE if self.levels else True
+        return choice
