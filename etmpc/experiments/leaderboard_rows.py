@@ -28,7 +28,7 @@ from etmpc.learning.base import shipped
 from etmpc.learning.config import VALIDATION_ENTROPY
 from etmpc.learning.jobs import mean_scores
 from etmpc.loop.closed import cpu_clock
-from etmpc.systems import folder_name, make_system, task_version
+from etmpc.systems import folder_name, make_system, names, system_class, task_version
 from etmpc.systems.capabilities import Experiments, require
 
 VALIDATION_EPISODES = 20  # training-distribution episodes that choose the best threshold
@@ -56,9 +56,17 @@ def shipped_learners() -> list[tuple[str, str, str, str]]:
     return shipped()
 
 
+SHIELDED = " + shield"  # a shipped learner's row under the task's shield (on a task that declares one)
+
+
 def row_names() -> list[str]:
-    """The leaderboard's rows, in order (a shipped learner's only where its policies are shipped)."""
-    return [*FIRST, *(name for name, *_ in shipped_learners()), *LAST]
+    """The leaderboard's rows, in order (a shipped learner's shielded row only where it ships a policy for a
+    task that declares a shield)."""
+    guarded = [task for task in names() if system_class(task).shield is not None]
+    rows = [*FIRST]
+    for name, file, *_ in shipped_learners():
+        rows += [name, name + SHIELDED] if any(shipped_policy(t, file) for t in guarded) else [name]
+    return [*rows, *LAST]
 
 
 def shipped_policy(task: str, file: str = "learned.json") -> Path | None:
@@ -76,7 +84,7 @@ def best_threshold(task: str, workers: int, say: Callable[[str], None]) -> str:
     """The ``threshold:X`` of the task's grid with the best mean objective on training-distribution episodes."""
     system = make_system(task)
     require(system, Experiments, "the leaderboard's best threshold")
-    specs = system.benchmark.threshold_specs()
+    specs = system.benchmark.threshold_specs(system.compute_levels)
     jobs = len(specs) * VALIDATION_EPISODES
     with make_backend("local", workers) as pool, Progress(jobs, f"{task}: best threshold") as bar:
         means = mean_scores(pool, system.name, specs, VALIDATION_ENTROPY, VALIDATION_EPISODES, lambda job: bar.update())
@@ -91,7 +99,7 @@ def kept_threshold(task: str, work: Path | None, workers: int, say: Callable[[st
     again (one that changed any of them does)."""
     system = make_system(task)
     key = {
-        "grid": system.benchmark.threshold_specs(),
+        "grid": system.benchmark.threshold_specs(system.compute_levels),
         "validation_entropy": VALIDATION_ENTROPY,
         "validation_episodes": VALIDATION_EPISODES,
         "suite_version": SUITE_VERSION,
@@ -125,6 +133,7 @@ def entries(
             f"threshold:X chosen on {VALIDATION_EPISODES} training-distribution episodes",
         ),
     ]
+    rules = {t: make_system(t).shield for t in tasks}
     for name, file, prefix, note in shipped_learners():
         shipped = {t: shipped_policy(t, file) for t in tasks}
         if any(path is not None for path in shipped.values()):
@@ -134,6 +143,17 @@ def entries(
                     "learned",
                     {t: f"{prefix}{p}" for t, p in shipped.items() if p is not None},
                     f"{note}; policies/<task>/{file}",
+                )
+            )
+        shielded = {t: f"shield:{rules[t].text}:{prefix}{p}" for t, p in shipped.items() if p is not None and rules[t]}
+        if shielded:
+            found.append(
+                Entry(
+                    name + SHIELDED,
+                    "learned",
+                    shielded,
+                    f"the same policy under the task's shield (a recompute when the plan is AGE steps old or the margin "
+                    f"to a failure is below MARGIN; docs/policies.md#shield); policies/<task>/{file}",
                 )
             )
     found += [

@@ -221,3 +221,22 @@ def test_the_failures_column_is_mean_and_ci_and_an_older_row_or_page_without_the
     assert _failures_cell(page(data), "always") == "-"
     stored = page(json.loads((REPO / "docs" / "leaderboard.json").read_text()))  # the stored page's JSON, as it is
     assert _failures_cell(stored, "always") == "0.00 ± 0.00"  # cart_pendulum: a plan every step keeps the pole up
+
+
+def test_each_shipped_learner_has_a_shielded_row_on_the_tasks_that_declare_a_shield(monkeypatch):
+    from etmpc.evaluation.references import stored
+    from etmpc.systems import make_system
+
+    monkeypatch.setattr(leaderboard_rows, "kept_threshold", lambda task, work, workers, say: "threshold:1")
+    tasks = ["cart_pendulum/kicks", "quadrotor/waypoints", "battery/trading"]
+    board = {e.name: e for e in leaderboard_rows.entries(tasks, {t: stored(t) for t in tasks}, 1, print)}
+    for name, file, prefix, _ in leaderboard_rows.shipped_learners():
+        for task in tasks:
+            path, rule = leaderboard_rows.shipped_policy(task, file), make_system(task).shield
+            shielded = board.get(name + leaderboard_rows.SHIELDED)
+            if path is None or rule is None:  # the battery counts no safety failures: no shield, no row
+                assert shielded is None or task not in shielded.specs
+                continue
+            assert board[name].specs[task] == f"{prefix}{path}"
+            assert shielded.specs[task] == f"shield:{rule.text}:{prefix}{path}" and shielded.kind == "learned"
+    assert "DPI (shipped) + shield" in board and "DPI (shipped) + shield" in leaderboard_rows.row_names()
