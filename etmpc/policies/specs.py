@@ -157,15 +157,14 @@ def _file(load: Callable[[str, Context], Policy], what: str) -> Callable[[str, s
 
 def _simulates(spec: str) -> bool:
     kind = find(spec)
+    if kind is not None and kind.build is _shield:  # a shield simulates what its base does
+        return _simulates(_shielded(spec.partition(":")[2])[1])
     return kind is not None and kind.simulates
 
 
 def _shield(arg: str, spec: str, context: Context) -> Policy:
     """``shield:BASE`` (the task's rule) or ``shield:AGE[:MARGIN]:BASE``: numbers first, then the base's spec."""
-    parts, numbers = arg.split(":"), []
-    while parts and len(numbers) < 2 and _numeric(parts[0]):
-        numbers.append(parts.pop(0))
-    base = ":".join(parts)
+    numbers, base = _shielded(arg)
     if not base:
         raise EtmpcError(f"bad policy {spec!r}: give the policy to shield, shield:BASE or shield:AGE[:MARGIN]:BASE")
     if (kind := find(base)) is not None and kind.clairvoyant:
@@ -185,6 +184,14 @@ def _shield(arg: str, spec: str, context: Context) -> Policy:
             f"bad policy {spec!r}: task {context.task} has no safety margin: shield it by age alone, shield:AGE:BASE"
         )
     return Shield(context.parse(base), rule.max_age, rule.margin, context.safety_margin, context.levels)
+
+
+def _shielded(arg: str) -> tuple[list[str], str]:
+    """A shield's argument as its numbers (at most two, first) and its base's spec."""
+    parts, numbers = arg.split(":"), []
+    while parts and len(numbers) < 2 and _numeric(parts[0]):
+        numbers.append(parts.pop(0))
+    return numbers, ":".join(parts)
 
 
 def _numeric(text: str) -> bool:

@@ -140,3 +140,11 @@ def test_the_tasks_own_rule_is_what_shield_base_plays(task):
     policy = parse_policy("shield:every:20", system)
     assert (policy.max_age, policy.margin) == (system.shield.max_age, system.shield.margin)
     assert policy.spec == f"shield:{system.shield.text}:every:20"  # the rule it played, written out
+
+
+def test_a_shield_is_no_way_round_the_one_rollout_rule(kicks_system):
+    """A rollout's base may not simulate itself; a shield around a rollout simulates as its base does."""
+    with pytest.raises(EtmpcError, match="rollout"):
+        parse_policy("rollout:shield:5:rollout:every:3:2:3:2:3", kicks_system)
+    assert parse_policy("shield:5:rollout:every:3:2:3", kicks_system).simulates
+    assert not parse_policy("rollout:shield:5:every:3:2:3", kicks_system).base.simulates
