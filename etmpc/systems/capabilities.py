@@ -69,11 +69,11 @@ class Failures(Protocol):
 
 class SafetyMargin(Protocol):
     """How near a safety failure a state is, for shields (``shield:``): ``(x) -> float``, the margin (in
-    ``margin_unit``) the state keeps one control interval on at its current rate: at most 0 is a failure.
-    ``shield`` is the task's own rule (a :class:`ShieldRule`), chosen on training-distribution episodes."""
+    ``margin_unit``) the state keeps one control interval on at its current rate: at most 0 is a failure. A
+    task may also declare its own rule, ``shield`` (a :class:`ShieldRule`, chosen on training-distribution
+    episodes), which ``shield:BASE`` plays."""
 
     safety_margin: Callable[[np.ndarray], float]
-    shield: ShieldRule
 
 
 @dataclass(frozen=True)

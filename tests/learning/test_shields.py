@@ -2,6 +2,7 @@
 validation episodes (played here by a stand-in that returns made-up outcomes per spec)."""
 
 import numpy as np
+import pytest
 
 from etmpc.learning import shields
 from etmpc.systems.capabilities import ShieldRule
@@ -23,33 +24,35 @@ def _choose(monkeypatch, outcomes: dict, grid):
     return result
 
 
-def test_the_safest_rule_wins_then_the_best_objective(monkeypatch):
+def test_the_safest_rule_within_the_budget_wins_then_the_best_objective(monkeypatch):
     grid = shields.rules((5, 10), (None, 0.5))
     assert [rule.text for rule in grid] == ["5", "5:0.5", "10", "10:0.5"]
-    outcomes = {"every:3": (30.0, 0.1), "rl:a": (28.0, 0.3), "sb3:b": (27.0, 0.2)}
+    outcomes = {"every:3": (30.0, 0.1), "rl:a": (28.0, 0.3), "sb3:b": (27.0, 0.2)}  # unshielded: 27.5 on average
     outcomes |= {
-        "shield:5:rl:a": (29.0, 0.1),
-        "shield:5:sb3:b": (29.5, 0.05),  # worst 0.1, objective 29.25
-        "shield:5:0.5:rl:a": (29.4, 0.0),
-        "shield:5:0.5:sb3:b": (29.6, 0.1),  # worst 0.1, objective 29.5: as safe, dearer
+        "shield:5:rl:a": (27.6, 0.1),
+        "shield:5:sb3:b": (27.8, 0.05),  # 27.7, worst 0.1: within 1 % of 27.5
+        "shield:5:0.5:rl:a": (27.6, 0.0),
+        "shield:5:0.5:sb3:b": (27.9, 0.1),  # 27.75, worst 0.1: as safe, dearer
         "shield:10:rl:a": (28.0, 0.3),
-        "shield:10:sb3:b": (27.0, 0.0),  # worst 0.3: cheapest, least safe
-        "shield:10:0.5:rl:a": (28.5, 0.2),
-        "shield:10:0.5:sb3:b": (27.5, 0.1),
+        "shield:10:sb3:b": (27.0, 0.0),  # 27.5, worst 0.3: cheapest, least safe
+        "shield:10:0.5:rl:a": (28.5, 0.0),
+        "shield:10:0.5:sb3:b": (28.5, 0.0),  # 28.5, worst 0: safest, but costs 3.6 %
     }
     result = _choose(monkeypatch, outcomes, grid)
-    assert result["chosen"] == "5" and result["safe"]  # 0.1 <= the schedule's 0.1
+    assert result["chosen"] == "5" and result["budget"] == shields.BUDGET and result["safe"]  # 0.1 <= the schedule's 0.1
     assert result["unshielded"]["worst_failures"] == 0.3 and result["schedule"]["failures"] == 0.1
     rows = {row["rule"]: row for row in result["rules"]}
-    assert rows["5"]["objective"] == 29.25 and rows["10"]["worst_failures"] == 0.3
+    assert rows["5"]["objective"] == pytest.approx(27.7) and rows["10"]["worst_failures"] == 0.3
+    # the same table with a larger budget buys the safest rule
+    assert shields.pick(result, budget=0.05)["chosen"] == "10:0.5"
 
 
-def test_a_rule_no_safer_than_the_schedule_is_said_so(monkeypatch):
-    grid = [ShieldRule(5)]
+def test_no_rule_within_the_budget_or_none_safer_than_no_shield_chooses_none(monkeypatch):
     outcomes = {"every:3": (30.0, 0.0), "rl:a": (28.0, 0.3), "sb3:b": (27.0, 0.2)}
-    outcomes |= {"shield:5:rl:a": (29.0, 0.1), "shield:5:sb3:b": (29.5, 0.0)}
-    result = _choose(monkeypatch, outcomes, grid)
-    assert result["chosen"] == "5" and not result["safe"]
+    outcomes |= {"shield:5:rl:a": (29.0, 0.1), "shield:5:sb3:b": (29.5, 0.0)}  # 29.25: costs 6 %
+    outcomes |= {"shield:9:rl:a": (27.6, 0.3), "shield:9:sb3:b": (27.5, 0.1)}  # within 1 %, but the worse still 0.3
+    result = _choose(monkeypatch, outcomes, [ShieldRule(5), ShieldRule(9)])
+    assert result["chosen"] is None and not result["safe"]  # unshielded, 0.3 > the schedule's 0
 
 
 def test_an_outcome_is_the_episodes_objective_failures_and_recomputes():
