@@ -61,6 +61,8 @@ def headline(data: dict) -> str:
             if _finite(a["iqm"]) and all(map(_finite, a["iqm_ci95"]))
             else "-"
         )
+        if iqm != "-" and len(rows) < len(tasks):  # over the tasks it was played on only: not the suite's
+            iqm += f" ({len(rows)} of {len(tasks)} tasks)"
         improve = f"{a['probability_of_improvement']:.2f}" if _finite(a["probability_of_improvement"]) else "-"
         cells = [_cell(rows[t]) if t in rows else "-" for t in tasks] + [iqm, improve, f"{np.mean(cpu):.1f}" if cpu else "-"]
         lines.append(f"| {entry['name']} | " + " | ".join(cells) + " |")

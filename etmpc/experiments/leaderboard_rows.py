@@ -153,7 +153,7 @@ def entries(
                     "learned",
                     shielded,
                     f"the same policy under the task's shield (a recompute when the plan is AGE steps old or the margin "
-                    f"to a failure is below MARGIN; docs/policies.md#shield); policies/<task>/{file}",
+                    f"to a failure is below MARGIN; docs/policies.md#shields-shield); policies/<task>/{file}",
                 )
             )
     found += [
