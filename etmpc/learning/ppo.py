@@ -203,6 +203,10 @@ class PpoLearner(Learner):
             policy_kwargs={"net_arch": list(s.hidden)},
             verbose=0,
         )
+        # A logger that writes nowhere: left to itself, every learn() makes an empty tempdir/SB3-<date> folder
+        from stable_baselines3.common.logger import Logger
+
+        self.model.set_logger(Logger(folder=None, output_formats=[]))
         if list(self.vec.get_attr("observation_names")[0]) != list(observation_names(system.name, system.state_names)):
             raise EtmpcError(f"{self.key.task}: the environment's observation is not the one sb3: computes")
         self.started = time.perf_counter()

@@ -209,3 +209,16 @@ def test_two_processes_save_the_same_training_byte_for_byte(tmp_path):
         assert b" at 0x" not in saved.read("data")
         assert saved.read("system_info.txt").splitlines()[0] == f"- OS: {platform.system()} {platform.machine()}".encode()
     PPO.load(str(tmp_path / "a" / "selected.zip"), device="cpu")  # the descriptions were never what loading reads
+
+
+def test_training_leaves_no_logger_folder_in_the_temporary_directory(tmp_path, monkeypatch):
+    """Stable-Baselines3 left to itself makes an empty tempdir/SB3-<date> folder at every learn()."""
+    import tempfile
+
+    scratch = tmp_path / "tmp"
+    scratch.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(scratch))
+    monkeypatch.delenv("SB3_LOGDIR", raising=False)
+    settings = PpoSettings(timesteps=512, checkpoints=2, validation_episodes=1, n_steps=128, batch_size=128, n_epochs=1)
+    train_ppo("battery", tmp_path / "run", settings, workers=1)
+    assert list(scratch.iterdir()) == []
