@@ -164,7 +164,8 @@ def headroom_section(r: dict, smoke: bool) -> list[str]:
     lines += [
         "",
         f"**The default learner on all {p['episodes']} test-set episodes** (`{d['policy']}`, seed {d['seed']}, "
-        f"chosen on {len(d['validation'])} seeds' validation episodes, never the test set; iteration 0 rolled out "
+        f"chosen among {len(d['validation'])} policies of {len({k.partition('@')[0] for k in d['validation']})} seeds on "
+        "validation episodes, never the test set; iteration 0 rolled out "
         f"over `{d['base']}`): {_f(d['objective_mean'])} with {d['recomputes_mean']:.1f} recomputes; against "
         f"`{best}`: gain {_pct(p)}, better in {p['better_episodes']}/{p['episodes']} episodes.",
     ]

@@ -78,7 +78,7 @@ def test_an_installed_plugin_adds_its_task_and_kind_everywhere_and_uninstalling_
     assert before.stdout.splitlines() == [
         "tasks cart_pendulum/balance cart_pendulum/kicks cart_pendulum/kicks_late cart_pendulum/kicks_levels battery/trading "
         "reacher/jumps reacher/jumps_late quadrotor/waypoints",
-        "kinds always never every iterate threshold rl self py sb3 rollout oracle",
+        "kinds always never every iterate threshold rl self py sb3 shield rollout oracle",
     ]
 
     pip("install", "--no-deps", "--no-build-isolation", str(source))
@@ -87,7 +87,7 @@ def test_an_installed_plugin_adds_its_task_and_kind_everywhere_and_uninstalling_
     assert after.stdout.splitlines() == [
         "tasks cart_pendulum/balance cart_pendulum/kicks cart_pendulum/kicks_late cart_pendulum/kicks_levels battery/trading "
         "reacher/jumps reacher/jumps_late quadrotor/waypoints slider/track",
-        "kinds always never every iterate threshold rl self py sb3 rollout oracle driftage",
+        "kinds always never every iterate threshold rl self py sb3 shield rollout oracle driftage",
         "suite () (1,)",
         "gym (12,)",
     ]

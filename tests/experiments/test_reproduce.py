@@ -165,11 +165,12 @@ def test_headroom_and_the_default_learner_are_direct_evaluations(run, domain):
     r = results["systems"][domain]
     best, sense = r["best_fixed"]["policy"], r["objective_sense"]
     sign = 1 if sense == "max" else -1
-    # The shipped policy is the validation-chosen seed's final DPI policy, byte for byte in content.
+    # The shipped policy is the validation-chosen (seed, iteration)'s DPI policy, byte for byte in content.
     selected = json.loads((out / domain / "train_dpi" / "selected.json").read_text())
     assert json.loads((out / "policies" / domain / "learned.json").read_text()) == selected
     validation = r["default_learner"]["validation"]
-    assert selected["hyperparameters"]["seed"] == int((max if sense == "max" else min)(validation, key=validation.get))
+    seed, episodes = map(int, (max if sense == "max" else min)(validation, key=validation.get).split("@"))
+    assert (selected["hyperparameters"]["seed"], selected["hyperparameters"]["episodes"]) == (seed, episodes)
     # Each headroom row is that policy's evaluation, paired with the best fixed one on the same episodes.
     direct = evaluate(domain, [f"rollout:{best}:2:5", f"oracle:{best}", best], episodes=2, workers=1, progress=False)
     by = {(x.policy, x.episode): x.objective for x in direct.runs}
