@@ -14,9 +14,9 @@ compute levels the forced answer is one SQP iteration from the shifted plan (the
 the answer that arrives soonest); elsewhere a solve.
 
 Why a shield and not a failure cost in learning: it holds for every policy (PPO's, DPI's, a user's) and
-every version of it without training again, and its two numbers are read in the task's own units. Each
-task that offers a margin declares its rule (:class:`etmpc.systems.capabilities.ShieldRule`), chosen on
-training-distribution episodes (``scripts/shields.py``), never the test set.
+every version of it without training again, and its two numbers are read in the task's own units. A task
+that offers a margin may declare its own rule (:class:`etmpc.systems.capabilities.ShieldRule`), chosen on
+training-distribution episodes (``scripts/shields.py``), never the test set; ``shield:BASE`` plays it.
 """
 
 from __future__ import annotations
@@ -27,6 +27,7 @@ import numpy as np
 
 from etmpc.control.timing import ITERATE
 from etmpc.loop import AugmentedState, Policy
+from etmpc.systems.capabilities import ShieldRule
 
 
 @dataclass(eq=False)
@@ -41,8 +42,7 @@ class Shield:
     levels: bool = False  # the task's decisions are compute levels: force one SQP iteration
 
     def __post_init__(self):
-        rule = str(self.max_age) if self.margin is None else f"{self.max_age}:{self.margin:g}"
-        self.spec = f"shield:{rule}:{self.base.spec}"
+        self.spec = f"shield:{ShieldRule(self.max_age, self.margin).text}:{self.base.spec}"  # the rule, checked
         self.stochastic = self.base.stochastic
         self.simulates = getattr(self.base, "simulates", False)
         self.observes = getattr(self.base, "observes", True)
