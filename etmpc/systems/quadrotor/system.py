@@ -103,7 +103,7 @@ class QuadrotorSystem(GaussNewtonSystem):
     failure_name = "outside geofence"  # steps ending outside the geofence or on the ground, per episode
     safety_margin = staticmethod(quadrotor_task.fence_margin)  # m to the fence or the ground, one interval on (shield:)
     margin_unit = "m"
-    shield = ShieldRule(15, 0.25)  # shield:BASE's rule, chosen on validation episodes: scripts/shields.py
+    shield = ShieldRule(10, 0.25)  # shield:BASE's rule, chosen on validation episodes: scripts/shields.py
     camera = "arena"
     space = SPACE  # the recordings' 3-D view of the flight
 
