@@ -1,6 +1,6 @@
 """The quadrotor page's flight figure: one stored test-set episode under two triggers, side by side in time.
 
-    python scripts/quadrotor_flight.py [--episode 3] [--policy every:7 --policy rl:policies/quadrotor/waypoints/learned.json]
+    python scripts/quadrotor_flight.py [--episode 59] [--policy every:7 --policy rl:policies/quadrotor/waypoints/learned.json]
                                        [--out docs/tasks/quadrotor_flight.png]
 
 Three panels on one time axis: the drone's distance from its waypoint (the waypoint changes drawn as
@@ -34,7 +34,7 @@ def _short(spec: str) -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--episode", type=int, default=3)
+    parser.add_argument("--episode", type=int, default=59)
     parser.add_argument("--policy", action="append", default=None)
     parser.add_argument("--out", type=Path, default=Path("docs/tasks/quadrotor_flight.png"))
     args = parser.parse_args()
