@@ -131,8 +131,13 @@ def _policy(system, policy):
 
 def _call(job):
     name, args = job
-    jobs = {"normalisation": normalisation_states, "train": train_block, "evaluate": evaluate_theta, "score": training_return}
-    return {**jobs, "outcome": training_outcome}[name](*args)
+    return {
+        "normalisation": normalisation_states,
+        "train": train_block,
+        "evaluate": evaluate_theta,
+        "score": training_return,
+        "outcome": training_outcome,
+    }[name](*args)
 
 
 def _learner_to_json(learner: Learner) -> dict:
@@ -159,14 +164,17 @@ def _learner_from_json(data: dict) -> Learner:
 
 def episode_scores(pool, domain: str, policies: list, entropy: int, episodes: int, on_result=None) -> list[np.ndarray]:
     """Each policy's objective on each of the first ``episodes`` episodes of ``entropy``'s stream."""
-    jobs = [("score", (domain, policy, entropy, i)) for policy in policies for i in range(episodes)]
-    values = pool.map(_call, jobs, on_result)
-    return [np.array(values[k * episodes : (k + 1) * episodes]) for k in range(len(policies))]
+    return _per_policy(pool, "score", domain, policies, entropy, episodes, on_result)
 
 
 def episode_outcomes(pool, domain: str, policies: list, entropy: int, episodes: int, on_result=None) -> list[np.ndarray]:
     """Each policy's ``(objective, failures, recomputes)`` rows on the first ``episodes`` episodes of ``entropy``'s stream."""
-    jobs = [("outcome", (domain, policy, entropy, i)) for policy in policies for i in range(episodes)]
+    return _per_policy(pool, "outcome", domain, policies, entropy, episodes, on_result)
+
+
+def _per_policy(pool, job: str, domain: str, policies: list, entropy: int, episodes: int, on_result) -> list[np.ndarray]:
+    """Job ``job`` (``"score"``, ``"outcome"``) on each policy's first ``episodes`` episodes, an array per policy."""
+    jobs = [(job, (domain, policy, entropy, i)) for policy in policies for i in range(episodes)]
     values = pool.map(_call, jobs, on_result)
     return [np.array(values[k * episodes : (k + 1) * episodes], dtype=float) for k in range(len(policies))]
 
