@@ -42,9 +42,9 @@ from etmpc.learning import dpi, hyperparams
 from etmpc.learning.config import TrainConfig, parse_seeds
 from etmpc.learning.ppo import train_ppo
 from etmpc.learning.ppo_settings import PpoSettings
-from etmpc.learning.train import train
+from etmpc.experiments.stages import trained
+from etmpc.learning.runner import cost_path, timed
 from etmpc.systems import folder_name, make_system, names
-from etmpc.views.curves import write_curve_png
 
 EVAL_EPISODES = 10  # test-set episodes of DPI's learning curve (a look back, never a choice)
 DPI_KEYS = ("futures", "horizon", "states_per_episode", "ridge", "selection_episodes")
@@ -54,13 +54,14 @@ DPI_KEYS = ("futures", "horizon", "states_per_episode", "ridge", "selection_epis
 #: schedules, DPI's policies did worse than iterate:1 there.
 RECIPES = {
     "cart_pendulum/kicks_levels": {
+        "episodes_per_seed": 60,  # the shipped policy is its run's first iteration (20 episodes); the run had 60
         "bases": (
             "iterate:1",
             "shield:5:threshold:0.2:iterate",
             "shield:8:threshold:0.2:iterate",
             "shield:8:threshold:0.1:iterate",
             "shield:8:threshold:0.3:iterate",
-        )
+        ),
     }
 }
 
@@ -71,7 +72,7 @@ def shipped_recipe(task: str) -> TrainConfig:
     h = dict(data["hyperparameters"], **RECIPES.get(task, {}))
     return TrainConfig(
         task,
-        episodes=h["episodes"],
+        episodes=h.get("episodes_per_seed", h["episodes"]),  # "episodes": the policy's own (an iteration's, if chosen so)
         eval_every=h.get("eval_every", 20),  # one DPI iteration per phase; files before it was written: 20
         eval_episodes=EVAL_EPISODES,
         normalisation_episodes=h["normalisation_episodes"],
@@ -82,29 +83,17 @@ def shipped_recipe(task: str) -> TrainConfig:
     )
 
 
-def timed_once(out: Path, what) -> dict:
-    """``what()`` unless ``out/cost.json`` says it finished; its wall time and workers."""
-    cost = out / "cost.json"
-    if not cost.exists():
-        started = time.perf_counter()
-        extra = what() or {}
-        out.mkdir(parents=True, exist_ok=True)
-        cost.write_text(json.dumps({"wall_seconds": time.perf_counter() - started, **extra}) + "\n")
-    return json.loads(cost.read_text())
-
-
 def dpi_runs(task: str, work: Path, seeds: tuple[int, ...], workers: int) -> dict:
     out = work / "dpi" / folder_name(task)
-    if (out / "checkpoint.json").exists():  # a run already in WORK keeps its seeds
-        seeds = tuple(json.loads((out / "checkpoint.json").read_text())["config"]["seeds"])
-    config = replace(shipped_recipe(task), seeds=seeds)
+    if (out / "checkpoint.json").exists():  # a run already in WORK continues as it was set up
+        config = TrainConfig.from_json(json.loads((out / "checkpoint.json").read_text())["config"])
+        seeds = config.seeds
+    else:
+        config = replace(shipped_recipe(task), seeds=seeds)
 
-    def run():
-        resume = (out / "checkpoint.json").exists()
-        train(config, out, workers, resume=resume, progress=True, curve_png=write_curve_png)
-        return {"workers": workers, "seeds": len(seeds), "simulated_steps": None}
-
-    cost = timed_once(out, run)
+    with timed(out, workers):  # the first invocation that finishes the run keeps its wall time
+        trained(config, out, {"workers": workers, "backend": "local", "address": None}, progress=True)
+    cost = json.loads(cost_path(out).read_text())
     per_seed = {s: out / f"seed{s}" / "selected.json" for s in seeds}
     validation = {s: json.loads(p.read_text())["hyperparameters"]["validation_objective"] for s, p in per_seed.items()}
     return {

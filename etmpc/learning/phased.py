@@ -181,9 +181,9 @@ class _Phased(Learner):
 
     def work(self) -> int:
         config = self.config()
-        candidates = len(config.milestones) - 1 if config.algorithm == "dpi" else 1  # DPI: every iteration's policy
+        per_seed = len(config.milestones) - 1 if config.algorithm == "dpi" else 1  # DPI: every iteration's policy
         evaluations = len(config.milestones) * config.eval_repeats * self._testset[0]
-        return len(config.seeds) * (config.episodes + evaluations + candidates * config.validation_episodes)
+        return len(config.seeds) * (config.episodes + evaluations + per_seed * config.validation_episodes)
 
     def work_done(self) -> int:
         config, done = self.config(), self.done
@@ -341,8 +341,11 @@ class DpiLearner(_Phased):
     shipped = ("DPI (shipped)", "learned.json", "the default learner, chosen on validation episodes")
 
     def _hyperparameters(self, config: TrainConfig) -> dict:
-        # eval_every: the episodes of one policy iteration (each phase ends in one), so the recipe is whole
-        return dict(asdict(config.dpi), bases=list(config.dpi.bases), eval_every=config.eval_every)
+        # eval_every: the episodes of one policy iteration (each phase ends in one), and the run's length (a policy's own
+        # "episodes" is those it was trained on: an earlier iteration's may be shipped), so the recipe is whole
+        return dict(
+            asdict(config.dpi), bases=list(config.dpi.bases), eval_every=config.eval_every, episodes_per_seed=config.episodes
+        )
 
     def _start(self, config: TrainConfig, initial: LogisticPolicy) -> tuple[dict, str]:
         learner = {"theta": initial.theta.tolist()}

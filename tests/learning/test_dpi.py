@@ -168,6 +168,7 @@ def test_a_dpi_run_does_not_depend_on_the_number_of_workers_and_chooses_on_valid
     seed, episodes = map(int, best.split("@"))
     assert selected["hyperparameters"]["seed"] == seed and selected["hyperparameters"]["episodes"] == episodes
     assert selected["decision"] == "greedy" and selected["hyperparameters"]["validation_objective"] == one.validation[best]
+    assert (selected["hyperparameters"]["episodes_per_seed"], selected["hyperparameters"]["eval_every"]) == (2, 1)  # the recipe
     (entry,) = [e for e in one.learners[str(seed)]["history"] if e["episodes"] == episodes]
     assert selected["theta"] == entry["theta"]
     assert one.learners[str(seed)]["history"][-1]["theta"] == one.learners[str(seed)]["theta"]  # the last is the final one
