@@ -92,7 +92,7 @@ def _candidate_returns(base, candidates: tuple[int, ...], futures: int, horizon:
         system = ctx.system
         snapshot = Snapshot.take(ctx)
         sampled = [system.sample_future(snapshot.episode, ctx.step, rng) for _ in range(futures)]
-        solved = system.plan(snapshot.x, snapshot.u_prev, snapshot.plan, snapshot.age, ctx.timestep)
+        solved = system.plan(snapshot.seen, snapshot.u_prev, snapshot.plan, snapshot.age, ctx.timestep)
         stop = ctx.step + horizon
         returns = [
             np.mean(

@@ -75,6 +75,10 @@ class ClosedLoop:
         # the last step's: the task's reward, whether it computed, what (a level), its work and its price
         self.reward, self.recomputed, self.level, self.work, self.cost = 0.0, False, KEEP, 0, 0.0
         self.latency, self.levels = system.latency, system.compute_levels
+        # What the controller reads (etmpc.control.sensing): with an exact sensor it sees the state itself
+        # (seen is x); else a filter's estimate (seen is belief.mean) from the episode's readings.
+        self.sensor, self.estimator = system.sensor, system.estimator
+        self.belief, self._readings = None, None
         self.pending: tuple[int, int, Plan, int] | None = None  # the solve in flight: (arrives at, made for, plan, started)
         self._instant = True  # the next plan is made before the interval (the first, or after a restart)
 
@@ -87,10 +91,11 @@ class ClosedLoop:
         self.timestep = _shown(self.env.reset())
         self.x = readonly(system.state(self.timestep))
         nu = system.u_min.shape[0]
-        self.trajectory = Trajectory.empty(system.episode_steps, self.x.shape[0], nu)
+        self.trajectory = Trajectory.empty(system.episode_steps, self.x.shape[0], nu, sensing=self.estimator is not None)
         self.plan: Plan | None = None
         self.age, self.u_prev, self.step_index, self.done, self.failed = 0, readonly(np.zeros(nu)), 0, False, False
-        self.pending, self._instant = None, True
+        self.pending, self._instant, self._readings = None, True, None
+        self._sense(None)
         self._arrive()
         return self
 
@@ -102,6 +107,7 @@ class ClosedLoop:
         self.env.physics.restore(snapshot.physics)
         self.env.task.resume(snapshot.episode if episode is None else episode, snapshot.step)
         self.plan, self.age, self.u_prev, self.x = snapshot.plan, snapshot.age, snapshot.u_prev, snapshot.x
+        self.belief, self.seen, self._readings = snapshot.belief, snapshot.seen, None
         self._observation, self.step_index, self.done, self.failed = snapshot.observation, snapshot.step, False, False
         self.pending, self._instant = snapshot.pending, snapshot.plan is None
         self.timestep = None
@@ -142,8 +148,13 @@ class ClosedLoop:
         if self.plan is None:
             return None
         plan, age = self.plan, self.age
-        ctx = DecisionContext(self.system, self.env, self.step_index, plan, age, self.u_prev, self.timestep) if context else None
-        return AugmentedState(self.x, plan.states[0], age, plan.state_at(age), plan, self.observation if observes else None, ctx)
+        ctx = (
+            DecisionContext(self.system, self.env, self.step_index, plan, age, self.u_prev, self.timestep, self.belief)
+            if context
+            else None
+        )
+        shown = self.observation if observes else None
+        return AugmentedState(self.seen, plan.states[0], age, plan.state_at(age), plan, shown, ctx, self.belief)
 
     def step(self, recompute: bool | int, started: float | None = None, solved: Plan | None = None) -> float:
         """Play this control interval: compute a new plan if ``recompute`` (or if forced; on a task
@@ -158,7 +169,7 @@ class ClosedLoop:
             raise RuntimeError("the episode is over: reset the loop")
         records = self.records
         start = (cpu_clock() if started is None else started) if records else 0.0
-        system, i, x = self.system, self.step_index, self.x
+        system, i, x = self.system, self.step_index, self.seen
         in_flight, forced = self.pending is not None, self.forced
         level = SOLVE if forced else KEEP if in_flight else self._level(recompute)
         work = 0
@@ -203,7 +214,9 @@ class ClosedLoop:
         self.step_index = i + 1
         u.flags.writeable = False  # the loop's own new array (np.minimum's): shown as u_prev, never written again
         self.age, self.u_prev = self.age + 1, u
-        if self.env.task.restarted:  # the task put the plant back: the plan (and one in flight) no longer applies
+        restarted = self.env.task.restarted
+        self._sense(None if restarted else u)
+        if restarted:  # the task put the plant back: the plan (and one in flight) no longer applies
             self.age, self.pending, self._instant = plan.horizon, None, True
         elif self.pending is not None and self.pending[0] == self.step_index:
             _, made, arrived, started = self.pending
@@ -250,7 +263,7 @@ class ClosedLoop:
         """A new plan from the state now (or, delay-compensated, from the state the kept plan predicts
         for when it will arrive): a full solve or one SQP iteration; timed and a failure counted when
         recording."""
-        system, x, u_prev, warm, age = self.system, self.x, self.u_prev, self.plan, self.age
+        system, x, u_prev, warm, age = self.system, self.seen, self.u_prev, self.plan, self.age
         if self._compensates():
             ahead = np.array([warm.input_at(age + j) for j in range(self.latency.intervals)])
             x, u_prev, age = readonly(system.predict(x, ahead)[-1]), readonly(ahead[-1]), age + self.latency.intervals
@@ -266,6 +279,25 @@ class ClosedLoop:
         if not new.success:
             self.trajectory.solver_failures += 1
         return new
+
+    def _sense(self, u: np.ndarray | None) -> None:
+        """What the controller sees of the state now (:attr:`seen`): the state itself with an exact sensor;
+        else the reading of this step, filtered (after the interval under ``u``; ``None``: the filter starts
+        again, at the episode's start or after the task put the plant back), recorded with the estimate."""
+        if self.estimator is None:
+            self.seen = self.x
+            return
+        if not np.isfinite(self.x).all():  # the plant failed: the episode ends here, nothing to read
+            self.seen = self.x
+            return
+        if self._readings is None:  # the episode's draws (those of the episode a light loop plays on)
+            self._readings = self.sensor.readings(self.env.task.episode, self.system.episode_steps, self.x.shape[0])
+        y, read = self.sensor.read(np.array(self.x), self._readings, self.step_index)
+        self.belief = self.estimator.start(y, read) if u is None else self.estimator.step(self.belief, u, y, read)
+        self.seen = self.belief.mean
+        if self.records:
+            self.trajectory.measurements[self.step_index] = y
+            self.trajectory.estimates[self.step_index] = self.seen
 
     def _advance(self, action) -> float | None:
         """Step the plant over one control interval; the task's reward, or None if the plant failed."""
@@ -362,7 +394,7 @@ def play_on(
             trace.recomputed.append(loop.recomputed)
             if loop.levels:
                 trace.levels.append(loop.level)
-            trace.after.append((loop.x, loop.plan, loop.age, loop.u_prev, loop.pending))
+            trace.after.append((loop.x, loop.plan, loop.age, loop.u_prev, loop.pending, loop.belief))
     if end < system.episode_steps:
         total += system.truncation_value(loop.x)
     return total

@@ -25,7 +25,7 @@ def computation_cost(computations, price: float):
 class Trajectory:
     """Everything one episode did, step by step (arrays preallocated for the full episode)."""
 
-    states: np.ndarray  # (T + 1, nx) measured; rows past `steps` stay NaN
+    states: np.ndarray  # (T + 1, nx) the plant's state; rows past `steps` stay NaN
     applied: np.ndarray  # (T, nu) input sent to the plant
     planned: np.ndarray  # (T, nu) the plan's input for that step
     correction: np.ndarray  # (T, nu) LQR correction before clipping
@@ -45,12 +45,16 @@ class Trajectory:
     plans: list[tuple[int, Plan]] = field(default_factory=list)  # (step made for, plan), successful or used
     arrivals: list[int] = field(default_factory=list)  # the step each of plans came into force (its made step + latency)
     starts: list[int] = field(default_factory=list)  # the step each of plans' recompute started (its made step, or earlier)
+    # with a sensor that is not exact (etmpc.control.sensing): its reading per step (NaN where nothing was read)
+    # and the filter's estimate, beside the plant's states; None with an exact sensor
+    measurements: np.ndarray | None = None
+    estimates: np.ndarray | None = None
     steps: int = 0
     solver_failures: int = 0
     nonfinite: bool = False  # the episode ended early on a non-finite state
 
     @classmethod
-    def empty(cls, steps: int, nx: int, nu: int) -> Trajectory:
+    def empty(cls, steps: int, nx: int, nu: int, sensing: bool = False) -> Trajectory:
         nan = lambda *shape: np.full(shape, np.nan)  # noqa: E731
         return cls(
             states=nan(steps + 1, nx),
@@ -69,6 +73,8 @@ class Trajectory:
             step_time_s=nan(steps),
             feedback_time_s=np.zeros(steps),
             decide_time_s=np.zeros(steps),
+            measurements=nan(steps + 1, nx) if sensing else None,
+            estimates=nan(steps + 1, nx) if sensing else None,
         )
 
     def cpu_seconds(self) -> dict[str, float]:

@@ -25,13 +25,16 @@ class AugmentedState:
     plan a frozen value, the observation a frozen mapping. A policy that writes into what it is shown
     gets an error, never a changed run; to compute with a value, copy it (``np.array(s.x)``)."""
 
-    x: np.ndarray  # x_i, measured now
-    x_plan: np.ndarray  # x_k, measured when the plan was made
+    x: np.ndarray  # x_i, measured now (with a sensor that is not exact: the filter's estimate)
+    x_plan: np.ndarray  # x_k, measured (estimated) when the plan was made
     age: int  # i - k
     x_predicted: np.ndarray  # x_hat_i, the plan's prediction for now
     plan: Any = None  # the kept Plan (its inputs and the forecasts it was made with)
     observation: Mapping | None = None  # what the task shows now (for the exogenous features)
     context: Any = None  # a DecisionContext: the loop's whole state, for policies that simulate (simulates = True)
+    # with a sensor that is not exact (etmpc.control.sensing), the filter's Belief after this step's reading:
+    # x is its mean; its covariance and the reading's innovation say how much to trust it. None: x is the state
+    belief: Any = None
 
 
 class Policy(Protocol):
@@ -54,6 +57,7 @@ class DecisionContext:
     age: int
     u_prev: np.ndarray
     timestep: dm_env.TimeStep
+    belief: Any = None  # the filter's Belief (etmpc.control.sensing), where the sensor is not exact
 
 
 @dataclass(frozen=True, eq=False)
@@ -70,6 +74,12 @@ class Snapshot:
     x: np.ndarray
     observation: Mapping
     pending: Any = None  # a solve in flight (ClosedLoop.pending): none at a decision, where snapshots are taken
+    belief: Any = None  # the filter's Belief, where the sensor is not exact (x is the plant's state all the same)
+
+    @property
+    def seen(self) -> np.ndarray:
+        """What the controller sees of the state: the filter's estimate, or the state itself."""
+        return self.x if self.belief is None else self.belief.mean
 
     @classmethod
     def take(cls, context: DecisionContext) -> Snapshot:
@@ -84,4 +94,5 @@ class Snapshot:
             np.array(context.u_prev),
             x,
             context.timestep.observation,
+            belief=context.belief,
         )

@@ -75,7 +75,7 @@ def q_values(
             continue
         solved = None
         if first and shared:
-            solved = system.plan(snapshot.x, snapshot.u_prev, snapshot.plan, snapshot.age, context.timestep)
+            solved = system.plan(snapshot.seen, snapshot.u_prev, snapshot.plan, snapshot.age, context.timestep)
         for k, (episode, seed) in enumerate(zip(episodes, seeds)):
             base_rng = None if seed is None else np.random.default_rng(seed)
             trace = Continuation(context.step) if memo is not None else None
@@ -128,12 +128,14 @@ class OracleMemo:
         trace, k = self.taken
         if trace.start + k != snapshot.step or k >= len(trace.added):
             return None
-        x, plan, age, u_prev, pending = trace.after[k - 1]
+        x, plan, age, u_prev, pending, belief = trace.after[k - 1]
         same = (
             pending is None
             and snapshot.pending is None
             and age == snapshot.age
             and np.array_equal(x, snapshot.x)
+            and (belief is None) == (snapshot.belief is None)
+            and (belief is None or np.array_equal(belief.mean, snapshot.belief.mean))
             and np.array_equal(u_prev, snapshot.u_prev)
             and (
                 plan is snapshot.plan

@@ -20,7 +20,9 @@ import dm_env
 import numpy as np
 
 from etmpc.common import checks
+from etmpc.common.errors import EtmpcError
 from etmpc.control.plan import Plan
+from etmpc.control.sensing import ExtendedKalmanFilter, FilterSettings, Sensor
 from etmpc.control.timing import Latency, checked_latency
 from etmpc.systems.benchmark import Benchmark, read_benchmark  # noqa: F401 (Benchmark: the systems' API)
 
@@ -181,6 +183,31 @@ class SystemBase:
     def counts_iterations(self) -> bool:
         """The MPC reports each solve's SQP iterations (Plan.iterations): for a price or a delay per iteration."""
         return self.compute_levels or self.latency.counts_work
+
+    # -- what the controller measures (etmpc.control.sensing): a Config's sensor and estimator, if it has them ----
+    @cached_property
+    def sensor(self) -> Sensor:
+        """What the controller reads of the state (the Config's ``sensor``; exact by default)."""
+        sensor = getattr(self.config, "sensor", Sensor())
+        if not isinstance(sensor, Sensor):
+            raise EtmpcError(f"task {self.name}'s Config gives a sensor of type {type(sensor).__name__}, not a Sensor")
+        return sensor
+
+    @cached_property
+    def estimator(self) -> ExtendedKalmanFilter | None:
+        """The filter between the sensor and the controller: none for an exact sensor (the controller reads the
+        state itself), else an extended Kalman filter on the MPC's predictor (``model.discrete``) with the
+        Config's ``estimator`` settings (:class:`~etmpc.control.sensing.FilterSettings`)."""
+        if self.sensor.exact:
+            return None
+        predictor = getattr(getattr(self, "model", None), "discrete", None)
+        if predictor is None:
+            raise EtmpcError(f"task {self.name} has no predictor (model.discrete) for an estimator: its sensor must be exact")
+        settings = getattr(self.config, "estimator", FilterSettings())
+        try:
+            return ExtendedKalmanFilter(predictor, self.sensor, settings)
+        except checks.BadValue as exc:
+            raise checks.BadValue(f"task {self.name}: {exc}") from None
 
     # -- derived from the members the task writes (a task may set its own in __init__) --------------------
     @cached_property

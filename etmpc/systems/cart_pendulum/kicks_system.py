@@ -34,6 +34,7 @@ import dm_env
 import numpy as np
 
 from etmpc.control.mpc import FeedbackWeights, SolverSettings
+from etmpc.control.sensing import FilterSettings, Sensor
 from etmpc.control.timing import Latency
 from etmpc.systems.gauss_newton import GaussNewtonSystem
 from etmpc.systems.cart_pendulum import kicks
@@ -75,6 +76,11 @@ class Config:
     plant: str = "mismatched"
     latency: Latency = Latency()  # how long a solve takes (etmpc.control.timing); none: the paper's loop
     compute_levels: bool = False  # a decision is keep, one SQP iteration or a full solve, priced per iteration
+    # what the controller measures, and its filter (etmpc.control.sensing): the exact state by default
+    sensor: Sensor = Sensor()
+    # the filter's process noise per state and interval (m, m/s, rad, rad/s): the plant's mismatch with the
+    # predictor and the kicks (jumps of the pole's rate), tuned on training episodes for position and angle read
+    estimator: FilterSettings = FilterSettings(process_std=(0.005, 0.2, 0.005, 1.0))
     solver: SolverSettings = field(
         default_factory=lambda: SolverSettings(
             tolerance=1e-6,

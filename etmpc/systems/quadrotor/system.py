@@ -28,6 +28,7 @@ import casadi as ca
 import numpy as np
 
 from etmpc.control.mpc import SolverSettings
+from etmpc.control.sensing import FilterSettings, Sensor
 from etmpc.control.timing import Latency
 from etmpc.systems.capabilities import ShieldRule
 from etmpc.systems.gauss_newton import GaussNewtonSystem, TrackedFeatures
@@ -81,6 +82,9 @@ class Config:
     plant: str = "mismatched"
     latency: Latency = Latency()  # how long a solve takes (etmpc.control.timing); none: the paper's loop
     compute_levels: bool = False  # a decision is keep, one SQP iteration or a full solve, priced per iteration
+    # what the controller measures, and its filter (etmpc.control.sensing): the exact state by default
+    sensor: Sensor = Sensor()
+    estimator: FilterSettings = FilterSettings()
     # The condensed Gauss-Newton SQP (etmpc.control.condensed): converged when a step moves no thrust by more
     # than 0.3 % of its range, and at most 10 QPs by DAQP (a plan that has not converged by then is flown: each
     # iterate descends from the warm start); the Gauss-Newton Hessian regularised by 1e-3 I. Against solving to

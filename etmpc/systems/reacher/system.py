@@ -40,6 +40,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from etmpc.control.sensing import FilterSettings, Sensor
 from etmpc.control.mpc import SolverSettings
 from etmpc.control.timing import Latency
 from etmpc.systems.gauss_newton import TRACKING_SOLVER, GaussNewtonSystem, TrackedFeatures
@@ -73,6 +74,9 @@ class Config:
     plant: str = "mismatched"
     latency: Latency = Latency()  # how long a solve takes (etmpc.control.timing); none: the paper's loop
     compute_levels: bool = False  # a decision is keep, one SQP iteration or a full solve, priced per iteration
+    # what the controller measures, and its filter (etmpc.control.sensing): the exact state by default
+    sensor: Sensor = Sensor()
+    estimator: FilterSettings = FilterSettings()
     solver: SolverSettings = TRACKING_SOLVER
 
 

@@ -1,0 +1,213 @@
+"""What a controller measures of the plant's state, and what it makes of it: a :class:`Sensor` (which states
+are read, with what noise, bias, quantisation and dropout) and an :class:`ExtendedKalmanFilter` on the MPC's
+own predictor that turns its readings into an estimate (:class:`Belief`: mean, covariance, innovation).
+
+A sensor's noise is a function of the episode it is read in (:func:`episode_key`) and its ``seed``: a
+policy and the references it is scored against read the same noise on the same stored episode (paired),
+whatever process plays it, and a simulation that redraws an episode's future redraws its noise too.
+
+The default :class:`Sensor` is exact: the loop then hands the controller the plant's state itself, and no
+filter runs (every number is what it was before sensors existed).
+
+This module may import ``etmpc.common``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass, field
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from etmpc.common.checks import BadValue
+
+
+def episode_key(episode: Any) -> int:
+    """A 64-bit number that names ``episode`` by its contents (its ``arrays()``, in name order, as little-endian
+    bytes): the same stored or drawn episode gives the same key on any machine, in any process."""
+    digest = hashlib.blake2b(digest_size=8)
+    arrays = episode.arrays() if hasattr(episode, "arrays") else {}
+    for name in sorted(arrays):
+        value = np.asarray(arrays[name])
+        digest.update(name.encode())
+        digest.update(np.ascontiguousarray(value, dtype=value.dtype.newbyteorder("<")).tobytes())
+    return int.from_bytes(digest.digest(), "little")
+
+
+@dataclass(frozen=True)
+class Readings:
+    """An episode's sensor draws, one row per step (``steps + 1``: the state before each step and the last):
+    standard normal ``noise`` per state, and whether the step's reading is ``dropped``."""
+
+    noise: np.ndarray
+    dropped: np.ndarray
+
+
+def _per_state(name: str, values: tuple, nx: int, default: float) -> np.ndarray:
+    if len(values) == 0:
+        return np.full(nx, default, dtype=float)
+    if len(values) == 1:
+        return np.full(nx, float(values[0]))
+    if len(values) != nx:
+        raise BadValue(f"a sensor's {name} has one value per state ({nx}) or one for all, got {len(values)}")
+    return np.asarray(values, dtype=float)
+
+
+@dataclass(frozen=True)
+class Sensor:
+    """What the controller reads of the state ``x`` at each step: for each state ``i`` that is
+    ``measured``, ``y_i = q_i round((x_i + bias_i + noise_std_i e_i) / q_i)`` (``e_i`` standard normal,
+    ``q_i`` the ``quantum``, no rounding where it is 0); the whole reading is lost with probability
+    ``dropout``. Each per-state field takes one value per state, one value for every state, or nothing
+    (no noise, no bias, no rounding; every state measured)."""
+
+    noise_std: tuple[float, ...] = ()
+    bias: tuple[float, ...] = ()
+    quantum: tuple[float, ...] = ()
+    measured: tuple[bool, ...] = ()
+    dropout: float = 0.0  # the probability that a step's reading is lost (the filter then only predicts)
+    seed: int = 0  # the noise stream: with the episode's key, it says every draw
+
+    def __post_init__(self):
+        for name in ("noise_std", "bias", "quantum", "measured"):
+            object.__setattr__(self, name, tuple(getattr(self, name)))
+        for name in ("noise_std", "quantum"):
+            if any(not np.isfinite(v) or v < 0 for v in getattr(self, name)):
+                raise BadValue(f"a sensor's {name} is finite and >= 0, got {getattr(self, name)}")
+        if not all(np.isfinite(v) for v in self.bias):
+            raise BadValue(f"a sensor's bias is finite, got {self.bias}")
+        if not 0.0 <= float(self.dropout) < 1.0:
+            raise BadValue(f"a sensor's dropout is a probability in [0, 1), got {self.dropout}")
+
+    @property
+    def exact(self) -> bool:
+        """The sensor reads the state itself: every state, no noise, bias, rounding or dropout."""
+        zero = lambda values: all(v == 0 for v in values)  # noqa: E731
+        return zero(self.noise_std) and zero(self.bias) and zero(self.quantum) and all(self.measured) and self.dropout == 0
+
+    def arrays(self, nx: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``(noise_std, bias, quantum, measured)`` as arrays of ``nx`` entries (checked against ``nx``)."""
+        measured = np.ones(nx, bool) if not self.measured else _per_state("measured", self.measured, nx, 1.0).astype(bool)
+        return (
+            _per_state("noise_std", self.noise_std, nx, 0.0),
+            _per_state("bias", self.bias, nx, 0.0),
+            _per_state("quantum", self.quantum, nx, 0.0),
+            measured,
+        )
+
+    def measurement_variance(self, nx: int) -> np.ndarray:
+        """The variance a filter assumes per state: the noise's, plus the rounding's (``q^2 / 12``)."""
+        std, _, quantum, _ = self.arrays(nx)
+        return std**2 + quantum**2 / 12.0
+
+    def readings(self, episode: Any, steps: int, nx: int) -> Readings:
+        """The draws of ``episode`` (``steps + 1`` rows), from ``seed`` and the episode's key."""
+        rng = np.random.default_rng([self.seed, episode_key(episode)])
+        noise = rng.standard_normal((steps + 1, nx))
+        dropped = rng.random(steps + 1) < self.dropout
+        return Readings(noise, dropped)
+
+    def read(self, x: np.ndarray, readings: Readings, step: int) -> tuple[np.ndarray, np.ndarray]:
+        """``(y, seen)``: the reading of state ``x`` at ``step`` (NaN where nothing is read) and which
+        entries were read."""
+        std, bias, quantum, measured = self.arrays(x.shape[0])
+        seen = measured & ~readings.dropped[step]
+        y = x + bias + std * readings.noise[step]
+        rounded = quantum > 0
+        y[rounded] = quantum[rounded] * np.round(y[rounded] / quantum[rounded])
+        y[~seen] = np.nan
+        return y, seen
+
+
+@dataclass(frozen=True)
+class FilterSettings:
+    """The estimator's model of what it does not know: the process noise's standard deviation per state and
+    control interval (the predictor's mismatch and the disturbances, as the filter sees them), and the
+    prior's standard deviation per state before the first reading. One value per state or one for all."""
+
+    process_std: tuple[float, ...] = (1e-3,)
+    initial_std: tuple[float, ...] = (1.0,)
+
+    def __post_init__(self):
+        for name in ("process_std", "initial_std"):
+            values = tuple(getattr(self, name))
+            object.__setattr__(self, name, values)
+            if not values or any(not np.isfinite(v) or v <= 0 for v in values):
+                raise BadValue(f"a filter's {name} is one or more values > 0, got {values}")
+
+
+@dataclass(frozen=True, eq=False)
+class Belief:
+    """What the filter knows after a step's reading: the estimate's ``mean`` and ``covariance``, the
+    reading's ``innovation`` (reading minus prediction; NaN where nothing was read) and its normalised
+    squared size ``nis`` (``nu' S^-1 nu``: chi-square with as many degrees of freedom as entries read, when
+    the filter's model is right; 0 when nothing was read)."""
+
+    mean: np.ndarray
+    covariance: np.ndarray
+    innovation: np.ndarray
+    nis: float = 0.0
+
+    def __post_init__(self):
+        for name in ("mean", "covariance", "innovation"):
+            getattr(self, name).flags.writeable = False
+
+
+@dataclass(frozen=True, eq=False)
+class ExtendedKalmanFilter:
+    """An extended Kalman filter on a discrete model ``x+ = F(x, u)`` (the MPC's predictor: a CasADi
+    ``Function``), with process noise of standard deviation ``process_std`` per state and step, and the
+    sensor's noise and rounding as the measurement's (the sensor's bias is not known to it: an
+    unmodelled error, as a real one is). The prediction linearises ``F`` at the estimate; the
+    correction uses Joseph's form, so the covariance stays symmetric and positive. On a linear model it
+    is the Kalman filter, optimal for Gaussian noise."""
+
+    model: ca.Function
+    sensor: Sensor
+    settings: FilterSettings = FilterSettings()
+    process_std: np.ndarray = field(init=False)
+    initial_std: np.ndarray = field(init=False)
+    _step: ca.Function = field(init=False, repr=False)
+
+    def __post_init__(self):
+        nx = int(self.model.size1_in(0))
+        x, u = ca.SX.sym("x", nx), ca.SX.sym("u", self.model.size1_in(1))
+        x_next = self.model(x, u)
+        object.__setattr__(self, "_step", ca.Function("ekf_predict", [x, u], [x_next, ca.jacobian(x_next, x)]))
+        object.__setattr__(self, "process_std", _per_state("process_std", self.settings.process_std, nx, 0.0))
+        object.__setattr__(self, "initial_std", _per_state("initial_std", self.settings.initial_std, nx, 1.0))
+        self.sensor.arrays(nx)  # checked against the model's size now
+
+    @property
+    def nx(self) -> int:
+        return int(self.model.size1_in(0))
+
+    def start(self, y: np.ndarray, seen: np.ndarray) -> Belief:
+        """The belief after the first reading: a prior of mean 0 and ``initial_std``, corrected by it."""
+        return self.correct(np.zeros(self.nx), np.diag(self.initial_std**2), y, seen)
+
+    def predict(self, belief: Belief, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The mean and covariance one interval on, under input ``u``."""
+        x_next, a = self._step(belief.mean, u)
+        a = np.asarray(a)
+        return np.asarray(x_next).ravel(), a @ belief.covariance @ a.T + np.diag(self.process_std**2)
+
+    def step(self, belief: Belief, u: np.ndarray, y: np.ndarray, seen: np.ndarray) -> Belief:
+        """Predict over the interval under ``u``, then correct with the reading ``y`` of the entries ``seen``."""
+        return self.correct(*self.predict(belief, u), y, seen)
+
+    def correct(self, mean: np.ndarray, covariance: np.ndarray, y: np.ndarray, seen: np.ndarray) -> Belief:
+        innovation = np.full(self.nx, np.nan)
+        if not seen.any():
+            return Belief(mean, covariance, innovation)
+        variance = self.sensor.measurement_variance(self.nx)[seen]
+        h = np.eye(self.nx)[seen]
+        nu = y[seen] - mean[seen]
+        s = covariance[np.ix_(seen, seen)] + np.diag(variance)
+        gain = np.linalg.solve(s, h @ covariance).T  # P H' S^-1 (S and P symmetric)
+        keep = np.eye(self.nx) - gain @ h
+        covariance = keep @ covariance @ keep.T + (gain * variance) @ gain.T
+        innovation[seen] = nu
+        return Belief(mean + gain @ nu, (covariance + covariance.T) / 2, innovation, float(nu @ np.linalg.solve(s, nu)))

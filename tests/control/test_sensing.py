@@ -1,0 +1,153 @@
+"""The sensor model and the extended Kalman filter, against independent truths: the Riccati equation's
+steady state (python-control's ``dlqe``), the empirical error of many runs of a linear system for which the
+filter is optimal, and the chi-square law of the normalised innovation."""
+
+import casadi as ca
+import control as ct
+import numpy as np
+import pytest
+
+from etmpc.common.checks import BadValue
+from etmpc.control.sensing import ExtendedKalmanFilter, FilterSettings, Readings, Sensor, episode_key
+
+DT = 0.1
+A = np.array([[1.0, DT], [0.0, 1.0]])  # a double integrator: position and velocity
+B = np.array([[DT**2 / 2], [DT]])
+PROCESS_STD = np.array([0.01, 0.05])
+NOISE_STD = 0.05  # on the position, the only state measured
+
+
+def _linear_model() -> ca.Function:
+    x, u = ca.SX.sym("x", 2), ca.SX.sym("u", 1)
+    return ca.Function("F", [x, u], [ca.mtimes(ca.DM(A), x) + ca.mtimes(ca.DM(B), u)])
+
+
+def _filter(**sensor) -> ExtendedKalmanFilter:
+    settings = FilterSettings(process_std=tuple(PROCESS_STD), initial_std=(1.0, 1.0))
+    sensor = {"noise_std": (NOISE_STD, 0.0), "measured": (True, False)} | sensor
+    return ExtendedKalmanFilter(_linear_model(), Sensor(**sensor), settings)
+
+
+def test_the_filters_covariance_reaches_the_riccati_equations_steady_state():
+    kf = _filter()
+    seen = np.array([True, False])
+    belief = kf.start(np.array([0.0, np.nan]), seen)
+    for _ in range(400):
+        prior_mean, prior = kf.predict(belief, np.zeros(1))
+        belief = kf.correct(prior_mean, prior, np.array([0.0, np.nan]), seen)
+    _, riccati, _ = ct.dlqe(A, np.eye(2), np.array([[1.0, 0.0]]), np.diag(PROCESS_STD**2), np.array([[NOISE_STD**2]]))
+    np.testing.assert_allclose(prior, riccati, rtol=1e-9)  # the predicted covariance is the DARE's solution
+
+
+def test_on_a_linear_system_the_error_has_the_covariance_the_filter_states():
+    """Many runs of the double integrator, with the noise the filter assumes: the estimate's error, averaged over
+    runs, has mean 0 and the covariance the filter reports (within sampling error), and the normalised
+    innovation squared averages the number of entries read (1)."""
+    runs, steps = 2000, 40
+    rng = np.random.default_rng(20261202)
+    kf, seen = _filter(), np.array([True, False])
+    errors, nis = [], []
+    for _ in range(runs):
+        x = rng.normal(0.0, 1.0, 2)  # the prior the filter starts from: mean 0, std 1
+        belief = kf.start(np.array([x[0] + NOISE_STD * rng.standard_normal(), np.nan]), seen)
+        for k in range(steps):
+            u = np.array([np.sin(0.3 * k)])
+            x = A @ x + B @ u + PROCESS_STD * rng.standard_normal(2)
+            belief = kf.step(belief, u, np.array([x[0] + NOISE_STD * rng.standard_normal(), np.nan]), seen)
+            if k >= steps - 10:
+                nis.append(belief.nis)
+        errors.append(x - belief.mean)
+    errors = np.array(errors)
+    empirical = np.cov(errors.T)
+    stated = belief.covariance  # the same for every run: the gain does not depend on the readings
+    assert np.all(np.abs(errors.mean(axis=0)) < 4 * np.sqrt(np.diag(stated) / runs))
+    # a variance estimated from n samples has a relative standard error sqrt(2 / n) = 3.2 %: 12 % is 3.8 of them
+    np.testing.assert_allclose(np.diag(empirical), np.diag(stated), rtol=0.12)
+    assert abs(empirical[0, 1] - stated[0, 1]) < 0.12 * np.sqrt(stated[0, 0] * stated[1, 1])
+    assert np.mean(nis) == pytest.approx(1.0, abs=0.05)  # chi-square with 1 degree of freedom: mean 1
+
+
+def test_a_lost_reading_only_predicts_and_the_uncertainty_grows():
+    kf, seen = _filter(), np.array([True, False])
+    belief = kf.start(np.array([0.2, np.nan]), seen)
+    lost = kf.step(belief, np.zeros(1), np.full(2, np.nan), np.array([False, False]))
+    mean, covariance = kf.predict(belief, np.zeros(1))
+    np.testing.assert_array_equal(lost.mean, mean)
+    np.testing.assert_array_equal(lost.covariance, covariance)
+    assert np.isnan(lost.innovation).all() and lost.nis == 0.0
+    assert np.all(np.diag(lost.covariance) > np.diag(belief.covariance) - 1e-15)
+
+
+def test_a_belief_is_read_only():
+    belief = _filter().start(np.array([0.1, np.nan]), np.array([True, False]))
+    with pytest.raises(ValueError):
+        belief.mean[0] = 1.0
+
+
+def test_the_default_sensor_is_exact_and_a_noisy_one_is_not():
+    assert Sensor().exact
+    assert Sensor(noise_std=(0.0,), bias=(0.0,), quantum=(0.0,), measured=(True,)).exact
+    assert not Sensor(noise_std=(0.01,)).exact
+    assert not Sensor(measured=(True, False)).exact
+    assert not Sensor(dropout=0.1).exact
+
+
+def test_a_reading_adds_bias_and_noise_rounds_and_hides_what_is_not_measured():
+    sensor = Sensor(noise_std=(0.1, 0.0, 0.2), bias=(1.0, 0.0, 0.0), quantum=(0.0, 0.5, 0.0), measured=(True, True, False))
+    readings = Readings(noise=np.array([[1.0, 3.0, -2.0]]), dropped=np.array([False]))
+    y, seen = sensor.read(np.array([2.0, 0.7, 5.0]), readings, 0)
+    np.testing.assert_array_equal(seen, [True, True, False])
+    assert y[0] == pytest.approx(2.0 + 1.0 + 0.1)
+    assert y[1] == 0.5  # 0.7 rounded to the nearest 0.5 (no noise on it)
+    assert np.isnan(y[2])
+    dropped = Readings(noise=np.zeros((1, 3)), dropped=np.array([True]))
+    y, seen = sensor.read(np.array([2.0, 0.7, 5.0]), dropped, 0)
+    assert not seen.any() and np.isnan(y).all()
+
+
+def test_the_filter_counts_rounding_as_noise():
+    sensor = Sensor(noise_std=(0.3,), quantum=(0.6,))
+    np.testing.assert_allclose(sensor.measurement_variance(2), [0.09 + 0.03, 0.09 + 0.03])
+
+
+class _Episode:
+    def __init__(self, **arrays):
+        self._arrays = arrays
+
+    def arrays(self):
+        return self._arrays
+
+
+def test_an_episodes_draws_are_its_own_whoever_reads_them():
+    a = _Episode(kick=np.arange(5.0), reference=np.ones(5))
+    same = _Episode(reference=np.ones(5), kick=np.arange(5.0).astype(">f8"))  # another order, big-endian bytes
+    other = _Episode(kick=np.arange(5.0) + 1e-12, reference=np.ones(5))
+    assert episode_key(a) == episode_key(same) != episode_key(other)
+    sensor = Sensor(noise_std=(0.1,), dropout=0.2, seed=3)
+    first, again = sensor.readings(a, 50, 4), sensor.readings(same, 50, 4)
+    np.testing.assert_array_equal(first.noise, again.noise)
+    np.testing.assert_array_equal(first.dropped, again.dropped)
+    assert not np.array_equal(first.noise, sensor.readings(other, 50, 4).noise)
+    assert not np.array_equal(first.noise, Sensor(noise_std=(0.1,), seed=4).readings(a, 50, 4).noise)
+    assert first.noise.shape == (51, 4) and 0 < first.dropped.sum() < 51
+
+
+@pytest.mark.parametrize(
+    "settings, message",
+    [
+        ({"noise_std": (-0.1,)}, "noise_std"),
+        ({"quantum": (float("nan"),)}, "quantum"),
+        ({"bias": (float("inf"),)}, "bias"),
+        ({"dropout": 1.0}, "dropout"),
+    ],
+)
+def test_a_bad_sensor_is_refused_naming_what_is_wrong(settings, message):
+    with pytest.raises(BadValue, match=message):
+        Sensor(**settings)
+
+
+def test_per_state_values_must_match_the_model():
+    with pytest.raises(BadValue, match="one value per state"):
+        ExtendedKalmanFilter(_linear_model(), Sensor(noise_std=(0.1, 0.2, 0.3)))
+    with pytest.raises(BadValue, match="process_std"):
+        FilterSettings(process_std=(0.0,))
