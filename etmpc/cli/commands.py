@@ -39,7 +39,7 @@ def _evaluate(args) -> None:
     if args.test_set is not None and not Path(args.test_set).is_file():
         raise EtmpcError(f"test set {args.test_set} not found")
     check_run_outputs({"--json": args.json, "--record": args.record}, inputs=run_inputs(args.policy, args.test_set))
-    key = system_key(args.task, args.price)  # the task at its price: one value from here to the objective
+    key = system_key(args.task, args.price, args.options)  # the task at its price: one value from here to the objective
     result = evaluate(
         key,
         args.policy,
@@ -112,17 +112,17 @@ def _sweep(args) -> None:
 
 def _render(args) -> None:
     from etmpc.views.render import render_rollout
-    from etmpc.systems import check_name
+    from etmpc.systems import system_key
     from etmpc.views.video import check_display
 
     check_display()  # before any domain is imported: an on-screen backend warns without a display
-    check_name(args.task)
+    key = system_key(args.task, options=args.options)  # the task with its options, checked
     if args.out.suffix != ".mp4":
         raise EtmpcError(f"--out {args.out} does not end in .mp4")
     check_run_outputs({"--out": args.out, "--record": args.record}, inputs=run_inputs([args.policy]))
     try:
         result = render_rollout(
-            args.task, args.policy, args.episode, args.out, args.seed, args.width, args.height, args.fps, record=args.record
+            key, args.policy, args.episode, args.out, args.seed, args.width, args.height, args.fps, record=args.record
         )
     except ValueError as exc:
         raise EtmpcError(" ".join(str(exc).split())) from None

@@ -117,6 +117,8 @@ def run(args) -> None:
     from etmpc.systems import distinct, folder_name, names
 
     tasks = distinct(args.task or names())
+    if args.options and (args.leaderboard or args.references):
+        raise EtmpcError("--leaderboard and --references are the suite's own tasks: no --option with them")
     if args.leaderboard:
         return _leaderboard(args, tasks)
     if args.readme is not None or args.card is not None:
@@ -140,7 +142,16 @@ def run(args) -> None:
     if args.test_set is not None and not Path(args.test_set).is_file():
         raise EtmpcError(f"test set {args.test_set} not found")
     check_run_outputs({"--json": args.json, "--figure": args.figure}, inputs=run_inputs(args.policy, args.test_set))
-    card = score(args.policy, tasks, args.test_set, args.workers, json_path=args.json, say=_say, episodes=args.episodes)
+    card = score(
+        args.policy,
+        tasks,
+        args.test_set,
+        args.workers,
+        json_path=args.json,
+        say=_say,
+        episodes=args.episodes,
+        options=args.options,
+    )
     print(format_scorecard(card))
     if args.json is not None and card.complete:  # a card with a failed row is never written (below)
         print(f"wrote {args.json}")

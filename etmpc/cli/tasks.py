@@ -25,7 +25,19 @@ def task_option(parser, tasks: str, what: str = "the task", many: bool = False, 
         parser.add_argument("--task", default=None, metavar="TASK", help=f"{what} (required): {tasks}")
     if positional:
         parser.add_argument(_OLD, nargs="*" if many else "?", default=None, metavar="TASK", help=argparse.SUPPRESS)
+    parser.add_argument(
+        "--option",
+        action="append",
+        default=None,
+        metavar="NAME=VALUE",
+        help="set one of the task's options (repeatable; e.g. sensor.noise_std=0.01; `etmpc tasks --options TASK` "
+        f"lists them){'' if parser.prog.split()[-1] in TAKES_OPTIONS else ' (not taken by this command yet)'}",
+    )
     parser.set_defaults(task_many=many)
+
+
+#: The commands that play a task with its options (``--option``); the others refuse them, saying so.
+TAKES_OPTIONS = ("evaluate", "score", "render")
 
 
 def resolve(args) -> None:
@@ -44,3 +56,14 @@ def resolve(args) -> None:
         args.task = list(words) if args.task_many else old
     if not args.task_many and args.task is None:
         raise EtmpcError(f"etmpc {args.command} needs --task TASK")
+    args.options = _options(args)
+
+
+def _options(args) -> tuple[tuple[str, str], ...]:
+    """``--option NAME=VALUE``s as ``(name, value)`` pairs (checked against the task when its key is made)."""
+    from etmpc.systems.options import split
+
+    given = getattr(args, "option", None) or []
+    if given and args.command not in TAKES_OPTIONS:
+        raise EtmpcError(f"etmpc {args.command} does not take --option yet (etmpc {', '.join(TAKES_OPTIONS)} do)")
+    return tuple(split(text) for text in given)

@@ -304,6 +304,7 @@ def _evaluate(
         runs,
         system.recompute_price,
         [cpu for _, _, cpu in outcomes],
+        dict(key.options) or None,
     )
 
 

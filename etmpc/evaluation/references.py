@@ -34,7 +34,7 @@ from etmpc.common.progress import stage
 from etmpc.common.sense import best as best_of, oriented
 from etmpc.evaluation import testsets
 from etmpc.evaluation.evaluate import Evaluation, evaluate
-from etmpc.systems import make_system, spec
+from etmpc.systems import SystemKey, make_system, spec, system_key
 from etmpc.systems.capabilities import Experiments, Rollouts, offers
 
 SUITE_VERSION = 3  # what changes it, and what changes a task's version instead: docs/versioning.md
@@ -163,27 +163,31 @@ def _objectives(evaluation: Evaluation, spec: str) -> list[float]:
 
 
 def build_references(
-    task: str,
+    task: str | SystemKey,
     testset_path: str | None = None,
     workers: int | None = None,
     progress: bool = True,
     say: Callable[[str], None] = lambda line: None,
+    episodes: int | None = None,
 ) -> References:
     """Play every periodic schedule, then the oracle and the rollout meter over the best of them, on ``task``'s
-    test set (the stored one by default)."""
-    system = make_system(task)
+    test set (the stored one by default; its first ``episodes`` only, if given). ``task``: a name, or a
+    :class:`~etmpc.systems.SystemKey` (a task with
+    its options: the references are then those of the task so set)."""
+    key = system_key(task)
+    system = key.make()
     periodic = periodic_schedules(system)
     say(f"{system.name}: references: {len(periodic)} periodic schedules, then the oracle and the rollout meter over the best")
-    run = dict(workers=workers, testset_path=testset_path, progress=progress)
+    run = dict(episodes=episodes, workers=workers, testset_path=testset_path, progress=progress)
     with stage(f"{system.name}: references: {len(periodic)} periodic schedules"):  # each named in the progress lines
-        fixed = evaluate(system.name, periodic, **run)
+        fixed = evaluate(key, periodic, **run)
     table = {spec: _objectives(fixed, spec) for spec in periodic}
     best = best_schedule(table, system.objective_sense)
     with stage(f"{system.name}: references: the oracle"):
-        oracle = evaluate(system.name, [f"oracle:{best}"], **run)
+        oracle = evaluate(key, [f"oracle:{best}"], **run)
     meter = rollout_meter_spec(system, best)
     with stage(f"{system.name}: references: the rollout meter"):
-        rollout = meter and evaluate(system.name, [meter], **run)
+        rollout = meter and evaluate(key, [meter], **run)
     refs = References(
         system.name,
         fixed.testset_sha256,

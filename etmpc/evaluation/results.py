@@ -121,10 +121,14 @@ class Evaluation:
     # Per run, in the order of ``runs``: the controller's CPU seconds (solve, feedback, decide). Measured
     # wall time, so it depends on the machine and its load: kept out of ``to_json`` unless asked for.
     cpu: list[dict[str, float]] | None = None
+    # the task's options (etmpc.systems.options: name -> canonical text) it was played with; none: the task as it is
+    options: dict[str, str] | None = None
 
     def to_json(self, cpu: bool = False) -> dict:
-        """The evaluation as JSON; with ``cpu``, also each run's CPU seconds (machine-dependent)."""
+        """The evaluation as JSON; with ``cpu``, also each run's CPU seconds (machine-dependent); the task's
+        options where it was played with some."""
         extra = {"cpu_seconds": self.cpu} if cpu and self.cpu is not None else {}
+        extra |= {"options": dict(self.options)} if self.options else {}
         return {
             "domain": self.domain,
             "task": self.task,
@@ -153,6 +157,7 @@ class Evaluation:
                 runs,
                 _number(data.get("recompute_price")),
                 data.get("cpu_seconds"),
+                data.get("options"),
             )
             checks.typed(evaluation)
         except ValueError as exc:  # checks.BadValue: a field of another type

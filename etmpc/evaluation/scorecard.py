@@ -70,7 +70,7 @@ from etmpc.evaluation.card import (  # noqa: F401  (the card's records, here bef
 from etmpc.evaluation.mainscript import UnguardedScript
 from etmpc.evaluation.scoretable import format_scorecard  # noqa: F401  (the card as text)
 from etmpc.evaluation.backends import shared_pools
-from etmpc.systems import distinct, folder_name, make_system, names, task_version
+from etmpc.systems import distinct, folder_name, make_system, names, system_key, task_version
 
 
 # -- scores ----------------------------------------------------------------------------------------
@@ -172,12 +172,17 @@ def score(
     json_path: str | Path | None = None,
     say: Callable[[str], None] = lambda line: None,
     episodes: int | None = None,
+    options=(),
 ) -> Scorecard:
     """Score every policy of ``policies`` (spec strings or policy objects, as :func:`etmpc.evaluate`
     takes) on every task of ``tasks`` (default: the whole suite), each on its stored test set at its
     own price, against the stored references (see the module's docstring). ``test_set``: another test
     set, for one task; its references are computed for the run. ``episodes``: the first N episodes
-    only (each task's references then of those episodes: 0 and 100 stay exact). A policy that fails
+    only (each task's references then of those episodes: 0 and 100 stay exact; references computed for the run
+    are played on those episodes only, the best schedule chosen there). ``options``: the tasks' options
+    (:mod:`etmpc.systems.options`, a mapping or ``(name, value)`` pairs, the same for every task), under which
+    the stored references do not hold: they are computed for the run, and the card keeps them per episode (for
+    ``etmpc verify``) with the options. A policy that fails
     on a task has that task's row say so; the others are still scored (:attr:`Scorecard.complete` is
     then False, and ``json_path`` is not written: a card with a failed row never is).
 
@@ -196,27 +201,39 @@ def score(
     if test_set is not None and not isinstance(test_set, (str, Path)):
         raise EtmpcError(f"test_set: a file path is needed, got {type(test_set).__name__} {test_set!r}")
     tasks = distinct(names() if tasks is None else tasks)
+    given = tuple(options.items()) if isinstance(options, dict) else tuple(options)
+    keys = {task: system_key(task, None, given) for task in tasks}  # each task with the options, checked
     if test_set is not None and len(tasks) != 1:
         raise EtmpcError("--test-set belongs to one task: give exactly one --task with it")
     if test_set is not None and not Path(test_set).is_file():
         raise EtmpcError(f"test set {test_set} not found")
     for task in tasks:  # each policy parsed (or checked) on each task: a bad one fails before any episode
         try:
-            parse_policies(make_system(task), policies)
+            parse_policies(keys[task].make(), policies)
         except EtmpcError as exc:
             raise EtmpcError(f"{task}: {exc}") from None
     check_run_outputs({"--json": json_path}, inputs=run_inputs(policies, test_set))
-    if test_set is None:  # every task's references checked before any policy is played
+    if test_set is None and not given:  # every task's references checked before any policy is played
         references = {task: stored(task, episodes) for task in tasks}
         shown = {task: {"stored": f"{folder_name(task)}/{references_path(task).name}"} for task in tasks}
     else:
-        (task,) = tasks
-        system = make_system(task)
-        ts_mod.load(test_set, system.domain, system.task)  # a bad test set fails before the references are played
-        say(f"{task}: no stored references for test set {test_set}: computing them for this run")
-        refs = build_references(task, test_set, workers, progress, say)
-        references = {task: refs if episodes is None else refs.head(episodes)}
-        shown = {task: {"stored": None}}
+        if test_set is not None:
+            system = make_system(tasks[0])
+            ts_mod.load(test_set, system.domain, system.task)  # a bad test set fails before the references are played
+        references, shown = {}, {}
+        for task in tasks:
+            why = f"test set {test_set}" if test_set is not None else f"its options ({', '.join(f'{n}={v}' for n, v in given)})"
+            say(f"{task}: no stored references for {why}: computing them for this run")
+            references[task] = build_references(keys[task], test_set, workers, progress, say, episodes)
+            shown[task] = {"stored": None}
+            if given:  # what etmpc verify replays these references against, episode by episode
+                kept = references[task]
+                shown[task] |= {
+                    "options": dict(keys[task].options),
+                    "best_objectives": list(kept.periodic[kept.best]),
+                    "oracle_objectives": list(kept.oracle),
+                    "objective_sense": kept.objective_sense,
+                }
     for task, refs in references.items():
         shown[task] |= {
             "best_periodic": refs.best,
@@ -230,7 +247,9 @@ def score(
     # each policy played on its own (a failing one fails its row only), one pool for all, one estimate for all
     with shared_pools(), Progress(total, enabled=progress, whole=True):
         rows = [
-            play_and_score(task, references[task], policy, test_set, workers, progress) for task in tasks for policy in policies
+            play_and_score(keys[task], references[task], policy, test_set, workers, progress)
+            for task in tasks
+            for policy in policies
         ]
     card = Scorecard(tasks, shown, rows, [aggregate(r) for r in by_policy(rows).values()])
     if json_path is not None and card.complete:
@@ -243,14 +262,15 @@ def _name(policy) -> str:
 
 
 def play_and_score(
-    task: str, refs: References, policy, test_set: str | None = None, workers: int | None = None, progress: bool = True
+    task, refs: References, policy, test_set: str | None = None, workers: int | None = None, progress: bool = True
 ) -> TaskScore:
-    """``policy`` (a spec or an object) played on ``refs``' episodes of ``task`` and scored; a policy that
-    fails (bad spec, its own error) gives a row that says so."""
+    """``policy`` (a spec or an object) played on ``refs``' episodes of ``task`` (a name, or a
+    :class:`~etmpc.systems.SystemKey` with options) and scored; a policy that fails (bad spec, its own error)
+    gives a row that says so."""
     try:
         evaluation = evaluate(task, [policy], refs.episodes, workers=workers, testset_path=test_set, progress=progress)
     except UnguardedScript:  # the script's error, not the policy's: no row can be played
         raise
     except EtmpcError as exc:  # the row says so (the table shows it): the command's own line says which rows failed
-        return failed_task(task, _name(policy), str(exc))
+        return failed_task(refs.task, _name(policy), str(exc))
     return task_score(refs, evaluation, evaluation.summaries[0].policy)

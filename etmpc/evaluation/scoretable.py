@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 
+from etmpc.systems.options import shown
 from etmpc.evaluation.metrics import CI_EPISODES
 from etmpc.evaluation.results import failures_cell
 
@@ -55,7 +56,9 @@ def format_scorecard(card) -> str:
             f"{f'[{a.probability_of_improvement_ci95[0]:.2f}, {a.probability_of_improvement_ci95[1]:.2f}]':>16}"
         )
     refs = "; ".join(
-        f"{t}: {r['best_periodic']} and {r['oracle']}" + ("" if r.get("stored") else " (computed)")
+        f"{t}: {r['best_periodic']} and {r['oracle']}"
+        + ("" if r.get("stored") else " (computed)")
+        + (f" with {shown(tuple(r['options'].items()))}" if r.get("options") else "")
         for t, r in card.references.items()
     )
     lines.append(f"references: {refs}")

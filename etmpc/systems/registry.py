@@ -295,19 +295,34 @@ def system_class(name: str) -> type:
 
 @dataclass(frozen=True)
 class SystemKey:
-    """A task (its canonical name) at a price of a recompute (``None``: the task's own), checked when
-    made. ``str(key)`` is how files and messages show it: ``DOMAIN[/TASK]``, ``@PRICE`` when priced."""
+    """A task (its canonical name) at a price of a recompute (``None``: the task's own) and with its
+    ``options`` (fields of its Config set by name: :mod:`etmpc.systems.options`; a mapping, or
+    ``(name, value)`` pairs), checked when made and kept canonical (sorted ``(name, text)`` pairs).
+    ``str(key)`` is how files and messages show it: ``DOMAIN[/TASK]``, ``@PRICE`` when priced, the options
+    as the command line writes them."""
 
     task: str
     recompute_price: float | None = None
+    options: tuple[tuple[str, str], ...] = ()
 
     def __post_init__(self):
         object.__setattr__(self, "task", canonical(self.task))
         if self.recompute_price is not None:
             object.__setattr__(self, "recompute_price", checks.argument("recompute_price", checks.price, self.recompute_price))
+        if self.options:
+            from etmpc.systems.options import normalised
+
+            object.__setattr__(self, "options", normalised(system_class(self.task).Config(), self.options))
+        else:
+            object.__setattr__(self, "options", ())
 
     def __str__(self) -> str:
-        return self.task if self.recompute_price is None else f"{self.task}@{self.recompute_price!r}"
+        shown = self.task if self.recompute_price is None else f"{self.task}@{self.recompute_price!r}"
+        if self.options:
+            from etmpc.systems.options import shown as written
+
+            shown = f"{shown} {written(self.options)}"
+        return shown
 
     def make(self):
         """The system: the task's class built from its ``Config()``, at this price if one is set. Its time in
@@ -317,7 +332,12 @@ class SystemKey:
         config = cls.Config()
         if self.recompute_price is not None:
             config = replace(config, recompute_price=self.recompute_price)
+        if self.options:
+            from etmpc.systems.options import apply
+
+            config = apply(config, self.options)
         system = cls(config)
+        system.estimator  # noqa: B018 (read, and so checked, now: a sensor the task cannot filter is refused here)
         latency, levels = system.latency, system.compute_levels  # read, and so checked, now
         if not latency.instant or levels:
             from etmpc.systems.capabilities import TimeInTheLoop, require
@@ -326,13 +346,14 @@ class SystemKey:
         return system
 
 
-def system_key(name: str | SystemKey, recompute_price: float | None = None) -> SystemKey:
-    """The key of task ``name`` at ``recompute_price`` (None: the task's own); a key is returned as it is."""
+def system_key(name: str | SystemKey, recompute_price: float | None = None, options=()) -> SystemKey:
+    """The key of task ``name`` at ``recompute_price`` (None: the task's own) with ``options`` (none by
+    default); a key is returned as it is."""
     if isinstance(name, SystemKey):
-        if recompute_price is not None:
-            raise TypeError("give a task's name with a price, or a SystemKey alone")
+        if recompute_price is not None or options:
+            raise TypeError("give a task's name with a price and options, or a SystemKey alone")
         return name
-    return SystemKey(name, recompute_price)
+    return SystemKey(name, recompute_price, tuple(options.items()) if isinstance(options, dict) else tuple(options))
 
 
 def make_system(key: str | SystemKey):

@@ -14,7 +14,7 @@ from etmpc.evaluation.workers import context, play_test_episode
 from etmpc.loop import Trajectory
 from etmpc.policies import parse_policy
 from etmpc.evaluation.inputs import check_shipped
-from etmpc.systems import check_name, system_class
+from etmpc.systems import SystemKey, system_class, system_key
 from etmpc.views.recording import Recorder
 from etmpc.views.solves import frame_captions
 from etmpc.views.video import caption_frames, check_display, check_framebuffer, check_scene, check_size, iter_frames, write_video
@@ -29,7 +29,7 @@ class RenderResult:
 
 
 def render_rollout(
-    domain: str,
+    domain: str | SystemKey,
     policy_spec: str,
     episode: int,
     out: str | Path,
@@ -41,13 +41,13 @@ def render_rollout(
     record: str | Path | None = None,
     progress: bool = True,
 ) -> RenderResult:
-    """Play test-set ``episode`` under ``policy_spec`` exactly as ``etmpc evaluate`` does (repeat 0
-    of ``seed``) and write its video to ``out``, at one frame per control interval by default.
-    With ``record``, also write the episode, its frames included, into that Rerun recording. ``progress``:
-    the frames drawn and the time left, on stderr."""
+    """Play test-set ``episode`` of task ``domain`` (its name, or a :class:`~etmpc.systems.SystemKey` with its
+    options) under ``policy_spec`` exactly as ``etmpc evaluate`` does (repeat 0 of ``seed``) and write its video
+    to ``out``, at one frame per control interval by default. With ``record``, also write the episode, its
+    frames included, into that Rerun recording. ``progress``: the frames drawn and the time left, on stderr."""
     check_display()  # before any domain is imported: an on-screen backend warns without a display
-    check_name(domain)
-    check_scene(system_class(domain))
+    domain = system_key(domain)  # a task's name, or a SystemKey (a task with its options)
+    check_scene(system_class(domain.task))
     check_size(width, height)
     system, env, _ = context(domain, testset_path)
     check_framebuffer(env.physics, width, height)

@@ -1,0 +1,84 @@
+"""A task's options: set by name from text, checked, written one way only, carried by the system's key."""
+
+import pytest
+
+from etmpc.common.checks import BadValue
+from etmpc.common.errors import EtmpcError, UnknownNameError
+from etmpc.control.sensing import Sensor
+from etmpc.systems import SystemKey, system_key
+from etmpc.systems.options import apply, canonical, settable, split
+
+KICKS = "cart_pendulum/kicks"
+
+
+def test_every_option_of_a_task_is_listed_with_its_default_and_the_price_is_not_one():
+    options = settable(SystemKey(KICKS).make().config)
+    assert options["horizon"] == 20
+    assert options["sensor.noise_std"] == () and options["sensor.dropout"] == 0.0
+    assert options["latency.intervals"] == 0
+    assert "recompute_price" not in options
+
+
+def test_options_set_nested_settings_from_text_by_the_fields_types():
+    config = SystemKey(KICKS).make().config
+    made = apply(config, {"sensor.noise_std": "0.01, 0, 0.02,0", "sensor.measured": "yes,no,true,0", "horizon": "15"})
+    assert made.sensor == Sensor(noise_std=(0.01, 0.0, 0.02, 0.0), measured=(True, False, True, False))
+    assert made.horizon == 15 and config.horizon == 20  # the default left as it was
+    assert apply(config, {"sensor.dropout": 0.25}).sensor.dropout == 0.25  # a value, not text, from the API
+
+
+def test_two_spellings_of_the_same_options_make_the_same_key():
+    a = system_key(KICKS, None, {"sensor.noise_std": "0.010,0,0.02,0", "sensor.seed": "7"})
+    b = system_key(KICKS, None, [("sensor.seed", "7"), ("sensor.noise_std", "1e-2,0.0,2e-2,0.")])
+    assert a == b and hash(a) == hash(b)
+    assert a.options == (("sensor.noise_std", "0.01,0.0,0.02,0.0"), ("sensor.seed", "7"))
+    assert str(a) == f"{KICKS} --option sensor.noise_std=0.01,0.0,0.02,0.0 --option sensor.seed=7"
+    assert a != SystemKey(KICKS) and str(SystemKey(KICKS)) == KICKS
+
+
+def test_a_key_with_options_makes_a_system_that_has_them():
+    system = system_key(KICKS, 0.2, {"sensor.noise_std": "0.01", "sensor.measured": "1,0,1,0"}).make()
+    assert system.recompute_price == 0.2
+    assert system.sensor.noise_std == (0.01,) and system.estimator is not None
+    assert SystemKey(KICKS).make().estimator is None  # the default: the exact state, no filter
+
+
+@pytest.mark.parametrize(
+    "options, error, message",
+    [
+        ({"sensor.nois_std": "1"}, UnknownNameError, "unknown option 'sensor.nois_std'; valid: horizon, "),
+        ({"recompute_price": "1"}, UnknownNameError, "--price"),
+        ({"horizon.x": "1"}, UnknownNameError, "unknown option 'horizon.x'"),
+        ({"solver.sqp_options": "1"}, UnknownNameError, "not a number, a word or a list"),
+        ({"horizon": "ten"}, BadValue, "option horizon: 'ten' is not a whole number"),
+        ({"sensor.dropout": "nan"}, BadValue, "not a finite number"),
+        ({"sensor.dropout": "1.5"}, BadValue, "dropout is a probability"),
+        ({"sensor.measured": "maybe"}, BadValue, "'maybe' is not true or false"),
+        ({"sensor.noise_std": "0.1,0.2"}, BadValue, "one value per state"),
+    ],
+)
+def test_a_bad_option_is_one_line_naming_it(options, error, message):
+    with pytest.raises(error, match=message.replace("(", r"\(").replace(".", r"\.")):
+        system_key(KICKS, None, options).make()
+
+
+def test_an_option_given_twice_or_not_as_name_value_is_refused():
+    with pytest.raises(EtmpcError, match="option horizon is given twice"):
+        system_key(KICKS, None, [("horizon", "10"), ("horizon", "12")])
+    with pytest.raises(EtmpcError, match="NAME=VALUE"):
+        split("sensor.noise_std")
+    assert split("sensor.noise_std=0.1=x") == ("sensor.noise_std", "0.1=x")
+
+
+def test_a_task_without_a_predictor_cannot_take_a_sensor():
+    from etmpc.systems.battery.system import BatterySystem
+
+    assert "sensor.noise_std" not in settable(BatterySystem.Config())  # the battery has no sensor to set
+
+
+def test_canonical_text_reads_back_to_the_same_value():
+    for value in (0.1, 1e-12, 3, True, "mismatched", (0.01, 0.0), (True, False)):
+        kind = type(value) if not isinstance(value, tuple) else tuple[type(value[0]), ...]
+        from etmpc.systems.options import parse
+
+        assert parse(kind, canonical(value), "x") == value
