@@ -182,13 +182,14 @@ def _verify(args) -> None:
 
 def _testset(args) -> None:
     from etmpc.evaluation.testsets import draw
-    from etmpc.systems import make_system
+    from etmpc.systems import system_key
 
     check_run_outputs({"--out": args.out})
-    digest = draw(make_system(args.task), args.seed, args.episodes, args.out)
+    key = system_key(args.task, options=args.options)  # a world's options (its disturbances) change the draws
+    digest = draw(key.make(), args.seed, args.episodes, args.out)
     print(
-        f"wrote {args.out} and {args.out}.sha256 ({args.episodes} episodes of {args.task}, seed {args.seed}, "
-        f"sha256 {digest}); use it with --test-set {args.out}"
+        f"wrote {args.out} and {args.out}.sha256 ({args.episodes} episodes of {key}, seed {args.seed}, "
+        f"sha256 {digest}); use it with --test-set {args.out}" + (" and the same options" if key.options else "")
     )
 
 

@@ -108,8 +108,12 @@ class GaussNewtonSystem(SystemBase):
     make_environment = None
 
     def make_env(self, random=None):
-        """The dm-control environment: the task's ``make_environment`` at this Config's ``plant``."""
-        return self.make_environment(random=random, plant=self.config.plant)
+        """The dm-control environment: the task's ``make_environment`` at this Config's ``plant`` (and its
+        ``disturbances``, where the Config has them: the task's options of its world)."""
+        disturbances = getattr(self.config, "disturbances", None)
+        if disturbances is None:
+            return self.make_environment(random=random, plant=self.config.plant)
+        return self.make_environment(random=random, plant=self.config.plant, disturbances=disturbances)
 
     def residuals(self) -> tuple[ca.Function, ca.Function]:
         """``stage_residual(x, u, du, p)`` and ``terminal_residual(x, p)``, ``p`` the tracked values."""

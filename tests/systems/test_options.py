@@ -1,5 +1,6 @@
 """A task's options: set by name from text, checked, written one way only, carried by the system's key."""
 
+import numpy as np
 import pytest
 
 from etmpc.common.checks import BadValue
@@ -82,3 +83,51 @@ def test_canonical_text_reads_back_to_the_same_value():
         from etmpc.systems.options import parse
 
         assert parse(kind, canonical(value), "x") == value
+
+
+def _played(key, episode, spec="every:3"):
+    from etmpc.loop import run_episode
+    from etmpc.policies import parse_policy
+
+    system = key.make()
+    return run_episode(system, system.make_env(), parse_policy(spec, system), None, episode)
+
+
+@pytest.mark.parametrize(
+    "task, option, field",
+    [("cart_pendulum/kicks", "disturbances.kick_scale", "kick"), ("quadrotor/waypoints", "disturbances.gust_scale", "gust_peak")],
+)
+def test_a_disturbances_scale_plays_the_stored_episode_with_its_disturbances_scaled(task, option, field):
+    """Independent truth: the same episode with its disturbance arrays doubled (or zeroed) by hand, played
+    without the option, gives the same trajectory bit for bit (times 2 and 0 are exact)."""
+    import dataclasses
+
+    from etmpc.evaluation import testsets
+
+    base = SystemKey(task)
+    system = base.make()
+    testset = testsets.load(testsets.default_path(system.domain, system.task), system.domain, system.task)
+    episode = next(
+        e
+        for e in (system.episode_from_arrays(testset.episode_arrays(i)) for i in range(testset.episodes))
+        if np.any(getattr(e, field))
+    )
+    for scale in (2.0, 0.0):
+        scaled = _played(system_key(task, None, {option: scale}), episode)
+        by_hand = _played(base, dataclasses.replace(episode, **{field: getattr(episode, field) * scale}))
+        np.testing.assert_array_equal(scaled.states, by_hand.states)
+        np.testing.assert_array_equal(scaled.rewards, by_hand.rewards)
+    assert not np.array_equal(_played(base, episode).states, scaled.states)  # and the option does something
+
+
+def test_a_disturbances_rate_changes_the_episodes_drawn_and_the_default_draws_as_before():
+    from etmpc.evaluation import testsets
+
+    kicks = SystemKey("cart_pendulum/kicks").make()
+    arrays, meta = testsets.generate(kicks, 20261126, 20)
+    stored = testsets.load(testsets.default_path(kicks.domain, kicks.task), kicks.domain, kicks.task)
+    np.testing.assert_array_equal(arrays["kick"][:20], np.stack([stored.episode_arrays(i)["kick"] for i in range(20)]))
+    stormy = system_key("cart_pendulum/kicks", None, {"disturbances.kicks_per_s": "3"}).make()
+    more, meta = testsets.generate(stormy, 20261126, 20)
+    assert meta["parameters"]["kicks_per_s"] == 3.0
+    assert np.count_nonzero(more["kick"]) > 5 * np.count_nonzero(arrays["kick"])

@@ -42,6 +42,7 @@ import mujoco
 import numpy as np
 from dm_control.rl import control
 
+from etmpc.common.checks import BadValue
 from etmpc.systems.cart_pendulum.model import NX, STATE_NAMES
 from etmpc.systems.cart_pendulum.physics import Bumpers, Physics, load_model
 from etmpc.systems.cart_pendulum.task import CartPendulumTask
@@ -67,6 +68,35 @@ ANGLE_SCALE_RAD = 0.6  # cost sin^2(beta/2) / sin^2(0.6): 1 at beta = 1.2 rad
 
 
 @dataclass(frozen=True)
+class Disturbances:
+    """The task's disturbances, as options (``--option disturbances.kick_scale=2``). The rates and sizes say how
+    episodes are drawn (``etmpc testset --option ...`` draws a test set with them; a rollout redraws a future
+    with them); ``kick_scale`` multiplies every kick as it is played, a stored episode's too, so that one test
+    set measures a trigger against stronger or gentler kicks, episode by episode (``etmpc robustness``)."""
+
+    kicks_per_s: float = KICKS_PER_S  # a Poisson rate
+    kick_rad_s: tuple[float, ...] = KICK_RAD_S  # |delta omega| ~ U(low, high), random sign
+    kick_scale: float = 1.0  # every kick played, times this
+    reference_jumps_per_s: float = REFERENCE_JUMPS_PER_S
+
+    def __post_init__(self):
+        object.__setattr__(self, "kick_rad_s", tuple(self.kick_rad_s))
+        low_high = self.kick_rad_s
+        if not (len(low_high) == 2 and 0 <= low_high[0] <= low_high[1] and math.isfinite(low_high[1])):
+            raise BadValue(f"kick_rad_s is (low, high) with 0 <= low <= high, got {low_high}")
+        for name in ("kicks_per_s", "kick_scale"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise BadValue(f"{name} is a finite number >= 0, got {value}")
+        if not 0 <= self.reference_jumps_per_s * CONTROL_DT_S <= 1:
+            raise BadValue(f"reference_jumps_per_s is in [0, {1 / CONTROL_DT_S:g}], got {self.reference_jumps_per_s}")
+
+    @property
+    def reference_jump_probability(self) -> float:
+        return self.reference_jumps_per_s * CONTROL_DT_S
+
+
+@dataclass(frozen=True)
 class KickEpisode:
     """Everything random about one episode, drawn in advance: a test-set row."""
 
@@ -75,11 +105,12 @@ class KickEpisode:
     reference: np.ndarray  # (steps,) m: the cart's reference in each interval
 
     @classmethod
-    def draw(cls, rng: np.random.Generator, steps: int = EPISODE_STEPS) -> KickEpisode:
+    def draw(cls, rng: np.random.Generator, steps: int = EPISODE_STEPS, disturbances: Disturbances | None = None) -> KickEpisode:
+        d = Disturbances() if disturbances is None else disturbances
         initial_state = rng.uniform(INITIAL_STATE_LOW, INITIAL_STATE_HIGH)
-        kick = draw_kicks(rng, steps)
+        kick = draw_kicks(rng, steps, d)
         first = draw_reference(rng)
-        return cls(initial_state, kick, np.concatenate([[first], continue_references(rng, first, steps - 1)]))
+        return cls(initial_state, kick, np.concatenate([[first], continue_references(rng, first, steps - 1, d)]))
 
     def arrays(self) -> dict[str, np.ndarray]:
         return {"initial_state": self.initial_state, "kick": self.kick, "reference": self.reference}
@@ -94,11 +125,12 @@ class KickEpisode:
         return cls(initial_state, kick, reference)
 
 
-def draw_kicks(rng: np.random.Generator, steps: int) -> np.ndarray:
-    """Each interval's kicks summed: a Poisson count (``KICKS_PER_S`` per second), each ``+-U(KICK_RAD_S)``."""
-    counts = rng.poisson(KICKS_PER_S * CONTROL_DT_S, size=steps)
+def draw_kicks(rng: np.random.Generator, steps: int, disturbances: Disturbances | None = None) -> np.ndarray:
+    """Each interval's kicks summed: a Poisson count (``kicks_per_s`` per second), each ``+-U(kick_rad_s)``."""
+    d = Disturbances() if disturbances is None else disturbances
+    counts = rng.poisson(d.kicks_per_s * CONTROL_DT_S, size=steps)
     n = int(counts.sum())
-    sizes = rng.uniform(*KICK_RAD_S, size=n) * rng.choice([-1.0, 1.0], size=n)
+    sizes = rng.uniform(*d.kick_rad_s, size=n) * rng.choice([-1.0, 1.0], size=n)
     kick = np.zeros(steps)
     np.add.at(kick, np.repeat(np.arange(steps), counts), sizes)
     return kick
@@ -109,10 +141,13 @@ def draw_reference(rng: np.random.Generator) -> float:
     return float(rng.uniform(-REFERENCE_M, REFERENCE_M))
 
 
-def continue_references(rng: np.random.Generator, current: float, steps: int) -> np.ndarray:
+def continue_references(
+    rng: np.random.Generator, current: float, steps: int, disturbances: Disturbances | None = None
+) -> np.ndarray:
     """The references of the ``steps`` intervals after one whose reference is ``current``: each
-    jumps to a new one with probability ``REFERENCE_JUMP_PROBABILITY``, else keeps the one before."""
-    return jump_process(rng, np.float64(current), steps, REFERENCE_JUMP_PROBABILITY, draw_reference)
+    jumps to a new one with the disturbances' probability per interval, else keeps the one before."""
+    probability = (Disturbances() if disturbances is None else disturbances).reference_jump_probability
+    return jump_process(rng, np.float64(current), steps, probability, draw_reference)
 
 
 def step_cost(angle_rad: float, position_error_m: float, on_bumper: bool) -> float:
@@ -142,36 +177,39 @@ class Kicks(CartPendulumTask):
 
     observation_names = OBSERVATION_NAMES
 
-    def __init__(self, random: Random = None, steps: int = EPISODE_STEPS):
+    def __init__(self, random: Random = None, steps: int = EPISODE_STEPS, disturbances: Disturbances | None = None):
         super().__init__(random, steps)
         self._fell = False
+        self.disturbances = Disturbances() if disturbances is None else disturbances
 
     def check_episode(self, episode: KickEpisode) -> None:
         if episode.kick.shape[0] < self._steps:
             raise ValueError(f"episode has {episode.kick.shape[0]} kicks, need {self._steps}")
 
     def draw_episode(self, random: np.random.Generator) -> KickEpisode:
-        return KickEpisode.draw(random, self._steps)
+        return KickEpisode.draw(random, self._steps, self.disturbances)
 
     def resample_episode(self, episode: KickEpisode, step: int, random: np.random.Generator) -> KickEpisode:
         """``episode`` with the kicks of intervals ``step..`` and the references after ``step``
         redrawn: at the decision of step ``step`` the controller has felt only the earlier kicks and
         sees that interval's reference (kicks and jumps are memoryless)."""
         kick, reference = np.array(episode.kick), np.array(episode.reference)
-        kick[step:] = draw_kicks(random, kick.size - step)
-        reference[step + 1 :] = continue_references(random, reference[step], reference.size - step - 1)
+        kick[step:] = draw_kicks(random, kick.size - step, self.disturbances)
+        reference[step + 1 :] = continue_references(random, reference[step], reference.size - step - 1, self.disturbances)
         return KickEpisode(episode.initial_state, kick, reference)
 
     def episode_parameters(self) -> dict:
-        """What the episodes are drawn from (recorded in the test set)."""
+        """What the episodes are drawn from (recorded in the test set; the kicks' scale where it is not 1)."""
+        d = self.disturbances
         return {
             "initial_state_low": INITIAL_STATE_LOW.tolist(),
             "initial_state_high": INITIAL_STATE_HIGH.tolist(),
-            "kicks_per_s": KICKS_PER_S,
-            "kick_rad_s": list(KICK_RAD_S),
+            "kicks_per_s": d.kicks_per_s,
+            "kick_rad_s": list(d.kick_rad_s),
+            **({"kick_scale": d.kick_scale} if d.kick_scale != 1 else {}),
             "steps": EPISODE_STEPS,
             "reference_m": REFERENCE_M,
-            "reference_jump_probability": REFERENCE_JUMP_PROBABILITY,
+            "reference_jump_probability": d.reference_jump_probability,
             "position_scale_m": POSITION_SCALE_M,
             "bumpers": asdict(BUMPERS),
             "fall_rad": FALL_RAD,
@@ -180,7 +218,7 @@ class Kicks(CartPendulumTask):
 
     def episode_ranges(self) -> dict:
         """What a stored episode may hold (checked before it is played)."""
-        kick = MOST_KICKS * KICK_RAD_S[1]
+        kick = MOST_KICKS * max(KICK_RAD_S[1], self.disturbances.kick_rad_s[1])
         return {
             "initial_state": (INITIAL_STATE_LOW, INITIAL_STATE_HIGH),
             "kick": (-kick, kick),
@@ -207,7 +245,8 @@ class Kicks(CartPendulumTask):
         physics.set_control(action)
         kick = self._episode.kick[self._step]
         if kick:
-            physics.add_angular_velocity(kick)
+            scale = self.disturbances.kick_scale
+            physics.add_angular_velocity(kick if scale == 1 else kick * scale)
         self._step += 1
 
     def after_step(self, physics: Physics) -> None:
@@ -231,9 +270,14 @@ class Kicks(CartPendulumTask):
 
 
 def make_environment(
-    random: Random = None, plant: str = "mismatched", steps: int = EPISODE_STEPS, environment_kwargs: dict | None = None
+    random: Random = None,
+    plant: str = "mismatched",
+    steps: int = EPISODE_STEPS,
+    environment_kwargs: dict | None = None,
+    disturbances: Disturbances | None = None,
 ) -> control.Environment:
     root = load_model(plant, timestep_s=PHYSICS_DT_S, bumpers=BUMPERS, reference=True)
     physics = Physics.from_xml_string(root.to_xml_string(), assets=root.get_assets())
     physics.bumpers = BUMPERS
-    return build_environment(physics, Kicks(random=random, steps=steps), steps, CONTROL_DT_S, environment_kwargs)
+    task = Kicks(random=random, steps=steps, disturbances=disturbances)
+    return build_environment(physics, task, steps, CONTROL_DT_S, environment_kwargs)

@@ -76,6 +76,8 @@ class Config:
     plant: str = "mismatched"
     latency: Latency = Latency()  # how long a solve takes (etmpc.control.timing); none: the paper's loop
     compute_levels: bool = False  # a decision is keep, one SQP iteration or a full solve, priced per iteration
+    # the kicks and the reference's jumps (the world's: kicks.Disturbances), as options
+    disturbances: kicks.Disturbances = kicks.Disturbances()
     # what the controller measures, and its filter (etmpc.control.sensing): the exact state by default
     sensor: Sensor = Sensor()
     # the filter's process noise per state and interval (m, m/s, rad, rad/s): the plant's mismatch with the

@@ -82,6 +82,8 @@ class Config:
     plant: str = "mismatched"
     latency: Latency = Latency()  # how long a solve takes (etmpc.control.timing); none: the paper's loop
     compute_levels: bool = False  # a decision is keep, one SQP iteration or a full solve, priced per iteration
+    # the waypoint changes and the gusts (the world's: task.Disturbances), as options
+    disturbances: quadrotor_task.Disturbances = quadrotor_task.Disturbances()
     # what the controller measures, and its filter (etmpc.control.sensing): the exact state by default
     sensor: Sensor = Sensor()
     estimator: FilterSettings = FilterSettings()

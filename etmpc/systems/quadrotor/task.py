@@ -40,12 +40,13 @@ from dm_control.rl import control
 from dm_control.utils import containers
 from dm_env import specs
 
+from etmpc.common.checks import BadValue
 from etmpc.systems.episodes import EpisodeTask, Random, add_task, build_environment, jump_process
 from etmpc.systems.plants import PLANTS
 from etmpc.systems.quadrotor.model import NX, STATE_NAMES
 from etmpc.systems.quadrotor.physics import Physics, load_model
 
-__all__ = ["PLANTS", "SUITE", "Episode", "Physics", "Waypoints", "load_model", "make_environment"]
+__all__ = ["PLANTS", "SUITE", "Disturbances", "Episode", "Physics", "Waypoints", "load_model", "make_environment"]
 
 CONTROL_DT_S = 0.05
 PHYSICS_DT_S = 0.005  # 10 RK4 steps per interval
@@ -67,6 +68,32 @@ SUITE = containers.TaggedTasks()
 
 
 @dataclass(frozen=True)
+class Disturbances:
+    """The task's disturbances, as options (``--option disturbances.gust_scale=1.5``). The probabilities, peaks
+    and durations say how episodes are drawn (``etmpc testset --option ...``; a rollout redraws a future with
+    them); ``gust_scale`` multiplies every gust's force as it is played, a stored episode's too, so that one test
+    set measures a trigger against stronger or weaker gusts, episode by episode (``etmpc robustness``)."""
+
+    change_probability: float = CHANGE_PROBABILITY  # a waypoint change per interval after the first
+    gust_probability: float = GUST_PROBABILITY  # a gust's onset per interval
+    gust_peak_n: tuple[float, ...] = GUST_PEAK_N  # its peak ~ U(low, high)
+    gust_duration_s: tuple[float, ...] = GUST_DURATION_S  # its length ~ U(low, high), in whole intervals
+    gust_scale: float = 1.0  # every gust played, times this
+
+    def __post_init__(self):
+        for name in ("gust_peak_n", "gust_duration_s"):
+            pair = tuple(getattr(self, name))
+            object.__setattr__(self, name, pair)
+            if not (len(pair) == 2 and 0 <= pair[0] <= pair[1] and math.isfinite(pair[1])):
+                raise BadValue(f"{name} is (low, high) with 0 <= low <= high, got {pair}")
+        for name in ("change_probability", "gust_probability"):
+            if not 0 <= getattr(self, name) <= 1:
+                raise BadValue(f"{name} is a probability in [0, 1], got {getattr(self, name)}")
+        if not (math.isfinite(self.gust_scale) and self.gust_scale >= 0):
+            raise BadValue(f"gust_scale is a finite number >= 0, got {self.gust_scale}")
+
+
+@dataclass(frozen=True)
 class Episode:
     """Everything random about one episode, drawn in advance: a test-set row."""
 
@@ -76,13 +103,14 @@ class Episode:
     gust_intervals: np.ndarray  # (steps,) its length in intervals (0: none)
 
     @classmethod
-    def draw(cls, rng: np.random.Generator, steps: int = EPISODE_STEPS) -> Episode:
+    def draw(cls, rng: np.random.Generator, steps: int = EPISODE_STEPS, disturbances: Disturbances | None = None) -> Episode:
+        d = Disturbances() if disturbances is None else disturbances
         position = rng.uniform(BOX_LOW, BOX_HIGH)
         yaw = rng.uniform(-INITIAL_YAW_RAD, INITIAL_YAW_RAD)
         initial_state = np.concatenate([position, [0.0, 0.0, yaw], np.zeros(6)])
         first = draw_target(rng)
-        target = np.vstack([first, jump_process(rng, first, steps - 1, CHANGE_PROBABILITY, draw_target)])
-        peak, intervals = draw_gusts(rng, steps)
+        target = np.vstack([first, jump_process(rng, first, steps - 1, d.change_probability, draw_target)])
+        peak, intervals = draw_gusts(rng, steps, d)
         return cls(initial_state, target, peak, intervals)
 
     def arrays(self) -> dict[str, np.ndarray]:
@@ -129,15 +157,16 @@ def draw_target(rng: np.random.Generator) -> np.ndarray:
     return rng.uniform(BOX_LOW, BOX_HIGH)
 
 
-def draw_gusts(rng: np.random.Generator, steps: int) -> tuple[np.ndarray, np.ndarray]:
+def draw_gusts(rng: np.random.Generator, steps: int, disturbances: Disturbances | None = None) -> tuple[np.ndarray, np.ndarray]:
     """``steps`` intervals of gusts: onsets first, then each gust's peak, direction and length in order,
     so a future redrawn from an interval on (a rollout's) uses the generator as an episode's own draw did."""
-    onsets = np.flatnonzero(rng.random(steps) < GUST_PROBABILITY)
+    d = Disturbances() if disturbances is None else disturbances
+    onsets = np.flatnonzero(rng.random(steps) < d.gust_probability)
     peak, intervals = np.zeros((steps, 3)), np.zeros(steps, dtype=np.int64)
     for j in onsets:
-        size, angle = rng.uniform(*GUST_PEAK_N), rng.uniform(-math.pi, math.pi)
+        size, angle = rng.uniform(*d.gust_peak_n), rng.uniform(-math.pi, math.pi)
         peak[j] = [size * math.cos(angle), size * math.sin(angle), 0.0]
-        intervals[j] = max(1, round(rng.uniform(*GUST_DURATION_S) / CONTROL_DT_S))
+        intervals[j] = max(1, round(rng.uniform(*d.gust_duration_s) / CONTROL_DT_S))
     return peak, intervals
 
 
@@ -168,8 +197,9 @@ def failure_steps(rewards: np.ndarray) -> int:
 class Waypoints(EpisodeTask):
     """Hold the drone on a waypoint that changes at random times, under gusts (see the module's docstring)."""
 
-    def __init__(self, random: Random = None, steps: int = EPISODE_STEPS):
+    def __init__(self, random: Random = None, steps: int = EPISODE_STEPS, disturbances: Disturbances | None = None):
         super().__init__(random)
+        self.disturbances = Disturbances() if disturbances is None else disturbances
         self._steps = steps
         self._step = 0
         self._gusts = np.zeros((steps, 3))
@@ -179,7 +209,7 @@ class Waypoints(EpisodeTask):
             raise ValueError(f"episode has {episode.target.shape[0]} waypoints, need {self._steps}")
 
     def draw_episode(self, random: np.random.Generator) -> Episode:
-        return Episode.draw(random, self._steps)
+        return Episode.draw(random, self._steps, self.disturbances)
 
     def resample_episode(self, episode: Episode, step: int, random: np.random.Generator) -> Episode:
         """``episode`` with what comes after interval ``step`` redrawn: the waypoints (the controller
@@ -187,21 +217,24 @@ class Waypoints(EpisodeTask):
         goes on as drawn: a future that forgot it would be as wrong the other way)."""
         steps = episode.target.shape[0]
         target = np.array(episode.target)
-        target[step + 1 :] = jump_process(random, target[step], steps - step - 1, CHANGE_PROBABILITY, draw_target)
+        d = self.disturbances
+        target[step + 1 :] = jump_process(random, target[step], steps - step - 1, d.change_probability, draw_target)
         peak, intervals = np.array(episode.gust_peak), np.array(episode.gust_intervals)
-        peak[step + 1 :], intervals[step + 1 :] = draw_gusts(random, steps - step - 1)
+        peak[step + 1 :], intervals[step + 1 :] = draw_gusts(random, steps - step - 1, d)
         return Episode(episode.initial_state, target, peak, intervals)
 
     def episode_parameters(self) -> dict:
-        """What the episodes are drawn from (recorded in the test set)."""
+        """What the episodes are drawn from (recorded in the test set; the gusts' scale where it is not 1)."""
+        d = self.disturbances
         return {
             "box_low_m": BOX_LOW.tolist(),
             "box_high_m": BOX_HIGH.tolist(),
             "initial_yaw_rad": INITIAL_YAW_RAD,
-            "change_probability": CHANGE_PROBABILITY,
-            "gust_probability": GUST_PROBABILITY,
-            "gust_peak_n": list(GUST_PEAK_N),
-            "gust_duration_s": list(GUST_DURATION_S),
+            "change_probability": d.change_probability,
+            "gust_probability": d.gust_probability,
+            "gust_peak_n": list(d.gust_peak_n),
+            "gust_duration_s": list(d.gust_duration_s),
+            **({"gust_scale": d.gust_scale} if d.gust_scale != 1 else {}),
             "fence_half_width_m": FENCE_HALF_WIDTH_M,
             "fence_height_m": FENCE_HEIGHT_M,
             "ground_m": GROUND_M,
@@ -214,7 +247,9 @@ class Waypoints(EpisodeTask):
         for its yaw, in the box; waypoints in the box; horizontal gusts of at most the largest peak, each
         lasting at most the longest gust's whole intervals (0: none begins)."""
         rest = np.zeros(NX - 6)
-        peak, longest = GUST_PEAK_N[1], max(1, round(GUST_DURATION_S[1] / CONTROL_DT_S))
+        d = self.disturbances
+        peak = max(GUST_PEAK_N[1], d.gust_peak_n[1])
+        longest = max(1, round(max(GUST_DURATION_S[1], d.gust_duration_s[1]) / CONTROL_DT_S))
         return {
             "initial_state": (
                 np.concatenate([BOX_LOW, [0.0, 0.0, -INITIAL_YAW_RAD], rest]),
@@ -255,7 +290,8 @@ class Waypoints(EpisodeTask):
 
     def before_step(self, action, physics: Physics) -> None:
         physics.set_control(action)
-        physics.set_gust(self._gusts[self._step])
+        scale = self.disturbances.gust_scale
+        physics.set_gust(self._gusts[self._step] if scale == 1 else self._gusts[self._step] * scale)
         physics.set_target(self.current_target())
         self._step += 1
 
@@ -279,11 +315,16 @@ class Waypoints(EpisodeTask):
 
 
 def make_environment(
-    random: Random = None, plant: str = "mismatched", steps: int = EPISODE_STEPS, environment_kwargs: dict | None = None
+    random: Random = None,
+    plant: str = "mismatched",
+    steps: int = EPISODE_STEPS,
+    environment_kwargs: dict | None = None,
+    disturbances: Disturbances | None = None,
 ) -> control.Environment:
     root = load_model(plant, timestep_s=PHYSICS_DT_S)
     physics = Physics.from_xml_string(root.to_xml_string(), assets=root.get_assets())
-    return build_environment(physics, Waypoints(random=random, steps=steps), steps, CONTROL_DT_S, environment_kwargs)
+    task = Waypoints(random=random, steps=steps, disturbances=disturbances)
+    return build_environment(physics, task, steps, CONTROL_DT_S, environment_kwargs)
 
 
 add_task(
