@@ -44,7 +44,7 @@ from etmpc.learning.ppo import train_ppo
 from etmpc.learning.ppo_settings import PpoSettings
 from etmpc.experiments.stages import trained
 from etmpc.learning.runner import cost_path, timed
-from etmpc.systems import folder_name, make_system, names
+from etmpc.systems import folder_name, make_system, names, system_class
 
 EVAL_EPISODES = 10  # test-set episodes of DPI's learning curve (a look back, never a choice)
 DPI_KEYS = ("futures", "horizon", "states_per_episode", "ridge", "selection_episodes")
@@ -66,9 +66,17 @@ RECIPES = {
 }
 
 
+def recipe_folder(task: str) -> Path:
+    """Where ``task``'s recipe is read: its shipped policies' folder, or, for a variant with none shipped yet (a
+    noisy variant's first run), the folder of the task whose world it plays (``variant_of``)."""
+    own = Path("policies") / folder_name(task)
+    variant_of = getattr(system_class(task), "variant_of", None)
+    return own if (own / "learned.json").exists() or variant_of is None else Path("policies") / folder_name(variant_of)
+
+
 def shipped_recipe(task: str) -> TrainConfig:
-    """The DPI run the shipped ``learned.json`` records (its hyperparameters)."""
-    data = json.loads((Path("policies") / folder_name(task) / "learned.json").read_text())
+    """The DPI run the shipped ``learned.json`` records (its hyperparameters; its base task's for a new variant)."""
+    data = json.loads((recipe_folder(task) / "learned.json").read_text())
     h = dict(data["hyperparameters"], **RECIPES.get(task, {}))
     return TrainConfig(
         task,
@@ -107,13 +115,17 @@ def dpi_runs(task: str, work: Path, seeds: tuple[int, ...], workers: int) -> dic
 
 def ppo_runs(task: str, work: Path, seeds: tuple[int, ...], workers: int) -> dict:
     shipped = Path("policies") / folder_name(task)
-    made = json.loads((shipped / "ppo.json").read_text())  # the shipped network: its seed's run, not made again
-    base = hyperparams.shipped(task, PpoSettings(validation_episodes=made["settings"]["validation_episodes"]))
+    # the shipped network (its seed's run, not made again), if it is this task's; a new variant's recipe is its
+    # own ppo.yml (the base task's, with the variant's id), trained at every seed
+    made = json.loads((shipped / "ppo.json").read_text()) if (shipped / "ppo.json").exists() else None
+    made = made if made is not None and made.get("task") == task else None
+    validation_episodes = (made or json.loads((recipe_folder(task) / "ppo.json").read_text()))["settings"]["validation_episodes"]
+    base = hyperparams.shipped(task, PpoSettings(validation_episodes=validation_episodes))
     paths, validation, costs = {}, {}, []
     for seed in seeds:
         out = work / "ppo" / folder_name(task) / f"seed{seed}"
         kept = (out / "selected.zip").exists() and (out / "selected.json").exists()  # a finished run (or a copy of one)
-        if not kept and made["settings"] == json.loads(json.dumps(asdict(replace(base, seed=seed)))):
+        if not kept and made is not None and made["settings"] == json.loads(json.dumps(asdict(replace(base, seed=seed)))):
             paths[seed], validation[seed] = shipped / "ppo.zip", made["validation_objective"]  # the shipped seed's run
             continue
         if not kept:
@@ -303,6 +315,7 @@ def main() -> None:
         result = compare(task, args.work, args.dpi_seeds, args.ppo_seeds, args.workers)
         document["tasks"][task] = result
         if args.ship:
+            (Path("policies") / folder_name(task)).mkdir(parents=True, exist_ok=True)  # a new task's first policies
             for learner in result["learners"].values():
                 for name, source in learner["files"].items():
                     shutil.copyfile(source, Path("policies") / folder_name(task) / name)

@@ -193,6 +193,19 @@ def _testset(args) -> None:
     )
 
 
+def _robustness(args) -> None:
+    from etmpc.experiments.robustness import parse_vary, robustness, write
+
+    option, values = parse_vary(args.vary)
+    _distinct_policies(args.policy)
+    check_run_outputs({"--out": args.out}, inputs=run_inputs(args.policy))
+    document = robustness(
+        args.task, option, values, args.policy, args.against, args.episodes, args.workers, args.options, say=_say
+    )
+    for path in write(document, args.out):
+        print(f"wrote {path}")
+
+
 COMMANDS = {
     "evaluate": _evaluate,
     "score": scoring.run,
@@ -205,6 +218,7 @@ COMMANDS = {
     "bench": _bench,
     "testset": _testset,
     "verify": _verify,
+    "robustness": _robustness,
     "discriminate": discriminate.run,
     "figure": figures.run,
 }

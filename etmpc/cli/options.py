@@ -187,6 +187,23 @@ def build_parser() -> argparse.ArgumentParser:
         help="skip the reference solvers (do-mpc for cart_pendulum, scipy linprog for battery)",
     )
 
+    rb = sub.add_parser(
+        "robustness",
+        help="score triggers across a range of one of a task's options (noise, gusts): robustness.json, .png, ROBUSTNESS.md",
+    )
+    task_option(rb, tasks, "the task to play")
+    rb.add_argument(
+        "--vary",
+        required=True,
+        metavar="NAME=V1;V2;...",
+        help="the option to vary and its values, separated by ';' (a value may be a list: 0.01,0,0.01,0)",
+    )
+    rb.add_argument("--policy", action="append", required=True, metavar="SPEC", help=f"{syntax()} (repeatable)")
+    rb.add_argument("--against", default=None, metavar="SPEC", help="also each policy's paired improvement over this one")
+    rb.add_argument("--episodes", type=types.positive_int, default=None, help="first N test-set episodes (default: all)")
+    rb.add_argument("--workers", type=types.workers, default=None, help="worker processes (default: by the work)")
+    rb.add_argument("--out", type=Path, required=True, metavar="DIR", help="where robustness.json, .png and ROBUSTNESS.md go")
+
     discriminate.add_parser(sub, tasks)
     figures.add_parser(sub, tasks)
     return parser

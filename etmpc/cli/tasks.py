@@ -37,7 +37,7 @@ def task_option(parser, tasks: str, what: str = "the task", many: bool = False, 
 
 
 #: The commands that play a task with its options (``--option``); the others refuse them, saying so.
-TAKES_OPTIONS = ("evaluate", "score", "render", "testset")
+TAKES_OPTIONS = ("evaluate", "score", "render", "testset", "robustness")
 
 
 def resolve(args) -> None:

@@ -298,6 +298,7 @@ class ClosedLoop:
         if self.records:
             self.trajectory.measurements[self.step_index] = y
             self.trajectory.estimates[self.step_index] = self.seen
+            self.trajectory.nis[self.step_index] = self.belief.nis
 
     def _advance(self, action) -> float | None:
         """Step the plant over one control interval; the task's reward, or None if the plant failed."""

@@ -49,6 +49,7 @@ class Trajectory:
     # and the filter's estimate, beside the plant's states; None with an exact sensor
     measurements: np.ndarray | None = None
     estimates: np.ndarray | None = None
+    nis: np.ndarray | None = None  # (T + 1,) the reading's normalised innovation squared (0 where nothing was read)
     steps: int = 0
     solver_failures: int = 0
     nonfinite: bool = False  # the episode ended early on a non-finite state
@@ -75,6 +76,7 @@ class Trajectory:
             decide_time_s=np.zeros(steps),
             measurements=nan(steps + 1, nx) if sensing else None,
             estimates=nan(steps + 1, nx) if sensing else None,
+            nis=nan(steps + 1) if sensing else None,
         )
 
     def cpu_seconds(self) -> dict[str, float]:

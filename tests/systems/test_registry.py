@@ -68,10 +68,12 @@ def test_a_task_plugin_joins_the_registry_the_suite_and_gymnasium(plugins):
         "cart_pendulum/kicks",
         "cart_pendulum/kicks_late",
         "cart_pendulum/kicks_levels",
+        "cart_pendulum/kicks_noisy",
         "battery/trading",
         "reacher/jumps",
         "reacher/jumps_late",
         "quadrotor/waypoints",
+        "quadrotor/waypoints_noisy",
         "twin/balance",
     )
     system = registry.make_system(registry.SystemKey("twin/balance", 0.5))

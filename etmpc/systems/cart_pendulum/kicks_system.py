@@ -59,6 +59,10 @@ def exogenous_features(s) -> np.ndarray:
     return np.array([now, planned, now - planned, abs(now - planned)])
 
 
+#: The filter's process noise per interval (m, m/s, rad, rad/s), where a sensor is set (kicks_noisy's).
+PROCESS_STD = (0.000625, 0.025, 0.000625, 0.125)
+
+
 @dataclass(frozen=True)
 class Config:
     """The kicks task's controller and price."""
@@ -81,8 +85,9 @@ class Config:
     # what the controller measures, and its filter (etmpc.control.sensing): the exact state by default
     sensor: Sensor = Sensor()
     # the filter's process noise per state and interval (m, m/s, rad, rad/s): the plant's mismatch with the
-    # predictor and the kicks (jumps of the pole's rate), tuned on training episodes for position and angle read
-    estimator: FilterSettings = FilterSettings(process_std=(0.005, 0.2, 0.005, 1.0))
+    # predictor and the kicks (jumps of the pole's rate), chosen on training episodes for kicks_noisy's sensor
+    # (scripts/estimators.py, docs/results/estimators.md)
+    estimator: FilterSettings = FilterSettings(process_std=PROCESS_STD)
     solver: SolverSettings = field(
         default_factory=lambda: SolverSettings(
             tolerance=1e-6,

@@ -40,3 +40,13 @@ for name, what in (
         tags=("benchmarking", "timing"),
         episode=kicks.KickEpisode,
     )
+add_task(
+    SUITE,
+    "kicks_noisy",
+    kicks.make_environment,
+    kicks.EPISODE_STEPS,
+    kicks.CONTROL_DT_S,
+    "The kicks world, for the task whose controller reads two of its four states, with noise, through a Kalman filter.",
+    tags=("benchmarking", "sensing"),
+    episode=kicks.KickEpisode,
+)

@@ -86,7 +86,9 @@ class Config:
     disturbances: quadrotor_task.Disturbances = quadrotor_task.Disturbances()
     # what the controller measures, and its filter (etmpc.control.sensing): the exact state by default
     sensor: Sensor = Sensor()
-    estimator: FilterSettings = FilterSettings()
+    # the filter's process noise per interval (position m, attitude rad, velocity m/s, rates rad/s), where a sensor
+    # is set: chosen on training episodes for waypoints_noisy's sensor (scripts/estimators.py)
+    estimator: FilterSettings = FilterSettings(process_std=(0.02,) * 6 + (0.4,) * 6)
     # The condensed Gauss-Newton SQP (etmpc.control.condensed): converged when a step moves no thrust by more
     # than 0.3 % of its range, and at most 10 QPs by DAQP (a plan that has not converged by then is flown: each
     # iterate descends from the warm start); the Gauss-Newton Hessian regularised by 1e-3 I. Against solving to

@@ -336,3 +336,13 @@ add_task(
     "Hold a quadrotor on changing waypoints under gusts, inside a geofence: 100 control intervals of 0.05 s (plant=...).",
     episode=Episode,
 )
+add_task(
+    SUITE,
+    "waypoints_noisy",
+    make_environment,
+    EPISODE_STEPS,
+    CONTROL_DT_S,
+    "The waypoints world, for the task whose controller reads the drone through noisy sensors and a Kalman filter.",
+    tags=("benchmarking", "sensing"),
+    episode=Episode,
+)

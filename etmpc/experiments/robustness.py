@@ -1,0 +1,158 @@
+"""``etmpc robustness``: triggers scored across a range of one of a task's options (a sensor's noise, the gusts'
+strength), on the task's stored test set: the same episodes at every value, so the curve is paired along the
+option and across the triggers.
+
+At each value of the option, every policy is played on the test set (:func:`etmpc.evaluate` with the task's key
+at that value), and the curve gives its mean objective with a 95 % CI over the episodes, its failures per
+episode, and, against a baseline policy (``against``: a fixed schedule, say), its improvement in percent of
+the baseline's mean objective, paired episode by episode, with a 95 % CI. Writes ``robustness.json``,
+``robustness.png`` (one panel per measure) and ``ROBUSTNESS.md`` into the output folder.
+"""
+
+from __future__ import annotations
+
+import math
+import platform
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from etmpc.common.errors import EtmpcError
+from etmpc.common.outputs import write_json
+from etmpc.common.provenance import commit_and_date
+from etmpc.common.sense import oriented
+from etmpc.evaluation import metrics
+from etmpc.evaluation.evaluate import evaluate
+from etmpc.systems import system_key
+from etmpc.systems.options import canonical, settable, shown, split
+
+FORMAT = "etmpc-robustness"
+
+
+def _costs(runs: list[dict], spec: str, sense: str) -> np.ndarray:
+    """``spec``'s objective per episode, as costs (lower is better), in episode order."""
+    mine = sorted((r["episode"], r["objective"]) for r in runs if r["policy"] == spec)
+    return -oriented(np.array([float("nan") if v is None else v for _, v in mine]), sense)
+
+
+def robustness(
+    task: str,
+    option: str,
+    values: Sequence[str],
+    policies: Sequence[str],
+    against: str | None = None,
+    episodes: int | None = None,
+    workers: int | None = None,
+    fixed: Sequence[tuple[str, str]] = (),
+    progress: bool = True,
+    say: Callable[[str], None] = lambda line: None,
+) -> dict:
+    """Score ``policies`` on ``task`` at each of ``values`` of ``option`` (with the ``fixed`` options too); see
+    the module's docstring. Every value is checked before any episode is played."""
+    if not values:
+        raise EtmpcError("give at least one value of the option to vary")
+    if against is not None and against not in policies:
+        raise EtmpcError(f"--against {against} is not one of the policies given")
+    if option in dict(fixed):
+        raise EtmpcError(f"option {option} is both varied and fixed")
+    keys = [system_key(task, None, (*fixed, (option, value))) for value in values]  # each value checked here
+    texts = [dict(key.options)[option] for key in keys]
+    if len(set(texts)) != len(texts):
+        raise EtmpcError(f"a value of {option} is given twice: {', '.join(texts)}")
+    started = time.perf_counter()
+    system = keys[0].make()
+    sense = system.objective_sense
+    levels = []
+    for key, text in zip(keys, texts):
+        say(f"{task}: {option}={text}")
+        evaluation = evaluate(key, list(policies), episodes, workers=workers, progress=progress).to_json()
+        runs = evaluation["runs"]
+        row = {"value": text, "policies": {}}
+        base = _costs(runs, against, sense) if against is not None else None
+        for spec in policies:
+            costs = _costs(runs, spec, sense)
+            summary = evaluation["policies"][spec]
+            entry = {
+                "objective": float(summary["objective_mean"]),
+                "objective_ci95": float(metrics.mean_ci95(-costs if sense == "max" else costs)),
+                "recomputes": float(summary["recomputes_mean"]),
+                "failures": summary.get("failures_mean"),
+                "failures_ci95": summary.get("failures_ci95"),
+            }
+            if base is not None:
+                scale = abs(float(np.mean(base)))
+                gain = 100.0 * (base - costs) / scale if scale > 0 else np.full(costs.shape, math.nan)
+                entry["improvement_pct"] = float(np.mean(gain))
+                entry["improvement_ci95"] = float(metrics.mean_ci95(gain))
+            row["policies"][spec] = entry
+        row["test_set_sha256"] = evaluation["test_set"]["sha256"]
+        row["episodes"] = len({r["episode"] for r in runs})
+        levels.append(row)
+    return commit_and_date() | {
+        "format": FORMAT,
+        "task": system.name,
+        "option": option,
+        "default": canonical(settable(system_key(task).make().config)[option]),
+        "fixed": dict(keys[0].options) | {option: None},
+        "objective_sense": sense,
+        "against": against,
+        "policies": list(policies),
+        "levels": levels,
+        "machine": f"{platform.machine()}, {platform.system()}",
+        "seconds": time.perf_counter() - started,
+    }
+
+
+def markdown(document: dict) -> str:
+    """The curve as a table: one row per value, one column per policy."""
+    fixed = {k: v for k, v in document["fixed"].items() if v is not None}
+    better = "higher" if document["objective_sense"] == "max" else "lower"
+    lines = [
+        f"## `{document['task']}` against `{document['option']}`",
+        "",
+        f"Default `{document['default'] or '()'}`"
+        + (f"; fixed: `{shown(tuple(fixed.items()))}`" if fixed else "")
+        + f". {document['levels'][0]['episodes']} stored test-set episodes at every value (the same ones: paired). "
+        f"Objective ({better} is better) ± 95 % CI; failures per episode"
+        + (
+            f"; improvement over `{document['against']}` in % of its mean objective, paired per episode, ± 95 % CI."
+            if document["against"]
+            else "."
+        ),
+        "",
+        "| " + document["option"] + " | " + " | ".join(f"`{p}`" for p in document["policies"]) + " |",
+        "|---|" + "---|" * len(document["policies"]),
+    ]
+    for level in document["levels"]:
+        cells = []
+        for spec in document["policies"]:
+            e = level["policies"][spec]
+            cell = f"{e['objective']:.4g} ± {e['objective_ci95']:.2g}"
+            if e.get("failures") is not None:
+                cell += f"; {e['failures']:.2f} fail"
+            if document["against"] and spec != document["against"]:
+                cell += f"; {e['improvement_pct']:+.1f} ± {e['improvement_ci95']:.1f} %"
+            cells.append(cell)
+        lines.append(f"| {level['value']} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def parse_vary(text: str) -> tuple[str, list[str]]:
+    """``NAME=V1;V2;...`` as ``(NAME, [V1, V2, ...])`` (values separated by ``;``, since a value may be a list)."""
+    name, values = split(text)
+    found = [v.strip() for v in values.split(";") if v.strip()]
+    if not found:
+        raise EtmpcError(f"--vary {text}: give NAME=V1;V2;... (values separated by ';')")
+    return name, found
+
+
+def write(document: dict, out: Path) -> list[Path]:
+    """``robustness.json``, ``ROBUSTNESS.md`` and ``robustness.png`` into ``out``."""
+    from etmpc.views.robustness import write_robustness_png
+
+    out.mkdir(parents=True, exist_ok=True)
+    write_json(out / "robustness.json", document)
+    (out / "ROBUSTNESS.md").write_text(markdown(document))
+    return [out / "robustness.json", out / "ROBUSTNESS.md", write_robustness_png(document, out / "robustness.png")]

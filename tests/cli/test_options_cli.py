@@ -1,0 +1,98 @@
+"""Options on the command line: --option on the commands that take it (one-line errors elsewhere), a card scored
+with options that verifies (its references replayed too), and the robustness curve, against evaluate's own numbers."""
+
+import json
+
+import numpy as np
+import pytest
+
+from etmpc.cli import main
+from etmpc.evaluation.evaluate import evaluate
+from etmpc.experiments.robustness import robustness
+from etmpc.systems import system_key
+
+KICKS = "cart_pendulum/kicks"
+NOISE = ["--option", "sensor.noise_std=0.01,0,0.01,0", "--option", "sensor.measured=1,0,1,0"]
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["evaluate", "--task", KICKS, "--policy", "every:3", "--option", "sensor.nois=1"], "unknown option 'sensor.nois'"),
+        (["evaluate", "--task", KICKS, "--policy", "every:3", "--option", "horizon"], "NAME=VALUE"),
+        (["evaluate", "--task", KICKS, "--policy", "every:3", "--option", "horizon=x"], "not a whole number"),
+        (["evaluate", "--task", "battery", "--policy", "every:3", "--option", "sensor.noise_std=1"], "unknown option"),
+        (["bench", "--task", KICKS, "--option", "horizon=10"], "etmpc bench does not take --option yet"),
+        (["score", "--task", KICKS, "--leaderboard", "--option", "horizon=10"], "no --option with them"),
+        (["robustness", "--task", KICKS, "--vary", "horizon", "--policy", "every:3", "--out", "x"], "NAME=VALUE"),
+        (
+            ["robustness", "--task", KICKS, "--vary", "sensor.dropout=0.1;0.10", "--policy", "every:3", "--out", "x"],
+            "given twice",
+        ),
+        (
+            [
+                "robustness",
+                "--task",
+                KICKS,
+                "--vary",
+                "horizon=10",
+                "--option",
+                "horizon=12",
+                "--policy",
+                "every:3",
+                "--out",
+                "x",
+            ],
+            "both varied and fixed",
+        ),
+        (
+            ["robustness", "--task", KICKS, "--vary", "horizon=10", "--policy", "every:3", "--against", "every:2", "--out", "x"],
+            "--against every:2 is not one of the policies",
+        ),
+    ],
+)
+def test_bad_options_are_one_line_and_exit_2(capsys, argv, message):
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("etmpc: error:") and message in err, err
+
+
+def test_a_card_scored_with_options_carries_them_and_verifies_its_references_too(tmp_path, capsys):
+    card = tmp_path / "card.json"
+    argv = ["score", "every:3", "--task", KICKS, "--episodes", "2", "--workers", "1", "--json", str(card), *NOISE]
+    assert main(argv) == 0
+    data = json.loads(card.read_text())
+    refs = data["references"][KICKS]
+    assert refs["stored"] is None
+    assert refs["options"] == {"sensor.measured": "true,false,true,false", "sensor.noise_std": "0.01,0.0,0.01,0.0"}
+    assert len(refs["best_objectives"]) == len(refs["oracle_objectives"]) == 2
+    assert "with --option sensor.measured=true,false,true,false" in capsys.readouterr().out
+    # the row's objectives are evaluate's under the same options, not the task's without them
+    key = system_key(KICKS, None, dict(refs["options"]))
+    played = evaluate(key, ["every:3"], 2, workers=1, progress=False).to_json()["runs"]
+    assert data["rows"][0]["episode_objectives"] == [r["objective"] for r in played]
+    exact = evaluate(KICKS, ["every:3"], 2, workers=1, progress=False).to_json()["runs"]
+    assert data["rows"][0]["episode_objectives"] != [r["objective"] for r in exact]
+    assert main(["verify", str(card), "--sample", "0", "--workers", "1"]) == 0
+    tampered = tmp_path / "tampered.json"
+    refs["oracle_objectives"][1] += 1e-6
+    tampered.write_text(json.dumps(data))
+    assert main(["verify", str(tampered), "--sample", "0", "--workers", "1"]) == 2
+    out = capsys.readouterr().out
+    assert "references' oracle:" in out and "episode 1: objective" in out
+
+
+def test_the_robustness_curve_is_evaluate_at_each_value_paired_against_the_baseline(tmp_path):
+    values = ["0.5", "2"]
+    document = robustness(KICKS, "disturbances.kick_scale", values, ["every:3", "threshold:0.2"], "every:3", 3, 1, progress=False)
+    assert [level["value"] for level in document["levels"]] == ["0.5", "2.0"]
+    for level, value in zip(document["levels"], values):
+        runs = evaluate(system_key(KICKS, None, {"disturbances.kick_scale": value}), ["every:3", "threshold:0.2"], 3, workers=1)
+        cost = {s: np.array([r.objective for r in runs.runs if r.policy == s]) for s in ("every:3", "threshold:0.2")}
+        entry = level["policies"]["threshold:0.2"]
+        assert entry["objective"] == pytest.approx(cost["threshold:0.2"].mean(), rel=1e-12)
+        gain = 100 * (cost["every:3"] - cost["threshold:0.2"]) / cost["every:3"].mean()
+        assert entry["improvement_pct"] == pytest.approx(gain.mean(), rel=1e-9)
+        assert level["policies"]["every:3"]["improvement_pct"] == 0.0
+    # stronger kicks cost the fixed schedule more, on the same episodes
+    assert document["levels"][1]["policies"]["every:3"]["objective"] > document["levels"][0]["policies"]["every:3"]["objective"]
