@@ -5,13 +5,14 @@ that played the episode and sent to the process that writes the file, such as
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, is_dataclass
 from typing import Protocol
 
 import numpy as np
 
 from etmpc.common.numerics import norm
 from etmpc.control.plan import Plan
+from etmpc.systems.options import of as task_options, shown
 
 
 def computation_cost(computations, price: float):
@@ -178,6 +179,9 @@ class EpisodeRecord:
     input_bounds: tuple = ()  # (u_min (nu,), u_max (nu,)), or () if the system has none
     announced: tuple = ()  # a self-trigger's (step a plan was made, steps it announced it would be kept)
     space: object = None  # the system's etmpc.systems.space.Space: a 3-D view of the episode (etmpc.views.space), or None
+    # with a sensor that is not exact: its readings (NaN where none) and the filter's estimates, (S + 1, nx) each
+    measurements: np.ndarray | None = None
+    estimates: np.ndarray | None = None
 
     @property
     def steps(self) -> int:
@@ -195,6 +199,10 @@ class EpisodeRecord:
         arrivals = _arrivals(traj)
         # Only a task with time in the loop says so: the paper's tasks keep the identity they had.
         timing = dict(latency=latency.describe(), compute_levels=levels) if timed else {}
+        # and only a task played with options (etmpc.systems.options) says which: the others' identity stays as it was
+        options = task_options(system.config) if hasattr(system, "config") and is_dataclass(system.config) else {}
+        if options:
+            timing["options"] = shown(tuple(options.items()))
         return cls(
             identity=dict(
                 identity,
@@ -223,6 +231,8 @@ class EpisodeRecord:
             signals={name: np.asarray(v, float) for name, v in system.signals(episode).items()},
             input_bounds=bounds if np.all(np.isfinite(bounds)) else (),  # none drawn for an unbounded input
             announced=tuple((int(k), int(announce(p))) for k, p in traj.plans) if announce is not None else (),
+            measurements=None if traj.measurements is None else traj.measurements[: n + 1].copy(),
+            estimates=None if traj.estimates is None else traj.estimates[: n + 1].copy(),
             arrivals=tuple(int(a) for a in arrivals),
             starts=tuple(int(s) for s in _starts(traj, arrivals, shift)),
             timed=timed,

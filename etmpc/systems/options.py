@@ -161,6 +161,13 @@ def normalised(config: Any, options: Mapping[str, Any] | Iterable[tuple[str, Any
     return tuple(sorted((name, canonical(values[name])) for name in names))
 
 
+def of(config: Any) -> dict[str, str]:
+    """The options ``config`` (a task's Config) was set with: each of its options that differs from the
+    default ``type(config)()``'s, as canonical text (``{}`` for the task as it is)."""
+    made, default = settable(config), settable(type(config)())
+    return {name: canonical(value) for name, value in sorted(made.items()) if value != default.get(name)}
+
+
 def shown(options: tuple[tuple[str, str], ...]) -> str:
     """Options as the command line writes them: ``--option a=1 --option b=2``."""
     return " ".join(f"--option {name}={text}" for name, text in options)

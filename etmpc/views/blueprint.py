@@ -109,6 +109,8 @@ def signal_of_forecast(forecast: str, signals) -> str | None:
 # Mid-lightness colours, readable on the viewer's dark and light themes.
 REALISED = (235, 94, 40)  # what happened: orange
 BOUND = (140, 140, 140)  # input bounds, thresholds: grey
+ESTIMATED = (60, 150, 220)  # the filter's estimate, where a sensor is not exact: blue
+MEASURED = (170, 170, 170)  # the sensor's readings: light grey (absent where a state is not read)
 CHOSEN = (66, 133, 244)  # a recompute the policy chose: blue
 FORCED = (219, 68, 55)  # a recompute forced because the plan ran out: red
 FIRST = (140, 140, 140)

@@ -142,7 +142,18 @@ class Recorder:
         # What happened. Entities drawn in one view are drawn in the order of their paths, so
         # ``realised/…`` comes over ``plan/…`` and ``forecast/…``.
         realised = dict(colors=[look.REALISED], widths=[look.REALISED_WIDTH])
+        sensed = record.estimates is not None  # a sensor that is not exact: its readings and the estimate beside the truth
         for j, s in enumerate(record.state_names):
+            if sensed:
+                series(
+                    f"realised/state/{s}",
+                    self._steps(n + 1, dt),
+                    np.column_stack([record.states[:, j], record.estimates[:, j], record.measurements[:, j]]),
+                    [f"what happened [{look.unit(s)}]", f"estimated [{look.unit(s)}]", f"measured [{look.unit(s)}]"],
+                    colors=[look.REALISED, look.ESTIMATED, look.MEASURED],
+                    widths=[look.REALISED_WIDTH, 1.5, 1.0],
+                )
+                continue
             series(
                 f"realised/state/{s}",
                 self._steps(n + 1, dt),

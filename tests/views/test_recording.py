@@ -548,3 +548,28 @@ def test_a_self_trigger_records_what_it_announced_at_each_solve(tmp_path, cart_s
     root_view, _ = read_blueprint(path)
     (recompute_view,) = [v for v in views_of(root_view) if v["class"] == "TimeSeries" and v["name"].startswith("recomputes")]
     assert f"{root}/announced" in recompute_view["contents"]
+
+
+def test_a_noisy_run_records_the_plant_its_estimate_and_the_readings_side_by_side(tmp_path):
+    from etmpc.systems import system_key
+
+    options = {"sensor.noise_std": "0.01,0,0.01,0", "sensor.measured": "1,0,1,0"}
+    key = system_key("cart_pendulum/kicks", None, options)
+    path = tmp_path / "noisy.rrd"
+    evaluate(key, ["every:3"], episodes=1, workers=1, progress=False, record=path)
+    system = key.make()
+    _, env, testset = context(key)
+    traj = run_episode(
+        system, env, parse_policy("every:3", system), policy_rng(0, 0, 0), system.episode_from_arrays(testset.episode_arrays(0))
+    )
+    entities = chunks_by_entity(path)
+    root = "/cart_pendulum-kicks/every\\:3/episode_000/repeat_0"
+    identity = entities[f"{root}/identity"][0].to_pydict()
+    assert identity["options"] == [["--option sensor.measured=true,false,true,false --option sensor.noise_std=0.01,0.0,0.01,0.0"]]
+    for j, name in enumerate(system.state_names):
+        _, values = series(entities, f"{root}/realised/state/{name}")
+        n = traj.steps + 1
+        np.testing.assert_array_equal(values[:, 0], traj.states[:n, j])  # what happened
+        np.testing.assert_array_equal(values[:, 1], traj.estimates[:n, j])  # the filter's estimate
+        np.testing.assert_array_equal(values[:, 2], traj.measurements[:n, j])  # the readings (NaN: not read)
+        assert np.isnan(values[:, 2]).all() == (name in ("cart_velocity", "pole_angular_velocity"))
