@@ -193,6 +193,18 @@ def _testset(args) -> None:
     )
 
 
+def _options(args) -> None:
+    from etmpc.systems import system_key
+    from etmpc.systems.options import canonical, settable
+
+    key = system_key(args.task, options=args.options)
+    given = dict(key.options)
+    print(f"{key.task}: its options (--option NAME=VALUE; the price is --price)")
+    for name, value in settable(key.make().config).items():
+        text = canonical(value) or ('""' if isinstance(value, str) else "()")  # an empty word, an empty list
+        print(f"  {name} = {text}" + ("   (as set)" if name in given else ""))
+
+
 def _robustness(args) -> None:
     from etmpc.experiments.robustness import parse_vary, robustness, write
 
@@ -219,6 +231,7 @@ COMMANDS = {
     "testset": _testset,
     "verify": _verify,
     "robustness": _robustness,
+    "options": _options,
     "discriminate": discriminate.run,
     "figure": figures.run,
 }

@@ -204,6 +204,9 @@ def build_parser() -> argparse.ArgumentParser:
     rb.add_argument("--workers", type=types.workers, default=None, help="worker processes (default: by the work)")
     rb.add_argument("--out", type=Path, required=True, metavar="DIR", help="where robustness.json, .png and ROBUSTNESS.md go")
 
+    op = sub.add_parser("options", help="a task's options (--option NAME=VALUE) with their values: its defaults, or as set")
+    task_option(op, tasks, "the task whose options to list")
+
     discriminate.add_parser(sub, tasks)
     figures.add_parser(sub, tasks)
     return parser
