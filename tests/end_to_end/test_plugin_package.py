@@ -124,5 +124,6 @@ def test_an_installed_plugin_adds_its_task_and_kind_everywhere_and_uninstalling_
     assert refused.returncode == 2
     assert refused.stderr.strip() == (
         "etmpc: error: unknown task 'slider'; valid: cart_pendulum/balance, cart_pendulum/kicks, cart_pendulum/kicks_late, "
-        "cart_pendulum/kicks_levels, battery/trading, reacher/jumps, reacher/jumps_late, quadrotor/waypoints"
+        "cart_pendulum/kicks_levels, cart_pendulum/kicks_noisy, battery/trading, reacher/jumps, reacher/jumps_late, "
+        "quadrotor/waypoints, quadrotor/waypoints_noisy"
     )

@@ -111,10 +111,12 @@ def test_a_broken_task_plugin_is_one_warning_naming_it_and_every_other_task_stil
         "cart_pendulum/kicks",
         "cart_pendulum/kicks_late",
         "cart_pendulum/kicks_levels",
+        "cart_pendulum/kicks_noisy",
         "battery/trading",
         "reacher/jumps",
         "reacher/jumps_late",
         "quadrotor/waypoints",
+        "quadrotor/waypoints_noisy",
     )
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # read once: no second warning
@@ -122,7 +124,8 @@ def test_a_broken_task_plugin_is_one_warning_naming_it_and_every_other_task_stil
     with pytest.raises(
         UnknownNameError,
         match="valid: cart_pendulum/balance, cart_pendulum/kicks, cart_pendulum/kicks_late, cart_pendulum/kicks_levels, "
-        "battery/trading, reacher/jumps, reacher/jumps_late, quadrotor/waypoints",
+        "cart_pendulum/kicks_noisy, battery/trading, reacher/jumps, reacher/jumps_late, quadrotor/waypoints, "
+        "quadrotor/waypoints_noisy",
     ):
         registry.check_name("broken")
 
@@ -247,10 +250,12 @@ def test_a_task_plugin_whose_import_exits_or_raises_anything_is_one_warning(plug
         "cart_pendulum/kicks",
         "cart_pendulum/kicks_late",
         "cart_pendulum/kicks_levels",
+        "cart_pendulum/kicks_noisy",
         "battery/trading",
         "reacher/jumps",
         "reacher/jumps_late",
         "quadrotor/waypoints",
+        "quadrotor/waypoints_noisy",
     )
     assert registry.make_system("battery").name == "battery/trading"
 

@@ -49,10 +49,10 @@ for _domain, _task in suite.ALL_TASKS:
 def test_suite_containers_list_every_task_as_dm_control_suite_does():
     assert suite.ALL_TASKS == tuple((d, t) for d, package in domains().items() for t in package.TASKS)  # the registry's
     built_in = {
-        "cart_pendulum": ("balance", "kicks", "kicks_late", "kicks_levels"),
+        "cart_pendulum": ("balance", "kicks", "kicks_late", "kicks_levels", "kicks_noisy"),
         "battery": ("trading",),
         "reacher": ("jumps", "jumps_late"),
-        "quadrotor": ("waypoints",),
+        "quadrotor": ("waypoints", "waypoints_noisy"),
     }
     assert suite.TASKS_BY_DOMAIN.items() >= built_in.items()
     assert set(suite.BENCHMARKING) == set(suite.ALL_TASKS)

@@ -109,7 +109,8 @@ def test_keys_name_a_task_by_its_id_and_carry_a_price():
         with pytest.raises(
             UnknownNameError,
             match="valid: cart_pendulum/balance, cart_pendulum/kicks, cart_pendulum/kicks_late, cart_pendulum/kicks_levels, "
-            "battery/trading, reacher/jumps, reacher/jumps_late, quadrotor/waypoints",
+            "cart_pendulum/kicks_noisy, battery/trading, reacher/jumps, reacher/jumps_late, quadrotor/waypoints, "
+            "quadrotor/waypoints_noisy",
         ):
             systems.check_name(bad)
 
