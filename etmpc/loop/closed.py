@@ -67,6 +67,11 @@ class ClosedLoop:
     and the plan comes into force with age ``d``. On a task with compute levels a decision is
     ``KEEP``, ``ITERATE`` or ``SOLVE`` (``True``/``False`` are a full solve/keep), and a recompute
     costs its SQP iterations.
+
+    Sensing (:mod:`etmpc.control.sensing`): :attr:`x` is always the plant's state (recorded, rewarded,
+    judged for failures); :attr:`seen` is what the controller reads of it: :attr:`x` itself with an exact
+    sensor, else the filter's estimate (:attr:`belief`'s mean) after this step's reading. The MPC plans from
+    :attr:`seen`, the feedback corrects from it, and the policy is shown it.
     """
 
     def __init__(self, system: System, env: dm_env.Environment, records: bool = True):
