@@ -40,6 +40,7 @@ from etmpc.common.outputs import strict
 from etmpc.common.provenance import LIBM_WORDS, libm_rounding
 from etmpc.evaluation import metrics
 from etmpc.evaluation.evaluate import parse_policies, run_jobs
+from etmpc.evaluation import carried as carry
 from etmpc.evaluation.references import SUITE_VERSION, References, stored
 from etmpc.evaluation.card import TaskScore, aggregate, by_policy
 from etmpc.evaluation.workers import workers_for
@@ -93,7 +94,7 @@ def _suite(card: dict, where: str) -> dict[str, References]:
             raise EtmpcError(f"{where} scored {task} at version {versions.get(task)!r}; this etmpc's is {task_version(task)}")
         ref = shown.get(task)
         if isinstance(ref, dict) and not ref.get("stored") and ref.get("options"):
-            references[task] = _carried(task, ref, where)  # a task with options: its references are the card's
+            references[task] = carry.carried(task, ref, where)  # a task with options: its references are the card's
             continue
         if not isinstance(ref, dict) or not ref.get("stored"):
             raise EtmpcError(f"{where} scored {task} on another test set than the stored one: it is not a suite result")
@@ -108,43 +109,6 @@ def _suite(card: dict, where: str) -> dict[str, References]:
             )
         references[task] = refs
     return references
-
-
-def _carried(task: str, ref: dict, where: str) -> References:
-    """The references a card scored ``task`` against with its options (computed for that run on the stored test
-    set, carried in the card episode by episode): what this replay checks the card's rows against, and replays
-    in turn on the sampled episodes (:func:`_reference_jobs`)."""
-    try:
-        options = system_key(task, None, tuple(ref["options"].items())).options  # the options, checked here
-        best, oracle = [float(v) for v in ref["best_objectives"]], [float(v) for v in ref["oracle_objectives"]]
-        episodes, price = ref["episodes"], float(ref["recompute_price"])
-        refs = References(
-            task,
-            ref["test_set_sha256"],
-            episodes,
-            price,
-            ref["objective_sense"],
-            {ref["best_periodic"]: best},
-            ref["best_periodic"],
-            oracle,
-        )
-    except (KeyError, TypeError, ValueError, AttributeError) as exc:
-        raise EtmpcError(f"{where}: its references of {task} with options are incomplete ({exc})") from None
-    if len(best) != episodes or len(oracle) != episodes or not isinstance(episodes, int) or episodes < 1:
-        raise EtmpcError(
-            f"{where}: its references of {task} carry {len(best)} and {len(oracle)} objectives for {episodes} episodes"
-        )
-    stored_sha = stored(task).test_set_sha256
-    if refs.test_set_sha256 != stored_sha:
-        raise EtmpcError(f"{where} scored {task} on another test set than the stored one: it is not a suite result")
-    if dict(options) != ref["options"]:
-        raise EtmpcError(f"{where}: {task}'s options {ref['options']} are not written as etmpc writes them ({dict(options)})")
-    return refs
-
-
-def _options(card: dict, task: str) -> tuple:
-    """The options ``card`` scored ``task`` with (none: the task as it is)."""
-    return tuple(((card.get("references") or {}).get(task) or {}).get("options", {}).items())
 
 
 def _stated_references(card: dict, references: dict[str, References]) -> list[str]:
@@ -340,7 +304,7 @@ def verify(path: str | Path, size: int = SAMPLE, seed: int = 0, workers: int | N
     jobs, expected = [], []
     for index in replayable:
         row, refs = rows[index], references[rows[index].task]
-        key = system_key(row.task, None, _options(card, row.task))
+        key = system_key(row.task, None, carry.options_of(card, row.task))
         try:
             (policy,) = parse_policies(key.make(), [row.policy]).values()
         except EtmpcError as exc:
@@ -349,13 +313,14 @@ def verify(path: str | Path, size: int = SAMPLE, seed: int = 0, workers: int | N
         for episode in sample(refs.episodes, size, seed, index):
             jobs.append((key, None, refs.test_set_sha256, row.policy, policy, 0, episode, 0, False))
             expected.append((row, refs, episode))
-    checked = _reference_jobs(card, references, size, seed, len(rows))  # references carried by the card: replayed too
+    # the references a card carries (a task scored with options): replayed too, each sampled as a row after the card's
+    checked = carry.reference_jobs(card, references, lambda episodes, k: sample(episodes, size, seed, len(rows) + k))
     jobs += [job for job, _ in checked]
     outcomes = run_jobs(jobs, workers or workers_for(len(jobs)), progress) if jobs else []
-    for (result, _, _), (_, (task, spec, episode, carried)) in zip(outcomes[len(expected) :], checked):
-        if not _same(carried, result.objective):
+    for (result, _, _), (_, (task, spec, episode, stated)) in zip(outcomes[len(expected) :], checked):
+        if not _same(stated, result.objective):
             mismatches.append(
-                f"{path}: {task} references' {spec} episode {episode}: objective {carried!r} in the card, "
+                f"{path}: {task} references' {spec} episode {episode}: objective {stated!r} in the card, "
                 f"{result.objective!r} replayed"
             )
     outcomes = outcomes[: len(expected)]
@@ -380,25 +345,6 @@ def verify(path: str | Path, size: int = SAMPLE, seed: int = 0, workers: int | N
                     f"{value!r} replayed"
                 )
     return Verdict(str(path), len(rows), len(jobs), mismatches, _caution(card))
-
-
-def _reference_jobs(card: dict, references: dict[str, References], size: int, seed: int, rows: int) -> list[tuple]:
-    """The replays of the references a card carries (a task scored with options): its best schedule and the oracle
-    over it on a seeded sample of the episodes (drawn as the sample of a row after the card's ``rows``), each job
-    with what it must give, ``(task, spec, episode, objective)``."""
-    found = []
-    for position, (task, refs) in enumerate(references.items()):
-        options = _options(card, task)
-        if not options:
-            continue
-        key = system_key(task, None, options)
-        system = key.make()
-        for spec, objectives in ((refs.best, refs.periodic[refs.best]), (refs.oracle_spec, refs.oracle)):
-            (policy,) = parse_policies(system, [spec]).values()
-            for episode in sample(refs.episodes, size, seed, rows + position):
-                job = (key, None, refs.test_set_sha256, spec, policy, 0, episode, 0, False)
-                found.append((job, (task, spec, episode, objectives[episode])))
-    return found
 
 
 def _caution(card: dict) -> str | None:

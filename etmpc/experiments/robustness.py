@@ -148,11 +148,14 @@ def parse_vary(text: str) -> tuple[str, list[str]]:
     return name, found
 
 
-def write(document: dict, out: Path) -> list[Path]:
-    """``robustness.json``, ``ROBUSTNESS.md`` and ``robustness.png`` into ``out``."""
+def write(document: dict, out: Path, table: bool = True) -> list[Path]:
+    """``robustness.json``, ``robustness.png`` and (with ``table``) ``ROBUSTNESS.md`` into ``out``."""
     from etmpc.views.robustness import write_robustness_png
 
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / "robustness.json", document)
-    (out / "ROBUSTNESS.md").write_text(markdown(document))
-    return [out / "robustness.json", out / "ROBUSTNESS.md", write_robustness_png(document, out / "robustness.png")]
+    written = [out / "robustness.json", write_robustness_png(document, out / "robustness.png")]
+    if table:
+        (out / "ROBUSTNESS.md").write_text(markdown(document))
+        written.append(out / "ROBUSTNESS.md")
+    return written

@@ -153,12 +153,8 @@ class ClosedLoop:
         if self.plan is None:
             return None
         plan, age = self.plan, self.age
-        ctx = (
-            DecisionContext(self.system, self.env, self.step_index, plan, age, self.u_prev, self.timestep, self.belief)
-            if context
-            else None
-        )
-        shown = self.observation if observes else None
+        loop = (self.system, self.env, self.step_index, plan, age, self.u_prev, self.timestep, self.belief)
+        ctx, shown = DecisionContext(*loop) if context else None, self.observation if observes else None
         return AugmentedState(self.seen, plan.states[0], age, plan.state_at(age), plan, shown, ctx, self.belief)
 
     def step(self, recompute: bool | int, started: float | None = None, solved: Plan | None = None) -> float:
@@ -289,10 +285,7 @@ class ClosedLoop:
         """What the controller sees of the state now (:attr:`seen`): the state itself with an exact sensor;
         else the reading of this step, filtered (after the interval under ``u``; ``None``: the filter starts
         again, at the episode's start or after the task put the plant back), recorded with the estimate."""
-        if self.estimator is None:
-            self.seen = self.x
-            return
-        if not np.isfinite(self.x).all():  # the plant failed: the episode ends here, nothing to read
+        if self.estimator is None or not np.isfinite(self.x).all():  # exact; or the plant failed: nothing to read
             self.seen = self.x
             return
         if self._readings is None:  # the episode's draws (those of the episode a light loop plays on)

@@ -76,8 +76,9 @@ def test_an_installed_plugin_adds_its_task_and_kind_everywhere_and_uninstalling_
     before = run("-c", SEES)
     assert before.returncode == 0, before.stderr
     assert before.stdout.splitlines() == [
-        "tasks cart_pendulum/balance cart_pendulum/kicks cart_pendulum/kicks_late cart_pendulum/kicks_levels battery/trading "
-        "reacher/jumps reacher/jumps_late quadrotor/waypoints",
+        "tasks cart_pendulum/balance cart_pendulum/kicks cart_pendulum/kicks_late cart_pendulum/kicks_levels "
+        "cart_pendulum/kicks_noisy battery/trading reacher/jumps reacher/jumps_late quadrotor/waypoints "
+        "quadrotor/waypoints_noisy",
         "kinds always never every iterate threshold rl self py sb3 shield rollout oracle",
     ]
 
@@ -85,8 +86,9 @@ def test_an_installed_plugin_adds_its_task_and_kind_everywhere_and_uninstalling_
     after = run("-c", SEES)
     assert after.returncode == 0, after.stderr
     assert after.stdout.splitlines() == [
-        "tasks cart_pendulum/balance cart_pendulum/kicks cart_pendulum/kicks_late cart_pendulum/kicks_levels battery/trading "
-        "reacher/jumps reacher/jumps_late quadrotor/waypoints slider/track",
+        "tasks cart_pendulum/balance cart_pendulum/kicks cart_pendulum/kicks_late cart_pendulum/kicks_levels "
+        "cart_pendulum/kicks_noisy battery/trading reacher/jumps reacher/jumps_late quadrotor/waypoints "
+        "quadrotor/waypoints_noisy slider/track",
         "kinds always never every iterate threshold rl self py sb3 shield rollout oracle driftage",
         "suite () (1,)",
         "gym (12,)",
