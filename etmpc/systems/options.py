@@ -136,6 +136,8 @@ def apply(config: Any, options: Mapping[str, Any] | Iterable[tuple[str, Any]]) -
     """``config`` with ``options`` set (each value text to parse, or a value of the field's type). An unknown
     name is refused listing the valid ones; a bad value names the option; the settings' own checks run."""
     items = options.items() if isinstance(options, Mapping) else options
+    if not dataclasses.is_dataclass(config):
+        raise EtmpcError(f"this task's Config ({type(config).__name__}) is not a dataclass: it takes no options")
     known = tuple(settable(config))
     for name, value in items:
         text = value if isinstance(value, str) else canonical(value if not isinstance(value, list) else tuple(value))
