@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import hashlib
 from dataclasses import dataclass, field
+from functools import lru_cache
 from typing import Any
 
 import casadi as ca
@@ -88,14 +89,9 @@ class Sensor:
         return zero(self.noise_std) and zero(self.bias) and zero(self.quantum) and all(self.measured) and self.dropout == 0
 
     def arrays(self, nx: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """``(noise_std, bias, quantum, measured)`` as arrays of ``nx`` entries (checked against ``nx``)."""
-        measured = np.ones(nx, bool) if not self.measured else _per_state("measured", self.measured, nx, 1.0).astype(bool)
-        return (
-            _per_state("noise_std", self.noise_std, nx, 0.0),
-            _per_state("bias", self.bias, nx, 0.0),
-            _per_state("quantum", self.quantum, nx, 0.0),
-            measured,
-        )
+        """``(noise_std, bias, quantum, measured)`` as read-only arrays of ``nx`` entries (checked against ``nx``;
+        made once per sensor and size: every step's reading uses them)."""
+        return _arrays(self, nx)
 
     def measurement_variance(self, nx: int) -> np.ndarray:
         """The variance a filter assumes per state: the noise's, plus the rounding's (``q^2 / 12``)."""
@@ -138,6 +134,20 @@ class FilterSettings:
                 raise BadValue(f"a filter's {name} is one or more values > 0, got {values}")
 
 
+@lru_cache(maxsize=64)
+def _arrays(sensor: Sensor, nx: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    measured = np.ones(nx, bool) if not sensor.measured else _per_state("measured", sensor.measured, nx, 1.0).astype(bool)
+    made = (
+        _per_state("noise_std", sensor.noise_std, nx, 0.0),
+        _per_state("bias", sensor.bias, nx, 0.0),
+        _per_state("quantum", sensor.quantum, nx, 0.0),
+        measured,
+    )
+    for array in made:
+        array.flags.writeable = False  # shared by every reading of this sensor
+    return made
+
+
 @dataclass(frozen=True, eq=False)
 class Belief:
     """What the filter knows after a step's reading: the estimate's ``mean`` and ``covariance``, the
@@ -169,20 +179,21 @@ class ExtendedKalmanFilter:
     settings: FilterSettings = FilterSettings()
     process_std: np.ndarray = field(init=False)
     initial_std: np.ndarray = field(init=False)
+    nx: int = field(init=False)
     _step: ca.Function = field(init=False, repr=False)
+    _process_covariance: np.ndarray = field(init=False, repr=False)  # diag(process_std^2), added at every prediction
+    _variance: np.ndarray = field(init=False, repr=False)  # the sensor's measurement variance per state
 
     def __post_init__(self):
         nx = int(self.model.size1_in(0))
         x, u = ca.SX.sym("x", nx), ca.SX.sym("u", self.model.size1_in(1))
         x_next = self.model(x, u)
+        object.__setattr__(self, "nx", nx)
         object.__setattr__(self, "_step", ca.Function("ekf_predict", [x, u], [x_next, ca.jacobian(x_next, x)]))
         object.__setattr__(self, "process_std", _per_state("process_std", self.settings.process_std, nx, 0.0))
         object.__setattr__(self, "initial_std", _per_state("initial_std", self.settings.initial_std, nx, 1.0))
-        self.sensor.arrays(nx)  # checked against the model's size now
-
-    @property
-    def nx(self) -> int:
-        return int(self.model.size1_in(0))
+        object.__setattr__(self, "_process_covariance", np.diag(self.process_std**2))
+        object.__setattr__(self, "_variance", self.sensor.measurement_variance(nx))  # checked against the size now
 
     def start(self, y: np.ndarray, seen: np.ndarray) -> Belief:
         """The belief after the first reading: a prior of mean 0 and ``initial_std``, corrected by it."""
@@ -192,7 +203,7 @@ class ExtendedKalmanFilter:
         """The mean and covariance one interval on, under input ``u``."""
         x_next, a = self._step(belief.mean, u)
         a = np.asarray(a)
-        return np.asarray(x_next).ravel(), a @ belief.covariance @ a.T + np.diag(self.process_std**2)
+        return np.asarray(x_next).ravel(), a @ belief.covariance @ a.T + self._process_covariance
 
     def step(self, belief: Belief, u: np.ndarray, y: np.ndarray, seen: np.ndarray) -> Belief:
         """Predict over the interval under ``u``, then correct with the reading ``y`` of the entries ``seen``."""
@@ -202,7 +213,7 @@ class ExtendedKalmanFilter:
         innovation = np.full(self.nx, np.nan)
         if not seen.any():
             return Belief(mean, covariance, innovation)
-        variance = self.sensor.measurement_variance(self.nx)[seen]
+        variance = self._variance[seen]
         h = np.eye(self.nx)[seen]
         nu = y[seen] - mean[seen]
         s = covariance[np.ix_(seen, seen)] + np.diag(variance)
