@@ -201,8 +201,8 @@ def score(
     if test_set is not None and not isinstance(test_set, (str, Path)):
         raise EtmpcError(f"test_set: a file path is needed, got {type(test_set).__name__} {test_set!r}")
     tasks = distinct(names() if tasks is None else tasks)
-    given = tuple(options.items()) if isinstance(options, dict) else tuple(options)
-    keys = {task: system_key(task, None, given) for task in tasks}  # each task with the options, checked
+    keys = {task: system_key(task, None, options) for task in tasks}  # each task with the options, checked
+    given = next(iter(keys.values())).options  # as the keys write them (the same names and values for every task)
     if test_set is not None and len(tasks) != 1:
         raise EtmpcError("--test-set belongs to one task: give exactly one --task with it")
     if test_set is not None and not Path(test_set).is_file():

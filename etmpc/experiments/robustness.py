@@ -25,7 +25,7 @@ from etmpc.common.provenance import commit_and_date
 from etmpc.common.sense import oriented
 from etmpc.evaluation import metrics
 from etmpc.evaluation.evaluate import evaluate
-from etmpc.systems import system_key
+from etmpc.systems import system_class, system_key
 from etmpc.systems.options import canonical, settable, shown, split
 
 FORMAT = "etmpc-robustness"
@@ -94,7 +94,7 @@ def robustness(
         "format": FORMAT,
         "task": system.name,
         "option": option,
-        "default": canonical(settable(system_key(task).make().config)[option]),
+        "default": canonical(settable(system_class(task).Config())[option]),
         "fixed": dict(keys[0].options) | {option: None},
         "objective_sense": sense,
         "against": against,

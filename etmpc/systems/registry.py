@@ -353,7 +353,7 @@ def system_key(name: str | SystemKey, recompute_price: float | None = None, opti
         if recompute_price is not None or options:
             raise TypeError("give a task's name with a price and options, or a SystemKey alone")
         return name
-    return SystemKey(name, recompute_price, tuple(options.items()) if isinstance(options, dict) else tuple(options))
+    return SystemKey(name, recompute_price, options)  # a mapping or pairs: the key writes them canonically
 
 
 def make_system(key: str | SystemKey):
