@@ -151,17 +151,19 @@ def _arrays(sensor: Sensor, nx: int) -> tuple[np.ndarray, np.ndarray, np.ndarray
 @dataclass(frozen=True, eq=False)
 class Belief:
     """What the filter knows after a step's reading: the estimate's ``mean`` and ``covariance``, the
-    reading's ``innovation`` (reading minus prediction; NaN where nothing was read) and its normalised
+    reading's ``innovation`` (reading minus prediction; NaN where nothing was read), its normalised
     squared size ``nis`` (``nu' S^-1 nu``: chi-square with as many degrees of freedom as entries read, when
-    the filter's model is right; 0 when nothing was read)."""
+    the filter's model is right; 0 when nothing was read) and the ``reading`` itself (NaN where nothing was
+    read)."""
 
     mean: np.ndarray
     covariance: np.ndarray
     innovation: np.ndarray
+    reading: np.ndarray
     nis: float = 0.0
 
     def __post_init__(self):
-        for name in ("mean", "covariance", "innovation"):
+        for name in ("mean", "covariance", "innovation", "reading"):
             getattr(self, name).flags.writeable = False
 
 
@@ -212,7 +214,7 @@ class ExtendedKalmanFilter:
     def correct(self, mean: np.ndarray, covariance: np.ndarray, y: np.ndarray, seen: np.ndarray) -> Belief:
         innovation = np.full(self.nx, np.nan)
         if not seen.any():
-            return Belief(mean, covariance, innovation)
+            return Belief(mean, covariance, innovation, innovation.copy())
         variance = self._variance[seen]
         h = np.eye(self.nx)[seen]
         nu = y[seen] - mean[seen]
@@ -221,4 +223,7 @@ class ExtendedKalmanFilter:
         keep = np.eye(self.nx) - gain @ h
         covariance = keep @ covariance @ keep.T + (gain * variance) @ gain.T
         innovation[seen] = nu
-        return Belief(mean + gain @ nu, (covariance + covariance.T) / 2, innovation, float(nu @ np.linalg.solve(s, nu)))
+        reading = np.full(self.nx, np.nan)
+        reading[seen] = y[seen]
+        nis = float(nu @ np.linalg.solve(s, nu))
+        return Belief(mean + gain @ nu, (covariance + covariance.T) / 2, innovation, reading, nis)

@@ -114,18 +114,23 @@ def _iterate(arg: str, spec: str, context: Context) -> Policy:
 
 
 def _threshold(arg: str, spec: str, context: Context) -> Policy:
-    text, _, answer = arg.partition(":")
+    text, *modifiers = arg.split(":")
     level = _number(text, float, spec)
     if not (math.isfinite(level) and level >= 0):
         raise EtmpcError(f"bad policy {spec!r}: the threshold must be a finite number >= 0")
+    reads = modifiers[-1:] == ["reading"]
+    answer = ":".join(modifiers[:-1] if reads else modifiers)
     if answer not in ("", "iterate"):
-        raise EtmpcError(f"bad policy {spec!r}: after the threshold only ':iterate' may follow (one SQP iteration)")
+        raise EtmpcError(
+            f"bad policy {spec!r}: after the threshold only ':iterate' (one SQP iteration) and then ':reading' "
+            "(the error on the sensor's readings) may follow"
+        )
     if answer and not context.levels:
         raise EtmpcError(
             f"bad policy {spec!r}: one SQP iteration is a compute level, and task {context.task} has none "
             "(its decisions are keep or solve): write threshold:X"
         )
-    return Threshold(level, np.asarray(context.error_weights, dtype=float), iterate=bool(answer))
+    return Threshold(level, np.asarray(context.error_weights, dtype=float), iterate=bool(answer), reads=reads)
 
 
 def _learned(path: str, context: Context) -> Policy:

@@ -26,14 +26,20 @@ class Threshold:
     weights: np.ndarray
     stochastic: bool = False
     iterate: bool = False  # on a task with compute levels: one SQP iteration, not a full solve
+    reads: bool = False  # the error on this step's readings, not on the filter's estimate
     observes: ClassVar[bool] = False
 
     @property
     def spec(self) -> str:
-        return f"threshold:{self.level:g}" + (":iterate" if self.iterate else "")
+        return f"threshold:{self.level:g}" + (":iterate" if self.iterate else "") + (":reading" if self.reads else "")
 
     def decide(self, s: AugmentedState, rng: np.random.Generator) -> bool | int:
-        fired = norm(self.weights * (s.x - s.x_predicted)) > self.level
+        if self.reads and s.belief is not None:
+            read = ~np.isnan(s.belief.reading)
+            error = self.weights[read] * (s.belief.reading[read] - s.x_predicted[read])
+        else:
+            error = self.weights * (s.x - s.x_predicted)
+        fired = norm(error) > self.level
         if self.iterate:
             return ITERATE if fired else KEEP
         return fired
