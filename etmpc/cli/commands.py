@@ -146,17 +146,18 @@ def _replay(args) -> None:
 
 def _bench(args) -> None:
     from etmpc.evaluation.bench import format_bench, run_bench
-    from etmpc.systems import check_name, names
+    from etmpc.systems import check_name, names, system_key
 
     domains = args.task or list(names())
     for domain in domains:  # all names checked before any bench runs
         check_name(domain)
+    keys = {domain: system_key(domain, options=args.options) for domain in domains}  # and every task's options
     check_run_outputs({"--json": args.json})
     figures = {}
     # counted between the tasks' measurements, never inside one: the bar costs no measured time
     with Progress(len(domains), unit="tasks") as bar:
         for domain in domains:
-            figures[domain] = run_bench(domain, episodes=args.episodes, references=not args.no_reference)
+            figures[domain] = run_bench(keys[domain], episodes=args.episodes, references=not args.no_reference)
             bar.result(format_bench(figures[domain]))
             bar.update()
     if args.json is not None:

@@ -50,7 +50,7 @@ def run(args) -> None:
     check_name(args.task)
     check_run_outputs({"--json": args.json})
     started = time.perf_counter()
-    found = discriminate(args.task, args.price, args.episodes, args.workers, progress=True)
+    found = discriminate(args.task, args.price, args.episodes, args.workers, progress=True, options=args.options)
     print(format_discrimination(args.task, found, args.episodes, time.perf_counter() - started))
     if args.json is not None:
         write_json(args.json, found)

@@ -84,12 +84,13 @@ def _forecasts(args) -> None:
 def _trajectory(args) -> None:
     from etmpc.evaluation.inputs import run_inputs
     from etmpc.experiments import figures
-    from etmpc.systems import check_name
+    from etmpc.systems import check_name, system_key
 
     check_name(args.task)
+    key = system_key(args.task, options=args.options)
     out = args.out or figures.trajectory_path(args.task, args.policy, args.episode)
     _check({"--out": out}, run_inputs([args.policy]))
-    drawn = figures.trajectory(out, args.task, args.policy, args.episode, args.seed)
+    drawn = figures.trajectory(out, key, args.policy, args.episode, args.seed)
     print(
         f"episode {args.episode} under {args.policy}: objective {drawn.objective!r}, {drawn.recomputes} recomputes, "
         f"{drawn.solver_failures} solver failures"

@@ -31,13 +31,13 @@ def task_option(parser, tasks: str, what: str = "the task", many: bool = False, 
         default=None,
         metavar="NAME=VALUE",
         help="set one of the task's options (repeatable; e.g. sensor.noise_std=0.01; `etmpc options --task TASK` "
-        f"lists them){'' if parser.prog.split()[-1] in TAKES_OPTIONS else ' (not taken by this command yet)'}",
+        f"lists them){'' if parser.prog.split()[1] in TAKES_OPTIONS else ' (not taken by this command yet)'}",
     )
     parser.set_defaults(task_many=many)
 
 
 #: The commands that play a task with its options (``--option``); the others refuse them, saying so.
-TAKES_OPTIONS = ("evaluate", "score", "render", "testset", "robustness", "options")
+TAKES_OPTIONS = ("evaluate", "score", "render", "testset", "robustness", "options", "train", "bench", "discriminate", "figure")
 
 
 def resolve(args) -> None:

@@ -175,7 +175,7 @@ def run(args) -> None:
     values, notes = legacy.given(args, cls.name, {f.name for f in dataclasses.fields(cls.Settings)})
     path = args.settings if args.settings is not None else args.hyperparams
     check_run_outputs({}, {"--out": args.out}, {"--settings": path})
-    key = system_key(args.task, args.price)
+    key = system_key(args.task, args.price, args.options)
     seeds = _seeds(args.seeds, cls)
     settings = configure(cls, path, key.task, {**values, **dict(args.set or [])})
     workers = args.workers or default_workers()
@@ -197,5 +197,6 @@ def run(args) -> None:
         )
     written = sorted(f"{p.name}/" if p.is_dir() else p.name for p in Path(args.out).iterdir())
     price = "" if args.price is None else f" --price {args.price:g}"
+    price += "".join(f" --option {name}={value}" for name, value in key.options)
     evaluate = f"etmpc evaluate --task {args.task} --policy {done.policy}{price}"
     print(f"wrote {args.out}: {', '.join(written)} (evaluate it with: {evaluate})")

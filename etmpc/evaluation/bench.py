@@ -35,7 +35,7 @@ from etmpc.common.errors import EtmpcError
 from etmpc.loop import Snapshot, play_on, run_episode
 from etmpc.loop.closed import cpu_clock
 from etmpc.policies import parse_policy
-from etmpc.systems import make_system
+from etmpc.systems import SystemKey, system_key
 from etmpc.systems.capabilities import Bench, offers
 
 
@@ -196,8 +196,13 @@ def _rollout_steps(system, env, testset, episodes: int, repeats: int = 5) -> dic
     }
 
 
-def run_bench(domain: str = "cart_pendulum", episodes: int = 10, references: bool = True, reference_solves: int = 200) -> dict:
-    system = make_system(domain)
+def run_bench(
+    domain: str | SystemKey = "cart_pendulum", episodes: int = 10, references: bool = True, reference_solves: int = 200
+) -> dict:
+    """Time ``domain``'s solves and steps (a task's name, or a :class:`SystemKey` with its options) on its first test-set
+    ``episodes``: what ``etmpc bench`` prints."""
+    key = system_key(domain)
+    system = key.make()
     testset = ts_mod.load(ts_mod.default_path(system.domain, system.task), system.domain, system.task)
     if episodes > testset.episodes:
         raise EtmpcError(f"--episodes {episodes}: the {domain} test set has {testset.episodes} episodes")
@@ -212,6 +217,8 @@ def run_bench(domain: str = "cart_pendulum", episodes: int = 10, references: boo
     rest = np.concatenate([t.step_time_s[: t.steps] - np.nan_to_num(t.solve_time_s[: t.steps]) for t in trajectories])
     figures = {
         "domain": system.domain,
+        "task": system.name,
+        **({"options": dict(key.options)} if key.options else {}),
         "machine": {"processor": platform.processor() or platform.machine(), "python": platform.python_version()},
         "episodes": episodes,
         "mpc_solve": _stats(solves),
@@ -233,7 +240,8 @@ def run_bench(domain: str = "cart_pendulum", episodes: int = 10, references: boo
 
 def format_bench(f: dict) -> str:
     lines = [
-        f"{f['domain']}: {f['episodes']} test-set episodes per policy, single process",
+        f"{f.get('task', f['domain'])}{''.join(f' --option {k}={v}' for k, v in f.get('options', {}).items())}: {f['episodes']} "
+        "test-set episodes per policy, single process",
         f"MPC solve          median {f['mpc_solve']['median_ms']:.3f} ms   p90 {f['mpc_solve']['p90_ms']:.3f} ms   "
         f"({f['mpc_solve']['samples']} solves)",
         f"rest of a step     median {f['rest_of_step']['median_us']:.1f} us   p90 {f['rest_of_step']['p90_ms'] * 1e3:.1f} us"

@@ -17,30 +17,38 @@ from __future__ import annotations
 from etmpc.common.progress import stage
 from etmpc.evaluation.evaluate import evaluate
 from etmpc.experiments.pareto import best_periodic, episode_table, versus_front
-from etmpc.systems import make_system
+from etmpc.systems import system_key
 
 EPISODES = 30  # the first stored test-set episodes played by default
 ROLLOUT_FUTURES, ROLLOUT_HORIZON = 4, 20  # rollout:BEST:K:H, H capped at the task's lookahead
 
 
 def discriminate(
-    task: str, price: float | None = None, episodes: int = EPISODES, workers: int | None = None, progress: bool = False
+    task: str,
+    price: float | None = None,
+    episodes: int = EPISODES,
+    workers: int | None = None,
+    progress: bool = False,
+    options=(),
 ) -> dict:
     """What :mod:`this module <etmpc.experiments.discriminate>` describes, as a dict: ``price``,
     ``best_periodic``, ``fixed`` and ``priced`` (the two evaluations' JSON), and ``rows``: per event trigger,
     oracle and rollout, its row of :func:`~etmpc.experiments.pareto.versus_front` (``None`` outside the
-    periodic schedules' range of rates), in that order. ``progress``: each of the two stages' time left on stderr."""
-    system = make_system(task)
+    periodic schedules' range of rates), in that order. ``progress``: each of the two stages' time left on stderr.
+    ``options``: the task's (:mod:`etmpc.systems.options`), for both stages."""
+    unpriced = system_key(task, None, options)
+    system = unpriced.make()
     price = system.recompute_price if price is None else price
+    priced_key = system_key(task, price, options)
     periodic = [f"every:{t}" for t in range(1, system.horizon + 1)]
     events = system.benchmark.threshold_specs()
     common = dict(episodes=episodes, progress=progress, workers=workers)
     with stage(f"{task}: {len(periodic)} periodic schedules and {len(events)} event triggers"):
-        fixed = evaluate(task, periodic + events, **common).to_json()
+        fixed = evaluate(unpriced, periodic + events, **common).to_json()
     best = best_periodic(fixed, periodic, price, system.objective_sense)
     specs = [f"oracle:{best}", f"rollout:{best}:{ROLLOUT_FUTURES}:{system.benchmark.capped(ROLLOUT_HORIZON)}"]
     with stage(f"{task}: the oracle and the rollout over {best}"):
-        priced = evaluate(task, specs, recompute_price=price, **common).to_json()
+        priced = evaluate(priced_key, specs, **common).to_json()
     table = {**episode_table(fixed), **episode_table(priced)}
     rows = {spec: versus_front(table, periodic, spec, system.objective_sense) for spec in events + specs}
     return {"price": price, "best_periodic": best, "fixed": fixed, "priced": priced, "rows": rows}

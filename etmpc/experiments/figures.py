@@ -27,7 +27,7 @@ from etmpc.evaluation.inputs import check_shipped
 from etmpc.evaluation.workers import context, play_test_episode
 from etmpc.loop import run_episode
 from etmpc.policies import parse_policy
-from etmpc.systems import make_system
+from etmpc.systems import make_system, system_key
 from etmpc.systems import spec as spec_of
 from etmpc.views import figures
 
@@ -77,16 +77,16 @@ class Drawn:
     solver_failures: int
 
 
-def trajectory(out: str | Path, task: str, spec: str, episode: int = 0, seed: int = 0) -> Drawn:
-    """Test-set ``episode`` of ``task`` under policy ``spec``, played as ``etmpc evaluate`` plays it (repeat 0
-    of ``seed``), drawn to ``out``."""
+def trajectory(out: str | Path, task, spec: str, episode: int = 0, seed: int = 0) -> Drawn:
+    """Test-set ``episode`` of ``task`` (a name, or a :class:`~etmpc.systems.SystemKey` with its options) under
+    policy ``spec``, played as ``etmpc evaluate`` plays it (repeat 0 of ``seed``), drawn to ``out``."""
     system = context(task)[0]
     played = play_test_episode(task, _policy(system, spec), seed, 0, episode)  # as evaluate plays it
     traj = played.trajectory
     objective, control = scores(system, traj)
     what = cost_or_profit(system.objective_sense)
     title = (
-        f"{system.name} test-set episode {episode}, policy {spec}: {what} {objective:.5g} "
+        f"{system_key(task)} test-set episode {episode}, policy {spec}: {what} {objective:.5g} "
         f"({control:.5g} without their price), {traj.recomputes} recomputes"
     )
     path = figures.write_trajectory_png(out, system, traj, title, system.signals(played.episode))

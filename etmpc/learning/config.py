@@ -39,6 +39,7 @@ class TrainConfig:
     dpi: dpi.Settings = field(default_factory=dpi.Settings)  # used when algorithm == "dpi" (levels: dpi.level_bases)
     validation_episodes: int = 50  # training-distribution episodes that choose selected.json
     recompute_price: float | None = None  # the price of a recompute to train for (None: the task's)
+    options: tuple[tuple[str, str], ...] = ()  # the task's options to train under (etmpc.systems.options)
 
     def __post_init__(self):
         checks.typed(self, finite=True, most=checks.MAX_SEED)  # a checkpoint's too: read from a file
@@ -51,19 +52,20 @@ class TrainConfig:
         if self.algorithm not in ALGORITHMS:
             raise EtmpcError(f"unknown algorithm {self.algorithm!r}; valid: {', '.join(ALGORITHMS)}")
         object.__setattr__(self, "domain", canonical(self.domain))  # the task's own name; a bad one fails here
-        self.system  # a bad price fails here
+        object.__setattr__(self, "options", self.system.options)  # a bad price or option fails here; kept canonical
         # On a task with compute levels DPI's default first schedules include iterate:1..5, written out here
         # (so the checkpoint and the policy's hyperparameters say which it chose among).
         object.__setattr__(self, "dpi", dpi.level_bases(self.dpi, has_levels(self.domain)))
 
     @property
     def system(self) -> SystemKey:
-        """The key workers build the system by: the domain, at ``recompute_price`` if one is set."""
-        return SystemKey(self.domain, self.recompute_price)
+        """The key workers build the system by: the domain, at ``recompute_price`` if one is set, with its options."""
+        return SystemKey(self.domain, self.recompute_price, self.options)
 
     def to_json(self) -> dict:
         data = asdict(self)
         data["seeds"] = list(self.seeds)
+        data["options"] = [list(pair) for pair in self.options]
         data["dpi"]["bases"] = list(self.dpi.bases)
         return data
 
@@ -74,6 +76,7 @@ class TrainConfig:
         data["gpomdp"] = Settings(**data["gpomdp"])
         data.setdefault("features", "paper")  # checkpoints from before feature sets
         data.setdefault("recompute_price", None)  # checkpoints from before prices
+        data["options"] = tuple(tuple(pair) for pair in data.get("options", ()))  # and before options
         dpi_settings = dict(data.get("dpi", {}))
         if "bases" in dpi_settings:
             dpi_settings["bases"] = tuple(dpi_settings["bases"])

@@ -23,7 +23,7 @@ from etmpc.learning.config import SELECTION_ENTROPY, TrainConfig
 from etmpc.learning.jobs import _call, _learner_to_json, mean_scores
 from etmpc.policies.features import DEFAULT_FEATURES, check_features
 from etmpc.policies.learned import LogisticPolicy, Normalisation
-from etmpc.systems import SystemKey, has_levels, make_system
+from etmpc.systems import has_levels, make_system
 
 
 @dataclass(frozen=True)
@@ -125,6 +125,7 @@ class _Phased(Learner):
             **{n: getattr(s, n) for n in _SHARED},
             algorithm=self.algorithm,
             recompute_price=self.key.recompute_price,
+            options=self.key.options,
             **own,
         )
 
@@ -138,10 +139,8 @@ class _Phased(Learner):
 
     def check(self) -> None:
         config = self.config()
-        if self._config is not None and (
-            SystemKey(config.domain, config.recompute_price) != self.key or config.seeds != self.seeds
-        ):
-            raise EtmpcError("the learner's configuration is for another task, price or seeds")
+        if self._config is not None and (config.system != self.key or config.seeds != self.seeds):
+            raise EtmpcError("the learner's configuration is for another task, price, options or seeds")
         refuse_foreign(self.out, ours, "training run")
         if self.settings.record_episodes and self.recorder is None:
             raise EtmpcError("record episodes: nothing to write them with: pass recorder=etmpc.views.recording.Recorder")
@@ -209,6 +208,8 @@ class _Phased(Learner):
         }
         if config.recompute_price is not None:  # trained for another price than the task's own
             hyper["recompute_price"] = config.recompute_price
+        if config.options:  # trained with some of the task's options set
+            hyper["options"] = dict(config.options)
         hyper.update(self._hyperparameters(config))
         greedy, levels = config.algorithm == "dpi", has_levels(config.domain)
         initial = LogisticPolicy.initial(normalisation, config.domain, hyper, config.features, greedy=greedy, levels=levels)

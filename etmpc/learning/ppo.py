@@ -159,7 +159,13 @@ class PpoLearner(Learner):
         return state
 
     def state(self) -> dict:
-        return {"format": RESUME_FORMAT, "version": 1, "settings": _json(self.settings), "checkpoints": self.checkpoints}
+        return {
+            "format": RESUME_FORMAT,
+            "version": 1,
+            "task": str(self.key),
+            "settings": _json(self.settings),
+            "checkpoints": self.checkpoints,
+        }
 
     def _environments(self):
         from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnvWrapper
@@ -221,6 +227,11 @@ class PpoLearner(Learner):
             raise EtmpcError(
                 f"{self.out} holds a PPO run with other settings; resume with the same ones, or choose another --out"
             )
+        if state.get("task", str(self.key)) != str(self.key):  # a run stopped before etmpc wrote the task: not checked
+            raise EtmpcError(
+                f"{self.out} holds a PPO run on {state['task']}, not {self.key}; resume it with that task and options, "
+                "or choose another --out"
+            )
         self.checkpoints = list(state["checkpoints"])
         last = self.checkpoints[-1]
         self.setup()  # the model and the normalisation the settings make, then the run's numbers into them
@@ -254,6 +265,7 @@ class PpoLearner(Learner):
             recompute_price=self.system.recompute_price,
             timesteps=int(model.num_timesteps),
             settings=_json(s),
+            **({"options": dict(self.key.options)} if self.key.options else {}),  # trained with some of the task's options
         )
         score = validate(self.pool, self.key, [f"sb3:{path}"], s.validation_episodes)[0]
         simulated = self._simulated_before + int(sum(vec.get_attr("simulated_steps")))  # the baseline's steps too

@@ -22,7 +22,7 @@ NOISE = ["--option", "sensor.noise_std=0.01,0,0.01,0", "--option", "sensor.measu
         (["evaluate", "--task", KICKS, "--policy", "every:3", "--option", "horizon"], "NAME=VALUE"),
         (["evaluate", "--task", KICKS, "--policy", "every:3", "--option", "horizon=x"], "not a whole number"),
         (["evaluate", "--task", "battery", "--policy", "every:3", "--option", "sensor.noise_std=1"], "unknown option"),
-        (["bench", "--task", KICKS, "--option", "horizon=10"], "etmpc bench does not take --option yet"),
+        (["sweep", "--task", KICKS, "--option", "horizon=10"], "etmpc sweep does not take --option yet"),
         (["score", "--task", KICKS, "--leaderboard", "--option", "horizon=10"], "no --option with them"),
         (["robustness", "--task", KICKS, "--vary", "horizon", "--policy", "every:3", "--out", "x"], "NAME=VALUE"),
         (
@@ -96,3 +96,40 @@ def test_the_robustness_curve_is_evaluate_at_each_value_paired_against_the_basel
         assert level["policies"]["every:3"]["improvement_pct"] == 0.0
     # stronger kicks cost the fixed schedule more, on the same episodes
     assert document["levels"][1]["policies"]["every:3"]["objective"] > document["levels"][0]["policies"]["every:3"]["objective"]
+
+
+def test_figure_trajectory_plays_the_episode_with_the_options(tmp_path, capsys):
+    out = tmp_path / "noisy.png"
+    assert main(["figure", "trajectory", "--task", KICKS, "--policy", "every:3", "--out", str(out), *NOISE]) == 0
+    shown = capsys.readouterr().out
+    key = system_key(KICKS, None, {"sensor.noise_std": "0.01,0,0.01,0", "sensor.measured": "1,0,1,0"})
+    noisy = evaluate(key, ["every:3"], 1, workers=1, progress=False).to_json()["runs"][0]["objective"]
+    exact = evaluate(KICKS, ["every:3"], 1, workers=1, progress=False).to_json()["runs"][0]["objective"]
+    assert f"objective {noisy!r}" in shown and noisy != exact and out.stat().st_size > 0
+
+
+def test_discriminate_plays_both_stages_with_the_options(monkeypatch):
+    from etmpc.experiments import discriminate
+
+    keys = []
+
+    class Stop(Exception):
+        pass
+
+    def evaluate(key, *args, **kwargs):
+        keys.append(key)
+        raise Stop
+
+    monkeypatch.setattr(discriminate, "evaluate", evaluate)
+    with pytest.raises(Stop):
+        discriminate.discriminate(KICKS, 0.2, 1, 1, options={"disturbances.kick_scale": "2"})
+    assert keys == [system_key(KICKS, None, {"disturbances.kick_scale": "2"})]
+    assert main(["discriminate", "--task", KICKS, "--option", "disturbances.kick_scal=2"]) == 2
+
+
+def test_bench_times_the_task_with_its_options(capsys):
+    from etmpc.evaluation.bench import format_bench, run_bench
+
+    figures = run_bench(system_key("battery", None, {"horizon": "12"}), episodes=1, references=False)
+    assert figures["options"] == {"horizon": "12"} and figures["mpc_solve"]["samples"] > 0
+    assert format_bench(figures).splitlines()[0].startswith("battery/trading --option horizon=12: 1 test-set episodes")

@@ -13,6 +13,7 @@ from etmpc.common.errors import EtmpcError
 from etmpc.learning import base
 from etmpc.learning.base import Learner, learner_class, learners, load_settings, shipped
 from etmpc.learning.runner import run
+from etmpc.systems import system_key
 
 TINY = {
     "gpomdp": dict(episodes=4, eval_every=2, eval_episodes=2, normalisation_episodes=2, validation_episodes=2),
@@ -318,3 +319,11 @@ def test_a_ppo_run_folder_handed_to_resume_is_data_its_paths_stay_inside_and_a_p
     with pytest.raises(EtmpcError, match=r"step_\d{8}\.zip: not this run's weights") as refused:
         run(tiny("ppo"), "battery", tmp_path / "cut", SEEDS["ppo"], resume=True, progress=False)
     assert "\n" not in str(refused.value) and not (tmp_path / "ran").exists()
+
+
+def test_a_stopped_ppo_run_resumes_only_on_its_task_price_and_options(tmp_path, monkeypatch):
+    pytest.importorskip("stable_baselines3")
+    _stopped_ppo_run(tmp_path, monkeypatch)
+    assert json.loads((tmp_path / "cut" / "checkpoints" / "resume.json").read_text())["task"] == "battery/trading"
+    with pytest.raises(EtmpcError, match="holds a PPO run on battery/trading, not battery/trading@0.5; resume it with that task"):
+        run(tiny("ppo"), system_key("battery", 0.5), tmp_path / "cut", SEEDS["ppo"], resume=True, progress=False)
