@@ -32,6 +32,7 @@ class Config:
     recompute_price: float = 5e-5  # per recompute, in the policy cost R_k
     rk4_substeps: int = 1  # RK4 steps of the MPC's predictor per 0.1 s interval (the paper: step 0.1 s)
     plant: str = "mismatched"  # or "matched"
+    disturbances: cp_env.Disturbances = cp_env.Disturbances()  # the angular disturbance (the world's), as options
     solver: SolverSettings = SolverSettings()
 
 
@@ -67,7 +68,9 @@ class CartPendulumSystem(SystemBase):
         return system_mpc(self, stage, terminal, "cart_pendulum_mpc")
 
     def make_env(self, random=None):
-        return cp_env.make_environment(random=random, plant=self.config.plant)
+        """The dm-control environment: the balance task at this Config's ``plant`` and ``disturbances``."""
+        disturbances = getattr(self.config, "disturbances", None)  # a Config of another task's may lack them
+        return cp_env.make_environment(random=random, plant=self.config.plant, disturbances=disturbances)
 
     def plan(self, x: np.ndarray, u_prev: np.ndarray, warm: Plan | None, age: int, timestep: dm_env.TimeStep) -> Plan:
         return self.mpc.solve(x, u_prev, warm, age)

@@ -6,6 +6,7 @@ as the generalised force ``M(q) e_hinge w``, refreshed before every physics step
 the angular acceleration ``w`` the paper adds to ``omega_dot`` (exactly at the start of each
 physics step; MuJoCo holds the force over the step's RK4 stages, so the cart coupling lags by up
 to one 0.025 s step: ~1e-3 over 2 s, see tests/tasks/cart_pendulum/test_cart_pendulum_model.py).
+Its standard deviation and a scale on every disturbance played are the task's options (:class:`Disturbances`).
 
 Two plant settings, ``mismatched`` (the default) and ``matched``: see ``physics.py``.
 
@@ -38,12 +39,13 @@ import numpy as np
 from dm_control.rl import control
 from dm_env import specs
 
+from etmpc.common.checks import BadValue
 from etmpc.systems.cart_pendulum.model import NX, STATE_NAMES
 from etmpc.systems.cart_pendulum.physics import Physics, load_model
 from etmpc.systems.plants import PLANTS
 from etmpc.systems.episodes import GAUSSIAN_BOUND_STD, EpisodeTask, Random, build_environment
 
-__all__ = ["PLANTS", "Episode", "Balance", "Physics", "load_model", "make_environment"]
+__all__ = ["PLANTS", "Disturbances", "Episode", "Balance", "Physics", "load_model", "make_environment"]
 
 CONTROL_DT_S = 0.1
 EPISODE_STEPS = 100
@@ -58,6 +60,24 @@ _FALLEN_RGB = np.array([0.85, 0.1, 0.1])
 
 
 @dataclass(frozen=True)
+class Disturbances:
+    """The task's angular disturbance, as options (``--option disturbances.disturbance_scale=2``).
+    ``angular_std_rad_s2`` says how episodes are drawn (``etmpc testset --option ...`` draws a test set with it; a
+    rollout redraws a future with it); ``disturbance_scale`` multiplies every disturbance as it is played, a stored
+    episode's too, so that one test set measures a trigger against a stronger or gentler disturbance, episode by
+    episode (``etmpc robustness``)."""
+
+    angular_std_rad_s2: float = DISTURBANCE_STD_RAD_S2  # w ~ N(0, this) per control interval
+    disturbance_scale: float = 1.0  # every disturbance played, times this
+
+    def __post_init__(self):
+        for name in ("angular_std_rad_s2", "disturbance_scale"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise BadValue(f"{name} is a finite number >= 0, got {value}")
+
+
+@dataclass(frozen=True)
 class Episode:
     """Everything random about one episode, drawn in advance: a test-set row."""
 
@@ -65,9 +85,10 @@ class Episode:
     disturbance: np.ndarray  # (EPISODE_STEPS,) rad/s^2, held over each control interval
 
     @classmethod
-    def draw(cls, rng: np.random.Generator, steps: int = EPISODE_STEPS) -> Episode:
+    def draw(cls, rng: np.random.Generator, steps: int = EPISODE_STEPS, disturbances: Disturbances | None = None) -> Episode:
+        d = Disturbances() if disturbances is None else disturbances
         initial_state = rng.uniform(INITIAL_STATE_LOW, INITIAL_STATE_HIGH)
-        disturbance = rng.normal(0.0, DISTURBANCE_STD_RAD_S2, size=steps)
+        disturbance = rng.normal(0.0, d.angular_std_rad_s2, size=steps)
         return cls(initial_state, disturbance)
 
     def arrays(self) -> dict[str, np.ndarray]:
@@ -119,34 +140,42 @@ class Balance(CartPendulumTask):
 
     Each episode (initial state and disturbance sequence) is drawn from ``random`` on reset, or is
     a stored one queued with :meth:`use_episode` (see :class:`etmpc.systems.episodes.EpisodeTask`).
+    ``disturbances`` (:class:`Disturbances`) says how they are drawn and how their disturbances are played.
     """
+
+    def __init__(self, random: Random = None, steps: int = EPISODE_STEPS, disturbances: Disturbances | None = None):
+        super().__init__(random, steps)
+        self.disturbances = Disturbances() if disturbances is None else disturbances
 
     def check_episode(self, episode: Episode) -> None:
         if episode.disturbance.shape[0] < self._steps:
             raise ValueError(f"episode has {episode.disturbance.shape[0]} disturbances, need {self._steps}")
 
     def draw_episode(self, random: np.random.Generator) -> Episode:
-        return Episode.draw(random, self._steps)
+        return Episode.draw(random, self._steps, self.disturbances)
 
     def resample_episode(self, episode: Episode, step: int, random: np.random.Generator) -> Episode:
         """``episode`` with the disturbances of intervals ``step..`` redrawn: at the decision of step
         ``step`` the controller has felt those of the earlier intervals only (they are i.i.d.)."""
         disturbance = np.array(episode.disturbance)
-        disturbance[step:] = random.normal(0.0, DISTURBANCE_STD_RAD_S2, size=disturbance.size - step)
+        disturbance[step:] = random.normal(0.0, self.disturbances.angular_std_rad_s2, size=disturbance.size - step)
         return Episode(episode.initial_state, disturbance)
 
     def episode_parameters(self) -> dict:
-        """What the episodes are drawn from (recorded in the test set)."""
+        """What the episodes are drawn from (recorded in the test set; the disturbances' scale where it is not 1)."""
+        d = self.disturbances
         return {
             "initial_state_low": INITIAL_STATE_LOW.tolist(),
             "initial_state_high": INITIAL_STATE_HIGH.tolist(),
-            "disturbance_std_rad_s2": DISTURBANCE_STD_RAD_S2,
+            "disturbance_std_rad_s2": d.angular_std_rad_s2,
+            **({"disturbance_scale": d.disturbance_scale} if d.disturbance_scale != 1 else {}),
             "steps": EPISODE_STEPS,
         }
 
     def episode_ranges(self) -> dict:
-        """What a stored episode may hold (checked before it is played)."""
-        bound = GAUSSIAN_BOUND_STD * DISTURBANCE_STD_RAD_S2
+        """What a stored episode may hold (checked before it is played): disturbances within ``GAUSSIAN_BOUND_STD``
+        standard deviations, of the task's or the options' if larger."""
+        bound = GAUSSIAN_BOUND_STD * max(DISTURBANCE_STD_RAD_S2, self.disturbances.angular_std_rad_s2)
         return {"initial_state": (INITIAL_STATE_LOW, INITIAL_STATE_HIGH), "disturbance": (-bound, bound)}
 
     def signals(self, episode: Episode) -> dict[str, np.ndarray]:
@@ -162,7 +191,8 @@ class Balance(CartPendulumTask):
 
     def before_step(self, action, physics: Physics) -> None:
         physics.set_control(action)
-        physics.set_disturbance(self._episode.disturbance[self._step])
+        w, scale = self._episode.disturbance[self._step], self.disturbances.disturbance_scale
+        physics.set_disturbance(w if scale == 1 else w * scale)
         self._step += 1
 
     def after_step(self, physics: Physics) -> None:
@@ -183,8 +213,13 @@ class Balance(CartPendulumTask):
 
 
 def make_environment(
-    random: Random = None, plant: str = "mismatched", steps: int = EPISODE_STEPS, environment_kwargs: dict | None = None
+    random: Random = None,
+    plant: str = "mismatched",
+    steps: int = EPISODE_STEPS,
+    environment_kwargs: dict | None = None,
+    disturbances: Disturbances | None = None,
 ) -> control.Environment:
     root = load_model(plant)
     physics = Physics.from_xml_string(root.to_xml_string(), assets=root.get_assets())
-    return build_environment(physics, Balance(random=random, steps=steps), steps, CONTROL_DT_S, environment_kwargs)
+    task = Balance(random=random, steps=steps, disturbances=disturbances)
+    return build_environment(physics, task, steps, CONTROL_DT_S, environment_kwargs)
