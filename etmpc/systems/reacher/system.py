@@ -74,6 +74,8 @@ class Config:
     plant: str = "mismatched"
     latency: Latency = Latency()  # how long a solve takes (etmpc.control.timing); none: the paper's loop
     compute_levels: bool = False  # a decision is keep, one SQP iteration or a full solve, priced per iteration
+    # the target's jumps (the world's: task.Disturbances), as options
+    disturbances: reacher_task.Disturbances = reacher_task.Disturbances()
     # what the controller measures, and its filter (etmpc.control.sensing): the exact state by default
     sensor: Sensor = Sensor()
     estimator: FilterSettings = FilterSettings()

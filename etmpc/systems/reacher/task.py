@@ -13,6 +13,7 @@ periodic schedule at the same rate of recomputes.
   target is drawn at radius ``U(0.3, 0.95)`` m and angle ``U(+-pi)`` (the arm reaches 1 m); at each
   later interval, with probability 0.04 (0.4 jumps per second), it jumps to a new one drawn alike.
   All drawn in advance (:class:`Episode`). The target of interval ``i`` is observed at its decision.
+  The rate of jumps and the radii are options (:class:`Disturbances`: ``--option disturbances.jumps_per_s=2``).
 * **Observation**: the state (``model.STATE_NAMES``), the current target ``target_x_m``,
   ``target_y_m`` and the fingertip ``fingertip_x_m``, ``fingertip_y_m``.
 * **Reward** ``-d^2 / (d^2 + 0.1^2)`` per step, in ``(-1, 0]``, with ``d`` the fingertip's distance
@@ -32,12 +33,13 @@ from dm_control.rl import control
 from dm_control.utils import containers
 from dm_env import specs
 
+from etmpc.common.checks import BadValue
 from etmpc.systems.episodes import EpisodeTask, Random, add_task, build_environment, jump_process
-from etmpc.systems.reacher.model import NX, STATE_NAMES
+from etmpc.systems.reacher.model import NX, STATE_NAMES, Parameters
 from etmpc.systems.plants import PLANTS
 from etmpc.systems.reacher.physics import Physics, load_model
 
-__all__ = ["PLANTS", "SUITE", "Episode", "Jumps", "Physics", "load_model", "make_environment"]
+__all__ = ["PLANTS", "SUITE", "Disturbances", "Episode", "Jumps", "Physics", "load_model", "make_environment"]
 
 CONTROL_DT_S = 0.1
 PHYSICS_DT_S = 0.01  # 10 RK4 steps per interval
@@ -47,9 +49,31 @@ INITIAL_STATE_HIGH = np.array([math.pi, 2.5, 0.0, 0.0])
 JUMPS_PER_S = 0.4
 JUMP_PROBABILITY = JUMPS_PER_S * CONTROL_DT_S  # per interval after the first
 TARGET_RADIUS_M = (0.3, 0.95)  # radius ~ U(low, high), angle ~ U(-pi, pi)
+REACH_M = Parameters().upper_arm_length_m + Parameters().forearm_length_m  # the arm's (the MJCF's links are as long)
 DISTANCE_SCALE_M = 0.1  # reward -d^2 / (d^2 + 0.1^2); farther than this is a failure
 OBSERVATION_NAMES = (*STATE_NAMES, "target_x_m", "target_y_m", "fingertip_x_m", "fingertip_y_m")
 SUITE = containers.TaggedTasks()
+
+
+@dataclass(frozen=True)
+class Disturbances:
+    """The target's jumps, as options (``--option disturbances.jumps_per_s=2``): how episodes are drawn (``etmpc
+    testset --option ...`` draws a test set with them; a rollout redraws a future with them)."""
+
+    jumps_per_s: float = JUMPS_PER_S  # a jump with probability jumps_per_s * CONTROL_DT_S per interval after the first
+    target_radius_m: tuple[float, ...] = TARGET_RADIUS_M  # a target's radius ~ U(low, high), within the arm's reach
+
+    def __post_init__(self):
+        object.__setattr__(self, "target_radius_m", tuple(self.target_radius_m))
+        if not 0 <= self.jumps_per_s * CONTROL_DT_S <= 1:
+            raise BadValue(f"jumps_per_s is in [0, {1 / CONTROL_DT_S:g}] (at most one jump an interval), got {self.jumps_per_s}")
+        pair = self.target_radius_m
+        if not (len(pair) == 2 and 0 <= pair[0] <= pair[1] <= REACH_M):
+            raise BadValue(f"target_radius_m is (low, high) with 0 <= low <= high <= {REACH_M:g} (the arm's reach), got {pair}")
+
+    @property
+    def jump_probability(self) -> float:
+        return self.jumps_per_s * CONTROL_DT_S
 
 
 @dataclass(frozen=True)
@@ -60,10 +84,10 @@ class Episode:
     target: np.ndarray  # (steps, 2) m: the target of each interval
 
     @classmethod
-    def draw(cls, rng: np.random.Generator, steps: int = EPISODE_STEPS) -> Episode:
+    def draw(cls, rng: np.random.Generator, steps: int = EPISODE_STEPS, disturbances: Disturbances | None = None) -> Episode:
         initial_state = rng.uniform(INITIAL_STATE_LOW, INITIAL_STATE_HIGH)
-        first = draw_target(rng)
-        return cls(initial_state, np.vstack([first, continue_targets(rng, first, steps - 1)]))
+        first = draw_target(rng, disturbances)
+        return cls(initial_state, np.vstack([first, continue_targets(rng, first, steps - 1, disturbances)]))
 
     def arrays(self) -> dict[str, np.ndarray]:
         return {"initial_state": self.initial_state, "target": self.target}
@@ -77,16 +101,20 @@ class Episode:
         return cls(initial_state, target)
 
 
-def draw_target(rng: np.random.Generator) -> np.ndarray:
-    """A target ``(x, y)``: radius ``U(TARGET_RADIUS_M)``, angle ``U(-pi, pi)``."""
-    radius, angle = rng.uniform(*TARGET_RADIUS_M), rng.uniform(-math.pi, math.pi)
+def draw_target(rng: np.random.Generator, disturbances: Disturbances | None = None) -> np.ndarray:
+    """A target ``(x, y)``: radius ``U(target_radius_m)`` (``TARGET_RADIUS_M`` by default), angle ``U(-pi, pi)``."""
+    d = Disturbances() if disturbances is None else disturbances
+    radius, angle = rng.uniform(*d.target_radius_m), rng.uniform(-math.pi, math.pi)
     return np.array([radius * math.cos(angle), radius * math.sin(angle)])
 
 
-def continue_targets(rng: np.random.Generator, current: np.ndarray, steps: int) -> np.ndarray:
+def continue_targets(
+    rng: np.random.Generator, current: np.ndarray, steps: int, disturbances: Disturbances | None = None
+) -> np.ndarray:
     """The targets of the ``steps`` intervals after one whose target is ``current``: each jumps to a
-    new target with probability ``JUMP_PROBABILITY``, else keeps the one before."""
-    return jump_process(rng, current, steps, JUMP_PROBABILITY, draw_target)
+    new target with the disturbances' probability (``JUMP_PROBABILITY`` by default), else keeps the one before."""
+    d = Disturbances() if disturbances is None else disturbances
+    return jump_process(rng, current, steps, d.jump_probability, lambda r: draw_target(r, d))
 
 
 def distance_reward(distance_m: float) -> float:
@@ -103,8 +131,9 @@ def far_steps(rewards: np.ndarray) -> int:
 class Jumps(EpisodeTask):
     """Keep the fingertip on a target that jumps at random times (see the module's docstring)."""
 
-    def __init__(self, random: Random = None, steps: int = EPISODE_STEPS):
+    def __init__(self, random: Random = None, steps: int = EPISODE_STEPS, disturbances: Disturbances | None = None):
         super().__init__(random)
+        self.disturbances = Disturbances() if disturbances is None else disturbances
         self._steps = steps
         self._step = 0
 
@@ -113,30 +142,31 @@ class Jumps(EpisodeTask):
             raise ValueError(f"episode has {episode.target.shape[0]} targets, need {self._steps}")
 
     def draw_episode(self, random: np.random.Generator) -> Episode:
-        return Episode.draw(random, self._steps)
+        return Episode.draw(random, self._steps, self.disturbances)
 
     def resample_episode(self, episode: Episode, step: int, random: np.random.Generator) -> Episode:
         """``episode`` with the targets of intervals after ``step`` redrawn: at the decision of step
         ``step`` the controller sees that interval's target, and jumps are memoryless."""
         target = np.array(episode.target)
-        target[step + 1 :] = continue_targets(random, target[step], target.shape[0] - step - 1)
+        target[step + 1 :] = continue_targets(random, target[step], target.shape[0] - step - 1, self.disturbances)
         return Episode(episode.initial_state, target)
 
     def episode_parameters(self) -> dict:
-        """What the episodes are drawn from (recorded in the test set)."""
+        """What the episodes are drawn from (recorded in the test set): the disturbances' jump probability and radii."""
+        d = self.disturbances
         return {
             "initial_state_low": INITIAL_STATE_LOW.tolist(),
             "initial_state_high": INITIAL_STATE_HIGH.tolist(),
-            "jump_probability": JUMP_PROBABILITY,
-            "target_radius_m": list(TARGET_RADIUS_M),
+            "jump_probability": d.jump_probability,
+            "target_radius_m": list(d.target_radius_m),
             "steps": EPISODE_STEPS,
             "distance_scale_m": DISTANCE_SCALE_M,
         }
 
     def episode_ranges(self) -> dict:
         """What a stored episode may hold (checked before it is played): each target's coordinates within
-        the largest radius."""
-        reach = TARGET_RADIUS_M[1]
+        the largest radius (the task's default, or the disturbances' if larger)."""
+        reach = max(TARGET_RADIUS_M[1], self.disturbances.target_radius_m[1])
         return {"initial_state": (INITIAL_STATE_LOW, INITIAL_STATE_HIGH), "target": (-reach, reach)}
 
     def signals(self, episode: Episode) -> dict[str, np.ndarray]:
@@ -176,11 +206,16 @@ class Jumps(EpisodeTask):
 
 
 def make_environment(
-    random: Random = None, plant: str = "mismatched", steps: int = EPISODE_STEPS, environment_kwargs: dict | None = None
+    random: Random = None,
+    plant: str = "mismatched",
+    steps: int = EPISODE_STEPS,
+    environment_kwargs: dict | None = None,
+    disturbances: Disturbances | None = None,
 ) -> control.Environment:
     root = load_model(plant, timestep_s=PHYSICS_DT_S)
     physics = Physics.from_xml_string(root.to_xml_string(), assets=root.get_assets())
-    return build_environment(physics, Jumps(random=random, steps=steps), steps, CONTROL_DT_S, environment_kwargs)
+    task = Jumps(random=random, steps=steps, disturbances=disturbances)
+    return build_environment(physics, task, steps, CONTROL_DT_S, environment_kwargs)
 
 
 add_task(
