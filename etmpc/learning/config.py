@@ -12,7 +12,8 @@ from etmpc.common.errors import EtmpcError
 from etmpc.learning import dpi
 from etmpc.learning.gpomdp import Settings
 from etmpc.policies.features import DEFAULT_FEATURES, check_features
-from etmpc.systems import SystemKey, canonical, has_levels
+from etmpc.systems import SystemKey, canonical, has_levels, system_class
+from etmpc.systems.capabilities import RewardFailures, require
 
 TRAIN_ENTROPY = 0x6574_6D70_6321  # "etmpc!"
 NORMALISATION_ENTROPY = 0x6E6F_726D  # "norm"
@@ -56,6 +57,8 @@ class TrainConfig:
         # On a task with compute levels DPI's default first schedules include iterate:1..5, written out here
         # (so the checkpoint and the policy's hyperparameters say which it chose among).
         object.__setattr__(self, "dpi", dpi.level_bases(self.dpi, has_levels(self.domain)))
+        if self.algorithm == "dpi" and self.dpi.failure_cost:  # refused before any work, not in a worker
+            require(system_class(self.domain), RewardFailures, "DPI's failure_cost")
 
     @property
     def system(self) -> SystemKey:

@@ -77,14 +77,18 @@ class Settings:
     ridge: float = 1e-2  # L2 weight on theta (not on the bias), per labelled decision
     bases: tuple[str, ...] = BASES  # candidates for pi_0 (with levels, by default also LEVEL_BASES: level_bases)
     selection_episodes: int = 30  # training episodes that choose pi_0 among the bases
+    # what each of the task's failures (falls, steps outside the geofence) in a labelling rollout costs on top of
+    # its reward: safety in the labels, its weight chosen on validation episodes (scripts/failure_cost.py); 0: none
+    failure_cost: float = 0.0
 
     def __post_init__(self):
         checks.typed(self, finite=True, most=checks.MAX_COUNT)
         for name in ("futures", "horizon", "states_per_episode", "selection_episodes"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
-        if self.ridge < 0:
-            raise ValueError(f"ridge must be >= 0, got {self.ridge}")
+        for name in ("ridge", "failure_cost"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"{name.replace('_', ' ')} must be >= 0, got {getattr(self, name)}")
 
 
 # 0. The first policy.
@@ -151,11 +155,13 @@ def label_episode(domain: str, base, settings: Settings, policy_json: dict, seed
         pick_rng.choice(system.episode_steps, size=min(settings.states_per_episode, system.episode_steps), replace=False).tolist()
     )
 
+    cost = dict(failure_cost=settings.failure_cost)
+
     def label(s, twin):  # every answer over the same sampled futures, then phi(s)
         if system.compute_levels:
-            keep, iterate, solve = q_values(s.context, base, settings.futures, future_rng, twin, settings.horizon)
+            keep, iterate, solve = q_values(s.context, base, settings.futures, future_rng, twin, settings.horizon, **cost)
             return featurise(s), float(np.mean(keep)), float(np.mean(solve)), s.context.step, float(np.mean(iterate))
-        keep, recompute = q_values(s.context, base, settings.futures, future_rng, twin, settings.horizon)
+        keep, recompute = q_values(s.context, base, settings.futures, future_rng, twin, settings.horizon, **cost)
         return featurise(s), float(np.mean(keep)), float(np.mean(recompute)), s.context.step
 
     labeller = Labeller(base, picked, label)

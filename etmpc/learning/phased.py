@@ -83,6 +83,7 @@ class DpiSettings(PhasedSettings):
     ridge: float = 1e-2
     bases: tuple[str, ...] = dpi.BASES  # on a task with compute levels, by default also dpi.LEVEL_BASES
     selection_episodes: int = 30
+    failure_cost: float = 0.0  # each failure in a labelling rollout costs this much more (dpi.Settings)
 
     @property
     def algorithm_settings(self) -> dpi.Settings:

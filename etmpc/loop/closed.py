@@ -201,13 +201,8 @@ class ClosedLoop:
         self.reward = reward
         if records:
             traj = self.trajectory
-            traj.recompute[i], traj.forced[i], traj.level[i], traj.work[i], traj.in_flight[i] = (
-                recompute,
-                forced,
-                level,
-                work,
-                in_flight,
-            )
+            traj.recompute[i], traj.forced[i], traj.level[i], traj.work[i] = recompute, forced, level, work
+            traj.in_flight[i] = in_flight
             traj.applied[i], traj.planned[i], traj.correction[i] = u, u_planned, correction
             traj.predicted[i], traj.plan_age[i] = x_predicted, self.age
             traj.rewards[i] = reward
@@ -358,6 +353,7 @@ def play_on(
     first_plan: Plan | None = None,
     stop: int | None = None,
     trace: Continuation | None = None,
+    failure_cost: float = 0.0,
 ) -> float:
     """Continue ``snapshot`` in ``env`` (a twin of the one it was taken in) and return the policy's
     return from the snapshot's step on: the sum of :meth:`ClosedLoop.step`'s rewards (the price of
@@ -370,7 +366,8 @@ def play_on(
     is the plan a recompute at the first step gives, when the caller has solved it already (it is
     the same for every future). ``stop`` is the step to stop before (default: the episode's end). A
     plant that fails (non-finite state) returns ``-inf``. ``trace``, if given (a new :class:`Continuation`),
-    is filled step by step.
+    is filled step by step. ``failure_cost``: the task's failures in the play (``system.failures_in_rewards``) cost
+    this much each, taken off the return.
 
     Plays :class:`ClosedLoop` in its light mode (a policy that never reads the observation sets
     ``observes = False``): the same numbers as :func:`run_episode`, bit for bit (tests/loop/test_rollout.py).
@@ -378,7 +375,7 @@ def play_on(
     loop = ClosedLoop(system, env, records=False).resume(snapshot, episode)
     end = system.episode_steps if stop is None else min(stop, system.episode_steps)
     observes = getattr(policy, "observes", True)  # the observation is made only when someone reads it
-    total = 0.0
+    total, rewards = 0.0, []
     while loop.step_index < end:
         if loop.step_index == snapshot.step:
             added = loop.step(first, solved=first_plan)
@@ -388,6 +385,7 @@ def play_on(
         if loop.failed:
             return -math.inf
         total += added
+        rewards.append(loop.reward)
         if trace is not None:
             trace.added.append(added)
             trace.recomputed.append(loop.recomputed)
@@ -396,4 +394,4 @@ def play_on(
             trace.after.append((loop.x, loop.plan, loop.age, loop.u_prev, loop.pending, loop.belief))
     if end < system.episode_steps:
         total += system.truncation_value(loop.x)
-    return total
+    return total - failure_cost * system.failures_in_rewards(np.array(rewards)) if failure_cost else total

@@ -31,7 +31,7 @@ from etmpc.common.errors import EtmpcError
 from etmpc.common.numerics import fsum
 from etmpc.control.timing import ITERATE, KEEP, SOLVE
 from etmpc.loop import AugmentedState, Continuation, DecisionContext, Policy, Snapshot, play_on
-from etmpc.systems.capabilities import Rollouts, require
+from etmpc.systems.capabilities import RewardFailures, Rollouts, require
 
 DEFAULT_FUTURES = 8
 MAX_FUTURES = 1000
@@ -46,6 +46,7 @@ def q_values(
     horizon: int | None = None,
     oracle: bool = False,
     memo: OracleMemo | None = None,
+    failure_cost: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Returns of each answer at ``context``'s decision, one row per answer and one column per future
     (paired): keeping and recomputing, or, on a task with compute levels, keeping, one SQP iteration
@@ -54,11 +55,17 @@ def q_values(
     ``twin`` is an environment of the same task to simulate in (``context.env`` is left untouched).
     With ``oracle``, the one future is the episode's stored one; then ``memo`` (an oracle's, whose
     base is deterministic and which plays to the episode's end) may already hold one of the two
-    answers, and is given the plays made here.
+    answers, and is given the plays made here. ``failure_cost``: each of the task's failures in a play costs this
+    much more (its ``failures_in_rewards``; DPI's safety weight), never with a ``memo`` (an oracle's plays are scored
+    as the task scores them).
     """
     system = context.system
     if not oracle:
         require(system, Rollouts, "a rollout over sampled futures")
+    if failure_cost:
+        require(system, RewardFailures, "a failure cost in learning")
+        if memo is not None:
+            raise ValueError("a failure cost is not an oracle's: give it without a memo")
     snapshot = Snapshot.take(context)
     episodes = [None] if oracle else [system.sample_future(snapshot.episode, context.step, rng) for _ in range(futures)]
     seeds = rng.integers(2**63, size=len(episodes)) if (base.stochastic and rng is not None) else [None] * len(episodes)
@@ -79,7 +86,7 @@ def q_values(
         for k, (episode, seed) in enumerate(zip(episodes, seeds)):
             base_rng = None if seed is None else np.random.default_rng(seed)
             trace = Continuation(context.step) if memo is not None else None
-            returns[index, k] = play_on(system, twin, snapshot, base, base_rng, first, episode, solved, stop, trace)
+            returns[index, k] = play_on(system, twin, snapshot, base, base_rng, first, episode, solved, stop, trace, failure_cost)
             if memo is not None:
                 memo.played(int(first), trace, returns[index, k])
     return returns

@@ -149,6 +149,7 @@ class SystemBase:
     # Trajectory, its first trajectory.steps rows: rewards, states, inputs, recomputes) and the episode it
     # played; each step judged on the steps up to it, so that the count never decreases as the episode goes on
     failures: Any = None
+    failures_in_rewards: Any = None  # (rewards) -> int: failures read off a stretch of rewards alone (the same count)
     # (x) -> the state's margin to a safety failure one interval on (at most 0: a failure), and the task's own
     # shield rule (capabilities.ShieldRule): what shield: plays around a policy
     safety_margin: Any = None

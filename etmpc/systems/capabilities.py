@@ -67,6 +67,13 @@ class Failures(Protocol):
     failures: Callable[[Any, Any], int]
 
 
+class RewardFailures(Protocol):
+    """Failures read off a stretch of rewards alone, ``(rewards) -> int`` (a fall's or a step's own reward says it
+    was one): what a failure cost in learning counts in a simulated future (DPI's ``failure_cost``)."""
+
+    failures_in_rewards: Callable[[np.ndarray], int]
+
+
 class SafetyMargin(Protocol):
     """How near a safety failure a state is, for shields (``shield:``): ``(x) -> float``, the margin (in
     ``margin_unit``) the state keeps one control interval on at its current rate: at most 0 is a failure. A
@@ -105,7 +112,17 @@ class TimeInTheLoop(Protocol):
 
 
 #: Every capability, in the order tests and docs list them.
-CAPABILITIES: tuple[type, ...] = (Experiments, Rollouts, ExogenousFeatures, Scene, Bench, Failures, SafetyMargin, TimeInTheLoop)
+CAPABILITIES: tuple[type, ...] = (
+    Experiments,
+    Rollouts,
+    ExogenousFeatures,
+    Scene,
+    Bench,
+    Failures,
+    RewardFailures,
+    SafetyMargin,
+    TimeInTheLoop,
+)
 
 C = TypeVar("C")
 

@@ -169,6 +169,8 @@ class KicksSystem(GaussNewtonSystem):
         return self.observed(timestep)
 
     # -- failures (episodes are drawn, resampled and described by the task: kicks.Kicks) -----------------
+    failures_in_rewards = staticmethod(kicks.falls)
+
     def failures(self, trajectory, episode) -> int:
         """Falls in an episode, from its rewards."""
         return kicks.falls(trajectory.rewards[: trajectory.steps])

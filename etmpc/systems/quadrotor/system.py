@@ -161,6 +161,8 @@ class QuadrotorSystem(GaussNewtonSystem):
         return stage, terminal
 
     # -- failures (episodes are drawn, resampled and described by the task: task.Waypoints) --------------
+    failures_in_rewards = staticmethod(quadrotor_task.failure_steps)
+
     def failures(self, trajectory, episode) -> int:
         """Steps ending outside the geofence or on the ground."""
         return quadrotor_task.failure_steps(trajectory.rewards[: trajectory.steps])

@@ -118,6 +118,8 @@ class ReacherSystem(GaussNewtonSystem):
         return stage, terminal
 
     # -- failures (episodes are drawn, resampled and described by the task: task.Jumps) -----------------
+    failures_in_rewards = staticmethod(reacher_task.far_steps)
+
     def failures(self, trajectory, episode) -> int:
         """Steps ending farther than 0.1 m from the target, from the rewards."""
         return reacher_task.far_steps(trajectory.rewards[: trajectory.steps])

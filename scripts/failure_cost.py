@@ -1,0 +1,182 @@
+"""Safety in DPI's labels, its weight chosen on validation episodes: ``docs/results/failure_cost.{json,md}``.
+
+    python scripts/failure_cost.py --work runs/failure_cost                       # quadrotor/waypoints: ~40 min
+    python scripts/failure_cost.py --work runs/failure_cost --task cart_pendulum/kicks_levels --costs 0,3,10
+    python scripts/failure_cost.py --page-only                                    # the page again from the JSON
+
+For each failure cost ``c`` of ``--costs`` (DPI's ``failure_cost``: each of the task's failures in a labelling
+rollout costs ``c`` on top of its reward), DPI is trained with the recipe the shipped ``learned.json`` records
+(``scripts/learners.py``'s), over the same seeds, in ``WORK/<task>/cost_<c>``; each run ships the seed it chose on
+its own validation episodes. The cost is then chosen on ``--validation`` training-distribution episodes (the
+stream ``etmpc train`` validates on, never the stored test set): the best mean objective among the costs whose
+mean failures per episode are at most the best fixed schedule's there, or, if none is, the fewest failures.
+Every cost's policy is scored on the stored test set beside the best fixed schedule (paired, 95 % CIs), so the
+page shows what the choice gave and what the others would have. Every stage is kept in WORK: run again, the
+script continues where it stopped.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+from learners import row, shipped_recipe  # scripts/learners.py: the shipped recipe, a card row as JSON
+
+from etmpc.common.provenance import commit_and_date
+from etmpc.evaluation.backends import make_backend
+from etmpc.evaluation.references import stored
+from etmpc.evaluation.scorecard import score
+from etmpc.experiments.stages import trained
+from etmpc.learning.config import VALIDATION_ENTROPY
+from etmpc.learning.jobs import episode_outcomes
+from etmpc.learning.runner import cost_path, timed
+from etmpc.systems import folder_name, make_system
+
+
+def runs(task: str, work: Path, costs: list[float], seeds: tuple[int, ...], workers: int) -> dict[float, dict]:
+    """One DPI run per cost (kept in WORK): its chosen policy, seed and training cost."""
+    recipe = replace(shipped_recipe(task), seeds=seeds)
+    done = {}
+    for cost in costs:
+        out = work / folder_name(task) / f"cost_{cost:g}"
+        config = replace(recipe, dpi=replace(recipe.dpi, failure_cost=cost))
+        with timed(out, workers):
+            trained(config, out, {"workers": workers, "backend": "local", "address": None}, progress=True)
+        chosen = json.loads((out / "selected.json").read_text())["hyperparameters"]
+        done[cost] = {
+            "policy": f"rl:{out / 'selected.json'}",
+            "seed": chosen["seed"],
+            "wall_seconds": json.loads(cost_path(out).read_text())["wall_seconds"],
+        }
+    return done
+
+
+def validate(task: str, specs: list[str], episodes: int, workers: int) -> list[dict]:
+    """Each spec's mean objective and failures per episode on the validation stream (paired episodes)."""
+    with make_backend("local", workers) as pool:
+        outcomes = episode_outcomes(pool, task, specs, VALIDATION_ENTROPY, episodes)
+    return [
+        {
+            "objective": float(np.mean(o[:, 0])),
+            "failures": float(np.mean(o[:, 1])),
+            "failures_ci95": float(1.96 * np.std(o[:, 1], ddof=1) / np.sqrt(len(o))),
+            "recomputes": float(np.mean(o[:, 2])),
+        }
+        for o in outcomes
+    ]
+
+
+def choose(costs: list[float], validation: dict, schedule: dict, sense: str) -> float:
+    """The cost with the best validation objective whose failures are at most the schedule's; else the fewest."""
+    sign = 1.0 if sense == "min" else -1.0
+    safe = [c for c in costs if validation[c]["failures"] <= schedule["failures"]]
+    if safe:
+        return min(safe, key=lambda c: sign * validation[c]["objective"])
+    return min(costs, key=lambda c: (validation[c]["failures"], sign * validation[c]["objective"]))
+
+
+def study(task: str, work: Path, costs: list[float], seeds, episodes: int, workers: int) -> dict:
+    system, refs = make_system(task), stored(task)
+    trained_runs = runs(task, work, costs, seeds, workers)
+    specs = [refs.best] + [trained_runs[c]["policy"] for c in costs]
+    checked = validate(task, specs, episodes, workers)
+    schedule, validation = checked[0], dict(zip(costs, checked[1:]))
+    chosen = choose(costs, validation, schedule, system.objective_sense)
+    card = score(specs, [task], workers=workers)
+    rows = {r.policy: row(r) for r in card.rows}
+    return {
+        "task": task,
+        "made": commit_and_date(),
+        "best_fixed": refs.best,
+        "seeds": list(seeds),
+        "validation_episodes": episodes,
+        "schedule": {"validation": schedule, "test": rows[refs.best]},
+        "costs": {
+            f"{c:g}": {**trained_runs[c], "validation": validation[c], "test": rows[trained_runs[c]["policy"]]} for c in costs
+        },
+        "chosen": f"{chosen:g}",
+    }
+
+
+def page(document: dict) -> str:
+    lines = [
+        "# A failure cost in DPI's labels",
+        "",
+        "<!-- Generated by scripts/failure_cost.py from docs/results/failure_cost.json: do not edit by hand. -->",
+        "",
+        "DPI labels each decision by rollouts (keep or recompute, over sampled futures); with a failure cost `c` "
+        "(`etmpc train --set failure_cost=c`) every failure of the task in a rollout (a fall, a step outside the "
+        "geofence) costs `c` more, so that the labels weigh safety beyond what the reward charges for it. The cost is "
+        "chosen on validation episodes of the training distribution (never the stored test set): the best mean "
+        "objective among the costs that fail no more often than the best fixed schedule there, else the fewest "
+        "failures. Each cost's run ships the seed it chose on its own validation episodes. The test columns are the "
+        "stored test set's (100 episodes): score 0 = the best fixed schedule, 100 = the oracle over it, ± a 95 % CI, "
+        "paired episode by episode.",
+        "",
+    ]
+    for task, t in document["tasks"].items():
+        made = t["made"]
+        dirty = " with uncommitted changes" if made.get("uncommitted_changes") else ""
+        lines += [
+            f"## `{task}`",
+            "",
+            f"Made at commit `{made['commit']}`{dirty} ({made['date']}) on {document['machine']}; seeds "
+            f"{', '.join(map(str, t['seeds']))}; {t['validation_episodes']} validation episodes. Chosen cost: "
+            f"**{t['chosen']}**.",
+            "",
+            "| | validation: objective | validation: failures / episode | test: score | test: failures / episode "
+            "| recomputes | training (min) |",
+            "|---|---:|---:|---:|---:|---:|---:|",
+        ]
+        s = t["schedule"]
+        lines.append(
+            f"| best fixed `{t['best_fixed']}` | {s['validation']['objective']:.4g} | {s['validation']['failures']:.2f} | "
+            f"0 | {s['test']['failures']:.2f} ± {s['test']['failures_ci95']:.2f} | {s['test']['recomputes']:.1f} | |"
+        )
+        for cost, c in t["costs"].items():
+            mark = " (chosen)" if cost == t["chosen"] else ""
+            lines.append(
+                f"| DPI, failure cost {cost}{mark} | {c['validation']['objective']:.4g} | {c['validation']['failures']:.2f} "
+                f"| {c['test']['score']:.1f} ± {c['test']['score_ci95']:.1f} | {c['test']['failures']:.2f} ± "
+                f"{c['test']['failures_ci95']:.2f} | {c['test']['recomputes']:.1f} | {c['wall_seconds'] / 60:.1f} |"
+            )
+        lines.append("")
+    return "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--work", type=Path, default=Path("runs/failure_cost"))
+    parser.add_argument("--task", action="append", default=None, help="default: quadrotor/waypoints")
+    parser.add_argument("--costs", default="0,3,10", help="failure costs to try, comma-separated (default 0,3,10)")
+    parser.add_argument("--seeds", default="0,1,2")
+    parser.add_argument("--validation", type=int, default=50, help="validation episodes that choose the cost")
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--out", type=Path, default=Path("docs/results"))
+    parser.add_argument("--page-only", action="store_true")
+    args = parser.parse_args()
+    path = args.out / "failure_cost.json"
+    if args.page_only:
+        (args.out / "failure_cost.md").write_text(page(json.loads(path.read_text())))
+        return
+    document = json.loads(path.read_text()) if path.exists() else {"tasks": {}}
+    costs = [float(c) for c in args.costs.split(",")]
+    seeds = tuple(int(s) for s in args.seeds.split(","))
+    started = time.perf_counter()
+    for task in args.task or ["quadrotor/waypoints"]:
+        document["tasks"][task] = study(task, args.work, costs, seeds, args.validation, args.workers)
+    document["machine"] = f"{platform.machine()}, {platform.system()}, {args.workers} workers"
+    document["seconds"] = time.perf_counter() - started
+    args.out.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(document, indent=1) + "\n")
+    (args.out / "failure_cost.md").write_text(page(document))
+    print(f"wrote {path} and {args.out / 'failure_cost.md'}")
+
+
+if __name__ == "__main__":
+    main()
