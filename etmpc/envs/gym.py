@@ -12,6 +12,9 @@ task's time limit, ``terminated`` only when the plant fails. ``info`` holds the 
 ``recompute``-d and whether that was ``forced``, and the episode's ``failures`` so far (an int, on
 every task that counts them). See :mod:`etmpc.envs.trigger` for the rest.
 
+``task_options={"sensor.noise_std": "0.01,0,0.01,0"}`` plays the task with some of its options set
+(:mod:`etmpc.systems.options`; ``etmpc options --task TASK`` lists them), as ``--option`` does on the command line.
+
 ``normalize="policies/<task>/ppo.json"`` hands out the observation normalised as that trained policy
 saw it (:class:`~etmpc.envs.normalization.Normalization`: ``VecNormalize``'s statistics, frozen, read
 from JSON): ``PPO.load`` of the shipped ``ppo.zip`` then decides on it as ``sb3:`` does. The spaces
@@ -66,10 +69,13 @@ class TriggerEnv(gymnasium.Env):
         render_mode: str | None = None,
         width: int = WIDTH,
         height: int = HEIGHT,
+        task_options=(),
     ):
         check_render(render_mode, width, height)  # before the MPC is built
         self.normalization = None if normalize is None else Normalization.read(normalize, task)  # before the MPC is built
-        self.core = TriggerEnvironment(task, recompute_price=recompute_price, test_set=test_set, reward_baseline=reward_baseline)
+        self.core = TriggerEnvironment(
+            task, recompute_price=recompute_price, test_set=test_set, reward_baseline=reward_baseline, task_options=task_options
+        )
         self.observation_names = self.core.observation_names
         self.observation_space, self.action_space = trigger_spaces(len(self.observation_names), self.core.actions)
         system = self.core.system

@@ -123,8 +123,8 @@ class NotPicklable(EtmpcError, TypeError):
 
 class TriggerEnvironment(dm_env.Environment):
     """The recompute decision of task ``task`` (``DOMAIN`` or ``DOMAIN/TASK``, or a
-    :class:`~etmpc.systems.SystemKey`), at ``recompute_price`` per recompute (default: the task's own).
-    See the module's docstring."""
+    :class:`~etmpc.systems.SystemKey`), at ``recompute_price`` per recompute (default: the task's own), with
+    ``task_options`` (a mapping or ``(name, value)`` pairs: :mod:`etmpc.systems.options`). See the module's docstring."""
 
     def __init__(
         self,
@@ -133,6 +133,7 @@ class TriggerEnvironment(dm_env.Environment):
         recompute_price: float | None = None,
         test_set: str | None = None,
         reward_baseline: str | None = None,
+        task_options=(),
     ):
         if not isinstance(task, (str, SystemKey)):
             raise checks.BadType(f"task: a task name (str) is needed, got {type(task).__name__} {task!r}")
@@ -140,7 +141,7 @@ class TriggerEnvironment(dm_env.Environment):
             checks.argument("seed", checks.seed, seed)
         if test_set is not None and not isinstance(test_set, (str, os.PathLike)):
             raise checks.BadType(f"test_set: a file path is needed, got {type(test_set).__name__} {test_set!r}")
-        self.key = system_key(task, recompute_price)  # the task and the price, checked here
+        self.key = system_key(task, recompute_price, task_options)  # the task, its price and options, checked here
         self.system = self.key.make()
         self.actions = 3 if self.system.compute_levels else 2  # Discrete(3) on a task with compute levels
         self.loop = ClosedLoop(self.system, self.system.make_env())

@@ -303,3 +303,25 @@ def test_a_process_forked_after_drawing_says_it_cannot_draw_rather_than_hang():
         assert "vector_kwargs={'context': 'spawn'}" in str(raised.value)
     finally:
         envs.close(terminate=True)
+
+
+def test_gymnasium_make_takes_the_tasks_options_and_plays_them_as_evaluate_does():
+    """``task_options`` through ``gymnasium.make``: the environment's system has them, and recomputing at every step
+    of a stored test episode returns, summed, what ``etmpc evaluate --option ... --policy always`` reports there."""
+    from etmpc.evaluation.evaluate import evaluate
+    from etmpc.systems import system_key
+
+    options = {"disturbances.kick_scale": "2"}
+    env = gym.make(env_id("cart_pendulum/kicks"), task_options=options)
+    assert env.unwrapped.core.system.config.disturbances.kick_scale == 2.0
+    env.reset(options={"test_episode": 0})
+    total, done = 0.0, False
+    while not done:
+        _, reward, terminated, truncated, _ = env.step(1)
+        total, done = total + reward, terminated or truncated
+    played = evaluate(system_key("cart_pendulum/kicks", None, options), ["always"], 1, workers=1, progress=False)
+    plain = evaluate("cart_pendulum/kicks", ["always"], 1, workers=1, progress=False)
+    objective = played.to_json()["runs"][0]["objective"]
+    assert -total == pytest.approx(objective, rel=1e-12) and objective != plain.to_json()["runs"][0]["objective"]
+    with pytest.raises(EtmpcError, match="unknown option 'disturbances.kick'"):
+        gym.make(env_id("cart_pendulum/kicks"), task_options={"disturbances.kick": "2"})
