@@ -8,8 +8,9 @@ For each failure cost ``c`` of ``--costs`` (DPI's ``failure_cost``: each of the 
 rollout costs ``c`` on top of its reward), DPI is trained with the recipe the shipped ``learned.json`` records
 (``scripts/learners.py``'s), over the same seeds, in ``WORK/<task>/cost_<c>``; each run ships the seed it chose on
 its own validation episodes. The cost is then chosen on ``--validation`` training-distribution episodes (the
-stream ``etmpc train`` validates on, never the stored test set): the best mean objective among the costs whose
-mean failures per episode are at most the best fixed schedule's there, or, if none is, the fewest failures.
+stream ``etmpc train`` validates on, never the stored test set), safety first: among the costs whose mean
+objective there is tied with the best one's (the paired difference's 95 % CI spans 0), the fewest failures per
+episode, then the better objective.
 Every cost's policy is scored on the stored test set beside the best fixed schedule (paired, 95 % CIs), so the
 page shows what the choice gave and what the others would have. Every stage is kept in WORK: run again, the
 script continues where it stopped.
@@ -57,7 +58,7 @@ def runs(task: str, work: Path, costs: list[float], seeds: tuple[int, ...], work
 
 
 def validate(task: str, specs: list[str], episodes: int, workers: int) -> list[dict]:
-    """Each spec's mean objective and failures per episode on the validation stream (paired episodes)."""
+    """Each spec's objective and failures per episode on the validation stream (the same episodes for every spec)."""
     with make_backend("local", workers) as pool:
         outcomes = episode_outcomes(pool, task, specs, VALIDATION_ENTROPY, episodes)
     return [
@@ -66,18 +67,23 @@ def validate(task: str, specs: list[str], episodes: int, workers: int) -> list[d
             "failures": float(np.mean(o[:, 1])),
             "failures_ci95": float(1.96 * np.std(o[:, 1], ddof=1) / np.sqrt(len(o))),
             "recomputes": float(np.mean(o[:, 2])),
+            "episode_objectives": o[:, 0].tolist(),
         }
         for o in outcomes
     ]
 
 
-def choose(costs: list[float], validation: dict, schedule: dict, sense: str) -> float:
-    """The cost with the best validation objective whose failures are at most the schedule's; else the fewest."""
+def choose(costs: list[float], validation: dict, sense: str) -> tuple[float, list[float]]:
+    """Safety first: among the costs whose validation objective is tied with the best one's (their paired
+    difference's 95 % CI spans 0), the fewest failures, then the better objective. Returns it and the tied costs."""
     sign = 1.0 if sense == "min" else -1.0
-    safe = [c for c in costs if validation[c]["failures"] <= schedule["failures"]]
-    if safe:
-        return min(safe, key=lambda c: sign * validation[c]["objective"])
-    return min(costs, key=lambda c: (validation[c]["failures"], sign * validation[c]["objective"]))
+    best = min(costs, key=lambda c: sign * validation[c]["objective"])
+    tied = []
+    for c in costs:
+        gap = sign * (np.asarray(validation[c]["episode_objectives"]) - validation[best]["episode_objectives"])
+        if c == best or gap.mean() <= 1.96 * gap.std(ddof=1) / np.sqrt(len(gap)):
+            tied.append(c)
+    return min(tied, key=lambda c: (validation[c]["failures"], sign * validation[c]["objective"])), tied
 
 
 def study(task: str, work: Path, costs: list[float], seeds, episodes: int, workers: int) -> dict:
@@ -86,7 +92,7 @@ def study(task: str, work: Path, costs: list[float], seeds, episodes: int, worke
     specs = [refs.best] + [trained_runs[c]["policy"] for c in costs]
     checked = validate(task, specs, episodes, workers)
     schedule, validation = checked[0], dict(zip(costs, checked[1:]))
-    chosen = choose(costs, validation, schedule, system.objective_sense)
+    chosen, tied = choose(costs, validation, system.objective_sense)
     card = score(specs, [task], workers=workers)
     rows = {r.policy: row(r) for r in card.rows}
     return {
@@ -100,6 +106,7 @@ def study(task: str, work: Path, costs: list[float], seeds, episodes: int, worke
             f"{c:g}": {**trained_runs[c], "validation": validation[c], "test": rows[trained_runs[c]["policy"]]} for c in costs
         },
         "chosen": f"{chosen:g}",
+        "tied": [f"{c:g}" for c in tied],
     }
 
 
@@ -112,9 +119,10 @@ def page(document: dict) -> str:
         "DPI labels each decision by rollouts (keep or recompute, over sampled futures); with a failure cost `c` "
         "(`etmpc train --set failure_cost=c`) every failure of the task in a rollout (a fall, a step outside the "
         "geofence) costs `c` more, so that the labels weigh safety beyond what the reward charges for it. The cost is "
-        "chosen on validation episodes of the training distribution (never the stored test set): the best mean "
-        "objective among the costs that fail no more often than the best fixed schedule there, else the fewest "
-        "failures. Each cost's run ships the seed it chose on its own validation episodes. The test columns are the "
+        "chosen on validation episodes of the training distribution (never the stored test set), safety first: among "
+        "the costs whose validation objective is tied with the best one's (the paired difference's 95 % CI spans 0), "
+        "the fewest failures, then the better objective. Each cost's run ships the seed it chose on its own validation "
+        "episodes. The test columns are the "
         "stored test set's (100 episodes): score 0 = the best fixed schedule, 100 = the oracle over it, ± a 95 % CI, "
         "paired episode by episode.",
         "",
@@ -126,8 +134,8 @@ def page(document: dict) -> str:
             f"## `{task}`",
             "",
             f"Made at commit `{made['commit']}`{dirty} ({made['date']}) on {document['machine']}; seeds "
-            f"{', '.join(map(str, t['seeds']))}; {t['validation_episodes']} validation episodes. Chosen cost: "
-            f"**{t['chosen']}**.",
+            f"{', '.join(map(str, t['seeds']))}; {t['validation_episodes']} validation episodes. Tied on validation: "
+            f"{', '.join(t.get('tied', []))}; chosen cost: **{t['chosen']}**.",
             "",
             "| | validation: objective | validation: failures / episode | test: score | test: failures / episode "
             "| recomputes | training (min) |",
