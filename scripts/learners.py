@@ -86,7 +86,7 @@ def shipped_recipe(task: str) -> TrainConfig:
         normalisation_episodes=h["normalisation_episodes"],
         features=h["features"],
         algorithm="dpi",
-        dpi=dpi.Settings(**{k: h[k] for k in DPI_KEYS}, bases=tuple(h["bases"])),
+        dpi=dpi.Settings(**{k: h[k] for k in DPI_KEYS}, bases=tuple(h["bases"]), failure_cost=h.get("failure_cost", 0.0)),
         validation_episodes=h["validation_episodes"],
     )
 
