@@ -35,8 +35,8 @@ def data_folders() -> list[Path]:
 def policy_files(spec: str) -> list[Path]:
     """The files that exist among those a policy spec is read from: the file a kind with a path names
     (``rl:PATH``, ``self:PATH``, ``sb3:PATH``), the description beside a model (``sb3:X.zip`` reads
-    ``X.json`` too), and for a kind that wraps another (``rollout:BASE:K:H``, ``oracle:BASE``), its
-    base's files. Nothing is parsed or loaded: a spec that names no file has none."""
+    ``X.json`` too), and for a kind that wraps another (``rollout:BASE:K:H``, ``oracle:BASE``,
+    ``shield:AGE:MARGIN:BASE``), its base's files. Nothing is parsed or loaded: a spec that names no file has none."""
     kind = find(spec)
     if kind is None:
         return []
@@ -46,10 +46,10 @@ def policy_files(spec: str) -> list[Path]:
         if not arg or not named.name:
             return []
         return [f for f in dict.fromkeys([named, named.with_suffix(".json")]) if f.is_file()]
-    if kind.simulates:  # BASE may end in :K[:H]: the files of every head of the argument that names some
+    if kind.simulates or kind.wraps:  # BASE may end in :K[:H] or follow AGE:MARGIN: every stretch of the argument
         tokens = arg.split(":")
-        heads = (":".join(tokens[:n]) for n in range(len(tokens), 0, -1))
-        return list(dict.fromkeys(f for head in heads for f in policy_files(head)))
+        stretches = (":".join(tokens[i:j]) for i in range(len(tokens)) for j in range(len(tokens), i, -1))
+        return list(dict.fromkeys(f for stretch in stretches for f in policy_files(stretch)))
     return []
 
 

@@ -74,6 +74,7 @@ class Kind:
     family: str = "other"  # periodic, event, learned, shielded, self, rollout, oracle, users, other: how tables group it
     path: bool = False  # its argument is a file (rl:PATH): tables shorten it
     simulates: bool = False  # it simulates the loop itself, so it may not be another such kind's base
+    wraps: bool = False  # its argument holds another policy's spec (shield:AGE:BASE): what it reads, the base reads too
 
 
 def _number(text: str, kind: type, spec: str):
@@ -259,6 +260,7 @@ BUILT_IN: tuple[Kind, ...] = (
         "BASE, but compute when the plan is AGE steps old or the safety margin is below MARGIN (default: the task's rule)",
         _shield,
         family="shielded",
+        wraps=True,
     ),
     Kind(
         "rollout",

@@ -802,6 +802,12 @@ OWN_CASES = [  # (id, setup, argv, what the one line must name)
     ),
     ("evaluate-json-on-its-rl-file", "policy-copy", [*EV, "--policy", "rl:p.json", "--json", "p.json"], "p.json"),
     (
+        "evaluate-json-on-the-file-a-shield-wraps",
+        "policy-copy",
+        [*EV, "--policy", "shield:5:rl:p.json", "--json", "p.json"],
+        "p.json",
+    ),
+    (
         "evaluate-json-on-a-rollouts-base-file",
         "policy-copy",
         [*EV, "--policy", "rollout:rl:p.json:2", "--json", "p.json"],
