@@ -96,7 +96,7 @@ def _sweep(args) -> None:
     from etmpc.experiments.sweep import check_directory, plan, sweep
     from etmpc.systems import folder_name
 
-    settings = plan(args.task, args.prices, args.episodes, args.quick)  # names, prices and sizes checked
+    settings = plan(args.task, args.prices, args.episodes, args.quick, args.options)  # names, prices, sizes, options checked
     _check_backend(args)
     out = args.out or Path("results") / ("sweep-quick" if args.quick else "sweep")
     check_run_outputs({}, {"--out": out})

@@ -37,7 +37,19 @@ def task_option(parser, tasks: str, what: str = "the task", many: bool = False, 
 
 
 #: The commands that play a task with its options (``--option``); the others refuse them, saying so.
-TAKES_OPTIONS = ("evaluate", "score", "render", "testset", "robustness", "options", "train", "bench", "discriminate", "figure")
+TAKES_OPTIONS = (
+    "evaluate",
+    "score",
+    "render",
+    "testset",
+    "robustness",
+    "options",
+    "train",
+    "bench",
+    "discriminate",
+    "figure",
+    "sweep",
+)
 
 
 def resolve(args) -> None:

@@ -212,11 +212,17 @@ def _pct(row: dict | None) -> str:
     return f"`{short_name(row['policy'])}` {row['computations']:.1f} recomputes: {row['gain_percent']:+.2f} % {ci}"
 
 
+def _with_options(pareto: dict) -> str:
+    """`` with --option NAME=VALUE ...`` for a sweep made with the task's options, else nothing."""
+    written = "".join(f" --option {name}={value}" for name, value in pareto["settings"].get("options") or [])
+    return f" with{written}" if written else ""
+
+
 def report_section(pareto: dict) -> list[str]:
     """A Markdown section: at equal rates, each state-dependent policy against the periodic front."""
     sense = metrics.higher_or_lower(pareto["objective_sense"])
     lines = [
-        f"## {pareto['domain']}: state-dependent against periodic at equal recompute rates",
+        f"## {pareto['domain']}{_with_options(pareto)}: state-dependent against periodic at equal recompute rates",
         "",
         f"First {pareto['episodes']} test-set episodes, paired per episode; the periodic front interpolated at "
         f"each policy's mean rate; gains in control objective ({sense} is better), > 0 = better than the front, "

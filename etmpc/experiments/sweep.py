@@ -51,7 +51,7 @@ from etmpc.experiments.pareto import best_periodic, build_pareto, report_section
 from etmpc.learning import dpi
 from etmpc.learning.config import TrainConfig
 from etmpc.learning.selftrigger import SelfSettings, train_self
-from etmpc.systems import SystemKey, distinct, make_system, names, system_key
+from etmpc.systems import SystemKey, distinct, make_system, names
 from etmpc.systems.capabilities import Experiments, require
 from etmpc.views.curves import draw_pareto
 from etmpc.views.figures import save_png_atomically
@@ -75,7 +75,7 @@ class LearnerSettings:
     bases: tuple[str, ...] = ("always", "every:2", "every:3", "every:5", "every:8", "every:12", "every:20")
     selection_episodes: int = 20
 
-    def config(self, domain: str, price: float) -> TrainConfig:
+    def config(self, domain: str, price: float, options=()) -> TrainConfig:
         return TrainConfig(
             domain,
             self.seeds,
@@ -92,6 +92,7 @@ class LearnerSettings:
             ),
             validation_episodes=self.validation_episodes,
             recompute_price=price,
+            options=tuple(options),
         )
 
 
@@ -113,10 +114,14 @@ class SweepSettings:
     quick: bool = False
     learner: LearnerSettings | None = LearnerSettings()  # None: no learned policies
     self_trigger: SelfSettings | None = SelfSettings()  # None: no self-triggering policies
+    options: tuple[tuple[str, str], ...] = ()  # the task's options (etmpc.systems.options), for every stage
 
     @classmethod
-    def default(cls, domain: str, prices=None, episodes: int | None = None, quick: bool = False) -> SweepSettings:
+    def default(
+        cls, domain: str, prices=None, episodes: int | None = None, quick: bool = False, options=()
+    ) -> SweepSettings:
         system = make_system(domain)
+        options = SystemKey(domain, None, options).options  # checked, canonical
         require(system, Experiments, "etmpc sweep")
         benchmark = system.benchmark  # the task's prices and threshold levels
         prices = benchmark.prices if prices is None else tuple(prices)
@@ -135,6 +140,7 @@ class SweepSettings:
                 quick=True,
                 learner=QUICK_LEARNER,
                 self_trigger=QUICK_SELF,
+                options=options,
             )
         return cls(
             prices,
@@ -143,17 +149,28 @@ class SweepSettings:
             futures=benchmark.sweep_futures,
             horizon=benchmark.capped(cls.horizon),
             self_trigger=SelfSettings() if benchmark.sweep_self_trigger else None,
+            options=options,
         )
 
     def to_json(self) -> dict:
-        return _lists(asdict(self))
+        data = _lists(asdict(self))
+        if not self.options:  # a sweep without options is written as before, so an older one continues
+            del data["options"]
+        return data
+
+    def key(self, domain: str, price: float | None = None) -> SystemKey:
+        """The task the sweep plays, at ``price`` (None: the task's own), with its options."""
+        return SystemKey(domain, price, self.options)
 
 
-def plan(tasks: list[str] | None, prices=None, episodes: int | None = None, quick: bool = False) -> dict[str, SweepSettings]:
+def plan(
+    tasks: list[str] | None, prices=None, episodes: int | None = None, quick: bool = False, options=()
+) -> dict[str, SweepSettings]:
     """The settings of a sweep of ``tasks`` (default: every task), each checked before any work:
-    known, given once, priced sensibly, and asking no more episodes than its stored test set has."""
+    known, given once, priced sensibly, and asking no more episodes than its stored test set has; ``options``: the
+    tasks' options (the same for every task, checked against each)."""
     tasks = distinct(tasks or names())
-    settings = {task: SweepSettings.default(task, prices, episodes, quick) for task in tasks}
+    settings = {task: SweepSettings.default(task, prices, episodes, quick, options) for task in tasks}
     for task, chosen in settings.items():
         system = make_system(task)
         stored = load(default_path(system.domain, system.task), system.domain, system.task)
@@ -238,15 +255,15 @@ def sweep(
 def _sweep(
     domain: str, out: Path, settings: SweepSettings, workers: int, backend: str, address: str | None, progress: bool, say
 ) -> dict:
-    system = make_system(domain)
+    system = settings.key(domain).make()  # with the options (a horizon among them sets the periodic schedules)
     _start(out, domain, settings)
     started = time.perf_counter()
-    run = dict(task=domain, episodes=settings.episodes, workers=workers, backend=backend, address=address, progress=progress)
+    run = dict(episodes=settings.episodes, workers=workers, backend=backend, address=address, progress=progress)
     periodic = [f"every:{t}" for t in range(1, system.horizon + 1)]
     events = [f"threshold:{x:g}" for x in settings.thresholds]
     say(f"{domain}: {len(periodic)} periodic schedules and {len(events)} event triggers")
     with stage(f"{domain}: fixed policies"):  # each stage named in the progress lines
-        fixed = _stage(out / "fixed.json", policies=periodic + events, **run)
+        fixed = _stage(out / "fixed.json", task=settings.key(domain), policies=periodic + events, **run)
     priced = []
     for i, price in enumerate(settings.prices):
         best = best_periodic(fixed, periodic, price, system.objective_sense)
@@ -254,13 +271,13 @@ def _sweep(
         specs = [f"rollout:{best}:{settings.futures}:{settings.horizon}", f"oracle:{best}"]
         at = f"{domain}: price {price:g} ({i + 1}/{len(settings.prices)})"
         with stage(f"{at}: rollout and oracle"):
-            evaluation = _stage(out / f"price_{i}.json", policies=specs, recompute_price=price, **run)
+            evaluation = _stage(out / f"price_{i}.json", task=settings.key(domain, price), policies=specs, **run)
         if settings.learner is not None:
             with stage(f"{at}: the default learner"):
-                evaluation = _merge(evaluation, _learned(out, i, domain, price, settings.learner, run))
+                evaluation = _merge(evaluation, _learned(out, i, settings.key(domain, price), settings.learner, run))
         if settings.self_trigger is not None:
             with stage(f"{at}: the self-trigger"):
-                evaluation = _merge(evaluation, _self(out, i, domain, price, settings.self_trigger, run, say))
+                evaluation = _merge(evaluation, _self(out, i, settings.key(domain, price), settings.self_trigger, run, say))
         priced.append(evaluation)
     pareto = build_pareto(domain, system.objective_sense, settings, fixed, periodic, events, priced)
     pareto["wall_seconds_this_invocation"] = time.perf_counter() - started
@@ -271,26 +288,25 @@ def _sweep(
     return pareto
 
 
-def _learned(out: Path, i: int, domain: str, price: float, learner: LearnerSettings, run: dict) -> dict:
-    """The default learner trained at ``price`` (``train_<i>/``, resumable), its chosen policy
-    evaluated on the sweep's episodes at that price (``learned_<i>.json``)."""
+def _learned(out: Path, i: int, key: SystemKey, learner: LearnerSettings, run: dict) -> dict:
+    """The default learner trained on ``key`` (the task at a price, with the sweep's options; ``train_<i>/``,
+    resumable), its chosen policy evaluated on the sweep's episodes there (``learned_<i>.json``)."""
     path, train_dir = out / f"learned_{i}.json", out / f"train_{i}"
     if path.exists():
         return loads(path.read_text())
-    trained(learner.config(domain, price), train_dir, run, run["progress"])
-    return _stage(path, policies=[f"rl:{train_dir / 'selected.json'}"], recompute_price=price, **run)
+    trained(learner.config(key.task, key.recompute_price, key.options), train_dir, run, run["progress"])
+    return _stage(path, task=key, policies=[f"rl:{train_dir / 'selected.json'}"], **run)
 
 
-def _self(out: Path, i: int, domain: str, price: float, settings: SelfSettings, run: dict, say) -> dict:
-    """The self-trigger trained at ``price`` (``self_policy_<i>.json``, kept once written), evaluated
-    on the sweep's episodes at that price (``self_<i>.json``)."""
+def _self(out: Path, i: int, key: SystemKey, settings: SelfSettings, run: dict, say) -> dict:
+    """The self-trigger trained on ``key`` (``self_policy_<i>.json``, kept once written), evaluated on the
+    sweep's episodes there (``self_<i>.json``)."""
     path, policy = out / f"self_{i}.json", out / f"self_policy_{i}.json"
     if path.exists():
         return loads(path.read_text())
     if not policy.exists():
-        key = system_key(domain, price)
         train_self(key, policy, settings, run["workers"], run["backend"], run["address"], say=say, progress=run["progress"])
-    return _stage(path, policies=[f"self:{policy}"], recompute_price=price, **run)
+    return _stage(path, task=key, policies=[f"self:{policy}"], **run)
 
 
 def _merge(a: dict, b: dict) -> dict:

@@ -22,7 +22,7 @@ NOISE = ["--option", "sensor.noise_std=0.01,0,0.01,0", "--option", "sensor.measu
         (["evaluate", "--task", KICKS, "--policy", "every:3", "--option", "horizon"], "NAME=VALUE"),
         (["evaluate", "--task", KICKS, "--policy", "every:3", "--option", "horizon=x"], "not a whole number"),
         (["evaluate", "--task", "battery", "--policy", "every:3", "--option", "sensor.noise_std=1"], "unknown option"),
-        (["sweep", "--task", KICKS, "--option", "horizon=10"], "etmpc sweep does not take --option yet"),
+        (["reproduce", "--task", KICKS, "--option", "horizon=10"], "etmpc reproduce does not take --option yet"),
         (["score", "--task", KICKS, "--leaderboard", "--option", "horizon=10"], "no --option with them"),
         (["robustness", "--task", KICKS, "--vary", "horizon", "--policy", "every:3", "--out", "x"], "NAME=VALUE"),
         (

@@ -253,3 +253,32 @@ def test_the_report_section_gives_each_prices_answer(tiny_sweep):
                     and f"{found['gain_percent']:+.2f} %" in cell
                 )
             )
+
+
+def test_a_sweep_with_the_tasks_options_plays_and_trains_every_stage_with_them(tmp_path):
+    from etmpc.systems import system_key
+
+    calm = (("disturbances.disturbance_scale", "0.0"),)  # the balance task without its disturbance
+    settings = sw.SweepSettings(
+        prices=(5e-5,), episodes=1, thresholds=(0.3,), futures=1, horizon=2, learner=TINY_LEARNER, self_trigger=None, options=calm
+    )
+    out = tmp_path / "calm"
+    pareto = sw.sweep("cart_pendulum", out, settings, workers=1, progress=False)
+    fixed, priced = (json.loads((out / name).read_text()) for name in ("fixed.json", "price_0.json"))
+    assert fixed["options"] == priced["options"] == {"disturbances.disturbance_scale": "0.0"}
+    checkpoint = json.loads((out / "train_0" / "checkpoint.json").read_text())
+    assert checkpoint["config"]["options"] == [["disturbances.disturbance_scale", "0.0"]]
+    assert json.loads((out / "learned_0.json").read_text())["options"] == fixed["options"]
+    # the fixed stage's numbers are evaluate's with the same options, and not the task's without them
+    alone = evaluate(system_key("cart_pendulum", None, dict(calm)), ["every:3"], 1, workers=1, progress=False).to_json()
+    plain = evaluate("cart_pendulum", ["every:3"], 1, workers=1, progress=False).to_json()
+    ours = [r["objective"] for r in fixed["runs"] if r["policy"] == "every:3"]
+    assert ours == [alone["runs"][0]["objective"]] != [plain["runs"][0]["objective"]]
+    assert "with --option disturbances.disturbance_scale=0.0" in (out / "SWEEP.md").read_text()
+    assert pareto["settings"]["options"] == [["disturbances.disturbance_scale", "0.0"]]
+    without = sw.SweepSettings(
+        prices=(5e-5,), episodes=1, thresholds=(0.3,), futures=1, horizon=2, learner=TINY_LEARNER, self_trigger=None
+    )
+    with pytest.raises(EtmpcError, match="other settings"):
+        sw.sweep("cart_pendulum", out, without, workers=1, progress=False)
+    assert "options" not in without.to_json()  # a sweep without options is written as before (an older one continues)
