@@ -163,7 +163,9 @@ def main() -> None:
     parser.add_argument("--task", action="append", default=None, help="default: quadrotor/waypoints")
     parser.add_argument("--costs", default="0,3,10", help="failure costs to try, comma-separated (default 0,3,10)")
     parser.add_argument("--seeds", default="0,1,2")
-    parser.add_argument("--validation", type=int, default=300, help="validation episodes that choose the cost (failures are rare)")
+    parser.add_argument(
+        "--validation", type=int, default=300, help="validation episodes that choose the cost (failures are rare)"
+    )
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--out", type=Path, default=Path("docs/results"))
     parser.add_argument("--page-only", action="store_true")

@@ -117,9 +117,7 @@ class SweepSettings:
     options: tuple[tuple[str, str], ...] = ()  # the task's options (etmpc.systems.options), for every stage
 
     @classmethod
-    def default(
-        cls, domain: str, prices=None, episodes: int | None = None, quick: bool = False, options=()
-    ) -> SweepSettings:
+    def default(cls, domain: str, prices=None, episodes: int | None = None, quick: bool = False, options=()) -> SweepSettings:
         system = make_system(domain)
         options = SystemKey(domain, None, options).options  # checked, canonical
         require(system, Experiments, "etmpc sweep")
