@@ -29,11 +29,9 @@ from pathlib import Path
 import numpy as np
 
 from etmpc.common.provenance import commit_and_date
-from etmpc.evaluation import metrics, testsets
-from etmpc.evaluation.backends import make_backend
+from etmpc.evaluation import testsets
 from etmpc.evaluation.scorecard import score
-from etmpc.learning.config import VALIDATION_ENTROPY
-from etmpc.learning.jobs import mean_scores
+from etmpc.experiments.leaderboard_rows import VALIDATION_EPISODES, best_threshold
 from etmpc.loop import run_episode
 from etmpc.policies import parse_policy
 from etmpc.systems import system_key
@@ -88,20 +86,13 @@ def tune(task: str, schedule: str, episodes: int, seed: int) -> dict:
     }
 
 
-def chosen(task: str, specs: list[str], episodes: int, workers: int) -> str:
-    """The spec of ``specs`` with the best mean objective on the leaderboard's validation episodes (never the test set)."""
-    system = system_key(task).make()
-    with make_backend("local", workers) as pool:
-        means = mean_scores(pool, system_key(task), specs, VALIDATION_ENTROPY, episodes)
-    return metrics.best(zip(specs, means), system.objective_sense, key=lambda pair: pair[1])[0]
-
-
-def readings(task: str, base: str, episodes: int, workers: int) -> list[dict]:
-    """The best threshold on the base, and on ``task`` the best on its estimate and on its readings: test-set rows."""
+def readings(task: str, base: str, workers: int) -> list[dict]:
+    """The best threshold on the base, and on ``task`` the best on its estimate and on its readings (each chosen as the
+    leaderboard chooses its best threshold): test-set rows."""
     grid = system_key(task).make().benchmark.threshold_specs()
-    picks = [(base, "the state (exact)", chosen(base, grid, episodes, workers))]
-    picks += [(task, "the filter's estimate", chosen(task, grid, episodes, workers))]
-    picks += [(task, "the readings", chosen(task, [f"{spec}:reading" for spec in grid], episodes, workers))]
+    picks = [(base, "the state (exact)", best_threshold(base, workers, print, grid))]
+    picks += [(task, "the filter's estimate", best_threshold(task, workers, print, grid))]
+    picks += [(task, "the readings", best_threshold(task, workers, print, [f"{spec}:reading" for spec in grid]))]
     rows, reference = [], None
     for name, reads, spec in picks:
         row = score([spec], tasks=[name], workers=workers, progress=False).rows[0]
@@ -200,10 +191,8 @@ def main() -> None:
     document = commit_and_date() | {"tasks": {}}
     for task, schedule in TASKS.items():
         document["tasks"][task] = tune(task, schedule, args.episodes, args.seed)
-    document["validation_episodes"] = args.episodes
-    document["readings"] = {
-        task: readings(task, system_key(task).make().variant_of, args.episodes, args.workers) for task in TASKS
-    }
+    document["validation_episodes"] = VALIDATION_EPISODES
+    document["readings"] = {task: readings(task, system_key(task).make().variant_of, args.workers) for task in TASKS}
     document["machine"] = f"{platform.machine()}, {platform.system()}, 1 process (the triggers' part: {args.workers})"
     document["seconds"] = time.perf_counter() - started
     args.out.mkdir(parents=True, exist_ok=True)

@@ -80,11 +80,12 @@ def shipped_policy(task: str, file: str = "learned.json") -> Path | None:
         return path
 
 
-def best_threshold(task: str, workers: int, say: Callable[[str], None]) -> str:
-    """The ``threshold:X`` of the task's grid with the best mean objective on training-distribution episodes."""
+def best_threshold(task: str, workers: int, say: Callable[[str], None], specs: list[str] | None = None) -> str:
+    """The ``threshold:X`` of the task's grid (or of ``specs``) with the best mean objective on training-distribution
+    episodes."""
     system = make_system(task)
     require(system, Experiments, "the leaderboard's best threshold")
-    specs = system.benchmark.threshold_specs(system.compute_levels)
+    specs = system.benchmark.threshold_specs(system.compute_levels) if specs is None else specs
     jobs = len(specs) * VALIDATION_EPISODES
     with make_backend("local", workers) as pool, Progress(jobs, f"{task}: best threshold") as bar:
         means = mean_scores(pool, system.name, specs, VALIDATION_ENTROPY, VALIDATION_EPISODES, lambda job: bar.update())

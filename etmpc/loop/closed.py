@@ -375,7 +375,7 @@ def play_on(
     loop = ClosedLoop(system, env, records=False).resume(snapshot, episode)
     end = system.episode_steps if stop is None else min(stop, system.episode_steps)
     observes = getattr(policy, "observes", True)  # the observation is made only when someone reads it
-    total, rewards = 0.0, []
+    total, rewards = 0.0, [] if failure_cost else None  # a failure cost counts the play's failures from its rewards
     while loop.step_index < end:
         if loop.step_index == snapshot.step:
             added = loop.step(first, solved=first_plan)
@@ -385,7 +385,8 @@ def play_on(
         if loop.failed:
             return -math.inf
         total += added
-        rewards.append(loop.reward)
+        if rewards is not None:
+            rewards.append(loop.reward)
         if trace is not None:
             trace.added.append(added)
             trace.recomputed.append(loop.recomputed)
