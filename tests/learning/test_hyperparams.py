@@ -1,6 +1,7 @@
 """PPO's hyperparameters as data: rl-zoo3-style YAML files, one per task, shipped beside its policy."""
 
 import dataclasses
+import json
 import re
 
 import numpy as np
@@ -11,7 +12,18 @@ from etmpc.envs.registration import env_id
 from etmpc.learning import hyperparams
 from etmpc.learning.hyperparams import HyperparameterError
 from etmpc.learning.ppo import PpoSettings, SettingError
+from etmpc.learning.ppo_settings import settings_json
 from etmpc.systems import make_system, names
+
+
+@pytest.mark.parametrize("task", names())
+def test_every_tasks_file_is_the_recipe_of_the_network_it_ships_beside(task):
+    # ppo.yml is what `etmpc train --algorithm ppo` (and `etmpc reproduce`) trains by default: the shipped network's
+    # own settings, seed included, as its ppo.json records them
+    path = hyperparams.shipped_path(task)
+    made = json.loads(path.with_name("ppo.json").read_text())["settings"]
+    settings = hyperparams.load(path, task, PpoSettings(validation_episodes=made["validation_episodes"]))
+    assert settings_json(settings) == made
 
 
 @pytest.mark.parametrize("task", names())
