@@ -1,16 +1,18 @@
-"""Safety in DPI's labels, its weight chosen on validation episodes: ``docs/results/failure_cost.{json,md}``.
+"""Safety in learning, its weight chosen on validation episodes: ``docs/results/failure_cost.{json,md}``.
 
     python scripts/failure_cost.py --work runs/failure_cost                       # quadrotor/waypoints: ~40 min
     python scripts/failure_cost.py --work runs/failure_cost --task cart_pendulum/kicks_levels --costs 0,3,10
+    python scripts/failure_cost.py --work runs/failure_cost --learner ppo --task quadrotor/waypoints_noisy
     python scripts/failure_cost.py --page-only                                    # the page again from the JSON
 
 For each failure cost ``c`` of ``--costs`` (DPI's ``failure_cost``: each of the task's failures in a labelling
-rollout costs ``c`` on top of its reward), DPI is trained with the recipe the shipped ``learned.json`` records
-(``scripts/learners.py``'s), over the same seeds, in ``WORK/<task>/cost_<c>``; each run ships the seed it chose on
-its own validation episodes. The cost is then chosen on ``--validation`` training-distribution episodes (the
-stream ``etmpc train`` validates on, never the stored test set), safety first: among the costs whose mean
-objective there is tied with the best one's (the paired difference's 95 % CI spans 0), the fewest failures per
-episode, then the better objective.
+rollout costs ``c`` on top of its reward; PPO's: each failure costs ``c`` in its training environments' reward),
+the learner is trained with the recipe the task ships (DPI: what ``learned.json`` records,
+``scripts/learners.py``'s; PPO: ``ppo.yml``), over the same seeds, in ``WORK/<task>/cost_<c>`` (PPO:
+``WORK/ppo/<task>/cost_<c>/seed<s>``); each cost's run ships the seed it chose on its own validation episodes. The
+cost is then chosen on ``--validation`` training-distribution episodes (the stream ``etmpc train`` validates on,
+never the stored test set), safety first: among the costs whose mean objective there is tied with the best one's
+(the paired difference's 95 % CI spans 0), the fewest failures per episode, then the better objective.
 Every cost's policy is scored on the stored test set beside the best fixed schedule (paired, 95 % CIs), so the
 page shows what the choice gave and what the others would have. Every stage is kept in WORK: run again, the
 script continues where it stopped.
@@ -26,13 +28,14 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-from learners import row, shipped_recipe  # scripts/learners.py: the shipped recipe, a card row as JSON
+from learners import recipe_folder, row, shipped_recipe  # scripts/learners.py: the shipped recipes, a card row as JSON
 
 from etmpc.common.provenance import commit_and_date
 from etmpc.evaluation.backends import make_backend
 from etmpc.evaluation.references import stored
 from etmpc.evaluation.scorecard import score
 from etmpc.experiments.stages import trained
+from etmpc.learning import hyperparams
 from etmpc.learning.config import VALIDATION_ENTROPY
 from etmpc.learning.jobs import episode_outcomes
 from etmpc.learning.runner import cost_path, timed
@@ -53,6 +56,31 @@ def runs(task: str, work: Path, costs: list[float], seeds: tuple[int, ...], work
             "policy": f"rl:{out / 'selected.json'}",
             "seed": chosen["seed"],
             "wall_seconds": json.loads(cost_path(out).read_text())["wall_seconds"],
+        }
+    return done
+
+
+def ppo_runs(task: str, work: Path, costs: list[float], seeds: tuple[int, ...], workers: int) -> dict[float, dict]:
+    """One PPO run per cost and seed (kept in WORK), with the task's shipped ``ppo.yml``: per cost, the seed with
+    the best objective on the run's own validation episodes, and the mean training cost per seed."""
+    from etmpc.learning.ppo import train_ppo
+    from etmpc.learning.ppo_settings import PpoSettings
+
+    shipped = json.loads((recipe_folder(task) / "ppo.json").read_text())["settings"]
+    recipe = hyperparams.shipped(task, PpoSettings(validation_episodes=shipped["validation_episodes"]))
+    sense, done = make_system(task).objective_sense, {}
+    for cost in costs:
+        folders = {seed: work / "ppo" / folder_name(task) / f"cost_{cost:g}" / f"seed{seed}" for seed in seeds}
+        for seed, out in folders.items():
+            if not (out / "selected.json").exists():
+                train_ppo(task, out, replace(recipe, seed=seed, failure_cost=cost), workers, progress=True)
+        validation = {s: json.loads((out / "selected.json").read_text())["validation_objective"] for s, out in folders.items()}
+        chosen = (max if sense == "max" else min)(seeds, key=validation.get)
+        seconds = [json.loads((out / "training.json").read_text())["wall_seconds"] for out in folders.values()]
+        done[cost] = {
+            "policy": f"sb3:{folders[chosen] / 'selected.zip'}",
+            "seed": chosen,
+            "wall_seconds": float(np.mean(seconds)),
         }
     return done
 
@@ -86,9 +114,9 @@ def choose(costs: list[float], validation: dict, sense: str) -> tuple[float, lis
     return min(tied, key=lambda c: (validation[c]["failures"], sign * validation[c]["objective"])), tied
 
 
-def study(task: str, work: Path, costs: list[float], seeds, episodes: int, workers: int) -> dict:
+def study(task: str, work: Path, costs: list[float], seeds, episodes: int, workers: int, learner: str = "dpi") -> dict:
     system, refs = make_system(task), stored(task)
-    trained_runs = runs(task, work, costs, seeds, workers)
+    trained_runs = (ppo_runs if learner == "ppo" else runs)(task, work, costs, seeds, workers)
     specs = [refs.best] + [trained_runs[c]["policy"] for c in costs]
     checked = validate(task, specs, episodes, workers)
     schedule, validation = checked[0], dict(zip(costs, checked[1:]))
@@ -110,15 +138,19 @@ def study(task: str, work: Path, costs: list[float], seeds, episodes: int, worke
     }
 
 
+SECTIONS = {"dpi": ("tasks", "DPI"), "ppo": ("ppo_tasks", "PPO")}  # the learner -> its key in the JSON, its name
+
+
 def page(document: dict) -> str:
     lines = [
-        "# A failure cost in DPI's labels",
+        "# A failure cost in learning",
         "",
         "<!-- Generated by scripts/failure_cost.py from docs/results/failure_cost.json: do not edit by hand. -->",
         "",
-        "DPI labels each decision by rollouts (keep or recompute, over sampled futures); with a failure cost `c` "
-        "(`etmpc train --set failure_cost=c`) every failure of the task in a rollout (a fall, a step outside the "
-        "geofence) costs `c` more, so that the labels weigh safety beyond what the reward charges for it. The cost is "
+        "With a failure cost `c` (`etmpc train --set failure_cost=c`) every failure of the task (a fall, a step "
+        "outside the geofence) costs `c` more than the reward charges for it, so that learning weighs safety: in DPI's "
+        "labels (each decision is labelled by rollouts, keep or recompute, over sampled futures) or in PPO's reward "
+        "(its training environments', `TriggerEnv(failure_cost=c)`). The cost is "
         "chosen on validation episodes of the training distribution (never the stored test set), safety first: among "
         "the costs whose validation objective is tied with the best one's (the paired difference's 95 % CI spans 0), "
         "the fewest failures, then the better objective. Each cost's run ships the seed it chose on its own validation "
@@ -127,11 +159,18 @@ def page(document: dict) -> str:
         "paired episode by episode.",
         "",
     ]
-    for task, t in document["tasks"].items():
+    for key, name in SECTIONS.values():
+        lines += section(document, key, name)
+    return "\n".join(lines)
+
+
+def section(document: dict, key: str, name: str) -> list[str]:
+    lines = []
+    for task, t in document.get(key, {}).items():
         made = t["made"]
         dirty = " with uncommitted changes" if made.get("uncommitted_changes") else ""
         lines += [
-            f"## `{task}`",
+            f"## {name}: `{task}`",
             "",
             f"Made at commit `{made['commit']}`{dirty} ({made['date']}) on {document['machine']}; seeds "
             f"{', '.join(map(str, t['seeds']))}; {t['validation_episodes']} validation episodes. Tied on validation: "
@@ -149,12 +188,12 @@ def page(document: dict) -> str:
         for cost, c in t["costs"].items():
             mark = " (chosen)" if cost == t["chosen"] else ""
             lines.append(
-                f"| DPI, failure cost {cost}{mark} | {c['validation']['objective']:.4g} | {c['validation']['failures']:.2f} "
+                f"| {name}, failure cost {cost}{mark} | {c['validation']['objective']:.4g} | {c['validation']['failures']:.2f} "
                 f"| {c['test']['score']:.1f} ± {c['test']['score_ci95']:.1f} | {c['test']['failures']:.2f} ± "
                 f"{c['test']['failures_ci95']:.2f} | {c['test']['recomputes']:.1f} | {c['wall_seconds'] / 60:.1f} |"
             )
         lines.append("")
-    return "\n".join(lines)
+    return lines
 
 
 def main() -> None:
@@ -163,6 +202,7 @@ def main() -> None:
     parser.add_argument("--task", action="append", default=None, help="default: quadrotor/waypoints")
     parser.add_argument("--costs", default="0,3,10", help="failure costs to try, comma-separated (default 0,3,10)")
     parser.add_argument("--seeds", default="0,1,2")
+    parser.add_argument("--learner", choices=sorted(SECTIONS), default="dpi")
     parser.add_argument(
         "--validation", type=int, default=300, help="validation episodes that choose the cost (failures are rare)"
     )
@@ -179,7 +219,8 @@ def main() -> None:
     seeds = tuple(int(s) for s in args.seeds.split(","))
     started = time.perf_counter()
     for task in args.task or ["quadrotor/waypoints"]:
-        document["tasks"][task] = study(task, args.work, costs, seeds, args.validation, args.workers)
+        section = document.setdefault(SECTIONS[args.learner][0], {})
+        section[task] = study(task, args.work, costs, seeds, args.validation, args.workers, args.learner)
     document["machine"] = f"{platform.machine()}, {platform.system()}, {args.workers} workers"
     document["seconds"] = time.perf_counter() - started
     args.out.mkdir(parents=True, exist_ok=True)

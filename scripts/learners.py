@@ -29,7 +29,7 @@ import json
 import platform
 import shutil
 import time
-from dataclasses import asdict, replace
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -41,7 +41,7 @@ from etmpc.evaluation.scorecard import score, task_score
 from etmpc.learning import dpi, hyperparams
 from etmpc.learning.config import TrainConfig, parse_seeds
 from etmpc.learning.ppo import train_ppo
-from etmpc.learning.ppo_settings import PpoSettings
+from etmpc.learning.ppo_settings import PpoSettings, settings_json
 from etmpc.experiments.stages import trained
 from etmpc.learning.runner import cost_path, timed
 from etmpc.systems import folder_name, make_system, names, system_class
@@ -125,7 +125,7 @@ def ppo_runs(task: str, work: Path, seeds: tuple[int, ...], workers: int) -> dic
     for seed in seeds:
         out = work / "ppo" / folder_name(task) / f"seed{seed}"
         kept = (out / "selected.zip").exists() and (out / "selected.json").exists()  # a finished run (or a copy of one)
-        if not kept and made is not None and made["settings"] == json.loads(json.dumps(asdict(replace(base, seed=seed)))):
+        if not kept and made is not None and made["settings"] == json.loads(json.dumps(settings_json(replace(base, seed=seed)))):
             paths[seed], validation[seed] = shipped / "ppo.zip", made["validation_objective"]  # the shipped seed's run
             continue
         if not kept:

@@ -70,11 +70,17 @@ class TriggerEnv(gymnasium.Env):
         width: int = WIDTH,
         height: int = HEIGHT,
         task_options=(),
+        failure_cost: float = 0.0,
     ):
         check_render(render_mode, width, height)  # before the MPC is built
         self.normalization = None if normalize is None else Normalization.read(normalize, task)  # before the MPC is built
         self.core = TriggerEnvironment(
-            task, recompute_price=recompute_price, test_set=test_set, reward_baseline=reward_baseline, task_options=task_options
+            task,
+            recompute_price=recompute_price,
+            test_set=test_set,
+            reward_baseline=reward_baseline,
+            task_options=task_options,
+            failure_cost=failure_cost,
         )
         self.observation_names = self.core.observation_names
         self.observation_space, self.action_space = trigger_spaces(len(self.observation_names), self.core.actions)

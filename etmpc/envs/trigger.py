@@ -29,6 +29,11 @@ trajectory that ``evaluate`` reports for them (``tests/envs/test_trigger_env.py`
   the variance the episode's own draw (its disturbances, prices, targets) puts into a return, which
   otherwise drowns the effect of one decision. It costs a second simulation (and the baseline's
   solves): :attr:`simulated_steps` counts both. :attr:`episode_return` stays the task's own return.
+* **A failure cost** (``failure_cost=C``, 0 by default): each of the task's failures costs ``C`` more, in
+  the reward of the step it happens in (:attr:`info` ``["failure_penalty"]``), on top of what the task's
+  reward already charges: safety as a weight in the reward, for a learner trained on it. With a reward
+  baseline, the baseline's failures cost the same (it is the same reward, played by the schedule). Only
+  on a task that counts failures.
 * **Episodes**: ``reset()`` draws a training-distribution episode from the environment's own
   generator (``seed``); ``reset(test_episode=i)`` plays episode ``i`` of the stored test set. An
   episode ends at the task's time limit (``LAST`` with discount 1: a truncation), or early, with
@@ -38,6 +43,7 @@ trajectory that ``evaluate`` reports for them (``tests/envs/test_trigger_env.py`
 from __future__ import annotations
 
 import math
+import numbers
 import os
 from typing import Any
 
@@ -117,6 +123,15 @@ def not_picklable(env) -> TypeError:
     )
 
 
+def checked_failure_cost(value, system) -> float:
+    """``failure_cost`` as a float: a finite number >= 0; above 0 only on a task that counts failures."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not (math.isfinite(value) and value >= 0):
+        raise EtmpcError(f"failure_cost must be a finite number >= 0, got {value!r}")
+    if value and system.failures is None:
+        raise EtmpcError(f"failure_cost: task {system.name} counts no failures, so none can cost")
+    return float(value)
+
+
 class NotPicklable(EtmpcError, TypeError):
     """Pickling something that must be made in each process (a ``TypeError``, as pickle's own are)."""
 
@@ -134,6 +149,7 @@ class TriggerEnvironment(dm_env.Environment):
         test_set: str | None = None,
         reward_baseline: str | None = None,
         task_options=(),
+        failure_cost: float = 0.0,
     ):
         if not isinstance(task, (str, SystemKey)):
             raise checks.BadType(f"task: a task name (str) is needed, got {type(task).__name__} {task!r}")
@@ -143,6 +159,7 @@ class TriggerEnvironment(dm_env.Environment):
             raise checks.BadType(f"test_set: a file path is needed, got {type(test_set).__name__} {test_set!r}")
         self.key = system_key(task, recompute_price, task_options)  # the task, its price and options, checked here
         self.system = self.key.make()
+        self.failure_cost = checked_failure_cost(failure_cost, self.system)
         self.actions = 3 if self.system.compute_levels else 2  # Discrete(3) on a task with compute levels
         self.loop = ClosedLoop(self.system, self.system.make_env())
         self.observation_names = observation_names(self.system.name, self.system.state_names)
@@ -155,6 +172,7 @@ class TriggerEnvironment(dm_env.Environment):
         self.reward_baseline = None if reward_baseline is None else fixed_schedule(reward_baseline, self.system)
         self._shadow = None if reward_baseline is None else ClosedLoop(self.system, self.key.make().make_env())
         self.simulated_steps = 0  # the agent's steps, and the baseline's
+        self._failed = [0, 0]  # the episode's failures so far: the agent's, the baseline's (for the failure cost)
 
     @property
     def gym_id(self) -> str:
@@ -175,6 +193,7 @@ class TriggerEnvironment(dm_env.Environment):
         if self._shadow is not None:
             self._shadow.reset(episode)
         self.info = {"step": 0} | self._failures()
+        self._failed = [0, 0]
         return dm_env.restart(self._observation())
 
     def step(self, action) -> dm_env.TimeStep:
@@ -195,6 +214,9 @@ class TriggerEnvironment(dm_env.Environment):
         if not (self.system.latency.instant and self.actions == 2):  # time in the loop: what was computed, and when
             self.info |= {"in_flight": in_flight, "level": int(loop.level), "work": loop.work, "pending": loop.in_flight}
         self.simulated_steps += 1
+        if self.failure_cost:
+            self.info["failure_penalty"] = penalty = self._penalty(0, self.info["failures"])
+            reward -= penalty
         if self._shadow is not None:
             baseline = self._baseline_step()
             reward -= baseline
@@ -218,7 +240,16 @@ class TriggerEnvironment(dm_env.Environment):
             return 0.0
         recompute = shadow.forced or self.reward_baseline.decide(shadow.observed_state(), None)
         self.simulated_steps += 1
-        return shadow.step(recompute)
+        reward = shadow.step(recompute)
+        if self.failure_cost:
+            reward -= self._penalty(1, int(self.system.failures(shadow.trajectory, self._episode)))
+        return reward
+
+    def _penalty(self, who: int, failures: int) -> float:
+        """The failure cost of this step's new failures (``who``: 0 the agent, 1 the baseline), ``failures``
+        being the episode's so far."""
+        new, self._failed[who] = failures - self._failed[who], failures
+        return self.failure_cost * new
 
     def observation_spec(self) -> specs.Array:
         return specs.Array((self._size,), np.float32, name="trigger_features")

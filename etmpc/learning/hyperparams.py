@@ -48,7 +48,7 @@ from etmpc.systems import SystemKey, folder_name
 RENAMED = {"n_timesteps": "timesteps"}
 KEYS = {field: key for key, field in RENAMED.items()} | {"hidden": "net_arch"}  # how messages name the fields
 IGNORED = {"policy": "MlpPolicy", "normalize": True}  # keys that must say what this project does
-ENV_KWARGS = ("reward_baseline",)
+ENV_KWARGS = ("reward_baseline", "failure_cost")
 
 
 class HyperparameterError(EtmpcError):
@@ -85,7 +85,7 @@ def parse(document: Any, task: str, where: str, base: PpoSettings = PpoSettings(
     entry = document[key]
     if not isinstance(entry, dict):
         raise HyperparameterError(f"{where}: {key} must map hyperparameter names to values, got {entry!r}")
-    known = {f.name for f in fields(PpoSettings)} - {"hidden", "reward_baseline", "validation_episodes"}
+    known = {f.name for f in fields(PpoSettings)} - {"hidden", *ENV_KWARGS, "validation_episodes"}
     values: dict[str, Any] = {}
     for name, value in entry.items():
         if name in IGNORED:
@@ -118,10 +118,11 @@ def parse(document: Any, task: str, where: str, base: PpoSettings = PpoSettings(
 def to_document(settings: PpoSettings, task: str) -> dict:
     """The file's content for ``settings`` (what :func:`load` reads back to the same settings)."""
     entry = {"n_timesteps": settings.timesteps, "policy": "MlpPolicy", "n_envs": settings.n_envs, "normalize": True}
-    if settings.reward_baseline is not None:
-        entry["env_kwargs"] = {"reward_baseline": settings.reward_baseline}
+    env_kwargs = {"reward_baseline": settings.reward_baseline, "failure_cost": settings.failure_cost}
+    if env_kwargs := {name: value for name, value in env_kwargs.items() if value}:  # what differs from the defaults
+        entry["env_kwargs"] = env_kwargs
     for f in fields(PpoSettings):
-        if f.name not in ("timesteps", "n_envs", "hidden", "reward_baseline", "validation_episodes"):
+        if f.name not in ("timesteps", "n_envs", "hidden", *ENV_KWARGS, "validation_episodes"):
             entry[f.name] = getattr(settings, f.name)
     entry["policy_kwargs"] = {"net_arch": list(settings.hidden)}
     return {env_id(task): entry}

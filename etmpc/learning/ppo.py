@@ -5,7 +5,9 @@ with the task's hyperparameters (``policies/<task>/ppo.yml``, rl-zoo3's layout, 
 :mod:`etmpc.learning.hyperparams`; ``--settings FILE`` for others, ``--set timesteps=N`` to change the
 budget): ``n_envs`` environments, stepped in ``--workers`` processes (the numbers do not depend on
 how many), observations and rewards normalised by ``VecNormalize``, and the reward taken against a
-fixed schedule when ``env_kwargs`` names one (``reward_baseline``: see :mod:`etmpc.envs.trigger`).
+fixed schedule when ``env_kwargs`` names one (``reward_baseline``: see :mod:`etmpc.envs.trigger`), with each of
+the task's failures costing ``failure_cost`` more there when it names one (safety in the reward; the validation
+scores the task's own objective).
 After each of ``checkpoints`` equal slices of the budget the network is saved
 (``checkpoints/step_<n>.zip``, byte for byte the same for the same training: :func:`save_model`, and
 beside it the ``.json`` that ``sb3:PATH`` reads: the task and the frozen normalisation, written by
@@ -55,7 +57,7 @@ from etmpc.learning.ppo_settings import (  # noqa: F401 (SettingError and the re
     PpoSettings,
     checked_checkpoints,
     SettingError,
-    _json,
+    settings_json,
     _libraries,
     _make_env,
     _ours,
@@ -114,10 +116,11 @@ class PpoLearner(Learner):
         self.sb3, self.torch = _libraries()
         self.system = self.key.make()
         s = self.settings
-        if s.reward_baseline is not None:  # the environments' own check, before the run's folder is made
-            from etmpc.envs.trigger import fixed_schedule
+        from etmpc.envs.trigger import checked_failure_cost, fixed_schedule
 
+        if s.reward_baseline is not None:  # the environments' own checks, before the run's folder is made
             fixed_schedule(s.reward_baseline, self.system)
+        checked_failure_cost(s.failure_cost, self.system)
         # PPO collects n_steps per environment between updates: a budget too small for that shrinks n_steps,
         # and each checkpoint's slice is a whole number of rollouts (so the steps reported are the steps run).
         self.n_steps = min(s.n_steps, max(1, s.timesteps // (s.checkpoints * s.n_envs)))
@@ -163,7 +166,7 @@ class PpoLearner(Learner):
             "format": RESUME_FORMAT,
             "version": 1,
             "task": str(self.key),
-            "settings": _json(self.settings),
+            "settings": settings_json(self.settings),
             "checkpoints": self.checkpoints,
         }
 
@@ -182,7 +185,7 @@ class PpoLearner(Learner):
                 return obs, rewards.astype(np.float32), dones, infos
 
         s = self.settings
-        envs = [_make_env(self.key, s.seed * 1000 + i, s.reward_baseline) for i in range(s.n_envs)]
+        envs = [_make_env(self.key, s.seed * 1000 + i, s.reward_baseline, s.failure_cost) for i in range(s.n_envs)]
         # The environments in worker processes or in this one: the same numbers either way.
         return Float32Rewards(SubprocVecEnv(envs) if min(self.workers, s.n_envs) > 1 else DummyVecEnv(envs))
 
@@ -223,7 +226,7 @@ class PpoLearner(Learner):
             self.result = state["finished"]
             self._timesteps = int(self.result["environment_steps"])
             return
-        if state.get("settings") != _json(self.settings):
+        if state.get("settings") != settings_json(self.settings):
             raise EtmpcError(
                 f"{self.out} holds a PPO run with other settings; resume with the same ones, or choose another --out"
             )
@@ -264,7 +267,7 @@ class PpoLearner(Learner):
             metadata_path(path),
             recompute_price=self.system.recompute_price,
             timesteps=int(model.num_timesteps),
-            settings=_json(s),
+            settings=settings_json(s),
             **({"options": dict(self.key.options)} if self.key.options else {}),  # trained with some of the task's options
         )
         score = validate(self.pool, self.key, [f"sb3:{path}"], s.validation_episodes)[0]
@@ -318,7 +321,7 @@ class PpoLearner(Learner):
             "format": FINISHED_FORMAT,
             "version": 1,
             "task": str(self.key),
-            "settings": _json(s),
+            "settings": settings_json(s),
             "workers": self.workers,
             "environment_steps": int(self.model.num_timesteps),
             "simulated_steps": self.checkpoints[-1]["simulated_steps"],

@@ -57,6 +57,7 @@ RANGES = {
         "a non-empty tuple of positive layer sizes",
         lambda v: isinstance(v, tuple) and bool(v) and all(type(n) is int and 0 < n <= MAX_COUNT for n in v),
     ),
+    "failure_cost": ("a finite number >= 0", _real(lambda x: 0 <= x < math.inf)),
     "reward_baseline": (
         "None or a fixed schedule's spec (always, never, every:T, or iterate:T on a task with compute levels)",
         lambda v: v is None or isinstance(v, str),
@@ -85,6 +86,9 @@ class PpoSettings:
     ent_coef: float = 0.0
     hidden: tuple[int, ...] = (64, 64)
     reward_baseline: str | None = None  # the environment's reward relative to this fixed schedule (TriggerEnvironment)
+    # what each of the task's failures costs on top of its reward, in the training environments' reward only
+    # (TriggerEnvironment's failure_cost; the validation that chooses among checkpoints scores the task's own)
+    failure_cost: float = 0.0
 
     def __post_init__(self):
         for name, (allowed, holds) in RANGES.items():
@@ -118,13 +122,13 @@ def _libraries():
     return stable_baselines3, torch
 
 
-def _make_env(key: SystemKey, seed: int, reward_baseline: str | None):
+def _make_env(key: SystemKey, seed: int, reward_baseline: str | None, failure_cost: float = 0.0):
     def make():
         from stable_baselines3.common.monitor import Monitor
 
         from etmpc.envs.gym import TriggerEnv
 
-        env = Monitor(TriggerEnv(key, reward_baseline=reward_baseline))
+        env = Monitor(TriggerEnv(key, reward_baseline=reward_baseline, failure_cost=failure_cost))
         env.reset(seed=seed)
         return env
 
@@ -172,9 +176,13 @@ def _ours(name: str) -> bool:
     return name in ("checkpoints", "selected.zip", "selected.json", "training.json")
 
 
-def _json(settings: PpoSettings) -> dict:
+def settings_json(settings: PpoSettings) -> dict:
+    """``settings`` as a run's files keep them; without a failure cost, as before there was one (so the
+    files of earlier runs are read as the same settings)."""
     data = asdict(settings)
     data["hidden"] = list(settings.hidden)
+    if not settings.failure_cost:
+        del data["failure_cost"]
     return data
 
 
