@@ -43,6 +43,13 @@ class Plan:
         object.__setattr__(self, "forecasts", frozen(self.forecasts))  # a plan's replace() keeps it as it is
 
     @property
+    def converged(self) -> bool:
+        """Whether the solver stopped within its tolerance (status ``"converged"``). A real-time iterate
+        is usable (``success``) without being converged: how far it is, a policy deciding between one
+        more iteration and keeping reads here (feature set ``levels``)."""
+        return self.status == "converged"
+
+    @property
     def horizon(self) -> int:
         return self.inputs.shape[0]
 

@@ -1,8 +1,8 @@
 """``etmpc train``: training of the logistic recomputation policy over several seeds.
 
 Two learners (``--algorithm``): ``gpomdp``, the paper's policy gradient (:mod:`etmpc.learning.gpomdp`), and
-``dpi``, direct policy iteration with rollout-labelled classification (:mod:`etmpc.learning.dpi`); and two
-feature sets (``--features``, :mod:`etmpc.policies.learned`): ``error`` (the default) and ``paper``. On a
+``dpi``, direct policy iteration with rollout-labelled classification (:mod:`etmpc.learning.dpi`); and three
+feature sets (``--features``, :mod:`etmpc.policies.features`): ``error`` (the default), ``paper`` and ``levels``. On a
 task with compute levels (keep, one SQP iteration or a full solve: ``cart_pendulum/kicks_levels``) DPI trains
 the two-stage policy (keep or compute, then a full solve or one iteration; see :mod:`etmpc.learning.dpi`) and
 GPOMDP, whose gradient is the keep-or-solve policy's, refuses the task.

@@ -6,7 +6,11 @@ A feature set defines a raw vector ``r`` of the augmented state ``s``:
 * ``error`` (the default): ``r = [x_i - x_hat_i, i - k, exogenous]``: the prediction error per state,
   the plan's age and, for a task whose system has them, its exogenous features (the battery's
   prices and production, now and as the kept plan assumed them);
-* ``paper``: ``r = s = [x_i, x_k, i - k]``, the augmented state as the paper's text defines it.
+* ``paper``: ``r = s = [x_i, x_k, i - k]``, the augmented state as the paper's text defines it;
+* ``levels``: the ``error`` set and ``unconverged``, 1 when the kept plan is a real-time iterate its
+  solver left short of convergence (:attr:`etmpc.control.plan.Plan.converged`), else 0: on a task with
+  compute levels, how far the last iteration left the plan from its optimum, which the prediction error
+  of a plan made this step cannot say.
 
 The learned policy normalises ``[r, r^2]`` and adds a bias (``etmpc.policies.learned``); the
 environment's observation is ``[r, r^2]`` of the ``error`` set, as float32 (:func:`observation`).
@@ -22,7 +26,7 @@ from etmpc.common.errors import EtmpcError
 from etmpc.loop import AugmentedState
 from etmpc.systems import system_class
 
-FEATURE_SETS = ("error", "paper")
+FEATURE_SETS = ("error", "paper", "levels")
 DEFAULT_FEATURES = "error"
 
 
@@ -46,14 +50,19 @@ def raw_features(features: str, domain: str, s: AugmentedState) -> np.ndarray:
         return raw_state(s)
     exogenous = _exogenous(domain)
     error = np.concatenate([s.x - s.x_predicted, [float(s.age)]])
-    return error if exogenous is None else np.concatenate([error, exogenous[0](s)])
+    error = error if exogenous is None else np.concatenate([error, exogenous[0](s)])
+    return np.append(error, float(not s.plan.converged)) if features == "levels" else error
+
+
+def _extra(features: str) -> int:
+    return 1 if features == "levels" else 0
 
 
 def raw_size(features: str, domain: str, nx: int) -> int:
     if features == "paper":
         return 2 * nx + 1
     exogenous = _exogenous(domain)
-    return nx + 1 + (0 if exogenous is None else len(exogenous[1]))
+    return nx + 1 + (0 if exogenous is None else len(exogenous[1])) + _extra(features)
 
 
 def feature_size(nx: int, features: str = "paper", domain: str = "") -> int:
@@ -71,7 +80,8 @@ def raw_names(features: str, domain: str, state_names) -> tuple[str, ...]:
     if features == "paper":
         return (*(f"{n}_now" for n in state_names), *(f"{n}_at_plan" for n in state_names), "plan_age")
     exogenous = _exogenous(domain)
-    return (*(f"error_{n}" for n in state_names), "plan_age", *(() if exogenous is None else exogenous[1]))
+    names = (*(f"error_{n}" for n in state_names), "plan_age", *(() if exogenous is None else exogenous[1]))
+    return (*names, "unconverged") if features == "levels" else names
 
 
 def observation_names(domain: str, state_names) -> tuple[str, ...]:

@@ -12,7 +12,9 @@ of a raw vector ``r`` chosen by the policy's *feature set*:
   environment feeds its policy; for the battery also the exogenous information a good policy needs
   (its system's ``exogenous_features``; the battery's: the price and net production now, what the plan
   assumed for them, their differences, and the value at today's price of the trade the plan makes now);
-* ``paper``: ``r = s = [x_i, x_k, i - k]``, the augmented state as the paper's text defines it.
+* ``paper``: ``r = s = [x_i, x_k, i - k]``, the augmented state as the paper's text defines it;
+* ``levels``: the ``error`` set and whether the kept plan is an unconverged real-time iterate
+  (:mod:`etmpc.policies.features`).
 
 The normalisation is measured once per training run (see :func:`etmpc.learning.train`) and saved with the
 parameters, the feature set, the task and the hyperparameters in one JSON file, so ``--policy
