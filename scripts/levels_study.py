@@ -1,0 +1,194 @@
+"""What a trigger that chooses how much to compute gains on ``cart_pendulum/kicks_levels``, and what a learner
+could: ``docs/results/levels.{json,md}``.
+
+    python scripts/levels_study.py --work runs/levels       # about 20 min on 2 cores
+    python scripts/levels_study.py --page-only              # the page again from levels.json
+
+Everything is played on validation episodes (the training distribution: the stream ``etmpc train`` validates on,
+never the stored test set), paired episode by episode with the task's best fixed schedule ``iterate:1``:
+
+1. event-triggered real-time iterations under an age cap, ``shield:A:threshold:X:iterate`` (one SQP iteration
+   when the weighted prediction error exceeds ``X`` or the plan is ``A`` steps old, else keep), over a grid;
+2. the shipped learners, and DPI trained with the shipped recipe (``scripts/learners.py``'s) over seeds 0-2 on
+   its ``error`` features and on the ``levels`` features (the same and ``unconverged``: whether the kept plan is
+   a real-time iterate short of convergence), each seed's own choice;
+3. on the first ``--rollout-episodes`` of them: the rollout policy over the best trigger of 1 (a one-step
+   lookahead over sampled futures, with 4 and 16 futures: the policy DPI's classifier learns to imitate, with
+   that trigger as its base) and the oracle over ``iterate:1`` (the same lookahead with each episode's future
+   known: a reference, not a policy).
+
+If the rollout policy does no better than its base, one step of policy improvement by simulation has nothing to
+find there, and what separates the trigger from the oracle is what knowing the future gives.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+from learners import shipped_recipe  # scripts/learners.py: the shipped DPI recipe
+
+from etmpc.common.provenance import commit_and_date
+from etmpc.evaluation import metrics
+from etmpc.evaluation.backends import make_backend
+from etmpc.experiments.stages import trained
+from etmpc.learning.config import VALIDATION_ENTROPY
+from etmpc.learning.jobs import episode_outcomes
+
+TASK = "cart_pendulum/kicks_levels"
+BEST_FIXED = "iterate:1"
+THRESHOLDS = (0.1, 0.2, 0.3, 0.5)
+AGES = (5, 8, 12)
+SHIPPED = {
+    "DPI (shipped)": "rl:policies/cart_pendulum/kicks_levels/learned.json",
+    "PPO (shipped)": "sb3:policies/cart_pendulum/kicks_levels/ppo.zip",
+}
+FEATURES = ("error", "levels")
+SEEDS = (0, 1, 2)
+
+
+def trigger(age: int, level: float) -> str:
+    return f"shield:{age}:threshold:{level:g}:iterate"
+
+
+def dpi_runs(work: Path, workers: int) -> dict[str, str]:
+    """DPI with the shipped recipe on each feature set (kept in WORK): row name -> each seed's chosen policy."""
+    found = {}
+    for features in FEATURES:
+        out = work / f"dpi_{features}"
+        config = replace(shipped_recipe(TASK), seeds=SEEDS, features=features)
+        trained(config, out, {"workers": workers, "backend": "local", "address": None}, progress=True)
+        for seed in SEEDS:
+            found[f"DPI, {features} features, seed {seed}"] = f"rl:{out / f'seed{seed}' / 'selected.json'}"
+    return found
+
+
+def played(specs: dict[str, str], episodes: int, workers: int) -> dict[str, np.ndarray]:
+    """name -> ``(episodes, 3)``: objective, failures and recomputes on the first ``episodes`` validation episodes."""
+    with make_backend("local", workers) as pool:
+        rows = episode_outcomes(pool, TASK, list(specs.values()), VALIDATION_ENTROPY, episodes)
+    return dict(zip(specs, rows))
+
+
+def summary(rows: np.ndarray, reference: np.ndarray, spec: str) -> dict:
+    gain = metrics.paired_differences(rows[:, 0], reference[:, 0], "min")
+    scale = float(np.mean(reference[:, 0]))
+    return {
+        "spec": spec,
+        "episodes": len(rows),
+        "objective": float(np.mean(rows[:, 0])),
+        "failures": float(np.mean(rows[:, 1])),
+        "recomputes": float(np.mean(rows[:, 2])),
+        "gain": 100.0 * metrics.oriented(gain["mean_difference"], "min") / scale,
+        "gain_ci95": 100.0 * gain["ci95"] / scale,
+    }
+
+
+def study(work: Path, episodes: int, rollout_episodes: int, workers: int) -> dict:
+    triggers = {trigger(a, x): trigger(a, x) for a in AGES for x in THRESHOLDS}
+    learners = {**SHIPPED, **dpi_runs(work, workers)}
+    main = played({BEST_FIXED: BEST_FIXED, **triggers, **learners}, episodes, workers)
+    reference = main[BEST_FIXED]
+    best = min(triggers, key=lambda name: float(np.mean(main[name][:, 0])))
+    lookahead = {
+        f"rollout over {best}, 4 futures": f"rollout:{best}:4:10",
+        f"rollout over {best}, 16 futures": f"rollout:{best}:16:10",
+        "oracle": f"oracle:{BEST_FIXED}",
+    }
+    short = played({BEST_FIXED: BEST_FIXED, best: best, **lookahead}, rollout_episodes, workers)
+    return {
+        "task": TASK,
+        "made": commit_and_date(),
+        "validation_episodes": episodes,
+        "rollout_episodes": rollout_episodes,
+        "best_trigger": best,
+        "rows": {
+            name: summary(rows, reference, ({BEST_FIXED: BEST_FIXED} | triggers | learners)[name]) for name, rows in main.items()
+        },
+        "lookahead": {
+            name: summary(rows, short[BEST_FIXED], ({BEST_FIXED: BEST_FIXED, best: best} | lookahead)[name])
+            for name, rows in short.items()
+        },
+    }
+
+
+def table(rows: dict) -> list[str]:
+    lines = ["| | spec | objective | gain over `iterate:1` | recomputes | failures / episode |", "|---|---|---:|---:|---:|---:|"]
+    for name, r in rows.items():
+        lines.append(
+            f"| {name} | `{r['spec']}` | {r['objective']:.3f} | {r['gain']:+.1f} % ± {r['gain_ci95']:.1f} | "
+            f"{r['recomputes']:.1f} | {r['failures']:.2f} |"
+        )
+    return lines
+
+
+def page(document: dict) -> str:
+    made = document["made"]
+    dirty = " with uncommitted changes" if made.get("uncommitted_changes") else ""
+    rows, look, best = document["rows"], document["lookahead"], document["best_trigger"]
+    learned = {name: r for name, r in rows.items() if name.startswith(("DPI", "PPO"))}
+    triggers = {name: r for name, r in rows.items() if name not in learned}
+    rollouts = [r["gain"] for name, r in look.items() if name.startswith("rollout")]
+    lines = [
+        "# Compute levels: what a trigger gains, and what is left to learn",
+        "",
+        "<!-- Generated by scripts/levels_study.py from docs/results/levels.json: do not edit by hand. -->",
+        "",
+        f"Made at commit `{made['commit']}`{dirty} ({made['date']}) on {document['machine']}, in "
+        f"{document['seconds'] / 60:.0f} min. On `{document['task']}` ([the task](../tasks/timing.md)) a decision is "
+        "keep, one SQP iteration or a full solve. Every row is played on validation episodes (the training "
+        "distribution, never the stored test set), paired episode by episode with the best fixed schedule "
+        "`iterate:1`; a gain is a share of its objective (lower is better), ± a 95 % CI.",
+        "",
+        f"## Event triggers and learners ({document['validation_episodes']} validation episodes)",
+        "",
+        *table(triggers),
+        "",
+        *table(learned),
+        "",
+        f"## One step of lookahead ({document['rollout_episodes']} validation episodes)",
+        "",
+        f"The rollout policy over the best trigger above, `{best}`, simulates each answer over sampled futures and "
+        "then plays the trigger: the policy DPI's classifier learns to imitate when the trigger is its base. "
+        "The oracle does the same over `iterate:1` with each episode's own future.",
+        "",
+        *table(look),
+        "",
+        f"The rollout policy's gain ({', '.join(f'{g:+.1f} %' for g in rollouts)}) against the trigger's own "
+        f"({look[best]['gain']:+.1f} %) on these episodes says what one step of improvement by simulation can add "
+        "to it; the oracle's, what knowing the future adds.",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--work", type=Path, default=Path("runs/levels"))
+    parser.add_argument("--episodes", type=int, default=200, help="validation episodes of the triggers and learners")
+    parser.add_argument("--rollout-episodes", type=int, default=20, help="validation episodes of the lookahead rows")
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--out", type=Path, default=Path("docs/results"))
+    parser.add_argument("--page-only", action="store_true")
+    args = parser.parse_args()
+    path = args.out / "levels.json"
+    if args.page_only:
+        (args.out / "levels.md").write_text(page(json.loads(path.read_text())))
+        return
+    started = time.perf_counter()
+    document = study(args.work, args.episodes, args.rollout_episodes, args.workers)
+    document["machine"] = f"{platform.machine()}, {platform.system()}, {args.workers} workers"
+    document["seconds"] = time.perf_counter() - started
+    args.out.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(document, indent=1) + "\n")
+    (args.out / "levels.md").write_text(page(document))
+    print(f"wrote {path} and {args.out / 'levels.md'}")
+
+
+if __name__ == "__main__":
+    main()
