@@ -75,18 +75,29 @@ def played(specs: dict[str, str], episodes: int, workers: int) -> dict[str, np.n
     return dict(zip(specs, rows))
 
 
-def summary(rows: np.ndarray, reference: np.ndarray, spec: str) -> dict:
-    gain = metrics.paired_differences(rows[:, 0], reference[:, 0], "min")
+def gain(rows: np.ndarray, reference: np.ndarray) -> tuple[float, float]:
+    """The paired gain of ``rows`` over ``reference`` (objectives, lower is better) as a share of the reference's
+    mean objective, in percent, and its 95 % CI."""
+    difference = metrics.paired_differences(rows[:, 0], reference[:, 0], "min")
     scale = float(np.mean(reference[:, 0]))
-    return {
+    return 100.0 * metrics.oriented(difference["mean_difference"], "min") / scale, 100.0 * difference["ci95"] / scale
+
+
+def summary(rows: np.ndarray, reference: np.ndarray, spec: str, trigger_rows: np.ndarray | None = None) -> dict:
+    share, ci = gain(rows, reference)
+    found = {
         "spec": spec,
         "episodes": len(rows),
         "objective": float(np.mean(rows[:, 0])),
         "failures": float(np.mean(rows[:, 1])),
         "recomputes": float(np.mean(rows[:, 2])),
-        "gain": 100.0 * metrics.oriented(gain["mean_difference"], "min") / scale,
-        "gain_ci95": 100.0 * gain["ci95"] / scale,
+        "gain": share,
+        "gain_ci95": ci,
+        "episode_objectives": rows[:, 0].tolist(),
     }
+    if trigger_rows is not None:  # and over the best trigger, on the same episodes
+        found["gain_over_trigger"], found["gain_over_trigger_ci95"] = gain(rows, trigger_rows)
+    return found
 
 
 def study(work: Path, episodes: int, rollout_episodes: int, workers: int) -> dict:
@@ -111,17 +122,22 @@ def study(work: Path, episodes: int, rollout_episodes: int, workers: int) -> dic
             name: summary(rows, reference, ({BEST_FIXED: BEST_FIXED} | triggers | learners)[name]) for name, rows in main.items()
         },
         "lookahead": {
-            name: summary(rows, short[BEST_FIXED], ({BEST_FIXED: BEST_FIXED, best: best} | lookahead)[name])
+            name: summary(rows, short[BEST_FIXED], ({BEST_FIXED: BEST_FIXED, best: best} | lookahead)[name], short[best])
             for name, rows in short.items()
         },
     }
 
 
-def table(rows: dict) -> list[str]:
-    lines = ["| | spec | objective | gain over `iterate:1` | recomputes | failures / episode |", "|---|---|---:|---:|---:|---:|"]
+def table(rows: dict, trigger: str | None = None) -> list[str]:
+    extra = f" gain over `{trigger}` |" if trigger else ""
+    lines = [
+        f"| | spec | objective | gain over `iterate:1` |{extra} recomputes | failures / episode |",
+        "|---|---|---:|---:|" + ("---:|" if trigger else "") + "---:|---:|",
+    ]
     for name, r in rows.items():
+        over = f" {r['gain_over_trigger']:+.1f} % ± {r['gain_over_trigger_ci95']:.1f} |" if trigger else ""
         lines.append(
-            f"| {name} | `{r['spec']}` | {r['objective']:.3f} | {r['gain']:+.1f} % ± {r['gain_ci95']:.1f} | "
+            f"| {name} | `{r['spec']}` | {r['objective']:.3f} | {r['gain']:+.1f} % ± {r['gain_ci95']:.1f} |{over} "
             f"{r['recomputes']:.1f} | {r['failures']:.2f} |"
         )
     return lines
@@ -133,7 +149,7 @@ def page(document: dict) -> str:
     rows, look, best = document["rows"], document["lookahead"], document["best_trigger"]
     learned = {name: r for name, r in rows.items() if name.startswith(("DPI", "PPO"))}
     triggers = {name: r for name, r in rows.items() if name not in learned}
-    rollouts = [r["gain"] for name, r in look.items() if name.startswith("rollout")]
+    rollouts = {name.rpartition(", ")[2]: r for name, r in look.items() if name.startswith("rollout")}
     lines = [
         "# Compute levels: what a trigger gains, and what is left to learn",
         "",
@@ -157,11 +173,12 @@ def page(document: dict) -> str:
         "then plays the trigger: the policy DPI's classifier learns to imitate when the trigger is its base. "
         "The oracle does the same over `iterate:1` with each episode's own future.",
         "",
-        *table(look),
+        *table(look, best),
         "",
-        f"The rollout policy's gain ({', '.join(f'{g:+.1f} %' for g in rollouts)}) against the trigger's own "
-        f"({look[best]['gain']:+.1f} %) on these episodes says what one step of improvement by simulation can add "
-        "to it; the oracle's, what knowing the future adds.",
+        "What one step of improvement by simulation adds to the trigger, paired on these episodes: "
+        + ", ".join(f"{r['gain_over_trigger']:+.1f} % ± {r['gain_over_trigger_ci95']:.1f} with {n}" for n, r in rollouts.items())
+        + f"; what knowing the future adds: {look['oracle']['gain_over_trigger']:+.1f} % ± "
+        f"{look['oracle']['gain_over_trigger_ci95']:.1f} (the oracle over the trigger).",
         "",
     ]
     return "\n".join(lines)
