@@ -12,7 +12,10 @@ simulation ``H`` steps ahead and adds ``system.truncation_value`` of the state i
 
 A rollout policy is a real, if expensive, policy: it uses only what the controller knows, and by
 the rollout property it does at least as well as ``BASE`` in expectation (up to the sampling noise
-of ``K`` futures). It measures how much a state-dependent policy can gain over ``BASE``.
+of ``K`` futures). It measures how much a state-dependent policy can gain over ``BASE``. One
+exception: with a sensor that is not exact, each simulation starts from the plant's state (the
+snapshot's physics), which the controller only estimates (the simulated controller reads the filter as
+the loop's does); there the meter is optimistic, not a policy one could run.
 
 ``oracle:BASE`` is the same one-step lookahead with the episode's **stored** future, which no
 controller knows: a **reference** for what such a policy can gain, never a contender. Its spec
