@@ -54,15 +54,11 @@ def raw_features(features: str, domain: str, s: AugmentedState) -> np.ndarray:
     return np.append(error, float(not s.plan.converged)) if features == "levels" else error
 
 
-def _extra(features: str) -> int:
-    return 1 if features == "levels" else 0
-
-
 def raw_size(features: str, domain: str, nx: int) -> int:
     if features == "paper":
         return 2 * nx + 1
     exogenous = _exogenous(domain)
-    return nx + 1 + (0 if exogenous is None else len(exogenous[1])) + _extra(features)
+    return nx + 1 + (0 if exogenous is None else len(exogenous[1])) + (features == "levels")  # and unconverged
 
 
 def feature_size(nx: int, features: str = "paper", domain: str = "") -> int:
