@@ -24,64 +24,32 @@ import argparse
 import json
 import platform
 import time
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-from learners import recipe_folder, row, shipped_recipe  # scripts/learners.py: the shipped recipes, a card row as JSON
+from learners import dpi_runs, ppo_runs, row  # scripts/learners.py: each learner's runs from the shipped recipes, a card row
 
 from etmpc.common.provenance import commit_and_date
 from etmpc.evaluation.backends import make_backend
 from etmpc.evaluation.references import stored
 from etmpc.evaluation.scorecard import score
-from etmpc.experiments.stages import trained
-from etmpc.learning import hyperparams
 from etmpc.learning.config import VALIDATION_ENTROPY
 from etmpc.learning.jobs import episode_outcomes
-from etmpc.learning.runner import cost_path, timed
 from etmpc.systems import folder_name, make_system
 
 
-def runs(task: str, work: Path, costs: list[float], seeds: tuple[int, ...], workers: int) -> dict[float, dict]:
-    """One DPI run per cost (kept in WORK): its chosen policy, seed and training cost."""
-    recipe = replace(shipped_recipe(task), seeds=seeds)
+def runs(task: str, work: Path, costs: list[float], seeds: tuple[int, ...], workers: int, learner: str) -> dict[float, dict]:
+    """One run of ``learner`` per cost (kept in WORK; ``scripts/learners.py``'s runs, over ``seeds``): its chosen
+    policy, seed and training cost (DPI: the run's; PPO: the mean per seed)."""
     done = {}
     for cost in costs:
-        out = work / folder_name(task) / f"cost_{cost:g}"
-        config = replace(recipe, dpi=replace(recipe.dpi, failure_cost=cost))
-        with timed(out, workers):
-            trained(config, out, {"workers": workers, "backend": "local", "address": None}, progress=True)
-        chosen = json.loads((out / "selected.json").read_text())["hyperparameters"]
-        done[cost] = {
-            "policy": f"rl:{out / 'selected.json'}",
-            "seed": chosen["seed"],
-            "wall_seconds": json.loads(cost_path(out).read_text())["wall_seconds"],
-        }
-    return done
-
-
-def ppo_runs(task: str, work: Path, costs: list[float], seeds: tuple[int, ...], workers: int) -> dict[float, dict]:
-    """One PPO run per cost and seed (kept in WORK), with the task's shipped ``ppo.yml``: per cost, the seed with
-    the best objective on the run's own validation episodes, and the mean training cost per seed."""
-    from etmpc.learning.ppo import train_ppo
-    from etmpc.learning.ppo_settings import PpoSettings
-
-    shipped = json.loads((recipe_folder(task) / "ppo.json").read_text())["settings"]
-    recipe = hyperparams.shipped(task, PpoSettings(validation_episodes=shipped["validation_episodes"]))
-    sense, done = make_system(task).objective_sense, {}
-    for cost in costs:
-        folders = {seed: work / "ppo" / folder_name(task) / f"cost_{cost:g}" / f"seed{seed}" for seed in seeds}
-        for seed, out in folders.items():
-            if not (out / "selected.json").exists():
-                train_ppo(task, out, replace(recipe, seed=seed, failure_cost=cost), workers, progress=True)
-        validation = {s: json.loads((out / "selected.json").read_text())["validation_objective"] for s, out in folders.items()}
-        chosen = (max if sense == "max" else min)(seeds, key=validation.get)
-        seconds = [json.loads((out / "training.json").read_text())["wall_seconds"] for out in folders.values()]
-        done[cost] = {
-            "policy": f"sb3:{folders[chosen] / 'selected.zip'}",
-            "seed": chosen,
-            "wall_seconds": float(np.mean(seconds)),
-        }
+        if learner == "ppo":
+            run = ppo_runs(task, work, seeds, workers, cost, work / "ppo" / folder_name(task) / f"cost_{cost:g}")
+            policy = f"sb3:{run['seeds'][run['chosen']]}"
+        else:
+            run = dpi_runs(task, work, seeds, workers, cost, work / folder_name(task) / f"cost_{cost:g}")
+            policy = f"rl:{run['files']['learned.json']}"
+        done[cost] = {"policy": policy, "seed": run["chosen"], "wall_seconds": run["cost"]["wall_seconds"]}
     return done
 
 
@@ -116,7 +84,7 @@ def choose(costs: list[float], validation: dict, sense: str) -> tuple[float, lis
 
 def study(task: str, work: Path, costs: list[float], seeds, episodes: int, workers: int, learner: str = "dpi") -> dict:
     system, refs = make_system(task), stored(task)
-    trained_runs = (ppo_runs if learner == "ppo" else runs)(task, work, costs, seeds, workers)
+    trained_runs = runs(task, work, costs, seeds, workers, learner)
     specs = [refs.best] + [trained_runs[c]["policy"] for c in costs]
     checked = validate(task, specs, episodes, workers)
     schedule, validation = checked[0], dict(zip(costs, checked[1:]))

@@ -91,13 +91,19 @@ def shipped_recipe(task: str) -> TrainConfig:
     )
 
 
-def dpi_runs(task: str, work: Path, seeds: tuple[int, ...], workers: int) -> dict:
-    out = work / "dpi" / folder_name(task)
+def dpi_runs(
+    task: str, work: Path, seeds: tuple[int, ...], workers: int, failure_cost: float | None = None, out: Path | None = None
+) -> dict:
+    """DPI over ``seeds`` in lockstep with the shipped recipe (``failure_cost``, if given, in place of the recipe's),
+    in ``out`` (default ``WORK/dpi/<task>``)."""
+    out = work / "dpi" / folder_name(task) if out is None else out
     if (out / "checkpoint.json").exists():  # a run already in WORK continues as it was set up
         config = TrainConfig.from_json(json.loads((out / "checkpoint.json").read_text())["config"])
         seeds = config.seeds
     else:
         config = replace(shipped_recipe(task), seeds=seeds)
+        if failure_cost is not None:
+            config = replace(config, dpi=replace(config.dpi, failure_cost=failure_cost))
 
     with timed(out, workers):  # the first invocation that finishes the run keeps its wall time
         trained(config, out, {"workers": workers, "backend": "local", "address": None}, progress=True)
@@ -113,7 +119,12 @@ def dpi_runs(task: str, work: Path, seeds: tuple[int, ...], workers: int) -> dic
     }
 
 
-def ppo_runs(task: str, work: Path, seeds: tuple[int, ...], workers: int) -> dict:
+def ppo_runs(
+    task: str, work: Path, seeds: tuple[int, ...], workers: int, failure_cost: float | None = None, folder: Path | None = None
+) -> dict:
+    """PPO, one run per seed, with the task's shipped ``ppo.yml`` (``failure_cost``, if given, in place of its own), in
+    ``folder/seed<S>`` (default ``WORK/ppo/<task>``); the shipped network stands for its own seed's run."""
+    folder = work / "ppo" / folder_name(task) if folder is None else folder
     shipped = Path("policies") / folder_name(task)
     # the shipped network (its seed's run, not made again), if it is this task's; a new variant's recipe is its
     # own ppo.yml (the base task's, with the variant's id), trained at every seed
@@ -121,9 +132,10 @@ def ppo_runs(task: str, work: Path, seeds: tuple[int, ...], workers: int) -> dic
     made = made if made is not None and made.get("task") == task else None
     validation_episodes = (made or json.loads((recipe_folder(task) / "ppo.json").read_text()))["settings"]["validation_episodes"]
     base = hyperparams.shipped(task, PpoSettings(validation_episodes=validation_episodes))
+    base = base if failure_cost is None else replace(base, failure_cost=failure_cost)
     paths, validation, costs = {}, {}, []
     for seed in seeds:
-        out = work / "ppo" / folder_name(task) / f"seed{seed}"
+        out = folder / f"seed{seed}"
         kept = (out / "selected.zip").exists() and (out / "selected.json").exists()  # a finished run (or a copy of one)
         if not kept and made is not None and made["settings"] == json.loads(json.dumps(settings_json(replace(base, seed=seed)))):
             paths[seed], validation[seed] = shipped / "ppo.zip", made["validation_objective"]  # the shipped seed's run
@@ -138,7 +150,7 @@ def ppo_runs(task: str, work: Path, seeds: tuple[int, ...], workers: int) -> dic
         validation[seed] = json.loads((out / "selected.json").read_text())["validation_objective"]
     sense = make_system(task).objective_sense
     chosen = (max if sense == "max" else min)(seeds, key=validation.get)
-    out = work / "ppo" / folder_name(task) / f"seed{chosen}"
+    out = folder / f"seed{chosen}"
     files = {"ppo.zip": out / "selected.zip", "ppo.json": out / "selected.json"} if paths[chosen].parent == out else {}
     return {
         "seeds": {s: str(p) for s, p in paths.items()},

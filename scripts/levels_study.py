@@ -101,30 +101,26 @@ def summary(rows: np.ndarray, reference: np.ndarray, spec: str, trigger_rows: np
 
 
 def study(work: Path, episodes: int, rollout_episodes: int, workers: int) -> dict:
-    triggers = {trigger(a, x): trigger(a, x) for a in AGES for x in THRESHOLDS}
-    learners = {**SHIPPED, **dpi_runs(work, workers)}
-    main = played({BEST_FIXED: BEST_FIXED, **triggers, **learners}, episodes, workers)
-    reference = main[BEST_FIXED]
+    triggers = [trigger(a, x) for a in AGES for x in THRESHOLDS]
+    specs = {BEST_FIXED: BEST_FIXED, **{t: t for t in triggers}, **SHIPPED, **dpi_runs(work, workers)}  # row name -> spec
+    main = played(specs, episodes, workers)
     best = min(triggers, key=lambda name: float(np.mean(main[name][:, 0])))
     lookahead = {
+        BEST_FIXED: BEST_FIXED,
+        best: best,
         f"rollout over {best}, 4 futures": f"rollout:{best}:4:10",
         f"rollout over {best}, 16 futures": f"rollout:{best}:16:10",
         "oracle": f"oracle:{BEST_FIXED}",
     }
-    short = played({BEST_FIXED: BEST_FIXED, best: best, **lookahead}, rollout_episodes, workers)
+    short = played(lookahead, rollout_episodes, workers)
     return {
         "task": TASK,
         "made": commit_and_date(),
         "validation_episodes": episodes,
         "rollout_episodes": rollout_episodes,
         "best_trigger": best,
-        "rows": {
-            name: summary(rows, reference, ({BEST_FIXED: BEST_FIXED} | triggers | learners)[name]) for name, rows in main.items()
-        },
-        "lookahead": {
-            name: summary(rows, short[BEST_FIXED], ({BEST_FIXED: BEST_FIXED, best: best} | lookahead)[name], short[best])
-            for name, rows in short.items()
-        },
+        "rows": {name: summary(rows, main[BEST_FIXED], specs[name]) for name, rows in main.items()},
+        "lookahead": {name: summary(rows, short[BEST_FIXED], lookahead[name], short[best]) for name, rows in short.items()},
     }
 
 
