@@ -107,18 +107,26 @@ def add_parser(sub, tasks: str) -> None:
         help="rebuild the references of the tasks (every periodic schedule and the oracle on the stored "
         "test set; a maintainer's step after a task changes), into --out: never over the stored ones",
     )
+    sc.add_argument(
+        "--meter-only",
+        action="store_true",
+        help="with --references: play only the rollout meter again, the schedules and the oracle as stored "
+        "(after a change to the meter itself, which moves no score)",
+    )
 
 
 def run(args) -> None:
     """``etmpc score``: the scorecard, ``--references`` or ``--leaderboard``."""
     from etmpc.evaluation.inputs import check_run_outputs, run_inputs
-    from etmpc.evaluation.references import build_references, references_path, write_references
+    from etmpc.evaluation.references import build_references, references_path, replay_meter, write_references
     from etmpc.evaluation.scorecard import format_scorecard, score
     from etmpc.systems import distinct, folder_name, names
 
     tasks = distinct(args.task or names())
     if args.options and (args.leaderboard or args.references):
         raise EtmpcError("--leaderboard and --references are the suite's own tasks: no --option with them")
+    if args.meter_only and not args.references:
+        raise EtmpcError("--meter-only is --references'")
     if args.leaderboard:
         return _leaderboard(args, tasks)
     if args.readme is not None or args.card is not None:
@@ -129,9 +137,8 @@ def run(args) -> None:
         out = args.out or REFERENCES_OUT
         check_run_outputs({}, {"--out": out})
         for task in tasks:
-            path = write_references(
-                build_references(task, workers=args.workers, say=_say), out / folder_name(task) / "references.json"
-            )
+            build = replay_meter if args.meter_only else build_references
+            path = write_references(build(task, workers=args.workers, say=_say), out / folder_name(task) / "references.json")
             print(f"wrote {path} (to ship it: copy it over {references_path(task)})")
         return
     if args.out is not None:

@@ -166,6 +166,18 @@ class Belief:
         for name in ("mean", "covariance", "innovation", "reading"):
             getattr(self, name).flags.writeable = False
 
+    def sample(self, rng: np.random.Generator) -> np.ndarray:
+        """A state drawn from the belief, ``N(mean, covariance)``: ``mean + L z`` with ``L`` the covariance's
+        Cholesky factor (its symmetric square root, negative eigenvalues of rounding set to 0, where it
+        is only semidefinite) and ``z`` one standard normal draw per state from ``rng``."""
+        covariance = 0.5 * (self.covariance + self.covariance.T)
+        try:
+            root = np.linalg.cholesky(covariance)
+        except np.linalg.LinAlgError:
+            values, vectors = np.linalg.eigh(covariance)
+            root = vectors * np.sqrt(np.clip(values, 0.0, None))
+        return self.mean + root @ rng.standard_normal(self.mean.shape[0])
+
 
 @dataclass(frozen=True, eq=False)
 class ExtendedKalmanFilter:

@@ -209,6 +209,21 @@ def build_references(
     return refs
 
 
+def replay_meter(
+    task: str, workers: int | None = None, progress: bool = True, say: Callable[[str], None] = lambda line: None
+) -> References:
+    """``task``'s stored references with the rollout meter played again over their best schedule, the schedules
+    and the oracle (the score's scale) kept as stored: after a change to the meter alone, which moves no score."""
+    refs, system = stored(task), make_system(task)
+    meter = rollout_meter_spec(system, refs.best)
+    if meter is None:
+        raise EtmpcError(f"{system.name} has no rollout meter to play again")
+    say(f"{system.name}: references: the rollout meter ({meter}) again, the schedules and the oracle as stored")
+    with stage(f"{system.name}: references: the rollout meter"):
+        rollout = evaluate(system_key(task), [meter], workers=workers, progress=progress)
+    return replace(refs, rollout_evaluation=rollout.to_json(cpu=True))
+
+
 def load_references(task: str, test_set_sha256: str, path: Path | None = None) -> References:
     """The stored references of ``task``, checked against the test set (its sha256), the suite's version
     and the task's price; a mismatch is one line that says how to rebuild them."""

@@ -162,8 +162,8 @@ def entries(
             LAST[0],
             "meter",
             {t: rollout_meter_spec(make_system(t), best[t]) for t in tasks},
-            "one-step lookahead over sampled futures: a real policy where the sensor is exact; on a noisy variant its "
-            "simulations start from the plant's state, which the controller only estimates (an optimistic meter there)",
+            "one-step lookahead over sampled futures, a real policy: on a noisy variant each future also starts "
+            "from a state drawn from the filter's belief",
         ),
         Entry(LAST[1], "oracle", {t: references[t].oracle_spec for t in tasks}, ORACLE_NOTE),
     ]

@@ -16,7 +16,10 @@ Then each iteration, for the current policy ``pi_t``:
 2. **Rollouts** (:class:`Labeller`). At each picked decision, estimate the return of keeping and of
    recomputing with :func:`etmpc.policies.rollout.q_values`: ``futures`` futures sampled from what the
    controller knows, the same for both answers (common random numbers), each simulated ``horizon``
-   steps ahead under ``pi_t`` and valued at ``system.truncation_value`` there.
+   steps ahead under ``pi_t`` and valued at ``system.truncation_value`` there. Where the sensor is
+   not exact, each play starts from the plant's true state, which the controller only estimates: the
+   labels are privileged (a teacher that knows more than the student), the policy learnt is not (its
+   features are the filter's).
 3. **Classification** (:func:`fit`). Label the decision *keep* when keeping returns at least as
    much, weight it by how much the better answer gains (``|Q(keep) - Q(recompute)|``: a mistake
    costs that much), and fit ``theta`` by weighted, ridge-regularised logistic regression on every
@@ -155,7 +158,9 @@ def label_episode(domain: str, base, settings: Settings, policy_json: dict, seed
         pick_rng.choice(system.episode_steps, size=min(settings.states_per_episode, system.episode_steps), replace=False).tolist()
     )
 
-    cost = dict(failure_cost=settings.failure_cost)
+    # Where the sensor is not exact, the labels' plays start from the plant's true state (privileged
+    # information, as in learning with a privileged critic): the policy learnt reads only the filter's.
+    cost = dict(failure_cost=settings.failure_cost, from_belief=False)
 
     def label(s, twin):  # every answer over the same sampled futures, then phi(s)
         if system.compute_levels:

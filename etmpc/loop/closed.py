@@ -104,14 +104,22 @@ class ClosedLoop:
         self._arrive()
         return self
 
-    def resume(self, snapshot: Snapshot, episode: Any = None) -> ClosedLoop:
+    def resume(self, snapshot: Snapshot, episode: Any = None, start: np.ndarray | None = None) -> ClosedLoop:
         """Continue ``snapshot`` (taken in a twin of this loop's environment) in the light mode;
-        ``episode`` replaces the episode being played from the snapshot's step on (a sampled future)."""
+        ``episode`` replaces the episode being played from the snapshot's step on (a sampled future), and
+        ``start`` the plant's state (one drawn from the filter's belief, where the controller knows no more),
+        the rest of the physics (a disturbance, the rotors' lag) and the controller's memory as snapshotted."""
         if self.records:
             raise RuntimeError("only a light loop (records=False) resumes a snapshot")
-        self.env.physics.restore(snapshot.physics)
+        physics = self.env.physics
+        physics.restore(snapshot.physics)
+        x = snapshot.x
+        if start is not None:
+            physics.set_state_vector(start)
+            physics.forward()
+            x = readonly(np.array(start, dtype=float))
         self.env.task.resume(snapshot.episode if episode is None else episode, snapshot.step)
-        self.plan, self.age, self.u_prev, self.x = snapshot.plan, snapshot.age, snapshot.u_prev, snapshot.x
+        self.plan, self.age, self.u_prev, self.x = snapshot.plan, snapshot.age, snapshot.u_prev, x
         self.belief, self.seen, self._readings = snapshot.belief, snapshot.seen, None
         self._observation, self.step_index, self.done, self.failed = snapshot.observation, snapshot.step, False, False
         self.pending, self._instant = snapshot.pending, snapshot.plan is None
@@ -354,6 +362,7 @@ def play_on(
     stop: int | None = None,
     trace: Continuation | None = None,
     failure_cost: float = 0.0,
+    start: np.ndarray | None = None,
 ) -> float:
     """Continue ``snapshot`` in ``env`` (a twin of the one it was taken in) and return the policy's
     return from the snapshot's step on: the sum of :meth:`ClosedLoop.step`'s rewards (the price of
@@ -367,12 +376,13 @@ def play_on(
     the same for every future). ``stop`` is the step to stop before (default: the episode's end). A
     plant that fails (non-finite state) returns ``-inf``. ``trace``, if given (a new :class:`Continuation`),
     is filled step by step. ``failure_cost``: the task's failures in the play (``system.failures_in_rewards``) cost
-    this much each, taken off the return.
+    this much each, taken off the return. ``start``: the plant's state to start from instead of the snapshot's
+    (:meth:`ClosedLoop.resume`).
 
     Plays :class:`ClosedLoop` in its light mode (a policy that never reads the observation sets
     ``observes = False``): the same numbers as :func:`run_episode`, bit for bit (tests/loop/test_rollout.py).
     """
-    loop = ClosedLoop(system, env, records=False).resume(snapshot, episode)
+    loop = ClosedLoop(system, env, records=False).resume(snapshot, episode, start)
     end = system.episode_steps if stop is None else min(stop, system.episode_steps)
     observes = getattr(policy, "observes", True)  # the observation is made only when someone reads it
     total, rewards = 0.0, [] if failure_cost else None  # a failure cost counts the play's failures from its rewards

@@ -12,10 +12,10 @@ simulation ``H`` steps ahead and adds ``system.truncation_value`` of the state i
 
 A rollout policy is a real, if expensive, policy: it uses only what the controller knows, and by
 the rollout property it does at least as well as ``BASE`` in expectation (up to the sampling noise
-of ``K`` futures). It measures how much a state-dependent policy can gain over ``BASE``. One
-exception: with a sensor that is not exact, each simulation starts from the plant's state (the
-snapshot's physics), which the controller only estimates (the simulated controller reads the filter as
-the loop's does); there the meter is optimistic, not a policy one could run.
+of ``K`` futures). It measures how much a state-dependent policy can gain over ``BASE``. With a
+sensor that is not exact, the controller knows the plant's state only as its filter's belief: each
+future then also starts from a state drawn from that belief (the simulated controller reads the filter
+as the loop's does), never from the plant's true state.
 
 ``oracle:BASE`` is the same one-step lookahead with the episode's **stored** future, which no
 controller knows: a **reference** for what such a policy can gain, never a contender. Its spec
@@ -50,6 +50,7 @@ def q_values(
     oracle: bool = False,
     memo: OracleMemo | None = None,
     failure_cost: float = 0.0,
+    from_belief: bool = True,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Returns of each answer at ``context``'s decision, one row per answer and one column per future
     (paired): keeping and recomputing, or, on a task with compute levels, keeping, one SQP iteration
@@ -60,7 +61,10 @@ def q_values(
     base is deterministic and which plays to the episode's end) may already hold one of the two
     answers, and is given the plays made here. ``failure_cost``: each of the task's failures in a play costs this
     much more (its ``failures_in_rewards``; DPI's safety weight), never with a ``memo`` (an oracle's plays are scored
-    as the task scores them).
+    as the task scores them). Where the sensor is not exact, each sampled future also starts from a plant state
+    drawn from the filter's belief (:meth:`~etmpc.control.sensing.Belief.sample`, after the futures' other
+    draws; the same state for every answer), since the controller knows no more; ``from_belief=False`` starts
+    every play from the plant's true state instead (privileged: DPI's labels). The oracle starts from the true state.
     """
     system = context.system
     if not oracle:
@@ -72,6 +76,8 @@ def q_values(
     snapshot = Snapshot.take(context)
     episodes = [None] if oracle else [system.sample_future(snapshot.episode, context.step, rng) for _ in range(futures)]
     seeds = rng.integers(2**63, size=len(episodes)) if (base.stochastic and rng is not None) else [None] * len(episodes)
+    believed = from_belief and not oracle and snapshot.belief is not None
+    starts = [snapshot.belief.sample(rng) for _ in episodes] if believed else [None] * len(episodes)
     known = memo.lookup(snapshot) if memo is not None else None
     stop = None if horizon is None else context.step + horizon
     options = answers(system)
@@ -86,10 +92,12 @@ def q_values(
         solved = None
         if first and shared:
             solved = system.plan(snapshot.seen, snapshot.u_prev, snapshot.plan, snapshot.age, context.timestep)
-        for k, (episode, seed) in enumerate(zip(episodes, seeds)):
+        for k, (episode, seed, start) in enumerate(zip(episodes, seeds, starts)):
             base_rng = None if seed is None else np.random.default_rng(seed)
             trace = Continuation(context.step) if memo is not None else None
-            returns[index, k] = play_on(system, twin, snapshot, base, base_rng, first, episode, solved, stop, trace, failure_cost)
+            returns[index, k] = play_on(
+                system, twin, snapshot, base, base_rng, first, episode, solved, stop, trace, failure_cost, start
+            )
             if memo is not None:
                 memo.played(int(first), trace, returns[index, k])
     return returns

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from etmpc.common.checks import BadValue
-from etmpc.control.sensing import ExtendedKalmanFilter, FilterSettings, Readings, Sensor, episode_key
+from etmpc.control.sensing import Belief, ExtendedKalmanFilter, FilterSettings, Readings, Sensor, episode_key
 
 DT = 0.1
 A = np.array([[1.0, DT], [0.0, 1.0]])  # a double integrator: position and velocity
@@ -82,6 +82,25 @@ def test_a_belief_is_read_only():
     belief = _filter().start(np.array([0.1, np.nan]), np.array([True, False]))
     with pytest.raises(ValueError):
         belief.mean[0] = 1.0
+
+
+@pytest.mark.parametrize(
+    "covariance",
+    [
+        np.array([[4e-4, 1e-4, 0.0], [1e-4, 9e-4, 0.0], [0.0, 0.0, 1e-2]]),
+        np.array([[1.0, 1.0, 0.0], [1.0, 1.0, 0.0], [0.0, 0.0, 0.0]]),  # singular: no Cholesky factor
+    ],
+)
+def test_states_drawn_from_a_belief_have_its_mean_and_covariance(covariance):
+    mean, nan = np.array([0.3, -1.0, 2.0]), np.full(3, np.nan)
+    belief = Belief(mean, covariance, nan, nan)
+    rng = np.random.default_rng(5)
+    draws = np.array([belief.sample(rng) for _ in range(20000)])
+    # standard errors: sqrt(var / n) for the mean, about sqrt(2 / n) * var for the covariance
+    np.testing.assert_allclose(draws.mean(axis=0), mean, atol=5 * np.sqrt(np.diag(covariance).max() / 20000))
+    np.testing.assert_allclose(np.cov(draws.T), covariance, atol=5 * np.sqrt(2 / 20000) * np.diag(covariance).max())
+    again = Belief(mean, covariance, nan, nan).sample(np.random.default_rng(5))
+    np.testing.assert_array_equal(again, draws[0])  # the generator's draws only
 
 
 def test_the_default_sensor_is_exact_and_a_noisy_one_is_not():

@@ -242,6 +242,23 @@ def test_the_stored_references_are_what_playing_the_episodes_again_gives(task):
         assert kept == json.loads(json.dumps(again))
 
 
+def test_playing_the_meter_again_keeps_the_scale_and_replays_the_stored_meter(monkeypatch):
+    import etmpc.evaluation.references as references
+
+    first = lambda key, specs, **run: evaluate(key, specs, **(run | {"episodes": 1}))  # noqa: E731 (one episode: seconds)
+    monkeypatch.setattr(references, "evaluate", first)
+    before = references.stored("battery/trading")
+    after = references.replay_meter("battery/trading", workers=1, progress=False)
+    assert replace(after, rollout_evaluation=None) == replace(before, rollout_evaluation=None)
+    kept = next(r for r in before.rollout_evaluation["runs"] if r["episode"] == 0)
+    assert after.rollout_evaluation["runs"] == [kept]  # an exact sensor: the meter as it was
+
+
+def test_meter_only_belongs_to_references(capsys):
+    assert main(["score", "--meter-only", "every:1"]) != 0
+    assert "--meter-only is --references'" in capsys.readouterr().err
+
+
 def test_scoring_plays_only_the_trigger_and_says_what_it_costs(tmp_path):
     best = json.loads(references_path("battery").read_text())["best"]
     card = etmpc.score([best, "threshold:0.01"], tasks=["battery"], workers=1, progress=False, json_path=tmp_path / "card.json")

@@ -2,6 +2,7 @@
 is what is recorded and judged, the same episode reads the same noise, and the light loop replays it exactly."""
 
 import copy
+import dataclasses
 
 import numpy as np
 import pytest
@@ -9,6 +10,7 @@ import pytest
 from etmpc.loop import Snapshot, play_on, run_episode
 from etmpc.evaluation import testsets
 from etmpc.policies import parse_policy
+from etmpc.policies.rollout import q_values
 from etmpc.systems import SystemKey, system_key
 
 NOISY = {"sensor.noise_std": "0.01,0,0.01,0", "sensor.measured": "1,0,1,0"}  # position and angle, 1 cm and 10 mrad
@@ -34,7 +36,7 @@ class Spy:
         self.seen.append((s.context.step, np.array(s.x), s.belief))
         decision = self.inner.decide(s, rng)
         if s.context.step == self.step:
-            self.snapshot, self.decision = Snapshot.take(s.context), decision
+            self.snapshot, self.decision, self.context = Snapshot.take(s.context), decision, s.context
         return decision
 
 
@@ -98,3 +100,39 @@ def test_the_light_loop_continues_a_noisy_episode_bit_for_bit(noisy, spec, step)
         expected += reward - system.recompute_price * work
     assert total == expected
     np.testing.assert_array_equal(twin.physics.state(), original.states[original.steps])
+
+
+def test_the_rollout_meter_knows_the_plant_only_through_the_filters_belief(noisy, monkeypatch):
+    """Move the plant's true state and leave the filter none the wiser: the meter's returns do not change
+    (its futures start from states drawn from the belief); DPI's privileged labels, from the true state, do."""
+    system, episodes = noisy
+    base = parse_policy("every:3", system)
+    spy = Spy(base, 31)
+    run_episode(system, system.make_env(), spy, None, episodes[1])
+    true = spy.snapshot
+    twin = system.make_env()
+    twin.physics.restore(true.physics)
+    moved_x = true.x + np.array([0.05, 0.2, 0.05, 0.2])
+    twin.physics.set_state_vector(moved_x)
+    twin.physics.forward()
+    moved = dataclasses.replace(true, physics=twin.physics.snapshot(), x=moved_x)
+
+    def returns(snapshot, from_belief):
+        monkeypatch.setattr(Snapshot, "take", lambda context: snapshot)
+        rng = np.random.default_rng(7)
+        return q_values(spy.context, base, 3, rng, system.make_env(), 15, from_belief=from_belief)
+
+    np.testing.assert_array_equal(returns(true, True), returns(moved, True))
+    assert not np.array_equal(returns(true, False), returns(moved, False))
+    assert not np.array_equal(returns(true, True), returns(true, False))
+
+
+def test_a_play_resumed_at_the_plants_own_state_is_the_play_itself(noisy):
+    system, episodes = noisy
+    inner = parse_policy("every:3", system)
+    spy = Spy(inner, 40)
+    run_episode(system, system.make_env(), spy, None, episodes[0])
+    snapshot = spy.snapshot
+    plain = play_on(system, system.make_env(), snapshot, inner, None, True)
+    started = play_on(system, system.make_env(), snapshot, inner, None, True, start=np.array(snapshot.x))
+    assert started == plain
