@@ -105,25 +105,20 @@ class ClosedLoop:
         return self
 
     def resume(self, snapshot: Snapshot, episode: Any = None, start: np.ndarray | None = None) -> ClosedLoop:
-        """Continue ``snapshot`` (taken in a twin of this loop's environment) in the light mode;
-        ``episode`` replaces the episode being played from the snapshot's step on (a sampled future), and
-        ``start`` the plant's state (one drawn from the filter's belief, where the controller knows no more),
-        the rest of the physics (a disturbance, the rotors' lag) and the controller's memory as snapshotted."""
+        """Continue ``snapshot`` (taken in a twin of this loop's environment) in the light mode; ``episode`` replaces
+        the episode from the snapshot's step on (a sampled future), ``start`` the plant's state (the rest as snapshotted)."""
         if self.records:
             raise RuntimeError("only a light loop (records=False) resumes a snapshot")
-        physics = self.env.physics
-        physics.restore(snapshot.physics)
-        x = snapshot.x
+        self.env.physics.restore(snapshot.physics)
+        x = snapshot.x if start is None else readonly(np.array(start, dtype=float))
         if start is not None:
-            physics.set_state_vector(start)
-            physics.forward()
-            x = readonly(np.array(start, dtype=float))
+            self.env.physics.set_state_vector(x)
+            self.env.physics.forward()
         self.env.task.resume(snapshot.episode if episode is None else episode, snapshot.step)
         self.plan, self.age, self.u_prev, self.x = snapshot.plan, snapshot.age, snapshot.u_prev, x
         self.belief, self.seen, self._readings = snapshot.belief, snapshot.seen, None
         self._observation, self.step_index, self.done, self.failed = snapshot.observation, snapshot.step, False, False
-        self.pending, self._instant = snapshot.pending, snapshot.plan is None
-        self.timestep = None
+        self.pending, self._instant, self.timestep = snapshot.pending, snapshot.plan is None, None
         return self
 
     @property
@@ -244,9 +239,8 @@ class ClosedLoop:
         answer is refused, naming the task: read by its truth, 2 was a full solve on a keep-or-solve task."""
         level = level_of(answer, self.levels)
         if level is None:
-            raise BadValue(
-                f"a decision is {ANSWERS[self.levels]} on task {self.system.name}, got {type(answer).__name__} {answer!r}"
-            )
+            got = f"{type(answer).__name__} {answer!r}"
+            raise BadValue(f"a decision is {ANSWERS[self.levels]} on task {self.system.name}, got {got}")
         return level
 
     def _deliver(self, new: Plan, made: int, expired: bool, now: int | None = None, started: int | None = None) -> None:
@@ -328,9 +322,8 @@ class ClosedLoop:
             self.trajectory.nonfinite, self.done, self.failed = True, True, True
 
     def _finish(self) -> None:
-        traj = self.trajectory
-        traj.states[traj.steps] = self.x
-        traj.nonfinite = self.failed = not bool(np.all(np.isfinite(self.x)))
+        self.trajectory.states[self.trajectory.steps] = self.x
+        self.trajectory.nonfinite = self.failed = not bool(np.all(np.isfinite(self.x)))
         self.done = True
 
 
@@ -375,9 +368,8 @@ def play_on(
     is the plan a recompute at the first step gives, when the caller has solved it already (it is
     the same for every future). ``stop`` is the step to stop before (default: the episode's end). A
     plant that fails (non-finite state) returns ``-inf``. ``trace``, if given (a new :class:`Continuation`),
-    is filled step by step. ``failure_cost``: the task's failures in the play (``system.failures_in_rewards``) cost
-    this much each, taken off the return. ``start``: the plant's state to start from instead of the snapshot's
-    (:meth:`ClosedLoop.resume`).
+    is filled step by step. ``failure_cost``: the task's failures in the play (``system.failures_in_rewards``)
+    cost this much each, taken off the return. ``start``: the plant's state instead of the snapshot's.
 
     Plays :class:`ClosedLoop` in its light mode (a policy that never reads the observation sets
     ``observes = False``): the same numbers as :func:`run_episode`, bit for bit (tests/loop/test_rollout.py).
