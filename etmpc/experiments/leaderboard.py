@@ -11,8 +11,8 @@ The entries, each one spec per task (:func:`entries`):
 * the learners shipped in ``policies/<task>/`` (from a checkout): **GPOMDP** (``gpomdp.json``, the
   paper's tasks), **DPI** (``learned.json``) and **PPO** (``ppo.zip``), each where it is shipped;
 * **rollout meter**: ``rollout:BEST:4:H``, the one-step lookahead over sampled futures with the task's
-  lookahead ``H``: a real policy where the sensor is exact (on a noisy variant it simulates from the plant's state,
-  which the controller only estimates), and the costliest to run (its CPU column shows it);
+  lookahead ``H``: a real policy (on a noisy variant each future also starts from a state drawn from the filter's
+  belief), and the costliest to run (its CPU column shows it);
 * **oracle**: ``oracle:BEST`` (its reference: 100), the clairvoyant reference: a one-step lookahead over the best
   periodic schedule with each episode's future known. Not a policy, and not a bound: a policy that saves
   recomputes the oracle's lookahead spends can score above 100 (the page says, per task, where and why).

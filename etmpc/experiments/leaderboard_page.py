@@ -35,10 +35,14 @@ def _cell(row: dict) -> str:
 
 
 def _failures(row: dict) -> str:
-    """The task's failures per episode, mean ± 95 % CI; a row of an older etmpc has no CI (the mean alone), a
-    task that counts none ``-``. In the JSON a CI that could not be given (one episode) is null."""
-    ci = row.get("failures_ci95")
-    return failures_cell(row["failures_mean"], math.nan if ci is None and row.get("episode_failures") is not None else ci)
+    """The task's failures per episode, mean ± 95 % CI, and in how many episodes any came (one crash can count
+    many steps); a row of an older etmpc has no CI (the mean alone), a task that counts none ``-``. In the JSON
+    a CI that could not be given (one episode) is null."""
+    ci, episodes = row.get("failures_ci95"), row.get("episode_failures")
+    cell = failures_cell(row["failures_mean"], math.nan if ci is None and episodes is not None else ci)
+    if episodes is None or cell == "-":
+        return cell
+    return f"{cell} ({sum(1 for n in episodes if n > 0)} ep.)"
 
 
 def _number(value, spec: str) -> str:
@@ -186,7 +190,8 @@ def page(data: dict) -> str:
             f"References: `{ref['best_periodic']}` and `{ref['oracle']}` (mean gap {ref['gap']:.5g}); objective: "
             f"{sense} is better, at {ref['recompute_price']:g} per recompute."
             + (
-                f" Failures ({ref['failure_name']}): per episode, mean ± 95 % CI ([what counts](scorecard.md#failures))."
+                f" Failures ({ref['failure_name']}): per episode, mean ± 95 % CI, and in how many episodes any came"
+                f" ([what counts](scorecard.md#failures))."
                 if ref.get("failure_name")
                 else ""
             ),

@@ -19,7 +19,9 @@ Then each iteration, for the current policy ``pi_t``:
    steps ahead under ``pi_t`` and valued at ``system.truncation_value`` there. Where the sensor is
    not exact, each play starts from the plant's true state, which the controller only estimates: the
    labels are privileged (a teacher that knows more than the student), the policy learnt is not (its
-   features are the filter's).
+   features are the filter's). The weighted classifier's best decision given those features is the sign
+   of the labels' mean given them; for a calibrated filter (the true state is then a draw from its
+   belief) that is the mean plays from states drawn from the belief would give.
 3. **Classification** (:func:`fit`). Label the decision *keep* when keeping returns at least as
    much, weight it by how much the better answer gains (``|Q(keep) - Q(recompute)|``: a mistake
    costs that much), and fit ``theta`` by weighted, ridge-regularised logistic regression on every

@@ -198,7 +198,11 @@ def test_the_failures_column_is_mean_and_ci_and_an_older_row_or_page_without_the
     out, data = board
     always = next(e for e in data["entries"] if e["name"] == "always")["rows"][0]
     assert always["episode_failures"] == [0, 0] and always["failures_ci95"] == 0.0  # a plan every step is never cut
-    assert _failures_cell(page(data), "always") == "0.00 ± 0.00" and "Failures (curtailed): per episode" in page(data)
+    assert _failures_cell(page(data), "always") == "0.00 ± 0.00 (0 ep.)" and "Failures (curtailed): per episode" in page(data)
+    crashed = copy.deepcopy(data)  # one episode with many failing steps, one with none
+    row = next(e for e in crashed["entries"] if e["name"] == "always")["rows"][0]
+    row.update(episode_failures=[0, 7], failures_mean=3.5, failures_ci95=6.86)
+    assert _failures_cell(page(crashed), "always") == "3.50 ± 6.86 (1 ep.)"
     # A row kept by an etmpc that counted no failures is played again; the row kept now is kept.
     (kept,) = (out / "work" / "always").glob("*/*.json")
     current = json.loads(kept.read_text())
@@ -220,7 +224,7 @@ def test_the_failures_column_is_mean_and_ci_and_an_older_row_or_page_without_the
         entry["rows"] = [dict(r, failures_mean=None) for r in entry["rows"]]
     assert _failures_cell(page(data), "always") == "-"
     stored = page(json.loads((REPO / "docs" / "leaderboard.json").read_text()))  # the stored page's JSON, as it is
-    assert _failures_cell(stored, "always") == "0.00 ± 0.00"  # cart_pendulum: a plan every step keeps the pole up
+    assert _failures_cell(stored, "always") == "0.00 ± 0.00 (0 ep.)"  # cart_pendulum: a plan every step keeps the pole up
 
 
 def test_each_shipped_learner_has_a_shielded_row_on_the_tasks_that_declare_a_shield(monkeypatch):
