@@ -181,6 +181,19 @@ def row(card_row) -> dict:
     }
 
 
+def bounds_of(task: str) -> tuple[dict, dict]:
+    """The oracle's and the rollout meter's specs by name, and their rows, from the stored references' own runs."""
+    system, refs = make_system(task), stored(task)
+    bounds = {"oracle": refs.oracle_spec}
+    if (meter := rollout_meter_spec(system, refs.best)) is not None and refs.kept_evaluation(meter) is not None:
+        bounds["rollout meter"] = meter
+    rows = {}
+    for spec in bounds.values():
+        evaluation = refs.kept_evaluation(spec)
+        rows[spec] = row(task_score(refs, evaluation, spec)) if evaluation is not None else None
+    return bounds, rows
+
+
 def compare(task: str, work: Path, dpi_seeds, ppo_seeds, workers: int) -> dict:
     system, refs = make_system(task), stored(task)
     learners = {"DPI": dpi_runs(task, work, dpi_seeds, workers), "PPO": ppo_runs(task, work, ppo_seeds, workers)}
@@ -200,12 +213,8 @@ def compare(task: str, work: Path, dpi_seeds, ppo_seeds, workers: int) -> dict:
         rows = {r.policy: row(r) for r in card.rows}
         card_path.parent.mkdir(parents=True, exist_ok=True)
         card_path.write_text(json.dumps({"specs": specs, "rows": rows}) + "\n")
-    bounds = {"oracle": refs.oracle_spec}
-    if (meter := rollout_meter_spec(system, refs.best)) is not None and refs.kept_evaluation(meter) is not None:
-        bounds["rollout meter"] = meter
-    for name, spec in bounds.items():
-        evaluation = refs.kept_evaluation(spec)
-        rows[spec] = row(task_score(refs, evaluation, spec)) if evaluation is not None else None
+    bounds, bound_rows = bounds_of(task)
+    rows |= bound_rows
     result = {"task": task, "best_fixed": refs.best, "rows": rows, "bounds": bounds, "learners": {}, "shield": None}
     result["made"] = commit_and_date()  # each task's own: tasks are run (and continued) by separate invocations
     if shielded:
@@ -328,6 +337,12 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("docs/results"))
     parser.add_argument("--ship", action="store_true", help="copy the chosen seeds' files into policies/<task>/")
     parser.add_argument("--page-only", action="store_true", help="only write the page again from learners.json")
+    parser.add_argument(
+        "--bounds-only",
+        action="store_true",
+        help="take the oracle's and the rollout meter's rows again from the stored references (after they were played "
+        "again), the learners' as they are in learners.json, and write the page again",
+    )
     args = parser.parse_args()
     started, provenance = time.perf_counter(), commit_and_date()  # the code that runs: the checkout as it starts
     path = args.out / "learners.json"
@@ -335,6 +350,16 @@ def main() -> None:
     document["tasks"] = {t: document["tasks"][t] for t in names() if t in document["tasks"]}
     if args.page_only:
         (args.out / "learners.md").write_text(page(document))
+        return
+    if args.bounds_only:
+        for task in args.task or list(document["tasks"]):
+            bounds, rows = bounds_of(task)
+            result = document["tasks"][task]
+            result["rows"] = {k: v for k, v in result["rows"].items() if k not in result["bounds"].values()} | rows
+            result["bounds"] = bounds
+        path.write_text(json.dumps(document, indent=1) + "\n")
+        (args.out / "learners.md").write_text(page(document))
+        print(f"wrote {path} and {args.out / 'learners.md'}")
         return
     for task in args.task or names():
         result = compare(task, args.work, args.dpi_seeds, args.ppo_seeds, args.workers)
