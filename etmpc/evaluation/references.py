@@ -169,15 +169,18 @@ def build_references(
     progress: bool = True,
     say: Callable[[str], None] = lambda line: None,
     episodes: int | None = None,
+    meter: bool = True,
 ) -> References:
     """Play every periodic schedule, then the oracle and the rollout meter over the best of them, on ``task``'s
     test set (the stored one by default; its first ``episodes`` only, if given). ``task``: a name, or a
-    :class:`~etmpc.systems.SystemKey` (a task with
-    its options: the references are then those of the task so set)."""
+    :class:`~etmpc.systems.SystemKey` (a task with its options: the references are then those of the task so
+    set). Without ``meter``, no rollout meter: the scale alone, what a scorecard needs (the leaderboard's
+    meter row is the stored references')."""
     key = system_key(task)
     system = key.make()
     periodic = periodic_schedules(system)
-    say(f"{system.name}: references: {len(periodic)} periodic schedules, then the oracle and the rollout meter over the best")
+    after = "the oracle and the rollout meter" if meter else "the oracle"
+    say(f"{system.name}: references: {len(periodic)} periodic schedules, then {after} over the best")
     run = dict(episodes=episodes, workers=workers, testset_path=testset_path, progress=progress)
     with stage(f"{system.name}: references: {len(periodic)} periodic schedules"):  # each named in the progress lines
         fixed = evaluate(key, periodic, **run)
@@ -185,7 +188,7 @@ def build_references(
     best = best_schedule(table, system.objective_sense)
     with stage(f"{system.name}: references: the oracle"):
         oracle = evaluate(key, [f"oracle:{best}"], **run)
-    meter = rollout_meter_spec(system, best)
+    meter = rollout_meter_spec(system, best) if meter else None
     with stage(f"{system.name}: references: the rollout meter"):
         rollout = meter and evaluate(key, [meter], **run)
     refs = References(

@@ -224,7 +224,7 @@ def score(
         for task in tasks:
             why = f"test set {test_set}" if test_set is not None else f"its options ({', '.join(f'{n}={v}' for n, v in given)})"
             say(f"{task}: no stored references for {why}: computing them for this run")
-            references[task] = build_references(keys[task], test_set, workers, progress, say, episodes)
+            references[task] = build_references(keys[task], test_set, workers, progress, say, episodes, meter=False)
             shown[task] = {"stored": None}
             if given:  # what etmpc verify replays these references against, episode by episode
                 kept = references[task]

@@ -100,6 +100,7 @@ class Settings:
     dpi_labels: int = 25  # decisions labelled per training episode
     dpi_futures: int = 4
     dpi_horizon: int = 20  # at most the task's Benchmark.lookahead
+    dpi_selection_episodes: int = 30  # training episodes that choose DPI's first policy among its bases
     validation_episodes: int = 50  # training-distribution episodes that choose the shipped seed
     rollout_episodes: int = 30  # first test-set episodes for rollout:BEST and oracle:BEST
     rollout_futures: int = 4  # K: 8 doubles its cost (2 K H simulated steps per decision)
@@ -110,6 +111,8 @@ class Settings:
     def to_json(self) -> dict:
         data = asdict(self)
         data["seeds"], data["video_size"], data["dpi_seeds"] = list(self.seeds), list(self.video_size), list(self.dpi_seeds)
+        if self.dpi_selection_episodes == Settings.dpi_selection_episodes:  # as a run made before it was a setting
+            del data["dpi_selection_episodes"]
         return data
 
 
@@ -258,6 +261,7 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
             futures=settings.dpi_futures,
             horizon=system.benchmark.capped(settings.dpi_horizon),
             states_per_episode=settings.dpi_labels,
+            selection_episodes=settings.dpi_selection_episodes,
         ),
     )
     dpi_dir = folder / "train_dpi"

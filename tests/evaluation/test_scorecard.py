@@ -41,7 +41,7 @@ def small_battery(tmp_path_factory):
     """A 4-episode battery test set and its references, computed as ``score --test-set`` computes them."""
     path = tmp_path_factory.mktemp("score") / "small.npz"
     testsets.draw(make_system("battery"), 7, 4, path)
-    return path, build_references("battery", str(path), workers=1, progress=False)
+    return path, build_references("battery", str(path), workers=1, progress=False, meter=False)
 
 
 def test_the_two_references_score_exactly_0_and_100(small_battery):

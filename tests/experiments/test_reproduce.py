@@ -47,6 +47,7 @@ TINY = Settings(
     dpi_labels=3,
     dpi_futures=2,
     dpi_horizon=5,
+    dpi_selection_episodes=2,
     validation_episodes=2,
     rollout_episodes=2,
     rollout_futures=2,
@@ -298,3 +299,9 @@ def test_every_stage_of_every_task_is_timed_and_the_report_says_where_the_time_w
         assert row.endswith(f"| {total / 60:.1f} | {100 * total / sum(totals.values()):.0f} % |")
     costliest = max(totals, key=totals.get)
     assert f"Costliest: {costliest}, {totals[costliest] / 60:.1f} min of {sum(totals.values()) / 60:.1f}." in report
+
+
+def test_a_run_made_before_dpi_selection_episodes_was_a_setting_continues():
+    """Its settings.json has no such key: the default writes none, so the same run is not refused as another."""
+    assert "dpi_selection_episodes" not in Settings().to_json()
+    assert TINY.to_json()["dpi_selection_episodes"] == 2
