@@ -51,3 +51,20 @@ def matvec(matrix, vector) -> np.ndarray:
 def norm(vector) -> float:
     """The Euclidean norm ``sqrt(v . v)`` (the square root is correctly rounded everywhere)."""
     return math.sqrt(dot(vector, vector))
+
+
+def cholesky(matrix) -> np.ndarray:
+    """The lower-triangular ``L`` with ``L L' = matrix`` (symmetric, positive semidefinite), each entry's sum
+    by :func:`fsum`: the same on every machine, unlike LAPACK's. A pivot that is not positive (a semidefinite
+    matrix, to rounding) leaves its column 0: ``L L'`` is then the matrix on the rest."""
+    a = np.asarray(matrix, dtype=float)
+    n = a.shape[0]
+    root = np.zeros((n, n))
+    for j in range(n):
+        pivot = a[j, j] - dot(root[j, :j], root[j, :j])
+        if not pivot > 0:
+            continue
+        root[j, j] = math.sqrt(pivot)
+        for i in range(j + 1, n):
+            root[i, j] = (a[i, j] - dot(root[i, :j], root[j, :j])) / root[j, j]
+    return root

@@ -23,6 +23,7 @@ import casadi as ca
 import numpy as np
 
 from etmpc.common.checks import BadValue
+from etmpc.common.numerics import cholesky, matvec
 
 
 def episode_key(episode: Any) -> int:
@@ -168,15 +169,10 @@ class Belief:
 
     def sample(self, rng: np.random.Generator) -> np.ndarray:
         """A state drawn from the belief, ``N(mean, covariance)``: ``mean + L z`` with ``L`` the covariance's
-        Cholesky factor (its symmetric square root, negative eigenvalues of rounding set to 0, where it
-        is only semidefinite) and ``z`` one standard normal draw per state from ``rng``."""
-        covariance = 0.5 * (self.covariance + self.covariance.T)
-        try:
-            root = np.linalg.cholesky(covariance)
-        except np.linalg.LinAlgError:
-            values, vectors = np.linalg.eigh(covariance)
-            root = vectors * np.sqrt(np.clip(values, 0.0, None))
-        return self.mean + root @ rng.standard_normal(self.mean.shape[0])
+        Cholesky factor and ``z`` one standard normal draw per state from ``rng``, both by exact sums
+        (:mod:`etmpc.common.numerics`: a decision that hinges on the draw is the same on every machine)."""
+        root = cholesky(0.5 * (self.covariance + self.covariance.T))
+        return self.mean + matvec(root, rng.standard_normal(self.mean.shape[0]))
 
 
 @dataclass(frozen=True, eq=False)
