@@ -42,6 +42,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 NO_FMA = "no FMA: OpenBLAS Prescott, numpy baseline, libm without AVX2/FMA"
 # (system, setting) pairs that differ by a known cause (the module's docstring): reported, not failed
+# The noisy variants are left out: their filter's algebra runs on BLAS and LAPACK, and their numbers differ
+# between kernels in the last bits (docs/using.md, "Not yet the noisy variants").
 OTHER_TASKS = ("cart_pendulum/kicks", "cart_pendulum/kicks_late", "cart_pendulum/kicks_levels", "reacher", "reacher/jumps_late")
 EXPECTED = {(task, NO_FMA) for task in ("quadrotor", *OTHER_TASKS)}  # their MPCs call libm from generated C
 

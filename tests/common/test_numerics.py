@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from etmpc.policies.learned import LogisticPolicy, Normalisation, PolicyFileError
-from etmpc.common.numerics import dot, fsum, matvec, norm
+from etmpc.common.numerics import cholesky, dot, fsum, matvec, norm
 from etmpc.policies import AugmentedState
 
 INF = math.inf
@@ -197,3 +197,15 @@ def test_the_battery_gain_is_the_closed_form_riccati_solution_correctly_rounded(
 def test_an_unpenalised_unfed_mode_has_a_gain_of_exactly_zero(cart_system):
     """Q puts no weight on the cart position and nothing else depends on it: its gain is 0, not 1e-17."""
     assert cart_system.feedback.gain[0, 0] == 0.0
+
+
+def test_the_cholesky_factor_is_lapacks_to_rounding_and_a_semidefinite_matrix_keeps_a_zero_column():
+    rng = np.random.default_rng(11)
+    for n in (1, 4, 12):
+        m = rng.normal(size=(n, n))
+        a = m @ m.T + n * np.eye(n)
+        root = cholesky(a)
+        assert np.array_equal(root, np.tril(root))
+        np.testing.assert_allclose(root, np.linalg.cholesky(a), rtol=1e-13, atol=1e-13)
+        np.testing.assert_allclose(root @ root.T, a, rtol=1e-13)
+    np.testing.assert_array_equal(cholesky([[4.0, 2.0], [2.0, 1.0]]), [[2.0, 0.0], [1.0, 0.0]])  # rank 1
