@@ -105,19 +105,19 @@ class ClosedLoop:
         return self
 
     def resume(self, snapshot: Snapshot, episode: Any = None, start: np.ndarray | None = None) -> ClosedLoop:
-        """Continue ``snapshot`` (taken in a twin of this loop's environment) in the light mode; ``episode`` replaces
-        the episode from the snapshot's step on (a sampled future), ``start`` the plant's state (the rest as snapshotted)."""
+        """Continue ``snapshot`` (of a twin environment) in the light mode, from ``episode`` and ``start`` if given."""
         if self.records:
             raise RuntimeError("only a light loop (records=False) resumes a snapshot")
         self.env.physics.restore(snapshot.physics)
-        x = snapshot.x if start is None else readonly(np.array(start, dtype=float))
-        if start is not None:
+        x, shown = snapshot.x, snapshot.observation
+        if start is not None:  # the plant moved: its observation is made again when read
+            x, shown = readonly(np.array(start, dtype=float)), None
             self.env.physics.set_state_vector(x)
             self.env.physics.forward()
         self.env.task.resume(snapshot.episode if episode is None else episode, snapshot.step)
         self.plan, self.age, self.u_prev, self.x = snapshot.plan, snapshot.age, snapshot.u_prev, x
         self.belief, self.seen, self._readings = snapshot.belief, snapshot.seen, None
-        self._observation, self.step_index, self.done, self.failed = snapshot.observation, snapshot.step, False, False
+        self._observation, self.step_index, self.done, self.failed = shown, snapshot.step, False, False
         self.pending, self._instant, self.timestep = snapshot.pending, snapshot.plan is None, None
         return self
 
@@ -369,7 +369,7 @@ def play_on(
     the same for every future). ``stop`` is the step to stop before (default: the episode's end). A
     plant that fails (non-finite state) returns ``-inf``. ``trace``, if given (a new :class:`Continuation`),
     is filled step by step. ``failure_cost``: the task's failures in the play (``system.failures_in_rewards``)
-    cost this much each, taken off the return. ``start``: the plant's state instead of the snapshot's.
+    cost this much each, taken off the return. ``start``: the plant's state instead of the snapshot's (the other physics kept).
 
     Plays :class:`ClosedLoop` in its light mode (a policy that never reads the observation sets
     ``observes = False``): the same numbers as :func:`run_episode`, bit for bit (tests/loop/test_rollout.py).
