@@ -181,9 +181,8 @@ def row(card_row) -> dict:
     }
 
 
-def bounds_of(task: str) -> tuple[dict, dict]:
+def bounds_of(system, refs) -> tuple[dict, dict]:
     """The oracle's and the rollout meter's specs by name, and their rows, from the stored references' own runs."""
-    system, refs = make_system(task), stored(task)
     bounds = {"oracle": refs.oracle_spec}
     if (meter := rollout_meter_spec(system, refs.best)) is not None and refs.kept_evaluation(meter) is not None:
         bounds["rollout meter"] = meter
@@ -213,7 +212,7 @@ def compare(task: str, work: Path, dpi_seeds, ppo_seeds, workers: int) -> dict:
         rows = {r.policy: row(r) for r in card.rows}
         card_path.parent.mkdir(parents=True, exist_ok=True)
         card_path.write_text(json.dumps({"specs": specs, "rows": rows}) + "\n")
-    bounds, bound_rows = bounds_of(task)
+    bounds, bound_rows = bounds_of(system, refs)
     rows |= bound_rows
     result = {"task": task, "best_fixed": refs.best, "rows": rows, "bounds": bounds, "learners": {}, "shield": None}
     result["made"] = commit_and_date()  # each task's own: tasks are run (and continued) by separate invocations
@@ -353,14 +352,11 @@ def main() -> None:
         return
     if args.bounds_only:
         for task in args.task or list(document["tasks"]):
-            bounds, rows = bounds_of(task)
+            bounds, rows = bounds_of(make_system(task), stored(task))
             result = document["tasks"][task]
             result["rows"] = {k: v for k, v in result["rows"].items() if k not in result["bounds"].values()} | rows
             result["bounds"] = bounds
-        path.write_text(json.dumps(document, indent=1) + "\n")
-        (args.out / "learners.md").write_text(page(document))
-        print(f"wrote {path} and {args.out / 'learners.md'}")
-        return
+        return write(document, args.out)
     for task in args.task or names():
         result = compare(task, args.work, args.dpi_seeds, args.ppo_seeds, args.workers)
         document["tasks"][task] = result
@@ -376,10 +372,15 @@ def main() -> None:
     document.update(provenance)
     document["machine"] = f"{platform.machine()}, {platform.processor() or platform.system()}, {args.workers} workers"
     document["seconds"] = time.perf_counter() - started
-    args.out.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(document, indent=1) + "\n")
-    (args.out / "learners.md").write_text(page(document))
-    print(f"wrote {path} and {args.out / 'learners.md'}")
+    write(document, args.out)
+
+
+def write(document: dict, out: Path) -> None:
+    """learners.json and its page into ``out``."""
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "learners.json").write_text(json.dumps(document, indent=1) + "\n")
+    (out / "learners.md").write_text(page(document))
+    print(f"wrote {out / 'learners.json'} and {out / 'learners.md'}")
 
 
 if __name__ == "__main__":
