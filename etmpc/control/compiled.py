@@ -97,11 +97,15 @@ def _build(source: str, library: Path, digest_file: Path, cc: str) -> None:
         os.replace(pending, digest_file)
 
 
-def _described(name: str) -> str:
-    """``cart_pendulum_mpc`` as ``cart_pendulum MPC``, ``quadrotor_waypoints_mpc_linearise`` (the condensed route's
-    first function) as ``quadrotor_waypoints MPC``; another function by its name."""
+def _described(name: str) -> tuple[str, str]:
+    """What is compiled, and about how long it takes: ``cart_pendulum_mpc`` as ``cart_pendulum MPC``,
+    ``quadrotor_waypoints_mpc_linearise`` (the condensed route's first function) as ``quadrotor_waypoints MPC``,
+    the state estimator's (``etmpc_ekf_...``) as such; another function by its name."""
+    if name.startswith("etmpc_ekf_"):
+        return "state estimator (extended Kalman filter)", "a few seconds"
     base = name.removesuffix("_linearise")
-    return f"{base.removesuffix('_mpc')} MPC" if base.endswith("_mpc") else f"{name} code"
+    what = f"{base.removesuffix('_mpc')} MPC" if base.endswith("_mpc") else f"{name} code"
+    return what, "about 20-30 s"
 
 
 def library_for(function: ca.Function | Sequence[ca.Function], cache: Path | None = None) -> Path:
@@ -134,11 +138,8 @@ def library_for(function: ca.Function | Sequence[ca.Function], cache: Path | Non
                 digest_file.unlink()  # the library is about to change: its old digest must not vouch for it
             # Said by the one process that builds (under the lock: another that waited finds it built), so a
             # first run is not silent for the half minute a build takes.
-            print(
-                f"etmpc: compiling the {_described(name)} to C once (about 20-30 s; cached in {cache})",
-                file=sys.stderr,
-                flush=True,
-            )
+            what, how_long = _described(name)
+            print(f"etmpc: compiling the {what} to C once ({how_long}; cached in {cache})", file=sys.stderr, flush=True)
             _build(source, library, digest_file, cc)
     return library
 

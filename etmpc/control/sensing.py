@@ -9,7 +9,7 @@ whatever process plays it, and a simulation that redraws an episode's future red
 The default :class:`Sensor` is exact: the loop then hands the controller the plant's state itself, and no
 filter runs (every number is what it was before sensors existed).
 
-This module may import ``etmpc.common``.
+This module may import ``etmpc.common`` and ``etmpc.control.compiled`` (the filter runs as generated C).
 """
 
 from __future__ import annotations
@@ -17,6 +17,8 @@ from __future__ import annotations
 import hashlib
 from dataclasses import dataclass, field
 from functools import lru_cache
+import warnings
+from collections.abc import Callable
 from typing import Any
 
 import casadi as ca
@@ -24,6 +26,7 @@ import numpy as np
 
 from etmpc.common.checks import BadValue
 from etmpc.common.numerics import cholesky, matvec
+from etmpc.control.compiled import CompileError, compile_functions
 
 
 def episode_key(episode: Any) -> int:
@@ -182,28 +185,32 @@ class ExtendedKalmanFilter:
     sensor's noise and rounding as the measurement's (the sensor's bias is not known to it: an
     unmodelled error, as a real one is). The prediction linearises ``F`` at the estimate; the
     correction uses Joseph's form, so the covariance stays symmetric and positive. On a linear model it
-    is the Kalman filter, optimal for Gaussian noise."""
+    is the Kalman filter, optimal for Gaussian noise.
+
+    Its algebra is CasADi expressions (:func:`prediction`, :func:`correction`: one per set of entries read),
+    evaluated one scalar operation at a time in a fixed order, never by BLAS or LAPACK: a belief is the same
+    to the last bit whatever kernels the CPU's numerical libraries pick. The prediction and the correction
+    of the entries the sensor measures are run as C (generated, built once per machine and cached, as the
+    MPC is: :mod:`etmpc.control.compiled`); without a C compiler, or for other entries, in CasADi's virtual
+    machine, which performs the same operations in the same order and so gives the same bits."""
 
     model: ca.Function
     sensor: Sensor
     settings: FilterSettings = FilterSettings()
+    compiled: bool = True  # run as generated C when a compiler is there; False: CasADi's virtual machine
     process_std: np.ndarray = field(init=False)
     initial_std: np.ndarray = field(init=False)
     nx: int = field(init=False)
-    _step: ca.Function = field(init=False, repr=False)
-    _process_covariance: np.ndarray = field(init=False, repr=False)  # diag(process_std^2), added at every prediction
     _variance: np.ndarray = field(init=False, repr=False)  # the sensor's measurement variance per state
+    _runs: dict = field(init=False, repr=False)  # "predict", or the read entries' mask as bytes -> its runner
 
     def __post_init__(self):
         nx = int(self.model.size1_in(0))
-        x, u = ca.SX.sym("x", nx), ca.SX.sym("u", self.model.size1_in(1))
-        x_next = self.model(x, u)
         object.__setattr__(self, "nx", nx)
-        object.__setattr__(self, "_step", ca.Function("ekf_predict", [x, u], [x_next, ca.jacobian(x_next, x)]))
         object.__setattr__(self, "process_std", _per_state("process_std", self.settings.process_std, nx, 0.0))
         object.__setattr__(self, "initial_std", _per_state("initial_std", self.settings.initial_std, nx, 1.0))
-        object.__setattr__(self, "_process_covariance", np.diag(self.process_std**2))
         object.__setattr__(self, "_variance", self.sensor.measurement_variance(nx))  # checked against the size now
+        object.__setattr__(self, "_runs", {})
 
     def start(self, y: np.ndarray, seen: np.ndarray) -> Belief:
         """The belief after the first reading: a prior of mean 0 and ``initial_std``, corrected by it."""
@@ -211,27 +218,109 @@ class ExtendedKalmanFilter:
 
     def predict(self, belief: Belief, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The mean and covariance one interval on, under input ``u``."""
-        x_next, a = self._step(belief.mean, u)
-        a = np.asarray(a)
-        return np.asarray(x_next).ravel(), a @ belief.covariance @ a.T + self._process_covariance
+        mean, covariance = self._run("predict")(belief.mean, u, belief.covariance)
+        return mean, covariance
 
     def step(self, belief: Belief, u: np.ndarray, y: np.ndarray, seen: np.ndarray) -> Belief:
         """Predict over the interval under ``u``, then correct with the reading ``y`` of the entries ``seen``."""
         return self.correct(*self.predict(belief, u), y, seen)
 
     def correct(self, mean: np.ndarray, covariance: np.ndarray, y: np.ndarray, seen: np.ndarray) -> Belief:
+        """The belief after reading ``y``'s entries ``seen`` from the prediction ``(mean, covariance)``."""
         innovation = np.full(self.nx, np.nan)
         if not seen.any():
             return Belief(mean, covariance, innovation, innovation.copy())
-        variance = self._variance[seen]
-        h = np.eye(self.nx)[seen]
         nu = y[seen] - mean[seen]
-        s = covariance[np.ix_(seen, seen)] + np.diag(variance)
-        gain = np.linalg.solve(s, h @ covariance).T  # P H' S^-1 (S and P symmetric)
-        keep = np.eye(self.nx) - gain @ h
-        covariance = keep @ covariance @ keep.T + (gain * variance) @ gain.T
+        corrected, covariance, nis = self._run(np.asarray(seen, dtype=bool).tobytes())(mean, covariance, nu)
         innovation[seen] = nu
         reading = np.full(self.nx, np.nan)
         reading[seen] = y[seen]
-        nis = float(nu @ np.linalg.solve(s, nu))
-        return Belief(mean + gain @ nu, (covariance + covariance.T) / 2, innovation, reading, nis)
+        return Belief(corrected, covariance, innovation, reading, float(nis[0]))
+
+    def _run(self, key: str | bytes) -> Callable[..., list[np.ndarray]]:
+        """The prediction's runner, or the correction's of the entries whose mask's bytes are ``key``: made at first
+        use (the prediction and the measured entries' correction compiled together, once)."""
+        if (run := self._runs.get(key)) is not None:
+            return run
+        measured = self.sensor.arrays(self.nx)[3]
+        functions = {
+            "predict": prediction(self.model, self.process_std**2),
+            measured.tobytes(): correction(measured, self._variance),
+        }
+        if key not in functions:  # entries the sensor does not measure as a rule (never in a task's loop)
+            self._runs[key] = _interpreted(correction(np.frombuffer(key, dtype=bool), self._variance))
+            return self._runs[key]
+        self._runs.update(_runners(functions, self.compiled))
+        return self._runs[key]
+
+
+def prediction(model: ca.Function, process_variance: np.ndarray) -> ca.Function:
+    """``(mean, u, P) -> (F(mean, u), A P A' + Q)``, ``A`` the Jacobian of ``F`` at the mean and ``Q`` the
+    process noise's (diagonal) covariance."""
+    nx = int(model.size1_in(0))
+    x, u, p = ca.SX.sym("x", nx), ca.SX.sym("u", model.size1_in(1)), ca.SX.sym("P", nx, nx)
+    x_next = model(x, u)
+    a = ca.jacobian(x_next, x)
+    covariance = ca.mtimes([a, p, a.T]) + ca.diag(process_variance)
+    return ca.Function("etmpc_ekf_predict", [x, u, p], [ca.densify(x_next), ca.densify(covariance)])
+
+
+def correction(seen: np.ndarray, variance: np.ndarray) -> ca.Function:
+    """``(mean, P, nu) -> (mean', P', nis)``: the Kalman correction by the innovation ``nu`` of the entries
+    ``seen`` (a mask), in Joseph's form, symmetrised. ``S = P_ss + R = U'U`` (Cholesky) gives the gain
+    ``K = P_:s S^-1`` and ``nis = |U'^-1 nu|^2``."""
+    nx, read = len(seen), [int(i) for i in np.flatnonzero(seen)]
+    mean, p, nu = ca.SX.sym("mean", nx), ca.SX.sym("P", nx, nx), ca.SX.sym("nu", len(read))
+    r = ca.diag(variance[read])
+    upper = ca.chol(p[read, read] + r)
+    gain = ca.solve(upper, ca.solve(upper.T, p[read, :])).T
+    keep = ca.SX.eye(nx)
+    keep[:, read] = keep[:, read] - gain
+    covariance = ca.mtimes([keep, p, keep.T]) + ca.mtimes([gain, r, gain.T])
+    whitened = ca.solve(upper.T, nu)
+    outputs = [mean + ca.mtimes(gain, nu), (covariance + covariance.T) / 2, ca.dot(whitened, whitened)]
+    name = "etmpc_ekf_correct_" + "".join("1" if s else "0" for s in seen)
+    return ca.Function(name, [mean, p, nu], [ca.densify(out) for out in outputs])
+
+
+def _interpreted(function: ca.Function) -> Callable[..., list[np.ndarray]]:
+    """``function`` in CasADi's virtual machine, its outputs as arrays (a vector flat, a matrix as a matrix)."""
+
+    def run(*inputs):
+        return [_shaped(out.full(), function.size_out(i)) for i, out in enumerate(function(*inputs))]
+
+    return run
+
+
+def _runners(functions: dict, compiled: bool) -> dict:
+    """Each of ``functions`` as a runner: built together as C when ``compiled`` and a compiler is there,
+    else in CasADi's virtual machine (the same operations in the same order: the same bits)."""
+    if compiled:
+        try:
+            built = compile_functions(list(functions.values()))
+        except CompileError as exc:
+            warnings.warn(
+                f"{exc}; the state estimator runs in CasADi's virtual machine instead (the same numbers)", RuntimeWarning
+            )
+        else:
+            return {key: _native(function, c) for (key, function), c in zip(functions.items(), built, strict=True)}
+    return {key: _interpreted(function) for key, function in functions.items()}
+
+
+def _native(function: ca.Function, compiled) -> Callable[..., list[np.ndarray]]:
+    """``function`` as compiled C: inputs copied in column-major, outputs copied out of its buffers."""
+    shapes = [function.size_out(i) for i in range(function.n_out())]
+
+    def run(*inputs):
+        outputs, code = compiled.call(*(np.asarray(v, dtype=float).ravel(order="F") for v in inputs))
+        if code:
+            raise RuntimeError(f"{function.name()} returned {code}")
+        return [_shaped(out, shape) for out, shape in zip(outputs, shapes, strict=True)]
+
+    return run
+
+
+def _shaped(values: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """A CasADi output's values (column-major) as a new array: flat for a vector, else ``shape``."""
+    rows, cols = shape
+    return values.reshape(-1).copy() if cols == 1 else values.reshape((rows, cols), order="F").copy()

@@ -37,7 +37,7 @@ from etmpc.evaluation.evaluate import Evaluation, evaluate
 from etmpc.systems import SystemKey, make_system, spec, system_key
 from etmpc.systems.capabilities import Experiments, Rollouts, offers
 
-SUITE_VERSION = 3  # what changes it, and what changes a task's version instead: docs/versioning.md
+SUITE_VERSION = 4  # what changes it, and what changes a task's version instead: docs/versioning.md
 FORMAT = "etmpc-references"
 ROLLOUT_FUTURES = 4  # the rollout meter's sampled futures per decision
 

@@ -23,6 +23,10 @@ TEST_SET_SEEDS = {
     "kicks_noisy": 20261126,
 }
 
+# Version 1 of kicks_noisy: its state estimator's algebra is CasADi's, run as C, instead of NumPy's on BLAS and
+# LAPACK: the same on any CPU (docs/versioning.md).
+VERSIONS = {"kicks_noisy": 1}
+
 __getattr__ = lazy(
     __name__,
     {
