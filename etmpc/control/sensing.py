@@ -267,18 +267,18 @@ def prediction(model: ca.Function, process_variance: np.ndarray) -> ca.Function:
 
 def correction(seen: np.ndarray, variance: np.ndarray) -> ca.Function:
     """``(mean, P, nu) -> (mean', P', nis)``: the Kalman correction by the innovation ``nu`` of the entries
-    ``seen`` (a mask), in Joseph's form, symmetrised. ``S = P_ss + R = U'U`` (Cholesky) gives the gain
-    ``K = P_:s S^-1`` and ``nis = |U'^-1 nu|^2``."""
+    ``seen`` (a mask), in Joseph's form, symmetrised. ``S = P_ss + R = L D L'`` (CasADi's ``ldl``: no square
+    root, so a filter driven far from its model, whose ``S`` rounds to indefinite, stays finite, as an LU
+    solve does) gives the gain ``K = P_:s S^-1`` and ``nis = nu' S^-1 nu``."""
     nx, read = len(seen), [int(i) for i in np.flatnonzero(seen)]
     mean, p, nu = ca.SX.sym("mean", nx), ca.SX.sym("P", nx, nx), ca.SX.sym("nu", len(read))
     r = ca.diag(variance[read])
-    upper = ca.chol(p[read, read] + r)
-    gain = ca.solve(upper, ca.solve(upper.T, p[read, :])).T
+    factors = ca.ldl(p[read, read] + r, False)  # D, L' and the order (the given one: no reordering)
+    gain = ca.ldl_solve(p[read, :], *factors).T
     keep = ca.SX.eye(nx)
     keep[:, read] = keep[:, read] - gain
     covariance = ca.mtimes([keep, p, keep.T]) + ca.mtimes([gain, r, gain.T])
-    whitened = ca.solve(upper.T, nu)
-    outputs = [mean + ca.mtimes(gain, nu), (covariance + covariance.T) / 2, ca.dot(whitened, whitened)]
+    outputs = [mean + ca.mtimes(gain, nu), (covariance + covariance.T) / 2, ca.dot(nu, ca.ldl_solve(nu, *factors))]
     name = "etmpc_ekf_correct_" + "".join("1" if s else "0" for s in seen)
     return ca.Function(name, [mean, p, nu], [ca.densify(out) for out in outputs])
 

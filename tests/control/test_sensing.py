@@ -265,3 +265,18 @@ def test_the_filter_as_c_and_in_casadis_virtual_machine_gives_the_same_bits(monk
     for belief in (interpreted, without_compiler):
         for name in ("mean", "covariance", "innovation", "reading", "nis"):
             np.testing.assert_array_equal(getattr(belief, name), getattr(native, name))
+
+
+def test_a_filter_driven_far_from_its_model_stays_finite():
+    """A filter whose covariance has lost its positivity (a quadrotor model near its Euler angles' singularity
+    drives it to 1e22 and rounding does the rest) still corrects to finite numbers, as an LU solve does: the
+    innovation's covariance is factored without a square root (a Cholesky factor would be NaN here)."""
+    kf = _filter(noise_std=(0.05, 0.05), measured=(True, True))
+    indefinite = np.array([[1.0, 2.0], [2.0, 1.0]])  # eigenvalues 3 and -1
+    y, seen = np.array([0.3, -0.2]), np.array([True, True])
+    belief = kf.correct(np.zeros(2), indefinite, y, seen)
+    s = indefinite + NOISE_STD**2 * np.eye(2)
+    gain = indefinite @ np.linalg.inv(s)
+    np.testing.assert_allclose(belief.mean, gain @ y, rtol=1e-12)
+    assert belief.nis == pytest.approx(y @ np.linalg.solve(s, y), rel=1e-12)
+    assert np.isfinite(belief.covariance).all()
