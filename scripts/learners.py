@@ -120,16 +120,23 @@ def dpi_runs(
 
 
 def ppo_runs(
-    task: str, work: Path, seeds: tuple[int, ...], workers: int, failure_cost: float | None = None, folder: Path | None = None
+    task: str,
+    work: Path,
+    seeds: tuple[int, ...],
+    workers: int,
+    failure_cost: float | None = None,
+    folder: Path | None = None,
+    retrain: bool = False,
 ) -> dict:
     """PPO, one run per seed, with the task's shipped ``ppo.yml`` (``failure_cost``, if given, in place of its own), in
-    ``folder/seed<S>`` (default ``WORK/ppo/<task>``); the shipped network stands for its own seed's run."""
+    ``folder/seed<S>`` (default ``WORK/ppo/<task>``); the shipped network stands for its own seed's run, unless
+    ``retrain`` (the task changed since it was trained: every seed is trained again)."""
     folder = work / "ppo" / folder_name(task) if folder is None else folder
     shipped = Path("policies") / folder_name(task)
     # the shipped network (its seed's run, not made again), if it is this task's; a new variant's recipe is its
     # own ppo.yml (the base task's, with the variant's id), trained at every seed
     made = json.loads((shipped / "ppo.json").read_text()) if (shipped / "ppo.json").exists() else None
-    made = made if made is not None and made.get("task") == task else None
+    made = made if made is not None and made.get("task") == task and not retrain else None
     validation_episodes = (made or json.loads((recipe_folder(task) / "ppo.json").read_text()))["settings"]["validation_episodes"]
     base = hyperparams.shipped(task, PpoSettings(validation_episodes=validation_episodes))
     base = base if failure_cost is None else replace(base, failure_cost=failure_cost)
@@ -193,9 +200,9 @@ def bounds_of(system, refs) -> tuple[dict, dict]:
     return bounds, rows
 
 
-def compare(task: str, work: Path, dpi_seeds, ppo_seeds, workers: int) -> dict:
+def compare(task: str, work: Path, dpi_seeds, ppo_seeds, workers: int, retrain: bool = False) -> dict:
     system, refs = make_system(task), stored(task)
-    learners = {"DPI": dpi_runs(task, work, dpi_seeds, workers), "PPO": ppo_runs(task, work, ppo_seeds, workers)}
+    learners = {"DPI": dpi_runs(task, work, dpi_seeds, workers), "PPO": ppo_runs(task, work, ppo_seeds, workers, retrain=retrain)}
     kinds = {"DPI": "rl", "PPO": "sb3"}
     shielded = system.shield is not None
     specs = [refs.best]
@@ -337,6 +344,11 @@ def main() -> None:
     parser.add_argument("--ship", action="store_true", help="copy the chosen seeds' files into policies/<task>/")
     parser.add_argument("--page-only", action="store_true", help="only write the page again from learners.json")
     parser.add_argument(
+        "--retrain",
+        action="store_true",
+        help="train PPO's every seed again, the shipped network's too (after the task's version changed)",
+    )
+    parser.add_argument(
         "--bounds-only",
         action="store_true",
         help="take the oracle's and the rollout meter's rows again from the stored references (after they were played "
@@ -358,7 +370,7 @@ def main() -> None:
             result["bounds"] = bounds
         return write(document, args.out)
     for task in args.task or names():
-        result = compare(task, args.work, args.dpi_seeds, args.ppo_seeds, args.workers)
+        result = compare(task, args.work, args.dpi_seeds, args.ppo_seeds, args.workers, args.retrain)
         document["tasks"][task] = result
         if args.ship:
             (Path("policies") / folder_name(task)).mkdir(parents=True, exist_ok=True)  # a new task's first policies
