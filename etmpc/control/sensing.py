@@ -240,17 +240,16 @@ class ExtendedKalmanFilter:
     def _run(self, key: str | bytes) -> Callable[..., list[np.ndarray]]:
         """The prediction's runner, or the correction's of the entries whose mask's bytes are ``key``: made at first
         use (the prediction and the measured entries' correction compiled together, once)."""
-        if (run := self._runs.get(key)) is not None:
-            return run
-        measured = self.sensor.arrays(self.nx)[3]
-        functions = {
-            "predict": prediction(self.model, self.process_std**2),
-            measured.tobytes(): correction(measured, self._variance),
-        }
-        if key not in functions:  # entries the sensor does not measure as a rule (never in a task's loop)
-            self._runs[key] = _interpreted(correction(np.frombuffer(key, dtype=bool), self._variance))
-            return self._runs[key]
-        self._runs.update(_runners(functions, self.compiled))
+        if key not in self._runs:
+            measured = self.sensor.arrays(self.nx)[3]
+            if key in ("predict", measured.tobytes()):
+                functions = {
+                    "predict": prediction(self.model, self.process_std**2),
+                    measured.tobytes(): correction(measured, self._variance),
+                }
+                self._runs.update(_runners(functions, self.compiled))
+            else:  # entries the sensor does not measure as a rule (never in a task's loop)
+                self._runs[key] = _interpreted(correction(np.frombuffer(key, dtype=bool), self._variance))
         return self._runs[key]
 
 
