@@ -5,7 +5,9 @@ a sensor that reads part of the state with noise, the extended Kalman filter bet
 * ``innovation_nis``: the last reading's normalised innovation squared (``nu' S^-1 nu``): about the number of
   entries read while the filter's model holds, large right after something it did not predict (a kick, a gust);
 * ``estimate_std``: the estimate's standard deviation, ``sqrt(trace P)``: how far to trust the state error a
-  threshold trigger reads.
+  threshold trigger reads. It sums the variances' sizes, ``sqrt(sum |P_ii|)``, the same number for any
+  covariance: a filter driven far from its model (a quadrotor tumbling past its Euler angles' singularity)
+  can round one to a negative variance, which then reads as a large spread, not as NaN.
 
 A trigger on the state error reads the filter's estimate minus the plan's prediction: partly noise, which a
 threshold fires on and a learner can learn to discount. The variants play their base task's episodes (the same
@@ -24,7 +26,7 @@ def filter_features(s) -> np.ndarray:
     belief = s.belief
     if belief is None:
         return np.zeros(2)
-    return np.array([belief.nis, float(np.sqrt(np.trace(belief.covariance)))])
+    return np.array([belief.nis, float(np.sqrt(np.abs(np.diag(belief.covariance)).sum()))])
 
 
 class WithFilterFeatures:

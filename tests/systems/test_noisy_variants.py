@@ -53,3 +53,18 @@ def test_the_filter_features_are_zero_where_the_sensor_is_exact():
         belief = None
 
     np.testing.assert_array_equal(filter_features(S()), [0.0, 0.0])
+
+
+def test_the_estimates_spread_is_the_root_of_the_trace_and_never_nan():
+    """``estimate_std`` is ``sqrt(trace P)`` for a covariance; for one a diverged filter rounded to a negative
+    variance (as a tumbling quadrotor's did, at -1.48 on its roll) it is the root of the variances' sizes."""
+    from etmpc.control.sensing import Belief
+
+    nan = np.full(3, np.nan)
+    a = np.random.default_rng(2).normal(size=(3, 3))
+    for covariance, spread in ((a @ a.T, np.sqrt(np.trace(a @ a.T))), (np.diag([4.0, -1.5, 0.25]), np.sqrt(5.75))):
+
+        class S:
+            belief = Belief(np.zeros(3), covariance, nan, nan, 7.0)
+
+        assert filter_features(S()).tolist() == [7.0, spread]
