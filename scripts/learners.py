@@ -3,6 +3,7 @@
     python scripts/learners.py --work runs/learners                      # every task: hours on 2 cores
     python scripts/learners.py --work runs/learners --task cart_pendulum/kicks_levels
     python scripts/learners.py --page-only                               # the page again from learners.json
+    python scripts/learners.py --task TASK --retrain --ship              # after TASK's version changed: every seed again
 
 Per task, with the recipe the shipped files record (``policies/<task>/learned.json``'s hyperparameters,
 ``ppo.yml``; :data:`RECIPES` says where this etmpc departs from it):
