@@ -144,6 +144,20 @@ def library_for(function: ca.Function | Sequence[ca.Function], cache: Path | Non
     return library
 
 
+def run(function: ca.Function, compiled: CompiledFunction | None, *args) -> list[np.ndarray]:
+    """``function`` at ``args`` (each flat, column-major), each output flat and column-major: as compiled C if
+    ``compiled`` is given (its output buffers, overwritten by its next call: copy what you keep), else in CasADi's
+    virtual machine, which performs the same operations in the same order. A C return code other than 0 is a
+    :class:`FloatingPointError`."""
+    if compiled is not None:
+        outputs, code = compiled.call(*args)
+        if code != 0:
+            raise FloatingPointError(f"{function.name()} failed (code {code})")
+        return outputs
+    shaped = [np.reshape(np.asarray(a, dtype=float), function.size_in(i), order="F") for i, a in enumerate(args)]
+    return [np.asarray(v).ravel(order="F") for v in function.call(shaped)]
+
+
 def compile_functions(functions: Sequence[ca.Function], cache: Path | None = None) -> list[CompiledFunction]:
     """Several functions built into one library (one compiler run), each callable as a :class:`CompiledFunction`."""
     library = library_for(functions, cache)

@@ -53,7 +53,7 @@ import casadi as ca
 import daqp
 import numpy as np
 
-from etmpc.control.compiled import CompiledFunction, CompileError, compile_functions
+from etmpc.control.compiled import CompiledFunction, CompileError, compile_functions, run
 from etmpc.control.plan import Plan
 from etmpc.control.riccati import gains_along
 
@@ -224,14 +224,7 @@ class CondensedGaussNewton:
 
     def _call(self, name: str, *args) -> list[np.ndarray]:
         """Function ``name`` at ``args``: its output buffers (the compiled ones are overwritten by its next call)."""
-        if self._compiled is not None:
-            outputs, code = self._compiled[name].call(*args)
-            if code != 0:
-                raise FloatingPointError(f"{name} failed (code {code})")
-            return outputs
-        function = self._interpreted[name]
-        shaped = [np.reshape(np.asarray(a, dtype=float), function.size_in(i), order="F") for i, a in enumerate(args)]
-        return [np.asarray(v).ravel(order="F") for v in function.call(shaped)]
+        return run(self._interpreted[name], None if self._compiled is None else self._compiled[name], *args)
 
     def plan(self, x, u_prev, warm: Plan | None, age: int, parameters, limit: int, rollout) -> Plan:
         """A plan from at most ``limit`` iterations from :meth:`guess`. Every iterate is a descent from the

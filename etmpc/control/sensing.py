@@ -18,7 +18,6 @@ import hashlib
 from dataclasses import dataclass, field
 from functools import lru_cache
 import warnings
-from collections.abc import Callable
 from typing import Any
 
 import casadi as ca
@@ -26,7 +25,7 @@ import numpy as np
 
 from etmpc.common.checks import BadValue
 from etmpc.common.numerics import cholesky, matvec
-from etmpc.control.compiled import CompileError, compile_functions
+from etmpc.control.compiled import CompiledFunction, CompileError, compile_functions, run
 
 
 def episode_key(episode: Any) -> int:
@@ -202,7 +201,7 @@ class ExtendedKalmanFilter:
     initial_std: np.ndarray = field(init=False)
     nx: int = field(init=False)
     _variance: np.ndarray = field(init=False, repr=False)  # the sensor's measurement variance per state
-    _runs: dict = field(init=False, repr=False)  # "predict", or the read entries' mask as bytes -> its runner
+    _functions: dict = field(init=False, repr=False)  # "predict", or the read entries' mask as bytes -> (function, C)
 
     def __post_init__(self):
         nx = int(self.model.size1_in(0))
@@ -210,7 +209,7 @@ class ExtendedKalmanFilter:
         object.__setattr__(self, "process_std", _per_state("process_std", self.settings.process_std, nx, 0.0))
         object.__setattr__(self, "initial_std", _per_state("initial_std", self.settings.initial_std, nx, 1.0))
         object.__setattr__(self, "_variance", self.sensor.measurement_variance(nx))  # checked against the size now
-        object.__setattr__(self, "_runs", {})
+        object.__setattr__(self, "_functions", {})
 
     def start(self, y: np.ndarray, seen: np.ndarray) -> Belief:
         """The belief after the first reading: a prior of mean 0 and ``initial_std``, corrected by it."""
@@ -218,7 +217,7 @@ class ExtendedKalmanFilter:
 
     def predict(self, belief: Belief, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The mean and covariance one interval on, under input ``u``."""
-        mean, covariance = self._run("predict")(belief.mean, u, belief.covariance)
+        mean, covariance = self._call("predict", belief.mean, u, belief.covariance)
         return mean, covariance
 
     def step(self, belief: Belief, u: np.ndarray, y: np.ndarray, seen: np.ndarray) -> Belief:
@@ -231,26 +230,35 @@ class ExtendedKalmanFilter:
         if not seen.any():
             return Belief(mean, covariance, innovation, innovation.copy())
         nu = y[seen] - mean[seen]
-        corrected, covariance, nis = self._run(np.asarray(seen, dtype=bool).tobytes())(mean, covariance, nu)
+        corrected, covariance, nis = self._call(np.asarray(seen, dtype=bool).tobytes(), mean, covariance, nu)
         innovation[seen] = nu
         reading = np.full(self.nx, np.nan)
         reading[seen] = y[seen]
         return Belief(corrected, covariance, innovation, reading, float(nis[0]))
 
-    def _run(self, key: str | bytes) -> Callable[..., list[np.ndarray]]:
-        """The prediction's runner, or the correction's of the entries whose mask's bytes are ``key``: made at first
-        use (the prediction and the measured entries' correction compiled together, once)."""
-        if key not in self._runs:
+    def _call(self, key: str | bytes, *inputs) -> list[np.ndarray]:
+        """The prediction (``key`` "predict"), or the correction of the entries whose mask's bytes are ``key``, at
+        ``inputs``; its outputs as new arrays (a vector flat, a matrix as a matrix)."""
+        function, native = self._function(key)
+        outputs = run(function, native, *(np.asarray(v, dtype=float).ravel(order="F") for v in inputs))
+        return [_shaped(out, function.size_out(i)) for i, out in enumerate(outputs)]
+
+    def _function(self, key: str | bytes) -> tuple[ca.Function, CompiledFunction | None]:
+        """The function of ``key`` and its compiled C (None: CasADi's virtual machine), made at first use: the
+        prediction and the measured entries' correction compiled together, once."""
+        if key not in self._functions:
             measured = self.sensor.arrays(self.nx)[3]
             if key in ("predict", measured.tobytes()):
                 functions = {
                     "predict": prediction(self.model, self.process_std**2),
                     measured.tobytes(): correction(measured, self._variance),
                 }
-                self._runs.update(_runners(functions, self.compiled))
+                built = _compiled(list(functions.values())) if self.compiled else [None] * len(functions)
+                for (name, function), native in zip(functions.items(), built, strict=True):
+                    self._functions[name] = (function, native)
             else:  # entries the sensor does not measure as a rule (never in a task's loop)
-                self._runs[key] = _interpreted(correction(np.frombuffer(key, dtype=bool), self._variance))
-        return self._runs[key]
+                self._functions[key] = (correction(np.frombuffer(key, dtype=bool), self._variance), None)
+        return self._functions[key]
 
 
 def prediction(model: ca.Function, process_variance: np.ndarray) -> ca.Function:
@@ -282,41 +290,14 @@ def correction(seen: np.ndarray, variance: np.ndarray) -> ca.Function:
     return ca.Function(name, [mean, p, nu], [ca.densify(out) for out in outputs])
 
 
-def _interpreted(function: ca.Function) -> Callable[..., list[np.ndarray]]:
-    """``function`` in CasADi's virtual machine, its outputs as arrays (a vector flat, a matrix as a matrix)."""
-
-    def run(*inputs):
-        return [_shaped(out.full(), function.size_out(i)) for i, out in enumerate(function(*inputs))]
-
-    return run
-
-
-def _runners(functions: dict, compiled: bool) -> dict:
-    """Each of ``functions`` as a runner: built together as C when ``compiled`` and a compiler is there,
-    else in CasADi's virtual machine (the same operations in the same order: the same bits)."""
-    if compiled:
-        try:
-            built = compile_functions(list(functions.values()))
-        except CompileError as exc:
-            warnings.warn(
-                f"{exc}; the state estimator runs in CasADi's virtual machine instead (the same numbers)", RuntimeWarning
-            )
-        else:
-            return {key: _native(function, c) for (key, function), c in zip(functions.items(), built, strict=True)}
-    return {key: _interpreted(function) for key, function in functions.items()}
-
-
-def _native(function: ca.Function, compiled) -> Callable[..., list[np.ndarray]]:
-    """``function`` as compiled C: inputs copied in column-major, outputs copied out of its buffers."""
-    shapes = [function.size_out(i) for i in range(function.n_out())]
-
-    def run(*inputs):
-        outputs, code = compiled.call(*(np.asarray(v, dtype=float).ravel(order="F") for v in inputs))
-        if code:
-            raise RuntimeError(f"{function.name()} returned {code}")
-        return [_shaped(out, shape) for out, shape in zip(outputs, shapes, strict=True)]
-
-    return run
+def _compiled(functions: list[ca.Function]) -> list[CompiledFunction | None]:
+    """``functions`` built together as C; without a C compiler, None for each (CasADi's virtual machine, which
+    performs the same operations in the same order: the same bits), with a warning."""
+    try:
+        return compile_functions(functions)
+    except CompileError as exc:
+        warnings.warn(f"{exc}; the state estimator runs in CasADi's virtual machine instead (the same numbers)", RuntimeWarning)
+        return [None] * len(functions)
 
 
 def _shaped(values: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
