@@ -65,7 +65,9 @@ def _evaluate(args) -> None:
         print(f"wrote {args.json}")
     nonfinite = sum(s.nonfinite_episodes for s in result.summaries)
     if nonfinite:
-        print(f"warning: {nonfinite} run(s) ended on a non-finite state and are excluded from the means", file=sys.stderr)
+        print(
+            f"warning: {nonfinite} run(s) ended on a non-finite state or input and are excluded from the means", file=sys.stderr
+        )
 
 
 def _reproduce(args) -> None:

@@ -32,7 +32,7 @@ class RunResult:
     recomputes: int
     solver_failures: int
     steps: int
-    finite: bool  # False: the episode ended early on a non-finite state
+    finite: bool  # False: the episode ended early on a non-finite state or input
     failures: int | None = None  # the task's own failures in the episode (falls, ...), if it counts them
 
 
@@ -46,7 +46,7 @@ class PolicySummary:
     control_objective_mean: float
     recomputes_mean: float
     solver_failures: int  # total over all runs
-    nonfinite_episodes: int  # runs that ended on a non-finite state; excluded from the means
+    nonfinite_episodes: int  # runs that ended on a non-finite state or input; excluded from the means
     episodes: int
     repeats: int
     clairvoyant: bool = False  # an oracle: it knows the episode's future; a reference, not a policy

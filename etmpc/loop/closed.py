@@ -165,7 +165,7 @@ class ClosedLoop:
         with compute levels ``recompute`` is the level), apply the plan in force's input plus the LQR
         correction, clipped, and step the plant. Returns the policy's reward for it: the task's
         (:attr:`reward`) minus the price of the recompute started, if one was (:attr:`cost`). A plant
-        that fails (non-finite) ends the episode; the step's reward is then 0. ``started``: when the
+        that fails (non-finite), or a non-finite input, ends the episode; the step's reward is then 0. ``started``: when the
         step's decision began, on :data:`cpu_clock` (the step's time counts from there). ``solved``: the
         plan this step's recompute gives, when the caller has it already. While a solve is in flight the
         answer is ignored (recorded as :attr:`in_flight` in the trajectory)."""
@@ -192,7 +192,7 @@ class ClosedLoop:
         if records:
             self.trajectory.feedback_time_s[i] = cpu_clock() - feedback_start
         recompute = level != KEEP
-        reward = self._advance(system.action(u, recompute))
+        reward = self._advance(system.action(u, recompute)) if np.isfinite(u).all() else None  # as a diverged plant
         self.recomputed, self.level, self.work = recompute, level, work
         self.cost = computation_cost(work, system.recompute_price)
         if reward is None:  # the plant failed

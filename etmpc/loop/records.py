@@ -53,7 +53,7 @@ class Trajectory:
     nis: np.ndarray | None = None  # (T + 1,) the reading's normalised innovation squared (0 where nothing was read)
     steps: int = 0
     solver_failures: int = 0
-    nonfinite: bool = False  # the episode ended early on a non-finite state
+    nonfinite: bool = False  # the episode ended early on a non-finite state or input
 
     @classmethod
     def empty(cls, steps: int, nx: int, nu: int, sensing: bool = False) -> Trajectory:
