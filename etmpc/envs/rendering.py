@@ -25,7 +25,7 @@ import warnings
 
 import numpy as np
 
-from etmpc.common.display import check_display
+from etmpc.common.display import check_display, render
 from etmpc.common.checks import BadType, BadValue
 from etmpc.common.errors import EtmpcError
 
@@ -98,15 +98,7 @@ class SceneFrames:
         scene = self._scene
         mujoco.mj_copyData(scene.data.ptr, scene.model.ptr, physics.data.ptr)
         mujoco.mj_forward(scene.model.ptr, scene.data.ptr)  # the bodies' positions of this state, as drawn
-        try:
-            return scene.render(self.height, self.width, camera_id=self.camera)
-        except (mujoco.FatalError, RuntimeError, ImportError, OSError, AttributeError) as exc:
-            # AttributeError: PyOpenGL without the platform library MUJOCO_GL asks for (osmesa, egl).
-            reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-            raise EtmpcError(
-                f"cannot render with MUJOCO_GL={os.environ.get('MUJOCO_GL', '')}: {reason} (headless machines need "
-                "MUJOCO_GL=egl, or osmesa with libOSMesa installed)"
-            ) from None
+        return render(scene, self.height, self.width, self.camera)
 
     def close(self) -> None:
         if self._scene is not None:

@@ -1,12 +1,14 @@
 """A MuJoCo plant from its MJCF file in ``models/``, under a plant setting: ``mismatched`` (the file as it
 is, unlike the MPC's predictor on purpose) or ``matched`` (edited to agree with the predictor, which a
 test then checks: it pins down the sign conventions), and :class:`Physics`, what every MuJoCo plant's
-physics shares: snapshots of the whole ``mjData`` and dm-control's RK4 stepping with its check inlined."""
+physics shares: snapshots of the whole ``mjData``, dm-control's RK4 stepping with its check inlined, and
+frames whose shadow map is sized to them."""
 
 from __future__ import annotations
 
 import copy
 import logging
+import math
 from collections.abc import Callable
 from pathlib import Path
 
@@ -20,6 +22,10 @@ from etmpc.common.errors import UnknownNameError
 from etmpc.common.resources import model_path
 
 PLANTS = ("mismatched", "matched")
+#: Shadow-map texels per pixel of a frame's longer side, and the fewest: a 640x480 frame gets the models'
+#: 4096 (their ``<quality shadowsize>``, never exceeded), a 64x48 one 512. MuJoCo draws the whole map at
+#: every frame, so with the model's map a small frame cost as much as a large one on a CPU's OpenGL.
+SHADOW_TEXELS_PER_PIXEL, SHADOW_TEXELS_MIN = 4, 512
 
 
 def load_plant(
@@ -78,3 +84,22 @@ class Physics(MjPhysics):
             if self._warnings_cause_exception:
                 raise control.PhysicsError(message)
             logging.warning(message)
+
+    # -- drawing ----------------------------------------------------------------------------------
+    def render(self, height: int = 240, width: int = 320, camera_id=-1, **kwargs) -> np.ndarray:
+        """dm-control's ``render``, with the shadow map sized to the frame (:data:`SHADOW_TEXELS_PER_PIXEL`, at
+        most the model's ``shadowsize``): the rendering context, which holds the map, is made at the first frame,
+        and made again, larger, when a later frame wants a larger map. Only the shadows' resolution changes."""
+        quality = self.model.vis.quality  # its shadowsize stays the model file's: set only while a context is made
+        most = int(quality.shadowsize)
+        wanted = min(most, max(SHADOW_TEXELS_MIN, 2 ** math.ceil(math.log2(SHADOW_TEXELS_PER_PIXEL * max(height, width, 1)))))
+        with self._contexts_lock:
+            if self._contexts is not None and self._contexts.mujoco.ptr.shadowSize < wanted:
+                self._free_rendering_contexts()
+            if self._contexts is None:
+                quality.shadowsize = wanted
+                try:
+                    self._make_rendering_contexts()
+                finally:
+                    quality.shadowsize = most
+        return super().render(height, width, camera_id=camera_id, **kwargs)

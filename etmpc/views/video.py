@@ -18,16 +18,15 @@ leaves a half-written file under the final name.
 
 from __future__ import annotations
 
-import os
 from collections.abc import Iterable, Iterator
 from fractions import Fraction
 from pathlib import Path
 
 import av
-import mujoco
 import numpy as np
 
 from etmpc.common.display import check_display  # noqa: F401 (the video's API too)
+from etmpc.common.display import render
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import atomic_path
 
@@ -56,20 +55,6 @@ def check_framebuffer(physics, width: int, height: int) -> None:
         )
 
 
-def _render(physics, height: int, width: int, camera: str) -> np.ndarray:
-    """``physics.render``, with a failure to make an OpenGL context said in one line."""
-    try:
-        return physics.render(height, width, camera_id=camera)
-    except (mujoco.FatalError, RuntimeError, ImportError, OSError, AttributeError) as exc:
-        # AttributeError: PyOpenGL without the platform library MUJOCO_GL asks for (osmesa, egl).
-        backend = os.environ.get("MUJOCO_GL", "")
-        reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise EtmpcError(
-            f"cannot render with MUJOCO_GL={backend}: {reason} (headless machines need MUJOCO_GL=egl, "
-            "or osmesa with libOSMesa installed)"
-        ) from None
-
-
 def iter_frames(system, env, states: np.ndarray, width: int, height: int) -> Iterator[np.ndarray]:
     """Each state put into the physics by the system (``system.show``) and drawn from its camera."""
     check_scene(system)
@@ -78,7 +63,7 @@ def iter_frames(system, env, states: np.ndarray, width: int, height: int) -> Ite
         if not np.all(np.isfinite(x)):
             raise ValueError(f"cannot render a non-finite state {x}")
         system.show(physics, x)
-        yield _render(physics, height, width, system.camera)
+        yield render(physics, height, width, system.camera)
 
 
 def render_frames(system, env, states: np.ndarray, width: int = 640, height: int = 480) -> list[np.ndarray]:

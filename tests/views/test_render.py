@@ -134,3 +134,23 @@ def test_rollout_is_the_evaluated_episode(rollout, cart_system, cart_testset):
     )
     np.testing.assert_array_equal(traj.states, rollout.trajectory.states)
     assert traj.recomputes == rollout.trajectory.recomputes
+
+
+def test_a_frame_is_drawn_with_a_shadow_map_of_its_size_and_a_larger_one_after_it_as_from_a_fresh_physics(cart_system):
+    """A small frame gets a small shadow map (MuJoCo draws the whole map at every frame); a larger frame
+    after it makes the context again with a larger map, and is then the picture a physics that never drew
+    a small frame draws; the model keeps its own shadowsize."""
+    from etmpc.common.display import render
+
+    camera = cart_system.camera
+    drawn, fresh = cart_system.make_env().physics, cart_system.make_env().physics
+    model_size = int(drawn.model.vis.quality.shadowsize)
+    assert model_size == 4096  # the models' <quality shadowsize>
+    small = render(drawn, 48, 64, camera)
+    assert drawn.contexts.mujoco.ptr.shadowSize == 512 and drawn.model.vis.quality.shadowsize == model_size
+    assert small.shape == (48, 64, 3) and small.std() > 10
+    large = render(drawn, 480, 640, camera)
+    assert drawn.contexts.mujoco.ptr.shadowSize == model_size
+    np.testing.assert_array_equal(large, render(fresh, 480, 640, camera))
+    np.testing.assert_array_equal(render(drawn, 48, 64, camera), render(fresh, 48, 64, camera))  # kept, not shrunk
+    assert drawn.contexts.mujoco.ptr.shadowSize == model_size
