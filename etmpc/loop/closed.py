@@ -164,10 +164,10 @@ class ClosedLoop:
         """Play this control interval: compute a new plan if ``recompute`` (or if forced; on a task
         with compute levels ``recompute`` is the level), apply the plan in force's input plus the LQR
         correction, clipped, and step the plant. Returns the policy's reward for it: the task's
-        (:attr:`reward`) minus the price of the recompute started, if one was (:attr:`cost`). A plant
-        that fails (non-finite), or a non-finite input, ends the episode; the step's reward is then 0. ``started``: when the
-        step's decision began, on :data:`cpu_clock` (the step's time counts from there). ``solved``: the
-        plan this step's recompute gives, when the caller has it already. While a solve is in flight the
+        (:attr:`reward`) minus the price of the recompute started, if one was (:attr:`cost`). A plant that
+        fails (non-finite), or a non-finite input, ends the episode; the step's reward is then 0. ``started``:
+        when the step's decision began, on :data:`cpu_clock` (the step's time counts from there). ``solved``:
+        the plan this step's recompute gives, when the caller has it already. While a solve is in flight the
         answer is ignored (recorded as :attr:`in_flight` in the trajectory)."""
         if self.done:
             raise RuntimeError("the episode is over: reset the loop")
