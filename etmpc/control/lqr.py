@@ -18,16 +18,27 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import TYPE_CHECKING
 
-import control as ct
 import mpmath
 import numpy as np
 
 from etmpc.common.numerics import matvec
 
+if TYPE_CHECKING:
+    import control as ct
+
 DIGITS = 60  # working precision of the exact computation
 AGREEMENT = 1e-9  # python-control's gain and the exact one, relative to the gain's largest entry
 _MAX_DOUBLINGS = 60  # 2^60 Riccati steps: far beyond convergence for any stabilisable system
+
+
+def state_space(*args, **kwargs) -> ct.StateSpace:
+    """python-control's ``ss`` (its arguments), imported when a system is first made, not when etmpc or a
+    task's class is: importing python-control takes about 2 s (it imports scipy.signal and matplotlib)."""
+    import control as ct
+
+    return ct.ss(*args, **kwargs)
 
 
 def discrete_lqr_gain(system: ct.StateSpace, Q: np.ndarray, R: np.ndarray, dt_s: float | None = None) -> np.ndarray:
@@ -37,6 +48,8 @@ def discrete_lqr_gain(system: ct.StateSpace, Q: np.ndarray, R: np.ndarray, dt_s:
     discrete one must already carry a timebase (handing continuous matrices to a discrete Riccati
     solver gives a wrong gain, a known defect of the paper's original code).
     """
+    import control as ct  # as in state_space
+
     Q, R = np.atleast_2d(np.asarray(Q, dtype=float)), np.atleast_2d(np.asarray(R, dtype=float))
     if system.isctime(strict=True):
         if dt_s is None:

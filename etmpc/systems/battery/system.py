@@ -15,7 +15,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 from functools import cached_property
 
-import control as ct
 import dm_env
 import numpy as np
 
@@ -24,7 +23,7 @@ from etmpc.systems.battery.mpc import EconomicMPC
 from etmpc.systems.battery.parameters import Battery, Market
 from etmpc.systems.battery.reference import LinprogReference
 from etmpc.common.errors import EtmpcError
-from etmpc.control.lqr import ErrorFeedback, discrete_lqr_gain
+from etmpc.control.lqr import ErrorFeedback, discrete_lqr_gain, state_space
 from etmpc.control.plan import Plan
 from etmpc.systems.base import SystemBase
 
@@ -122,7 +121,7 @@ class BatterySystem(SystemBase):
         self.error_weights = np.sqrt([config.lqr_state_weight])
         # The SoC error: eps+ = eps - delta/C u_lqr (the paper's LQR, Q = 1, R = 0.1: docs/paper.md), a discrete
         # system with its timebase.
-        soc_error = ct.ss([[1.0]], [[-battery.soc_per_kw]], [[1.0]], [[0.0]], dt=battery.interval_s)
+        soc_error = state_space([[1.0]], [[-battery.soc_per_kw]], [[1.0]], [[0.0]], dt=battery.interval_s)
         gain = discrete_lqr_gain(soc_error, np.array([[config.lqr_state_weight]]), np.array([[config.lqr_input_weight]]))
         self.feedback = ErrorFeedback(gain)
 

@@ -7,13 +7,12 @@ from dataclasses import dataclass, replace
 from functools import cached_property
 
 import casadi as ca
-import control as ct
 import dm_env
 import numpy as np
 
 from etmpc.systems.cart_pendulum import task as cp_env
 from etmpc.systems.cart_pendulum.model import NU, NX, STATE_NAMES, AnalyticModel
-from etmpc.control.lqr import ErrorFeedback, discrete_lqr_gain
+from etmpc.control.lqr import ErrorFeedback, discrete_lqr_gain, state_space
 from etmpc.control.mpc import GaussNewtonMPC, SolverSettings
 from etmpc.control.plan import Plan
 from etmpc.systems.base import SystemBase
@@ -52,7 +51,7 @@ class CartPendulumSystem(SystemBase):
         self.error_weights = np.sqrt(np.asarray(config.lqr_state_weights))
         A, B = self.model.linearised_upright()
         gain = discrete_lqr_gain(
-            ct.ss(A, B, np.eye(NX), np.zeros((NX, NU))),
+            state_space(A, B, np.eye(NX), np.zeros((NX, NU))),
             np.diag(config.lqr_state_weights),
             np.array([[config.lqr_input_weight]]),
             dt_s=cp_env.CONTROL_DT_S,
