@@ -9,6 +9,7 @@ from pathlib import Path
 
 from etmpc.systems import folder_name, same_task
 from etmpc.experiments.clock import time_table
+from etmpc.experiments import shipped as shipped_policies
 from etmpc.evaluation.metrics import higher_or_lower, oriented
 from etmpc.experiments.pareto import report_section
 
@@ -98,6 +99,7 @@ def report(results: dict) -> str:
             + [f"Files: {', '.join(f'`{v}`' for v in r['files'].values())}.", ""]
         )
     lines += scorecard_section(results)
+    lines += shipped_policies.section(results["systems"])
     if results.get("sweep"):
         lines += ["# Beyond the paper: the trade-off curve", ""]
         for domain, pareto in results["sweep"].items():

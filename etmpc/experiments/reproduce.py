@@ -9,8 +9,8 @@ Per task, in ``DIR/<domain>/<task>/`` (its folder, :func:`etmpc.systems.folder_n
 3. ``learned.json``: each seed's final policy (``last.json``) evaluated ``repeats`` times;
 3b. ``train_dpi/``: the default learner (DPI on the ``error`` features) over its seeds; the seed
    chosen on validation episodes (``selected.json``) is copied to ``DIR/policies/<domain>/learned.json``
-   (the project ships the full run's copy in ``policies/``) and evaluated on the test set
-   (``learned_default.json``);
+   and evaluated on the test set (``learned_default.json``); whether it and PPO's network are the files
+   shipped in ``policies/`` is in the report (:mod:`etmpc.experiments.shipped`);
 3c. ``headroom.json``: the rollout policy over the best fixed one and the ``oracle:`` reference on
    the first ``rollout_episodes`` test-set episodes (rollouts are expensive);
 3d. ``train_ppo/``: PPO from Stable-Baselines3 on the trigger environment (with the 'rl' extra), with
@@ -47,6 +47,7 @@ from etmpc.common.provenance import commit_and_date
 from etmpc.evaluation.evaluate import evaluate
 from etmpc.views.render import render_rollout
 from etmpc.evaluation.backends import shared_pools
+from etmpc.experiments import shipped as shipped_policies
 from etmpc.experiments import sweep as sweeps
 from etmpc.experiments.clock import StageClock
 from etmpc.experiments.report import PAPER, machine, report, software_versions
@@ -309,6 +310,7 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
         summary["other_learners"] = {name: {"policy": spec, "evaluation": data} for name, (data, spec) in others.items()}
         scored.update(others)
     summary["scorecard"] = summarise_scorecard(system, scored)
+    summary["shipped"] = shipped_policies.compare(system.name, shipped.parent)
 
     _say(f"{domain}: figures, recording, video")
     files = {

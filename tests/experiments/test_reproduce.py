@@ -267,6 +267,25 @@ def test_the_run_ships_ppo_with_its_hyperparameters_and_draws_every_learners_sam
 
 
 @pytest.mark.slow
+def test_the_report_says_how_the_runs_policies_depart_from_the_shipped_ones(run):
+    """A tiny run trains with other budgets than the shipped files record: each says so, naming the budget
+    as the two files give it (the shipped file's, then the run's)."""
+    out, results = run
+    report = (out / "REPORT.md").read_text().split("## This run's policies and the shipped ones")[1]
+    for name, r in results["systems"].items():
+        shipped = REPO / "policies" / folder_name(name)
+        recipe = json.loads((shipped / "learned.json").read_text())["hyperparameters"]
+        dpi = r["shipped"]["DPI"]
+        assert dpi["verdict"] == "differs"
+        assert dpi["recipe"]["states_per_episode"] == [recipe["states_per_episode"], TINY.dpi_labels]
+        assert dpi["recipe"]["futures"] == [recipe["futures"], TINY.dpi_futures]
+        assert f"| {name} | DPI | differs: " in report
+        if "PPO" in r["shipped"]:
+            timesteps = json.loads((shipped / "ppo.json").read_text())["settings"]["timesteps"]
+            assert r["shipped"]["PPO"]["recipe"]["timesteps"] == [timesteps, TINY.ppo_timesteps]
+
+
+@pytest.mark.slow
 def test_the_papers_learner_trains_on_the_papers_features_as_the_report_says(run):
     out, _ = run
     for name in PAPER:
