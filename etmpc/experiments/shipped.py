@@ -2,10 +2,12 @@
 they are not, how the shipped file's recipe differs from the run's: the report's answer to "does this
 command regenerate the shipped policies?", read from the files, never typed.
 
-A run's DPI is trained with the run's settings (its seeds, episodes, schedules); the shipped one with the
-recipe its file records (``scripts/learners.py`` in a checkout, over more seeds on some tasks), so on a task
-whose recipe departs from the run's the two files differ, and the comparison names where. PPO is trained
-from the task's ``ppo.yml`` by both.
+Three answers, per learner: the same file, byte for byte; the same parameters in a file that records them
+otherwise (a shipped file written by an older etmpc names the task by its domain, or records fewer of its
+recipe's entries); or other parameters, with the recipe entries, recorded by both files, in which the shipped
+one departs from the run's. A run's DPI is trained with the run's settings (its seeds, episodes,
+schedules); the shipped one with the recipe its file records (``scripts/learners.py`` in a checkout, over
+more seeds on some tasks). PPO is trained from the task's ``ppo.yml`` by both.
 """
 
 from __future__ import annotations
@@ -16,37 +18,61 @@ from pathlib import Path
 from etmpc.common.resources import data_root
 from etmpc.systems import folder_name
 
-# (learner, the run's file in DIR/policies/<task>/ and the shipped one's name, the file holding its recipe, its key)
+# (learner, the policy file, the file recording its recipe, the recipe's key there)
 FILES = (("DPI", "learned.json", "learned.json", "hyperparameters"), ("PPO", "ppo.zip", "ppo.json", "settings"))
 # Recorded beside the recipe, not part of it: what the chosen policy scored on its validation episodes.
 _OUTCOMES = {"validation_objective"}
+# A JSON policy's record, not its parameters: the recipe, and the task it names (an older file: its domain).
+_RECORD = ("hyperparameters", "domain")
 
 
 def compare(task: str, made: Path) -> dict:
-    """``{learner: {"verdict": "same" | "differs" | "not shipped", "recipe": {key: [shipped, run's]}}}`` for each
-    learner the run wrote into ``made`` (``DIR/policies/<task>/``); ``recipe`` holds the recipe's entries in
-    which the shipped file departs from the run's (empty: the same recipe, other bits)."""
+    """For each learner the run wrote into ``made`` (``DIR/policies/<task>/``): ``{"verdict": "same"}`` (byte for
+    byte), ``{"verdict": "same parameters", "record": [entries recorded otherwise]}``, ``{"verdict": "differs",
+    "recipe": {entry: [shipped, run's]}}`` (the entries both files record, where they depart; empty: the same
+    recipe, other bits) or ``{"verdict": "not shipped"}``."""
     found = {}
     for learner, file, recipe_file, key in FILES:
-        if not (made / file).is_file():
+        ours = made / file
+        if not ours.is_file():
             continue
-        shipped = data_root() / "policies" / folder_name(task) / file
-        if not shipped.is_file():
+        theirs = data_root() / "policies" / folder_name(task) / file
+        if not theirs.is_file():
             found[learner] = {"verdict": "not shipped"}
-        elif shipped.read_bytes() == (made / file).read_bytes():
+        elif theirs.read_bytes() == ours.read_bytes():
             found[learner] = {"verdict": "same"}
+        elif (record := _record_only(theirs, ours)) is not None:
+            found[learner] = {"verdict": "same parameters", "record": record}
         else:
-            theirs, ours = (_recipe(p.parent / recipe_file, key) for p in (shipped, made / file))
-            departs = {k: [theirs.get(k), ours.get(k)] for k in sorted(set(theirs) | set(ours)) if theirs.get(k) != ours.get(k)}
-            found[learner] = {"verdict": "differs", "recipe": departs}
+            a, b = (_recipe(p.parent / recipe_file, key) for p in (theirs, ours))
+            found[learner] = {
+                "verdict": "differs",
+                "recipe": {k: [a[k], b[k]] for k in sorted(a.keys() & b.keys()) if a[k] != b[k]},
+            }
     return found
 
 
-def _recipe(path: Path, key: str) -> dict:
+def _load(path: Path):
     try:
-        recipe = json.loads(path.read_text()).get(key, {})
-    except (OSError, ValueError, AttributeError):
-        return {}
+        return json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+
+
+def _record_only(theirs: Path, ours: Path) -> list[str] | None:
+    """The entries in which two JSON policies' records differ, if their parameters are the same; else None."""
+    a, b = _load(theirs), _load(ours)
+    if not (isinstance(a, dict) and isinstance(b, dict)):
+        return None
+    if {k: v for k, v in a.items() if k not in _RECORD} != {k: v for k, v in b.items() if k not in _RECORD}:
+        return None
+    recipes = [x.get("hyperparameters") if isinstance(x.get("hyperparameters"), dict) else {} for x in (a, b)]
+    differ = {k for k in recipes[0].keys() | recipes[1].keys() if recipes[0].get(k) != recipes[1].get(k)}
+    return sorted(differ - _OUTCOMES | ({"domain"} if a.get("domain") != b.get("domain") else set()))
+
+
+def _recipe(path: Path, key: str) -> dict:
+    recipe = (_load(path) or {}).get(key, {})
     return {k: v for k, v in recipe.items() if k not in _OUTCOMES} if isinstance(recipe, dict) else {}
 
 
@@ -58,9 +84,11 @@ def section(systems: dict) -> list[str]:
     lines = [
         "## This run's policies and the shipped ones",
         "",
-        "Each learner's policy this run wrote (`policies/<task>/` here) against the one etmpc ships for the task. "
-        "Where they differ, the recipe entries in which the shipped file departs from this run's (shipped → this "
-        "run); none listed: the same recipe, other bits (another CPU's kernels, or another version of etmpc).",
+        "Each learner's policy this run wrote (`policies/<task>/` here) against the one etmpc ships for the task: the "
+        "same file; the same parameters in a file that records them otherwise (a shipped file written by an older "
+        "etmpc); or other parameters, with the recipe entries, recorded by both files, in which the shipped one "
+        "departs (shipped → this run). None listed: the same recipe, other bits (another CPU's kernels, or another "
+        "version of etmpc).",
         "",
         "| task | learner | this run's policy |",
         "|---|---|---|",
@@ -68,7 +96,9 @@ def section(systems: dict) -> list[str]:
     for task, learner, c in rows:
         if c["verdict"] == "differs":
             departs = "; ".join(f"`{k}` {_value(a)} → {_value(b)}" for k, (a, b) in c["recipe"].items())
-            verdict = f"differs: {departs}" if departs else "differs in its bits, same recipe"
+            verdict = f"other parameters: {departs}" if departs else "other parameters, the same recipe"
+        elif c["verdict"] == "same parameters":
+            verdict = "the shipped parameters; the files record otherwise: " + ", ".join(f"`{k}`" for k in c["record"])
         else:
             verdict = {"same": "the shipped file, byte for byte", "not shipped": "none shipped"}[c["verdict"]]
         lines.append(f"| {task} | {learner} | {verdict} |")
@@ -78,4 +108,4 @@ def section(systems: dict) -> list[str]:
 def _value(v) -> str:
     if isinstance(v, list) and len(v) > 4:
         return f"[{', '.join(map(str, v[:2]))}, … {len(v)} items]"
-    return "(not recorded)" if v is None else str(v)
+    return str(v)

@@ -279,7 +279,7 @@ def test_the_report_says_how_the_runs_policies_depart_from_the_shipped_ones(run)
         assert dpi["verdict"] == "differs"
         assert dpi["recipe"]["states_per_episode"] == [recipe["states_per_episode"], TINY.dpi_labels]
         assert dpi["recipe"]["futures"] == [recipe["futures"], TINY.dpi_futures]
-        assert f"| {name} | DPI | differs: " in report
+        assert f"| {name} | DPI | other parameters: " in report
         if "PPO" in r["shipped"]:
             timesteps = json.loads((shipped / "ppo.json").read_text())["settings"]["timesteps"]
             assert r["shipped"]["PPO"]["recipe"]["timesteps"] == [timesteps, TINY.ppo_timesteps]
