@@ -167,7 +167,7 @@ class GaussNewtonMPC:
         self._trajectory = ca.Function("trajectory", [w, params], [ca.vertcat(*states)])
         self._name = name
         self.function = self._solver_function(name, settings.max_iterations)
-        self._compiled = self._compile(self.function) if settings.compiled else None  # _step: iterate()'s, when first asked
+        self._compiled = self._compile(self.function) if settings.compiled else None  # _step: prepare_iterations()
 
     def _solver_function(self, name: str, max_iterations: int) -> ca.Function:
         """One function: the SQP (at most ``max_iterations`` iterations) from a guess, then the plan's
@@ -327,12 +327,18 @@ class GaussNewtonMPC:
             success, status = True, f"{iterations} iteration(s), {status}"  # a real-time iterate: usable, not converged
         return Plan(inputs, states, cost, time.perf_counter() - start, success, iterations, status, gains=gains)
 
+    def prepare_iterations(self) -> None:
+        """Make (and build, or load from the cache) the one-iteration SQP that :meth:`iterate` calls, which
+        is otherwise made when first asked for: a system whose every solve is counted in iterations makes
+        it with its MPC, so that no solve's measured time holds a one-off build."""
+        if self._condensed is None and self._step is None:
+            function = self._solver_function(f"{self._name}_step", 1)
+            self._step = (function, self._compile(function) if self.settings.compiled else None)
+
     def _iterate_from(self, guess: np.ndarray, p: np.ndarray, limit: int):
         """``(result, iterations)``: up to ``limit`` single SQP iterations from ``guess``, until converged
         (``result`` as :meth:`_solve_from`'s)."""
-        if self._step is None:
-            function = self._solver_function(f"{self._name}_step", 1)
-            self._step = (function, self._compile(function) if self.settings.compiled else None)
+        self.prepare_iterations()
         w = guess
         for iteration in range(1, limit + 1):
             result = self._solve_from(w, p, self._step)

@@ -43,7 +43,7 @@ def system_mpc(system, stage_residual: ca.Function, terminal_residual: ca.Functi
     compiled solver named ``name``; ``options`` are :class:`GaussNewtonMPC`'s others (``parameters``,
     ``feedback``)."""
     config = system.config
-    return GaussNewtonMPC(
+    mpc = GaussNewtonMPC(
         system.model.discrete,
         stage_residual,
         terminal_residual,
@@ -54,6 +54,9 @@ def system_mpc(system, stage_residual: ca.Function, terminal_residual: ca.Functi
         name=name,
         **options,
     )
+    if system.counts_iterations:  # every solve is SQP iterations counted one by one: their code, built now
+        mpc.prepare_iterations()
+    return mpc
 
 
 def tracked_change(s, tracked: tuple[str, ...]) -> np.ndarray:

@@ -345,3 +345,26 @@ def test_a_tasks_time_in_the_loop_is_refused_when_its_system_is_made_not_mid_epi
     with pytest.raises(getattr(checks, error), match=re.escape(says)):
         make_system("cart_pendulum/kicks_late")
     assert make_system("cart_pendulum/kicks").latency.instant  # the default is none, and is a Latency
+
+
+def test_a_task_that_counts_iterations_builds_their_code_with_its_mpc_so_no_measured_solve_holds_a_build(monkeypatch):
+    from etmpc.control import mpc as mpc_module
+
+    made = []
+
+    class Counted(mpc_module.CompiledFunction):
+        def __init__(self, function, *args, **kwargs):
+            made.append(function.name())
+            super().__init__(function, *args, **kwargs)
+
+    monkeypatch.setattr(mpc_module, "CompiledFunction", Counted)
+    system = make_system("cart_pendulum/kicks_levels")
+    system.mpc
+    assert made == ["cart_pendulum_kicks_mpc", "cart_pendulum_kicks_mpc_step"]
+    loop = ClosedLoop(system, system.make_env()).reset(_episode(system, 0))
+    for level in (SOLVE, ITERATE, KEEP, SOLVE):
+        loop.step(level)
+    assert len(made) == 2 and list(loop.trajectory.level[:4]) == [SOLVE, ITERATE, KEEP, SOLVE]  # played, nothing built
+    kicks = make_system("cart_pendulum/kicks")
+    kicks.mpc
+    assert made[2:] == ["cart_pendulum_kicks_mpc"]  # a task priced per solve never makes the one-iteration code
