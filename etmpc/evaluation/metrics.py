@@ -25,7 +25,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy import stats
 
 from etmpc.common.numerics import fsum
 from etmpc.common.sense import SENSES, best, higher_or_lower, oriented, sign  # noqa: F401 (re-exported)
@@ -91,6 +90,8 @@ def paired_differences(values, reference, sense: str) -> dict:
 # -- over tasks -------------------------------------------------------------------------------------
 def _iqm(*samples, axis=-1):
     """The 25 %-trimmed mean of every sample together (vectorised, for the bootstrap)."""
+    from scipy import stats  # here, not at the top: scipy.stats takes 0.4 s to import, and most commands never use it
+
     return stats.trim_mean(np.concatenate(samples, axis=axis), 0.25, axis=axis)
 
 
@@ -105,6 +106,8 @@ def stratified_interval(
     (``scipy.stats.bootstrap``, seeded); NaNs when a sample has fewer than two values."""
     if any(len(s) < 2 for s in samples):
         return (math.nan, math.nan)
+    from scipy import stats
+
     result = stats.bootstrap(
         tuple(samples),
         statistic,
