@@ -142,8 +142,9 @@ def save_model(model, path: Path) -> None:
     them); the memory addresses in the descriptions Stable-Baselines3 writes beside each pickled object
     (``<function f at 0x7f...>``: a description only, loading reads the pickle) and the kernel's build in
     ``system_info.txt`` (the OS line keeps the system and the machine). The zip's entries are dated
-    1980-01-01. The same training gives the same bytes in any process on machines of a kind, so a
-    regenerated shipped policy can be compared byte for byte."""
+    1980-01-01. The same training gives the same bytes in any process on one machine, so a policy trained
+    again there can be compared byte for byte; on a machine whose math library (PyTorch's MKL) takes another
+    code path, the weights may differ in their last bits, and over a long training grow apart."""
     from etmpc.envs.gym import trigger_spaces
 
     fresh = trigger_spaces(model.observation_space.shape[0], int(model.action_space.n))

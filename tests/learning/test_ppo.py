@@ -161,7 +161,7 @@ def test_the_numbers_do_not_depend_on_the_worker_processes_and_the_baselines_ste
     for name in weights[0]:  # the same network, trained in one process or in two
         np.testing.assert_array_equal(weights[0][name].numpy(), weights[1][name].numpy(), err_msg=name)
     assert runs[0]["checkpoints"][0]["validation_objective"] == runs[1]["checkpoints"][0]["validation_objective"]
-    # Byte for byte, the model file too (no clock in it): a regenerated shipped policy can be compared so.
+    # Byte for byte, the model file too (no clock in it): a policy trained again can be compared so.
     assert (tmp_path / "w1" / "selected.zip").read_bytes() == (tmp_path / "w2" / "selected.zip").read_bytes()
     # The agent's 512 steps and the baseline's as many (a battery episode never ends early).
     assert runs[0]["environment_steps"] == 512 and runs[0]["simulated_steps"] == 1024
@@ -170,7 +170,7 @@ def test_the_numbers_do_not_depend_on_the_worker_processes_and_the_baselines_ste
 @pytest.mark.slow
 def test_two_processes_save_the_same_training_byte_for_byte(tmp_path):
     """What a process or a machine puts into Stable-Baselines3's zip (memory addresses in its descriptions,
-    the kernel's build) is left out: `make reproduce` regenerates the shipped zips byte for byte."""
+    the kernel's build) is left out: a training played again on the same machine saves the same zip, byte for byte."""
     import subprocess
     import sys
     from stable_baselines3 import PPO
