@@ -63,7 +63,7 @@ def features_while_kept():
 # xdist_group mark (tests/end_to_end/test_ray.py: `ray stop --force` stops every Ray instance of the user).
 # Any other test is a unit of work of its own.
 _RUNS_WHOLE = re.compile(r"""scope\s*=\s*["']module["']|\bxdist_group\b""")
-# The longest units (measured with two workers on 2 cores: about 150, 70, 45, 25, 20 and 15 s), started
+# The longest units (measured with two workers on 2 cores: about 135, 65, 50, 50, 25 and 10 s), started
 # first so that no worker is left with one of them at the end. Only the order: a file missing here is fine.
 _FIRST = (
     "tests/experiments/test_reproduce.py",
