@@ -105,7 +105,7 @@ def pytest_xdist_make_scheduler(config, log):
     return Scheduling(config, log)
 
 
-# The build that takes longest (about 30 s of the 70 s that every task's take on 2 cores), started first.
+# The build that takes longest (about 30 s of the 70 s that all the builds take on 2 cores), started first.
 _BUILT_FIRST = ("reacher/jumps",)
 
 
