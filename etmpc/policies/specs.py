@@ -17,148 +17,27 @@ The parser sits above the policies it builds: it imports each kind, none of them
 
 from __future__ import annotations
 
-import math
 import warnings
-from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from functools import cache
 from importlib.metadata import entry_points
-from pathlib import Path
 
 import numpy as np
 
-from etmpc.common.documents import loads
 from etmpc.common import interrupts
 from etmpc.common.errors import EtmpcError, UnknownNameError
 from etmpc.loop import Policy
-from etmpc.policies.fixed import Always, Every, Iterate, Never
-from etmpc.policies.learned import load_policy
+from etmpc.policies.builders import Context, Kind, every, file_kind, iterate, learned, no_argument, number, threshold
+from etmpc.policies.fixed import Always, Never
 from etmpc.policies.rollout import parse_rollout
 from etmpc.policies.sb3 import load_sb3
 from etmpc.policies.selftrigger import load_self
 from etmpc.policies.shield import Shield
-from etmpc.policies.threshold import Threshold
 from etmpc.policies.user import load_user
 from etmpc.systems import SystemKey, make_system
 from etmpc.systems.capabilities import ShieldRule
 
 ENTRY_POINTS = "etmpc.policies"
-
-
-@dataclass(frozen=True)
-class Context:
-    """What a kind's builder may use: the task's ``error_weights`` (the diagonal of W), its name
-    (``task``, for policy files made for one task), the episode's length, and ``parse`` for a kind that
-    wraps another policy (``rollout:BASE``)."""
-
-    error_weights: np.ndarray
-    task: str | None
-    steps: int
-    parse: Callable[[str], Policy]
-    levels: bool = False  # the task's decisions are compute levels (keep, one SQP iteration, a full solve)
-    variant_of: str | None = None  # the task whose world this one plays with time in the loop: its rl: files fit
-    shield: ShieldRule | None = None  # the task's own shield rule (shield:BASE)
-    safety_margin: Callable[[np.ndarray], float] | None = None  # the task's margin to a safety failure
-
-
-@dataclass(frozen=True)
-class Kind:
-    """A kind of policy: ``build(arg, spec, context)`` makes one from the text after the first colon
-    (``""`` when there is none), raising :class:`EtmpcError` with a one-line message on bad input."""
-
-    name: str
-    syntax: str  # how a spec of this kind is written, for the help and errors ("every:T")
-    summary: str  # one line: what it does
-    build: Callable[[str, str, Context], Policy]
-    clairvoyant: bool = False  # True: it knows each episode's future; a reference, not a policy
-    family: str = "other"  # periodic, event, learned, shielded, self, rollout, oracle, users, other: how tables group it
-    path: bool = False  # its argument is a file (rl:PATH): tables shorten it
-    simulates: bool = False  # it simulates the loop itself, so it may not be another such kind's base
-    wraps: bool = False  # its argument holds another policy's spec (shield:AGE:BASE): what it reads, the base reads too
-
-
-def _number(text: str, kind: type, spec: str):
-    try:
-        if text != text.strip():  # int(" 3") is 3, but "every: 3" is not how a spec is written
-            raise ValueError(text)
-        return kind(text)
-    except ValueError:
-        raise EtmpcError(f"bad policy {spec!r}: {text!r} is not a{'n integer' if kind is int else ' number'}") from None
-
-
-def _no_argument(policy: type) -> Callable[[str, str, Context], Policy]:
-    def build(arg: str, spec: str, context: Context) -> Policy:
-        if arg:
-            raise EtmpcError(f"bad policy {spec!r}: {spec.partition(':')[0]!r} takes no argument")
-        return policy()
-
-    return build
-
-
-def _every(arg: str, spec: str, context: Context) -> Policy:
-    period = _number(arg, int, spec)
-    if period < 1:
-        raise EtmpcError(f"bad policy {spec!r}: the period must be a whole number of steps >= 1")
-    return Every(period)
-
-
-def _iterate(arg: str, spec: str, context: Context) -> Policy:
-    if not context.levels:
-        raise EtmpcError(
-            f"bad policy {spec!r}: one SQP iteration is a compute level, and task {context.task} has none "
-            "(its decisions are keep or solve)"
-        )
-    period = _number(arg, int, spec)
-    if period < 1:
-        raise EtmpcError(f"bad policy {spec!r}: the period must be a whole number of steps >= 1")
-    return Iterate(period)
-
-
-def _threshold(arg: str, spec: str, context: Context) -> Policy:
-    text, *modifiers = arg.split(":")
-    level = _number(text, float, spec)
-    if not (math.isfinite(level) and level >= 0):
-        raise EtmpcError(f"bad policy {spec!r}: the threshold must be a finite number >= 0")
-    reads = modifiers[-1:] == ["reading"]
-    answer = ":".join(modifiers[:-1] if reads else modifiers)
-    if answer not in ("", "iterate"):
-        raise EtmpcError(
-            f"bad policy {spec!r}: after the threshold only ':iterate' (one SQP iteration) and then ':reading' "
-            "(the error on the sensor's readings) may follow"
-        )
-    if answer and not context.levels:
-        raise EtmpcError(
-            f"bad policy {spec!r}: one SQP iteration is a compute level, and task {context.task} has none "
-            "(its decisions are keep or solve): write threshold:X"
-        )
-    return Threshold(level, np.asarray(context.error_weights, dtype=float), iterate=bool(answer), reads=reads)
-
-
-def _learned(path: str, context: Context) -> Policy:
-    """An ``rl:`` file made for the task, or for the task a timing variant plays with time in the loop
-    (the same world and features: the learner trained at latency 0, played late)."""
-    task = context.task
-    if context.variant_of is not None and task is not None and _trained_on(path) == context.variant_of:
-        task = context.variant_of
-    return load_policy(path, task, nx=len(context.error_weights))
-
-
-def _trained_on(path: str) -> str | None:
-    """The task a policy file says it was made for (None if it cannot say: load_policy says why)."""
-    try:
-        data = loads(Path(path).read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return None
-    return data.get("domain") if isinstance(data, dict) else None
-
-
-def _file(load: Callable[[str, Context], Policy], what: str) -> Callable[[str, str, Context], Policy]:
-    def build(arg: str, spec: str, context: Context) -> Policy:
-        if not arg:
-            raise EtmpcError(f"bad policy {spec!r}: give the {what} file, {spec.partition(':')[0]}:PATH")
-        return load(arg, context)
-
-    return build
 
 
 def _simulates(spec: str) -> bool:
@@ -176,9 +55,9 @@ def _shield(arg: str, spec: str, context: Context) -> Policy:
     if (kind := find(base)) is not None and kind.clairvoyant:
         raise EtmpcError(f"bad policy {spec!r}: {base} is an oracle, a reference and not a policy: shield a policy")
     if numbers:
-        age = _number(numbers[0], int, spec)
+        age = number(numbers[0], int, spec)
         try:
-            rule = ShieldRule(age, _number(numbers[1], float, spec) if len(numbers) > 1 else None)
+            rule = ShieldRule(age, number(numbers[1], float, spec) if len(numbers) > 1 else None)
         except EtmpcError as exc:
             raise EtmpcError(f"bad policy {spec!r}: {exc}") from None
     elif context.shield is None:
@@ -213,29 +92,29 @@ def _rollout(arg: str, spec: str, context: Context) -> Policy:
 
 
 BUILT_IN: tuple[Kind, ...] = (
-    Kind("always", "always", "recompute at every step (standard MPC)", _no_argument(Always), family="periodic"),
-    Kind("never", "never", "keep each plan to its end", _no_argument(Never), family="periodic"),
-    Kind("every", "every:T", "recompute when the plan is T steps old", _every, family="periodic"),
+    Kind("always", "always", "recompute at every step (standard MPC)", no_argument(Always), family="periodic"),
+    Kind("never", "never", "keep each plan to its end", no_argument(Never), family="periodic"),
+    Kind("every", "every:T", "recompute when the plan is T steps old", every, family="periodic"),
     Kind(
         "iterate",
         "iterate:T",
         "one SQP iteration when the plan is T steps old (a task with compute levels)",
-        _iterate,
+        iterate,
         family="periodic",
     ),
     Kind(
         "threshold",
         "threshold:X[:iterate]",
         "recompute when the weighted prediction error exceeds X (:iterate: one SQP iteration, with compute levels)",
-        _threshold,
+        threshold,
         family="event",
     ),
-    Kind("rl", "rl:PATH", "a learned policy (etmpc train)", _file(_learned, "policy"), family="learned", path=True),
+    Kind("rl", "rl:PATH", "a learned policy (etmpc train)", file_kind(learned, "policy"), family="learned", path=True),
     Kind(
         "self",
         "self:PATH",
         "a self-triggering policy (etmpc train --algorithm self)",
-        _file(lambda path, c: load_self(path, c.task), "policy"),
+        file_kind(lambda path, c: load_self(path, c.task), "policy"),
         family="self",
         path=True,
     ),
@@ -250,7 +129,7 @@ BUILT_IN: tuple[Kind, ...] = (
         "sb3",
         "sb3:PATH",
         "a network trained on the trigger environment",
-        _file(lambda path, c: load_sb3(path, c.task), "model"),
+        file_kind(lambda path, c: load_sb3(path, c.task), "model"),
         family="learned",
         path=True,
     ),
