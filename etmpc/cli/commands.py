@@ -198,14 +198,19 @@ def _testset(args) -> None:
 
 def _options(args) -> None:
     from etmpc.systems import system_key
-    from etmpc.systems.options import canonical, settable
+    from etmpc.systems.options import canonical, described, settable
 
     key = system_key(args.task, options=args.options)
-    given = dict(key.options)
-    print(f"{key.task}: its options (--option NAME=VALUE; the price is --price)")
-    for name, value in settable(key.make().config).items():
+    given, config = dict(key.options), key.make().config
+    print(f"{key.task}: its options (--option NAME=VALUE; the price is --price), each with what it may be and why")
+    declared = described(config)
+    for name, value in settable(config).items():
         text = canonical(value) or ('""' if isinstance(value, str) else "()")  # an empty word, an empty list
         print(f"  {name} = {text}" + ("   (as set)" if name in given else ""))
+        what, kind = declared[name]
+        unit = f" ({what.unit})" if what.unit else ""
+        drawn = "; acts on newly drawn episodes (etmpc testset --option ...), not on a stored test set" if what.draws else ""
+        print(f"      {what.describe(kind)}{unit}: {what.why}{drawn}")
 
 
 def _robustness(args) -> None:

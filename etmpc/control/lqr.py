@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING
 import mpmath
 import numpy as np
 
+from etmpc.common.checks import BadValue
 from etmpc.common.numerics import matvec
 
 if TYPE_CHECKING:
@@ -59,13 +60,27 @@ def discrete_lqr_gain(system: ct.StateSpace, Q: np.ndarray, R: np.ndarray, dt_s:
         discrete, hold = system, None
     else:
         raise ValueError("the system's timebase is unspecified; give dt=0 (continuous) or dt>0 (discrete)")
-    designed, _, _ = ct.dlqr(discrete, Q, R)
-    designed = np.asarray(designed)
-    exact = _exact_gain(_key(system.A), _key(system.B), _key(Q), _key(R), hold)
+    try:  # weights a user set (options) may give no stabilising gain: one line, naming them
+        designed, _, _ = ct.dlqr(discrete, Q, R)
+        designed = np.asarray(designed)
+        exact = _exact_gain(_key(system.A), _key(system.B), _key(Q), _key(R), hold)
+    except (np.linalg.LinAlgError, ArithmeticError, ValueError) as exc:
+        said = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise BadValue(f"the LQR's weights {_weights(Q, R)} give no stabilising gain ({said[:160]})") from None
+    if not (np.all(np.isfinite(designed)) and np.all(np.isfinite(exact))):
+        raise BadValue(f"the LQR's weights {_weights(Q, R)} give a gain that is not finite")
     scale = max(float(np.max(np.abs(designed))), np.finfo(float).tiny)
     if np.max(np.abs(exact - designed)) > AGREEMENT * scale:
         raise ArithmeticError(f"the exact LQR gain {exact.tolist()} disagrees with python-control's {designed.tolist()}")
     return exact
+
+
+def _weights(Q: np.ndarray, R: np.ndarray) -> str:
+    """``Q = diag(0, 1), R = diag(0.1)`` (the matrices themselves where they are not diagonal)."""
+    shown = lambda M: (
+        f"diag({', '.join(f'{v:g}' for v in np.diag(M))})" if np.array_equal(M, np.diag(np.diag(M))) else str(M.tolist())
+    )  # noqa: E731
+    return f"Q = {shown(Q)}, R = {shown(R)}"
 
 
 def _key(matrix) -> tuple:

@@ -42,7 +42,8 @@ from etmpc.control.compiled import CompiledFunction, CompileError
 from etmpc.control.condensed import CondensedGaussNewton
 from etmpc.control.plan import Plan
 from etmpc.control.riccati import FeedbackWeights, gains_along
-from etmpc.control.settings import ROUTES, SolverSettings
+from etmpc.common.checks import BadValue
+from etmpc.control.settings import ROUTES, SolverSettings, plugin_library
 
 __all__ = ["FeedbackWeights", "GaussNewtonMPC", "ROUTES", "SolverSettings"]
 
@@ -67,12 +68,8 @@ class GaussNewtonMPC:
         :meth:`solve` and passed to both residuals last: ``stage_residual(x, u, du, p)``,
         ``terminal_residual(x, p)``. With ``feedback``, every plan carries the gains of a
         time-varying LQR along it (:class:`FeedbackWeights`)."""
-        if settings.route not in ROUTES:
-            raise ValueError(f"route must be one of {', '.join(ROUTES)}, got {settings.route!r}")
-        if not 1 <= settings.block <= horizon:
-            raise ValueError(f"block must be in 1..{horizon}, got {settings.block}")
-        if settings.cold_start not in ("rollout", "hold"):
-            raise ValueError(f"cold_start must be 'rollout' or 'hold', got {settings.cold_start!r}")
+        if not 1 <= settings.block <= horizon:  # the rest of the settings was checked when they were made
+            raise BadValue(f"option solver.block: {settings.block} is not in 1..{horizon}, the MPC's horizon")
         nx, nu = model.size1_in(0), model.size1_in(1)
         self.nx, self.nu, self.horizon, self.settings = nx, nu, horizon, settings
         self.parameters, self.feedback = parameters, feedback
@@ -138,6 +135,7 @@ class GaussNewtonMPC:
             "gauss_newton_hessian", [w, params, lam_f, lam_g], [gauss_newton], ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"]
         )
         self._dual_tolerance = settings.tolerance if settings.dual_tolerance is None else settings.dual_tolerance
+        plugin_library("conic", settings.qpsol)  # CasADi's own: never one it would look for in the working folder
         quiet = {"error_on_fail": False}
         if settings.qpsol == "qrqp":
             quiet |= {"print_iter": False, "print_header": False, "print_info": False}

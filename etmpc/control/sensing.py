@@ -23,9 +23,16 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from etmpc.common.checks import BadValue
+from etmpc.common.checks import MAX_SEED, BadValue
+from etmpc.common.declared import PER_STATE, Checked, setting
 from etmpc.common.numerics import cholesky, matvec
 from etmpc.control.compiled import CompiledFunction, CompileError, compile_functions, run
+
+
+#: The largest value a reading's noise, bias or rounding, or a filter's standard deviation may have, in the state's
+#: units: far beyond any plant here (a cart's rail is 5 m), small enough that no square of it overflows.
+MAX_READING = 1e3
+EACH = (0, 1, PER_STATE)  # a sensor's per-state field: nothing, one value for every state, or one per state
 
 
 def episode_key(episode: Any) -> int:
@@ -60,30 +67,36 @@ def _per_state(name: str, values: tuple, nx: int, default: float) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class Sensor:
+class Sensor(Checked):
     """What the controller reads of the state ``x`` at each step: for each state ``i`` that is
     ``measured``, ``y_i = q_i round((x_i + bias_i + noise_std_i e_i) / q_i)`` (``e_i`` standard normal,
     ``q_i`` the ``quantum``, no rounding where it is 0); the whole reading is lost with probability
     ``dropout``. Each per-state field takes one value per state, one value for every state, or nothing
-    (no noise, no bias, no rounding; every state measured)."""
+    (no noise, no bias, no rounding; every state measured): checked against the plant's states where the
+    system is made. Each field is an option (``--option sensor.noise_std=0.01``), in the state's own units."""
 
-    noise_std: tuple[float, ...] = ()
-    bias: tuple[float, ...] = ()
-    quantum: tuple[float, ...] = ()
-    measured: tuple[bool, ...] = ()
-    dropout: float = 0.0  # the probability that a step's reading is lost (the filter then only predicts)
-    seed: int = 0  # the noise stream: with the episode's key, it says every draw
+    noise_std: tuple[float, ...] = setting(
+        (), lengths=EACH, low=0, high=MAX_READING, unit="state units", why="the reading's noise per state, a standard deviation"
+    )
+    bias: tuple[float, ...] = setting(
+        (), lengths=EACH, low=-MAX_READING, high=MAX_READING, unit="state units", why="a constant error of the reading per state"
+    )
+    quantum: tuple[float, ...] = setting(
+        (),
+        lengths=EACH,
+        low=0,
+        high=MAX_READING,
+        unit="state units",
+        why="the reading rounded to multiples of this (0: no rounding)",
+    )
+    measured: tuple[bool, ...] = setting((), lengths=EACH, why="which states are read (the rest only estimated)")
+    dropout: float = setting(0.0, low=0, below=1, why="the probability that a step's reading is lost (the filter then predicts)")
+    seed: int = setting(0, low=0, high=MAX_SEED, why="the noise stream: with the episode's key, it says every draw")
 
     def __post_init__(self):
         for name in ("noise_std", "bias", "quantum", "measured"):
             object.__setattr__(self, name, tuple(getattr(self, name)))
-        for name in ("noise_std", "quantum"):
-            if any(not np.isfinite(v) or v < 0 for v in getattr(self, name)):
-                raise BadValue(f"a sensor's {name} is finite and >= 0, got {getattr(self, name)}")
-        if not all(np.isfinite(v) for v in self.bias):
-            raise BadValue(f"a sensor's bias is finite, got {self.bias}")
-        if not 0.0 <= float(self.dropout) < 1.0:
-            raise BadValue(f"a sensor's dropout is a probability in [0, 1), got {self.dropout}")
+        super().__post_init__()
 
     @property
     def exact(self) -> bool:
@@ -121,20 +134,32 @@ class Sensor:
 
 
 @dataclass(frozen=True)
-class FilterSettings:
+class FilterSettings(Checked):
     """The estimator's model of what it does not know: the process noise's standard deviation per state and
     control interval (the predictor's mismatch and the disturbances, as the filter sees them), and the
     prior's standard deviation per state before the first reading. One value per state or one for all."""
 
-    process_std: tuple[float, ...] = (1e-3,)
-    initial_std: tuple[float, ...] = (1.0,)
+    process_std: tuple[float, ...] = setting(
+        (1e-3,),
+        lengths=(1, PER_STATE),
+        above=0,
+        high=MAX_READING,
+        unit="state units",
+        why="the filter's process noise per state and interval",
+    )
+    initial_std: tuple[float, ...] = setting(
+        (1.0,),
+        lengths=(1, PER_STATE),
+        above=0,
+        high=MAX_READING,
+        unit="state units",
+        why="the filter's prior standard deviation per state",
+    )
 
     def __post_init__(self):
         for name in ("process_std", "initial_std"):
-            values = tuple(getattr(self, name))
-            object.__setattr__(self, name, values)
-            if not values or any(not np.isfinite(v) or v <= 0 for v in values):
-                raise BadValue(f"a filter's {name} is one or more values > 0, got {values}")
+            object.__setattr__(self, name, tuple(getattr(self, name)))
+        super().__post_init__()
 
 
 @lru_cache(maxsize=64)

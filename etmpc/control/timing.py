@@ -22,7 +22,11 @@ from typing import Any
 
 import numpy as np
 
-from etmpc.common.checks import BadType, BadValue, argument, flag
+from etmpc.common.checks import BadType, BadValue
+from etmpc.common.declared import Checked, setting
+from etmpc.control.settings import MAX_HORIZON
+
+MAX_ITERATION_S = 10.0  # the longest time one SQP iteration may take: a solve of 1000 iterations then takes hours
 
 #: What a policy may ask for at a decision on a task with compute levels (``Discrete(3)``); on any other
 #: task a decision is a yes or no, and a yes is a full solve.
@@ -56,7 +60,7 @@ def level_of(answer: Any, levels: bool) -> int | None:
 
 
 @dataclass(frozen=True)
-class Latency:
+class Latency(Checked):
     """How many control intervals a solve takes before its plan is in force.
 
     ``d = intervals + ceil(iterations * iteration_s / interval_s)``: a fixed part (communication, a
@@ -68,23 +72,19 @@ class Latency:
     plant the task put back) is made before the first interval: it is in force at once.
     """
 
-    intervals: int = 0
-    iteration_s: float = 0.0
-    platform: str = ""
-    compensate: bool = False
+    intervals: int = setting(
+        0, low=0, high=MAX_HORIZON - 1, unit="intervals", why="a solve's fixed delay; shorter than the horizon"
+    )
+    iteration_s: float = setting(
+        0.0, low=0, high=MAX_ITERATION_S, unit="s", why="one SQP iteration's time on the target platform (0: not counted)"
+    )
+    platform: str = setting("", label=True, why="the platform iteration_s was measured on: a name, shown in results")
+    compensate: bool = setting(False, why="solve from the state predicted for when the plan arrives")
 
     def __post_init__(self):
-        # Each field is checked for its kind, not read by its truth: compensate="no" would turn compensation on.
-        if isinstance(self.intervals, bool) or not isinstance(self.intervals, int) or self.intervals < 0:
-            raise BadValue(f"latency: intervals must be a whole number >= 0, got {self.intervals!r}")
-        real = isinstance(self.iteration_s, (int, float)) and not isinstance(self.iteration_s, bool)
-        if not (real and math.isfinite(self.iteration_s) and self.iteration_s >= 0):
-            raise BadValue(f"latency: iteration_s must be a finite number of seconds >= 0, got {self.iteration_s!r}")
-        if not isinstance(self.platform, str):
-            raise BadValue(f"latency: platform must be a str (a name), got {type(self.platform).__name__} {self.platform!r}")
+        super().__post_init__()  # each field of its type and range, never read by its truth: compensate="no" is refused
         if self.iteration_s and not self.platform:
             raise BadValue("latency: a time per SQP iteration needs the platform it was measured on (platform=...)")
-        object.__setattr__(self, "compensate", argument("latency: compensate", flag, self.compensate))
 
     @property
     def instant(self) -> bool:

@@ -157,6 +157,9 @@ class TriggerEnvironment(dm_env.Environment):
             checks.argument("seed", checks.seed, seed)
         if test_set is not None and not isinstance(test_set, (str, os.PathLike)):
             raise checks.BadType(f"test_set: a file path is needed, got {type(test_set).__name__} {test_set!r}")
+        from etmpc.systems.options import pairs
+
+        task_options = pairs(task_options, "task_options")  # its shape, said in the keyword's name
         self.key = system_key(task, recompute_price, task_options)  # the task, its price and options, checked here
         self.system = self.key.make()
         self.failure_cost = checked_failure_cost(failure_cost, self.system)

@@ -11,9 +11,19 @@ import numpy as np
 from dm_control.rl import control
 from dm_env import specs
 
+from etmpc.common.declared import setting
+
 Random = np.random.Generator | np.random.RandomState | int | None
 #: A stored episode's bound on a Gaussian's draw, in its standard deviations (beyond it: probability 1.5e-23 a draw).
 GAUSSIAN_BOUND_STD = 10.0
+#: The largest factor a disturbance may be scaled by when it is played (``disturbances.*_scale``), and the most
+#: events a second a rate may draw (at most 1,000 per 100-step episode of 0.1 s: the draws stay small).
+MAX_SCALE, MAX_EVENTS_PER_S = 100.0, 100.0
+
+
+def scale_setting(what: str) -> Any:
+    """A factor on every disturbance of a kind as it is played (a stored episode's too), as an option."""
+    return setting(1.0, low=0, high=MAX_SCALE, why=f"every {what} played, times this: acts on a stored test set too")
 
 
 def generator(random: Random) -> np.random.Generator:

@@ -1,11 +1,13 @@
 """A task's options: the fields of its ``Config`` set by name, from the command line (``--option NAME=VALUE``)
 or the API (``SystemKey(task, options={...})``).
 
-An option's name is a field of the task's ``Config``, or a dotted path into one of its settings
-(``sensor.noise_std``, ``estimator.process_std``, ``latency.intervals``). Its value is parsed by the field's
-type: a number, ``true``/``false``, a word, or comma-separated values for a tuple (``0.01,0,0.02,0``).
-:func:`settable` lists a task's options with their defaults (``etmpc tasks --options`` prints them). The
-price of a recompute has its own argument (``--price``), not an option.
+An option's name is a declared field of the task's ``Config`` (:func:`~etmpc.common.declared.setting`: its
+range or choices, its unit and why), or a dotted path into one of its settings (``sensor.noise_std``,
+``estimator.process_std``, ``latency.intervals``); a field that is not declared is no option. Its value is
+parsed by the field's type (a number, ``true``/``false``, a word, or comma-separated values for a tuple:
+``0.01,0,0.02,0``), then checked against its declaration before anything is built. :func:`settable` lists a
+task's options with their defaults, :func:`described` with what each may be (``etmpc options --task TASK``
+prints both). The price of a recompute has its own argument (``--price``), not an option.
 
 Options are kept as ``(name, text)`` pairs in the canonical text of their parsed value (:func:`canonical`),
 sorted by name: two ways of writing the same options give the same key, the same card and the same replay.
@@ -17,29 +19,15 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import typing
-from collections.abc import Iterable, Mapping
-from functools import cache
+from collections.abc import Iterable, Iterator, Mapping
 from typing import Any
 
-from etmpc.common.checks import BadValue
+from etmpc.common.checks import BadType, BadValue
+from etmpc.common.declared import Declared, check_per_state, declarations, element_of
 from etmpc.common.errors import EtmpcError, UnknownNameError
 
 NOT_OPTIONS = ("recompute_price",)  # set by its own argument (--price, SystemKey's recompute_price)
 _TRUE, _FALSE = ("true", "yes", "on", "1"), ("false", "no", "off", "0")
-
-
-@cache
-def _hints(cls: type) -> dict[str, Any]:
-    return typing.get_type_hints(cls)
-
-
-def _kind(cls: type, name: str, value: Any) -> Any:
-    """The type of field ``name`` of dataclass ``cls`` (its annotation, resolved; else its value's)."""
-    try:
-        return _hints(cls)[name]
-    except (NameError, KeyError, TypeError):
-        return type(value)
 
 
 def _scalar(kind: Any) -> bool:
@@ -48,26 +36,40 @@ def _scalar(kind: Any) -> bool:
 
 def _element(kind: Any) -> Any | None:
     """The element type of ``tuple[X, ...]`` where X is a scalar type; else None."""
-    if typing.get_origin(kind) is tuple:
-        args = typing.get_args(kind)
-        if len(args) == 2 and args[1] is Ellipsis and _scalar(args[0]):
-            return args[0]
-    return None
+    element = element_of(kind)
+    return element if _scalar(element) else None
 
 
-def settable(config: Any, prefix: str = "") -> dict[str, Any]:
-    """Every option of ``config`` (a task's Config, or one of its settings) by dotted name, with its value:
-    the scalar fields, the tuples of scalars, and those of the dataclasses within (not the price)."""
-    found: dict[str, Any] = {}
+def _declared(config: Any) -> dict[str, tuple[Declared, Any]]:
+    """The options among ``config``'s own fields (not those of the settings within it): each declared one
+    (:func:`~etmpc.common.declared.setting`) of a scalar type or a tuple of scalars, but the price."""
+    return {
+        name: (declared, kind)
+        for name, (declared, kind) in declarations(type(config)).items()
+        if name not in NOT_OPTIONS and (_scalar(kind) or _element(kind) is not None)
+    }
+
+
+def _walk(config: Any, prefix: str = "") -> Iterator[tuple[str, Declared, Any, Any]]:
+    """``(dotted name, declaration, type, value)`` of every option of ``config`` and the settings within it."""
+    own = _declared(config)
     for f in dataclasses.fields(config):
-        if not prefix and f.name in NOT_OPTIONS:
-            continue
-        value, kind = getattr(config, f.name), _kind(type(config), f.name, getattr(config, f.name))
+        value = getattr(config, f.name)
         if dataclasses.is_dataclass(value):
-            found |= settable(value, f"{prefix}{f.name}.")
-        elif _scalar(kind) or _element(kind) is not None:
-            found[f"{prefix}{f.name}"] = value
-    return found
+            yield from _walk(value, f"{prefix}{f.name}.")
+        elif f.name in own:
+            yield (f"{prefix}{f.name}", *own[f.name], value)
+
+
+def settable(config: Any) -> dict[str, Any]:
+    """Every option of ``config`` (a task's Config, or one of its settings) by dotted name, with its value:
+    its declared fields, and those of the dataclasses within (not the price)."""
+    return {name: value for name, _, _, value in _walk(config)}
+
+
+def described(config: Any) -> dict[str, tuple[Declared, Any]]:
+    """Every option of ``config`` by dotted name, with its declaration and its type (as :func:`settable`)."""
+    return {name: (declared, kind) for name, declared, kind, _ in _walk(config)}
 
 
 def _parse_scalar(kind: type, text: str, name: str) -> Any:
@@ -126,16 +128,38 @@ def _set(config: Any, path: list[str], text: str, name: str, known: Iterable[str
         if not dataclasses.is_dataclass(value):
             raise UnknownNameError(f"unknown option {name!r}; valid: {', '.join(known)}")
         return dataclasses.replace(config, **{head: _set(value, rest, text, name, known)})
-    kind = _kind(type(config), head, value)
-    if not (_scalar(kind) or _element(kind) is not None):
-        raise UnknownNameError(f"option {name!r} is not a number, a word or a list of them; valid: {', '.join(known)}")
-    return dataclasses.replace(config, **{head: parse(kind, text, name)})
+    own = _declared(config)
+    if head not in own:
+        raise UnknownNameError(f"{name!r} is not an option (a setting of the task's own); valid: {', '.join(known)}")
+    declared, kind = own[head]
+    parsed = declared.check(f"option {name}", kind, parse(kind, text, name))  # what it may be, said in its words
+    return dataclasses.replace(config, **{head: parsed})
+
+
+def pairs(options: Any, argument: str = "options") -> list[tuple[str, Any]]:
+    """``options`` as ``(name, value)`` pairs: a mapping of option names to values, or an iterable of
+    ``(name, value)`` pairs; anything else is a :class:`BadType` naming ``argument`` and the shape it needs."""
+    need = f"{argument} must be a mapping of option names to values (or (name, value) pairs)"
+    if isinstance(options, Mapping):
+        items = list(options.items())
+    elif isinstance(options, (str, bytes)) or not isinstance(options, Iterable):
+        raise BadType(f"{need}, got {type(options).__name__} {options!r:.60}")
+    else:
+        items = list(options)
+        wrong = next((item for item in items if not (isinstance(item, (tuple, list)) and len(item) == 2)), None)
+        if wrong is not None:
+            raise BadType(f"{need}, got an entry {wrong!r:.60}")
+    name = next((name for name, _ in items if not isinstance(name, str)), None)
+    if name is not None:
+        raise BadType(f"{need}: an option's name is text, got {type(name).__name__} {name!r:.60}")
+    return items
 
 
 def apply(config: Any, options: Mapping[str, Any] | Iterable[tuple[str, Any]]) -> Any:
     """``config`` with ``options`` set (each value text to parse, or a value of the field's type). An unknown
-    name is refused listing the valid ones; a bad value names the option; the settings' own checks run."""
-    items = options.items() if isinstance(options, Mapping) else options
+    name is refused listing the valid ones; a value is checked against what the option may be (its
+    declaration: :mod:`etmpc.common.declared`), then by the settings' own checks."""
+    items = pairs(options)
     if not dataclasses.is_dataclass(config):
         raise EtmpcError(f"this task's Config ({type(config).__name__}) is not a dataclass: it takes no options")
     known = tuple(settable(config))
@@ -153,7 +177,7 @@ def apply(config: Any, options: Mapping[str, Any] | Iterable[tuple[str, Any]]) -
 def normalised(config: Any, options: Mapping[str, Any] | Iterable[tuple[str, Any]]) -> tuple[tuple[str, str], ...]:
     """``options`` checked against ``config`` and written canonically, sorted by name: ``((name, text), ...)``.
     An option given twice is refused; one set to its default is kept (it says what was asked)."""
-    items = list(options.items() if isinstance(options, Mapping) else options)
+    items = pairs(options)
     names = [n for n, _ in items]
     twice = sorted({n for n in names if names.count(n) > 1})
     if twice:
@@ -173,3 +197,19 @@ def of(config: Any) -> dict[str, str]:
 def shown(options: tuple[tuple[str, str], ...]) -> str:
     """Options as the command line writes them: ``--option a=1 --option b=2``."""
     return " ".join(f"--option {name}={text}" for name, text in options)
+
+
+def check_together(system) -> None:
+    """What of a system's Config depends on more than one field or on the plant, checked where the system is made
+    (each field alone was checked when its settings were made: :mod:`etmpc.common.declared`): a per-state setting
+    has one value per state of the plant (or one for all), and the MPC's shooting blocks fit in its horizon."""
+    config = system.config
+    if not dataclasses.is_dataclass(config):
+        return
+    values, states = {}, len(system.state_names)
+    for name, declared, _, value in _walk(config):
+        check_per_state(f"option {name}", declared, value, states)
+        values[name] = value
+    block, horizon = values.get("solver.block"), values.get("horizon")
+    if block is not None and horizon is not None and block > horizon:
+        raise BadValue(f"option solver.block: {block} is longer than the horizon of {horizon} intervals")

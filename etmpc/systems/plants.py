@@ -10,6 +10,7 @@ import copy
 import logging
 import math
 from collections.abc import Callable
+from typing import Any
 from pathlib import Path
 
 import mujoco
@@ -18,6 +19,7 @@ from dm_control import mjcf
 from dm_control.mujoco import Physics as MjPhysics
 from dm_control.rl import control
 
+from etmpc.common.declared import setting
 from etmpc.common.errors import UnknownNameError
 from etmpc.common.resources import model_path
 
@@ -26,6 +28,11 @@ PLANTS = ("mismatched", "matched")
 #: 4096 (their ``<quality shadowsize>``, never exceeded), a 64x48 one 512. MuJoCo draws the whole map at
 #: every frame, so with the model's map a small frame cost as much as a large one on a CPU's OpenGL.
 SHADOW_TEXELS_PER_PIXEL, SHADOW_TEXELS_MIN = 4, 512
+
+
+def plant_setting(default: str = "mismatched") -> Any:
+    """A task's plant setting, as an option."""
+    return setting(default, choices=PLANTS, why="the MuJoCo plant as it is, or matched to the MPC's predictor")
 
 
 def load_plant(

@@ -337,6 +337,9 @@ class SystemKey:
 
             config = apply(config, self.options)
         system = cls(config)
+        from etmpc.systems.options import check_together
+
+        check_together(system)
         system.estimator  # noqa: B018 (read, and so checked, now: a sensor the task cannot filter is refused here)
         latency, levels = system.latency, system.compute_levels  # read, and so checked, now
         if not latency.instant or levels:

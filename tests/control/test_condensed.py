@@ -8,7 +8,8 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from etmpc.control.mpc import GaussNewtonMPC, SolverSettings
+from etmpc.common.checks import BadValue
+from etmpc.control.mpc import SolverSettings
 from etmpc.systems.cart_pendulum.system import CartPendulumSystem
 from etmpc.systems.quadrotor.system import QuadrotorSystem
 from tests.control.test_mpc import ipopt_reference, random_state
@@ -190,14 +191,6 @@ def test_a_task_without_parameters_or_gains_reaches_ipopts_optimum():
         assert plan.cost == pytest.approx(ipopt_reference(cart, x, u_prev), rel=1e-7)
 
 
-def test_an_unknown_route_is_refused(quadrotor):
-    with pytest.raises(ValueError, match="route must be one of sqpmethod, condensed"):
-        GaussNewtonMPC(
-            quadrotor.mpc._model,
-            *quadrotor.residuals(),
-            horizon=5,
-            u_min=quadrotor.u_min,
-            u_max=quadrotor.u_max,
-            parameters=3,
-            settings=SolverSettings(route="hpipm"),
-        )
+def test_an_unknown_route_is_refused_by_the_settings_before_any_mpc_is_built():
+    with pytest.raises(BadValue, match="^SolverSettings.route: 'hpipm' is not one of sqpmethod, condensed"):
+        SolverSettings(route="hpipm")

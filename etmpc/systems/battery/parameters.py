@@ -12,20 +12,33 @@ a net production of 100 kW held for 10 s moves 2.8 %; the computer's 0.1 kW draw
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import MISSING, dataclass
+from typing import Any
+
+from etmpc.common.checks import BadValue
+from etmpc.common.declared import Checked, setting
 
 SECONDS_PER_HOUR = 3600.0
+#: The largest values an option may set: a capacity, a power, a signal's level (kW or EUR/kWh), a duration, and
+#: an episode's or a forecast's length (10,000 intervals: the work of a run grows with it).
+MAX_ENERGY_KWH, MAX_POWER_KW, MAX_LEVEL, MAX_DURATION_S, MAX_STEPS = 1e6, 1e6, 1e6, 1e6, 10_000
 
 
 @dataclass(frozen=True)
-class Battery:
+class Battery(Checked):
     """The storage and its market access: the paper's numbers (its eq. battery; docs/paper.md)."""
 
-    capacity_kwh: float = 10.0  # C
-    interval_s: float = 10.0  # delta: one control interval
-    trade_fraction_per_interval: float = 0.1  # |u| <= 0.1 C / delta: 10 % of the capacity per interval
-    compute_power_kw: float = 0.1  # eta_c: drawn from the battery while the MPC computes
-    episode_steps: int = 100
+    capacity_kwh: float = setting(10.0, low=1e-3, high=MAX_ENERGY_KWH, unit="kWh", why="C, the storage's capacity")  # C
+    interval_s: float = setting(  # delta: one control interval
+        10.0, low=1e-3, high=SECONDS_PER_HOUR, unit="s", why="delta, one control interval"
+    )
+    trade_fraction_per_interval: float = setting(  # |u| <= 0.1 C / delta: 10 % of the capacity per interval
+        0.1, above=0, high=1, why="the largest trade per interval, as a share of the capacity"
+    )
+    compute_power_kw: float = setting(  # eta_c: drawn from the battery while the MPC computes
+        0.1, low=0, high=MAX_POWER_KW, unit="kW", why="eta_c, drawn from the battery while the MPC computes"
+    )
+    episode_steps: int = setting(100, low=1, high=MAX_STEPS, unit="intervals", why="an episode's length")
 
     @property
     def interval_h(self) -> float:
@@ -42,8 +55,18 @@ class Battery:
         return self.interval_h / self.capacity_kwh
 
 
+def level(why: str) -> Any:
+    """A signal's level (kW or EUR/kWh, its unit), as an option: it says how episodes are drawn."""
+    return setting(MISSING, low=-MAX_LEVEL, high=MAX_LEVEL, draws=True, why=why)
+
+
+def duration(why: str, low: float = 1e-3) -> Any:
+    """A signal's time constant or mean duration, as an option."""
+    return setting(MISSING, low=low, high=MAX_DURATION_S, unit="s", draws=True, why=why)
+
+
 @dataclass(frozen=True)
-class Signal:
+class Signal(Checked):
     """A time-varying parameter: ``base + OU``, and how it is forecast.
 
     * **base**: an hourly level (fixed per clock hour, drawn ``U(hourly_low, hourly_high)``; the spot
@@ -57,16 +80,26 @@ class Signal:
       knows neither the coming events nor the current OU deviation.
     """
 
-    unit: str
-    hourly_low: float
-    hourly_high: float
-    event_low: float
-    event_high: float
-    event_mean_duration_s: float
-    ou_time_constant_s: float
-    ou_std: float
-    forecast_std_per_step: float
-    forecast_time_constant_s: float
+    unit: str  # a label for tables and figures: not an option
+    hourly_low: float = level("the hourly level's low end")
+    hourly_high: float = level("the hourly level's high end")
+    event_low: float = level("an event level's low end")
+    event_high: float = level("an event level's high end")
+    event_mean_duration_s: float = duration("an event's mean duration (exponential): events are drawn one by one", low=1.0)
+    ou_time_constant_s: float = duration("the Ornstein-Uhlenbeck deviation's time constant")
+    ou_std: float = setting(
+        MISSING, low=0, high=MAX_LEVEL, draws=True, why="the Ornstein-Uhlenbeck deviation's stationary standard deviation"
+    )
+    forecast_std_per_step: float = setting(
+        MISSING, low=0, high=MAX_LEVEL, draws=True, why="the forecast's noise per step of lead time"
+    )
+    forecast_time_constant_s: float = duration("the forecast noise's time constant along lead time")
+
+    def __post_init__(self):
+        super().__post_init__()
+        for low, high in (("hourly_low", "hourly_high"), ("event_low", "event_high")):
+            if getattr(self, low) > getattr(self, high):
+                raise BadValue(f"{low} {getattr(self, low)} is above {high} {getattr(self, high)}")
 
     @property
     def mean(self) -> float:
@@ -109,13 +142,20 @@ PRICE = Signal(
 
 
 @dataclass(frozen=True)
-class Market:
+class Market(Checked):
     """Everything random about a trading episode."""
 
     production: Signal = PRODUCTION
     price: Signal = PRICE
-    forecast_steps: int = 20  # values per forecast (k .. k+19): the paper's horizon N
-    initial_soc_low: float = 0.1  # x_0 ~ U(low, high)
-    initial_soc_high: float = 0.9
+    forecast_steps: int = setting(  # values per forecast (k .. k+19): the paper's horizon N
+        20, low=1, high=MAX_STEPS, unit="intervals", draws=True, why="values per forecast: at least the MPC's horizon"
+    )
+    initial_soc_low: float = setting(0.1, low=0, high=1, draws=True, why="x_0 ~ U(low, high): its low end")
+    initial_soc_high: float = setting(0.9, low=0, high=1, draws=True, why="x_0 ~ U(low, high): its high end")
     # Each episode starts at a uniform time within the clock hour, so the 1000 s of about 28 % of
     # the episodes see the spot price change.
+
+    def __post_init__(self):
+        super().__post_init__()
+        if self.initial_soc_low > self.initial_soc_high:
+            raise BadValue(f"initial_soc_low {self.initial_soc_low} is above initial_soc_high {self.initial_soc_high}")

@@ -22,9 +22,11 @@ from etmpc.systems.battery import task as battery_env
 from etmpc.systems.battery.mpc import EconomicMPC
 from etmpc.systems.battery.parameters import Battery, Market
 from etmpc.systems.battery.reference import LinprogReference
+from etmpc.common.declared import Checked
 from etmpc.common.errors import EtmpcError
 from etmpc.control.lqr import ErrorFeedback, discrete_lqr_gain, state_space
 from etmpc.control.plan import Plan
+from etmpc.control.settings import horizon_setting, input_weight_setting, weight_setting
 from etmpc.systems.base import SystemBase
 
 
@@ -82,12 +84,12 @@ def exogenous_features(s) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class Config:
+class Config(Checked):
     """The paper's settings for the battery (docs/paper.md, "The paper's settings, and what it leaves open")."""
 
-    horizon: int = 20  # N
-    lqr_state_weight: float = 1.0  # Q on the state-of-charge error (dimensionless)
-    lqr_input_weight: float = 0.1  # R on the correction, per kW^2
+    horizon: int = horizon_setting(20)  # N
+    lqr_state_weight: float = weight_setting(1.0, "the LQR's Q on the state-of-charge error")  # dimensionless
+    lqr_input_weight: float = input_weight_setting(0.1, "the LQR's R on the correction, per kW^2")
     recompute_price: float = 0.0  # a recompute's cost is physical: eta_c is drawn from the battery
     battery: Battery = Battery()
     market: Market = Market()
@@ -105,8 +107,6 @@ class BatterySystem(SystemBase):
     failure_name = "curtailed"  # intervals whose commanded trade the empty or full battery cut by > 1 % of the limit
 
     def __init__(self, config: Config = Config()):
-        if config.lqr_state_weight < 0 or config.lqr_input_weight <= 0:
-            raise ValueError(f"LQR weights need Q >= 0 and R > 0, got Q={config.lqr_state_weight}, R={config.lqr_input_weight}")
         if config.horizon > config.market.forecast_steps:
             raise EtmpcError(
                 f"horizon {config.horizon} exceeds the {config.market.forecast_steps} forecast values the task provides"

@@ -43,10 +43,11 @@ import numpy as np
 from dm_control.rl import control
 
 from etmpc.common.checks import BadValue
+from etmpc.common.declared import Checked, setting
 from etmpc.systems.cart_pendulum.model import NX, STATE_NAMES
 from etmpc.systems.cart_pendulum.physics import Bumpers, Physics, load_model
 from etmpc.systems.cart_pendulum.task import CartPendulumTask
-from etmpc.systems.episodes import Random, build_environment, jump_process
+from etmpc.systems.episodes import MAX_EVENTS_PER_S, Random, build_environment, jump_process, scale_setting
 
 CONTROL_DT_S = 0.1
 PHYSICS_DT_S = 0.01  # 10 RK4 steps per interval: the bumpers' spring (31 rad/s on the cart) needs them
@@ -55,6 +56,7 @@ INITIAL_STATE_LOW = np.array([-0.5, -0.3, -0.1, -0.3])  # eta, v, beta, omega
 INITIAL_STATE_HIGH = -INITIAL_STATE_LOW
 KICKS_PER_S = 0.3
 KICK_RAD_S = (0.3, 0.8)  # |delta omega| ~ U(low, high), random sign
+MAX_KICK_RAD_S = 100.0  # the largest kick an option may draw
 MOST_KICKS = 10  # in one interval, for a stored episode's range (a Poisson count of mean 0.03: 11 has probability 4e-25)
 BUMPERS = Bumpers(position_m=2.5, stiffness_n_m=1000.0, damping_n_s_m=40.0)
 REFERENCE_M = 1.0  # the cart's reference ~ U(+-1 m)
@@ -68,28 +70,39 @@ ANGLE_SCALE_RAD = 0.6  # cost sin^2(beta/2) / sin^2(0.6): 1 at beta = 1.2 rad
 
 
 @dataclass(frozen=True)
-class Disturbances:
+class Disturbances(Checked):
     """The task's disturbances, as options (``--option disturbances.kick_scale=2``). The rates and sizes say how
     episodes are drawn (``etmpc testset --option ...`` draws a test set with them; a rollout redraws a future
     with them); ``kick_scale`` multiplies every kick as it is played, a stored episode's too, so that one test
     set measures a trigger against stronger or gentler kicks, episode by episode (``etmpc robustness``)."""
 
-    kicks_per_s: float = KICKS_PER_S  # a Poisson rate
-    kick_rad_s: tuple[float, ...] = KICK_RAD_S  # |delta omega| ~ U(low, high), random sign
-    kick_scale: float = 1.0  # every kick played, times this
-    reference_jumps_per_s: float = REFERENCE_JUMPS_PER_S
+    kicks_per_s: float = setting(
+        KICKS_PER_S, low=0, high=MAX_EVENTS_PER_S, unit="1/s", draws=True, why="the kicks' Poisson rate, as episodes are drawn"
+    )
+    kick_rad_s: tuple[float, ...] = setting(  # |delta omega| ~ U(low, high), random sign
+        KICK_RAD_S,
+        low=0,
+        high=MAX_KICK_RAD_S,
+        lengths=(2,),
+        unit="rad/s",
+        draws=True,
+        why="a kick's size on the pole's rate ~ U(low, high), random sign",
+    )
+    kick_scale: float = scale_setting("kick")
+    reference_jumps_per_s: float = setting(
+        REFERENCE_JUMPS_PER_S,
+        low=0,
+        high=1 / CONTROL_DT_S,
+        unit="1/s",
+        draws=True,
+        why="the cart reference's jumps a second: at most one an interval",
+    )
 
     def __post_init__(self):
         object.__setattr__(self, "kick_rad_s", tuple(self.kick_rad_s))
-        low_high = self.kick_rad_s
-        if not (len(low_high) == 2 and 0 <= low_high[0] <= low_high[1] and math.isfinite(low_high[1])):
-            raise BadValue(f"kick_rad_s is (low, high) with 0 <= low <= high, got {low_high}")
-        for name in ("kicks_per_s", "kick_scale"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
-                raise BadValue(f"{name} is a finite number >= 0, got {value}")
-        if not 0 <= self.reference_jumps_per_s * CONTROL_DT_S <= 1:
-            raise BadValue(f"reference_jumps_per_s is in [0, {1 / CONTROL_DT_S:g}], got {self.reference_jumps_per_s}")
+        super().__post_init__()
+        if self.kick_rad_s[0] > self.kick_rad_s[1]:
+            raise BadValue(f"kick_rad_s is (low, high) with low <= high, got {self.kick_rad_s}")
 
     @property
     def reference_jump_probability(self) -> float:

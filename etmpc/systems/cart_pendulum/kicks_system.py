@@ -33,12 +33,16 @@ import casadi as ca
 import dm_env
 import numpy as np
 
+from etmpc.common.declared import Checked, setting
 from etmpc.control.mpc import FeedbackWeights, SolverSettings
+from etmpc.control.settings import horizon_setting, input_weight_setting, levels_setting, rk4_setting, weight_setting
 from etmpc.control.sensing import FilterSettings, Sensor
 from etmpc.control.timing import Latency
 from etmpc.systems.gauss_newton import GaussNewtonSystem
+from etmpc.systems.plants import plant_setting
 from etmpc.systems.cart_pendulum import kicks
 from etmpc.systems.cart_pendulum.model import NU, NX, STATE_NAMES, AnalyticModel
+from etmpc.systems.cart_pendulum.system import MAX_FORCE_N
 
 
 REFERENCE = "cart_reference_m"  # the observation's current reference, and the plan's forecast of it
@@ -64,22 +68,25 @@ PROCESS_STD = (0.000625, 0.025, 0.000625, 0.125)
 
 
 @dataclass(frozen=True)
-class Config:
+class Config(Checked):
     """The kicks task's controller and price."""
 
-    horizon: int = 20
-    force_limit_n: float = 25.0
-    rail_margin_m: float = 0.5  # the MPC keeps the cart this far inside the bumpers
-    position_weight: float = 1.0  # on eta - r in each stage's residual
-    terminal_position_weight: float = 3.0
-    input_weight: float = 0.03
-    feedback_state_weights: tuple[float, ...] = (1.0, 1.0, 10.0, 1.0)  # Q of the TV-LQR (and W of threshold:X: sqrt Q)
-    feedback_input_weight: float = 0.1  # R
+    horizon: int = horizon_setting(20)
+    force_limit_n: float = setting(25.0, above=0, high=MAX_FORCE_N, unit="N", why="the cart force's bound")
+    rail_margin_m: float = setting(  # the MPC keeps the cart this far inside the bumpers
+        0.5, low=0, below=kicks.BUMPERS.position_m, unit="m", why="the MPC keeps the cart this far inside the bumpers"
+    )
+    position_weight: float = weight_setting(1.0, "on eta - r in each stage's residual")
+    terminal_position_weight: float = weight_setting(3.0, "on eta - r in the terminal residual")
+    input_weight: float = weight_setting(0.03, "on the force in each stage's residual")
+    # Q of the TV-LQR (and W of threshold:X: sqrt Q)
+    feedback_state_weights: tuple[float, ...] = weight_setting((1.0, 1.0, 10.0, 1.0), "the TV-LQR's Q", lengths=(NX,))
+    feedback_input_weight: float = input_weight_setting(0.1, "the TV-LQR's R")
     recompute_price: float = 0.1
-    rk4_substeps: int = 2
-    plant: str = "mismatched"
+    rk4_substeps: int = rk4_setting(2)
+    plant: str = plant_setting()
     latency: Latency = Latency()  # how long a solve takes (etmpc.control.timing); none: the paper's loop
-    compute_levels: bool = False  # a decision is keep, one SQP iteration or a full solve, priced per iteration
+    compute_levels: bool = levels_setting(False)  # a decision is keep, one SQP iteration or a full solve
     # the kicks and the reference's jumps (the world's: kicks.Disturbances), as options
     disturbances: kicks.Disturbances = kicks.Disturbances()
     # what the controller measures, and its filter (etmpc.control.sensing): the exact state by default

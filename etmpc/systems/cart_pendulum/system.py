@@ -13,24 +13,30 @@ import numpy as np
 from etmpc.systems.cart_pendulum import task as cp_env
 from etmpc.systems.cart_pendulum.model import NU, NX, STATE_NAMES, AnalyticModel
 from etmpc.control.lqr import ErrorFeedback, discrete_lqr_gain, state_space
+from etmpc.common.declared import Checked, setting
 from etmpc.control.mpc import GaussNewtonMPC, SolverSettings
+from etmpc.control.settings import horizon_setting, input_weight_setting, rk4_setting, weight_setting
+from etmpc.systems.plants import plant_setting
 from etmpc.control.plan import Plan
 from etmpc.systems.base import SystemBase
 from etmpc.systems.gauss_newton import system_mpc
 
 
+MAX_FORCE_N = 1000.0  # the largest force bound an option may set: 40 times the paper's 25 N
+
+
 @dataclass(frozen=True)
-class Config:
+class Config(Checked):
     """The paper's settings for the cart pendulum (docs/paper.md, "The paper's settings, and what it leaves open")."""
 
-    horizon: int = 20  # N
-    input_change_weight: float = 1e-4  # D on (u_k - u_{k-1})^2
-    force_limit_n: float = 25.0
-    lqr_state_weights: tuple[float, ...] = (0.0, 1.0, 10.0, 10.0)  # diag Q
-    lqr_input_weight: float = 0.1  # R
+    horizon: int = horizon_setting(20)  # N
+    input_change_weight: float = weight_setting(1e-4, "D on (u_k - u_{k-1})^2")
+    force_limit_n: float = setting(25.0, above=0, high=MAX_FORCE_N, unit="N", why="the cart force's bound")
+    lqr_state_weights: tuple[float, ...] = weight_setting((0.0, 1.0, 10.0, 10.0), "the LQR's Q, its diagonal", lengths=(NX,))
+    lqr_input_weight: float = input_weight_setting(0.1, "the LQR's R")
     recompute_price: float = 5e-5  # per recompute, in the policy cost R_k
-    rk4_substeps: int = 1  # RK4 steps of the MPC's predictor per 0.1 s interval (the paper: step 0.1 s)
-    plant: str = "mismatched"  # or "matched"
+    rk4_substeps: int = rk4_setting(1)  # RK4 steps of the MPC's predictor per 0.1 s interval (the paper: step 0.1 s)
+    plant: str = plant_setting()  # "mismatched" or "matched"
     disturbances: cp_env.Disturbances = cp_env.Disturbances()  # the angular disturbance (the world's), as options
     solver: SolverSettings = SolverSettings()
 

@@ -39,17 +39,18 @@ import numpy as np
 from dm_control.rl import control
 from dm_env import specs
 
-from etmpc.common.checks import BadValue
+from etmpc.common.declared import Checked, setting
 from etmpc.systems.cart_pendulum.model import NX, STATE_NAMES
 from etmpc.systems.cart_pendulum.physics import Physics, load_model
 from etmpc.systems.plants import PLANTS
-from etmpc.systems.episodes import GAUSSIAN_BOUND_STD, EpisodeTask, Random, build_environment
+from etmpc.systems.episodes import GAUSSIAN_BOUND_STD, EpisodeTask, Random, build_environment, scale_setting
 
 __all__ = ["PLANTS", "Disturbances", "Episode", "Balance", "Physics", "load_model", "make_environment"]
 
 CONTROL_DT_S = 0.1
 EPISODE_STEPS = 100
 DISTURBANCE_STD_RAD_S2 = 1.0
+MAX_ANGULAR_STD_RAD_S2 = 100.0  # the largest an option may draw: 100 times the paper's
 INITIAL_STATE_LOW = np.array([0.0, -1.0, -0.78, -1.0])  # eta, v, beta, omega
 INITIAL_STATE_HIGH = np.array([0.0, 1.0, 0.78, 1.0])
 OFF_BALANCE_RAD = 0.1  # a step ending with |beta| beyond this is a failure, but for the initial recovery:
@@ -60,21 +61,22 @@ _FALLEN_RGB = np.array([0.85, 0.1, 0.1])
 
 
 @dataclass(frozen=True)
-class Disturbances:
+class Disturbances(Checked):
     """The task's angular disturbance, as options (``--option disturbances.disturbance_scale=2``).
     ``angular_std_rad_s2`` says how episodes are drawn (``etmpc testset --option ...`` draws a test set with it; a
     rollout redraws a future with it); ``disturbance_scale`` multiplies every disturbance as it is played, a stored
     episode's too, so that one test set measures a trigger against a stronger or gentler disturbance, episode by
     episode (``etmpc robustness``)."""
 
-    angular_std_rad_s2: float = DISTURBANCE_STD_RAD_S2  # w ~ N(0, this) per control interval
-    disturbance_scale: float = 1.0  # every disturbance played, times this
-
-    def __post_init__(self):
-        for name in ("angular_std_rad_s2", "disturbance_scale"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
-                raise BadValue(f"{name} is a finite number >= 0, got {value}")
+    angular_std_rad_s2: float = setting(  # w ~ N(0, this) per control interval
+        DISTURBANCE_STD_RAD_S2,
+        low=0,
+        high=MAX_ANGULAR_STD_RAD_S2,
+        unit="rad/s^2",
+        draws=True,
+        why="the angular disturbance's standard deviation, drawn per control interval",
+    )
+    disturbance_scale: float = scale_setting("disturbance")
 
 
 @dataclass(frozen=True)

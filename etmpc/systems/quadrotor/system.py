@@ -27,11 +27,14 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from etmpc.common.declared import Checked, setting
 from etmpc.control.mpc import SolverSettings
 from etmpc.control.sensing import FilterSettings, Sensor
+from etmpc.control.settings import horizon_setting, input_weight_setting, levels_setting, rk4_setting, weight_setting
 from etmpc.control.timing import Latency
 from etmpc.systems.capabilities import ShieldRule
 from etmpc.systems.gauss_newton import GaussNewtonSystem, TrackedFeatures
+from etmpc.systems.plants import plant_setting
 from etmpc.systems.quadrotor import task as quadrotor_task
 from etmpc.systems.quadrotor.model import INPUT_NAMES, NU, NX, STATE_NAMES, AnalyticModel, Parameters
 from etmpc.systems.space import Space
@@ -55,33 +58,42 @@ EXOGENOUS = TrackedFeatures(TARGET)
 EXOGENOUS_FEATURES = EXOGENOUS.names
 
 
+MAX_SCALE_M = 10.0  # the largest distance scale an option may set (the geofence is 4 m wide)
+
+
 @dataclass(frozen=True)
-class Config:
+class Config(Checked):
     """The quadrotor's controller and price."""
 
-    horizon: int = 20
-    distance_scale_m: float = 0.3  # stage residual e / 0.3
-    terminal_distance_factor: float = 2.0  # terminal residual 2 e / 0.3
-    velocity_weight: float = 0.1
-    terminal_velocity_weight: float = 0.3
-    angle_weight: float = 0.5
-    terminal_angle_weight: float = 0.3
-    rate_weight: float = 0.3
-    terminal_rate_weight: float = 0.05
-    thrust_weight: float = 0.1  # on (u - hover) / max
-    clearance_m: float = 0.3  # the MPC keeps the drone above this height: a soft constraint
-    clearance_weight: float = 10.0  # on the shortfall below it (smoothed over 5 cm) / 0.3
-    idle_thrust_n: float = 0.02  # the least thrust the MPC plans per rotor (the plant's rotors may stop)
-    thrust_change_weight: float = 1.0  # on du / max
-    feedback_state_weights: tuple[float, ...] = (
-        (10.0,) * 3 + (3.0,) * 3 + (1.0,) * 3 + (0.3,) * 3
-    )  # Q (and W of threshold:X: sqrt Q)
-    feedback_input_weights: tuple[float, ...] = (5000.0,) * 4  # R
+    horizon: int = horizon_setting(20)
+    distance_scale_m: float = setting(  # stage residual e / 0.3
+        0.3, low=1e-3, high=MAX_SCALE_M, unit="m", why="the stage residual is the distance to the waypoint over this"
+    )
+    terminal_distance_factor: float = weight_setting(2.0, "the terminal residual's distance, times this")
+    velocity_weight: float = weight_setting(0.1, "on the velocity in each stage's residual")
+    terminal_velocity_weight: float = weight_setting(0.3, "on the velocity in the terminal residual")
+    angle_weight: float = weight_setting(0.5, "on the attitude in each stage's residual")
+    terminal_angle_weight: float = weight_setting(0.3, "on the attitude in the terminal residual")
+    rate_weight: float = weight_setting(0.3, "on the body rates in each stage's residual")
+    terminal_rate_weight: float = weight_setting(0.05, "on the body rates in the terminal residual")
+    thrust_weight: float = weight_setting(0.1, "on (u - hover) / max in each stage's residual")
+    clearance_m: float = setting(  # the MPC keeps the drone above this height: a soft constraint
+        0.3, low=0, below=quadrotor_task.FENCE_HEIGHT_M, unit="m", why="the MPC keeps the drone above this height (soft)"
+    )
+    clearance_weight: float = weight_setting(10.0, "on the shortfall below the clearance (smoothed over 5 cm) / 0.3")
+    idle_thrust_n: float = setting(  # the least thrust the MPC plans per rotor (the plant's rotors may stop)
+        0.02, low=0, below=Parameters().max_thrust_n, unit="N", why="the least thrust the MPC plans per rotor"
+    )
+    thrust_change_weight: float = weight_setting(1.0, "on du / max in each stage's residual")
+    feedback_state_weights: tuple[float, ...] = weight_setting(  # Q (and W of threshold:X: sqrt Q)
+        (10.0,) * 3 + (3.0,) * 3 + (1.0,) * 3 + (0.3,) * 3, "the TV-LQR's Q", lengths=(NX,)
+    )
+    feedback_input_weights: tuple[float, ...] = input_weight_setting((5000.0,) * 4, "the TV-LQR's R", lengths=(NU,))
     recompute_price: float = 0.5
-    rk4_substeps: int = 2
-    plant: str = "mismatched"
+    rk4_substeps: int = rk4_setting(2)
+    plant: str = plant_setting()
     latency: Latency = Latency()  # how long a solve takes (etmpc.control.timing); none: the paper's loop
-    compute_levels: bool = False  # a decision is keep, one SQP iteration or a full solve, priced per iteration
+    compute_levels: bool = levels_setting(False)  # a decision is keep, one SQP iteration or a full solve
     # the waypoint changes and the gusts (the world's: task.Disturbances), as options
     disturbances: quadrotor_task.Disturbances = quadrotor_task.Disturbances()
     # what the controller measures, and its filter (etmpc.control.sensing): the exact state by default

@@ -41,7 +41,8 @@ from dm_control.utils import containers
 from dm_env import specs
 
 from etmpc.common.checks import BadValue
-from etmpc.systems.episodes import EpisodeTask, Random, add_task, build_environment, jump_process
+from etmpc.common.declared import Checked, setting
+from etmpc.systems.episodes import EpisodeTask, Random, add_task, build_environment, jump_process, scale_setting
 from etmpc.systems.plants import PLANTS
 from etmpc.systems.quadrotor.model import NX, STATE_NAMES
 from etmpc.systems.quadrotor.physics import Physics, load_model
@@ -58,6 +59,7 @@ CHANGE_PROBABILITY = 0.05  # a waypoint change per interval after the first
 GUST_PROBABILITY = 0.03  # a gust's onset per interval
 GUST_PEAK_N = (0.06, 0.15)
 GUST_DURATION_S = (0.3, 0.8)
+MAX_GUST_N, MAX_GUST_S = 10.0, 10.0  # the strongest and longest gust an option may draw (the drone weighs 0.26 N)
 FENCE_HALF_WIDTH_M = 2.0  # |x|, |y| <= 2
 FENCE_HEIGHT_M = 2.5
 GROUND_M = 0.05  # z below this is on the ground
@@ -68,29 +70,39 @@ SUITE = containers.TaggedTasks()
 
 
 @dataclass(frozen=True)
-class Disturbances:
+class Disturbances(Checked):
     """The task's disturbances, as options (``--option disturbances.gust_scale=1.5``). The probabilities, peaks
     and durations say how episodes are drawn (``etmpc testset --option ...``; a rollout redraws a future with
     them); ``gust_scale`` multiplies every gust's force as it is played, a stored episode's too, so that one test
     set measures a trigger against stronger or weaker gusts, episode by episode (``etmpc robustness``)."""
 
-    change_probability: float = CHANGE_PROBABILITY  # a waypoint change per interval after the first
-    gust_probability: float = GUST_PROBABILITY  # a gust's onset per interval
-    gust_peak_n: tuple[float, ...] = GUST_PEAK_N  # its peak ~ U(low, high)
-    gust_duration_s: tuple[float, ...] = GUST_DURATION_S  # its length ~ U(low, high), in whole intervals
-    gust_scale: float = 1.0  # every gust played, times this
+    change_probability: float = setting(  # a waypoint change per interval after the first
+        CHANGE_PROBABILITY, low=0, high=1, draws=True, why="a waypoint change's probability per interval"
+    )
+    gust_probability: float = setting(  # a gust's onset per interval
+        GUST_PROBABILITY, low=0, high=1, draws=True, why="a gust's onset's probability per interval"
+    )
+    gust_peak_n: tuple[float, ...] = setting(  # its peak ~ U(low, high)
+        GUST_PEAK_N, low=0, high=MAX_GUST_N, lengths=(2,), unit="N", draws=True, why="a gust's peak force ~ U(low, high)"
+    )
+    gust_duration_s: tuple[float, ...] = setting(  # its length ~ U(low, high), in whole intervals
+        GUST_DURATION_S,
+        low=0,
+        high=MAX_GUST_S,
+        lengths=(2,),
+        unit="s",
+        draws=True,
+        why="a gust's length ~ U(low, high), in whole intervals",
+    )
+    gust_scale: float = scale_setting("gust")
 
     def __post_init__(self):
         for name in ("gust_peak_n", "gust_duration_s"):
-            pair = tuple(getattr(self, name))
-            object.__setattr__(self, name, pair)
-            if not (len(pair) == 2 and 0 <= pair[0] <= pair[1] and math.isfinite(pair[1])):
-                raise BadValue(f"{name} is (low, high) with 0 <= low <= high, got {pair}")
-        for name in ("change_probability", "gust_probability"):
-            if not 0 <= getattr(self, name) <= 1:
-                raise BadValue(f"{name} is a probability in [0, 1], got {getattr(self, name)}")
-        if not (math.isfinite(self.gust_scale) and self.gust_scale >= 0):
-            raise BadValue(f"gust_scale is a finite number >= 0, got {self.gust_scale}")
+            object.__setattr__(self, name, tuple(getattr(self, name)))
+        super().__post_init__()
+        for name in ("gust_peak_n", "gust_duration_s"):
+            if getattr(self, name)[0] > getattr(self, name)[1]:
+                raise BadValue(f"{name} is (low, high) with low <= high, got {getattr(self, name)}")
 
 
 @dataclass(frozen=True)

@@ -40,10 +40,13 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from etmpc.common.declared import Checked, setting
 from etmpc.control.sensing import FilterSettings, Sensor
 from etmpc.control.mpc import SolverSettings
+from etmpc.control.settings import horizon_setting, input_weight_setting, levels_setting, rk4_setting, weight_setting
 from etmpc.control.timing import Latency
 from etmpc.systems.gauss_newton import TRACKING_SOLVER, GaussNewtonSystem, TrackedFeatures
+from etmpc.systems.plants import plant_setting
 from etmpc.systems.reacher import task as reacher_task
 from etmpc.systems.reacher.model import INPUT_NAMES, NU, NX, STATE_NAMES, AnalyticModel, fingertip
 
@@ -55,25 +58,31 @@ EXOGENOUS = TrackedFeatures(TARGET)
 EXOGENOUS_FEATURES = EXOGENOUS.names
 
 
+MAX_TORQUE_NM, MAX_SCALE_M = 100.0, 10.0  # the largest torque bound and distance scale an option may set
+
+
 @dataclass(frozen=True)
-class Config:
+class Config(Checked):
     """The reacher's controller and price."""
 
-    horizon: int = 20
-    torque_limit_nm: float = 2.0
-    distance_scale_m: float = 0.3  # stage residual e / 0.3
-    terminal_distance_factor: float = 2.0  # terminal residual 2 e / 0.3
-    velocity_weight: float = 0.02
-    terminal_velocity_weight: float = 0.1
-    torque_weight: float = 0.01
-    torque_change_weight: float = 0.02
-    feedback_state_weights: tuple[float, ...] = (10.0, 10.0, 1.0, 1.0)  # Q of the TV-LQR (and W of threshold:X: sqrt Q)
-    feedback_input_weights: tuple[float, ...] = (0.1, 0.1)  # R
+    horizon: int = horizon_setting(20)
+    torque_limit_nm: float = setting(2.0, above=0, high=MAX_TORQUE_NM, unit="N m", why="each joint torque's bound")
+    distance_scale_m: float = setting(  # stage residual e / 0.3
+        0.3, low=1e-3, high=MAX_SCALE_M, unit="m", why="the stage residual is the fingertip's distance over this"
+    )
+    terminal_distance_factor: float = weight_setting(2.0, "the terminal residual's distance, times this")
+    velocity_weight: float = weight_setting(0.02, "on the joint rates in each stage's residual")
+    terminal_velocity_weight: float = weight_setting(0.1, "on the joint rates in the terminal residual")
+    torque_weight: float = weight_setting(0.01, "on the torques in each stage's residual")
+    torque_change_weight: float = weight_setting(0.02, "on the torques' change in each stage's residual")
+    # Q of the TV-LQR (and W of threshold:X: sqrt Q)
+    feedback_state_weights: tuple[float, ...] = weight_setting((10.0, 10.0, 1.0, 1.0), "the TV-LQR's Q", lengths=(NX,))
+    feedback_input_weights: tuple[float, ...] = input_weight_setting((0.1, 0.1), "the TV-LQR's R", lengths=(NU,))
     recompute_price: float = 0.1
-    rk4_substeps: int = 2
-    plant: str = "mismatched"
+    rk4_substeps: int = rk4_setting(2)
+    plant: str = plant_setting()
     latency: Latency = Latency()  # how long a solve takes (etmpc.control.timing); none: the paper's loop
-    compute_levels: bool = False  # a decision is keep, one SQP iteration or a full solve, priced per iteration
+    compute_levels: bool = levels_setting(False)  # a decision is keep, one SQP iteration or a full solve
     # the target's jumps (the world's: task.Disturbances), as options
     disturbances: reacher_task.Disturbances = reacher_task.Disturbances()
     # what the controller measures, and its filter (etmpc.control.sensing): the exact state by default

@@ -34,6 +34,7 @@ from dm_control.utils import containers
 from dm_env import specs
 
 from etmpc.common.checks import BadValue
+from etmpc.common.declared import Checked, setting
 from etmpc.systems.episodes import EpisodeTask, Random, add_task, build_environment, jump_process
 from etmpc.systems.reacher.model import NX, STATE_NAMES, Parameters
 from etmpc.systems.plants import PLANTS
@@ -56,20 +57,33 @@ SUITE = containers.TaggedTasks()
 
 
 @dataclass(frozen=True)
-class Disturbances:
+class Disturbances(Checked):
     """The target's jumps, as options (``--option disturbances.jumps_per_s=2``): how episodes are drawn (``etmpc
     testset --option ...`` draws a test set with them; a rollout redraws a future with them)."""
 
-    jumps_per_s: float = JUMPS_PER_S  # a jump with probability jumps_per_s * CONTROL_DT_S per interval after the first
-    target_radius_m: tuple[float, ...] = TARGET_RADIUS_M  # a target's radius ~ U(low, high), within the arm's reach
+    jumps_per_s: float = setting(  # a jump with probability jumps_per_s * CONTROL_DT_S per interval after the first
+        JUMPS_PER_S,
+        low=0,
+        high=1 / CONTROL_DT_S,
+        unit="1/s",
+        draws=True,
+        why="the target's jumps a second: at most one an interval",
+    )
+    target_radius_m: tuple[float, ...] = setting(  # a target's radius ~ U(low, high), within the arm's reach
+        TARGET_RADIUS_M,
+        low=0,
+        high=REACH_M,
+        lengths=(2,),
+        unit="m",
+        draws=True,
+        why="a target's distance from the shoulder ~ U(low, high), within the arm's reach",
+    )
 
     def __post_init__(self):
         object.__setattr__(self, "target_radius_m", tuple(self.target_radius_m))
-        if not 0 <= self.jumps_per_s * CONTROL_DT_S <= 1:
-            raise BadValue(f"jumps_per_s is in [0, {1 / CONTROL_DT_S:g}] (at most one jump an interval), got {self.jumps_per_s}")
-        pair = self.target_radius_m
-        if not (len(pair) == 2 and 0 <= pair[0] <= pair[1] <= REACH_M):
-            raise BadValue(f"target_radius_m is (low, high) with 0 <= low <= high <= {REACH_M:g} (the arm's reach), got {pair}")
+        super().__post_init__()
+        if self.target_radius_m[0] > self.target_radius_m[1]:
+            raise BadValue(f"target_radius_m is (low, high) with low <= high, got {self.target_radius_m}")
 
     @property
     def jump_probability(self) -> float:
