@@ -11,6 +11,7 @@ and copied in by hand.)
 
 from __future__ import annotations
 
+import functools
 import hashlib
 from collections.abc import Iterable, Mapping
 from pathlib import Path
@@ -18,7 +19,7 @@ from pathlib import Path
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import check_outputs
 from etmpc.common.resources import data_root
-from etmpc.policies.specs import find
+from etmpc.policies.specs import MAX_NESTING, check_size, find
 from etmpc.systems import data_dir
 from etmpc.systems.registry import domains
 
@@ -37,20 +38,26 @@ def policy_files(spec: str) -> list[Path]:
     (``rl:PATH``, ``self:PATH``, ``sb3:PATH``), the description beside a model (``sb3:X.zip`` reads
     ``X.json`` too), and for a kind that wraps another (``rollout:BASE:K:H``, ``oracle:BASE``,
     ``shield:AGE:MARGIN:BASE``), its base's files. Nothing is parsed or loaded: a spec that names no file has none."""
-    kind = find(spec)
-    if kind is None:
-        return []
-    arg = spec.partition(":")[2]
-    if kind.path:
-        named = Path(arg)
-        if not arg or not named.name:
-            return []
-        return [f for f in dict.fromkeys([named, named.with_suffix(".json")]) if f.is_file()]
-    if kind.simulates or kind.wraps:  # BASE may end in :K[:H] or follow AGE:MARGIN: every stretch of the argument
-        tokens = arg.split(":")
-        stretches = (":".join(tokens[i:j]) for i in range(len(tokens)) for j in range(len(tokens), i, -1))
-        return list(dict.fromkeys(f for stretch in stretches for f in policy_files(stretch)))
-    return []
+    check_size(spec)  # a spec past the parser's bounds is refused before it is looked into
+
+    @functools.cache
+    def files(stretch: str, depth: int) -> tuple[Path, ...]:
+        kind = find(stretch)
+        if kind is None or depth > MAX_NESTING:  # wrapped deeper than the parser takes: it refuses the spec
+            return ()
+        arg = stretch.partition(":")[2]
+        if kind.path:
+            named = Path(arg)
+            if not arg or not named.name:
+                return ()
+            return tuple(f for f in dict.fromkeys([named, named.with_suffix(".json")]) if f.is_file())
+        if kind.simulates or kind.wraps:  # BASE may end in :K[:H] or follow AGE:MARGIN: every stretch of the argument
+            tokens = arg.split(":")
+            stretches = (":".join(tokens[i:j]) for i in range(len(tokens)) for j in range(len(tokens), i, -1))
+            return tuple(dict.fromkeys(f for part in stretches for f in files(part, depth + 1)))
+        return ()
+
+    return list(files(spec, 0))
 
 
 def run_inputs(policies: Iterable, test_set: str | Path | None = None) -> dict[str, Path]:

@@ -38,6 +38,10 @@ from etmpc.systems import SystemKey, make_system
 from etmpc.systems.capabilities import ShieldRule
 
 ENTRY_POINTS = "etmpc.policies"
+#: The longest spec, the most ``:``-separated parts and the deepest wrapping a spec may hold: a path is at most 4096
+#: characters on Linux, no built-in spec has more than a dozen parts, and no built-in kind wraps another more than
+#: twice (``oracle:shield:BASE``); a spec past these is refused before it is read.
+MAX_SPEC_CHARS, MAX_SPEC_PARTS, MAX_NESTING = 4096, 64, 8
 
 
 def _simulates(spec: str) -> bool:
@@ -240,11 +244,31 @@ def parse_policy(spec: str, system, *legacy) -> Policy:
     return _parse(spec, Context(system.error_weights, system.name, system.episode_steps, None, levels, variant_of, *safety))
 
 
-def _parse(spec: str, context: Context) -> Policy:
-    if context.parse is None:
-        context = replace(context, parse=lambda base: _parse(base, context))
+def _short(spec: str) -> str:
+    return repr(spec) if len(spec) <= 60 else f"{spec[:57]!r}..."
+
+
+def check_size(spec: str) -> None:
+    """Refuse, in one line, a spec longer than :data:`MAX_SPEC_CHARS`, of more than :data:`MAX_SPEC_PARTS` parts or
+    holding a control character: what a reader of specs (the parser, :func:`etmpc.evaluation.inputs.policy_files`)
+    checks before it looks inside."""
+    if not isinstance(spec, str):
+        raise EtmpcError(f"a policy spec is text, got {type(spec).__name__}")
+    if len(spec) > MAX_SPEC_CHARS:
+        raise EtmpcError(f"bad policy {_short(spec)}: {len(spec)} characters, more than the {MAX_SPEC_CHARS} a spec may hold")
+    if (parts := spec.count(":") + 1) > MAX_SPEC_PARTS:
+        raise EtmpcError(f"bad policy {_short(spec)}: {parts} parts, more than the {MAX_SPEC_PARTS} a spec may hold")
     if any(ord(c) < 32 or ord(c) == 127 for c in spec):  # a line break would split every table and message
         raise EtmpcError(f"bad policy {spec!r}: it holds a control character (a line break?)")
+
+
+def _parse(spec: str, context: Context, depth: int = 0, whole: str | None = None) -> Policy:
+    """``spec``, a policy wrapped ``depth`` deep in the spec ``whole`` (the one a user wrote)."""
+    check_size(spec)
+    whole = spec if whole is None else whole
+    if depth > MAX_NESTING:
+        raise EtmpcError(f"bad policy {_short(whole)}: policies wrapped more than {MAX_NESTING} deep (shield:, rollout:)")
+    context = replace(context, parse=lambda base: _parse(base, context, depth + 1, whole))
     kind = kind_of(spec)
     if any(kind is own for own in BUILT_IN):
         return kind.build(spec.partition(":")[2], spec, context)
