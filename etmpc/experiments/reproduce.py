@@ -36,7 +36,6 @@ settings are kept in ``DIR/settings.json`` and a second run with other settings 
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from etmpc.common.documents import loads
@@ -51,6 +50,7 @@ from etmpc.experiments import shipped as shipped_policies
 from etmpc.experiments import sweep as sweeps
 from etmpc.experiments.clock import StageClock
 from etmpc.experiments.report import PAPER, machine, report, software_versions
+from etmpc.experiments.reproduce_settings import FULL, QUICK, Settings  # noqa: F401 (reproduce's API)
 from etmpc.experiments.summary import (
     summarise_default,
     summarise_headroom,
@@ -79,65 +79,6 @@ from etmpc.experiments.stages import (  # noqa: F401 (evaluated_once: reproduce'
     evaluated_once,
     run_root,
     trained,
-)
-
-
-@dataclass(frozen=True)
-class Settings:
-    """How big the run is. ``full`` is the paper's protocol; ``quick`` the same steps, smaller."""
-
-    seeds: tuple[int, ...] = (0, 1, 2, 3, 4)
-    episodes: int = 1500  # training episodes per seed
-    eval_every: int = 150
-    eval_episodes: int | None = None  # test-set episodes per evaluation during training (None: all)
-    test_episodes: int | None = None  # test-set episodes for the baselines and the final evaluation
-    repeats: int = 5  # passes over the test set for the learned policy
-    record_episodes: int = 3  # representative episodes per policy in the recording
-    video_size: tuple[int, int] = (640, 480)
-    # The default learner (DPI on the error features) and the headroom meters.
-    dpi_seeds: tuple[int, ...] = (0, 1, 2)
-    dpi_episodes: int = 60  # training episodes per seed: 3 iterations of 20
-    dpi_eval_every: int = 20
-    dpi_labels: int = 25  # decisions labelled per training episode
-    dpi_futures: int = 4
-    dpi_horizon: int = 20  # at most the task's Benchmark.lookahead
-    dpi_selection_episodes: int = 30  # training episodes that choose DPI's first policy among its bases
-    validation_episodes: int = 50  # training-distribution episodes that choose the shipped seed
-    rollout_episodes: int = 30  # first test-set episodes for rollout:BEST and oracle:BEST
-    rollout_futures: int = 4  # K: 8 doubles its cost (2 K H simulated steps per decision)
-    rollout_horizon: int | None = 20  # None: to the episode's end; at most the task's Benchmark.lookahead
-    ppo_timesteps: int | None = None  # PPO (Stable-Baselines3, the 'rl' extra): None, its ppo.yml's budget; 0: none
-    smoke: bool = False  # a smoke run: its report gives no verdicts
-
-    def to_json(self) -> dict:
-        data = asdict(self)
-        data["seeds"], data["video_size"], data["dpi_seeds"] = list(self.seeds), list(self.video_size), list(self.dpi_seeds)
-        if self.dpi_selection_episodes == Settings.dpi_selection_episodes:  # as a run made before it was a setting
-            del data["dpi_selection_episodes"]
-        return data
-
-
-FULL = Settings()
-QUICK = Settings(
-    episodes=30,
-    eval_every=15,
-    eval_episodes=10,
-    test_episodes=20,
-    repeats=2,
-    record_episodes=2,
-    video_size=(320, 240),
-    dpi_seeds=(0, 1),
-    dpi_episodes=4,
-    dpi_eval_every=2,
-    dpi_labels=5,
-    dpi_futures=2,
-    dpi_horizon=10,
-    validation_episodes=5,
-    rollout_episodes=3,
-    rollout_futures=2,
-    rollout_horizon=10,
-    ppo_timesteps=2048,
-    smoke=True,
 )
 
 
