@@ -36,9 +36,9 @@ def _evaluate(args) -> None:
     _distinct_policies(args.policy)
     if args.against is not None and args.against not in args.policy:
         raise EtmpcError(f"--against {args.against} is not one of the --policy given")
+    check_run_outputs({"--json": args.json, "--record": args.record}, inputs=run_inputs(args.policy, args.test_set))
     if args.test_set is not None and not Path(args.test_set).is_file():
         raise EtmpcError(f"test set {args.test_set} not found")
-    check_run_outputs({"--json": args.json, "--record": args.record}, inputs=run_inputs(args.policy, args.test_set))
     key = system_key(args.task, args.price, args.options)  # the task at its price: one value from here to the objective
     result = evaluate(
         key,
@@ -147,7 +147,7 @@ def _replay(args) -> None:
 
 
 def _bench(args) -> None:
-    from etmpc.evaluation.bench import format_bench, run_bench
+    from etmpc.evaluation.bench import benched, format_bench, run_bench
     from etmpc.systems import check_name, names, system_key
 
     domains = args.task or list(names())
@@ -155,6 +155,8 @@ def _bench(args) -> None:
         check_name(domain)
     keys = {domain: system_key(domain, options=args.options) for domain in domains}  # and every task's options
     check_run_outputs({"--json": args.json})
+    for key in keys.values():  # and every task's system and test set, with the episodes asked
+        benched(key, args.episodes)
     figures = {}
     # counted between the tasks' measurements, never inside one: the bar costs no measured time
     with Progress(len(domains), unit="tasks") as bar:
@@ -214,11 +216,11 @@ def _options(args) -> None:
 
 
 def _robustness(args) -> None:
-    from etmpc.experiments.robustness import parse_vary, robustness, write
+    from etmpc.experiments.robustness import check_out, parse_vary, robustness, write
 
     option, values = parse_vary(args.vary)
     _distinct_policies(args.policy)
-    check_run_outputs({"--out": args.out}, inputs=run_inputs(args.policy))
+    check_out(args.out, args.policy)  # a directory, of no one else's files and none the policies read
     document = robustness(
         args.task, option, values, args.policy, args.against, args.episodes, args.workers, args.options, say=_say
     )

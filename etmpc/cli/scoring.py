@@ -135,7 +135,8 @@ def run(args) -> None:
         if args.policy or args.test_set is not None or args.json is not None or args.figure is not None:
             raise EtmpcError("--references rebuilds the stored references only: no SPEC, --test-set, --json or --figure with it")
         out = args.out or REFERENCES_OUT
-        check_run_outputs({}, {"--out": out})
+        files = [f"{folder_name(task)}/references.json" for task in tasks]  # every task's, checked before the first is built
+        check_run_outputs({}, {"--out": out}, writes={"--out": files})
         for task in tasks:
             build = replay_meter if args.meter_only else build_references
             path = write_references(build(task, workers=args.workers, say=_say), out / folder_name(task) / "references.json")
@@ -146,9 +147,9 @@ def run(args) -> None:
     if not args.policy:
         raise EtmpcError("give at least one policy to score (a SPEC such as every:3 or py:MODULE:NAME)")
     _distinct_policies(args.policy)
+    check_run_outputs({"--json": args.json, "--figure": args.figure}, inputs=run_inputs(args.policy, args.test_set))
     if args.test_set is not None and not Path(args.test_set).is_file():
         raise EtmpcError(f"test set {args.test_set} not found")
-    check_run_outputs({"--json": args.json, "--figure": args.figure}, inputs=run_inputs(args.policy, args.test_set))
     card = score(
         args.policy,
         tasks,
@@ -178,9 +179,8 @@ def run(args) -> None:
 
 
 def _leaderboard(args, tasks: list[str]) -> None:
-    from etmpc.evaluation.inputs import check_run_outputs
     from etmpc.evaluation.workers import default_workers
-    from etmpc.experiments.leaderboard import WORK, build, check_readme, headline
+    from etmpc.experiments.leaderboard import PAGE, WORK, build, check_files, headline
 
     if args.policy or args.references or args.test_set is not None or args.json is not None or args.figure is not None:
         raise EtmpcError(
@@ -188,16 +188,13 @@ def _leaderboard(args, tasks: list[str]) -> None:
             "--test-set, --json or --figure with it"
         )
     out = args.out or LEADERBOARD_OUT
-    if args.readme is not None:
-        check_readme(args.readme)
     cards = args.card or []
+    check_files(out, WORK, args.readme, cards)  # the page, the kept rows, the README and the cards: none on another
     for card in cards:
         if not card.is_file():
             raise EtmpcError(f"--card {card} not found")
-    check_run_outputs({}, {"--out": out, "the kept rows' directory": WORK}, {f"--card {c}": c for c in cards})
     data = build(out, WORK, tasks, args.episodes, args.workers or default_workers(), args.readme, say=_say, cards=cards)
     print(headline(data))
     print(
-        f"wrote {out}/leaderboard.md, leaderboard.json and leaderboard_profile.png"
-        + (f"; the table in {args.readme}" if args.readme is not None else "")
+        f"wrote {out}/{PAGE[0]}, {PAGE[1]} and {PAGE[2]}" + (f"; the table in {args.readme}" if args.readme is not None else "")
     )

@@ -174,13 +174,16 @@ def run(args) -> None:
     cls = learner_class(args.algorithm)
     values, notes = legacy.given(args, cls.name, {f.name for f in dataclasses.fields(cls.Settings)})
     path = args.settings if args.settings is not None else args.hyperparams
-    check_run_outputs({}, {"--out": args.out}, {"--settings": path})
+    check_run_outputs({}, {"--out": args.out}, {"--settings": path})  # before the settings are read: no FIFO, no device
     key = system_key(args.task, args.price, args.options)
     seeds = _seeds(args.seeds, cls)
     settings = configure(cls, path, key.task, {**values, **dict(args.set or [])})
+    learner = cls(settings)
+    # and, now that the learner says which files of the run's directory are its, none of them is the settings file
+    check_run_outputs({}, {"--out": args.out}, {"--settings": path}, writes={"--out": learner.owns})
     workers = args.workers or default_workers()
     views = dict(recorder=Recorder, curve_png=write_curve_png)  # what the run's recordings and curve are drawn with
-    done = train(cls(settings), key, args.out, seeds, workers, args.resume, args.backend, args.address, say=say, **views)
+    done = train(learner, key, args.out, seeds, workers, args.resume, args.backend, args.address, say=say, **views)
     for note in notes:
         warn(note)
     learner = done.learner

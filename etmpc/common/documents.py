@@ -13,7 +13,7 @@ import json
 from pathlib import Path
 
 from etmpc.common.errors import EtmpcError
-from etmpc.common.outputs import strict
+from etmpc.common.outputs import special, strict
 
 
 def _refuse_constant(name: str):
@@ -45,7 +45,11 @@ def yaml_loads(text: str):
 
 def read_document(path: str | Path, format: str, missing: str, unreadable: str, foreign: str) -> dict:
     """The JSON object in ``path`` (strict JSON) whose ``format`` field is ``format``; else :class:`EtmpcError` with
-    ``missing``, ``unreadable`` (``{error}`` is replaced by what went wrong) or ``foreign``."""
+    ``missing``, ``unreadable`` (``{error}`` is replaced by what went wrong) or ``foreign``. A path that is no
+    regular file (a FIFO, which would hang the read; a device) is unreadable, and never read."""
+    kind = special(Path(path))
+    if kind is not None:
+        raise EtmpcError(unreadable.replace("{error}", f"it is {kind}, not a regular file"))
     try:
         data = loads(Path(path).read_text())
     except FileNotFoundError:

@@ -2,8 +2,11 @@
 renamed into place, so that a reader (or the next run) sees the old file or the whole new one,
 never a part, and nothing is left behind when writing fails.
 
-* :func:`check_outputs` refuses, before a run, two outputs that name the same file and any output
-  that cannot be written (its directory is a file, read-only, or full);
+* :func:`check_outputs` refuses, before a run, two outputs that name the same file, an output (or a
+  file a command writes inside its output directory) that is one of the run's inputs, any output that
+  cannot be written (its directory is a file, read-only, or full), and any input or output that exists
+  but is not a regular file where a file is expected (a FIFO, a socket, a device such as ``/dev/null``:
+  reading one may hang, writing one writes through it), nor a directory where one is expected;
 * :func:`atomic_path` gives the temporary name to write to and renames it on success;
 * :func:`write_text` and :func:`write_json` are the two common cases; JSON is strict (RFC 8259): a
   missing or non-finite number is ``null``, never ``NaN`` or ``Infinity``, which ``jq`` and JavaScript
@@ -20,7 +23,8 @@ import errno
 import json
 import math
 import os
-from collections.abc import Iterator, Mapping
+import stat
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from pathlib import Path
 
 from etmpc.common.errors import EtmpcError
@@ -46,13 +50,54 @@ def _existing_ancestor(path: Path) -> Path:
     return parent
 
 
+_SPECIAL = (
+    (stat.S_ISFIFO, "a FIFO (named pipe)"),
+    (stat.S_ISSOCK, "a socket"),
+    (stat.S_ISCHR, "a character device"),
+    (stat.S_ISBLK, "a block device"),
+)
+
+
+def special(path: Path) -> str | None:
+    """What ``path`` is when it exists and is neither a regular file nor a directory (``"a FIFO (named
+    pipe)"``, ``"a socket"``, a device), else None; a symbolic link is what it points to."""
+    try:
+        mode = os.stat(path).st_mode
+    except (OSError, ValueError):  # missing, unreachable, or no path at all: the reader says so in its words
+        return None
+    return next((what for test, what in _SPECIAL if test(mode)), None)
+
+
+def check_input(path: Path, source: str) -> None:
+    """Raise unless ``path``, which a command reads as its ``source`` (``--readme``, ``test set``), is a
+    regular file or missing (whose reader says so): a FIFO would hang the command, a device feed it
+    anything, and a directory is no file."""
+    kind = special(path) or ("a directory" if Path(path).is_dir() else None)
+    if kind is not None:
+        raise EtmpcError(f"{path} ({source}) is {kind}, not a regular file: name a regular file")
+
+
+def check_inputs(inputs: Mapping[str, Path | str | None]) -> None:
+    """:func:`check_input` on each of ``inputs`` (a name to the file read under it; None: none)."""
+    for source, path in inputs.items():
+        if path is not None:
+            check_input(Path(path), source)
+
+
 def check_writable(path: Path, option: str, directory: bool = False) -> None:
     """Raise unless ``path`` (a file, or a ``directory``) can be created or replaced: probes the
-    directory it goes in with a small file, removed again. Creates nothing that stays."""
+    directory it goes in with a small file, removed again. Creates nothing that stays. A path that
+    exists as something else (a directory for a file, a FIFO or a device for either) is refused: a
+    device would be written through, or replaced by the rename."""
     path = Path(path)
     label = f"{option} {path}"
+    kind = special(path)
+    if kind is not None:
+        raise EtmpcError(f"{label} is {kind}, not a {'directory' if directory else 'regular file'}: name another path")
     if path.exists() and path.is_dir() != directory:
-        raise EtmpcError(f"{label} is {'not a directory' if directory else 'a directory, not a file'}")
+        raise EtmpcError(
+            f"{label} is {'not a directory: name a directory' if directory else 'a directory, not a file: name a file'}"
+        )
     where = path if (directory and path.is_dir()) else _existing_ancestor(path)
     if not where.is_dir():
         raise EtmpcError(f"cannot write {label}: {where} is not a directory")
@@ -72,36 +117,98 @@ def check_writable(path: Path, option: str, directory: bool = False) -> None:
             os.unlink(probe)
 
 
+#: What a command writes inside one of its output directories: the names of the files (relative to it:
+#: ``"leaderboard.md"``, ``"battery/trading/references.json"``), or, when they are not known before the
+#: run, a test of the name of an entry of it (a learner's ``owns``): what it claims, and all beneath.
+Writes = Iterable[str] | Callable[[str], bool]
+
+
+def _written(directory: Path, writes: Writes) -> list[Path]:
+    """The files ``writes`` names in ``directory``: those listed, or every path there, at any depth, in an
+    entry that it claims (a resumed run reads them back)."""
+    if not callable(writes):
+        return [directory / name for name in writes]
+    found = []
+    for name in sorted(os.listdir(directory)) if directory.is_dir() else []:
+        if writes(name):
+            found.append(directory / name)
+            if (directory / name).is_dir() and not (directory / name).is_symlink():
+                found += [Path(root) / n for root, dirs, files in os.walk(directory / name) for n in files + dirs]
+    return found
+
+
+def _claims(directory: Path, writes: Writes, path: Path) -> bool:
+    """Whether ``path`` (resolved) is, or lies in, a file or folder that ``writes`` claims in ``directory``."""
+    root = directory.resolve()
+    if callable(writes):
+        return root in path.parents and writes(path.relative_to(root).parts[0])
+    return any(path == (root / name).resolve() or (root / name).resolve() in path.parents for name in writes)
+
+
+def _or(option: str) -> str:
+    """``" or choose another --out"`` for an option the user gave (a label such as "the kept rows' directory" is none)."""
+    return f" or choose another {option}" if option.startswith("--") else ""
+
+
+def _refuse_special_written(folders: dict[str, Path], claimed: Mapping[str, Writes]) -> None:
+    """Raise if a file a directory gets (``claimed``) exists as a FIFO or a device (a resumed run would read it
+    back, or write through it), or, where a file is named, as a directory."""
+    for option, writes in claimed.items():
+        for path in _written(folders[option], writes):
+            kind = special(path) or ("a directory" if path.is_dir() and not callable(writes) else None)
+            if kind is not None:
+                where = f"{option} {folders[option]} holds {path}, {kind}, where it writes a file"
+                raise EtmpcError(f"{where}: move it away{_or(option)}")
+
+
 def check_outputs(
     outputs: Mapping[str, Path | None],
     directories: Mapping[str, Path | None] | None = None,
     inputs: Mapping[str, Path | str | None] | None = None,
+    writes: Mapping[str, Writes] | None = None,
+    edits: Mapping[str, Path | None] | None = None,
 ) -> None:
     """Check every output of one command before it runs: ``outputs`` maps an option (``--json``)
     to the file it names (``None``: not asked for), ``directories`` an option to a directory the
-    command writes into, ``inputs`` a name to a file the command reads. Two options naming the same
-    file, a file inside a named directory, or an output that is an input, are refused."""
+    command writes into, ``writes`` such an option to the files it writes there (:data:`Writes`),
+    ``inputs`` a name to a file the command reads, and ``edits`` an option to a file it reads and
+    rewrites in place (a README's table: an input, and an output no other may land on). Refused: an
+    input, an edited file or a file a directory gets that exists but is no regular file; an output, or a
+    file written in a directory, that is an input or an edited file; two options naming the same file; a
+    file inside a named directory; an output that cannot be written."""
+    reads = {source: Path(p) for source, p in (inputs or {}).items() if p is not None}
+    edited = {option: Path(p) for option, p in (edits or {}).items() if p is not None}
+    check_inputs({**reads, **edited})
+    folders = {option: Path(p) for option, p in (directories or {}).items() if p is not None}
+    claimed = {option: w for option, w in (writes or {}).items() if option in folders}
+    _refuse_special_written(folders, claimed)
+    files = [(o, Path(p)) for o, p in outputs.items() if p is not None] + list(edited.items())
+    for source, path in [*reads.items(), *edited.items()]:
+        does = "edits" if source in edited else "reads"
+        resolved = path.resolve()
+        for option, out in files:
+            if option != source and out.resolve() == resolved:
+                raise EtmpcError(f"{option} {out} would overwrite the {source} it {does}: write it elsewhere")
+        for option, w in claimed.items():
+            if _claims(folders[option], w, resolved):
+                raise EtmpcError(
+                    f"{option} {folders[option]} would write over the {source} it {does} ({path}): move {path.name} "
+                    f"out of it{_or(option)}"
+                )
     seen: dict[Path, str] = {}
-    named = [(o, Path(p), False) for o, p in outputs.items() if p is not None]
-    named += [(o, Path(p), True) for o, p in (directories or {}).items() if p is not None]
-    for source, path in (inputs or {}).items():
-        if path is None:
-            continue
-        for option, out, _ in named:
-            if out.resolve() == Path(path).resolve():
-                raise EtmpcError(f"{option} {out} would overwrite the {source} it reads: write it elsewhere")
-    for option, path, directory in named:
+    for option, path in [*files, *folders.items()]:
         resolved = path.resolve()
         if resolved in seen:
             raise EtmpcError(f"{seen[resolved]} and {option} name the same file {path}: give each its own")
         seen[resolved] = option
-    for option, path, directory in named:
-        if directory:
-            inside = [o for o, p, d in named if not d and path.resolve() in p.resolve().parents]
-            if inside:
-                raise EtmpcError(f"{inside[0]} {outputs[inside[0]]} lies inside {option} {path}: write it elsewhere")
-    for option, path, directory in named:
-        check_writable(path, option, directory)
+    for option, path in folders.items():  # an edited file may lie in one: it is no file a run creates there
+        inside = [o for o, p in files if o not in edited and path.resolve() in p.resolve().parents]
+        if inside:
+            raise EtmpcError(f"{inside[0]} {outputs[inside[0]]} lies inside {option} {path}: write it elsewhere")
+    for option, path in files:
+        check_writable(path, option)
+    for option, path in folders.items():
+        check_writable(path, option, directory=True)
 
 
 @contextlib.contextmanager

@@ -196,16 +196,23 @@ def _rollout_steps(system, env, testset, episodes: int, repeats: int = 5) -> dic
     }
 
 
+def benched(domain: str | SystemKey, episodes: int):
+    """``domain``'s system and its stored test set, once it is known to hold ``episodes`` (else one line):
+    ``etmpc bench`` checks every task's before it times the first."""
+    system = system_key(domain).make()
+    testset = ts_mod.load(ts_mod.default_path(system.domain, system.task), system.domain, system.task)
+    if episodes > testset.episodes:
+        raise EtmpcError(f"--episodes {episodes}: the {domain} test set has {testset.episodes} episodes")
+    return system, testset
+
+
 def run_bench(
     domain: str | SystemKey = "cart_pendulum", episodes: int = 10, references: bool = True, reference_solves: int = 200
 ) -> dict:
     """Time ``domain``'s solves and steps (a task's name, or a :class:`SystemKey` with its options) on its first test-set
     ``episodes``: what ``etmpc bench`` prints."""
     key = system_key(domain)
-    system = key.make()
-    testset = ts_mod.load(ts_mod.default_path(system.domain, system.task), system.domain, system.task)
-    if episodes > testset.episodes:
-        raise EtmpcError(f"--episodes {episodes}: the {domain} test set has {testset.episodes} episodes")
+    system, testset = benched(key, episodes)
     env = system.make_env()
     _play(system, env, testset, "always", 1)  # warm up caches and lazy builds
 

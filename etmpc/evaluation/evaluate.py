@@ -20,6 +20,7 @@ from etmpc.common import checks, interrupts
 from etmpc.common.progress import Progress
 from etmpc.common.errors import EtmpcError
 from etmpc.common.interrupts import described, genuine
+from etmpc.common.outputs import check_inputs
 from etmpc.common.sense import higher_or_lower, oriented
 from etmpc.policies import parse_policy
 from etmpc.policies.specs import names_a_kind
@@ -209,7 +210,9 @@ def check_picklable(spec: str, policy, backend: str = "local") -> None:
 
 def parse_policies(system, policies: list) -> dict:
     """``policies`` (specs and objects) as the policies ``system``'s loop plays, by spec: each spec
-    parsed, each object checked; a bad one, or one named twice, raises :class:`EtmpcError`."""
+    parsed, each object checked; a bad one, or one named twice, raises :class:`EtmpcError`. A file a spec
+    reads that is no regular file (a FIFO, which would hang the read; a device) is refused before any is read."""
+    check_inputs(run_inputs(policies))
     parsed = {}
     for policy in policies:
         if isinstance(policy, str):

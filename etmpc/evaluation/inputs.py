@@ -1,12 +1,13 @@
 """What a run reads, so that nothing it writes lands on it.
 
-A command names its outputs (``--json``, ``--record``, ``--out``) and reads inputs: a test set, the
-stored references, policy files and the descriptions beside them, a hyperparameter file. Before any
-work, :func:`check_run_outputs` refuses, in one line, an output that is one of those inputs or that
-lies in one of the :func:`data_folders` (the package's models, stored test sets and references and
-shipped policies, and every installed task plugin's data folder): the suite's stored numbers are never
-written over by a run, whatever path a user types. (A maintainer's rebuild of them is written elsewhere
-and copied in by hand.)
+A command names its outputs (``--json``, ``--record``, ``--out`` and the files it writes in that
+directory) and reads inputs: a test set, the stored references, policy files and the descriptions beside
+them, a hyperparameter file, a card, a README whose table it rewrites. Before any work,
+:func:`check_run_outputs` refuses, in one line, an input or output that exists but is not a regular file
+(a FIFO, a device), an output that is one of those inputs, and one that lies in one of the
+:func:`data_folders` (the package's models, stored test sets and references and shipped policies, and
+every installed task plugin's data folder): the suite's stored numbers are never written over by a run,
+whatever path a user types. (A maintainer's rebuild of them is written elsewhere and copied in by hand.)
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 
 from etmpc.common.errors import EtmpcError
-from etmpc.common.outputs import check_outputs
+from etmpc.common.outputs import Writes, check_outputs
 from etmpc.common.resources import data_root
 from etmpc.policies.specs import MAX_NESTING, check_size, find
 from etmpc.systems import data_dir
@@ -37,7 +38,8 @@ def policy_files(spec: str) -> list[Path]:
     """The files that exist among those a policy spec is read from: the file a kind with a path names
     (``rl:PATH``, ``self:PATH``, ``sb3:PATH``), the description beside a model (``sb3:X.zip`` reads
     ``X.json`` too), and for a kind that wraps another (``rollout:BASE:K:H``, ``oracle:BASE``,
-    ``shield:AGE:MARGIN:BASE``), its base's files. Nothing is parsed or loaded: a spec that names no file has none."""
+    ``shield:AGE:MARGIN:BASE``), its base's files. Nothing is parsed or loaded: a spec that names no file has none.
+    A path that exists but is no regular file (a FIFO, a device) is among them, so that it is refused before it is read."""
     check_size(spec)  # a spec past the parser's bounds is refused before it is looked into
 
     @functools.cache
@@ -50,7 +52,7 @@ def policy_files(spec: str) -> list[Path]:
             named = Path(arg)
             if not arg or not named.name:
                 return ()
-            return tuple(f for f in dict.fromkeys([named, named.with_suffix(".json")]) if f.is_file())
+            return tuple(f for f in dict.fromkeys([named, named.with_suffix(".json")]) if f.exists() and not f.is_dir())
         if kind.simulates or kind.wraps:  # BASE may end in :K[:H] or follow AGE:MARGIN: every stretch of the argument
             tokens = arg.split(":")
             stretches = (":".join(tokens[i:j]) for i in range(len(tokens)) for j in range(len(tokens), i, -1))
@@ -78,15 +80,19 @@ def check_run_outputs(
     outputs: Mapping[str, Path | str | None],
     directories: Mapping[str, Path | str | None] | None = None,
     inputs: Mapping[str, Path | str | None] | None = None,
+    writes: Mapping[str, Writes] | None = None,
+    edits: Mapping[str, Path | str | None] | None = None,
 ) -> None:
-    """:func:`~etmpc.common.outputs.check_outputs` (an output that is an input, two outputs on one file,
-    an output that cannot be written), and no output inside a :func:`data_folders` folder, nor an
-    output directory that holds one."""
+    """:func:`~etmpc.common.outputs.check_outputs` (an input or output that is no regular file, an output
+    or a file written in an output directory that is an input or an ``edits`` file, two outputs on one
+    file, an output that cannot be written), and no output or edited file inside a :func:`data_folders`
+    folder, nor an output directory that holds one."""
     files = {o: Path(p) for o, p in outputs.items() if p is not None}
     folders = {o: Path(p) for o, p in (directories or {}).items() if p is not None}
-    if files or folders:
+    edited = {o: Path(p) for o, p in (edits or {}).items() if p is not None}
+    if files or folders or edited:
         data = data_folders()
-        for option, path in [*files.items(), *folders.items()]:
+        for option, path in [*files.items(), *edited.items(), *folders.items()]:
             resolved = path.resolve()
             hit = next(
                 (d for d in data if resolved == d or d in resolved.parents or (option in folders and resolved in d.parents)), None
@@ -97,7 +103,7 @@ def check_run_outputs(
                     f"{option} {path} {where} etmpc's data folder {hit} (stored test sets, references, "
                     "models, policies), which a run never writes: write it elsewhere"
                 )
-    check_outputs(files, folders, inputs)
+    check_outputs(files, folders, inputs, writes, edited)
 
 
 MANIFEST = "SHA256SUMS"  # in policies/: the SHA-256 of every shipped policy file, as sha256sum writes them

@@ -16,7 +16,7 @@ import numpy as np
 from etmpc.common import checks
 from etmpc.common.documents import loads
 from etmpc.common.errors import EtmpcError
-from etmpc.common.outputs import write_json
+from etmpc.common.outputs import check_input, write_json
 from etmpc.evaluation import metrics
 
 
@@ -168,7 +168,9 @@ class Evaluation:
 
     @classmethod
     def load(cls, path: str | Path) -> Evaluation:
-        """The evaluation in ``path`` (as ``etmpc evaluate --json`` or :meth:`save` wrote it)."""
+        """The evaluation in ``path`` (as ``etmpc evaluate --json`` or :meth:`save` wrote it); a path that is no
+        regular file (a FIFO, a device) is refused, never read."""
+        check_input(Path(path), "evaluation")
         try:
             data = loads(Path(path).read_text())
         except (OSError, ValueError) as exc:

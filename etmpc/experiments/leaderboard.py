@@ -48,6 +48,7 @@ from etmpc.common.progress import Progress
 from etmpc.common.provenance import commit_and_date
 from etmpc.evaluation.references import SUITE_VERSION, software, stored
 from etmpc.evaluation.evaluate import parse_policies
+from etmpc.evaluation.inputs import check_run_outputs
 from etmpc.evaluation.scorecard import Scorecard, TaskScore, aggregate, profiles
 from etmpc.evaluation.verify import read_card, verify
 from etmpc.evaluation.backends import shared_pools
@@ -67,6 +68,7 @@ from etmpc.views.figures import write_performance_profile_png
 
 FORMAT = "etmpc-leaderboard"
 WORK = Path("results") / "leaderboard"  # where finished rows are kept (make leaderboard runs from the checkout)
+PAGE = ("leaderboard.md", "leaderboard.json", "leaderboard_profile.png")  # what it writes into its --out
 THRESHOLDS = np.linspace(-100.0, 200.0, 301)
 
 
@@ -100,24 +102,52 @@ def build(
         return _build(docs, work, distinct(tasks or names()), episodes, workers, readme, say, list(cards))
 
 
+def check_files(docs: Path, work: Path, readme: Path | None = None, cards=()) -> None:
+    """Raise, before any row is played, unless the page's files (:data:`PAGE` in ``docs``), the kept rows
+    (``work``) and the README whose table is rewritten in place can be written without landing on one
+    another or on a card read, none is a FIFO or a device, none lies in etmpc's data folders, and the
+    README has its markers (:func:`check_readme`)."""
+    check_run_outputs(
+        {},
+        {"--out": docs, "the kept rows' directory": work},
+        {f"--card {card}": card for card in cards},
+        writes={"--out": PAGE, "the kept rows' directory": lambda name: True},  # every kept row is read back
+        edits={"--readme": readme},
+    )
+    if readme is not None:
+        check_readme(readme)
+
+
+def _scored_as_asked(card: Path, tasks: list[str], episodes: int) -> None:
+    """Raise unless ``card`` scores ``tasks`` on ``episodes`` each, read before any card is verified (which
+    replays episodes); a card too malformed to say is left to :func:`~etmpc.evaluation.verify.verify`."""
+    data = read_card(card)
+    named, rows = data.get("tasks"), data.get("rows")
+    if not (isinstance(named, list) and isinstance(rows, list) and rows and all(isinstance(r, dict) for r in rows)):
+        return
+    counts = list(dict.fromkeys(r.get("episodes") for r in rows))
+    if set(map(str, named)) != set(tasks) or counts != [episodes]:
+        raise EtmpcError(
+            f"--card {card} scores {', '.join(map(str, named))} on {counts[0]} episodes; "
+            f"the leaderboard has {', '.join(tasks)} on {episodes}: score every task on its whole test set"
+        )
+
+
 def submitted(
     cards: list[Path], tasks: list[str], episodes: int, workers: int, say: Callable[[str], None]
 ) -> tuple[list[Entry], dict[tuple[str, str], TaskScore]]:
-    """Each card's policies as entries, and their rows by (entry, task): a card must verify (a seeded
-    sample of each row replayed bit for bit) and be scored on the leaderboard's tasks and episodes."""
+    """Each card's policies as entries, and their rows by (entry, task): a card must be scored on the
+    leaderboard's tasks and episodes (every card checked before any is verified) and verify (a seeded
+    sample of each row replayed bit for bit)."""
+    for card in cards:
+        _scored_as_asked(card, tasks, episodes)
     found, rows = [], {}
     for card in cards:
         verdict = verify(card, workers=workers)
         if not verdict.verified:
             raise EtmpcError(f"--card {card} does not verify ({verdict.mismatches[0]}; etmpc verify {card} lists all)")
         say(f"--card {card}: verified ({verdict.replayed} episodes replayed bit for bit)")
-        data = read_card(card)
-        card_rows = [TaskScore.from_json(r) for r in data["rows"]]  # verified: every row is a row
-        if set(data["tasks"]) != set(tasks) or any(r.episodes != episodes for r in card_rows):
-            raise EtmpcError(
-                f"--card {card} scores {', '.join(data['tasks'])} on {card_rows[0].episodes} episodes; "
-                f"the leaderboard has {', '.join(tasks)} on {episodes}: score every task on its whole test set"
-            )
+        card_rows = [TaskScore.from_json(r) for r in read_card(card)["rows"]]  # verified: every row is a row
         for row in card_rows:
             name = f"{row.policy} (submitted)"
             if name not in [e.name for e in found]:
@@ -137,17 +167,16 @@ def _build(
     say: Callable[[str], None],
     cards: list[Path],
 ) -> dict:
-    if readme is not None:
-        check_readme(readme)
+    check_files(docs, work, readme, cards)
     check_kept(work)
     references = {task: stored(task, episodes) for task in tasks}
-    extra, given = submitted(cards, tasks, episodes or min(r.episodes for r in references.values()), workers, say)
-    for task in tasks:  # the shipped policies parse (and are the files shipped) before any row is played
+    for task in tasks:  # the shipped policies parse (and are the files shipped) before any card or row is played
         system = make_system(task)
         parse_policies(
             system,
             [f"{prefix}{path}" for _, file, prefix, _ in shipped_learners() if (path := shipped_policy(task, file)) is not None],
         )
+    extra, given = submitted(cards, tasks, episodes or min(r.episodes for r in references.values()), workers, say)
     board = entries(tasks, references, workers, say, work) + extra
     n = episodes or min(r.episodes for r in references.values())
     result = []
@@ -202,9 +231,10 @@ def _build(
     }
     docs.mkdir(parents=True, exist_ok=True)
     card = Scorecard(tasks, {}, rows_all, [])
-    write_performance_profile_png(docs / "leaderboard_profile.png", profiles(card, THRESHOLDS), THRESHOLDS, tasks)
-    write_json(docs / "leaderboard.json", data)
-    write_text(docs / "leaderboard.md", page(data))
+    markdown, json_file, figure = (docs / name for name in PAGE)
+    write_performance_profile_png(figure, profiles(card, THRESHOLDS), THRESHOLDS, tasks)
+    write_json(json_file, data)
+    write_text(markdown, page(data))
     if readme is not None:
         write_text(Path(readme), with_table(Path(readme).read_text(), headline(data)))
     return data

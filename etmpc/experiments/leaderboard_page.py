@@ -220,11 +220,12 @@ def page(data: dict) -> str:
 
 
 def check_readme(readme: Path) -> None:
-    """Raise :class:`EtmpcError` unless ``readme`` has the leaderboard's markers, once each and in order, and
-    lies outside etmpc's data folders (checked before any row is played)."""
+    """Raise :class:`EtmpcError` unless ``readme`` is a regular file (a FIFO would hang the read) that has the
+    leaderboard's markers, once each and in order, and lies outside etmpc's data folders (checked before any
+    row is played)."""
     from etmpc.evaluation.inputs import check_run_outputs
 
-    check_run_outputs({"--readme": readme})
+    check_run_outputs({}, edits={"--readme": readme})
     try:
         text = Path(readme).read_text()
     except FileNotFoundError:

@@ -40,7 +40,7 @@ from pathlib import Path
 
 from etmpc.common.documents import loads
 from etmpc.common.errors import EtmpcError
-from etmpc.common.outputs import refuse_foreign, what_differs, write_text
+from etmpc.common.outputs import check_outputs, refuse_foreign, what_differs, write_text
 from etmpc.common.progress import stage
 from etmpc.common.provenance import commit_and_date
 from etmpc.evaluation.evaluate import evaluate
@@ -136,6 +136,9 @@ def _reproduce(
 
 
 def _check_settings(out: Path, settings: Settings, domains) -> None:
+    """Start a new run in a new or empty ``out``, or continue the one there with the same settings; its
+    files, every one the run's (a FIFO or a device among them would hang it when read back), are checked first."""
+    check_outputs({}, {"--out": out}, writes={"--out": lambda name: True})
     path = out / "settings.json"
     wanted = {"settings": settings.to_json(), "domains": list(domains)}
     if path.exists():

@@ -6,7 +6,12 @@ At each value of the option, every policy is played on the test set (:func:`etmp
 at that value), and the curve gives its mean objective with a 95 % CI over the episodes, its failures per
 episode, and, against a baseline policy (``against``: a fixed schedule, say), its improvement in percent of
 the baseline's mean objective, paired episode by episode, with a 95 % CI. Writes ``robustness.json``,
-``robustness.png`` (one panel per measure) and ``ROBUSTNESS.md`` into the output folder.
+``robustness.png`` (one panel per measure) and ``ROBUSTNESS.md`` into the output folder (:data:`FILES`): a new
+or empty one, or one that holds only an earlier curve's files (:func:`check_out`, before any work).
+
+Every value's system is built, and every policy parsed on it, before the first episode is played
+(:func:`robustness`): a value that only fails when its system is made (a solver's block longer than the
+horizon, weights that give no LQR gain) is refused in one line, with nothing played.
 """
 
 from __future__ import annotations
@@ -20,15 +25,35 @@ from pathlib import Path
 import numpy as np
 
 from etmpc.common.errors import EtmpcError
-from etmpc.common.outputs import write_json
+from etmpc.common.outputs import refuse_foreign, write_json, write_text
 from etmpc.common.provenance import commit_and_date
 from etmpc.common.sense import oriented
 from etmpc.evaluation import metrics
-from etmpc.evaluation.evaluate import evaluate
+from etmpc.evaluation.evaluate import evaluate, parse_policies
+from etmpc.evaluation.inputs import check_run_outputs, run_inputs
 from etmpc.systems import system_class, system_key
 from etmpc.systems.options import canonical, settable, shown, split
 
 FORMAT = "etmpc-robustness"
+FILES = ("robustness.json", "robustness.png", "ROBUSTNESS.md")  # what a curve writes into its folder
+
+
+def check_out(out: Path, policies: Sequence[str], option: str = "--out") -> None:
+    """Raise, before any work, unless ``out`` can take a curve of ``policies``: a directory (new, empty, or
+    holding only an earlier curve's :data:`FILES`, which are replaced), none of whose files is one the
+    policies read, nor a FIFO or a device."""
+    check_run_outputs({}, {option: out}, run_inputs(policies), writes={option: FILES})
+    refuse_foreign(Path(out), lambda name: name in FILES, "robustness curve", option)
+
+
+def _made(key, option: str, text: str):
+    """``key``'s system, built now: a value that fails only when the system is made is one line naming it."""
+    try:
+        return key.make()
+    except EtmpcError as exc:
+        raise EtmpcError(f"--vary {option}={text}: {exc}") from None
+    except (ArithmeticError, ValueError) as exc:  # a singular LQR weight, a block longer than the horizon
+        raise EtmpcError(f"--vary {option}={text}: the task cannot be built with it ({exc}): choose another value") from None
 
 
 def _costs(runs: list[dict], spec: str, sense: str) -> np.ndarray:
@@ -50,7 +75,8 @@ def robustness(
     say: Callable[[str], None] = lambda line: None,
 ) -> dict:
     """Score ``policies`` on ``task`` at each of ``values`` of ``option`` (with the ``fixed`` options too); see
-    the module's docstring. Every value is checked before any episode is played."""
+    the module's docstring. Every value is checked, its system built and every policy parsed on it, before any
+    episode is played."""
     if not values:
         raise EtmpcError("give at least one value of the option to vary")
     if against is not None and against not in policies:
@@ -61,8 +87,14 @@ def robustness(
     texts = [dict(key.options)[option] for key in keys]
     if len(set(texts)) != len(texts):
         raise EtmpcError(f"a value of {option} is given twice: {', '.join(texts)}")
+    systems = [_made(key, option, text) for key, text in zip(keys, texts)]  # every value's system, before any episode
+    for system, text in zip(systems, texts):  # and every policy on each
+        try:
+            parse_policies(system, list(policies))
+        except EtmpcError as exc:
+            raise EtmpcError(f"--vary {option}={text}: {exc}") from None
     started = time.perf_counter()
-    system = keys[0].make()
+    system = systems[0]
     sense = system.objective_sense
     levels = []
     for key, text in zip(keys, texts):
@@ -156,6 +188,5 @@ def write(document: dict, out: Path, table: bool = True) -> list[Path]:
     write_json(out / "robustness.json", document)
     written = [out / "robustness.json", write_robustness_png(document, out / "robustness.png")]
     if table:
-        (out / "ROBUSTNESS.md").write_text(markdown(document))
-        written.append(out / "ROBUSTNESS.md")
+        written.append(write_text(out / "ROBUSTNESS.md", markdown(document)))
     return written

@@ -41,7 +41,7 @@ from pathlib import Path
 
 from etmpc.common.documents import loads
 from etmpc.common.errors import EtmpcError
-from etmpc.common.outputs import refuse_foreign, what_differs, write_json, write_text
+from etmpc.common.outputs import check_outputs, refuse_foreign, what_differs, write_json, write_text
 from etmpc.common.progress import stage
 from etmpc.evaluation.evaluate import evaluate
 from etmpc.evaluation.testsets import default_path, load
@@ -192,9 +192,11 @@ def _ours(name: str) -> bool:
     )
 
 
-def check_directory(out: Path, domain: str, settings: SweepSettings) -> bool:
+def check_directory(out: Path, domain: str, settings: SweepSettings, option: str = "--out") -> bool:
     """Raise unless ``out`` can hold this sweep: new, empty, or the same sweep (then True: it
-    continues). Writes nothing, so every task's directory is checked before any work."""
+    continues), a directory, and none of its files a FIFO or a device (which reading back would hang on).
+    Writes nothing, so every task's directory is checked before any work."""
+    check_outputs({}, {option: out}, writes={option: _ours})
     path = out / "settings.json"
     if not path.exists():
         refuse_foreign(out, lambda name: False, "sweep")

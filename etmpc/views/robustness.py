@@ -11,6 +11,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from etmpc.views.png import save_png_atomically  # noqa: E402
+
 
 def _position(values: list[str]) -> tuple[np.ndarray, bool]:
     """The x of each value: the number itself where every value is one number, else its index."""
@@ -57,7 +59,5 @@ def draw_robustness(document: dict):
 
 
 def write_robustness_png(document: dict, path: Path) -> Path:
-    fig = draw_robustness(document)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    """The curve drawn into ``path``, atomically (a reader sees the old figure or the whole new one)."""
+    return save_png_atomically(draw_robustness(document), path)

@@ -33,15 +33,16 @@ BATTERY_POLICY = REPO / "policies" / "battery" / "trading" / "learned.json"
 
 
 # -- what every case checks -----------------------------------------------------------------------
-def _files(root: Path) -> dict[str, bytes | None]:
-    """Every file (its bytes) and directory (None) under ``root``."""
+def _files(root: Path) -> dict[str, bytes | str | None]:
+    """Every file (its bytes), directory (None) and other entry (a FIFO: its type, never read) under ``root``."""
     out = {}
     for dirpath, dirnames, filenames in os.walk(root):
         for d in dirnames:
             out[os.path.relpath(os.path.join(dirpath, d), root)] = None
         for f in filenames:
             path = os.path.join(dirpath, f)
-            out[os.path.relpath(path, root)] = Path(path).read_bytes()
+            regular = os.path.isfile(path)
+            out[os.path.relpath(path, root)] = Path(path).read_bytes() if regular else f"mode {os.stat(path).st_mode:o}"
     return out
 
 

@@ -244,3 +244,16 @@ def test_each_shipped_learner_has_a_shielded_row_on_the_tasks_that_declare_a_shi
             assert board[name].specs[task] == f"{prefix}{path}"
             assert shielded.specs[task] == f"shield:{rule.text}:{prefix}{path}" and shielded.kind == "learned"
     assert "DPI (shipped) + shield" in board and "DPI (shipped) + shield" in leaderboard_rows.row_names()
+
+
+def test_no_page_file_lands_on_the_readme_it_edits_though_the_readme_may_lie_beside_them(tmp_path):
+    from etmpc.common.errors import EtmpcError
+    from etmpc.experiments.leaderboard import PAGE, check_files
+
+    (tmp_path / "docs").mkdir()
+    for name in ("README.md", *PAGE):
+        (tmp_path / "docs" / name).write_text(f"# mine\n\n{BEGIN}\n{END}\n")
+    check_files(tmp_path / "docs", tmp_path / "work", tmp_path / "docs" / "README.md")
+    for name in PAGE:
+        with pytest.raises(EtmpcError, match=f"would write over the --readme it edits .*{name}"):
+            check_files(tmp_path / "docs", tmp_path / "work", tmp_path / "docs" / name)
