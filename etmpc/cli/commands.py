@@ -172,7 +172,7 @@ def _bench(args) -> None:
 def _verify(args) -> None:
     from etmpc.evaluation.verify import verify
 
-    verdict = verify(args.card, args.sample, args.seed, args.workers, progress=True)
+    verdict = verify(args.card, args.sample, args.seed, args.workers, progress=True, allow_code=args.allow_code, say=_say)
     if verdict.caution is not None:
         print(f"note: {verdict.caution}")
     for line in verdict.mismatches:
@@ -182,6 +182,7 @@ def _verify(args) -> None:
     print(
         f"verified: card {args.card}: {verdict.rows} rows; every number it states follows from its episodes, "
         f"and {verdict.replayed} episodes replayed give the card's numbers bit for bit"
+        + (f"; the references of {', '.join(verdict.rebuilt)} (scored with options) rebuilt in full" if verdict.rebuilt else "")
     )
 
 

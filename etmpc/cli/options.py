@@ -148,7 +148,7 @@ def build_parser() -> argparse.ArgumentParser:
     vf = sub.add_parser(
         "verify",
         help="check a scorecard (etmpc score --json) by replaying a seeded sample of its "
-        "episodes bit for bit: one line per mismatch",
+        "episodes bit for bit (and rebuilding the references of a task scored with options): one line per mismatch",
     )
     vf.add_argument("card", type=Path, metavar="CARD.json")
     vf.add_argument(
@@ -159,6 +159,14 @@ def build_parser() -> argparse.ArgumentParser:
         help="episodes replayed per row (default 5; 0: every episode)",
     )
     vf.add_argument("--seed", type=types.seed, default=0, help="the seed the sample is drawn from")
+    vf.add_argument(
+        "--allow-code",
+        action="append",
+        default=[],
+        metavar="SPEC",
+        help="replay a row whose policy imports a Python module (py:MODULE:NAME, also within another spec), "
+        "given as its exact spec (repeatable): without it, verify refuses such a card before playing anything",
+    )
     vf.add_argument(
         "--workers",
         type=types.workers,

@@ -1,66 +1,78 @@
 """The references a score card carries itself: those of a task scored with options (``etmpc score --option``),
-computed for that run on the stored test set and kept in the card episode by episode, which ``etmpc verify``
-checks the card's rows against and replays in turn (:mod:`etmpc.evaluation.verify`)."""
+computed for that run on the stored test set and kept in the card episode by episode.
+
+``etmpc verify`` takes none of them on the card's word: a card that names a worse schedule as the best
+(with that schedule's true objectives) would raise every score of the task and still replay. So verify
+rebuilds them in full from the task and its options on the card's episodes, exactly as ``etmpc score``
+built them (:func:`rebuild`: every periodic schedule, then the oracle over the best), compares every
+number the card carries with the rebuilt ones (:func:`differences`), and checks the rows against the
+rebuilt references, never the card's (:mod:`etmpc.evaluation.verify`). The fields' types are checked
+before (:mod:`etmpc.evaluation.card_checks`).
+"""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 from etmpc.common.errors import EtmpcError
-from etmpc.evaluation.evaluate import parse_policies
-from etmpc.evaluation.references import References, stored
-from etmpc.systems import system_key
+from etmpc.evaluation import testsets
+from etmpc.evaluation.references import References, build_references
+from etmpc.systems import SystemKey, system_key
 
 
-def carried(task: str, ref: dict, where: str) -> References:
-    """The references a card scored ``task`` against with its options (computed for that run on the stored test
-    set, carried in the card episode by episode): what this replay checks the card's rows against, and replays
-    in turn on the sampled episodes (:func:`reference_jobs`)."""
+def key_of(task: str, ref: dict, where: str) -> SystemKey:
+    """``task`` with the options the card scored it with, each checked (an option the task does not have, or
+    a value it does not take, is one line), once its test set is known to be the stored one and its episodes
+    within it: all before anything is played."""
     try:
-        options = system_key(task, None, tuple(ref["options"].items())).options  # the options, checked here
-        best, oracle = [float(v) for v in ref["best_objectives"]], [float(v) for v in ref["oracle_objectives"]]
-        episodes, price = ref["episodes"], float(ref["recompute_price"])
-        refs = References(
-            task,
-            ref["test_set_sha256"],
-            episodes,
-            price,
-            ref["objective_sense"],
-            {ref["best_periodic"]: best},
-            ref["best_periodic"],
-            oracle,
-        )
-    except (KeyError, TypeError, ValueError, AttributeError) as exc:
-        raise EtmpcError(f"{where}: its references of {task} with options are incomplete ({exc})") from None
-    if len(best) != episodes or len(oracle) != episodes or not isinstance(episodes, int) or episodes < 1:
-        raise EtmpcError(
-            f"{where}: its references of {task} carry {len(best)} and {len(oracle)} objectives for {episodes} episodes"
-        )
-    stored_sha = stored(task).test_set_sha256
-    if refs.test_set_sha256 != stored_sha:
+        key = system_key(task, None, tuple(ref["options"].items()))
+        system = key.make()
+    except EtmpcError as exc:
+        raise EtmpcError(f"{where}: references.{task}.options: {exc}") from None
+    test_set = testsets.load(testsets.default_path(system.domain, system.task), system.domain, system.task)
+    if ref["test_set_sha256"] != test_set.sha256:
         raise EtmpcError(f"{where} scored {task} on another test set than the stored one: it is not a suite result")
-    if dict(options) != ref["options"]:
-        raise EtmpcError(f"{where}: {task}'s options {ref['options']} are not written as etmpc writes them ({dict(options)})")
-    return refs
+    if ref["episodes"] > test_set.episodes:
+        raise EtmpcError(f"{where} scored {task} on {ref['episodes']} episodes; its test set has {test_set.episodes}")
+    return key
+
+
+def rebuild(
+    key: SystemKey, episodes: int, workers: int | None, progress: bool, say: Callable[[str], None] = lambda line: None
+) -> References:
+    """The references of ``key`` (a task with its options) on the first ``episodes`` of its stored test set, as
+    :func:`etmpc.evaluation.scorecard.score` builds them for a card: every periodic schedule, then the oracle
+    over the best (no rollout meter). It costs what scoring the task's references cost."""
+    return build_references(key, None, workers, progress, say, episodes, meter=False)
+
+
+def differences(task: str, ref: dict, key: SystemKey, refs: References) -> list[str]:
+    """Every number the card carries about ``task``'s references that is not the rebuilt ``refs``' bit for bit,
+    one line each (the best schedule, the oracle, the gap and the price: ``verify``'s own comparison)."""
+    own = {
+        "options": dict(key.options),  # as etmpc writes them (canonical)
+        "objective_sense": refs.objective_sense,
+        "test_set_sha256": refs.test_set_sha256,
+        "episodes": refs.episodes,
+    }
+    found = [
+        f"{task}: references' {name} {ref[name]!r} in the card, {value!r} rebuilt"
+        for name, value in own.items()
+        if ref[name] != value
+    ]
+    for name, spec, rebuilt in (
+        ("best_objectives", ref["best_periodic"], refs.periodic[refs.best]),
+        ("oracle_objectives", ref["oracle"], refs.oracle),
+    ):
+        found += [
+            f"{task}: references' {spec} ({name}) episode {episode}: objective {stated!r} in the card, "
+            f"{value!r} rebuilt ({refs.oracle_spec if name == 'oracle_objectives' else refs.best}'s)"
+            for episode, (stated, value) in enumerate(zip(ref[name], rebuilt))
+            if stated != value
+        ]
+    return found
 
 
 def options_of(card: dict, task: str) -> tuple:
     """The options ``card`` scored ``task`` with (none: the task as it is)."""
     return tuple(((card.get("references") or {}).get(task) or {}).get("options", {}).items())
-
-
-def reference_jobs(card: dict, references: dict[str, References], episodes_of) -> list[tuple]:
-    """The replays of the references a card carries (a task scored with options): its best schedule and the oracle
-    over it on the episodes ``episodes_of(count, k)`` gives for the ``k``-th such task (a seeded sample), each job
-    with what it must give, ``(task, spec, episode, objective)``."""
-    found = []
-    for position, (task, refs) in enumerate(references.items()):
-        options = options_of(card, task)
-        if not options:
-            continue
-        key = system_key(task, None, options)
-        system = key.make()
-        for spec, objectives in ((refs.best, refs.periodic[refs.best]), (refs.oracle_spec, refs.oracle)):
-            (policy,) = parse_policies(system, [spec]).values()
-            for episode in episodes_of(refs.episodes, position):
-                job = (key, None, refs.test_set_sha256, spec, policy, 0, episode, 0, False)
-                found.append((job, (task, spec, episode, objectives[episode])))
-    return found

@@ -226,7 +226,7 @@ def score(
             say(f"{task}: no stored references for {why}: computing them for this run")
             references[task] = build_references(keys[task], test_set, workers, progress, say, episodes, meter=False)
             shown[task] = {"stored": None}
-            if given:  # what etmpc verify replays these references against, episode by episode
+            if given:  # what etmpc verify compares with the references it rebuilds, episode by episode
                 kept = references[task]
                 shown[task] |= {
                     "options": dict(keys[task].options),

@@ -50,7 +50,7 @@ from etmpc.evaluation.references import SUITE_VERSION, software, stored
 from etmpc.evaluation.evaluate import parse_policies
 from etmpc.evaluation.inputs import check_run_outputs
 from etmpc.evaluation.scorecard import Scorecard, TaskScore, aggregate, profiles
-from etmpc.evaluation.verify import read_card, verify
+from etmpc.evaluation.verify import read_card, read_checked, verify
 from etmpc.evaluation.backends import shared_pools
 from etmpc.experiments.leaderboard_page import (  # noqa: F401
     BEGIN,
@@ -119,16 +119,13 @@ def check_files(docs: Path, work: Path, readme: Path | None = None, cards=()) ->
 
 
 def _scored_as_asked(card: Path, tasks: list[str], episodes: int) -> None:
-    """Raise unless ``card`` scores ``tasks`` on ``episodes`` each, read before any card is verified (which
-    replays episodes); a card too malformed to say is left to :func:`~etmpc.evaluation.verify.verify`."""
-    data = read_card(card)
-    named, rows = data.get("tasks"), data.get("rows")
-    if not (isinstance(named, list) and isinstance(rows, list) and rows and all(isinstance(r, dict) for r in rows)):
-        return
-    counts = list(dict.fromkeys(r.get("episodes") for r in rows))
-    if set(map(str, named)) != set(tasks) or counts != [episodes]:
+    """Raise unless ``card`` scores ``tasks`` on ``episodes`` each, read and checked field by field as
+    :func:`~etmpc.evaluation.verify.verify` checks it, before any card is verified (which replays episodes)."""
+    data, rows = read_checked(card)
+    counts = list(dict.fromkeys(row.episodes for row in rows))
+    if set(data["tasks"]) != set(tasks) or counts != [episodes]:
         raise EtmpcError(
-            f"--card {card} scores {', '.join(map(str, named))} on {counts[0]} episodes; "
+            f"--card {card} scores {', '.join(data['tasks'])} on {counts[0]} episodes; "
             f"the leaderboard has {', '.join(tasks)} on {episodes}: score every task on its whole test set"
         )
 

@@ -178,10 +178,71 @@ def _setup(kind: str, d: Path) -> None:
         (d / "card.json").write_text(json.dumps(card | {"rows": [row]}))
         evaluation = {"domain": "cart_pendulum", "task": "balance", "test_set": {"path": "t.npz", "sha256": "0"}, "seed": 0}
         (d / "ev.json").write_text(json.dumps(evaluation | {"policies": {}, "runs": "every:2"}))
+    elif kind == "hostile-cards":  # a well-formed card of this suite (its numbers aside), and each one field changed
+        _hostile_cards(d)
     elif kind.startswith("py-"):
         (d / f"{kind.replace('-', '_')}.py").write_text(TRIGGERS[kind])
     elif kind != "none":
         raise AssertionError(kind)
+
+
+def _hostile_cards(d: Path) -> None:
+    """``NAME.json`` for each of :data:`CARD_EDITS`: a card of this suite's shape (one row of 4 episodes, its
+    numbers not consistent: every case is refused before they are read) with that edit, and the module a ``py:``
+    row names, which leaves a file behind if it is ever imported."""
+    from etmpc.evaluation.references import SUITE_VERSION, stored
+
+    sha = stored("battery", 4).test_set_sha256
+    reference = {"stored": "battery/trading/references.json", "episodes": 4, "test_set_sha256": sha}
+    card = {"format": "etmpc-scorecard", "suite_version": SUITE_VERSION, "tasks": ["battery/trading"]}
+    card |= {"task_versions": {"battery/trading": 1}, "references": {"battery/trading": reference}}
+    four = [0.5, 0.6, 0.7, 0.8]
+    row = dict(task="battery/trading", policy="every:3", episodes=4, objective_mean=0.6, objective_sense="max")
+    row |= dict(recomputes_mean=34.0, failures_mean=0.0, solver_failures=0, nonfinite_episodes=0, score=1.0, score_ci95=0.5)
+    row |= dict(episode_scores=four, better_share=0.5, cpu_ms={}, reference="every:1", task_version=1, failures_ci95=0.0)
+    row |= dict(episode_failures=[0] * 4, episode_objectives=four, episode_recomputes=[34] * 4, episode_solver_failures=[0] * 4)
+    aggregate = dict(policy="every:3", tasks=1, iqm=1.0, iqm_ci95=[0.0, 2.0])
+    aggregate |= dict(probability_of_improvement=0.5, probability_of_improvement_ci95=[0.0, 1.0])
+    card |= {"rows": [row], "aggregates": [aggregate], "machine": {"processor": "x86_64", "system": "Linux", "libm": "fma"}}
+    for name, edit in CARD_EDITS.items():
+        edited = json.loads(json.dumps(card))
+        edit(edited)
+        (d / f"{name}.json").write_text(json.dumps(edited))
+    (d / "card_code.py").write_text("open('imported', 'w').write('the card ran me')\nT = None\n")
+
+
+def _carried(card: dict, options: dict | None = None, task: str = "battery/trading") -> None:
+    """The card's references made those of a task scored with options (``options``; else one that exists, and the
+    best schedule's objectives one short); ``task``: the card made one of that task."""
+    if task != "battery/trading":
+        from etmpc.evaluation.references import stored
+        from etmpc.systems import task_version
+
+        card |= {"tasks": [task], "task_versions": {task: task_version(task)}}
+        card["references"] = {task: card["references"].pop("battery/trading")}
+        card["references"][task]["test_set_sha256"] = stored(task, 4).test_set_sha256
+        card["rows"][0]["task"] = task
+    ref = card["references"][task]
+    ref |= {"stored": None, "options": options or {"lqr_input_weight": "0.2"}, "best_objectives": [1.0] * (4 if options else 3)}
+    ref |= {"oracle_objectives": [2.0] * 4, "objective_sense": "max", "best_periodic": "every:1"}
+    ref |= {"oracle": "oracle:every:1", "recompute_price": 0.0, "gap": 1.0}
+
+
+CARD_EDITS = {
+    "as_it_is": lambda c: None,
+    "machine_list": lambda c: c.update(machine=["x86_64"]),
+    "libm_list": lambda c: c["machine"].update(libm=["fma"]),
+    "libm_unknown": lambda c: c["machine"].update(libm="avx512"),
+    "objectives_empty": lambda c: c["rows"][0].update(episode_objectives=[]),
+    "aggregates_number": lambda c: c.update(aggregates=3),
+    "aggregate_policy_list": lambda c: c["aggregates"][0].update(policy=["every:3"]),
+    "task_versions_list": lambda c: c.update(task_versions=[1]),
+    "carried_short": _carried,
+    "planted_solver": lambda c: _carried(c, {"solver.qpsol": "planted"}, "cart_pendulum/kicks"),
+    "row_episodes_list": lambda c: c["rows"][0].update(episodes=[4]),
+    "py_row": lambda c: [e.update(policy="py:card_code:T") for e in (*c["rows"], *c["aggregates"])],
+    "py_row_shielded": lambda c: [e.update(policy="shield:4:py:card_code:T") for e in (*c["rows"], *c["aggregates"])],
+}
 
 
 # Triggers of a hostile user's, each a module of its own (py:MODULE:NAME), named after its setup.
@@ -327,6 +388,39 @@ CASES = [
         "reward_baseline",
     ),
     ("verify-row-text-score", "wrong-types", ["verify", "card.json"], "score must be a number, got '1'"),
+    # a card is evidence: every field of its type, and no code run that the card alone names
+    ("verify-machine-not-an-object", "hostile-cards", ["verify", "machine_list.json"], "machine must be an object"),
+    ("verify-libm-a-list", "hostile-cards", ["verify", "libm_list.json"], "machine.libm must be one of fma, sse2, other"),
+    ("verify-libm-unknown", "hostile-cards", ["verify", "libm_unknown.json"], "machine.libm must be one of fma, sse2, other"),
+    ("verify-objectives-empty", "hostile-cards", ["verify", "objectives_empty.json"], "episode_objectives holds 0 values"),
+    ("verify-aggregates-a-number", "hostile-cards", ["verify", "aggregates_number.json"], "aggregates must be a list"),
+    ("verify-aggregate-policy-list", "hostile-cards", ["verify", "aggregate_policy_list.json"], "aggregates[0].policy must be"),
+    ("verify-task-versions-list", "hostile-cards", ["verify", "task_versions_list.json"], "task_versions must be an object"),
+    (
+        "verify-carried-references-short",
+        "hostile-cards",
+        ["verify", "carried_short.json"],
+        "references.battery/trading.best_objectives must be a list of 4 finite numbers",
+    ),
+    (
+        "verify-options-name-a-planted-solver",
+        "hostile-cards",
+        ["verify", "planted_solver.json"],
+        "references.cart_pendulum/kicks.options: option solver.qpsol: 'planted' is not one of",
+    ),
+    (
+        "leaderboard-card-episodes-a-list",
+        "hostile-cards",
+        ["score", "--leaderboard", "--out", "lb", "--card", "row_episodes_list.json"],
+        "episodes",
+    ),
+    ("verify-py-row-not-allowed", "hostile-cards", ["verify", "py_row.json"], "--allow-code py:card_code:T"),
+    (
+        "verify-py-row-inner-spec-allowed-only",
+        "hostile-cards",
+        ["verify", "py_row_shielded.json", "--allow-code", "py:card_code:T"],
+        "--allow-code shield:4:py:card_code:T",
+    ),
     ("figure-runs-text", "wrong-types", ["figure", "bars", "ev.json", "--out", "x.png"], "ev.json is not an etmpc evaluation"),
     (
         "leaderboard-readme-in-policies",

@@ -12,7 +12,6 @@ no traceback, every file byte-identical, none new), and besides:
 from __future__ import annotations
 
 import contextlib
-import json
 import os
 import signal
 import sys
@@ -58,10 +57,6 @@ def _outputs_setup(kind: str, d: Path) -> None:
         _fifo(d / "run" / "settings.json")
     elif kind == "kept-row-fifo":
         _fifo(d / "results" / "leaderboard" / "always" / "battery" / "trading.json")
-    elif kind == "card-of-other-tasks":  # scored elsewhere on another task: refused before any card is verified
-        row = {"task": "cart_pendulum/balance", "policy": "every:2", "episodes": 100}
-        card = {"format": "etmpc-scorecard", "tasks": ["cart_pendulum/balance"], "rows": [row]}
-        (d / "card.json").write_text(json.dumps(card))
     else:
         _setup(kind, d)
 
@@ -132,7 +127,12 @@ CASES = [  # (id, setup, argv, what the one line must name)
         [*ROBUSTNESS, "--vary", "solver.block=4;50", "--policy", "every:3", "--out", "rob"],
         "solver.block=50",
     ),
-    ("leaderboard-card-of-other-tasks", "card-of-other-tasks", [*LEADERBOARD, "--card", "card.json"], "card.json scores"),
+    (  # a card of this suite scored on one task and 4 episodes: refused before any card is verified
+        "leaderboard-card-of-other-tasks",
+        "hostile-cards",
+        [*LEADERBOARD, "--card", "as_it_is.json"],
+        "as_it_is.json scores battery/trading on 4 episodes",
+    ),
 ]
 
 

@@ -1,9 +1,12 @@
 """``etmpc verify CARD``: a card made by ``etmpc score`` verifies; one with an edited episode does not, whether
-the forger kept the card consistent (the replay finds it) or not (its own numbers give it away)."""
+the forger kept the card consistent (the replay finds it) or not (its own numbers give it away). A card is
+evidence, never an instruction: each field of another type is one line, the references a card scored with
+options carries are rebuilt in full (a forged best schedule is found), and no code it names runs unless allowed."""
 
 from __future__ import annotations
 
 import json
+import sys
 
 import numpy as np
 import pytest
@@ -168,7 +171,6 @@ EVERY_NUMBER = [
     *[
         (_row_edit(field), says)
         for field, says in [
-            ("episodes", "episode scores for 5 episodes"),
             ("objective_mean", "battery/trading every:3: objective"),
             ("recomputes_mean", "battery/trading every:3: recomputes"),
             ("failures_mean", "battery/trading every:3: failures"),
@@ -321,3 +323,318 @@ def test_libm_rounding_tells_glibcs_variants_apart_in_a_process_of_each():
     env = dict(os.environ, GLIBC_TUNABLES="glibc.cpu.hwcaps=-AVX2,-FMA,-AVX512F,-AVX")
     forced = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout.strip()
     assert forced == "sse2"
+
+
+# -- a card is evidence: every field of its type, its references rebuilt, no code it alone names run -----------
+OPTION = "lqr_input_weight=0.2"  # an option of the battery: its references are computed for the run, carried in the card
+OPTIONS_TASK = "battery/trading"
+EPISODES = 2  # of the card scored with the option: its references are rebuilt in full (20 schedules and the oracle)
+
+
+@pytest.fixture(scope="module")
+def options_card(tmp_path_factory):
+    """A card scored with an option (its references computed for the run and carried), with the references
+    ``score`` built, captured as it built them (every periodic schedule's objectives: what a forger has too)."""
+    import etmpc.evaluation.scorecard as scorecard
+
+    path = tmp_path_factory.mktemp("options") / "card.json"
+    built = []
+    real = scorecard.build_references
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(scorecard, "build_references", lambda *a, **k: built.append(real(*a, **k)) or built[-1])
+        argv = ["score", "every:3", "threshold:0.02", "--task", "battery", "--episodes", str(EPISODES), "--workers", "1"]
+        assert main([*argv, "--option", OPTION, "--json", str(path)]) == 0
+    return path, built[0]
+
+
+def _rebuilt_as_scored(monkeypatch, refs, calls=None):
+    """``carried.rebuild`` answering with the references ``score`` built (what a real rebuild gives, bit for bit,
+    as the forgery test shows): the comparisons tested without playing the schedules again."""
+    import etmpc.evaluation.carried as carried
+
+    def rebuild(key, episodes, workers, progress, say=lambda line: None):
+        if calls is not None:
+            calls.append((key, episodes))
+        return refs
+
+    monkeypatch.setattr(carried, "rebuild", rebuild)
+
+
+def test_a_card_scored_with_options_verifies_with_its_references_rebuilt_in_full(options_card, capsys):
+    """verify plays every periodic schedule and the oracle again under the card's options, on its episodes, and
+    says so: the rebuilt references are the ones score built, bit for bit."""
+    path, scored = options_card
+    said = []
+    verdict = verify(path, size=0, workers=1, say=said.append)
+    assert verdict.verified, verdict.mismatches
+    assert verdict.rebuilt == (OPTIONS_TASK,) and verdict.replayed == 2 * EPISODES
+    assert said[0] == (
+        f"{OPTIONS_TASK}: rebuilding the references the card scored it against ({OPTION}) on its {EPISODES} episodes: "
+        "every periodic schedule and the oracle, as scoring did"
+    )
+    assert "20 periodic schedules, then the oracle over the best" in said[1]
+
+
+def test_the_command_says_it_rebuilds_the_references_and_the_rebuild_is_scores(options_card, monkeypatch, capsys):
+    from etmpc.systems import system_key
+
+    path, scored = options_card
+    calls = []
+    _rebuilt_as_scored(monkeypatch, scored, calls)
+    assert main(["verify", str(path), "--sample", "1", "--workers", "1"]) == 0
+    out, err = capsys.readouterr()
+    assert calls == [(system_key("battery", None, {"lqr_input_weight": "0.2"}), EPISODES)]
+    assert f"{OPTIONS_TASK}: rebuilding the references the card scored it against" in err
+    assert f"the references of {OPTIONS_TASK} (scored with options) rebuilt in full" in out
+
+
+def test_a_forged_card_naming_the_worst_schedule_as_best_with_its_true_objectives_does_not_verify(options_card, tmp_path):
+    """The forger's card: the worst periodic schedule named as the best, with its true objectives and those of
+    the oracle over it (each replays), every row scored against it and every number recomputed from that, so
+    that the card holds together. The scores rise; the rebuilt references name the true best, and say so."""
+    from dataclasses import replace
+
+    from etmpc.common.outputs import strict
+    from etmpc.evaluation import metrics
+    from etmpc.evaluation.card import TaskScore, aggregate
+    from etmpc.evaluation.evaluate import evaluate
+    from etmpc.systems import system_key
+
+    path, true = options_card
+    worst = max(true.periodic, key=lambda spec: float(np.mean(true.costs(true.periodic[spec]))))
+    key = system_key("battery", None, {"lqr_input_weight": "0.2"})
+    runs = evaluate(key, [f"oracle:{worst}"], EPISODES, workers=1, progress=False).runs
+    forged = replace(true, best=worst, oracle=[r.objective for r in sorted(runs, key=lambda r: r.episode)])
+    assert worst != true.best and forged.gap > 0
+
+    def forge(data):
+        ref = data["references"][OPTIONS_TASK]
+        ref |= {"best_periodic": worst, "oracle": forged.oracle_spec, "gap": forged.gap}
+        ref |= {"best_objectives": list(forged.periodic[worst]), "oracle_objectives": list(forged.oracle)}
+        best = forged.costs(forged.periodic[worst])
+        for row in data["rows"]:
+            s = metrics.normalized_scores(forged.costs(row["episode_objectives"]), best, forged.gap)
+            row |= {"reference": worst, "episode_scores": [float(v) for v in s], "score": float(np.mean(s))}
+            row |= {"score_ci95": metrics.mean_ci95(s), "better_share": metrics.improvement_share(s)}
+        data["aggregates"] = [strict(aggregate([TaskScore.from_json(row)]).to_json()) for row in data["rows"]]
+
+    card = _edited(path, tmp_path, forge)
+    rows, true_rows = json.loads(card.read_text())["rows"], json.loads(path.read_text())["rows"]
+    assert all(r["score"] > t["score"] + 50 for r, t in zip(rows, true_rows))  # what the forgery buys
+    verdict = verify(card, size=0, workers=1)
+    assert not verdict.verified
+    lines = verdict.mismatches
+    assert f"{card}: {OPTIONS_TASK}: references' best_periodic {worst!r} in the card, rebuilt {true.best!r}" in lines
+    assert f"{card}: {OPTIONS_TASK} every:3: scored against {worst}, the references' best schedule is {true.best}" in lines
+    assert f"{card}: {OPTIONS_TASK}: references' gap {forged.gap!r} in the card, rebuilt {true.gap!r}" in lines
+    # the card holds together: what differs is what the rebuilt references give (they, the rows' best schedule, and
+    # the replayed episodes' scores against them), nothing the card's own numbers give
+    assert all(" references' " in line or "scored against" in line or "replayed" in line for line in lines), lines
+    assert not [line for line in lines if "from its" in line or "mean of" in line or "aggregate" in line]
+
+
+@pytest.mark.parametrize(
+    "edit, says",
+    [
+        (lambda r: r["best_objectives"].__setitem__(1, r["best_objectives"][1] + 1e-9), "(best_objectives) episode 1: objective"),
+        (
+            lambda r: r["oracle_objectives"].__setitem__(0, r["oracle_objectives"][0] * 2),
+            "(oracle_objectives) episode 0: objective",
+        ),
+        (lambda r: r.update(recompute_price=1e-4), "references' recompute_price 0.0001 in the card, rebuilt 0.0"),
+        (lambda r: r.update(objective_sense="min"), "references' objective_sense 'min' in the card, 'max' rebuilt"),
+        (lambda r: r.update(gap=r["gap"] * 2), "references' gap"),
+        (lambda r: r.update(oracle="oracle:every:2"), "references' oracle 'oracle:every:2' in the card"),
+        (
+            lambda r: r.update(options={"lqr_input_weight": "0.20"}),
+            "references' options {'lqr_input_weight': '0.20'} in the card",
+        ),
+    ],
+)
+def test_every_number_a_card_carries_of_its_references_is_compared_with_the_rebuilt_ones(
+    options_card, tmp_path, monkeypatch, edit, says
+):
+    path, scored = options_card
+    _rebuilt_as_scored(monkeypatch, scored)
+    forged = _edited(path, tmp_path, lambda data: edit(data["references"][OPTIONS_TASK]))
+    lines = verify(forged, size=1, workers=1).mismatches
+    assert any(says in line for line in lines), lines
+
+
+def _set(where, value):
+    """An edit of the card: the field at ``where`` (keys and indices) set to ``value``."""
+
+    def edit(data):
+        for step in where[:-1]:
+            data = data[step]
+        data[where[-1]] = value
+
+    return edit
+
+
+def _twice(data):
+    """The card's task named twice, the second time by its short name (its rows would count twice)."""
+    data["tasks"].append("battery")
+    data["task_versions"]["battery"] = data["task_versions"]["battery/trading"]
+    data["references"]["battery"] = data["references"]["battery/trading"]
+
+
+# Fields of another type or shape, each one line naming the file and the field, before anything is played.
+MALFORMED = [
+    (_set(["machine"], ["x86_64"]), "machine must be an object, got ['x86_64']"),
+    (_set(["machine"], "x86_64"), "machine must be an object, got 'x86_64'"),
+    (_set(["machine", "libm"], ["fma"]), "machine.libm must be one of fma, sse2, other, got ['fma']"),
+    (_set(["machine", "libm"], "avx512"), "machine.libm must be one of fma, sse2, other, got 'avx512'"),
+    (
+        _set(["rows", 0, "episode_objectives"], []),
+        "rows[0] (every:3 on battery/trading): episode_objectives holds 0 values for its 4",
+    ),
+    (_set(["rows", 0, "episode_recomputes"], [34]), "episode_recomputes holds 1 values for its 4 episodes"),
+    (_set(["rows", 0, "episode_solver_failures"], [0] * 5), "episode_solver_failures holds 5 values for its 4 episodes"),
+    (_set(["rows", 1, "episode_failures"], []), "rows[1] (threshold:0.02 on battery/trading): episode_failures holds 0"),
+    (_set(["rows", 0, "episodes"], 5), "episode_scores holds 4 values for its 5 episodes"),
+    (_set(["rows", 0, "episode_recomputes", 0], 10**400), "rows[0].episode_recomputes[0] is a whole number beyond a double's"),
+    (_set(["rows"], {}), "rows must be a non-empty list of rows (objects), got {}"),
+    (_set(["rows"], []), "rows must be a non-empty list of rows"),
+    (_set(["tasks"], "battery/trading"), "tasks must be a non-empty list of task names"),
+    (_set(["tasks"], [["battery/trading"]]), "tasks must be a non-empty list of task names"),
+    (_set(["task_versions"], {"battery/trading": "1"}), "task_versions.battery/trading must be a whole number, got '1'"),
+    (_set(["task_versions"], []), "task_versions must be an object of a version per task"),
+    (_set(["references", "battery/trading"], []), "references.battery/trading must be an object, got []"),
+    (_set(["references", "battery/trading", "episodes"], "4"), "references.battery/trading.episodes must be a count"),
+    (_set(["references", "battery/trading", "gap"], [1]), "references.battery/trading.gap must be a finite number"),
+    (_set(["references", "battery/trading", "episodes"], 1000), "references.battery/trading: --episodes must be in 1..100"),
+    (_set(["aggregates"], 3), "aggregates must be a list of objects, got 3"),
+    (_set(["aggregates", 0, "policy"], ["every:3"]), "aggregates[0].policy must be a policy's spec (text)"),
+    (_set(["aggregates", 0, "iqm_ci95"], "wide"), "aggregates[0].iqm_ci95 must be a pair of finite numbers or nulls"),
+    (_set(["aggregates", 0, "tasks"], True), "aggregates[0].tasks must be a count of tasks"),
+    (_set(["software"], ["etmpc"]), "software must be an object of versions (text)"),
+    (_twice, "tasks: task battery/trading is given twice"),
+]
+
+
+@pytest.mark.parametrize("edit, says", MALFORMED)
+def test_a_field_of_another_type_or_shape_is_one_line_naming_it(card, tmp_path, capsys, edit, says):
+    forged = _edited(card, tmp_path, edit)
+    assert main(["verify", str(forged), "--workers", "1"]) == 2
+    out, err = capsys.readouterr()
+    assert err.count("\n") == 1 and says in err and "Traceback" not in err and f"card {forged}: " in err, err
+    assert out == ""
+
+
+def test_a_row_of_another_episode_count_than_its_references_is_a_mismatch(card, tmp_path):
+    def fewer(data):
+        row = data["rows"][0]
+        for name in ("episode_scores", "episode_objectives", "episode_recomputes", "episode_solver_failures", "episode_failures"):
+            row[name] = row[name][:3]
+        row["episodes"] = 3
+
+    forged = _edited(card, tmp_path, fewer)
+    assert f"{forged}: battery/trading every:3: 3 episode scores for 3 episodes; the references have 4" in (
+        verify(forged, size=1).mismatches
+    )
+
+
+CARRIED_MALFORMED = [
+    (_set(["best_objectives"], []), f"references.battery/trading.best_objectives must be a list of {EPISODES} finite numbers"),
+    (
+        _set(["oracle_objectives"], ["1.0"] * EPISODES),
+        f"references.battery/trading.oracle_objectives must be a list of {EPISODES}",
+    ),
+    (_set(["options"], {"lqr_input_weight": 0.2}), "references.battery/trading.options must be a non-empty object"),
+    (_set(["options"], {}), "references.battery/trading.options must be a non-empty object"),
+    (_set(["options"], {"no_such_option": "1"}), "references.battery/trading.options: "),
+    (_set(["recompute_price"], "0"), "references.battery/trading.recompute_price must be a finite number, got '0'"),
+    (_set(["objective_sense"], "up"), "references.battery/trading.objective_sense must be min or max, got 'up'"),
+    (_set(["best_periodic"], None), "references.battery/trading.best_periodic must be a schedule's spec"),
+    (_set(["episodes"], float(EPISODES)), "references.battery/trading.episodes must be a count of episodes"),
+    (_set(["stored"], "battery/trading/references.json"), "names stored references and options"),
+    (_set(["test_set_sha256"], "0" * 64), "scored battery/trading on another test set than the stored one"),
+    (
+        lambda ref: ref.update(episodes=1000, best_objectives=[1.0] * 1000, oracle_objectives=[1.0] * 1000),
+        "scored battery/trading on 1000 episodes; its test set has 100",
+    ),
+]
+
+
+@pytest.mark.parametrize("edit, says", CARRIED_MALFORMED)
+def test_references_carried_of_another_type_are_one_line_before_any_rebuild(
+    options_card, tmp_path, monkeypatch, capsys, edit, says
+):
+    import etmpc.evaluation.carried as carried
+
+    monkeypatch.setattr(carried, "rebuild", lambda *a, **k: pytest.fail("rebuilt a malformed card's references"))
+    forged = _edited(options_card[0], tmp_path, lambda data: edit(data["references"][OPTIONS_TASK]))
+    assert main(["verify", str(forged), "--workers", "1"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and says in err and "Traceback" not in err, err
+
+
+# -- code a card names -------------------------------------------------------------------------------------
+PROBE = "verify_code_probe"  # a module of a py: policy that leaves a file behind when imported
+
+
+@pytest.fixture
+def code_card(card, tmp_path, monkeypatch):
+    """The card with its every:3 row named ``py:PROBE:T`` (a factory of every:3: the row replays as it is), the
+    module importable, and the file its import writes."""
+    marker = tmp_path / "imported"
+    (tmp_path / "probe").mkdir()
+    (tmp_path / "probe" / f"{PROBE}.py").write_text(
+        f"import pathlib\npathlib.Path({str(marker)!r}).write_text('imported')\n"
+        "from etmpc.policies.fixed import Every\n\n\ndef T():\n    return Every(3)\n"
+    )
+    monkeypatch.syspath_prepend(str(tmp_path / "probe"))
+    monkeypatch.delitem(sys.modules, PROBE, raising=False)
+    yield (lambda spec: _edited(card, tmp_path, lambda data: _renamed(data, "every:3", spec))), marker
+    sys.modules.pop(PROBE, None)
+
+
+def _renamed(data, old, new):
+    for entry in (*data["rows"], *data["aggregates"]):
+        if entry["policy"] == old:
+            entry["policy"] = new
+
+
+def test_a_row_that_runs_code_is_refused_before_anything_unless_its_exact_spec_is_allowed(code_card, capsys):
+    edited, marker = code_card
+    spec = f"py:{PROBE}:T"
+    path = edited(spec)
+    with pytest.raises(EtmpcError, match=rf"{spec} on battery/trading runs code .* --allow-code {spec}$"):
+        verify(path, size=1, workers=1)
+    assert main(["verify", str(path), "--workers", "1"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"--allow-code {spec}" in err
+    assert not marker.exists() and PROBE not in sys.modules  # never imported
+    with pytest.raises(EtmpcError, match="runs code"):
+        verify(path, size=1, workers=1, allow_code=[f"py:{PROBE}:X"])  # another spec allowed: not this one
+    assert not marker.exists()
+    verdict = verify(path, size=1, workers=1, allow_code=[spec])
+    assert verdict.verified and marker.exists()  # allowed: imported, replayed, and it verifies
+    assert main(["verify", str(path), "--workers", "1", "--allow-code", "every:2", "--allow-code", spec]) == 0
+
+
+@pytest.mark.parametrize("outer", ["shield:4:{}", "shield:{}", "rollout:{}", "rollout:{}:2:5"])
+def test_a_spec_that_holds_a_py_spec_runs_code_too(code_card, outer):
+    from etmpc.evaluation.verify import runs_code
+
+    edited, marker = code_card
+    spec = outer.format(f"py:{PROBE}:T")
+    assert runs_code(spec)
+    with pytest.raises(EtmpcError, match="runs code"):
+        verify(edited(spec), size=1, workers=1, allow_code=[f"py:{PROBE}:T"])  # the inner spec allowed: not this one
+    assert not marker.exists()
+
+
+def test_only_a_py_stretch_runs_code():
+    from etmpc.evaluation.verify import runs_code
+
+    assert not any(
+        runs_code(spec) for spec in ("every:3", "threshold:0.02", "rl:policy.json", "shield:4:every:3", "oracle:every:2")
+    )
+    assert runs_code("py:m:T") and runs_code("rollout:shield:3:py:m:T:4")
+
+
+def test_allow_code_must_be_a_list_of_specs(card):
+    with pytest.raises(EtmpcError, match="allow_code: a list of policy specs"):
+        verify(card, allow_code=f"py:{PROBE}:T")
