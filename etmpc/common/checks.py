@@ -162,8 +162,10 @@ def _conforms(value: Any, hint: Any, finite: bool, most: int | None) -> bool:
         return isinstance(value, bool)
     if hint is int:
         return isinstance(value, numbers.Integral) and not isinstance(value, bool) and (most is None or abs(value) <= most)
-    if hint is float:
-        return isinstance(value, numbers.Real) and not isinstance(value, bool) and (not finite or math.isfinite(value))
+    if hint is float:  # an integer beyond a double is not finite (math.isfinite would raise OverflowError)
+        real = isinstance(value, numbers.Real) and not isinstance(value, bool)
+        whole_number = isinstance(value, numbers.Integral)
+        return real and (not finite or (abs(value) <= DOUBLE_MAX if whole_number else math.isfinite(value)))
     if origin in (list, tuple):
         if not isinstance(value, origin):
             return False
@@ -177,7 +179,15 @@ def _conforms(value: Any, hint: Any, finite: bool, most: int | None) -> bool:
     return isinstance(value, origin or hint)
 
 
-_WORDS = {int: "a whole number", float: "a number", str: "text", bool: "true or false", type(None): "null"}
+_WORDS = {
+    int: "a whole number",
+    float: "a number",
+    str: "text",
+    bool: "true or false",
+    type(None): "null",
+    list: "a list",
+    dict: "an object",
+}
 
 
 def _spelled(hint: Any, finite: bool = False, most: int | None = None) -> str:
@@ -203,5 +213,30 @@ def typed(record: Any, finite: bool = False, most: int | None = None) -> None:
     for field in dataclasses.fields(record):
         hint, value = _hints(type(record))[field.name], getattr(record, field.name)
         if not _conforms(value, hint, finite, most):
-            shown = repr(value) if len(repr(value)) <= 60 else repr(value)[:57] + "..."
-            raise BadValue(f"{field.name} must be {_spelled(hint, finite, most)}, got {shown}")
+            raise BadValue(f"{field.name} must be {_spelled(hint, finite, most)}, got {_shown(value)}")
+
+
+def typed_json(data: Any, hints: dict[str, Any], name: str, optional: tuple[str, ...] = (), finite=True, most=MAX_COUNT) -> dict:
+    """``data``, the JSON object a file holds at ``name`` (``curve[0]``; ``""``: the file's own), if it has each field
+    of ``hints`` (a field's name -> its annotated type, as :func:`typed` reads them) but those in ``optional``, no
+    other, and each of its type (by default, as a file's must be: each float finite, each whole number within
+    ``MAX_COUNT``); else :class:`BadValue` naming the first that is not (``curve[0].objective must be a number
+    (finite), got 'x'``). :func:`typed` for records read from a file, whose fields need not be Python names."""
+    if not isinstance(data, dict):
+        raise BadValue(f"{name or 'it'} must be an object, got {_shown(data)}")
+    missing = [key for key in hints if key not in data and key not in optional]
+    if missing:
+        raise BadValue(f"{name or 'it'} has no field {missing[0]!r}")
+    unknown = [key for key in data if key not in hints]
+    if unknown:
+        raise BadValue(f"{name or 'it'} has a field it must not have, {_shown(unknown[0])}")
+    for key, hint in hints.items():
+        if key in data and not _conforms(data[key], hint, finite, most):
+            field = f"{name}.{key}" if name else key
+            raise BadValue(f"{field} must be {_spelled(hint, finite, most)}, got {_shown(data[key])}")
+    return data
+
+
+def _shown(value: Any) -> str:
+    """``value`` as a message quotes it: its ``repr``, at most 60 characters."""
+    return repr(value) if len(repr(value)) <= 60 else repr(value)[:57] + "..."

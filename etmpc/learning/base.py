@@ -20,7 +20,9 @@ A learner is one class::
 
 and nothing else: defining it registers it in :data:`LEARNERS` (``etmpc train --algorithm mine``,
 :func:`etmpc.learning.runner.run`, ``reproduce`` and, with :attr:`Learner.shipped`, the leaderboard
-find it there). Its settings come from a YAML or JSON file of field names (:func:`load_settings`).
+find it there). Its settings come from a YAML or JSON file of field names (:func:`load_settings`). To be
+resumed only as the run it was, it also says what ``out`` holds: ``saved_state()`` (each field checked as
+it is read) and ``saved_identity(state)`` (the task and settings it was made with, see :meth:`Learner.identity`).
 """
 
 from __future__ import annotations
@@ -34,7 +36,7 @@ from typing import Any, Callable, ClassVar
 
 from etmpc.common.documents import loads, yaml_loads
 from etmpc.common.errors import EtmpcError
-from etmpc.common.outputs import refuse_foreign
+from etmpc.common.outputs import refuse_foreign, strict
 from etmpc.loop.records import EpisodeSink
 
 LEARNERS: dict[str, type[Learner]] = {}  # name -> class, filled as classes are defined
@@ -96,7 +98,19 @@ class Learner(ABC):
         return self.saved_state() is not None
 
     def saved_state(self) -> dict | None:
-        """The state a run in :attr:`out` saved (None: none), for resume."""
+        """The state a run in :attr:`out` saved (None: none), for resume, each field checked as it is read
+        (a folder handed to ``--resume`` is data: :mod:`etmpc.learning.resume`)."""
+        return None
+
+    def identity(self) -> dict:
+        """The run asked for, as a saved state keeps it: ``{"task": str(self.key)`` (the task, its price and
+        options), ``"settings":`` the settings as JSON``}``. A run in :attr:`out` is resumed only if its
+        :meth:`saved_identity` is this (:func:`etmpc.learning.resume.same_run`)."""
+        return {"task": str(self.key), "settings": strict(dataclasses.asdict(self.settings))}
+
+    def saved_identity(self, state: dict) -> tuple[str, dict] | None:
+        """The file :meth:`saved_state` read ``state`` from, and the :meth:`identity` of the run that saved it;
+        None: the state keeps none, and the run is resumed unchecked (a learner of etmpc's keeps one)."""
         return None
 
     def default_seeds(self) -> tuple[int, ...]:

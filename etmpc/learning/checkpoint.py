@@ -4,18 +4,21 @@ learning curve, written so that the checkpoint never points past the files (see 
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from functools import cached_property
 from pathlib import Path
 from typing import Callable
 
 import numpy as np
 
+from etmpc.common import checks
 from etmpc.common.documents import loads
+from etmpc.common.errors import EtmpcError
 from etmpc.common.sense import best as best_of
 from etmpc.learning.config import CHECKPOINT_FORMAT, TrainConfig
+from etmpc.learning.resume import AGAIN, corrupt, number, numbers
 from etmpc.policies.learned import LogisticPolicy, PolicyFileError, write_json_atomically
-from etmpc.systems import make_system
+from etmpc.systems import has_levels, make_system
 
 
 @dataclass
@@ -60,17 +63,47 @@ def load_checkpoint(path: Path) -> RunState:
     try:
         data = loads(path.read_text())
     except (OSError, UnicodeDecodeError, ValueError) as exc:
-        raise PolicyFileError(f"checkpoint {path} is corrupt or unreadable ({exc}); move it away to start afresh") from None
+        raise PolicyFileError(f"checkpoint {path} is corrupt or unreadable ({exc}); {AGAIN}") from None
     return state_from_json(data, f"checkpoint {path}")
 
 
+# What checkpoint.json's records hold (checks.typed_json's hints): every field is checked when a run is resumed.
+_STATE = dict(format=str, version=int, config=dict, policy=dict, learners=dict, curve=list, best=dict, training=list)
+_STATE.update(base=str | None, validation=dict[str, float])
+# A number no result reads back may be null (a non-finite one, as strict JSON writes it): the control cost, a return.
+_CURVE_ROW = dict(episodes=int, seed=int, objective=float, control=float | None, recomputes=float)
+_POINT = dict(episodes=int, theta=list, theta_level=list)  # a policy DPI kept (its history)
+_LEARNER = {
+    "gpomdp": dict(theta=list, baseline_mean=list, episodes=int, settings=dict, value_gram=list, value_target=list),
+    "dpi": dict(theta=list, theta_level=list, episodes=int, iterations=int, data=list, history=list),
+}
+_EPISODE = {
+    "gpomdp": {"episode": int, "return": float | None, "recomputes": float, "seed": int},
+    "dpi": dict(episode=int, seed=int, labels=int),
+}
+
+
 def state_from_json(data: dict, where: str = "checkpoint") -> RunState:
-    """A :class:`RunState` from ``checkpoint.json``'s content, checked."""
+    """A :class:`RunState` from ``checkpoint.json``'s content, each field checked: of its type (numbers finite), of
+    the run's sizes (a parameter vector per feature, a label per field) and as the run wrote them (a learner and a
+    curve point per seed at each milestone so far). One that is not is one line naming ``where`` and the field."""
     try:
-        if data.get("format") != CHECKPOINT_FORMAT or data.get("version") != 1:
-            raise ValueError(f"format {data.get('format')!r} version {data.get('version')!r}")
-        config = TrainConfig.from_json(data["config"])
-        LogisticPolicy.from_json(data["policy"], where=where)
+        if not isinstance(data, dict) or data.get("format") != CHECKPOINT_FORMAT or data.get("version") != 1:
+            found = data if not isinstance(data, dict) else {k: data.get(k) for k in ("format", "version")}
+            raise checks.BadValue(f"not a training checkpoint of format {CHECKPOINT_FORMAT} version 1: {str(found)[:60]}")
+        checks.typed_json(data, _STATE, "the checkpoint", optional=("base", "validation"), most=checks.MAX_SEED)
+        try:
+            config = TrainConfig.from_json(data["config"])
+        except (EtmpcError, KeyError, TypeError, ValueError) as exc:
+            raise checks.BadValue(f"config: {exc}") from None
+        try:
+            policy = LogisticPolicy.from_json(data["policy"], where="policy")  # each number, as rl: reads a policy's
+        except PolicyFileError as exc:
+            raise checks.BadValue(str(exc)) from None
+        if data["policy"]["domain"] != config.domain or policy.levels != has_levels(config.domain):
+            raise checks.BadValue(f"policy: not a policy of {config.domain}'s decisions")
+        if not isinstance(data["policy"].get("hyperparameters", {}), dict):
+            raise checks.BadValue("policy.hyperparameters must be an object")
         state = RunState(
             config,
             data["policy"],
@@ -81,18 +114,90 @@ def state_from_json(data: dict, where: str = "checkpoint") -> RunState:
             data.get("base"),
             data.get("validation", {}),
         )
-        if sorted(state.learners) != sorted(str(s) for s in config.seeds):
-            raise ValueError("learners do not match the seeds")
-        levels = "theta_level" in data["policy"]
-        history = [entry for learner in state.learners.values() for entry in learner.get("history", [])]
-        for learner in (*state.learners.values(), *state.best.values(), *history):
-            if len(learner["theta"]) != len(data["policy"]["theta"]):
-                raise ValueError("feature size differs between learners and policy")
-            if levels != ("theta_level" in learner) or (levels and len(learner["theta_level"]) != len(learner["theta"])):
-                raise ValueError("the learners' and the policy's compute levels (theta_level) differ")
-    except (AttributeError, ValueError, KeyError, TypeError) as exc:
-        raise PolicyFileError(f"{where} is corrupt or unreadable ({exc}); move it away to start afresh") from None
+        _check(state, policy.theta.size, policy.levels)
+    except (checks.BadValue, KeyError, TypeError, ValueError) as exc:
+        raise corrupt(where, exc, PolicyFileError) from None
     return state
+
+
+def _check(state: RunState, p: int, levels: bool) -> None:
+    """:func:`state_from_json`'s checks of the learners, the curve, the best points, the training episodes and the
+    validation scores: ``p`` parameters per stage, two stages with compute ``levels``."""
+    config, algorithm = state.config, state.config.algorithm
+    milestones, seeds = config.milestones, [str(s) for s in config.seeds]
+    if sorted(state.learners) != sorted(seeds) or sorted(state.best) != sorted(seeds):
+        raise checks.BadValue(f"learners and best must hold one entry per seed of the run ({', '.join(seeds)})")
+    steps = make_system(config.system).episode_steps if algorithm == "gpomdp" else 0
+    for seed in seeds:
+        name, learner = f"learners.{seed}", state.learners[seed]
+        checks.typed_json(learner, _LEARNER[algorithm], name, optional=("theta_level", "history"), most=checks.MAX_SEED)
+        _parameters(learner, name, p, levels)
+        if learner["episodes"] not in milestones:
+            raise checks.BadValue(f"{name}.episodes is {learner['episodes']}, not one of the run's milestones")
+        if algorithm == "gpomdp":
+            numbers(learner["baseline_mean"], f"{name}.baseline_mean", (steps,))
+            numbers(learner["value_gram"], f"{name}.value_gram", (p, p))
+            numbers(learner["value_target"], f"{name}.value_target", (p,))
+            if learner["settings"] != asdict(config.gpomdp):
+                raise checks.BadValue(f"{name}.settings are not the run's ({asdict(config.gpomdp)})")
+            continue
+        iterations, history = milestones.index(learner["episodes"]), learner.get("history", [])
+        if learner["iterations"] != iterations or ("history" in learner and len(history) != iterations):
+            raise checks.BadValue(f"{name} must have made {iterations} iterations at {learner['episodes']} episodes")
+        _labels(learner["data"], f"{name}.data", p, levels)
+        for i, entry in enumerate(history):
+            checks.typed_json(entry, _POINT, f"{name}.history[{i}]", optional=("theta_level",), most=checks.MAX_SEED)
+            _parameters(entry, f"{name}.history[{i}]", p, levels)
+            if entry["episodes"] != milestones[i + 1]:
+                raise checks.BadValue(f"{name}.history[{i}].episodes must be {milestones[i + 1]}")
+    done = state.done
+    evaluated = [(m, int(s)) for m in milestones if m <= done for s in seeds]
+    for i, row in enumerate(state.curve):
+        checks.typed_json(row, _CURVE_ROW, f"curve[{i}]", most=checks.MAX_SEED)
+    if [(row["episodes"], row["seed"]) for row in state.curve] != evaluated:
+        raise checks.BadValue("curve must hold a point per seed at each milestone so far")
+    for seed in seeds:
+        best = checks.typed_json(state.best[seed], {**_POINT, "objective": float}, f"best.{seed}", optional=("theta_level",))
+        _parameters(best, f"best.{seed}", p, levels)
+        if best["episodes"] not in milestones or best["episodes"] > done:
+            raise checks.BadValue(f"best.{seed}.episodes is {best['episodes']}, not a milestone so far")
+    for i, row in enumerate(state.training):
+        checks.typed_json(row, _EPISODE[algorithm], f"training[{i}]", most=checks.MAX_SEED)
+    if sorted((row["seed"], row["episode"]) for row in state.training) != sorted((int(s), e) for s in seeds for e in range(done)):
+        raise checks.BadValue("training must hold an entry per seed and episode so far")
+    if (state.base is None) != (algorithm == "gpomdp") or (state.base is not None and state.base not in config.dpi.bases):
+        raise checks.BadValue(f"base is {state.base!r}, not one of the run's first schedules")
+    if state.validation and sorted(state.validation) != sorted(candidates(state)):
+        raise checks.BadValue("validation must score each of the run's candidates")
+
+
+def _parameters(entry: dict, name: str, p: int, levels: bool) -> None:
+    """A learner's, a best point's or a kept policy's ``theta`` (and ``theta_level`` with compute levels): ``p`` numbers."""
+    numbers(entry["theta"], f"{name}.theta", (p,))
+    if levels != ("theta_level" in entry):
+        raise checks.BadValue(f"{name}.theta_level must be there {'with' if levels else 'only with'} compute levels")
+    if levels:
+        numbers(entry["theta_level"], f"{name}.theta_level", (p,))
+
+
+def _labels(rows: list, name: str, p: int, levels: bool) -> None:
+    """DPI's labels (:func:`etmpc.learning.dpi.label_episode`'s rows): ``[phi, q_keep, q_recompute, step]``, and
+    ``q_iterate`` last with compute levels; ``phi`` ``p`` numbers. Checked all at once (a run holds many), and,
+    where that fails, one by one to name the one at fault."""
+    fields = "[phi, q_keep, q_solve, step, q_iterate]" if levels else "[phi, q_keep, q_recompute, step]"
+    width = 5 if levels else 4
+    for i, row in enumerate(rows):
+        if type(row) is not list or len(row) != width or type(row[3]) is not int or row[3] < 0:
+            raise checks.BadValue(f"{name}[{i}] must be a label {fields} (step a whole number >= 0), got {str(row)[:40]}")
+    try:
+        numbers([row[0] for row in rows], name, (len(rows), p))
+        numbers([[row[j] for j in (1, 2, 4)[: width - 2]] for row in rows], name)
+    except checks.BadValue:
+        for i, row in enumerate(rows):  # the one at fault, by its place
+            numbers(row[0], f"{name}[{i}][0]", (p,))
+            for j in (1, 2, 4)[: width - 2]:
+                number(row[j], f"{name}[{i}][{j}]")
+        raise
 
 
 def policy_at(state: RunState, theta, theta_level=None) -> dict:

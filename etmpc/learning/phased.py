@@ -156,15 +156,13 @@ class _Phased(Learner):
 
     def saved_state(self) -> dict | None:
         checkpoint = self.out / "checkpoint.json"
-        if not checkpoint.exists():
-            return None
-        state = load_checkpoint(checkpoint)
-        if state.config != self.config():
-            raise EtmpcError(
-                f"{checkpoint} was made with different settings ({_difference(state.config, self.config())}); "
-                "resume with the same ones, or choose another --out"
-            )
-        return state.to_json()
+        return load_checkpoint(checkpoint).to_json() if checkpoint.exists() else None
+
+    def identity(self) -> dict:
+        return _identity(self.config())
+
+    def saved_identity(self, state: dict) -> tuple[str, dict]:
+        return str(self.out / "checkpoint.json"), _identity(TrainConfig.from_json(state["config"]))
 
     def state(self) -> dict:
         return self.run_state.to_json()
@@ -389,6 +387,8 @@ def once_each(backend, fn, jobs: list, progress) -> list:
     return [played[key] for key in keys]
 
 
-def _difference(a: TrainConfig, b: TrainConfig) -> str:
-    da, db = a.to_json(), b.to_json()
-    return ", ".join(f"{k}: {da[k]} vs {db[k]}" for k in da if da[k] != db[k])
+def _identity(config: TrainConfig) -> dict:
+    """A run's :meth:`~etmpc.learning.base.Learner.identity`: the task its workers build (at its price, with its
+    options), and the rest of its configuration (the seeds too: a run is resumed with the seeds it trains)."""
+    settings = {k: v for k, v in config.to_json().items() if k not in ("domain", "recompute_price", "options")}
+    return {"task": str(config.system), "settings": settings}

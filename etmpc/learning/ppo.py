@@ -28,9 +28,10 @@ The budget is environment steps, in ``checkpoints`` slices; after each the netwo
 validation episodes and the run's state kept (``checkpoints/resume.json`` and the normalisation's
 running statistics, ``checkpoints/resume_normalize.json``; both removed when the run ends, so a run's
 files are what they were). A stopped run resumed continues from its last checkpoint's network and
-statistics, with its environments reset, and reads them as data: the statistics as JSON, the network
-and the optimiser into a model built from the run's settings with torch's weights-only reader
-(nothing in the run's folder is unpickled, so a folder someone hands you runs no code). It is not bit
+statistics, with its environments reset, and reads them as data (:mod:`etmpc.learning.ppo_state`: each
+field checked; a run, under way or finished, of another task, price, options or settings refused): the
+statistics as JSON, the network and the optimiser into a model built from the run's settings with torch's
+weights-only reader (nothing in the run's folder is unpickled, so a folder someone hands you runs no code). It is not bit
 for bit the uninterrupted run (the episodes in progress, the rollout and the random generators' states
 are not in Stable-Baselines3's save).
 """
@@ -47,12 +48,24 @@ from pathlib import Path
 
 import numpy as np
 
-from etmpc.common.documents import loads, read_document
 from etmpc.common.sense import best as best_of
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import refuse_foreign, write_json
 from etmpc.envs.normalization import save_normalization
 from etmpc.learning.base import Learner
+from etmpc.learning.resume import AGAIN
+from etmpc.learning.ppo_state import (
+    FINISHED_FORMAT,
+    NORMALIZE,
+    RESUME,
+    RESUME_FORMAT,
+    RUNNING,
+    check_progress,
+    description,
+    read_state,
+    restore_running,
+    state_file,
+)
 from etmpc.learning.ppo_settings import (  # noqa: F401 (SettingError and the rest re-exported, as before the split)
     PpoSettings,
     checked_checkpoints,
@@ -67,10 +80,6 @@ from etmpc.policies.features import observation_names
 from etmpc.policies.learned import write_json_atomically
 from etmpc.policies.sb3 import metadata_path
 from etmpc.systems import SystemKey, system_key
-
-RESUME, NORMALIZE = "resume.json", "resume_normalize.json"  # in checkpoints/, while the run is under way
-RESUME_FORMAT, FINISHED_FORMAT = "etmpc-ppo-resume", "etmpc-ppo-run"  # resume.json's, training.json's
-_RUNNING = ("obs_rms", "ret_rms")  # VecNormalize's running statistics, each a mean, a var and a count
 
 
 class PpoLearner(Learner):
@@ -138,28 +147,15 @@ class PpoLearner(Learner):
         return (self.out / "training.json").exists() or (self.out / "checkpoints" / RESUME).exists()
 
     def saved_state(self) -> dict | None:
-        """The run's state in :attr:`out`, checked: a folder handed to ``--resume`` is read as data, and its
-        checkpoint files are the run's own (a path elsewhere is refused, never followed)."""
-        finished, path = self.out / "training.json", self.out / "checkpoints" / RESUME
-        found = finished if finished.exists() else path if path.exists() else None
-        if found is None:
-            return None
-        again = "start the run again in another --out"
-        state = read_document(
-            found,
-            FINISHED_FORMAT if found is finished else RESUME_FORMAT,
-            missing=f"{found} went away while it was read; {again}",
-            unreadable=f"{found} cannot be read ({{error}}); {again}",
-            foreign=f"{found} is not a PPO run's state; {again}",
-        )
-        checked_checkpoints(state.get("checkpoints"), str(found))
-        if found is finished:
-            files = [c["file"] for c in state["checkpoints"]]
-            steps = state.get("environment_steps")
-            if state.get("selected") not in files or isinstance(steps, bool) or not isinstance(steps, int):
-                raise EtmpcError(f"{found} is not a finished PPO run (its selected checkpoint or steps)")
-            return {"finished": state}
-        return state
+        """The run's state in :attr:`out`, each field checked (:func:`etmpc.learning.ppo_state.read_state`)."""
+        return read_state(self.out)
+
+    def identity(self) -> dict:
+        return {"task": str(self.key), "settings": settings_json(self.settings)}
+
+    def saved_identity(self, state: dict) -> tuple[str, dict]:
+        saved = state.get("finished", state)
+        return str(state_file(self.out, state)), {"task": saved["task"], "settings": saved["settings"]}
 
     def state(self) -> dict:
         return {
@@ -222,30 +218,23 @@ class PpoLearner(Learner):
         (self.out / "checkpoints").mkdir(parents=True, exist_ok=True)
 
     def load_state(self, state: dict) -> None:
+        """Resume from :meth:`saved_state` (the run's task and settings checked by the runner, its checkpoints here)."""
+        check_progress(self.out, state, self.milestones())
         if "finished" in state:
             self.result = state["finished"]
             self._timesteps = int(self.result["environment_steps"])
             return
-        if state.get("settings") != settings_json(self.settings):
-            raise EtmpcError(
-                f"{self.out} holds a PPO run with other settings; resume with the same ones, or choose another --out"
-            )
-        if state.get("task", str(self.key)) != str(self.key):  # a run stopped before etmpc wrote the task: not checked
-            raise EtmpcError(
-                f"{self.out} holds a PPO run on {state['task']}, not {self.key}; resume it with that task and options, "
-                "or choose another --out"
-            )
         self.checkpoints = list(state["checkpoints"])
         last = self.checkpoints[-1]
         self.setup()  # the model and the normalisation the settings make, then the run's numbers into them
-        _restore_running(self.vec, self.out / "checkpoints" / NORMALIZE)
+        restore_running(self.vec, self.out / "checkpoints" / NORMALIZE)
         try:  # the weights only: PyTorch's weights-only reader refuses a pickle (and would warn of its protocol)
             with warnings.catch_warnings():
                 warnings.filterwarnings("ignore", message="Detected pickle protocol")
                 self.model.set_parameters(str(self.out / last["file"]), exact_match=True, device="cpu")
         except (pickle.UnpicklingError, RuntimeError, ValueError, KeyError, OSError, EOFError, zipfile.BadZipFile) as exc:
             first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-            raise EtmpcError(f"{self.out / last['file']}: not this run's weights ({first[:160]}); start the run again") from None
+            raise EtmpcError(f"{self.out / last['file']}: not this run's weights ({first[:160]}); {AGAIN}") from None
         self.model.num_timesteps = self._timesteps = int(last["timesteps"])
         self.started = time.perf_counter() - last["wall_seconds"]
         self._simulated_before = int(last["simulated_steps"])
@@ -292,7 +281,7 @@ class PpoLearner(Learner):
                 self.out / "checkpoints" / NORMALIZE,
                 {
                     name: {"mean": rms.mean.tolist(), "var": rms.var.tolist(), "count": float(rms.count)}
-                    for name in _RUNNING
+                    for name in RUNNING
                     for rms in [getattr(self.vec, name)]
                 },
             )
@@ -312,7 +301,7 @@ class PpoLearner(Learner):
         out, s, system = self.out, self.settings, self.system
         pick = best_of(self.checkpoints, system.objective_sense, key=lambda c: c["validation_objective"])
         shutil.copyfile(out / pick["file"], out / "selected.zip")
-        meta = loads(metadata_path(out / pick["file"]).read_text())
+        meta = description(metadata_path(out / pick["file"]), self.key, pick["timesteps"], settings_json(s))
         write_json(
             out / "selected.json",
             dict(meta, validation_objective=pick["validation_objective"], validation_episodes=s.validation_episodes),
@@ -375,18 +364,3 @@ def train_ppo(
     learner = PpoLearner(settings, workers)
     run(learner, key, out, (settings.seed,), workers, resume, progress=progress, say=say)
     return learner.result
-
-
-def _restore_running(vec, path) -> None:
-    """Put the running statistics :meth:`PpoLearner.save` wrote as JSON back into ``vec`` (a VecNormalize
-    of the same shapes); a file that is not theirs is one line."""
-    try:
-        data = loads(path.read_text())
-        for name in _RUNNING:
-            rms, values = getattr(vec, name), data[name]
-            mean, var = np.asarray(values["mean"], float), np.asarray(values["var"], float)
-            if mean.shape != np.shape(rms.mean) or var.shape != np.shape(rms.var):
-                raise ValueError(f"{name} has the shape {mean.shape}, the environment's is {np.shape(rms.mean)}")
-            rms.mean, rms.var, rms.count = mean, var, float(values["count"])
-    except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise EtmpcError(f"{path}: not this run's normalisation statistics ({exc}); start the run again") from None

@@ -8,6 +8,7 @@ import math
 import numbers
 import platform
 import re
+import typing
 import zipfile
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
@@ -16,6 +17,7 @@ from pathlib import Path
 from etmpc.common import checks
 from etmpc.common.checks import MAX_COUNT, short
 from etmpc.common.errors import EtmpcError
+from etmpc.learning.resume import corrupt
 from etmpc.systems import SystemKey
 
 
@@ -203,18 +205,21 @@ class SavedCheckpoint:
 
 
 def checked_checkpoints(entries, where: str) -> list[dict]:
-    """``entries`` if each is a :class:`SavedCheckpoint` of the run's own folder (its file one of the run's
-    ``checkpoints/step_N.zip``, never a path elsewhere); else :class:`EtmpcError`, one line."""
+    """``entries`` if each is a :class:`SavedCheckpoint` (each field of its type, finite, none missing or other)
+    of the run's own folder (its file one of the run's ``checkpoints/step_N.zip``, never a path elsewhere); else
+    :class:`EtmpcError`, one line naming the file ``where`` and the field."""
     try:
         if not isinstance(entries, list) or not entries:
             raise ValueError(f"its checkpoints are {str(entries)[:40]!r}, not a list of them")
-        for entry in entries:
-            if not isinstance(entry, dict):
-                raise ValueError(f"a checkpoint is {str(entry)[:40]!r}")
-            saved = SavedCheckpoint(**entry)
-            checks.typed(saved, most=2**62)
+        for i, entry in enumerate(entries):
+            name = f"checkpoints[{i}]"
+            saved = SavedCheckpoint(**checks.typed_json(entry, typing.get_type_hints(SavedCheckpoint), name, most=2**62))
+            if min(saved.timesteps - 1, saved.simulated_steps, saved.wall_seconds) < 0:
+                raise ValueError(
+                    f"{name}: its steps are {saved.timesteps} and {saved.simulated_steps}, its seconds {saved.wall_seconds}"
+                )
             if not _CHECKPOINT_FILE.fullmatch(saved.file):
                 raise ValueError(f"checkpoint file {saved.file[:80]!r} is not one of the run's checkpoints/step_N.zip")
-    except (TypeError, ValueError) as exc:
-        raise EtmpcError(f"{where} is not a PPO run's state ({exc}); start the run again in another --out") from None
+    except ValueError as exc:
+        raise corrupt(where, exc) from None
     return entries

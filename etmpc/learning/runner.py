@@ -1,7 +1,8 @@
 """One runner for every :class:`~etmpc.learning.base.Learner`: ``etmpc train --algorithm NAME``.
 
-:func:`run` checks the seeds and the run's directory, resumes from the learner's saved state (or sets
-it up afresh), advances it milestone by milestone (saving after each: a killed run resumed with
+:func:`run` checks the seeds and the run's directory, resumes from the learner's saved state if it is
+the run asked for (:func:`etmpc.learning.resume.same_run`: its task, price, options and settings) or sets
+it up afresh, advances it milestone by milestone (saving after each: a killed run resumed with
 ``resume=True`` continues from the last one, bit for bit where the learner says so,
 :attr:`~etmpc.learning.base.Learner.resumes_exactly`), then scores the learner's candidates on
 validation episodes of the training distribution (:func:`validate`: never the test set) and lets it
@@ -25,6 +26,7 @@ from etmpc.evaluation.backends import make_backend
 from etmpc.learning.base import Learner, check_decisions, learner_class
 from etmpc.learning.config import VALIDATION_ENTROPY
 from etmpc.learning.jobs import mean_scores
+from etmpc.learning.resume import same_run
 from etmpc.loop.records import EpisodeSink
 from etmpc.policies.learned import write_json_atomically
 from etmpc.systems import SystemKey, system_key
@@ -68,7 +70,9 @@ def run(
     learner.check()
     if learner.has_saved() and not resume:
         raise EtmpcError(f"{out} already holds a training run; pass --resume to continue it, or choose another --out")
-    saved = learner.saved_state()
+    saved = learner.saved_state()  # each field checked as it is read
+    if saved is not None:
+        same_run(learner, saved)  # the run asked for: its task, price, options and settings
     total = learner.work()
     with make_backend(backend, workers, address) as pool, Progress(total, enabled=progress, unit=learner.unit) as bar:
         learner.pool, learner.tick = pool, bar.update

@@ -20,6 +20,7 @@ as :mod:`etmpc.learning.dpi` does for event triggering:
 
 from __future__ import annotations
 
+import typing
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -28,6 +29,7 @@ from scipy.optimize import minimize
 
 from etmpc.common import checks
 from etmpc.common.sense import oriented
+from etmpc.common.documents import loads
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import write_json
 from etmpc.evaluation.workers import context
@@ -35,9 +37,10 @@ from etmpc.learning import dpi
 from etmpc.learning.base import Learner
 from etmpc.learning.config import SELECTION_ENTROPY
 from etmpc.learning.jobs import mean_scores
+from etmpc.learning.resume import AGAIN, corrupt
 from etmpc.loop import Snapshot, play_on, run_episode
 from etmpc.policies import Always, Every, parse_policy
-from etmpc.policies.selftrigger import CANDIDATES, SelfTrigger, plan_features
+from etmpc.policies.selftrigger import CANDIDATES, SelfTrigger, from_json, plan_features
 from etmpc.systems import SystemKey, system_key
 
 SELF_ENTROPY = 0x73656C66  # "self"
@@ -187,9 +190,19 @@ class SelfLearner(Learner):
             raise EtmpcError(f"no candidate keep length fits the MPC horizon ({self.system.horizon} steps)")
 
     def saved_state(self) -> dict | None:
-        return {"done": True} if not self._standalone and self.policy_file.exists() else None
+        """The finished run in :attr:`out`: its ``selected.json``, each field checked (:func:`read_run`)."""
+        return read_run(self.policy_file) if not self._standalone and self.policy_file.exists() else None
+
+    def identity(self) -> dict:
+        return {"task": str(self.key), "settings": self.settings.to_json()}
+
+    def saved_identity(self, state: dict) -> tuple[str, dict]:
+        hyper = state["hyperparameters"]
+        return str(self.policy_file), {"task": hyper["system"], "settings": {k: hyper[k] for k in self.settings.to_json()}}
 
     def load_state(self, state: dict) -> None:
+        if state["domain"] != self.system.name or state["hyperparameters"]["recompute_price"] != self.system.recompute_price:
+            raise corrupt(self.policy_file, f"its policy is not one of {self.key}'s")
         self.written = True  # the run had finished
 
     @property
@@ -281,6 +294,36 @@ def train_self(
     learner = SelfLearner(settings, Path(out))
     run(learner, system_key(key), Path(out).parent, None, workers, False, backend, address, progress=progress, say=say)
     return learner.written
+
+
+# What a self-trigger run's selected.json holds (checks.typed_json's hints), the settings as SelfSettings.to_json writes them.
+_POLICY = dict(format=str, version=int, domain=str, candidates=list[int], theta=list, mean=list, scale=list, hyperparameters=dict)
+_RUN = {
+    f: list[typing.get_args(h)[0]] if typing.get_origin(h) is tuple else h for f, h in typing.get_type_hints(SelfSettings).items()
+}
+_RUN.update(system=str, recompute_price=float, base=str, labelled_solves=int, best_keep_counts=dict[str, int], chosen=str)
+_RUN.update(base_selection=dict[str, float | None], validation=dict[str, float | None])  # a score not finite is null
+
+
+def read_run(path: Path) -> dict:
+    """The content of a finished run's ``selected.json``, each field of its type: the policy as ``self:`` reads it
+    (:func:`etmpc.policies.selftrigger.from_json`) and the record of its training, the choice one of those scored."""
+    try:
+        data = loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise EtmpcError(f"{path} cannot be read ({exc}); {AGAIN}") from None
+    try:
+        checks.typed_json(data, _POLICY, "")
+        hyper = checks.typed_json(data["hyperparameters"], _RUN, "hyperparameters")
+        if hyper["chosen"] not in hyper["validation"] or hyper["base"] not in hyper["bases"]:
+            raise checks.BadValue(f"hyperparameters: its choice {hyper['chosen']!r} or base {hyper['base']!r} is not one it had")
+    except checks.BadValue as exc:
+        raise corrupt(path, exc) from None
+    try:
+        from_json(data, str(path), None)  # the policy's numbers and sizes, as self: reads them
+    except EtmpcError as exc:
+        raise EtmpcError(f"{exc}; {AGAIN}") from None
+    return data
 
 
 def _period(spec: str, system) -> int:

@@ -102,6 +102,64 @@ def _overflowing(data: dict) -> None:
     norm["std"][0] = norm["std"][1] = 1.0
 
 
+TINY_RUN = ["--set", "episodes=2", "--set", "eval_every=2", "--set", "eval_episodes=2", "--set", "normalisation_episodes=2"]
+TINY_RUN += ["--set", "validation_episodes=2", "--seeds", "0"]
+
+
+_TINY_RUN_FILES: dict[str, bytes] = {}  # filled once per process
+
+
+def _tiny_gpomdp_run() -> dict[str, bytes]:
+    """The files of a finished GPOMDP run of ``TINY_RUN``'s settings on the battery: trained once per process, in a
+    few seconds, for the cases that doctor it."""
+    if not _TINY_RUN_FILES:
+        import tempfile
+
+        from etmpc.learning.base import learner_class
+        from etmpc.learning.runner import run
+
+        cls = learner_class("gpomdp")
+        settings = cls.Settings(episodes=2, eval_every=2, eval_episodes=2, normalisation_episodes=2, validation_episodes=2)
+        with tempfile.TemporaryDirectory() as folder:
+            run(cls(settings), "battery", Path(folder), (0,), progress=False)
+            _TINY_RUN_FILES.update(
+                {p.relative_to(folder).as_posix(): p.read_bytes() for p in Path(folder).rglob("*") if p.is_file()}
+            )
+    return _TINY_RUN_FILES
+
+
+def _saved_run(kind: str, run: Path) -> None:
+    """A run's saved state in ``run``, doctored: a GPOMDP checkpoint with text in its learning curve, a finished PPO
+    run and a self-trigger's (on their tasks at their own price), a PPO run under way whose checkpoint took 1e999 s."""
+    if kind == "train-text-in-curve":
+        for name, content in _tiny_gpomdp_run().items():
+            (run / name).parent.mkdir(parents=True, exist_ok=True)
+            (run / name).write_bytes(content)
+        checkpoint = json.loads((run / "checkpoint.json").read_text())
+        checkpoint["curve"][0]["objective"] = "0.5"
+        (run / "checkpoint.json").write_text(json.dumps(checkpoint))
+        return
+    (run / "checkpoints").mkdir(parents=True)
+    saved = dict(timesteps=256, simulated_steps=512, file="checkpoints/step_00000256.zip", validation_objective=0.5)
+    saved |= {"wall_seconds": 1.0 if kind == "ppo-finished" else "1e999"}
+    state = {"format": "etmpc-ppo-resume", "version": 1, "task": "battery/trading", "settings": {}, "checkpoints": [saved]}
+    if kind == "ppo-finished":
+        state |= dict(format="etmpc-ppo-run", workers=1, environment_steps=256, simulated_steps=512, wall_seconds=1.0)
+        state |= dict(selected=saved["file"], objective_sense="max", stable_baselines3="2.3.2", torch="2.3.1")
+        (run / "training.json").write_text(json.dumps(state))
+    elif kind == "ppo-infinite-seconds":
+        (run / "checkpoints" / "resume.json").write_text(json.dumps(state).replace('"1e999"', "1e999"))
+    else:
+        from etmpc.learning.selftrigger import SelfSettings
+
+        (run / "checkpoints").rmdir()
+        hyper = dict(SelfSettings().to_json(), system="cart_pendulum/balance", recompute_price=0.1, base="every:3")
+        hyper |= dict(base_selection={"every:3": 1.0}, labelled_solves=1, best_keep_counts={"3": 1}, chosen="ridge 0.1")
+        policy = {"format": "etmpc-self-trigger", "version": 1, "domain": "cart_pendulum/balance", "candidates": [1, 3]}
+        policy |= {"theta": [[0.0, 0.0], [1.0, 0.0]], "mean": [0.0], "scale": [1.0]}
+        (run / "selected.json").write_text(json.dumps(policy | {"hyperparameters": hyper | {"validation": {"ridge 0.1": 1.0}}}))
+
+
 def _setup(kind: str, d: Path) -> None:
     if kind == "existing-json":
         (d / "ev.json").write_text('{"mine": true}\n')
@@ -180,6 +238,8 @@ def _setup(kind: str, d: Path) -> None:
         (d / "ev.json").write_text(json.dumps(evaluation | {"policies": {}, "runs": "every:2"}))
     elif kind == "hostile-cards":  # a well-formed card of this suite (its numbers aside), and each one field changed
         _hostile_cards(d)
+    elif kind in ("train-text-in-curve", "ppo-finished", "ppo-infinite-seconds", "self-finished"):
+        _saved_run(kind, d / "run")
     elif kind.startswith("py-"):
         (d / f"{kind.replace('-', '_')}.py").write_text(TRIGGERS[kind])
     elif kind != "none":
@@ -386,6 +446,31 @@ CASES = [
         "none",
         ["train", "--task", "battery", "--out", "run", "--algorithm", "ppo", "--set", "reward_baseline=bogus"],
         "reward_baseline",
+    ),
+    # a run handed to --resume is data, and resumed only as the run it was
+    (
+        "train-resume-text-in-curve",
+        "train-text-in-curve",
+        ["train", "--task", "battery", "--algorithm", "gpomdp", *TINY_RUN, "--out", "run", "--resume"],
+        "checkpoint.json is corrupt (curve[0].objective must be a number (finite), got '0.5')",
+    ),
+    (
+        "train-resume-ppo-finished-at-another-price",
+        "ppo-finished",
+        ["train", "--task", "battery", "--algorithm", "ppo", "--price", "0.5", "--out", "run", "--resume"],
+        "holds a ppo run on battery/trading, not battery/trading@0.5",
+    ),
+    (
+        "train-resume-ppo-infinite-seconds",
+        "ppo-infinite-seconds",
+        ["train", "--task", "battery", "--algorithm", "ppo", "--out", "run", "--resume"],
+        "checkpoints[0].wall_seconds must be a number (finite), got inf",
+    ),
+    (
+        "train-resume-self-finished-at-another-price",
+        "self-finished",
+        ["train", "--task", "cart_pendulum", "--algorithm", "self", "--price", "0.5", "--out", "run", "--resume"],
+        "holds a self run on cart_pendulum/balance, not cart_pendulum/balance@0.5",
     ),
     ("verify-row-text-score", "wrong-types", ["verify", "card.json"], "score must be a number, got '1'"),
     # a card is evidence: every field of its type, and no code run that the card alone names

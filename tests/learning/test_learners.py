@@ -303,11 +303,11 @@ def test_a_ppo_run_folder_handed_to_resume_is_data_its_paths_stay_inside_and_a_p
     shutil.copyfile(last, tmp_path / "outside.zip")
     for file in ("../outside.zip", str(tmp_path / "outside.zip"), "checkpoints/../../outside.zip"):
         resume.write_text(json.dumps(dict(state, checkpoints=[dict(state["checkpoints"][0], file=file)])))
-        with pytest.raises(EtmpcError, match=r"is not a PPO run's state \(checkpoint file .* is not one of the run's"):
+        with pytest.raises(EtmpcError, match=r"resume.json is corrupt \(checkpoint file .* is not one of the run's"):
             run(tiny("ppo"), "battery", tmp_path / "cut", SEEDS["ppo"], resume=True, progress=False)
     for bad in ({"checkpoints": "step_00000256.zip"}, {"checkpoints": [dict(state["checkpoints"][0], timesteps="256")]}):
         resume.write_text(json.dumps(dict(state, **bad)))
-        with pytest.raises(EtmpcError, match="is not a PPO run's state"):
+        with pytest.raises(EtmpcError, match=r"resume.json is corrupt \(checkpoints.*; start the run again in another --out"):
             run(tiny("ppo"), "battery", tmp_path / "cut", SEEDS["ppo"], resume=True, progress=False)
     resume.write_text(json.dumps(state))
     with zipfile.ZipFile(last) as zf:
@@ -325,5 +325,5 @@ def test_a_stopped_ppo_run_resumes_only_on_its_task_price_and_options(tmp_path, 
     pytest.importorskip("stable_baselines3")
     _stopped_ppo_run(tmp_path, monkeypatch)
     assert json.loads((tmp_path / "cut" / "checkpoints" / "resume.json").read_text())["task"] == "battery/trading"
-    with pytest.raises(EtmpcError, match="holds a PPO run on battery/trading, not battery/trading@0.5; resume it with that task"):
+    with pytest.raises(EtmpcError, match="holds a ppo run on battery/trading, not battery/trading@0.5; resume it with that task"):
         run(tiny("ppo"), system_key("battery", 0.5), tmp_path / "cut", SEEDS["ppo"], resume=True, progress=False)
