@@ -10,6 +10,7 @@ ones that need a real process (signals, a full disk, the OpenGL backend) run ``e
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import resource
@@ -660,20 +661,27 @@ CASES = [
 ]
 
 
-@pytest.mark.parametrize("setup, argv, names", [c[1:] for c in CASES], ids=[c[0] for c in CASES])
-def test_a_hostile_input_is_one_line_and_touches_nothing(setup, argv, names, tmp_path, monkeypatch, capsys):
-    monkeypatch.chdir(tmp_path)
-    monkeypatch.setattr(sys, "dont_write_bytecode", True)  # importing a py: trigger writes nothing either
-    _setup(setup, tmp_path)
-    before, processes = _files(tmp_path), set(_children(os.getpid()))  # earlier tests' helpers may live on
-    with warnings.catch_warnings(record=True) as caught:  # a warning would be a second line on stderr
+def refused_in_one_line(argv: list[str], names: str, root: Path, capsys, within=contextlib.nullcontext()) -> None:
+    """``etmpc ARGV``, run in this process in ``root`` (the case's directory, set up) ``within`` a context (an
+    alarm, say), is refused as the tool promises: exit code 2, one line on stderr naming ``names``, every file
+    under ``root`` as it was (nothing new, no partial file) and no process left behind."""
+    before, processes = _files(root), set(_children(os.getpid()))  # earlier tests' helpers may live on
+    with warnings.catch_warnings(record=True) as caught, within:  # a warning would be a second line on stderr
         warnings.simplefilter("always")
         code = main(list(argv))
     _, err = capsys.readouterr()
     assert code == 2, err
     _assert_one_line(err + "".join(f"{w.message}\n" for w in caught), names)
-    assert _files(tmp_path) == before  # nothing changed, nothing new (no partial file either)
+    assert _files(root) == before
     assert set(_children(os.getpid())) <= processes
+
+
+@pytest.mark.parametrize("setup, argv, names", [c[1:] for c in CASES], ids=[c[0] for c in CASES])
+def test_a_hostile_input_is_one_line_and_touches_nothing(setup, argv, names, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(sys, "dont_write_bytecode", True)  # importing a py: trigger writes nothing either
+    _setup(setup, tmp_path)
+    refused_in_one_line(argv, names, tmp_path, capsys)
 
 
 # -- faults that need a real process -------------------------------------------------------------

@@ -3,15 +3,12 @@ it, before anything is built or played, with every file as it was (the harness o
 
 from __future__ import annotations
 
-import os
 import sys
-import warnings
 
 import pytest
 
-from etmpc.cli import main
 
-from tests.end_to_end.test_hostile import _assert_one_line, _children, _files
+from tests.end_to_end.test_hostile import refused_in_one_line
 
 KICKS = ["evaluate", "--task", "cart_pendulum/kicks", "--policy", "every:3", "--episodes", "1", "--workers", "1"]
 BALANCE = ["evaluate", "--task", "cart_pendulum", "--policy", "every:3", "--episodes", "1", "--workers", "1"]
@@ -78,15 +75,7 @@ CASES = [
 def test_a_hostile_option_or_spec_is_one_line_and_touches_nothing(argv, names, tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     monkeypatch.setattr(sys, "dont_write_bytecode", True)
-    before, processes = _files(tmp_path), set(_children(os.getpid()))
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        code = main(list(argv))
-    _, err = capsys.readouterr()
-    assert code == 2, err
-    _assert_one_line(err + "".join(f"{w.message}\n" for w in caught), names)
-    assert _files(tmp_path) == before
-    assert set(_children(os.getpid())) <= processes
+    refused_in_one_line(argv, names, tmp_path, capsys)
 
 
 def test_the_files_a_spec_reads_are_found_at_every_depth_the_parser_takes_and_a_spec_past_its_bounds_is_refused():

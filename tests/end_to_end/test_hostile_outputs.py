@@ -15,13 +15,12 @@ import contextlib
 import os
 import signal
 import sys
-import warnings
 from pathlib import Path
 
 import pytest
 
 from etmpc.cli import main
-from tests.end_to_end.test_hostile import CART_POLICY, EV, _assert_one_line, _children, _files, _setup
+from tests.end_to_end.test_hostile import CART_POLICY, EV, _assert_one_line, _files, _setup, refused_in_one_line
 
 MARKERS = "<!-- leaderboard:begin -->\n| a table |\n<!-- leaderboard:end -->\n"
 LEADERBOARD = ["score", "--leaderboard", "--task", "battery", "--out", "lb"]
@@ -184,15 +183,7 @@ def test_a_file_that_is_not_what_it_seems_is_refused_before_any_work(
     monkeypatch.chdir(tmp_path)
     monkeypatch.setattr(sys, "dont_write_bytecode", True)
     _outputs_setup(setup, tmp_path)
-    before, processes = _files(tmp_path), set(_children(os.getpid()))
-    with warnings.catch_warnings(record=True) as caught, _within(60):
-        warnings.simplefilter("always")
-        code = main(list(argv))
-    _, err = capsys.readouterr()
-    assert code == 2, err
-    _assert_one_line(err + "".join(f"{w.message}\n" for w in caught), names)
-    assert _files(tmp_path) == before
-    assert set(_children(os.getpid())) <= processes
+    refused_in_one_line(argv, names, tmp_path, capsys, _within(60))
 
 
 def test_robustness_writes_into_an_empty_directory_and_over_its_own_curve(tmp_path, monkeypatch, capsys):
