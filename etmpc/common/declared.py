@@ -51,7 +51,8 @@ class Declared:
 
     ``why`` says in one line what the setting is and why it is bounded; ``unit`` its unit ("" for none);
     ``draws``: it says how episodes are drawn (a rate, a range), so it acts on newly drawn episodes
-    (``etmpc testset --option ...``), not on a stored test set's."""
+    (``etmpc testset --option ...``), not on a stored test set's; ``pair``: a range ``(low, high)`` with
+    ``low <= high``."""
 
     why: str
     low: float | None = None
@@ -63,6 +64,7 @@ class Declared:
     label: bool = False
     unit: str = ""
     draws: bool = False
+    pair: bool = False  # a range (low, high): two values, low <= high
 
     def _in_range(self, value: float) -> bool:
         return (
@@ -94,7 +96,9 @@ class Declared:
             word = f"a whole number in {short(int(low))}..{'2**63-1' if high == 2**63 - 1 else short(int(high))}"
         else:
             word = f"a number {self._bounds()}"
-        return word if element is None else f"{self._counts()}, each {word}"
+        if element is None:
+            return word
+        return f"a pair (low, high), low <= high, each {word}" if self.pair else f"{self._counts()}, each {word}"
 
     def _counts(self) -> str:
         if self.lengths is None:
@@ -115,7 +119,10 @@ class Declared:
             per_state = PER_STATE in (self.lengths or ()) and len(value) >= 2  # the plant's count: checked when it is made
             if self.lengths is not None and len(value) not in self.lengths and not per_state:
                 raise BadValue(f"{name}: {_shown(value)} has {len(value)} values; it is {self.describe(kind)} ({self.why})")
-            return tuple(self._scalar(name, element, item, kind, value) for item in value)
+            held = tuple(self._scalar(name, element, item, kind, value) for item in value)
+            if self.pair and held[0] > held[1]:
+                raise BadValue(f"{name}: {_shown(value)} is not {self.describe(kind)} ({self.why})")
+            return held
         return self._scalar(name, kind, value, kind, value)
 
     def _scalar(self, name: str, kind: Any, value: Any, whole_kind: Any, whole: Any) -> Any:
@@ -175,12 +182,13 @@ def setting(
     label: bool = False,
     unit: str = "",
     draws: bool = False,
+    pair: bool = False,
     default_factory: Any = MISSING,
 ) -> Any:
     """A dataclass field that is an option, with what it may be (:class:`Declared`). A numeric setting must
     have both a lower and an upper bound (an option without one could ask for unbounded work), a word its
     choices: :func:`declarations` refuses one that has not."""
-    declared = Declared(why, low, high, above, below, tuple(choices), lengths, label, unit, draws)
+    declared = Declared(why, low, high, above, below, tuple(choices), (2,) if pair else lengths, label, unit, draws, pair)
     return dataclasses.field(default=default, default_factory=default_factory, metadata={KEY: declared})
 
 

@@ -97,10 +97,10 @@ def test_etmpc_options_lists_the_two_disturbances(capsys):
     [
         ("disturbances.jumps_per_s", "11", "option disturbances.jumps_per_s: 11.0 is not a number in [0, 10]"),
         ("disturbances.jumps_per_s", "-0.1", "option disturbances.jumps_per_s: -0.1 is not a number in [0, 10]"),
-        ("disturbances.target_radius_m", "0.5,1.2", "target_radius_m: (0.5, 1.2) is not 2 values, each a number in [0, 1]"),
-        ("disturbances.target_radius_m", "0.6,0.5", "target_radius_m is (low, high) with low <= high"),
-        ("disturbances.target_radius_m", "-0.1,0.5", "target_radius_m: (-0.1, 0.5) is not 2 values, each a number in [0, 1]"),
-        ("disturbances.target_radius_m", "0.5", "target_radius_m: (0.5,) has 1 values; it is 2 values"),
+        ("disturbances.target_radius_m", "0.5,1.2", "target_radius_m: (0.5, 1.2) is not a pair (low, high), low <= high, each"),
+        ("disturbances.target_radius_m", "0.6,0.5", "target_radius_m: (0.6, 0.5) is not a pair (low, high), low <= high"),
+        ("disturbances.target_radius_m", "-0.1,0.5", "target_radius_m: (-0.1, 0.5) is not a pair (low, high), low <= high"),
+        ("disturbances.target_radius_m", "0.5", "target_radius_m: (0.5,) has 1 values; it is a pair (low, high)"),
         ("disturbances.target_radius_m", "0.3,inf", "not a finite number"),
     ],
 )

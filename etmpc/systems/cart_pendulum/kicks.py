@@ -42,7 +42,6 @@ import mujoco
 import numpy as np
 from dm_control.rl import control
 
-from etmpc.common.checks import BadValue
 from etmpc.common.declared import Checked, setting
 from etmpc.systems.cart_pendulum.model import NX, STATE_NAMES
 from etmpc.systems.cart_pendulum.physics import Bumpers, Physics, load_model
@@ -83,7 +82,7 @@ class Disturbances(Checked):
         KICK_RAD_S,
         low=0,
         high=MAX_KICK_RAD_S,
-        lengths=(2,),
+        pair=True,
         unit="rad/s",
         draws=True,
         why="a kick's size on the pole's rate ~ U(low, high), random sign",
@@ -97,12 +96,6 @@ class Disturbances(Checked):
         draws=True,
         why="the cart reference's jumps a second: at most one an interval",
     )
-
-    def __post_init__(self):
-        object.__setattr__(self, "kick_rad_s", tuple(self.kick_rad_s))
-        super().__post_init__()
-        if self.kick_rad_s[0] > self.kick_rad_s[1]:
-            raise BadValue(f"kick_rad_s is (low, high) with low <= high, got {self.kick_rad_s}")
 
     @property
     def reference_jump_probability(self) -> float:

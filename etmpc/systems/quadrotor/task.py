@@ -40,7 +40,6 @@ from dm_control.rl import control
 from dm_control.utils import containers
 from dm_env import specs
 
-from etmpc.common.checks import BadValue
 from etmpc.common.declared import Checked, setting
 from etmpc.systems.episodes import EpisodeTask, Random, add_task, build_environment, jump_process, scale_setting
 from etmpc.systems.plants import PLANTS
@@ -83,26 +82,18 @@ class Disturbances(Checked):
         GUST_PROBABILITY, low=0, high=1, draws=True, why="a gust's onset's probability per interval"
     )
     gust_peak_n: tuple[float, ...] = setting(  # its peak ~ U(low, high)
-        GUST_PEAK_N, low=0, high=MAX_GUST_N, lengths=(2,), unit="N", draws=True, why="a gust's peak force ~ U(low, high)"
+        GUST_PEAK_N, low=0, high=MAX_GUST_N, pair=True, unit="N", draws=True, why="a gust's peak force ~ U(low, high)"
     )
     gust_duration_s: tuple[float, ...] = setting(  # its length ~ U(low, high), in whole intervals
         GUST_DURATION_S,
         low=0,
         high=MAX_GUST_S,
-        lengths=(2,),
+        pair=True,
         unit="s",
         draws=True,
         why="a gust's length ~ U(low, high), in whole intervals",
     )
     gust_scale: float = scale_setting("gust")
-
-    def __post_init__(self):
-        for name in ("gust_peak_n", "gust_duration_s"):
-            object.__setattr__(self, name, tuple(getattr(self, name)))
-        super().__post_init__()
-        for name in ("gust_peak_n", "gust_duration_s"):
-            if getattr(self, name)[0] > getattr(self, name)[1]:
-                raise BadValue(f"{name} is (low, high) with low <= high, got {getattr(self, name)}")
 
 
 @dataclass(frozen=True)

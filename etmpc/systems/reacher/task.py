@@ -33,7 +33,6 @@ from dm_control.rl import control
 from dm_control.utils import containers
 from dm_env import specs
 
-from etmpc.common.checks import BadValue
 from etmpc.common.declared import Checked, setting
 from etmpc.systems.episodes import EpisodeTask, Random, add_task, build_environment, jump_process
 from etmpc.systems.reacher.model import NX, STATE_NAMES, Parameters
@@ -73,17 +72,11 @@ class Disturbances(Checked):
         TARGET_RADIUS_M,
         low=0,
         high=REACH_M,
-        lengths=(2,),
+        pair=True,
         unit="m",
         draws=True,
         why="a target's distance from the shoulder ~ U(low, high), within the arm's reach",
     )
-
-    def __post_init__(self):
-        object.__setattr__(self, "target_radius_m", tuple(self.target_radius_m))
-        super().__post_init__()
-        if self.target_radius_m[0] > self.target_radius_m[1]:
-            raise BadValue(f"target_radius_m is (low, high) with low <= high, got {self.target_radius_m}")
 
     @property
     def jump_probability(self) -> float:
