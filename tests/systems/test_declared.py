@@ -272,3 +272,11 @@ def test_etmpc_options_says_what_each_option_may_be_and_why(capsys):
     kicks = out[out.index("  disturbances.kicks_per_s") :].splitlines()[1]
     assert "acts on newly drawn episodes" in kicks and "[0, 100]" in kicks
     assert canonical(0.3) in out
+
+
+def test_the_options_page_names_the_qp_solvers_an_option_may_name():
+    """The docs say which QP solvers ``solver.qpsol`` takes; the list is the code's (QP_SOLVERS), not another."""
+    from tests.conftest import REPO
+
+    page = (REPO / "docs" / "tasks" / "sensing.md").read_text()
+    assert "(" + ", ".join(f"`{name}`" for name in QP_SOLVERS) + ";" in page
