@@ -7,15 +7,15 @@ the fields of its ``Config`` and of the settings within it. A field is an option
     horizon: int = setting(20, low=1, high=100, unit="intervals", why="the MPC's horizon N: its OCP grows with it")
 
 The declaration is data, read by one check (:meth:`Declared.check`) wherever a value enters: when an option is
-set from text or from the API, and when a settings object is made (:class:`Declared` checks in
-``__post_init__``, the :class:`Checked` base's). So a value no controller can have (a weight of 0 where the LQR
+set from text or from the API, and when a settings object is made (the ``__post_init__`` of the :class:`Checked`
+base, which holds NumPy numbers as Python's own). So a value no controller can have (a weight of 0 where the LQR
 needs R > 0, a negative interval, a horizon of 10^5 that would build for hours) is refused in one line before any
 work, naming the option and what it may be; and no option can hang a run or exhaust memory, since every number
 has a finite range. A word is chosen from its ``choices``, never passed on: no option names a library to load,
 a file to read or code to run. A free label (a platform's name) is text of bounded length, shown and never read.
 
-What depends on more than one field (a shield block no longer than the horizon, one value per state of the
-task's plant) is checked where the system is made (:meth:`etmpc.systems.registry.SystemKey.make`).
+What depends on more than one field (shooting blocks no longer than the horizon, one value per state of the
+task's plant) is checked where the system is made (:func:`etmpc.systems.options.check_together`).
 
 This module is on the ground floor: it imports only :mod:`etmpc.common`.
 """
