@@ -42,8 +42,7 @@ from etmpc.control.compiled import CompiledFunction, CompileError
 from etmpc.control.condensed import CondensedGaussNewton
 from etmpc.control.plan import Plan
 from etmpc.control.riccati import FeedbackWeights, gains_along
-from etmpc.common.checks import BadValue
-from etmpc.control.settings import ROUTES, SolverSettings, plugin_library
+from etmpc.control.settings import ROUTES, SolverSettings, check_block, plugin_library
 
 __all__ = ["FeedbackWeights", "GaussNewtonMPC", "ROUTES", "SolverSettings"]
 
@@ -68,8 +67,7 @@ class GaussNewtonMPC:
         :meth:`solve` and passed to both residuals last: ``stage_residual(x, u, du, p)``,
         ``terminal_residual(x, p)``. With ``feedback``, every plan carries the gains of a
         time-varying LQR along it (:class:`FeedbackWeights`)."""
-        if not 1 <= settings.block <= horizon:  # the rest of the settings was checked when they were made
-            raise BadValue(f"option solver.block: {settings.block} is not in 1..{horizon}, the MPC's horizon")
+        check_block(settings.block, horizon)  # the rest of the settings was checked when they were made
         nx, nu = model.size1_in(0), model.size1_in(1)
         self.nx, self.nu, self.horizon, self.settings = nx, nu, horizon, settings
         self.parameters, self.feedback = parameters, feedback

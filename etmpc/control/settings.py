@@ -64,6 +64,13 @@ def levels_setting(default: bool) -> Any:
     return setting(default, why="a decision is keep, one SQP iteration or a full solve, priced per iteration")
 
 
+def check_block(block: int, horizon: int) -> None:
+    """Shooting nodes every ``block`` intervals fit in a horizon of ``horizon`` (each is in range alone): checked
+    where the system is made and where an MPC is built, with one message."""
+    if block > horizon:
+        raise BadValue(f"option solver.block: {block} is longer than the horizon of {horizon} intervals")
+
+
 def plugin_library(kind: str, name: str) -> Path:
     """CasADi's own library of plugin ``name`` of ``kind`` (``conic``, ``nlpsol``), which must exist: CasADi
     would look for one it does not have in the working folder (and load whatever lies there)."""

@@ -25,6 +25,7 @@ from typing import Any
 from etmpc.common.checks import BadType, BadValue
 from etmpc.common.declared import Declared, check_per_state, declarations, element_of
 from etmpc.common.errors import EtmpcError, UnknownNameError
+from etmpc.control.settings import check_block
 
 NOT_OPTIONS = ("recompute_price",)  # set by its own argument (--price, SystemKey's recompute_price)
 _TRUE, _FALSE = ("true", "yes", "on", "1"), ("false", "no", "off", "0")
@@ -211,5 +212,5 @@ def check_together(system) -> None:
         check_per_state(f"option {name}", declared, value, states)
         values[name] = value
     block, horizon = values.get("solver.block"), values.get("horizon")
-    if block is not None and horizon is not None and block > horizon:
-        raise BadValue(f"option solver.block: {block} is longer than the horizon of {horizon} intervals")
+    if block is not None and horizon is not None:
+        check_block(block, horizon)
