@@ -14,6 +14,12 @@ episodes per second and the side-by-side solver comparisons below are wall time.
   simulate futures with) under ``never``, forced solves taken out; and the steps per second that
   makes.
 * Episodes per second, single process, for ``always``, ``every:3`` and ``never``.
+* Where a step under ``every:3`` goes: its share of the MPC's solves, the plant's own step
+  (``env.physics.step``: MuJoCo's substeps, with what a task adds to each, such as the cart's bumpers), and
+  the rest, Python around them (the task's bookkeeping, the feedback, the policy, the records). From those,
+  the most a batch of episodes could gain that keeps every number (the same solves and physics, bit for
+  bit): with none of the rest, and the solves and physics spread over every core, a step costs at least
+  ``(solve + physics) / cores``.
 * Reference solvers (``system.reference_solvers()``: do-mpc for the cart pendulum when installed,
   scipy's ``linprog`` for the battery): the very same OCP, solved at the same sequence of measured
   states in the same run, one solver after the other (so neither evicts the other's caches); the
@@ -25,6 +31,7 @@ episodes per second and the side-by-side solver comparisons below are wall time.
 
 from __future__ import annotations
 
+import os
 import platform
 import time
 
@@ -59,6 +66,51 @@ def _play(system, env, testset, spec: str, episodes: int):
         run_episode(system, env, policy, np.random.default_rng(e), _episode(system, testset, e)) for e in range(episodes)
     ]
     return trajectories, time.perf_counter() - start
+
+
+class _PlantClock:
+    """While in use, the CPU time of ``env``'s plant steps (``env.physics.step``, on :data:`cpu_clock`), summed
+    in :attr:`seconds`: the step of this one environment is timed, not its class's."""
+
+    def __init__(self, env):
+        self.physics, self.seconds = env.physics, 0.0
+
+    def __enter__(self) -> _PlantClock:
+        step = self.physics.step
+
+        def timed(*args, **kwargs):
+            start = cpu_clock()
+            try:
+                return step(*args, **kwargs)
+            finally:
+                self.seconds += cpu_clock() - start
+
+        self.physics.step = timed
+        return self
+
+    def __exit__(self, *exc) -> None:
+        del self.physics.step  # the class's own again
+
+
+def _step_budget(trajectories, plant_s: float, cores: int) -> dict:
+    """Where the steps of ``trajectories`` went (ms a step, averaged over all of them): the solves, the plant
+    (``plant_s`` in all), the rest; and ``batch_bound``, the most a batch that keeps the solves and the plant as
+    they are could speed a step up, on one core and on ``cores``: the step over ``solve + plant``, spread."""
+    steps = sum(t.steps for t in trajectories)
+    total_s = sum(float(t.step_time_s[: t.steps].sum()) for t in trajectories)
+    solve_s = sum(float(np.nansum(t.solve_time_s[: t.steps])) for t in trajectories)
+    floor_s = solve_s + plant_s
+    per_step = lambda seconds: seconds / steps * 1e3  # noqa: E731
+    return {
+        "policy": "every:3",
+        "steps": steps,
+        "step_ms": per_step(total_s),
+        "solve_ms": per_step(solve_s),
+        "plant_ms": per_step(plant_s),
+        "rest_ms": per_step(total_s - floor_s),
+        "cores": cores,
+        "batch_bound": {"one_core": total_s / floor_s, "every_core": total_s * cores / floor_s},
+    }
 
 
 class _Capture:
@@ -216,7 +268,10 @@ def run_bench(
     env = system.make_env()
     _play(system, env, testset, "always", 1)  # warm up caches and lazy builds
 
-    played = {spec: _play(system, env, testset, spec, episodes) for spec in ("always", "every:3", "never")}
+    played = {spec: _play(system, env, testset, spec, episodes) for spec in ("always", "never")}
+    with _PlantClock(env) as plant:
+        played["every:3"] = _play(system, env, testset, "every:3", episodes)
+    played = {spec: played[spec] for spec in ("always", "every:3", "never")}
     always = played["always"][0]
     solves = np.concatenate([t.solve_time_s[: t.steps] for t in always])
     solves = solves[~np.isnan(solves)]
@@ -232,6 +287,7 @@ def run_bench(
         "rest_of_step": {**_stats(rest), "median_us": float(np.median(rest) * 1e6)},
         "rollout_step": _rollout_steps(system, env, testset, episodes),
         "episodes_per_second": {spec: episodes / seconds for spec, (_, seconds) in played.items()},
+        "step_budget": _step_budget(played["every:3"][0], plant.seconds, os.cpu_count() or 1),
         "solver_failures": int(sum(t.solver_failures for t in trajectories)),
         "references": [],
         "references_skipped": not references,
@@ -245,6 +301,16 @@ def run_bench(
     return figures
 
 
+def _budget_lines(b: dict) -> list[str]:
+    bound = b["batch_bound"]
+    return [
+        f"a step, {b['policy']}   {b['step_ms']:.3f} ms = solves {b['solve_ms']:.3f} + plant {b['plant_ms']:.3f} "
+        f"+ the rest {b['rest_ms']:.3f} (Python around them)",
+        f"    a batch that keeps the solves and the plant: at most {bound['one_core']:.1f}x on one core, "
+        f"{bound['every_core']:.1f}x on {b['cores']} cores",
+    ]
+
+
 def format_bench(f: dict) -> str:
     lines = [
         f"{f.get('task', f['domain'])}{''.join(f' --option {k}={v}' for k, v in f.get('options', {}).items())}: {f['episodes']} "
@@ -256,6 +322,7 @@ def format_bench(f: dict) -> str:
         f"rollout step       median {f['rollout_step']['median_us']:.1f} us   p90 {f['rollout_step']['p90_us']:.1f} us"
         f"   = {f['rollout_step']['steps_per_second']:,.0f} steps/s   (fast path: play_on, no solve)",
         "episodes/s         " + "   ".join(f"{spec} {rate:.1f}" for spec, rate in f["episodes_per_second"].items()),
+        *_budget_lines(f["step_budget"]),
         f"solver failures    {f['solver_failures']}",
     ]
     for r in f["references"]:

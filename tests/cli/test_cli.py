@@ -96,3 +96,26 @@ def test_bench_reports_consistent_figures():
     before = figures["interpreted"]  # the same OCPs solved as before compiling: the same optimum
     assert before["ours"]["samples"] == before["interpreted"]["samples"] == 200
     assert before["objective_gap_relative"]["max_abs"] < 1e-6
+    budget = figures["step_budget"]  # every:3's steps, split: the parts make the whole
+    assert budget["steps"] == 100 and min(budget["solve_ms"], budget["plant_ms"]) > 0
+    assert budget["solve_ms"] + budget["plant_ms"] + budget["rest_ms"] == pytest.approx(budget["step_ms"])
+    floor = budget["solve_ms"] + budget["plant_ms"]
+    assert budget["batch_bound"]["one_core"] == pytest.approx(budget["step_ms"] / floor)
+    assert budget["batch_bound"]["every_core"] == pytest.approx(budget["cores"] * budget["batch_bound"]["one_core"])
+
+
+def test_the_plant_clock_times_one_environment_and_leaves_it_as_it_was():
+    from etmpc.evaluation.bench import _PlantClock
+    from etmpc.systems import system_key
+
+    env, other = (system_key("cart_pendulum").make().make_env() for _ in range(2))
+    env.reset(), other.reset()
+    before = env.physics.data.time
+    with _PlantClock(env) as clock:
+        env.physics.step(7)
+        other.physics.step(7)  # a twin's steps are not this environment's
+        timed = clock.seconds
+        other.physics.step(1000)
+    assert timed > 0 and clock.seconds == timed  # only env's steps counted
+    assert env.physics.data.time == pytest.approx(before + 7 * env.physics.model.opt.timestep)  # the steps were taken
+    assert "step" not in vars(env.physics)  # the class's own step again
