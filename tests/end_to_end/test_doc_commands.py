@@ -333,7 +333,17 @@ def test_a_synopsis_is_read_as_its_plainest_instance(tmp_path, parser):
         tmp_path,
         "```sh\netmpc sweep [--task TASK ...] [--prices P1,P2,...] [--episodes N] \\\n    [--backend local|ray]  # all\n```\n",
     )
-    assert argv(line, parser) == ["sweep", "--task", "cart_pendulum", "--prices", "0.001,0.01", "--episodes", "3", "--backend", "local"]
+    assert argv(line, parser) == [
+        "sweep",
+        "--task",
+        "cart_pendulum",
+        "--prices",
+        "0.001,0.01",
+        "--episodes",
+        "3",
+        "--backend",
+        "local",
+    ]
     args, _ = parse(line, parser)
     assert args.task == ["cart_pendulum"] and args.prices == (0.001, 0.01) and args.backend == "local"
 
@@ -345,8 +355,7 @@ def test_an_unknown_placeholder_is_refused(tmp_path, parser):
 
 
 @pytest.mark.parametrize(
-    "text",
-    ["etmpc bench TASK", "etmpc sweep cart_pendulum --quick", "etmpc train-self --task battery --out x.json"],
+    "text", ["etmpc bench TASK", "etmpc sweep cart_pendulum --quick", "etmpc train-self --task battery --out x.json"]
 )
 def test_a_deprecated_form_is_found(tmp_path, relaxed, text):
     (line,) = _fake(tmp_path, f"Run `{text}`.\n")
@@ -359,7 +368,9 @@ def test_an_option_the_task_does_not_have_is_refused(tmp_path, parser):
     args, _ = parse(line, parser)
     with pytest.raises(AssertionError, match="docs/page.md:2: .*sensor.noise_std"):
         check_tasks_and_options(line, args)
-    (line,) = _fake(tmp_path, "```sh\netmpc evaluate --task cart_pendulum/kicks --policy every:3 --option sensor.noise_std=0.01\n```\n")
+    (line,) = _fake(
+        tmp_path, "```sh\netmpc evaluate --task cart_pendulum/kicks --policy every:3 --option sensor.noise_std=0.01\n```\n"
+    )
     check_tasks_and_options(line, parse(line, parser)[0])
 
 
