@@ -379,3 +379,23 @@ def test_an_unknown_task_is_refused(tmp_path, relaxed):
     args, _ = parse(line, relaxed)
     with pytest.raises(AssertionError, match="unknown task"):
         check_tasks_and_options(line, args)
+
+
+# -- the Gymnasium ids the pages name ----------------------------------------------------------------------
+VERSIONS_PAGE = "docs/versioning.md"  # names a task's older ids, to say they are refused
+
+
+def test_every_gymnasium_id_the_docs_name_is_registered():
+    from etmpc.systems import registry
+
+    ids = {spec.gym_id for spec in registry.specs()}
+    for page in _pages():
+        name, text = page.relative_to(REPO).as_posix(), page.read_text()
+        template = re.search(r"etmpc/<\w+>-<\w+>-v\d", text)  # every task at one version: none is
+        assert template is None, f"{name}: {template.group(0)}: the version is each task's own (-vN)"
+        for match in re.finditer(r"etmpc/([a-z_]+-[a-z_]+)-v(\d+)", text):
+            line = text.count("\n", 0, match.start()) + 1
+            if match.group(0) in ids:
+                continue
+            older = any(s.slug == match.group(1) and int(match.group(2)) < s.version for s in registry.specs())
+            assert older and name == VERSIONS_PAGE, f"{name}:{line}: {match.group(0)} is no registered id"
