@@ -399,3 +399,19 @@ def test_every_gymnasium_id_the_docs_name_is_registered():
                 continue
             older = any(s.slug == match.group(1) and int(match.group(2)) < s.version for s in registry.specs())
             assert older and name == VERSIONS_PAGE, f"{name}:{line}: {match.group(0)} is no registered id"
+
+
+def test_every_self_policy_file_the_docs_play_is_one_a_training_line_of_the_docs_writes(parser):
+    """``self:DIR/selected.json`` in a page is what ``etmpc train --algorithm self --out DIR`` writes: the pages
+    agree on where the self-triggering policy lands."""
+    written = set()
+    for line in LINES:
+        if line.fragment or not line.text.startswith("etmpc train "):
+            continue
+        args, _ = parse(line, parser)
+        if args is not None and args.algorithm == "self":
+            written.add(f"{Path(args.out).as_posix()}/selected.json")
+    assert written
+    for line in LINES:
+        for path in re.findall(r"self:(runs/\S+)", line.text):
+            assert path in written, f"{line.where()}\n  self:{path} is written by no training line of the docs ({written})"
