@@ -124,6 +124,14 @@ def test_workers_started_from_a_script_without_a_guard_end_in_one_line(tmp_path)
     assert "multiprocessing" not in done.stderr and "concurrent" not in done.stderr and "spawn" not in done.stderr
 
 
+def test_the_docs_show_the_last_line_an_unguarded_script_ends_with():
+    """using.md shows the line the test above finds at the end of the traceback (it once said the script
+    "stops with one line")."""
+    text = (REPO / "docs" / "using.md").read_text()
+    assert f"\netmpc.evaluation.mainscript.UnguardedScript: {UNGUARDED}\n" in text
+    assert "stops with one line" not in text
+
+
 # -- a trigger defined where a worker cannot import it ----------------------------------------------------
 MAIN_TRIGGER = """
 import sys
