@@ -274,3 +274,11 @@ def test_a_generated_text_names_a_function_of_etmpc(tmp_path):
     page.write_text("<!-- generated: os:getcwd -->x<!-- /generated -->\n")
     (problem,) = doc_numbers.check([page], tmp_path)
     assert "must be etmpc's" in problem
+
+
+def test_no_marker_starts_a_line_of_the_readmes_text():
+    """GitHub shows the README as it is: an HTML comment that starts a line ends the paragraph it is in (the
+    site drops the markers, docs/hooks.py). A generated table's markers stand on lines of their own."""
+    for number, line in enumerate((REPO / "README.md").read_text().splitlines(), 1):
+        if line.startswith(("<!-- number:", "<!-- generated:")):
+            assert re.fullmatch(r"<!-- generated: \S+ -->", line), f"README.md:{number}: {line[:80]}"
