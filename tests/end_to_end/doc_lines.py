@@ -14,7 +14,8 @@ A synopsis is read as its plainest instance: ``[--quick]`` is given, ``a|b`` and
 choice, ``...`` and ``…`` elide (a flag followed by one must exist, its value is not checked), and a
 placeholder in capitals is given a value of its kind (:data:`PLACEHOLDERS`; one the test does not know
 fails, asking to be added). A ``--task`` must name a task of the registry and each ``--option`` one of
-that task's options with a value it takes. A deprecated form (the task as a positional word, ``train-self``,
+that task's options with a value it takes, and each policy spec one of a registered kind (built for the task where
+it reads no file). A deprecated form (the task as a positional word, ``train-self``,
 ``train``'s old flags) may appear only on the page that lists deprecations (:data:`DEPRECATIONS_PAGE`).
 """
 
@@ -22,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import functools
 import io
 import re
 import shlex
@@ -230,6 +232,38 @@ def check_tasks_and_options(line: Line, args) -> None:
                 system_key(task, options=getattr(args, "options", ()) or ())
             except Exception as exc:  # noqa: BLE001 (whatever it is, the line does not work as written)
                 raise AssertionError(f"{line.where()}\n  --task {task}: {exc}") from None
+
+
+# A spec that reads a file (or imports a module) names its kind only: the file is the user's, made by another line.
+READS_A_FILE = re.compile(r"(?:^|:)(?:rl|self|sb3|py):")
+
+
+@functools.cache
+def _system(task: str, options: tuple):
+    from etmpc.systems import system_key
+
+    return system_key(task, options=options).make()
+
+
+def check_policies(line: Line, args) -> None:
+    """Each policy the line plays (``--policy``, ``score``'s, ``--against``) is a spec of a registered kind, and
+    one that reads no file is built for the line's task (its first; the cart pendulum where it names none)."""
+    from etmpc.policies.specs import kind_of, parse_policy
+
+    given = getattr(args, "policy", None)
+    specs = [] if given is None else given if isinstance(given, list) else [given]
+    specs += [args.against] if getattr(args, "against", None) else []
+    tasks = getattr(args, "task", None) or ["cart_pendulum"]
+    task = tasks if isinstance(tasks, str) else tasks[0]
+    for spec in specs:
+        try:
+            kind_of(spec)
+            if not READS_A_FILE.search(spec) and task not in PLUGIN_TASKS.get(line.page, ()):
+                with warnings.catch_warnings():
+                    warnings.simplefilter("error")  # a deprecated spec is a deprecated form
+                    parse_policy(spec, _system(task, tuple(getattr(args, "options", ()) or ())))
+        except Exception as exc:  # noqa: BLE001 (whatever it is, the line does not work as written)
+            raise AssertionError(f"{line.where()}\n  policy {spec}: {exc}") from None
 
 
 LINES = command_lines()  # the README's and docs/' own

@@ -21,6 +21,7 @@ from tests.end_to_end.doc_lines import (
     Line,
     relax,
     argv,
+    check_policies,
     check_tasks_and_options,
     command_lines,
     deprecated,
@@ -64,6 +65,7 @@ def test_the_command_line_parses_with_the_real_parser(line, parser, relaxed):
     assert old is None or line.page == DEPRECATIONS_PAGE, f"{line.where()}\n  a deprecated form: {old}"
     if args is not None:
         check_tasks_and_options(line, args)
+        check_policies(line, args)
 
 
 def _cheap(line: Line, parser) -> bool:
@@ -171,3 +173,12 @@ def test_an_unknown_task_is_refused(tmp_path, relaxed):
     args, _ = parse(line, relaxed)
     with pytest.raises(AssertionError, match="unknown task"):
         check_tasks_and_options(line, args)
+
+
+def test_a_policy_of_no_kind_or_a_bad_one_is_refused(tmp_path, parser):
+    for spec, why in [("treshold:0.3", "unknown policy"), ("every:0", "every:0")]:
+        (line,) = _fake(tmp_path, f"```sh\netmpc evaluate --task cart_pendulum/kicks --policy {spec}\n```\n")
+        with pytest.raises(AssertionError, match=f"(?s)docs/page.md:2: .*policy {spec}: .*{why}"):
+            check_policies(line, parse(line, parser)[0])
+    (line,) = _fake(tmp_path, "```sh\netmpc evaluate --task cart_pendulum/kicks --policy rl:mine.json --policy every:3\n```\n")
+    check_policies(line, parse(line, parser)[0])  # a file of the user's: its kind is enough
