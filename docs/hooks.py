@@ -8,6 +8,9 @@ import re
 import os
 
 MARKER = "<!-- cli-reference -->"
+# scripts/doc_numbers.py's markers around a number or a generated text: an HTML comment that starts a line ends
+# the paragraph it is in, so the site shows the text without them.
+_SOURCE_MARKERS = re.compile(r"<!-- (?:number|generated): .*? -->|<!-- /(?:number|generated) -->")
 
 
 def cli_reference() -> str:
@@ -45,6 +48,7 @@ def _commands(parser: argparse.ArgumentParser, prefix: str, level: str) -> list[
 
 
 def on_page_markdown(markdown: str, page, config, files) -> str:
+    markdown = _SOURCE_MARKERS.sub("", markdown)
     if MARKER in markdown:
         return markdown.replace(MARKER, cli_reference())
     return markdown

@@ -24,6 +24,14 @@ comes from:
     python scripts/doc_numbers.py            # check: one line per number that disagrees with its source
     python scripts/doc_numbers.py --write    # rewrite every marked number from its source
 
+A list, a table or a count the registry holds (the tasks, their ids and versions, their prices) sits under a
+marker of its own kind, naming a function of etmpc that takes no argument and returns the text
+(:mod:`etmpc.systems.catalogue`'s):
+
+    the suite has <!-- generated: etmpc.systems.catalogue:task_count -->ten<!-- /generated --> tasks
+
+A text of several lines (a table) stands between the markers on lines of its own, with a blank line either side.
+
 ``tests/end_to_end/test_docs_numbers.py`` runs the check.
 """
 
@@ -42,6 +50,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 MARKER = re.compile(r"<!-- number: (?P<spec>.*?) -->(?P<shown>.*?)<!-- /number -->")
+GENERATED = re.compile(r"<!-- generated: (?P<spec>\S+) -->(?P<shown>.*?)<!-- /generated -->", flags=re.S)
 _PART = re.compile(r"\[([^\]]*)\]|([^.\[\]]+)")
 _PYTHON = re.compile(r"(?P<module>[^\s:]+):(?P<key>\S+)")  # MODULE:ATTRIBUTE, no space
 _ETMPC_MODULE = re.compile(r"etmpc(?:\.[A-Za-z_][A-Za-z0-9_]*)*")  # the only modules a page may name
@@ -59,6 +68,7 @@ class Number:
     shown: str
     span: tuple[int, int]  # of the shown text in the page
     python: bool = False  # the source is a module of etmpc (MODULE:ATTRIBUTE), not a JSON file
+    generated: bool = False  # a text a function of that module returns (``<!-- generated: ... -->``)
 
     def where(self) -> str:
         return f"{self.page}:{self.line}"
@@ -164,7 +174,9 @@ def module(name: str, root: Path = ROOT):
 
 
 def render(value, options: dict[str, str]) -> str:
-    """The number as the page shows it."""
+    """The number as the page shows it (a generated text as it is, a text of several lines set apart by blank lines)."""
+    if options.get("text"):
+        return f"\n\n{value}\n\n" if "\n" in value else value
     fmt = options.get("fmt", "")
     if fmt.endswith("%"):
         return format(value * 100, fmt[:-1] + "f") + " %"
@@ -173,6 +185,11 @@ def render(value, options: dict[str, str]) -> str:
 
 def source_value(number: Number, root: Path = ROOT, cache: dict | None = None):
     cache = {} if cache is None else cache
+    if number.generated:
+        made = attribute(module(number.source, root), number.key)
+        if not callable(made):
+            raise TypeError(f"{number.name()} is not a function")
+        return made()
     if number.python:
         data, read = module(number.source, root), attribute
     else:
@@ -199,7 +216,14 @@ def numbers(page: Path, text: str | None = None) -> list[Number]:
         source, key, options, python = parse(match.group("spec"))
         line = text.count("\n", 0, match.start()) + 1
         found.append(Number(page, line, source, key, options, match.group("shown"), match.span("shown"), python))
-    return found
+    for match in GENERATED.finditer(text):
+        source, key, _, python = parse(match.group("spec"))
+        if not python:
+            raise ValueError(f"a generated text names a function of etmpc, MODULE:FUNCTION: {match.group('spec')!r}")
+        line = text.count("\n", 0, match.start()) + 1
+        shown, span = match.group("shown"), match.span("shown")
+        found.append(Number(page, line, source, key, {"text": "1"}, shown, span, python=True, generated=True))
+    return sorted(found, key=lambda n: n.span)
 
 
 def pages(root: Path = ROOT) -> list[Path]:

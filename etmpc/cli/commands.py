@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 from etmpc.cli import discriminate, figures, legacy, scoring, training
+from etmpc.cli import suite
 from etmpc.cli.output import check_backend as _check_backend, distinct_policies as _distinct_policies, say as _say
 from etmpc.common.errors import EtmpcError
 from etmpc.common.progress import Progress
@@ -243,6 +244,7 @@ COMMANDS = {
     "verify": _verify,
     "robustness": _robustness,
     "options": _options,
+    "tasks": suite.run,
     "discriminate": discriminate.run,
     "figure": figures.run,
 }

@@ -11,6 +11,7 @@ from pathlib import Path
 from etmpc.cli.tasks import task_option
 from etmpc.cli import discriminate, figures, scoring, training, types
 from etmpc.cli.output import backend_arguments
+from etmpc.cli import suite
 from etmpc.common.errors import EtmpcError
 from etmpc.policies.specs import syntax
 from etmpc.systems import names
@@ -214,6 +215,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     op = sub.add_parser("options", help="a task's options (--option NAME=VALUE) with their values: its defaults, or as set")
     task_option(op, tasks, "the task whose options to list")
+    suite.add_parser(sub)
 
     discriminate.add_parser(sub, tasks)
     figures.add_parser(sub, tasks)

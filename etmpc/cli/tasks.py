@@ -2,7 +2,7 @@
 its domain's first task; :func:`etmpc.systems.spec`). A command of one task requires it; a command that can
 play several repeats it, every task by default.
 
-An older etmpc took the task as the first word after the command (``etmpc evaluate --task cart_pendulum ...``); that
+An older etmpc took the task as the first word after the command (``etmpc evaluate cart_pendulum ...``); that
 form still works for one release, with one deprecation line saying what to write instead."""
 
 from __future__ import annotations

@@ -228,3 +228,57 @@ def test_a_module_source_is_read_from_the_checked_repositorys_own_etmpc(tmp_path
     (problem,) = doc_numbers.check([page], tmp_path)
     assert "cannot be read" in problem and f"not from {tmp_path.resolve() / 'etmpc'}" in problem
     assert doc_numbers.check([page], REPO) == []
+
+
+# -- a text the registry holds: <!-- generated: MODULE:FUNCTION --> -------------------------------------
+def test_the_generated_task_lists_are_the_registrys():
+    """The texts the pages are generated from, against the registry and Gymnasium's own registry."""
+    import gymnasium
+
+    from etmpc.systems import catalogue, registry
+
+    own = [spec for spec in registry.specs() if spec.domain in registry.BUILT_IN]
+    rows = catalogue.gym_ids_table().splitlines()[2:]
+    assert len(rows) == len(own)
+    for spec, row in zip(own, rows):
+        cells = [cell.strip(" `") for cell in row.strip("|").split("|")]
+        assert cells[:2] == [spec.id, spec.gym_id]
+        steps = gymnasium.spec(spec.gym_id).max_episode_steps  # what gym.make's TimeLimit ends the episode at
+        assert cells[2].startswith(f"{steps} steps")
+    assert catalogue.task_ids() == ", ".join(f"`{name}`" for name in registry.names() if name.split("/")[0] in registry.BUILT_IN)
+    assert catalogue.domain_names() == ", ".join(f"`{name}`" for name in registry.BUILT_IN)
+
+
+def test_a_page_that_lists_tasks_by_hand_fails_and_write_generates_it(tmp_path):
+    from etmpc.systems import catalogue
+
+    count = "<!-- generated: etmpc.systems.catalogue:task_count -->{}<!-- /generated -->"
+    table = "<!-- generated: etmpc.systems.catalogue:gym_ids_table -->\n\n{}\n\n<!-- /generated -->"
+    page = tmp_path / "page.md"
+    right = f"The suite has {count.format(catalogue.task_count())} tasks:\n\n{table.format(catalogue.gym_ids_table())}\n"
+    page.write_text(right)
+    assert doc_numbers.check([page], tmp_path) == []
+    stale = right.replace("-v2`", "-v0`").replace(f"-->{catalogue.task_count()}<", "-->five<")
+    page.write_text(stale)
+    problems = doc_numbers.check([page], tmp_path)
+    assert len(problems) == 2 and f"{page}:1" in problems[0] and "'five'" in problems[0]
+    assert f"{page}:3" in problems[1] and "gym_ids_table" in problems[1]
+    assert doc_numbers.write([page], tmp_path) == [page] and page.read_text() == right
+
+
+def test_a_generated_text_names_a_function_of_etmpc(tmp_path):
+    page = tmp_path / "page.md"
+    page.write_text("<!-- generated: etmpc.systems.catalogue:_WORDS -->x<!-- /generated -->\n")
+    (problem,) = doc_numbers.check([page], tmp_path)
+    assert "not a function" in problem
+    page.write_text("<!-- generated: os:getcwd -->x<!-- /generated -->\n")
+    (problem,) = doc_numbers.check([page], tmp_path)
+    assert "must be etmpc's" in problem
+
+
+def test_no_marker_starts_a_line_of_the_readmes_text():
+    """GitHub shows the README as it is: an HTML comment that starts a line ends the paragraph it is in (the
+    site drops the markers, docs/hooks.py). A generated table's markers stand on lines of their own."""
+    for number, line in enumerate((REPO / "README.md").read_text().splitlines(), 1):
+        if line.startswith(("<!-- number:", "<!-- generated:")):
+            assert re.fullmatch(r"<!-- generated: \S+ -->", line), f"README.md:{number}: {line[:80]}"

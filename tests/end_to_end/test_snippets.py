@@ -29,6 +29,9 @@ EXAMPLES = REPO / "examples"
 # hand-written snippet in them to go stale (and tests/end_to_end/test_docs.py builds them).
 GENERATED = ("docs/results/", "docs/reference/")
 SHRUNK_STEPS = 256
+# A block teaches no deprecated form: a deprecation its own lines meet (an old keyword, an old task name; etmpc
+# warns at the caller's line, so the warning is the script's, ``__main__``'s) fails it.
+DEPRECATED_IS_AN_ERROR = "error::DeprecationWarning:__main__,error::FutureWarning:__main__"
 # Blocks known not to run as written: (page, a line of the block) -> why. Strict: a block fixed in its page
 # makes its entry fail, to be removed here. None now: keep it that way.
 KNOWN_FAILURES: dict[tuple[str, str], str] = {}
@@ -91,11 +94,19 @@ def test_the_python_block_runs_as_a_script(page, code, tmp_path):
     for name in set(re.findall(r"[\"']([\w.-]+)/", code)):  # "policies/...": the checkout's folder, linked
         if (REPO / name).is_dir() and not (tmp_path / name).exists():
             (tmp_path / name).symlink_to(REPO / name)
-    done = _run(code, tmp_path, cwd=EXAMPLES if examples else None, env={"PYTHONPATH": str(EXAMPLES)} if examples else None)
+    env = {"PYTHONWARNINGS": DEPRECATED_IS_AN_ERROR, **({"PYTHONPATH": str(EXAMPLES)} if examples else {})}
+    done = _run(code, tmp_path, cwd=EXAMPLES if examples else None, env=env)
     output = done.stdout + done.stderr
     assert done.returncode == 0, f"{page}: exit {done.returncode}\n{output[-3000:]}"
     assert "Traceback" not in done.stderr, done.stderr[-3000:]
     assert UNGUARDED not in output and "failed: " not in output, output[-3000:]  # a scorecard row that failed says so
+
+
+def test_a_block_that_uses_a_deprecated_form_fails(tmp_path):
+    old = 'import etmpc\netmpc.evaluate(domain="cart_pendulum", policies=["every:3"], episodes=1, progress=False)\n'
+    done = _run(old, tmp_path, env={"PYTHONWARNINGS": DEPRECATED_IS_AN_ERROR})
+    assert done.returncode != 0 and "DeprecationWarning: the keyword domain= is deprecated" in done.stderr
+    assert _run(old.replace("domain=", "task="), tmp_path, env={"PYTHONWARNINGS": DEPRECATED_IS_AN_ERROR}).returncode == 0
 
 
 # -- a script without `if __name__ == "__main__":` ------------------------------------------------------
@@ -122,6 +133,14 @@ def test_workers_started_from_a_script_without_a_guard_end_in_one_line(tmp_path)
     # The script's own traceback, down to etmpc's raise: none of multiprocessing's, nor the workers'.
     assert done.stderr.count("Traceback") == 1 and done.stderr.count(UNGUARDED) == 1
     assert "multiprocessing" not in done.stderr and "concurrent" not in done.stderr and "spawn" not in done.stderr
+
+
+def test_the_docs_show_the_last_line_an_unguarded_script_ends_with():
+    """using.md shows the line the test above finds at the end of the traceback (it once said the script
+    "stops with one line")."""
+    text = (REPO / "docs" / "using.md").read_text()
+    assert f"\netmpc.evaluation.mainscript.UnguardedScript: {UNGUARDED}\n" in text
+    assert "stops with one line" not in text
 
 
 # -- a trigger defined where a worker cannot import it ----------------------------------------------------
