@@ -85,14 +85,16 @@ def evaluate(
     repeats: int = 1,
     workers: int | None = None,
     seed: int = 0,
-    testset_path: str | None = None,
+    test_set: str | os.PathLike | None = None,
     progress: bool = True,
     backend: str = "local",
     address: str | None = None,
     record: str | Path | None = None,
     recompute_price: float | None = None,
     *,
+    options=None,
     domain: str | SystemKey | None = None,
+    testset_path: str | os.PathLike | None = None,
     recorder: Callable[[Path], EpisodeSink] | None = None,
 ) -> Evaluation:
     """Run every policy on the first ``episodes`` test-set episodes, ``repeats`` times each, on
@@ -106,14 +108,21 @@ def evaluate(
     With ``record``, also write every episode into that Rerun recording (``.rrd``), opened by ``recorder``
     (:class:`etmpc.views.recording.Recorder`, which :func:`etmpc.evaluate` gives).
     ``recompute_price``: the price of a recompute, if not the task's own (it enters every
-    objective, and what rollouts optimise).
+    objective, and what rollouts optimise). ``options``: the task's options (:mod:`etmpc.systems.options`, a
+    mapping NAME -> value or ``(name, value)`` pairs), as ``--option`` and :func:`etmpc.score` take them.
+    ``test_set``: a test set file (default: the task's stored one). The keywords are those of
+    :func:`etmpc.score` and the environments; ``testset_path=``, the old name of ``test_set=``, works for this
+    release with a ``DeprecationWarning``.
 
     Bad arguments, policies and files raise :class:`EtmpcError` with the command line's messages
     (:func:`check_arguments`), before any work; so does a policy's own failure, naming it."""
     task, price = checks.renamed("task", task, "domain", domain), recompute_price
+    test_set = checks.renamed("test_set", test_set, "testset_path", testset_path, required=False)
+    if options is not None and isinstance(task, (str, SystemKey)):  # a SystemKey carries its own: refused
+        task, price = system_key(task, price, options), None
     with interrupts.watching():  # a policy that raises KeyboardInterrupt is its failure, not a Ctrl-C
         return _evaluate(
-            task, policies, episodes, repeats, workers, seed, testset_path, progress, backend, address, record, price, recorder
+            task, policies, episodes, repeats, workers, seed, test_set, progress, backend, address, record, price, recorder
         )
 
 
@@ -131,7 +140,7 @@ def check_arguments(
     if workers is not None:
         checks.argument("workers", checks.workers, workers)
     checks.argument("seed", checks.seed, seed)
-    for name, path in (("testset_path", testset_path), ("record", record)):
+    for name, path in (("test_set", testset_path), ("record", record)):
         if path is not None and not isinstance(path, (str, os.PathLike)):
             raise EtmpcError(f"{name}: a file path is needed, got {type(path).__name__} {path!r}")
     if record is not None and Path(record).suffix != ".rrd":
