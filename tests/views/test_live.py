@@ -8,6 +8,7 @@ answers, and ``--spawn`` without a screen, are one line each before any episode 
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import signal
 import socket
@@ -19,6 +20,7 @@ from pathlib import Path
 import pytest
 
 from etmpc.cli import main
+from etmpc.common.errors import EtmpcError
 from etmpc.views.replay import replay_summary
 from etmpc.views.sinks import viewer_url
 
@@ -40,6 +42,15 @@ def listening(port: int) -> bool:
     return True
 
 
+def complete(path: Path) -> bool:
+    """Whether ``path`` holds a whole recording yet (its end marker read)."""
+    try:
+        replay_summary(path)
+    except EtmpcError:
+        return False
+    return True
+
+
 @pytest.fixture
 def receiver(tmp_path):
     """A headless Rerun server on a free local port that saves what it receives: ``(url, saved file)``."""
@@ -50,6 +61,7 @@ def receiver(tmp_path):
         [RERUN, "--bind", "127.0.0.1", "--port", str(port), "--save", str(saved)],
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
+        start_new_session=True,  # the command is a Python launcher of Rerun's binary: both are ended together
     )
     try:
         deadline = time.monotonic() + 30
@@ -59,7 +71,7 @@ def receiver(tmp_path):
         yield f"rerun+http://127.0.0.1:{port}/proxy", saved, server
     finally:
         if server.poll() is None:
-            server.kill()
+            os.killpg(server.pid, signal.SIGKILL)
             server.wait(timeout=30)
 
 
@@ -68,8 +80,10 @@ def test_evaluate_streams_its_episodes_to_a_viewer_and_the_viewer_receives_them_
     run = tmp_path / "run.json"
     assert main([*EVALUATE, "2", "--json", str(run), "--record", url]) == 0
     assert f"streamed the episodes to {url}" in capsys.readouterr().out
-    time.sleep(1.0)  # the server writes what it received as it comes; then it is stopped as Ctrl-C would
-    server.send_signal(signal.SIGINT)
+    deadline = time.monotonic() + 30  # the server writes what it receives as it comes: wait for the end marker
+    while not (saved.is_file() and complete(saved)) and time.monotonic() < deadline:
+        time.sleep(0.3)
+    os.killpg(server.pid, signal.SIGINT)  # then stopped as Ctrl-C would
     server.wait(timeout=30)
     replayed = replay_summary(saved)  # complete: the end marker came too
     live = json.loads(run.read_text())["runs"]
