@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 from etmpc.cli import discriminate, figures, legacy, scoring, training
+from etmpc.cli.recording import file_of, recorded, viewer
 from etmpc.cli.output import check_backend as _check_backend, distinct_policies as _distinct_policies, say as _say
 from etmpc.common.errors import EtmpcError
 from etmpc.common.progress import Progress
@@ -36,14 +37,11 @@ def _evaluate(args) -> None:
     _distinct_policies(args.policy)
     if args.against is not None and args.against not in args.policy:
         raise EtmpcError(f"--against {args.against} is not one of the --policy given")
-    check_run_outputs({"--json": args.json, "--record": _file(args.record)}, inputs=run_inputs(args.policy, args.test_set))
+    check_run_outputs({"--json": args.json, "--record": file_of(args.record)}, inputs=run_inputs(args.policy, args.test_set))
     if args.test_set is not None and not Path(args.test_set).is_file():
         raise EtmpcError(f"test set {args.test_set} not found")
     key = system_key(args.task, args.price, args.options)  # the task at its price: one value from here to the objective
-    # A viewer to stream to (a URL, --spawn) is opened, and checked, here; a file by evaluate, as from Python.
-    streams = args.spawn or isinstance(args.record, str)  # a viewer's URL is a str, a file's path a Path
-    live = Recorder(args.record, spawn=args.spawn) if streams else None
-    try:
+    with viewer(args) as live:  # --record URL, --spawn: a viewer, opened and checked before any work (a file: by evaluate)
         result = evaluate(
             key,
             args.policy,
@@ -57,19 +55,13 @@ def _evaluate(args) -> None:
             record=live or args.record,
             recorder=Recorder,
         )
-    except BaseException:
-        if live is not None:
-            live.close(keep=False)
-        raise
     print(format_table(result))
     if args.against is not None:
         from etmpc.evaluation.compare import format_against
 
         print(format_against(result.to_json(), args.against))
-    if live is not None:
-        print(f"streamed the episodes to {live.destinations}" + (f" and wrote {args.record}" if _file(args.record) else ""))
-    elif args.record is not None:
-        print(f"wrote {args.record} (open it with: rerun {args.record}; summarise it with: etmpc replay {args.record})")
+    if args.record is not None or live is not None:
+        print(recorded(args.record, live))
     if args.json is not None:
         write_json(args.json, result.to_json())
         print(f"wrote {args.json}")
@@ -78,11 +70,6 @@ def _evaluate(args) -> None:
         print(
             f"warning: {nonfinite} run(s) ended on a non-finite state or input and are excluded from the means", file=sys.stderr
         )
-
-
-def _file(record):
-    """``--record``'s file, or None (none given, or a viewer's URL: a ``str``, where a file's path is a ``Path``)."""
-    return record if isinstance(record, Path) else None
 
 
 def _reproduce(args) -> None:
@@ -136,7 +123,7 @@ def _render(args) -> None:
     key = system_key(args.task, options=args.options)  # the task with its options, checked
     if args.out.suffix != ".mp4":
         raise EtmpcError(f"--out {args.out} does not end in .mp4")
-    check_run_outputs({"--out": args.out, "--record": _file(args.record)}, inputs=run_inputs([args.policy]))
+    check_run_outputs({"--out": args.out, "--record": file_of(args.record)}, inputs=run_inputs([args.policy]))
     try:
         result = render_rollout(
             key, args.policy, args.episode, args.out, args.seed, args.width, args.height, args.fps, record=args.record
@@ -145,7 +132,7 @@ def _render(args) -> None:
         raise EtmpcError(" ".join(str(exc).split())) from None
     print(f"wrote {result.path}: {result.frames} frames at {result.fps:g} fps, {result.trajectory.recomputes} recomputes")
     if args.record is not None:
-        print(f"wrote {args.record}" if _file(args.record) else f"streamed the episode to {args.record}")
+        print(f"wrote {args.record}" if file_of(args.record) else f"streamed the episode to {args.record}")
 
 
 def _replay(args) -> None:
