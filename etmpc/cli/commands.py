@@ -7,8 +7,8 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from etmpc.cli import discriminate, figures, legacy, scoring, training
-from etmpc.cli import suite
+from etmpc.cli import discriminate, figures, legacy, scoring, suite, training
+from etmpc.cli.recording import file_of, recorded, viewer
 from etmpc.cli.output import check_backend as _check_backend, distinct_policies as _distinct_policies, say as _say
 from etmpc.common.errors import EtmpcError
 from etmpc.common.progress import Progress
@@ -37,30 +37,31 @@ def _evaluate(args) -> None:
     _distinct_policies(args.policy)
     if args.against is not None and args.against not in args.policy:
         raise EtmpcError(f"--against {args.against} is not one of the --policy given")
-    check_run_outputs({"--json": args.json, "--record": args.record}, inputs=run_inputs(args.policy, args.test_set))
+    check_run_outputs({"--json": args.json, "--record": file_of(args.record)}, inputs=run_inputs(args.policy, args.test_set))
     if args.test_set is not None and not Path(args.test_set).is_file():
         raise EtmpcError(f"test set {args.test_set} not found")
     key = system_key(args.task, args.price, args.options)  # the task at its price: one value from here to the objective
-    result = evaluate(
-        key,
-        args.policy,
-        args.episodes,
-        args.repeats,
-        args.workers,
-        args.seed,
-        args.test_set,
-        backend=args.backend,
-        address=args.address,
-        record=args.record,
-        recorder=Recorder,
-    )
+    with viewer(args) as live:  # --record URL, --spawn: a viewer, opened and checked before any work (a file: by evaluate)
+        result = evaluate(
+            key,
+            args.policy,
+            args.episodes,
+            args.repeats,
+            args.workers,
+            args.seed,
+            args.test_set,
+            backend=args.backend,
+            address=args.address,
+            record=live or args.record,
+            recorder=Recorder,
+        )
     print(format_table(result))
     if args.against is not None:
         from etmpc.evaluation.compare import format_against
 
         print(format_against(result.to_json(), args.against))
-    if args.record is not None:
-        print(f"wrote {args.record} (open it with: rerun {args.record}; summarise it with: etmpc replay {args.record})")
+    if args.record is not None or live is not None:
+        print(recorded(args.record, live))
     if args.json is not None:
         write_json(args.json, result.to_json())
         print(f"wrote {args.json}")
@@ -122,7 +123,7 @@ def _render(args) -> None:
     key = system_key(args.task, options=args.options)  # the task with its options, checked
     if args.out.suffix != ".mp4":
         raise EtmpcError(f"--out {args.out} does not end in .mp4")
-    check_run_outputs({"--out": args.out, "--record": args.record}, inputs=run_inputs([args.policy]))
+    check_run_outputs({"--out": args.out, "--record": file_of(args.record)}, inputs=run_inputs([args.policy]))
     try:
         result = render_rollout(
             key, args.policy, args.episode, args.out, args.seed, args.width, args.height, args.fps, record=args.record
@@ -131,7 +132,7 @@ def _render(args) -> None:
         raise EtmpcError(" ".join(str(exc).split())) from None
     print(f"wrote {result.path}: {result.frames} frames at {result.fps:g} fps, {result.trajectory.recomputes} recomputes")
     if args.record is not None:
-        print(f"wrote {args.record}")
+        print(f"wrote {args.record}" if file_of(args.record) else f"streamed the episode to {args.record}")
 
 
 def _replay(args) -> None:

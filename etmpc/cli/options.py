@@ -73,10 +73,16 @@ def build_parser() -> argparse.ArgumentParser:
     )
     ev.add_argument(
         "--record",
-        type=types.rrd_path,
+        type=types.recording,
         default=None,
-        metavar="PATH.rrd",
-        help="write every episode into a Rerun recording (open it with `rerun PATH.rrd`)",
+        metavar="PATH.rrd|URL",
+        help="write every episode into a Rerun recording (open it with `rerun PATH.rrd`), or stream it to the "
+        "Rerun viewer at URL (rerun+http://HOST:PORT/proxy, as `rerun` prints it)",
+    )
+    ev.add_argument(
+        "--spawn",
+        action="store_true",
+        help="stream every episode to a Rerun viewer started for the run (where there is a screen), besides any --record",
     )
     backend_arguments(ev)
 
@@ -140,10 +146,10 @@ def build_parser() -> argparse.ArgumentParser:
     rn.add_argument("--fps", type=types.fps, default=None, help="frames per second (default: one frame per control interval)")
     rn.add_argument(
         "--record",
-        type=types.rrd_path,
+        type=types.recording,
         default=None,
-        metavar="PATH.rrd",
-        help="also write the episode, frames included, into a Rerun recording",
+        metavar="PATH.rrd|URL",
+        help="also write the episode, frames included, into a Rerun recording, or stream it to the viewer at URL",
     )
 
     vf = sub.add_parser(

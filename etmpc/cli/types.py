@@ -95,6 +95,20 @@ def rrd_path(text: str) -> Path:
     return path
 
 
+def recording(text: str) -> Path | str:
+    """``--record``: a ``.rrd`` file's path, or a Rerun viewer's URL to stream to (``rerun+http://HOST:PORT/proxy``,
+    ``tcp://HOST:PORT``), checked for its form here and for an answer when the recording opens."""
+    from etmpc.common.errors import EtmpcError
+    from etmpc.views.sinks import is_url, viewer_url
+
+    if not is_url(text):
+        return rrd_path(text)
+    try:
+        return viewer_url(text)
+    except EtmpcError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def setting(text: str) -> tuple[str, object]:
     """``KEY=VALUE`` (``--set``): the key, and the value read as YAML (``yaml.safe_load``: numbers, words,
     ``[a, b]`` lists, ``null``; never evaluated as code)."""

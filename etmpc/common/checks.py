@@ -118,14 +118,15 @@ def argument(name: str, check, value: Any):
         raise BadValue(f"{name}: {exc}") from None
 
 
-def renamed(new: str, value: Any, old: str, old_value: Any, required: bool = True) -> Any:
+def renamed(new: str, value: Any, old: str, old_value: Any, required: bool = True, stacklevel: int = 3) -> Any:
     """The value of a parameter that was called ``old`` before it was called ``new``: the old keyword
     works for one release, with a ``DeprecationWarning``; both at once, or neither when ``required``,
-    is an error naming them."""
+    is an error naming them. The warning names the line that called the caller (``stacklevel`` 3), or the
+    frame ``stacklevel`` says."""
     if old_value is not None:
         if value is not None:
             raise EtmpcError(f"{new}: give it once ({old}= is its old name)")
-        warnings.warn(f"the keyword {old}= is deprecated: call it {new}=", DeprecationWarning, stacklevel=3)
+        warnings.warn(f"the keyword {old}= is deprecated: call it {new}=", DeprecationWarning, stacklevel=stacklevel)
         return old_value
     if value is None and required:
         raise EtmpcError(f"{new}: missing")

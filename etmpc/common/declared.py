@@ -1,6 +1,6 @@
 """What a setting may be, declared beside its field: its range or choices, its unit, and why.
 
-A task's options (``--option NAME=VALUE``, ``SystemKey(task, options=...)``, ``task_options=`` in Gymnasium) are
+A task's options (``--option NAME=VALUE``, ``SystemKey(task, options=...)``, ``options=`` in Gymnasium) are
 the fields of its ``Config`` and of the settings within it. A field is an option only if it is declared with
 :func:`setting`::
 

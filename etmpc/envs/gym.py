@@ -12,8 +12,11 @@ task's time limit, ``terminated`` only when the plant fails. ``info`` holds the 
 ``recompute``-d and whether that was ``forced``, and the episode's ``failures`` so far (an int, on
 every task that counts them). See :mod:`etmpc.envs.trigger` for the rest.
 
-``task_options={"sensor.noise_std": "0.01,0,0.01,0"}`` plays the task with some of its options set
-(:mod:`etmpc.systems.options`; ``etmpc options --task TASK`` lists them), as ``--option`` does on the command line.
+``options={"sensor.noise_std": "0.01,0,0.01,0"}`` plays the task with some of its options set
+(:mod:`etmpc.systems.options`; ``etmpc options --task TASK`` lists them), as ``--option`` does on the command line
+and ``options=`` in :func:`etmpc.evaluate` and :func:`etmpc.score` (``test_set=`` too: the same keywords).
+``task_options=``, its old name, works for this release with a ``DeprecationWarning``. (The constructor's
+``options`` are the task's; ``reset(options={"test_episode": i})`` are gymnasium's, for one episode.)
 
 ``normalize="policies/<task>/ppo.json"`` hands out the observation normalised as that trained policy
 saw it (:class:`~etmpc.envs.normalization.Normalization`: ``VecNormalize``'s statistics, frozen, read
@@ -31,13 +34,14 @@ It works in ``gymnasium.make_vec`` and ``AsyncVectorEnv``: ``reset(seed=S)`` see
 from __future__ import annotations
 
 import os
+import sys
 from collections.abc import Mapping
 
 import gymnasium
 import numpy as np
 from gymnasium import spaces
 
-from etmpc.common.checks import BadValue
+from etmpc.common.checks import BadValue, renamed
 from etmpc.envs.normalization import Normalization
 from etmpc.envs.rendering import HEIGHT, RENDER_MODES, WIDTH, Window, check_render, frames_for, render_modes
 from etmpc.envs.trigger import TriggerEnvironment
@@ -50,6 +54,16 @@ def trigger_spaces(size: int, actions: int = 2) -> tuple[spaces.Box, spaces.Disc
     pickle to the same bytes however they travelled)."""
     top = np.finfo(np.float32).max
     return spaces.Box(-top, top, shape=(size,), dtype=np.float32, seed=0), spaces.Discrete(actions, seed=0)
+
+
+def _maker_level() -> int:
+    """The ``stacklevel`` at which :func:`~etmpc.common.checks.renamed`, called by ``TriggerEnv.__init__``,
+    names the line that made the environment: past gymnasium's own frames (``gymnasium.make``), so that the
+    warning shows where Python shows a ``DeprecationWarning``, in the user's code."""
+    level, frame = 3, sys._getframe(2)  # 3: renamed -> __init__ -> its caller; frame 2: __init__'s caller
+    while frame is not None and frame.f_globals.get("__name__", "").startswith("gymnasium"):
+        level, frame = level + 1, frame.f_back
+    return level
 
 
 class TriggerEnv(gymnasium.Env):
@@ -69,9 +83,12 @@ class TriggerEnv(gymnasium.Env):
         render_mode: str | None = None,
         width: int = WIDTH,
         height: int = HEIGHT,
-        task_options=(),
+        options=None,
         failure_cost: float = 0.0,
+        *,
+        task_options=None,
     ):
+        options = renamed("options", options, "task_options", task_options, required=False, stacklevel=_maker_level())
         check_render(render_mode, width, height)  # before the MPC is built
         self.normalization = None if normalize is None else Normalization.read(normalize, task)  # before the MPC is built
         self.core = TriggerEnvironment(
@@ -79,7 +96,7 @@ class TriggerEnv(gymnasium.Env):
             recompute_price=recompute_price,
             test_set=test_set,
             reward_baseline=reward_baseline,
-            task_options=task_options,
+            options=options,
             failure_cost=failure_cost,
         )
         self.observation_names = self.core.observation_names

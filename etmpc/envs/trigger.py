@@ -139,7 +139,10 @@ class NotPicklable(EtmpcError, TypeError):
 class TriggerEnvironment(dm_env.Environment):
     """The recompute decision of task ``task`` (``DOMAIN`` or ``DOMAIN/TASK``, or a
     :class:`~etmpc.systems.SystemKey`), at ``recompute_price`` per recompute (default: the task's own), with
-    ``task_options`` (a mapping or ``(name, value)`` pairs: :mod:`etmpc.systems.options`). See the module's docstring."""
+    ``options`` (the task's options, a mapping NAME -> value or ``(name, value)`` pairs: :mod:`etmpc.systems.options`;
+    the keyword of :func:`etmpc.evaluate` and :func:`etmpc.score`), on ``test_set`` (a test set file, default the
+    stored one). ``task_options=``, the old name of ``options=``, works for this release with a
+    ``DeprecationWarning``. See the module's docstring."""
 
     def __init__(
         self,
@@ -148,8 +151,10 @@ class TriggerEnvironment(dm_env.Environment):
         recompute_price: float | None = None,
         test_set: str | None = None,
         reward_baseline: str | None = None,
-        task_options=(),
+        options=None,
         failure_cost: float = 0.0,
+        *,
+        task_options=None,
     ):
         if not isinstance(task, (str, SystemKey)):
             raise checks.BadType(f"task: a task name (str) is needed, got {type(task).__name__} {task!r}")
@@ -159,8 +164,10 @@ class TriggerEnvironment(dm_env.Environment):
             raise checks.BadType(f"test_set: a file path is needed, got {type(test_set).__name__} {test_set!r}")
         from etmpc.systems.options import pairs
 
-        task_options = pairs(task_options, "task_options")  # its shape, said in the keyword's name
-        self.key = system_key(task, recompute_price, task_options)  # the task, its price and options, checked here
+        named = "task_options" if task_options is not None else "options"  # a wrong shape is said in the keyword given
+        options = checks.renamed("options", options, "task_options", task_options, required=False)
+        options = pairs(() if options is None else options, named)
+        self.key = system_key(task, recompute_price, options)  # the task, its price and options, checked here
         self.system = self.key.make()
         self.failure_cost = checked_failure_cost(failure_cost, self.system)
         self.actions = 3 if self.system.compute_levels else 2  # Discrete(3) on a task with compute levels

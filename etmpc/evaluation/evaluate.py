@@ -85,14 +85,16 @@ def evaluate(
     repeats: int = 1,
     workers: int | None = None,
     seed: int = 0,
-    testset_path: str | None = None,
+    test_set: str | os.PathLike | None = None,
     progress: bool = True,
     backend: str = "local",
     address: str | None = None,
-    record: str | Path | None = None,
+    record: str | Path | EpisodeSink | None = None,
     recompute_price: float | None = None,
     *,
+    options=None,
     domain: str | SystemKey | None = None,
+    testset_path: str | os.PathLike | None = None,
     recorder: Callable[[Path], EpisodeSink] | None = None,
 ) -> Evaluation:
     """Run every policy on the first ``episodes`` test-set episodes, ``repeats`` times each, on
@@ -104,16 +106,22 @@ def evaluate(
     ``stochastic`` and ``decide(s, rng)``, see :mod:`etmpc.policies.user`), side by side; each is
     named by its spec in the results, and every one meets the same episodes with the same draws.
     With ``record``, also write every episode into that Rerun recording (``.rrd``), opened by ``recorder``
-    (:class:`etmpc.views.recording.Recorder`, which :func:`etmpc.evaluate` gives).
+    (:class:`etmpc.views.recording.Recorder`, which :func:`etmpc.evaluate` gives); or into an open one (an
+    :class:`~etmpc.loop.records.EpisodeSink`: ``Recorder(connect=URL)``, ``Recorder(spawn=True)``), closed at the end.
     ``recompute_price``: the price of a recompute, if not the task's own (it enters every
-    objective, and what rollouts optimise).
+    objective, and what rollouts optimise). ``options`` (the task's, NAME -> value: :mod:`etmpc.systems.options`)
+    and ``test_set`` (a file; default the task's stored one): the keywords of :func:`etmpc.score` and the
+    environments (``testset_path=``, the old name of ``test_set=``, works for this release, deprecated).
 
     Bad arguments, policies and files raise :class:`EtmpcError` with the command line's messages
     (:func:`check_arguments`), before any work; so does a policy's own failure, naming it."""
     task, price = checks.renamed("task", task, "domain", domain), recompute_price
+    test_set = checks.renamed("test_set", test_set, "testset_path", testset_path, required=False)
+    if options is not None and isinstance(task, (str, SystemKey)):  # a SystemKey carries its own: refused
+        task, price = system_key(task, price, options), None
     with interrupts.watching():  # a policy that raises KeyboardInterrupt is its failure, not a Ctrl-C
         return _evaluate(
-            task, policies, episodes, repeats, workers, seed, testset_path, progress, backend, address, record, price, recorder
+            task, policies, episodes, repeats, workers, seed, test_set, progress, backend, address, record, price, recorder
         )
 
 
@@ -131,7 +139,8 @@ def check_arguments(
     if workers is not None:
         checks.argument("workers", checks.workers, workers)
     checks.argument("seed", checks.seed, seed)
-    for name, path in (("testset_path", testset_path), ("record", record)):
+    record = None if isinstance(record, EpisodeSink) else record  # an open recording: checked where it was opened
+    for name, path in (("test_set", testset_path), ("record", record)):
         if path is not None and not isinstance(path, (str, os.PathLike)):
             raise EtmpcError(f"{name}: a file path is needed, got {type(path).__name__} {path!r}")
     if record is not None and Path(record).suffix != ".rrd":
@@ -237,6 +246,8 @@ def _evaluate(
 ) -> Evaluation:
     refuse_in_rerun_main()  # a worker spawned from a script without a __main__ guard, re-running it: not again
     check_arguments(domain, policies, episodes, repeats, workers, seed, testset_path, progress, backend, address, record, price)
+    sink = record if isinstance(record, EpisodeSink) else None  # a recording opened by the caller (a live viewer)
+    record = None if sink is not None else record
     if record is not None and recorder is None:  # the recording's writer is the caller's (etmpc.evaluate gives one)
         raise EtmpcError("record: nothing to write it with: pass recorder=etmpc.views.recording.Recorder, or call etmpc.evaluate")
     key = system_key(domain, price)  # the task and the price, checked once: every worker builds from it
@@ -266,7 +277,7 @@ def _evaluate(
             workers = 1
     # Workers find the stored test set themselves (a cluster node's install may live elsewhere) and
     # check that its digest is the one verified here.
-    sink = recorder(Path(record)) if record is not None else None  # a bad path fails before any work
+    sink = recorder(Path(record)) if record is not None else sink  # a bad path fails before any work
     jobs = [
         (key, testset_path, testset.sha256, spec, parsed[spec], r, e, seed, sink is not None)
         for spec in policies

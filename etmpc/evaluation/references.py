@@ -164,7 +164,7 @@ def _objectives(evaluation: Evaluation, spec: str) -> list[float]:
 
 def build_references(
     task: str | SystemKey,
-    testset_path: str | None = None,
+    test_set: str | None = None,
     workers: int | None = None,
     progress: bool = True,
     say: Callable[[str], None] = lambda line: None,
@@ -181,7 +181,7 @@ def build_references(
     periodic = periodic_schedules(system)
     after = "the oracle and the rollout meter" if meter else "the oracle"
     say(f"{system.name}: references: {len(periodic)} periodic schedules, then {after} over the best")
-    run = dict(episodes=episodes, workers=workers, testset_path=testset_path, progress=progress)
+    run = dict(episodes=episodes, workers=workers, test_set=test_set, progress=progress)
     with stage(f"{system.name}: references: {len(periodic)} periodic schedules"):  # each named in the progress lines
         fixed = evaluate(key, periodic, **run)
     table = {spec: _objectives(fixed, spec) for spec in periodic}

@@ -268,7 +268,7 @@ def play_and_score(
     :class:`~etmpc.systems.SystemKey` with options) and scored; a policy that fails (bad spec, its own error)
     gives a row that says so."""
     try:
-        evaluation = evaluate(task, [policy], refs.episodes, workers=workers, testset_path=test_set, progress=progress)
+        evaluation = evaluate(task, [policy], refs.episodes, workers=workers, test_set=test_set, progress=progress)
     except UnguardedScript:  # the script's error, not the policy's: no row can be played
         raise
     except EtmpcError as exc:  # the row says so (the table shows it): the command's own line says which rows failed

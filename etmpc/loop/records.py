@@ -6,7 +6,7 @@ that played the episode and sent to the process that writes the file, such as
 from __future__ import annotations
 
 from dataclasses import dataclass, field, is_dataclass
-from typing import Protocol
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
@@ -271,10 +271,12 @@ def prediction_errors(traj, error_weights, shift: int = 0) -> np.ndarray:
     return errors
 
 
+@runtime_checkable
 class EpisodeSink(Protocol):
-    """What receives the episodes a run records: a recording being written (a Rerun file,
+    """What receives the episodes a run records: a recording being written (a Rerun file or a live viewer,
     :class:`etmpc.views.recording.Recorder`). Evaluation and learning are given what opens one at a path,
-    a ``Callable[[Path], EpisodeSink]`` (``recorder=``), and know nothing of what it draws."""
+    a ``Callable[[Path], EpisodeSink]`` (``recorder=``), or one already open (``evaluate(record=...)``), and
+    know nothing of what it draws."""
 
     def log_episode(self, record: EpisodeRecord) -> object:
         """Write one episode."""

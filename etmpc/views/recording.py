@@ -11,40 +11,35 @@ from pathlib import Path
 import numpy as np
 
 from etmpc.views import blueprint as look
-from etmpc.common.errors import EtmpcError
 from etmpc.common.sense import sign as sense_sign
 from etmpc.loop import computation_cost
 from etmpc.loop.records import EpisodeRecord
 from etmpc.views.layout import _about, _fan, _slots, _solve_series, _timeline
 from etmpc.views.solves import solve_log
 from etmpc.views.schema import APPLICATION_ID, END_MARKER, episode_root
+from etmpc.views.sinks import Destinations, is_url
 from etmpc.views.space import log_space
 
 
 class Recorder:
-    """Writes episodes into one ``.rrd`` file. The file appears under its name only once it is
-    complete: it is written beside it and renamed on ``close``, after the blueprint (which needs
-    every episode) and an end marker.
+    """Writes episodes into one ``.rrd`` file, and/or streams them to a Rerun viewer: ``connect=URL`` (one
+    running, ``rerun+http://HOST:PORT/proxy``; a URL given as ``path`` is taken so too) or ``spawn=True`` (one
+    started for it): :class:`etmpc.views.sinks.Destinations`, each checked here. The file appears under its
+    name only once it is complete: it is written beside it and renamed on ``close``, after the blueprint
+    (which needs every episode) and an end marker.
 
     Rerun (and the pandas that pyarrow loads on its first numpy array) takes a second or two to
     import: a thread started here imports it while the caller plays its episodes, and the file is
     opened when the first episode comes."""
 
-    def __init__(self, path: str | Path):
-        self.path = Path(path)
-        if self.path.suffix != ".rrd":
-            raise EtmpcError(f"a recording is a .rrd file, got {self.path}")
-        if self.path.is_dir():
-            raise EtmpcError(f"{self.path} is a directory, not a file")
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._tmp = self.path.with_name(f".{self.path.name}.partial")
-        try:
-            self._tmp.touch()  # a path that cannot be written fails here, before any work
-        except OSError as exc:
-            raise EtmpcError(f"cannot write {self.path}: {exc.strerror or exc}") from None
+    def __init__(self, path: str | Path | None = None, *, connect: str | None = None, spawn: bool = False):
+        if is_url(path):  # a viewer's URL where a file's path goes (--record rerun+http://...)
+            path, connect = None, path
         self._imported: list = []
         self._importer = threading.Thread(target=_import_rerun, args=(self._imported,), daemon=True)
         self._importer.start()
+        self.destinations = Destinations(path, connect, spawn, rerun=self._rerun)  # each checked: before any work
+        self.path = self.destinations.path
         self._rr = None
         self._stream = None
         self._policy_parts: dict[tuple[str, str], str] = {}
@@ -59,14 +54,18 @@ class Recorder:
     def __exit__(self, exc_type, *exc):
         self.close(keep=exc_type is None)
 
+    def _rerun(self):
+        """The ``rerun`` module, once the thread has imported it."""
+        self._importer.join()
+        if isinstance(self._imported[0], BaseException):
+            raise self._imported[0]
+        return self._imported[0]
+
     def _open(self):
         if self._stream is None:
-            self._importer.join()
-            if isinstance(self._imported[0], BaseException):
-                raise self._imported[0]
-            self._rr = self._imported[0]
+            self._rr = self._rerun()
             self._stream = self._rr.RecordingStream(APPLICATION_ID)
-            self._stream.save(self._tmp)
+            self.destinations.attach(self._rr, self._stream)
         return self._rr, self._stream
 
     def close(self, keep: bool = True) -> None:
@@ -80,18 +79,14 @@ class Recorder:
             if self._stream is not None:
                 self._stream.flush()
                 self._stream.disconnect()
-            if keep:
-                self._tmp.replace(self.path)
-        except (OSError, RuntimeError) as exc:  # RuntimeError: Rerun's file writer gave up (a full disk)
+        except (OSError, RuntimeError) as exc:  # RuntimeError: Rerun's writer gave up (a full disk, a viewer gone)
             keep = False
-            reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
-            raise EtmpcError(f"cannot write {self.path}: {reason} (is the disk full?)") from None
+            raise self.destinations.failed(exc) from None
         except BaseException:
             keep = False
             raise
         finally:
-            if not keep:
-                self._tmp.unlink(missing_ok=True)
+            self.destinations.finish(keep)
 
     def _policy_part(self, domain: str, policy: str) -> tuple[str, str]:
         """``(label, entity path part)`` of a policy spec: two specs with the same label stay apart."""

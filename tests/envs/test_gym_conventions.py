@@ -306,13 +306,13 @@ def test_a_process_forked_after_drawing_says_it_cannot_draw_rather_than_hang():
 
 
 def test_gymnasium_make_takes_the_tasks_options_and_plays_them_as_evaluate_does():
-    """``task_options`` through ``gymnasium.make``: the environment's system has them, and recomputing at every step
+    """``options`` through ``gymnasium.make``: the environment's system has them, and recomputing at every step
     of a stored test episode returns, summed, what ``etmpc evaluate --option ... --policy always`` reports there."""
     from etmpc.evaluation.evaluate import evaluate
     from etmpc.systems import system_key
 
     options = {"disturbances.kick_scale": "2"}
-    env = gym.make(env_id("cart_pendulum/kicks"), task_options=options)
+    env = gym.make(env_id("cart_pendulum/kicks"), options=options)
     assert env.unwrapped.core.system.config.disturbances.kick_scale == 2.0
     env.reset(options={"test_episode": 0})
     total, done = 0.0, False
@@ -324,4 +324,4 @@ def test_gymnasium_make_takes_the_tasks_options_and_plays_them_as_evaluate_does(
     objective = played.to_json()["runs"][0]["objective"]
     assert -total == pytest.approx(objective, rel=1e-12) and objective != plain.to_json()["runs"][0]["objective"]
     with pytest.raises(EtmpcError, match="unknown option 'disturbances.kick'"):
-        gym.make(env_id("cart_pendulum/kicks"), task_options={"disturbances.kick": "2"})
+        gym.make(env_id("cart_pendulum/kicks"), options={"disturbances.kick": "2"})

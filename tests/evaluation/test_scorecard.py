@@ -46,7 +46,7 @@ def small_battery(tmp_path_factory):
 
 def test_the_two_references_score_exactly_0_and_100(small_battery):
     path, refs = small_battery
-    played = evaluate("battery", [refs.best, refs.oracle_spec], workers=1, testset_path=str(path), progress=False)
+    played = evaluate("battery", [refs.best, refs.oracle_spec], workers=1, test_set=str(path), progress=False)
     best, oracle = task_score(refs, played, refs.best), task_score(refs, played, refs.oracle_spec)
     assert best.score == 0.0 and oracle.score == 100.0
     assert best.episode_scores == [0.0] * 4 and best.better_share == 0.5  # every episode a tie
@@ -54,7 +54,7 @@ def test_the_two_references_score_exactly_0_and_100(small_battery):
 
 def test_a_score_is_the_formula_computed_by_hand(small_battery):
     path, refs = small_battery
-    played = evaluate("battery", ["every:7", "always"], workers=1, testset_path=str(path), progress=False)
+    played = evaluate("battery", ["every:7", "always"], workers=1, test_set=str(path), progress=False)
     profits = {spec: np.array([r.objective for r in played.runs if r.policy == spec]) for spec in ("every:7", "always")}
     best, oracle = np.array(refs.periodic[refs.best]), np.array(refs.oracle)  # the battery's objective is a profit
     for spec, profit in profits.items():
@@ -126,7 +126,7 @@ def test_a_score_from_an_evaluation_is_the_score_from_its_json(small_battery, tm
     from etmpc.common.outputs import write_json
 
     path, refs = small_battery
-    played = evaluate("battery", ["every:5", "threshold:0.02"], workers=1, testset_path=str(path), progress=False)
+    played = evaluate("battery", ["every:5", "threshold:0.02"], workers=1, test_set=str(path), progress=False)
     data = json.loads(write_json(tmp_path / "evaluation.json", played.to_json()).read_text())
     for spec in ("every:5", "threshold:0.02"):
         row, again = task_score(refs, played, spec), task_score(refs, data, spec)

@@ -244,22 +244,22 @@ def test_no_library_in_the_working_folder_is_ever_loaded_through_an_option(tmp_p
 
 
 @pytest.mark.parametrize(
-    "task_options, error, says",
+    "options, error, says",
     [
-        ("sensor.seed=1", BadType, "task_options must be a mapping of option names to values .* got str"),
-        (3, BadType, "task_options must be a mapping .* got int 3"),
-        ([("sensor.seed", "1", "2")], BadType, r"task_options must be a mapping .* got an entry \('sensor.seed', '1', '2'\)"),
+        ("sensor.seed=1", BadType, "options must be a mapping of option names to values .* got str"),
+        (3, BadType, "options must be a mapping .* got int 3"),
+        ([("sensor.seed", "1", "2")], BadType, r"options must be a mapping .* got an entry \('sensor.seed', '1', '2'\)"),
         ({1: 2}, BadType, "an option's name is text, got int 1"),
         ({"sensor.seed": -1}, BadValue, r"option sensor.seed: -1 is not a whole number in 0..2\*\*63-1"),
     ],
 )
-def test_gymnasium_refuses_task_options_of_the_wrong_shape_or_value_when_the_environment_is_made(task_options, error, says):
+def test_gymnasium_refuses_options_of_the_wrong_shape_or_value_when_the_environment_is_made(options, error, says):
     import gymnasium as gym
 
     import etmpc  # noqa: F401 (registers the environments)
 
     with pytest.raises(error, match=says):
-        gym.make("etmpc/cart_pendulum-kicks-v0", task_options=task_options)
+        gym.make("etmpc/cart_pendulum-kicks-v0", options=options)
 
 
 def test_etmpc_options_says_what_each_option_may_be_and_why(capsys):
