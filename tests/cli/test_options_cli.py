@@ -59,7 +59,7 @@ def test_bad_options_are_one_line_and_exit_2(capsys, argv, message):
 
 def test_a_card_scored_with_options_carries_them_and_verifies_its_references_too(tmp_path, capsys):
     card = tmp_path / "card.json"
-    argv = ["score", "every:3", "--task", KICKS, "--episodes", "1", "--workers", "1", "--json", str(card), *NOISE]
+    argv = ["score", "--policy", "every:3", "--task", KICKS, "--episodes", "1", "--workers", "1", "--json", str(card), *NOISE]
     assert main(argv) == 0
     data = json.loads(card.read_text())
     refs = data["references"][KICKS]
