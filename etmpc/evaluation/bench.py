@@ -200,6 +200,7 @@ def benched(domain: str | SystemKey, episodes: int):
     """``domain``'s system and its stored test set, once it is known to hold ``episodes`` (else one line):
     ``etmpc bench`` checks every task's before it times the first."""
     system = system_key(domain).make()
+    ts_mod.check_options_act(system_key(domain), takes_test_set=False)  # it plays the stored test set
     testset = ts_mod.load(ts_mod.default_path(system.domain, system.task), system.domain, system.task)
     if episodes > testset.episodes:
         raise EtmpcError(f"--episodes {episodes}: the {domain} test set has {testset.episodes} episodes")

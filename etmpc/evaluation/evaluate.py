@@ -240,6 +240,7 @@ def _evaluate(
     if record is not None and recorder is None:  # the recording's writer is the caller's (etmpc.evaluate gives one)
         raise EtmpcError("record: nothing to write it with: pass recorder=etmpc.views.recording.Recorder, or call etmpc.evaluate")
     key = system_key(domain, price)  # the task and the price, checked once: every worker builds from it
+    ts_mod.check_options_act(key, testset_path)  # an option the stored episodes cannot feel: refused, not ignored
     system = key.make()
     # Parsed (or checked) once here, so a bad policy fails before any work starts, then sent with each job.
     parsed = parse_policies(system, policies)

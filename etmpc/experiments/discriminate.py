@@ -17,6 +17,7 @@ from __future__ import annotations
 from etmpc.common.progress import stage
 from etmpc.evaluation.evaluate import evaluate
 from etmpc.experiments.pareto import best_periodic, episode_table, versus_front
+from etmpc.evaluation.testsets import check_options_act
 from etmpc.systems import system_key
 
 EPISODES = 30  # the first stored test-set episodes played by default
@@ -37,6 +38,7 @@ def discriminate(
     periodic schedules' range of rates), in that order. ``progress``: each of the two stages' time left on stderr.
     ``options``: the task's (:mod:`etmpc.systems.options`), for both stages."""
     unpriced = system_key(task, None, options)
+    check_options_act(unpriced, takes_test_set=False)  # both stages play the stored test set
     system = unpriced.make()
     price = system.recompute_price if price is None else price
     priced_key = system_key(task, price, options)

@@ -137,6 +137,14 @@ def _set(config: Any, path: list[str], text: str, name: str, known: Iterable[str
     return dataclasses.replace(config, **{head: parsed})
 
 
+def drawn_only(config: Any, options: Iterable[tuple[str, Any]]) -> list[str]:
+    """The names among ``options`` (valid ``(name, value)`` pairs of ``config``'s options) declared ``draws``: they
+    say how episodes are drawn (a rate, a range), so they act on newly drawn episodes only, never on a stored test
+    set's, whose episodes were drawn once and are replayed as they are."""
+    declared = described(config)
+    return [name for name, _ in options if name in declared and declared[name][0].draws]
+
+
 def pairs(options: Any, argument: str = "options") -> list[tuple[str, Any]]:
     """``options`` as ``(name, value)`` pairs: a mapping of option names to values, or an iterable of
     ``(name, value)`` pairs; anything else is a :class:`BadType` naming ``argument`` and the shape it needs."""
