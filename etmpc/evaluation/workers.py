@@ -65,12 +65,16 @@ class Played:
     def record(self, policy: str, announce=None, **extra) -> EpisodeRecord:
         """What a recording keeps of this episode, under the policy's name (``extra``: more identity;
         ``announce``: a self-trigger's, to record what it announced at each solve)."""
+        failures = None if self.system.failures is None else self.system.failures(self.trajectory, self.episode)
         identity = {
             "policy": policy,
             "episode": self.index,
             "repeat": self.repeat,
             "seed": self.seed,
             "test_set_sha256": self.test_set_sha256,
+            # what evaluate's table counts beside the objective, so that etmpc replay shows the same columns
+            "solver_failures": int(self.trajectory.solver_failures),
+            **({} if failures is None else {"failures": float(failures), "failure_name": self.system.failure_name}),
             **extra,
         }
         return EpisodeRecord.from_trajectory(self.system, self.trajectory, identity, self.episode, announce)

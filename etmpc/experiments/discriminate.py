@@ -19,6 +19,7 @@ from etmpc.evaluation.evaluate import evaluate
 from etmpc.experiments.pareto import best_periodic, episode_table, versus_front
 from etmpc.evaluation.testsets import check_options_act
 from etmpc.systems import system_key
+from etmpc.systems.options import options_line
 
 EPISODES = 30  # the first stored test-set episodes played by default
 ROLLOUT_FUTURES, ROLLOUT_HORIZON = 4, 20  # rollout:BEST:K:H, H capped at the task's lookahead
@@ -53,7 +54,8 @@ def discriminate(
         priced = evaluate(priced_key, specs, **common).to_json()
     table = {**episode_table(fixed), **episode_table(priced)}
     rows = {spec: versus_front(table, periodic, spec, system.objective_sense) for spec in events + specs}
-    return {"price": price, "best_periodic": best, "fixed": fixed, "priced": priced, "rows": rows}
+    chosen = dict(unpriced.options)  # the task's options, beside the results (none: the task as it is)
+    return {"price": price, "best_periodic": best, "options": chosen, "fixed": fixed, "priced": priced, "rows": rows}
 
 
 def format_discrimination(task: str, found: dict, episodes: int, seconds: float) -> str:
@@ -61,6 +63,7 @@ def format_discrimination(task: str, found: dict, episodes: int, seconds: float)
     lines = [
         f"{task}: best periodic schedule at price {found['price']:g}: {found['best_periodic']}; {episodes} episodes, "
         f"{seconds:.0f} s",
+        *options_line(found.get("options")),
         f"{'policy':28s} {'recomputes':>12s}  {'gain over the front at its rate':>31s}  better in",
     ]
     for spec, row in found["rows"].items():

@@ -208,6 +208,13 @@ def shown(options: tuple[tuple[str, str], ...]) -> str:
     return " ".join(f"--option {name}={text}" for name, text in options)
 
 
+def options_line(options: Mapping[str, str] | Iterable[tuple[str, str]] | None) -> list[str]:
+    """The line a table starts with when its run was played with options (``options: --option a=1 ...``), in a
+    list to splice into the table's lines; none for the task as it is, whose tables stay as they were."""
+    items = tuple((options or {}).items()) if isinstance(options, Mapping) or options is None else tuple(options)
+    return [f"options: {shown(items)}"] if items else []
+
+
 def check_together(system) -> None:
     """What of a system's Config depends on more than one field or on the plant, checked where the system is made
     (each field alone was checked when its settings were made: :mod:`etmpc.common.declared`): a per-state setting

@@ -228,7 +228,7 @@ def test_a_score_over_fewer_episodes_than_its_ci_needs_says_so_in_one_line_and_t
     assert not any(line.startswith("note:") for line in format_scorecard(whole).splitlines())
     card = Scorecard(["battery", "reacher"], {}, [enough, few, failed_task("battery", "other", "it failed")], [])
     (note,) = [line for line in format_scorecard(card).splitlines() if line.startswith("note:")]
-    assert f"reacher on {CI_EPISODES - 1} episode(s), fewer than the {CI_EPISODES}" in note and "battery" not in note
+    assert f"{CI_EPISODES - 1} episodes on reacher, fewer than the {CI_EPISODES}" in note and "battery" not in note
     assert "note:" not in json.dumps(card.to_json())  # the human-readable output only: the card's fields are its own
 
 
