@@ -25,7 +25,9 @@ def test_score_takes_policy_options_and_the_older_positional_form_gives_the_same
     ]
     assert "deprecated" not in quiet
     lines = [line for line in warned.splitlines() if "deprecated" in line]
-    assert lines == ["etmpc: warning: 'etmpc score every:3 never' is deprecated: say 'etmpc score --policy every:3 --policy never'"]
+    assert lines == [
+        "etmpc: warning: 'etmpc score every:3 never' is deprecated: say 'etmpc score --policy every:3 --policy never'"
+    ]
 
 
 def test_policies_given_both_ways_are_refused_in_one_line(capsys):
