@@ -16,6 +16,7 @@ import numpy as np
 
 from etmpc.evaluation import testsets as ts_mod
 from etmpc.common.errors import EtmpcError
+from etmpc.common import progress
 from etmpc.evaluation.mainscript import missing_main_script
 from etmpc.loop import Trajectory, run_episode
 from etmpc.loop.records import EpisodeRecord
@@ -87,7 +88,9 @@ def play_test_episode(
     ``evaluate``, the evaluations during ``train``, ``render`` and the figures all play an episode."""
     system, env, testset = context(domain, testset_path, sha256)
     stored = system.episode_from_arrays(testset.episode_arrays(episode))  # a bad index raises TestSetError
-    traj = run_episode(system, env, policy, policy_rng(seed, repeat, episode), stored)
+    named = f"episode {episode}" + (f" of {policy.spec}" if isinstance(getattr(policy, "spec", None), str) else "")
+    with progress.episode(named + (f", repeat {repeat}" if repeat else "")):  # what a long episode's lines name
+        traj = run_episode(system, env, policy, policy_rng(seed, repeat, episode), stored)
     return Played(system, env, traj, stored, episode, repeat, seed, testset.sha256)
 
 
