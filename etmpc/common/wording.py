@@ -33,5 +33,32 @@ def interval(bounds, spec: str = ".1f") -> str:
     return f"[{low:{spec}}, {high:{spec}}]" if _finite(low) and _finite(high) else NOT_AVAILABLE
 
 
+# A name's unit suffix (etmpc names carry their unit: ``force_n``, ``vx_m_s``) and the unit it stands for, the
+# longer suffixes first (``_rad_s2`` before ``_rad_s`` before ``_s``).
+_UNITS = (
+    ("_rad_s2", "rad/s²"),
+    ("_rad_s", "rad/s"),
+    ("_m_s", "m/s"),
+    ("_eur_kwh", "EUR/kWh"),
+    ("_rad", "rad"),
+    ("_nm", "N m"),
+    ("_kwh", "kWh"),
+    ("_kw", "kW"),
+    ("_n", "N"),
+    ("_m", "m"),
+    ("_s", "s"),
+)
+
+
+def unit_label(name: str) -> str:
+    """A state's, input's or signal's name as an axis label with its unit, read from the name's suffix:
+    ``vx_m_s`` -> ``vx (m/s)``, ``shoulder_torque_nm`` -> ``shoulder torque (N m)``; a name without a unit suffix
+    as its words."""
+    for suffix, unit in _UNITS:
+        if name.endswith(suffix) and len(name) > len(suffix):
+            return f"{name.removesuffix(suffix).replace('_', ' ')} ({unit})"
+    return name.replace("_", " ")
+
+
 def _finite(value) -> bool:
     return value is not None and math.isfinite(value)

@@ -33,7 +33,7 @@ from etmpc.evaluation.evaluate import evaluate, parse_policies
 from etmpc.evaluation.inputs import check_run_outputs, run_inputs
 from etmpc.evaluation.testsets import check_options_act
 from etmpc.systems import system_class, system_key
-from etmpc.systems.options import canonical, settable, shown, split
+from etmpc.systems.options import canonical, described, settable, shown, split
 
 FORMAT = "etmpc-robustness"
 FILES = ("robustness.json", "robustness.png", "ROBUSTNESS.md")  # what a curve writes into its folder
@@ -129,6 +129,7 @@ def robustness(
         "task": system.name,
         "option": option,
         "default": canonical(settable(system_class(task).Config())[option]),
+        "unit": described(system_class(task).Config())[option][0].unit,  # the option's, for the figure's axis
         "fixed": dict(keys[0].options) | {option: None},
         "objective_sense": sense,
         "against": against,
