@@ -20,7 +20,7 @@ from etmpc.common import progress
 from etmpc.evaluation.mainscript import missing_main_script
 from etmpc.loop import Trajectory, run_episode
 from etmpc.loop.records import EpisodeRecord
-from etmpc.systems import make_system, system_key
+from etmpc.systems import make_system
 
 _CONTEXTS: dict = {}
 
@@ -32,8 +32,6 @@ def context(domain: str, testset_path: str | None = None, sha256: str | None = N
     key = (domain, testset_path, sha256)
     if key not in _CONTEXTS:
         system = make_system(domain)
-        # render and figure play their episode here: an option the stored episodes cannot feel is refused
-        ts_mod.check_options_act(system_key(domain), testset_path, takes_test_set=False)
         path = testset_path or ts_mod.default_path(system.domain, system.task)
         testset = ts_mod.load(path, system.domain, system.task)
         if sha256 is not None and testset.sha256 != sha256:

@@ -97,3 +97,13 @@ def test_the_test_set_the_refusal_names_is_drawn_with_the_option_and_is_then_acc
     capsys.readouterr()
     assert main([*PLAYING["evaluate"], *RATE, "--test-set", drawn, "--workers", "1"]) == 0
     assert "every:3" in capsys.readouterr().out
+
+
+def test_training_which_draws_its_episodes_still_takes_such_an_option():
+    """The learners build their episodes' system through the worker's context (and draw new episodes from it):
+    the check belongs to what plays the stored test set, not there."""
+    from etmpc.evaluation.workers import context
+
+    key = system_key(KICKS, None, {"disturbances.kicks_per_s": 3})
+    system, _, _ = context(key)
+    assert system.config.disturbances.kicks_per_s == 3.0
