@@ -170,7 +170,7 @@ def test_a_card_round_trips_through_its_json_missing_numbers_included(tmp_path):
     unmeasured = format_scorecard(Scorecard(["battery"], {}, [replace(rows[0], cpu_ms={})], []))
     assert unmeasured.splitlines()[3].split()[-4:] == ["-", "-", "-", "-"]  # CPU not measured: no numbers
     shown = format_scorecard(card).splitlines()
-    assert f"1.33 ± {rows[0].failures_ci95:.2f}" in shown[3] and "2.00 ± -" in shown[4]  # failures per episode, mean ± 95 % CI
+    assert f"1.33 ± {rows[0].failures_ci95:.2f}" in shown[3] and "2.00 ± n/a" in shown[4]  # failures per episode, mean ± 95 % CI
 
 
 def test_a_card_row_of_an_older_etmpc_without_the_failures_ci_and_counts_still_loads():
