@@ -30,6 +30,7 @@ import time
 
 import numpy as np
 
+from etmpc.common.wording import counted
 from etmpc.evaluation import testsets as ts_mod
 from etmpc.common.errors import EtmpcError
 from etmpc.loop import Snapshot, play_on, run_episode
@@ -248,8 +249,8 @@ def run_bench(
 
 def format_bench(f: dict) -> str:
     lines = [
-        f"{f.get('task', f['domain'])}{''.join(f' --option {k}={v}' for k, v in f.get('options', {}).items())}: {f['episodes']} "
-        "test-set episodes per policy, single process",
+        f"{f.get('task', f['domain'])}{''.join(f' --option {k}={v}' for k, v in f.get('options', {}).items())}: "
+        f"{counted(f['episodes'], 'test-set episode')} per policy, single process",
         f"MPC solve          median {f['mpc_solve']['median_ms']:.3f} ms   p90 {f['mpc_solve']['p90_ms']:.3f} ms   "
         f"({f['mpc_solve']['samples']} solves)",
         f"rest of a step     median {f['rest_of_step']['median_us']:.1f} us   p90 {f['rest_of_step']['p90_ms'] * 1e3:.1f} us"

@@ -14,6 +14,7 @@ excludes 0 (docs/adding-a-task.md, step 8).
 
 from __future__ import annotations
 
+from etmpc.common.wording import counted
 from etmpc.common.progress import stage
 from etmpc.evaluation.evaluate import evaluate
 from etmpc.experiments.pareto import best_periodic, episode_table, versus_front
@@ -61,7 +62,7 @@ def discriminate(
 def format_discrimination(task: str, found: dict, episodes: int, seconds: float) -> str:
     """The table ``etmpc discriminate`` prints: one line per state-dependent policy."""
     lines = [
-        f"{task}: best periodic schedule at price {found['price']:g}: {found['best_periodic']}; {episodes} episodes, "
+        f"{task}: best periodic schedule at price {found['price']:g}: {found['best_periodic']}; {counted(episodes, 'episode')}, "
         f"{seconds:.0f} s",
         *options_line(found.get("options")),
         f"{'policy':28s} {'recomputes':>12s}  {'gain over the front at its rate':>31s}  better in",
