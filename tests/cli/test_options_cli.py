@@ -132,4 +132,4 @@ def test_bench_times_the_task_with_its_options(capsys):
 
     figures = run_bench(system_key("battery", None, {"horizon": "12"}), episodes=1, references=False)
     assert figures["options"] == {"horizon": "12"} and figures["mpc_solve"]["samples"] > 0
-    assert format_bench(figures).splitlines()[0].startswith("battery/trading --option horizon=12: 1 test-set episodes")
+    assert format_bench(figures).splitlines()[0].startswith("battery/trading --option horizon=12: 1 test-set episode per policy")
