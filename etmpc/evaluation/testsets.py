@@ -44,7 +44,8 @@ def check_options_act(key, test_set: str | Path | None = None, takes_test_set: b
     episodes are replayed as they were drawn, so the run would be the task's own under another name. The line
     says how to draw a test set where they act, and where to play it (``takes_test_set``: the caller takes one;
     else evaluate and score do). Every command and function that plays a test set with options
-    calls this one check (evaluate, score, robustness, render, bench, discriminate, figure, sweep)."""
+    calls this one check (evaluate, score, robustness, render, bench, discriminate, figure, sweep, and the
+    Gymnasium environment's test episodes); what draws its own episodes (testset, the learners) does not."""
     from etmpc.systems import system_class
     from etmpc.systems.options import drawn_only, shown
 
