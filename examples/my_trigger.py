@@ -11,7 +11,7 @@ task's observation. The same trigger from the command line, in this folder:
     etmpc evaluate --task cart_pendulum --policy every:3 --policy threshold:0.3 --policy py:my_trigger:AngleOrAge \\
         --against every:3
 
-``DriftOrAge`` below reads nothing task-specific: ``etmpc score py:my_trigger:DriftOrAge`` scores it on
+``DriftOrAge`` below reads nothing task-specific: ``etmpc score --policy py:my_trigger:DriftOrAge`` scores it on
 every task of the suite against the stored references.
 """
 
@@ -43,7 +43,7 @@ class DriftOrAge:
     """For any task: recompute when the state has drifted from the plan's prediction by more than
     ``relative`` of its size, or the plan is old. Score it on the whole suite, in this folder:
 
-        etmpc score py:my_trigger:DriftOrAge
+        etmpc score --policy py:my_trigger:DriftOrAge
     """
 
     spec: str = "py:my_trigger:DriftOrAge"

@@ -11,6 +11,7 @@ from etmpc.cli import discriminate, figures, legacy, scoring, suite, training
 from etmpc.cli.recording import file_of, recorded, viewer
 from etmpc.cli.output import check_backend as _check_backend, distinct_policies as _distinct_policies, say as _say
 from etmpc.common.errors import EtmpcError
+from etmpc.common.wording import counted
 from etmpc.common.progress import Progress
 from etmpc.common.outputs import write_json
 
@@ -130,7 +131,9 @@ def _render(args) -> None:
         )
     except ValueError as exc:
         raise EtmpcError(" ".join(str(exc).split())) from None
-    print(f"wrote {result.path}: {result.frames} frames at {result.fps:g} fps, {result.trajectory.recomputes} recomputes")
+    print(
+        f"wrote {result.path}: {result.frames} frames at {result.fps:g} fps, {counted(result.trajectory.recomputes, 'recompute')}"
+    )
     if args.record is not None:
         print(f"wrote {args.record}" if file_of(args.record) else f"streamed the episode to {args.record}")
 
@@ -183,7 +186,7 @@ def _verify(args) -> None:
         raise EtmpcError(f"card {args.card} does not verify: {len(verdict.mismatches)} mismatch(es), listed above")
     print(
         f"verified: card {args.card}: {verdict.rows} rows; every number it states follows from its episodes, "
-        f"and {verdict.replayed} episodes replayed give the card's numbers bit for bit"
+        f"and {counted(verdict.replayed, 'episode')} replayed give the card's numbers bit for bit"
         + (f"; the references of {', '.join(verdict.rebuilt)} (scored with options) rebuilt in full" if verdict.rebuilt else "")
     )
 
@@ -196,7 +199,7 @@ def _testset(args) -> None:
     key = system_key(args.task, options=args.options)  # a world's options (its disturbances) change the draws
     digest = draw(key.make(), args.seed, args.episodes, args.out)
     print(
-        f"wrote {args.out} and {args.out}.sha256 ({args.episodes} episodes of {key}, seed {args.seed}, "
+        f"wrote {args.out} and {args.out}.sha256 ({counted(args.episodes, 'episode')} of {key}, seed {args.seed}, "
         f"sha256 {digest}); use it with --test-set {args.out}" + (" and the same options" if key.options else "")
     )
 

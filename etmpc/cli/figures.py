@@ -8,6 +8,7 @@ from pathlib import Path
 from etmpc.cli.tasks import task_option
 from etmpc.cli import types
 from etmpc.cli.output import distinct_policies
+from etmpc.common.wording import counted
 from etmpc.policies.specs import syntax
 
 KINDS = ("forecasts", "trajectory", "bars")
@@ -92,8 +93,8 @@ def _trajectory(args) -> None:
     _check({"--out": out}, run_inputs([args.policy]))
     drawn = figures.trajectory(out, key, args.policy, args.episode, args.seed)
     print(
-        f"episode {args.episode} under {args.policy}: objective {drawn.objective!r}, {drawn.recomputes} recomputes, "
-        f"{drawn.solver_failures} solver failures"
+        f"{key}: episode {args.episode} under {args.policy}: objective {drawn.objective:.5f}, "
+        f"{counted(drawn.recomputes, 'recompute')}, {counted(drawn.solver_failures, 'solver failure')}"
     )
     print(f"wrote {out}")
 

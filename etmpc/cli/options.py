@@ -6,11 +6,12 @@ Every type refuses bad input with a one-line message (argparse's errors become :
 from __future__ import annotations
 
 import argparse
+from contextlib import contextmanager
 from pathlib import Path
 
 from etmpc.cli.tasks import task_option
 from etmpc.cli import discriminate, figures, scoring, training, types
-from etmpc.cli.output import backend_arguments
+from etmpc.cli.output import LazyHelp, backend_arguments, task_prices
 from etmpc.cli import suite
 from etmpc.common.errors import EtmpcError
 from etmpc.policies.specs import syntax
@@ -27,8 +28,30 @@ def _version() -> str:
 
 
 class _Parser(argparse.ArgumentParser):
+    """etmpc's parser: an error is one line (exit code 2), and an argument marked ``shown_required`` (``--task``,
+    which the older positional form may give instead) is shown as required, without brackets, in the usage."""
+
     def error(self, message: str):  # one line, exit code 2
         raise EtmpcError(message)
+
+    def format_usage(self) -> str:
+        with self._required_shown():
+            return super().format_usage()
+
+    def format_help(self) -> str:
+        with self._required_shown():
+            return super().format_help()
+
+    @contextmanager
+    def _required_shown(self):
+        marked = [action for action in self._actions if getattr(action, "shown_required", False)]
+        for action in marked:
+            action.required = True
+        try:
+            yield
+        finally:
+            for action in marked:
+                action.required = False
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -60,8 +83,7 @@ def build_parser() -> argparse.ArgumentParser:
         type=types.price,
         default=None,
         metavar="P",
-        help="price of a recompute in the objective (default: the task's, 5e-5 for the cart "
-        "pendulum, 0 for the battery, whose computer draws eta_c from the battery)",
+        help=LazyHelp(lambda: f"price of a recompute in the objective (default: the task's own: {task_prices()})"),
     )
     ev.add_argument("--test-set", default=None, metavar="PATH", help="test set file (default: the stored one)")
     ev.add_argument("--json", type=types.json_path, default=None, metavar="PATH", help="write the results as JSON")
@@ -139,10 +161,10 @@ def build_parser() -> argparse.ArgumentParser:
     task_option(rn, tasks, "the task to render (one with a 3-D scene: a task without one, such as the battery, says so)")
     rn.add_argument("--policy", required=True, metavar="SPEC", help=f"the policy that plays it: {syntax()}")
     rn.add_argument("--episode", type=types.index, default=0, help="test-set episode (default 0)")
-    rn.add_argument("--out", type=Path, required=True, metavar="FILE.mp4")
+    rn.add_argument("--out", type=Path, required=True, metavar="FILE.mp4", help="the video to write (a new .mp4 file)")
     rn.add_argument("--seed", type=types.seed, default=0, help="seed of the policy's own randomness, as in evaluate")
-    rn.add_argument("--width", type=types.positive_int, default=640)
-    rn.add_argument("--height", type=types.positive_int, default=480)
+    rn.add_argument("--width", type=types.positive_int, default=640, metavar="PIXELS", help="frame width (default 640)")
+    rn.add_argument("--height", type=types.positive_int, default=480, metavar="PIXELS", help="frame height (default 480)")
     rn.add_argument("--fps", type=types.fps, default=None, help="frames per second (default: one frame per control interval)")
     rn.add_argument(
         "--record",
@@ -157,7 +179,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="check a scorecard (etmpc score --json) by replaying a seeded sample of its "
         "episodes bit for bit (and rebuilding the references of a task scored with options): one line per mismatch",
     )
-    vf.add_argument("card", type=Path, metavar="CARD.json")
+    vf.add_argument("card", type=Path, metavar="CARD.json", help="the scorecard to check (etmpc score --json)")
     vf.add_argument(
         "--sample",
         type=types.non_negative_int,
@@ -188,7 +210,7 @@ def build_parser() -> argparse.ArgumentParser:
     tst.add_argument("--out", type=Path, required=True, metavar="FILE.npz", help="a new file (never overwritten)")
 
     rp = sub.add_parser("replay", help="summarise a Rerun recording: objective, recomputes, prediction errors")
-    rp.add_argument("recording", type=Path, metavar="PATH.rrd")
+    rp.add_argument("recording", type=Path, metavar="PATH.rrd", help="a recording of etmpc evaluate --record")
     rp.add_argument("--per-episode", action="store_true", help="one line per episode, not only per policy")
     rp.add_argument("--json", type=types.json_path, default=None, metavar="PATH", help="write every episode's figures as JSON")
 
@@ -204,7 +226,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     rb = sub.add_parser(
         "robustness",
-        help="score triggers across a range of one of a task's options (noise, gusts): robustness.json, .png, ROBUSTNESS.md",
+        help="score policies across a range of one of a task's options (noise, gusts): robustness.json, .png, ROBUSTNESS.md",
     )
     task_option(rb, tasks, "the task to play")
     rb.add_argument(

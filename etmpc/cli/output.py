@@ -19,6 +19,29 @@ def warn(line: str) -> None:
     print(f"etmpc: warning: {line}", file=sys.stderr, flush=True)
 
 
+class LazyHelp(str):
+    """A help text made only when the help is shown (argparse expands it with ``%``): ``make()`` may read the
+    registry and import the tasks, which ``etmpc --help`` and every command's parsing must not."""
+
+    def __new__(cls, make):
+        text = super().__new__(cls, "(made when shown)")
+        text.make = make
+        return text
+
+    def __mod__(self, params):
+        return self.make().replace("%", "%%") % params
+
+
+def task_prices() -> str:
+    """Each task's own price of a recompute, from the registry: ``5e-05 on cart_pendulum/balance; 0.1 on ...``."""
+    from etmpc.systems import names, system_class
+
+    by_price: dict[float, list[str]] = {}
+    for task in names():
+        by_price.setdefault(system_class(task).Config().recompute_price, []).append(task)
+    return "; ".join(f"{price:g} on {', '.join(tasks)}" for price, tasks in by_price.items())
+
+
 def backend_arguments(parser) -> None:
     from etmpc.evaluation.backends import BACKENDS
 

@@ -6,15 +6,19 @@ for the leaderboard. This module sits with the command line, on top: it may impo
 
 from __future__ import annotations
 
+import argparse
+import shlex
 from pathlib import Path
 
 from etmpc.cli.tasks import task_option
 from etmpc.cli import types
-from etmpc.cli.output import distinct_policies as _distinct_policies, say as _say
+from etmpc.cli.output import distinct_policies as _distinct_policies, say as _say, warn
 from etmpc.common.errors import EtmpcError
+from etmpc.policies.specs import syntax
 
 REFERENCES_OUT = Path("results") / "references"  # where --references writes, unless --out says
 LEADERBOARD_OUT = Path("docs")
+_OLD_POLICIES = "given_policies"  # where the older form's positional policies land
 
 
 class _LeaderboardHelp(str):
@@ -36,11 +40,13 @@ def add_parser(sub, tasks: str) -> None:
     """The ``score`` subcommand's options, on the command line's subparsers ``sub``."""
     sc = sub.add_parser("score", help="score policies on every task against the suite's fixed references: the scorecard")
     sc.add_argument(
-        "policy",
-        nargs="*",
+        "--policy",
+        action="append",
+        default=None,
         metavar="SPEC",
-        help="policies to score: any --policy spec of evaluate (py:MODULE:NAME for your own, sb3:PATH, ...)",
+        help=f"a policy to score (repeatable): {syntax()} (py:MODULE:NAME for your own)",
     )
+    sc.add_argument(_OLD_POLICIES, nargs="*", default=None, metavar="SPEC", help=argparse.SUPPRESS)  # the older form
     task_option(sc, tasks, many=True, positional=False)
     sc.add_argument(
         "--test-set",
@@ -115,8 +121,21 @@ def add_parser(sub, tasks: str) -> None:
     )
 
 
+def policies(args) -> list[str]:
+    """The policies to score: ``--policy SPEC``s, or those given positionally as an older etmpc took them (for one
+    release, with one deprecation line saying what to write instead); never both."""
+    old = getattr(args, _OLD_POLICIES, None) or []
+    if old and args.policy:
+        raise EtmpcError("give the policies once, each as --policy SPEC")
+    if old:
+        new = " ".join(f"--policy {shlex.quote(spec)}" for spec in old)
+        warn(f"'etmpc score {' '.join(shlex.quote(spec) for spec in old)}' is deprecated: say 'etmpc score {new}'")
+    return list(args.policy or old)
+
+
 def run(args) -> None:
     """``etmpc score``: the scorecard, ``--references`` or ``--leaderboard``."""
+    args.policy = policies(args)
     from etmpc.evaluation.inputs import check_run_outputs, run_inputs
     from etmpc.evaluation.references import build_references, references_path, replay_meter, write_references
     from etmpc.evaluation.scorecard import format_scorecard, score
@@ -133,7 +152,9 @@ def run(args) -> None:
         raise EtmpcError("--readme and --card are --leaderboard's")
     if args.references:
         if args.policy or args.test_set is not None or args.json is not None or args.figure is not None:
-            raise EtmpcError("--references rebuilds the stored references only: no SPEC, --test-set, --json or --figure with it")
+            raise EtmpcError(
+                "--references rebuilds the stored references only: no --policy, --test-set, --json or --figure with it"
+            )
         out = args.out or REFERENCES_OUT
         files = [f"{folder_name(task)}/references.json" for task in tasks]  # every task's, checked before the first is built
         check_run_outputs({}, {"--out": out}, writes={"--out": files})
@@ -145,7 +166,7 @@ def run(args) -> None:
     if args.out is not None:
         raise EtmpcError("--out is --leaderboard's and --references'")
     if not args.policy:
-        raise EtmpcError("give at least one policy to score (a SPEC such as every:3 or py:MODULE:NAME)")
+        raise EtmpcError("give at least one policy to score: --policy SPEC (such as every:3 or py:MODULE:NAME)")
     _distinct_policies(args.policy)
     check_run_outputs({"--json": args.json, "--figure": args.figure}, inputs=run_inputs(args.policy, args.test_set))
     if args.test_set is not None and not Path(args.test_set).is_file():
@@ -184,7 +205,7 @@ def _leaderboard(args, tasks: list[str]) -> None:
 
     if args.policy or args.references or args.test_set is not None or args.json is not None or args.figure is not None:
         raise EtmpcError(
-            "--leaderboard scores the built-in policies on the stored test sets: no SPEC, --references, "
+            "--leaderboard scores the built-in policies on the stored test sets: no --policy, --references, "
             "--test-set, --json or --figure with it"
         )
     out = args.out or LEADERBOARD_OUT

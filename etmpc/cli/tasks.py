@@ -22,18 +22,21 @@ def task_option(parser, tasks: str, what: str = "the task", many: bool = False, 
         every = f"only this task ({tasks}; repeatable; default: every task)"
         parser.add_argument("--task", action="append", default=None, metavar="TASK", help=every)
     else:
-        parser.add_argument("--task", default=None, metavar="TASK", help=f"{what} (required): {tasks}")
+        given = parser.add_argument("--task", default=None, metavar="TASK", required=not positional, help=f"{what}: {tasks}")
+        given.shown_required = positional  # shown required in the usage; the older form may give it instead (resolve)
     if positional:
         parser.add_argument(_OLD, nargs="*" if many else "?", default=None, metavar="TASK", help=argparse.SUPPRESS)
     parser.add_argument(
-        "--option",
-        action="append",
-        default=None,
-        metavar="NAME=VALUE",
-        help="set one of the task's options (repeatable; e.g. sensor.noise_std=0.01; `etmpc options --task TASK` "
-        f"lists them){'' if parser.prog.split()[1] in TAKES_OPTIONS else ' (not taken by this command yet)'}",
+        "--option", action="append", default=None, metavar="NAME=VALUE", help=_option_help(parser.prog.split()[1])
     )
     parser.set_defaults(task_many=many)
+
+
+def _option_help(command: str) -> str:
+    if command == "options":
+        return "set one of the task's options, to see what it is set to and what it may be (repeatable)"
+    where = "`etmpc options --task TASK` lists them" + ("" if command in TAKES_OPTIONS else "; not taken by this command yet")
+    return f"set one of the task's options (repeatable; e.g. horizon=15; {where})"
 
 
 #: The commands that play a task with its options (``--option``); the others refuse them, saying so.

@@ -23,6 +23,12 @@ new one shows nothing (no bar over a bar). :func:`stage` names the part of a com
 stage("cart_pendulum: DPI training"): ...``) in the lines of the trackers opened inside it, and
 :func:`command` names the command (``etmpc score``) at the start of every line.
 
+**Within an episode.** A single episode can run for minutes (a rollout that simulates to the episode's end at
+each decision). :class:`EpisodeSteps` counts its steps and, once the episode has run :data:`FIRST_LINE_AFTER`
+seconds, says where it is every :data:`EVERY` seconds (``etmpc evaluate: episode 0 of rollout:every:7: step
+40/600, 0:31 elapsed, about 7:15 left``), above the bar if one shows, in whichever process plays it; a shorter
+episode says nothing. :func:`episode` names the episode in those lines.
+
 Progress changes nothing but stderr: no number, no file. Tests drive it with a fake ``clock`` and ``stream``.
 """
 
@@ -43,6 +49,7 @@ MEASURED = 5.0  # seconds of work since the first unit before there is a rate (r
 _COMMAND: ContextVar[str] = ContextVar("etmpc_progress_command", default="etmpc")
 _STAGES: ContextVar[tuple[str, ...]] = ContextVar("etmpc_progress_stages", default=())
 _OPEN: ContextVar[Progress | None] = ContextVar("etmpc_progress_open", default=None)
+_EPISODE: ContextVar[str] = ContextVar("etmpc_progress_episode", default="an episode")
 
 
 @contextmanager
@@ -225,3 +232,38 @@ class Progress:
     def _print(self, line: str) -> None:
         self._said += 1
         print(line, file=self._stream, flush=True)
+
+
+@contextmanager
+def episode(name: str) -> Iterator[None]:
+    """Within it, an episode's step lines name it (``episode 3 of every:3``) rather than ``an episode``."""
+    token = _EPISODE.set(name)
+    try:
+        yield
+    finally:
+        _EPISODE.reset(token)
+
+
+class EpisodeSteps:
+    """The steps of one episode (``total``), counted with :meth:`update`: once the episode has run
+    :data:`FIRST_LINE_AFTER` seconds, a line on stderr every :data:`EVERY` seconds with the step it is at and
+    its time left at the rate so far (see the module). ``clock`` and ``stream`` are for tests."""
+
+    def __init__(self, total: int, clock: Callable[[], float] = time.monotonic, stream=None):
+        self.n, self.total = 0, int(total)
+        self._clock, self._stream = clock, stream
+        self._started = clock()
+        self._next = self._started + FIRST_LINE_AFTER
+
+    def update(self) -> None:
+        """One more step done (a clock read: nothing else unless a line is due)."""
+        self.n += 1
+        now = self._clock()
+        if now >= self._next and self.n < self.total:
+            self._next = now + EVERY
+            elapsed = now - self._started
+            left = (self.total - self.n) * elapsed / self.n
+            title = ": ".join([_COMMAND.get(), *_STAGES.get(), _EPISODE.get()])
+            say(
+                f"{title}: step {self.n}/{self.total}, {clock_time(elapsed)} elapsed, about {clock_time(left)} left", self._stream
+            )

@@ -105,7 +105,9 @@ def _described(name: str) -> tuple[str, str]:
         return "state estimator (extended Kalman filter)", "a few seconds"
     base = name.removesuffix("_linearise")
     what = f"{base.removesuffix('_mpc')} MPC" if base.endswith("_mpc") else f"{name} code"
-    return what, "about 20-30 s"
+    # Measured cold (an empty ETMPC_CACHE_DIR, a 2-core machine at load 2): the cart pendulum's 6-7 s, its kicks'
+    # 12 s (14 s with compute levels), the quadrotor's 10 s, the reacher's 38 s.
+    return what, "about 5-40 s"
 
 
 def library_for(function: ca.Function | Sequence[ca.Function], cache: Path | None = None) -> Path:
@@ -137,7 +139,7 @@ def library_for(function: ca.Function | Sequence[ca.Function], cache: Path | Non
             with contextlib.suppress(FileNotFoundError):
                 digest_file.unlink()  # the library is about to change: its old digest must not vouch for it
             # Said by the one process that builds (under the lock: another that waited finds it built), so a
-            # first run is not silent for the half minute a build takes.
+            # first run is not silent for the seconds a build takes.
             what, how_long = _described(name)
             print(f"etmpc: compiling the {what} to C once ({how_long}; cached in {cache})", file=sys.stderr, flush=True)
             _build(source, library, digest_file, cc)

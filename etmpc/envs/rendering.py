@@ -28,6 +28,7 @@ import numpy as np
 from etmpc.common.display import check_display, render
 from etmpc.common.checks import BadType, BadValue
 from etmpc.common.errors import EtmpcError
+from etmpc.common.wording import unit_label
 
 RENDER_MODES = ("rgb_array", "human")
 HUMAN_MIN_FPS = 10.0  # "human" shows a task whose control interval is longer than 0.1 s faster than real time
@@ -139,7 +140,7 @@ class ChartFrames:
         self._panels = []
         for ax, (kind, name) in zip(axes, panels):
             ax.set_xlim(0, system.episode_steps)
-            ax.set_ylabel(name, fontsize=7)
+            ax.set_ylabel(unit_label(name), fontsize=7)
             ax.tick_params(labelsize=6)
             ax.grid(True, linewidth=0.3)
             ticks = blended_transform_factory(ax.transData, ax.transAxes)  # x a step, y a fraction of the panel

@@ -286,6 +286,7 @@ class TriggerEnvironment(dm_env.Environment):
     def test_episode(self, index: int):
         """Episode ``index`` of the stored test set (or of ``test_set``)."""
         if self._test_set is None:
+            testsets.check_options_act(self.key, self._test_set_path)  # its training episodes are drawn: they feel them
             path = self._test_set_path or testsets.default_path(self.system.domain, self.system.task)
             test_set = testsets.load(path, self.system.domain, self.system.task)
             test_set.check_playable(self.system, self.loop.env.task)  # a bad episode is refused here, named

@@ -37,6 +37,7 @@ import time
 
 import numpy as np
 
+from etmpc.common.wording import counted
 from etmpc.evaluation import testsets as ts_mod
 from etmpc.common.errors import EtmpcError
 from etmpc.loop import Snapshot, play_on, run_episode
@@ -252,6 +253,7 @@ def benched(domain: str | SystemKey, episodes: int):
     """``domain``'s system and its stored test set, once it is known to hold ``episodes`` (else one line):
     ``etmpc bench`` checks every task's before it times the first."""
     system = system_key(domain).make()
+    ts_mod.check_options_act(system_key(domain), takes_test_set=False)  # it plays the stored test set
     testset = ts_mod.load(ts_mod.default_path(system.domain, system.task), system.domain, system.task)
     if episodes > testset.episodes:
         raise EtmpcError(f"--episodes {episodes}: the {domain} test set has {testset.episodes} episodes")
@@ -313,8 +315,8 @@ def _budget_lines(b: dict) -> list[str]:
 
 def format_bench(f: dict) -> str:
     lines = [
-        f"{f.get('task', f['domain'])}{''.join(f' --option {k}={v}' for k, v in f.get('options', {}).items())}: {f['episodes']} "
-        "test-set episodes per policy, single process",
+        f"{f.get('task', f['domain'])}{''.join(f' --option {k}={v}' for k, v in f.get('options', {}).items())}: "
+        f"{counted(f['episodes'], 'test-set episode')} per policy, single process",
         f"MPC solve          median {f['mpc_solve']['median_ms']:.3f} ms   p90 {f['mpc_solve']['p90_ms']:.3f} ms   "
         f"({f['mpc_solve']['samples']} solves)",
         f"rest of a step     median {f['rest_of_step']['median_us']:.1f} us   p90 {f['rest_of_step']['p90_ms'] * 1e3:.1f} us"

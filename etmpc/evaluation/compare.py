@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from etmpc.common.wording import spread
 from etmpc.common.errors import EtmpcError
 from etmpc.evaluation import metrics
 
@@ -102,10 +103,10 @@ def format_against(evaluation: dict, reference: str) -> str:
     ]
     for spec, r in rows.items():
         label = spec + (" (oracle)" if r["clairvoyant"] else "")
-        failures = f"{r['failures']['difference']:>+11.2f} ± {r['failures']['ci95']:<5.2f}" if counted else ""
+        failures = f"{r['failures']['difference']:>+11.2f} ± {spread(r['failures']['ci95']):<5}" if counted else ""
         lines.append(
-            f"{label:<{width}}{r['objective_mean']:>12.5f}{r['mean_difference']:>+13.5f}{r['ci95']:>11.5f}"
-            f"{r['gain_percent']:>+9.2f}{r['gain_percent_ci95']:>7.2f}{r['better_episodes']:>5d}/{r['episodes']:<3d}"
+            f"{label:<{width}}{r['objective_mean']:>12.5f}{r['mean_difference']:>+13.5f}{spread(r['ci95'], '.5f'):>11}"
+            f"{r['gain_percent']:>+9.2f}{spread(r['gain_percent_ci95']):>7}{r['better_episodes']:>5d}/{r['episodes']:<3d}"
             f"{r['recomputes_mean']:>12.2f}{failures}"
         )
     if counted:

@@ -21,12 +21,14 @@ from etmpc.common.progress import Progress
 from etmpc.common.errors import EtmpcError
 from etmpc.common.interrupts import described, genuine
 from etmpc.common.outputs import check_inputs
+from etmpc.common.wording import counted
 from etmpc.common.sense import higher_or_lower, oriented
 from etmpc.policies import parse_policy
 from etmpc.policies.specs import names_a_kind
 from etmpc.policies.user import checked
 from etmpc.loop.records import EpisodeRecord, EpisodeSink
 from etmpc.systems import SystemKey, has_levels, system_key
+from etmpc.systems.options import options_line
 from etmpc.evaluation.inputs import check_run_outputs, check_shipped, run_inputs
 from etmpc.evaluation.mainscript import refuse_in_rerun_main, unimportable_main
 from etmpc.evaluation.backends import BACKENDS, make_backend
@@ -251,6 +253,7 @@ def _evaluate(
     if record is not None and recorder is None:  # the recording's writer is the caller's (etmpc.evaluate gives one)
         raise EtmpcError("record: nothing to write it with: pass recorder=etmpc.views.recording.Recorder, or call etmpc.evaluate")
     key = system_key(domain, price)  # the task and the price, checked once: every worker builds from it
+    ts_mod.check_options_act(key, testset_path)  # an option the stored episodes cannot feel: refused, not ignored
     system = key.make()
     # Parsed (or checked) once here, so a bad policy fails before any work starts, then sent with each job.
     parsed = parse_policies(system, policies)
@@ -338,6 +341,7 @@ def format_table(evaluation: Evaluation) -> str:
         f"{evaluation.domain}/{evaluation.task}: objective ({higher_or_lower(sense)} is better), "
         f"test set {evaluation.testset_sha256[:12]}, {evaluation.recompute_price:g} per "
         + ("SQP iteration (recomputes: solves and iterations started)" if levels else "recompute"),
+        *options_line(evaluation.options),
         head,
         "-" * len(head),
     ]
@@ -347,11 +351,8 @@ def format_table(evaluation: Evaluation) -> str:
             f"{names[s.policy]:<{width}}{s.objective_mean:>12.5f}{s.objective_std:>10.5f}{s.control_objective_mean:>11.5f}"
             f"{s.recomputes_mean:>12.2f}{column}{s.solver_failures:>17d}{s.nonfinite_episodes:>12d}"
         )
-    lines.append(
-        f"{evaluation.summaries[0].episodes} episodes x {evaluation.summaries[0].repeats} repeats per policy"
-        if evaluation.summaries
-        else ""
-    )
+    first = evaluation.summaries[0] if evaluation.summaries else None
+    lines.append(f"{counted(first.episodes, 'episode')} x {counted(first.repeats, 'repeat')} per policy" if first else "")
     if task_failures:
         lines.append(f"{task_failures}/episode: the task's failures, mean ± 95 % CI over the episodes (1.96 sd / √n)")
     if any(s.clairvoyant for s in evaluation.summaries):

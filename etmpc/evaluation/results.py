@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from etmpc.common.wording import spread
 from etmpc.common import checks
 from etmpc.common.documents import loads
 from etmpc.common.errors import EtmpcError
@@ -99,13 +100,13 @@ def summarise(
 
 def failures_cell(mean: float | None, ci95: float | None = None) -> str:
     """A task's failures per episode as the tables show them: ``mean ± 95 % CI``; ``-`` where they are not
-    known (a task that counts none), the mean alone where the CI is not (a row of an older etmpc), ``± -``
+    known (a task that counts none), the mean alone where the CI is not (a row of an older etmpc), ``± n/a``
     where there is none (one episode)."""
     if mean is None or not math.isfinite(mean):
         return "-"
     if ci95 is None:
         return f"{mean:.2f}"
-    return f"{mean:.2f} ± {ci95:.2f}" if math.isfinite(ci95) else f"{mean:.2f} ± -"
+    return f"{mean:.2f} ± {spread(ci95)}"
 
 
 @dataclass(frozen=True)

@@ -207,6 +207,8 @@ def score(
         raise EtmpcError("--test-set belongs to one task: give exactly one --task with it")
     if test_set is not None and not Path(test_set).is_file():
         raise EtmpcError(f"test set {test_set} not found")
+    for key in keys.values():  # an option the stored episodes cannot feel: refused before any reference is played
+        ts_mod.check_options_act(key, test_set)
     for task in tasks:  # each policy parsed (or checked) on each task: a bad one fails before any episode
         try:
             parse_policies(keys[task].make(), policies)

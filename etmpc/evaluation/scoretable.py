@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import math
 
-from etmpc.systems.options import shown
+from etmpc.common.wording import counted, interval, spread
+from etmpc.systems.options import options_line, shown
 from etmpc.evaluation.metrics import CI_EPISODES
 from etmpc.evaluation.results import failures_cell
 
@@ -22,6 +23,7 @@ def format_scorecard(card) -> str:
         f"{'score':>9}{'± 95 % CI':>11}{'CPU ms/ep':>11}{'(solve':>9}{'feedback':>10}{'policy)':>10}"
     )
     lines = [
+        *options_line(_options(card)),
         "normalized score per task: 0 = its best periodic schedule, 100 = the oracle over it (a one-step "
         "lookahead: above 100 is possible); failures: the task's own per episode (falls, ...), 95 % CI over the "
         "episodes; CPU: measured on this machine, per episode",
@@ -34,7 +36,7 @@ def format_scorecard(card) -> str:
             continue
         failures = failures_cell(r.failures_mean, r.failures_ci95)  # per episode, the task's own (falls, ...)
         score = (
-            f"{r.score:>9.1f}{r.score_ci95:>11.1f}"
+            f"{r.score:>9.1f}{spread(r.score_ci95, '.1f'):>11}"
             if math.isfinite(r.score)
             else f"{'-':>9}{f'{r.nonfinite_episodes} non-finite':>11}"
         )
@@ -51,9 +53,9 @@ def format_scorecard(card) -> str:
     ]
     for a in card.aggregates:
         lines.append(
-            f"{a.policy:<{width}}{a.tasks:>6}{a.iqm:>9.1f}{f'[{a.iqm_ci95[0]:.1f}, {a.iqm_ci95[1]:.1f}]':>18}"
+            f"{a.policy:<{width}}{a.tasks:>6}{a.iqm:>9.1f}{interval(a.iqm_ci95):>18}"
             f"{a.probability_of_improvement:>12.2f}"
-            f"{f'[{a.probability_of_improvement_ci95[0]:.2f}, {a.probability_of_improvement_ci95[1]:.2f}]':>16}"
+            f"{interval(a.probability_of_improvement_ci95, '.2f'):>16}"
         )
     refs = "; ".join(
         f"{t}: {r['best_periodic']} and {r['oracle']}"
@@ -65,7 +67,23 @@ def format_scorecard(card) -> str:
     few = {r.task: r.episodes for r in card.rows if r.error is None and r.episodes < CI_EPISODES}
     if few:
         lines.append(
-            f"note: {', '.join(f'{t} on {n}' for t, n in few.items())} episode(s), fewer than the {CI_EPISODES} a 95 % CI "
-            "needs to cover about 95 % (episode scores are skewed): read these CIs as too narrow, or score more episodes"
+            f"note: {_few(few, card.tasks)}, fewer than the {CI_EPISODES} a 95 % CI needs to cover about 95 % (episode "
+            "scores are skewed): read these CIs as too narrow, or score more episodes"
         )
     return "\n".join(lines)
+
+
+def _options(card) -> dict[str, str]:
+    """The options the card's tasks were played with (the same for every task: score takes one set)."""
+    return next((r["options"] for r in card.references.values() if r.get("options")), {})
+
+
+def _few(few: dict[str, int], tasks) -> str:
+    """The tasks scored on too few episodes, each count said once: ``1 episode on every task``, ``3 episodes on
+    reacher/jumps and battery/trading, 5 on ...``."""
+    by_count: dict[int, list[str]] = {}
+    for task, n in few.items():
+        by_count.setdefault(n, []).append(task)
+    if len(by_count) == 1 and len(few) == len(tasks):
+        return f"{counted(next(iter(by_count)), 'episode')} on {'the task' if len(tasks) == 1 else 'every task'}"
+    return ", ".join(f"{counted(n, 'episode')} on {' and '.join(names)}" for n, names in sorted(by_count.items()))

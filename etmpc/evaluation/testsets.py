@@ -37,6 +37,39 @@ def default_path(domain: str, task: str) -> Path:
     return spec(f"{domain}/{task}").data_file("testset.npz")
 
 
+def check_options_act(key, test_set: str | Path | None = None, takes_test_set: bool = True) -> None:
+    """Refuse, in one line and before any work, options of ``key`` (a :class:`~etmpc.systems.SystemKey`) that
+    cannot change a run on the stored test set (``test_set`` None, or the stored file named): those declared
+    ``draws`` (:func:`etmpc.systems.options.drawn_only`) act only when episodes are drawn, and the stored
+    episodes are replayed as they were drawn, so the run would be the task's own under another name. The line
+    says how to draw a test set where they act, and where to play it (``takes_test_set``: the caller takes one;
+    else evaluate and score do). Every command and function that plays a test set with options
+    calls this one check (evaluate, score, robustness, render, bench, discriminate, figure, sweep, and the
+    Gymnasium environment's test episodes); what draws its own episodes (testset, the learners) does not."""
+    from etmpc.systems import system_class
+    from etmpc.systems.options import drawn_only, shown
+
+    if not key.options:
+        return
+    found = spec(key.task)
+    if test_set is not None and Path(test_set).resolve() != default_path(found.domain, found.task).resolve():
+        return  # a test set of the caller's: drawn with the options, we trust, as etmpc testset says
+    inert = drawn_only(system_class(key.task).Config(), key.options)
+    if inert:
+        out, it = f"{found.slug}.npz", "it acts" if len(inert) == 1 else "they act"
+        raise EtmpcError(
+            f"option{'s' * (len(inert) > 1)} {', '.join(inert)}: {it} only on newly drawn episodes, not on the stored test "
+            f"set of {key.task} (replayed as drawn): draw a test set where {it} with 'etmpc testset --task {key.task} "
+            f"{shown(key.options)} --seed 1 --out {out}', then {_play_it(out, takes_test_set)}"
+        )
+
+
+def _play_it(out: str, takes_test_set: bool) -> str:
+    if takes_test_set:
+        return f"give --test-set {out} (test_set= in Python)"
+    return f"play it with etmpc evaluate or score --test-set {out} (this command plays the stored test set only)"
+
+
 def episode_generators(seed: int, episodes: int) -> list[np.random.Generator]:
     """One independent generator per episode, spawned from the test set's seed."""
     return [np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(episodes)]

@@ -16,6 +16,7 @@ import numpy as np
 
 from etmpc.evaluation import testsets as ts_mod
 from etmpc.common.errors import EtmpcError
+from etmpc.common import progress
 from etmpc.evaluation.mainscript import missing_main_script
 from etmpc.loop import Trajectory, run_episode
 from etmpc.loop.records import EpisodeRecord
@@ -63,12 +64,16 @@ class Played:
     def record(self, policy: str, announce=None, **extra) -> EpisodeRecord:
         """What a recording keeps of this episode, under the policy's name (``extra``: more identity;
         ``announce``: a self-trigger's, to record what it announced at each solve)."""
+        failures = None if self.system.failures is None else self.system.failures(self.trajectory, self.episode)
         identity = {
             "policy": policy,
             "episode": self.index,
             "repeat": self.repeat,
             "seed": self.seed,
             "test_set_sha256": self.test_set_sha256,
+            # what evaluate's table counts beside the objective, so that etmpc replay shows the same columns
+            "solver_failures": int(self.trajectory.solver_failures),
+            **({} if failures is None else {"failures": float(failures), "failure_name": self.system.failure_name}),
             **extra,
         }
         return EpisodeRecord.from_trajectory(self.system, self.trajectory, identity, self.episode, announce)
@@ -81,7 +86,9 @@ def play_test_episode(
     ``evaluate``, the evaluations during ``train``, ``render`` and the figures all play an episode."""
     system, env, testset = context(domain, testset_path, sha256)
     stored = system.episode_from_arrays(testset.episode_arrays(episode))  # a bad index raises TestSetError
-    traj = run_episode(system, env, policy, policy_rng(seed, repeat, episode), stored)
+    named = f"episode {episode}" + (f" of {policy.spec}" if isinstance(getattr(policy, "spec", None), str) else "")
+    with progress.episode(named + (f", repeat {repeat}" if repeat else "")):  # what a long episode's lines name
+        traj = run_episode(system, env, policy, policy_rng(seed, repeat, episode), stored)
     return Played(system, env, traj, stored, episode, repeat, seed, testset.sha256)
 
 

@@ -14,10 +14,13 @@ excludes 0 (docs/adding-a-task.md, step 8).
 
 from __future__ import annotations
 
+from etmpc.common.wording import counted
 from etmpc.common.progress import stage
 from etmpc.evaluation.evaluate import evaluate
 from etmpc.experiments.pareto import best_periodic, episode_table, versus_front
+from etmpc.evaluation.testsets import check_options_act
 from etmpc.systems import system_key
+from etmpc.systems.options import options_line
 
 EPISODES = 30  # the first stored test-set episodes played by default
 ROLLOUT_FUTURES, ROLLOUT_HORIZON = 4, 20  # rollout:BEST:K:H, H capped at the task's lookahead
@@ -37,6 +40,7 @@ def discriminate(
     periodic schedules' range of rates), in that order. ``progress``: each of the two stages' time left on stderr.
     ``options``: the task's (:mod:`etmpc.systems.options`), for both stages."""
     unpriced = system_key(task, None, options)
+    check_options_act(unpriced, takes_test_set=False)  # both stages play the stored test set
     system = unpriced.make()
     price = system.recompute_price if price is None else price
     priced_key = system_key(task, price, options)
@@ -51,14 +55,16 @@ def discriminate(
         priced = evaluate(priced_key, specs, **common).to_json()
     table = {**episode_table(fixed), **episode_table(priced)}
     rows = {spec: versus_front(table, periodic, spec, system.objective_sense) for spec in events + specs}
-    return {"price": price, "best_periodic": best, "fixed": fixed, "priced": priced, "rows": rows}
+    chosen = dict(unpriced.options)  # the task's options, beside the results (none: the task as it is)
+    return {"price": price, "best_periodic": best, "options": chosen, "fixed": fixed, "priced": priced, "rows": rows}
 
 
 def format_discrimination(task: str, found: dict, episodes: int, seconds: float) -> str:
     """The table ``etmpc discriminate`` prints: one line per state-dependent policy."""
     lines = [
-        f"{task}: best periodic schedule at price {found['price']:g}: {found['best_periodic']}; {episodes} episodes, "
+        f"{task}: best periodic schedule at price {found['price']:g}: {found['best_periodic']}; {counted(episodes, 'episode')}, "
         f"{seconds:.0f} s",
+        *options_line(found.get("options")),
         f"{'policy':28s} {'recomputes':>12s}  {'gain over the front at its rate':>31s}  better in",
     ]
     for spec, row in found["rows"].items():

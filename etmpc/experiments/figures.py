@@ -80,6 +80,7 @@ class Drawn:
 def trajectory(out: str | Path, task, spec: str, episode: int = 0, seed: int = 0) -> Drawn:
     """Test-set ``episode`` of ``task`` (a name, or a :class:`~etmpc.systems.SystemKey` with its options) under
     policy ``spec``, played as ``etmpc evaluate`` plays it (repeat 0 of ``seed``), drawn to ``out``."""
+    testsets.check_options_act(system_key(task), takes_test_set=False)  # an option the stored episodes cannot feel
     system = context(task)[0]
     played = play_test_episode(task, _policy(system, spec), seed, 0, episode)  # as evaluate plays it
     traj = played.trajectory

@@ -31,8 +31,9 @@ from etmpc.common.sense import oriented
 from etmpc.evaluation import metrics
 from etmpc.evaluation.evaluate import evaluate, parse_policies
 from etmpc.evaluation.inputs import check_run_outputs, run_inputs
+from etmpc.evaluation.testsets import check_options_act
 from etmpc.systems import system_class, system_key
-from etmpc.systems.options import canonical, settable, shown, split
+from etmpc.systems.options import canonical, described, settable, shown, split
 
 FORMAT = "etmpc-robustness"
 FILES = ("robustness.json", "robustness.png", "ROBUSTNESS.md")  # what a curve writes into its folder
@@ -84,6 +85,7 @@ def robustness(
     if option in dict(fixed):
         raise EtmpcError(f"option {option} is both varied and fixed")
     keys = [system_key(task, None, (*fixed, (option, value))) for value in values]  # each value checked here
+    check_options_act(keys[0], takes_test_set=False)  # an option that only acts when episodes are drawn: the curve would be flat
     texts = [dict(key.options)[option] for key in keys]
     if len(set(texts)) != len(texts):
         raise EtmpcError(f"a value of {option} is given twice: {', '.join(texts)}")
@@ -127,6 +129,7 @@ def robustness(
         "task": system.name,
         "option": option,
         "default": canonical(settable(system_class(task).Config())[option]),
+        "unit": described(system_class(task).Config())[option][0].unit,  # the option's, for the figure's axis
         "fixed": dict(keys[0].options) | {option: None},
         "objective_sense": sense,
         "against": against,

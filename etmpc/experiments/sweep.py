@@ -44,7 +44,7 @@ from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import check_outputs, refuse_foreign, what_differs, write_json, write_text
 from etmpc.common.progress import stage
 from etmpc.evaluation.evaluate import evaluate
-from etmpc.evaluation.testsets import default_path, load
+from etmpc.evaluation.testsets import check_options_act, default_path, load
 from etmpc.evaluation.backends import shared_pools
 from etmpc.experiments.stages import trained
 from etmpc.experiments.pareto import best_periodic, build_pareto, report_section
@@ -171,6 +171,7 @@ def plan(
     settings = {task: SweepSettings.default(task, prices, episodes, quick, options) for task in tasks}
     for task, chosen in settings.items():
         system = make_system(task)
+        check_options_act(chosen.key(task), takes_test_set=False)  # every stage plays the stored test set
         stored = load(default_path(system.domain, system.task), system.domain, system.task)
         if chosen.episodes > stored.episodes:
             raise EtmpcError(f"--episodes must be in 1..{stored.episodes} for the {task} test set, got {chosen.episodes}")

@@ -14,6 +14,7 @@ from dm_control.rl.control import PhysicsError
 
 from etmpc.common.checks import BadValue
 from etmpc.common.frozen import frozen, readonly
+from etmpc.common.progress import EpisodeSteps
 from etmpc.control.plan import Plan
 from etmpc.control.timing import ANSWERS, KEEP, SOLVE, level_of
 from etmpc.loop.records import Continuation, Trajectory, computation_cost
@@ -333,6 +334,7 @@ def run_episode(
     """Play one episode (a stored one if given, else one drawn by the task) under ``policy``."""
     loop = ClosedLoop(system, env).reset(episode)
     simulates = getattr(policy, "simulates", False)
+    steps = EpisodeSteps(len(loop.trajectory.rewards))  # a long episode (a rollout's) says where it is, on stderr
     while not loop.done:
         started = cpu_clock()
         s = loop.augmented_state(simulates)
@@ -340,6 +342,7 @@ def run_episode(
         if s is not None:
             loop.trajectory.decide_time_s[loop.step_index] = cpu_clock() - started
         loop.step(answer, started)
+        steps.update()
     return loop.trajectory
 
 

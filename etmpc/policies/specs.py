@@ -108,8 +108,9 @@ BUILT_IN: tuple[Kind, ...] = (
     ),
     Kind(
         "threshold",
-        "threshold:X[:iterate]",
-        "recompute when the weighted prediction error exceeds X (:iterate: one SQP iteration, with compute levels)",
+        "threshold:X[:iterate][:reading]",
+        "recompute when the weighted prediction error exceeds X (:iterate: one SQP iteration, with compute levels; "
+        ":reading: the error on the sensor's readings)",
         threshold,
         family="event",
     ),
@@ -132,7 +133,7 @@ BUILT_IN: tuple[Kind, ...] = (
     Kind(
         "sb3",
         "sb3:PATH",
-        "a network trained on the trigger environment",
+        "a network trained on the Gymnasium environment (etmpc train --algorithm ppo)",
         file_kind(lambda path, c: load_sb3(path, c.task), "model"),
         family="learned",
         path=True,

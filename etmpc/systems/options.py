@@ -137,6 +137,14 @@ def _set(config: Any, path: list[str], text: str, name: str, known: Iterable[str
     return dataclasses.replace(config, **{head: parsed})
 
 
+def drawn_only(config: Any, options: Iterable[tuple[str, Any]]) -> list[str]:
+    """The names among ``options`` (valid ``(name, value)`` pairs of ``config``'s options) declared ``draws``: they
+    say how episodes are drawn (a rate, a range), so they act on newly drawn episodes only, never on a stored test
+    set's, whose episodes were drawn once and are replayed as they are."""
+    declared = described(config)
+    return [name for name, _ in options if name in declared and declared[name][0].draws]
+
+
 def pairs(options: Any, argument: str = "options") -> list[tuple[str, Any]]:
     """``options`` as ``(name, value)`` pairs: a mapping of option names to values, or an iterable of
     ``(name, value)`` pairs; anything else is a :class:`BadType` naming ``argument`` and the shape it needs."""
@@ -198,6 +206,13 @@ def of(config: Any) -> dict[str, str]:
 def shown(options: tuple[tuple[str, str], ...]) -> str:
     """Options as the command line writes them: ``--option a=1 --option b=2``."""
     return " ".join(f"--option {name}={text}" for name, text in options)
+
+
+def options_line(options: Mapping[str, str] | Iterable[tuple[str, str]] | None) -> list[str]:
+    """The line a table starts with when its run was played with options (``options: --option a=1 ...``), in a
+    list to splice into the table's lines; none for the task as it is, whose tables stay as they were."""
+    items = tuple((options or {}).items()) if isinstance(options, Mapping) or options is None else tuple(options)
+    return [f"options: {shown(items)}"] if items else []
 
 
 def check_together(system) -> None:

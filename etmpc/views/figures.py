@@ -27,6 +27,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from etmpc.loop import Trajectory  # noqa: E402
+from etmpc.common.wording import unit_label  # noqa: E402
 from etmpc.views.png import save_png_atomically  # noqa: E402
 from etmpc.views.bars import (  # noqa: E402, F401 (the paper's Figure 3, re-exported)
     Bar,
@@ -86,8 +87,9 @@ _LABELS = {
 
 
 def axis_label(name: str) -> str:
-    """An axis label with the unit for a state, input or signal name (its words if unknown)."""
-    return _LABELS.get(name, name.replace("_", " "))
+    """An axis label with the unit for a state, input or signal name: the ones above, else read from its unit
+    suffix (:func:`etmpc.common.wording.unit_label`)."""
+    return _LABELS.get(name) or unit_label(name)
 
 
 def _held(values: np.ndarray, dt_s: float) -> tuple[np.ndarray, np.ndarray]:

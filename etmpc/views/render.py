@@ -14,6 +14,7 @@ from etmpc.evaluation.workers import context, play_test_episode
 from etmpc.loop import Trajectory
 from etmpc.policies import parse_policy
 from etmpc.evaluation.inputs import check_shipped
+from etmpc.evaluation.testsets import check_options_act
 from etmpc.systems import SystemKey, system_class, system_key
 from etmpc.views.recording import Recorder
 from etmpc.views.solves import frame_captions
@@ -47,6 +48,7 @@ def render_rollout(
     frames included, into that Rerun recording. ``progress``: the frames drawn and the time left, on stderr."""
     check_display()  # before any domain is imported: an on-screen backend warns without a display
     domain = system_key(domain)  # a task's name, or a SystemKey (a task with its options)
+    check_options_act(domain, testset_path, takes_test_set=False)  # an option the stored episodes cannot feel
     check_scene(system_class(domain.task))
     check_size(width, height)
     system, env, _ = context(domain, testset_path)

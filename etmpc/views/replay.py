@@ -15,6 +15,9 @@ from pathlib import Path
 import numpy as np
 
 from etmpc.common.errors import EtmpcError
+from etmpc.common.wording import spread
+from etmpc.evaluation import metrics
+from etmpc.evaluation.results import failures_cell
 from etmpc.common.sense import higher_or_lower, oriented
 from etmpc.loop import computation_cost
 from etmpc.views.schema import COMPUTE_SERIES, DECISION_SERIES, END_MARKER, OBJECTIVE_SERIES
@@ -112,6 +115,10 @@ class ReplayedEpisode:
     prediction_error_max: float
     prediction_error_at_recompute: float  # mean error at the steps where the policy chose to recompute
     work: float = float("nan")  # the priced work: the recomputes, or their SQP iterations on a task with compute levels
+    solver_failures: int | None = None  # None: a recording of an older etmpc, which did not keep them
+    failures: float | None = None  # the task's own (falls, ...); None where it counts none, or an older recording
+    failure_name: str | None = None
+    options: str = ""  # the task's options as the command line writes them ("" for the task as it is)
 
 
 def replay_summary(path: str | Path) -> list[ReplayedEpisode]:
@@ -149,10 +156,18 @@ def replay_summary(path: str | Path) -> list[ReplayedEpisode]:
                 prediction_error_max=float(errors.max()) if len(errors) else float("nan"),
                 prediction_error_at_recompute=_mean(at_recompute),
                 work=float(work),
+                solver_failures=_whole(identity.get("solver_failures")),
+                failures=None if identity.get("failures") is None else float(identity["failures"]),
+                failure_name=identity.get("failure_name"),
+                options=str(identity.get("options", "")),
             )
         )
     out.sort(key=lambda r: (r.task, r.policy, r.episode, r.repeat))
     return out
+
+
+def _whole(value) -> int | None:
+    return None if value is None else int(value)
 
 
 def _mean(values) -> float:
@@ -178,22 +193,30 @@ def _sense(group) -> str:
 
 
 def format_replay(episodes: list[ReplayedEpisode], per_episode: bool = False) -> str:
+    """The table ``etmpc replay`` prints: per task (with its options), one line per policy (and with
+    ``per_episode`` one per episode), with evaluate's columns: objective, control, recomputes, the task's
+    failures per episode, solver failures; then the prediction errors. ``n/a`` where a figure cannot be had
+    (no recompute chosen, no step), ``-`` where the recording does not hold it (an older etmpc's)."""
     lines = []
     groups: dict[tuple[str, str], list[ReplayedEpisode]] = {}
     for e in episodes:
         groups.setdefault((e.task, e.policy), []).append(e)
     labels = [f"  episode {e.episode} repeat {e.repeat}" for e in episodes] if per_episode else []
     width = max([16] + [len(p) + 2 for _, p in groups] + [len(label) + 2 for label in labels])
-    head = (
-        f"{'policy':<{width}}{'episodes':>9}{'objective':>12}{'control':>11}{'recomputes':>12}"
-        f"{'pred.err mean':>15}{'max':>10}{'at recompute':>14}"
-    )
     current = None
     for (task, policy), group in groups.items():
+        named = next((e.failure_name for e in episodes if e.task == task and e.failure_name), None)
+        failures_width = max(len(named) + 10, 16) if named else 0
         if task != current:
+            head = (
+                f"{'policy':<{width}}{'episodes':>9}{'objective':>12}{'control':>11}{'recomputes':>12}"
+                + (f"{named + '/episode':>{failures_width}}" if named else "")
+                + f"{'solver failures':>17}{'pred.err mean':>15}{'max':>10}{'at recompute':>14}"
+            )
             lines += [
                 f"{task}: objective ({higher_or_lower(_sense(group))}"
                 " is better); prediction error ‖W (x − x̂)‖ against the plan in force",
+                *([f"options: {group[0].options}"] if group[0].options else []),
                 head,
                 "-" * len(head),
             ]
@@ -201,11 +224,21 @@ def format_replay(episodes: list[ReplayedEpisode], per_episode: bool = False) ->
         for e in [None] + (group if per_episode else []):  # the policy's line, then its episodes
             chosen = group if e is None else [e]
             label = policy if e is None else f"  episode {e.episode} repeat {e.repeat}"
-            mean = lambda attr: _mean([getattr(x, attr) for x in chosen])  # noqa: E731
-            top = max((x.prediction_error_max for x in chosen if np.isfinite(x.prediction_error_max)), default=float("nan"))
-            lines.append(
-                f"{label:<{width}}{len(chosen):>9}{mean('objective'):>12.5f}{mean('control_objective'):>11.5f}"
-                f"{mean('recomputes'):>12.2f}{mean('prediction_error_mean'):>15.4f}{top:>10.4f}"
-                f"{mean('prediction_error_at_recompute'):>14.4f}"
-            )
+            lines.append(f"{label:<{width}}{_row(chosen, failures_width)}")
     return "\n".join(lines)
+
+
+def _row(chosen: list[ReplayedEpisode], failures_width: int) -> str:
+    """One line's figures over the episodes ``chosen`` (its label aside)."""
+    mean = lambda attr: _mean([getattr(x, attr) for x in chosen])  # noqa: E731
+    top = max((x.prediction_error_max for x in chosen if np.isfinite(x.prediction_error_max)), default=float("nan"))
+    failures = [x.failures for x in chosen]
+    cell = "-" if None in failures else failures_cell(_mean(failures), metrics.mean_ci95(np.array(failures, float)))
+    solver = [x.solver_failures for x in chosen]
+    return (
+        f"{len(chosen):>9}{mean('objective'):>12.5f}{mean('control_objective'):>11.5f}{mean('recomputes'):>12.2f}"
+        + (f"{cell:>{failures_width}}" if failures_width else "")
+        + f"{'-' if None in solver else sum(solver):>17}"
+        f"{spread(mean('prediction_error_mean'), '.4f'):>15}{spread(top, '.4f'):>10}"
+        f"{spread(mean('prediction_error_at_recompute'), '.4f'):>14}"
+    )

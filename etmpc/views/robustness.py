@@ -48,7 +48,7 @@ def draw_robustness(document: dict):
         if panel == "improvement_pct":
             ax.axhline(0.0, color="grey", lw=0.8)
         ax.set_title(titles[panel], fontsize=10)
-        ax.set_xlabel(document["option"])
+        ax.set_xlabel(document["option"] + (f" ({document['unit']})" if document.get("unit") else ""))
         if not numeric:
             ax.set_xticks(x, values, rotation=30, fontsize=7)
         ax.grid(alpha=0.3)

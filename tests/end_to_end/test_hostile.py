@@ -973,19 +973,19 @@ OWN_CASES = [  # (id, setup, argv, what the one line must name)
     (
         "score-json-on-the-stored-references",
         "none",
-        ["score", "every:3", "--task", "battery", "--json", str(STORED_REFERENCES)],
+        ["score", "--policy", "every:3", "--task", "battery", "--json", str(STORED_REFERENCES)],
         "data folder",
     ),
     (
         "score-json-on-the-policy-it-scores",
         "none",
-        ["score", f"rl:{BATTERY_POLICY}", "--task", "battery", "--json", str(BATTERY_POLICY)],
+        ["score", "--policy", f"rl:{BATTERY_POLICY}", "--task", "battery", "--json", str(BATTERY_POLICY)],
         "data folder",
     ),
     (
         "score-json-on-a-users-policy-it-scores",
         "policy-copy",
-        ["score", "rl:p.json", "--task", "cart_pendulum", "--json", "p.json"],
+        ["score", "--policy", "rl:p.json", "--task", "cart_pendulum", "--json", "p.json"],
         "policy",
     ),
     ("evaluate-json-on-its-rl-file", "policy-copy", [*EV, "--policy", "rl:p.json", "--json", "p.json"], "p.json"),
@@ -1028,18 +1028,18 @@ OWN_CASES = [  # (id, setup, argv, what the one line must name)
         ["score", "--references", "--task", "battery", "--out", str(REPO / "tasks")],
         "data folder",
     ),
-    ("score-misspelt-spec-keeps-the-old-card", "mine-json", ["score", "evry:3", "--json", "mine.json"], "evry:3"),
+    ("score-misspelt-spec-keeps-the-old-card", "mine-json", ["score", "--policy", "evry:3", "--json", "mine.json"], "evry:3"),
     (
         "score-spec-for-another-task-before-any-episode",
         "mine-json",
-        ["score", f"rl:{CART_POLICY}", "--task", "cart_pendulum", "--task", "battery", "--json", "mine.json"],
+        ["score", "--policy", f"rl:{CART_POLICY}", "--task", "cart_pendulum", "--task", "battery", "--json", "mine.json"],
         "battery",
     ),
-    ("score-out-without-a-mode", "none", ["score", "every:3", "--out", "x"], "--out"),
+    ("score-out-without-a-mode", "none", ["score", "--policy", "every:3", "--out", "x"], "--out"),
     (
         "score-overflowing-weights",
         "huge-theta",
-        ["score", "rl:p.json", "--task", "cart_pendulum", "--episodes", "1", "--workers", "1", "--json", "card.json"],
+        ["score", "--policy", "rl:p.json", "--task", "cart_pendulum", "--episodes", "1", "--workers", "1", "--json", "card.json"],
         "p.json: theta[0] is 1e+308, beyond",
     ),
     (
@@ -1087,7 +1087,22 @@ def test_a_card_with_a_failed_row_never_replaces_an_existing_card(tmp_path, monk
     )
     (tmp_path / "card.json").write_text('{"mine": true}\n')
     assert (
-        main(["score", "py:late_failure:T", "--task", "battery", "--episodes", "1", "--workers", "1", "--json", "card.json"]) == 2
+        main(
+            [
+                "score",
+                "--policy",
+                "py:late_failure:T",
+                "--task",
+                "battery",
+                "--episodes",
+                "1",
+                "--workers",
+                "1",
+                "--json",
+                "card.json",
+            ]
+        )
+        == 2
     )
     _assert_one_line(capsys.readouterr().err, "card.json not written")
     assert (tmp_path / "card.json").read_text() == '{"mine": true}\n'
@@ -1178,7 +1193,7 @@ def test_a_scorecard_is_strict_json_even_with_missing_numbers(tmp_path, monkeypa
 
     monkeypatch.chdir(tmp_path)
     assert (
-        main(["score", "every:1", "--task", "battery", "--episodes", "1", "--workers", "1", "--json", "c.json"]) == 0
+        main(["score", "--policy", "every:1", "--task", "battery", "--episodes", "1", "--workers", "1", "--json", "c.json"]) == 0
     )  # its best
     card = loads((tmp_path / "c.json").read_text())  # refuses NaN and Infinity
     (row,) = card["rows"]

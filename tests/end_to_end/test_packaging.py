@@ -134,10 +134,10 @@ def test_the_installed_commands_work_outside_the_checkout(wheel, tmp_path):
     installed = json.loads((outside / "installed.json").read_text())
     assert installed["runs"] == here["runs"] and installed["test_set"]["sha256"] == here["test_set"]["sha256"]
 
-    result = run("score", "every:3", "--task", "battery", "--workers", "2")  # the stored references are installed
+    result = run("score", "--policy", "every:3", "--task", "battery", "--workers", "2")  # the stored references are installed
     best = json.loads((REPO / "tasks" / "battery" / "trading" / "references.json").read_text())["best"]
     assert result.returncode == 0 and f"references: battery/trading: {best} and oracle:{best}" in result.stdout, result.stderr
-    result = run("score", "every:3", "--task", "battery", "--episodes", "2", "--workers", "1")  # references computed
+    result = run("score", "--policy", "every:3", "--task", "battery", "--episodes", "2", "--workers", "1")  # references computed
     assert result.returncode == 0 and "references: battery/trading: " in result.stdout, result.stderr
 
     # `pip show` as this pip prints it (the venv's own, from ensurepip, may be too old to print License-Expression)

@@ -111,7 +111,9 @@ def test_an_installed_plugin_adds_its_task_and_kind_everywhere_and_uninstalling_
     )
     assert evaluated.returncode == 0, evaluated.stderr
     assert "slider/track: objective (lower is better)" in evaluated.stdout and "driftage:0.05:4" in evaluated.stdout
-    scored = run("-m", "etmpc.cli", "score", "driftage:0.05:4", "--task", "slider", "--episodes", "3", "--workers", "1")
+    scored = run(
+        "-m", "etmpc.cli", "score", "--policy", "driftage:0.05:4", "--task", "slider", "--episodes", "3", "--workers", "1"
+    )
     assert scored.returncode == 0, scored.stderr
     assert "references: slider/track: every:3 and oracle:every:3" in scored.stdout  # the plugin's stored references
     own = run("-m", "pytest", "-q", "-p", "no:cacheprovider", str(source / "tests"))  # the plugin's tests, installed

@@ -170,7 +170,7 @@ def test_a_card_round_trips_through_its_json_missing_numbers_included(tmp_path):
     unmeasured = format_scorecard(Scorecard(["battery"], {}, [replace(rows[0], cpu_ms={})], []))
     assert unmeasured.splitlines()[3].split()[-4:] == ["-", "-", "-", "-"]  # CPU not measured: no numbers
     shown = format_scorecard(card).splitlines()
-    assert f"1.33 ± {rows[0].failures_ci95:.2f}" in shown[3] and "2.00 ± -" in shown[4]  # failures per episode, mean ± 95 % CI
+    assert f"1.33 ± {rows[0].failures_ci95:.2f}" in shown[3] and "2.00 ± n/a" in shown[4]  # failures per episode, mean ± 95 % CI
 
 
 def test_a_card_row_of_an_older_etmpc_without_the_failures_ci_and_counts_still_loads():
@@ -193,7 +193,21 @@ def test_a_suite_score_in_a_log_counts_the_whole_cards_episodes_on_stderr_and_ke
 
     for name in ("FIRST_LINE_AFTER", "EVERY", "CLOSEST", "MEASURED"):  # a line at every episode from the second (a rate)
         monkeypatch.setattr(progress, name, 0.0)
-    argv = ["score", "every:3", "every:5", "--task", "battery", "--task", "cart_pendulum", "--episodes", "2", "--workers", "1"]
+    argv = [
+        "score",
+        "--policy",
+        "every:3",
+        "--policy",
+        "every:5",
+        "--task",
+        "battery",
+        "--task",
+        "cart_pendulum",
+        "--episodes",
+        "2",
+        "--workers",
+        "1",
+    ]
     assert main(argv) == 0
     out, err = capsys.readouterr()
     lines = [line for line in err.splitlines() if line.startswith("etmpc score: ")]
@@ -214,7 +228,7 @@ def test_a_score_over_fewer_episodes_than_its_ci_needs_says_so_in_one_line_and_t
     assert not any(line.startswith("note:") for line in format_scorecard(whole).splitlines())
     card = Scorecard(["battery", "reacher"], {}, [enough, few, failed_task("battery", "other", "it failed")], [])
     (note,) = [line for line in format_scorecard(card).splitlines() if line.startswith("note:")]
-    assert f"reacher on {CI_EPISODES - 1} episode(s), fewer than the {CI_EPISODES}" in note and "battery" not in note
+    assert f"{CI_EPISODES - 1} episodes on reacher, fewer than the {CI_EPISODES}" in note and "battery" not in note
     assert "note:" not in json.dumps(card.to_json())  # the human-readable output only: the card's fields are its own
 
 
@@ -271,7 +285,19 @@ def test_scoring_plays_only_the_trigger_and_says_what_it_costs(tmp_path):
 def test_on_another_test_set_the_references_are_computed_and_said_so(small_battery, capsys):
     path, refs = small_battery
     figure = path.with_name("profile.png")
-    argv = ["score", refs.best, refs.oracle_spec, "--task", "battery", "--test-set", str(path), "--workers", "1"]
+    argv = [
+        "score",
+        "--policy",
+        refs.best,
+        "--policy",
+        refs.oracle_spec,
+        "--task",
+        "battery",
+        "--test-set",
+        str(path),
+        "--workers",
+        "1",
+    ]
     assert main([*argv, "--figure", str(figure)]) == 0
     out, err = capsys.readouterr()
     assert f"battery/trading: no stored references for test set {path}: computing them for this run" in err
@@ -287,7 +313,19 @@ def test_a_trigger_that_fails_on_one_task_has_that_row_say_so_and_the_others_sco
         "        if len(s.x) == 1:\n            raise RuntimeError('not for batteries')\n        return s.age >= 3\n"
     )
     code = main(
-        ["score", "py:picky_trigger:T", "--task", "battery", "--task", "cart_pendulum", "--workers", "2", "--json", "card.json"]
+        [
+            "score",
+            "--policy",
+            "py:picky_trigger:T",
+            "--task",
+            "battery",
+            "--task",
+            "cart_pendulum",
+            "--workers",
+            "2",
+            "--json",
+            "card.json",
+        ]
     )
     out, err = capsys.readouterr()
     assert code == 2
@@ -308,11 +346,11 @@ def test_a_trigger_that_fails_on_one_task_has_that_row_say_so_and_the_others_sco
 @pytest.mark.parametrize(
     "argv, says",
     [
-        (["score", "every:3", "--task", "cartpole"], "unknown task 'cartpole'"),
+        (["score", "--policy", "every:3", "--task", "cartpole"], "unknown task 'cartpole'"),
         (["score", "--task", "battery"], "give at least one policy"),
-        (["score", "every:3", "every:3"], "given twice"),
-        (["score", "every:3", "--task", "battery", "--task", "reacher", "--test-set", "x.npz"], "x.npz not found"),
-        (["score", "every:3", "--references"], "--references rebuilds the stored references only"),
+        (["score", "--policy", "every:3", "--policy", "every:3"], "given twice"),
+        (["score", "--policy", "every:3", "--task", "battery", "--task", "reacher", "--test-set", "x.npz"], "x.npz not found"),
+        (["score", "--policy", "every:3", "--references"], "--references rebuilds the stored references only"),
     ],
 )
 def test_bad_input_is_one_line(argv, says, tmp_path, monkeypatch, capsys):

@@ -48,7 +48,7 @@ def test_a_drawn_test_set_is_what_evaluate_takes_and_never_overwrites(tmp_path, 
     loaded = testset.load(out, "battery", "trading")
     assert loaded.episodes == 3 and loaded.meta["seed"] == 7
     assert main(["evaluate", "--task", "battery", "--policy", "every:3", "--test-set", str(out), "--workers", "1"]) == 0
-    assert "3 episodes x 1 repeats" in capsys.readouterr().out
+    assert "3 episodes x 1 repeat per policy" in capsys.readouterr().out
     before = out.read_bytes()
     assert main(["testset", "--task", "battery", "--seed", "8", "--out", str(out)]) == 2
     assert "never overwritten" in capsys.readouterr().err and out.read_bytes() == before

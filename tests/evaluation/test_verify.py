@@ -22,7 +22,21 @@ def card(tmp_path_factory):
     path = folder / "card.json"
     assert (
         main(
-            ["score", "every:3", "threshold:0.02", "--task", "battery", "--episodes", "4", "--workers", "1", "--json", str(path)]
+            [
+                "score",
+                "--policy",
+                "every:3",
+                "--policy",
+                "threshold:0.02",
+                "--task",
+                "battery",
+                "--episodes",
+                "4",
+                "--workers",
+                "1",
+                "--json",
+                str(path),
+            ]
         )
         == 0
     )
@@ -342,7 +356,19 @@ def options_card(tmp_path_factory):
     real = scorecard.build_references
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(scorecard, "build_references", lambda *a, **k: built.append(real(*a, **k)) or built[-1])
-        argv = ["score", "every:3", "threshold:0.02", "--task", "battery", "--episodes", str(EPISODES), "--workers", "1"]
+        argv = [
+            "score",
+            "--policy",
+            "every:3",
+            "--policy",
+            "threshold:0.02",
+            "--task",
+            "battery",
+            "--episodes",
+            str(EPISODES),
+            "--workers",
+            "1",
+        ]
         assert main([*argv, "--option", OPTION, "--json", str(path)]) == 0
     return path, built[0]
 

@@ -203,7 +203,7 @@ def test_trajectory_command_plays_the_episode_as_evaluate_does(tmp_path, capsys)
     )
     assert code == 0, err
     run = evaluate("battery", [spec], episodes=3, workers=1, seed=3, progress=False).runs[2]
-    assert run.episode == 2 and f"objective {run.objective!r}, {run.recomputes} recomputes" in stdout
+    assert run.episode == 2 and f"objective {run.objective:.5f}, {run.recomputes} recomputes" in stdout
     image = matplotlib.image.imread(tmp_path / "out" / "traj.png")
     assert image.shape[0] > 500 and image.shape[1] > 800 and image.shape[2] == 4 and image.std() > 0.05
     assert [p.name for p in (tmp_path / "out").iterdir()] == ["traj.png"]  # no temporary file left
@@ -225,7 +225,7 @@ def test_trajectory_command_plays_a_task_of_a_domain_with_its_shipped_policy(tmp
     code, stdout, err = _figure(capsys, "trajectory", "--task", "cart_pendulum/kicks", "--policy", spec, "--episode", 1)
     assert code == 0, err
     run = evaluate("cart_pendulum/kicks", [spec], episodes=2, workers=1, progress=False).runs[1]
-    assert f"objective {run.objective!r}, {run.recomputes} recomputes" in stdout
+    assert f"objective {run.objective:.5f}, {run.recomputes} recomputes" in stdout
     (out,) = (tmp_path / "results").iterdir()
     assert out.name.startswith("trajectory_cart_pendulum-kicks_rl-") and out.name.endswith("_ep1.png")
 

@@ -156,7 +156,9 @@ def test_a_verified_card_joins_as_a_row_and_a_forged_one_is_refused_before_any_r
 
     out, data = board
     card = tmp_path / "card.json"
-    assert main(["score", "every:2", "--task", "battery", "--episodes", "2", "--workers", "1", "--json", str(card)]) == 0
+    assert (
+        main(["score", "--policy", "every:2", "--task", "battery", "--episodes", "2", "--workers", "1", "--json", str(card)]) == 0
+    )
     monkeypatch.setattr(leaderboard_rows, "play_and_score", lambda *a, **k: pytest.fail("a row was played"))
     monkeypatch.setattr(leaderboard_rows, "best_threshold", lambda task, workers, say: data["entries"][2]["specs"][task])
     joined = build(tmp_path / "docs", out / "work", ["battery"], episodes=2, workers=1, cards=[card])

@@ -406,7 +406,7 @@ def test_nor_when_scored(entry, tmp_path, capsys):
     """``etmpc score`` parses the model on every task before any episode, then plays it on workers."""
     marker = tmp_path / "ran"
     model = _poisoned(tmp_path, entry, marker)
-    code = main(["score", f"sb3:{model}", "--task", "cart_pendulum", "--episodes", "2", "--workers", "2"])
+    code = main(["score", "--policy", f"sb3:{model}", "--task", "cart_pendulum", "--episodes", "2", "--workers", "2"])
     err = capsys.readouterr().err
     assert not marker.exists()
     assert code == (0 if entry == "lr_schedule" else 2), err
