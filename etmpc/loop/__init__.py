@@ -28,7 +28,8 @@ Two ways to play the same loop, bit for bit the same numbers:
   rollout policies simulate their futures with.
 """
 
-from etmpc.loop.closed import ClosedLoop, play_on, run_episode
+from etmpc.loop.closed import ClosedLoop
+from etmpc.loop.play import play_on, run_episode
 from etmpc.loop.records import Continuation, Trajectory, computation_cost
 from etmpc.loop.state import AugmentedState, DecisionContext, Policy, Snapshot
 
