@@ -204,23 +204,6 @@ def _testset(args) -> None:
     )
 
 
-def _options(args) -> None:
-    from etmpc.systems import system_key
-    from etmpc.systems.options import canonical, described, settable
-
-    key = system_key(args.task, options=args.options)
-    given, config = dict(key.options), key.make().config
-    print(f"{key.task}: its options (--option NAME=VALUE; the price is --price), each with what it may be and why")
-    declared = described(config)
-    for name, value in settable(config).items():
-        text = canonical(value) or ('""' if isinstance(value, str) else "()")  # an empty word, an empty list
-        print(f"  {name} = {text}" + ("   (as set)" if name in given else ""))
-        what, kind = declared[name]
-        unit = f" ({what.unit})" if what.unit else ""
-        drawn = "; acts on newly drawn episodes (etmpc testset --option ...), not on a stored test set" if what.draws else ""
-        print(f"      {what.describe(kind)}{unit}: {what.why}{drawn}")
-
-
 def _robustness(args) -> None:
     from etmpc.experiments.robustness import check_out, parse_vary, robustness, write
 
@@ -247,7 +230,7 @@ COMMANDS = {
     "testset": _testset,
     "verify": _verify,
     "robustness": _robustness,
-    "options": _options,
+    "options": suite.run_options,
     "tasks": suite.run,
     "discriminate": discriminate.run,
     "figure": figures.run,

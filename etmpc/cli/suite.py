@@ -1,6 +1,6 @@
-"""``etmpc tasks``: the suite, listed from the registry (:mod:`etmpc.systems.catalogue`): per task its id, its
-Gymnasium id with its version, its episode's length, the price of a recompute and its options' names
-(``etmpc options --task TASK`` gives each option's value, range, unit and meaning)."""
+"""The suite described: ``etmpc tasks``, listed from the registry (:mod:`etmpc.systems.catalogue`): per task its
+id, its Gymnasium id with its version, its episode's length, the price of a recompute and its options' names;
+and ``etmpc options --task TASK``, each option's value, range, unit and meaning."""
 
 from __future__ import annotations
 
@@ -42,3 +42,20 @@ def run(args) -> None:
     from etmpc.systems.catalogue import entries
 
     print(format_tasks(entries()))
+
+
+def run_options(args) -> None:
+    from etmpc.systems import system_key
+    from etmpc.systems.options import canonical, described, settable
+
+    key = system_key(args.task, options=args.options)
+    given, config = dict(key.options), key.make().config
+    print(f"{key.task}: its options (--option NAME=VALUE; the price is --price), each with what it may be and why")
+    declared = described(config)
+    for name, value in settable(config).items():
+        text = canonical(value) or ('""' if isinstance(value, str) else "()")  # an empty word, an empty list
+        print(f"  {name} = {text}" + ("   (as set)" if name in given else ""))
+        what, kind = declared[name]
+        unit = f" ({what.unit})" if what.unit else ""
+        drawn = "; acts on newly drawn episodes (etmpc testset --option ...), not on a stored test set" if what.draws else ""
+        print(f"      {what.describe(kind)}{unit}: {what.why}{drawn}")
