@@ -56,7 +56,8 @@ def _terminate(signum, frame):
 
 def main(argv: list[str] | None = None) -> int:
     """Run the command; returns the exit code: 0, 2 for any error (one line on stderr), 130 for
-    Ctrl-C and 143 for SIGTERM (each also one line)."""
+    Ctrl-C and 143 for SIGTERM (each also one line), and 141, silently, when what reads the output closes
+    it early (a pipe into ``head``), as a shell's own commands do."""
     # Rerun's own log lines (its file writer's errors) stay off stderr: a failure to write a
     # recording is reported as one line by etmpc itself. Set RUST_LOG to see them.
     os.environ.setdefault("RUST_LOG", "off")
@@ -84,6 +85,9 @@ def main(argv: list[str] | None = None) -> int:
     except EtmpcError as exc:  # one line, whatever a name in it (a spec, a path) holds
         print(f"etmpc: error: {' '.join(str(exc).splitlines())}", file=sys.stderr)
         return 2
+    except BrokenPipeError:  # the reader went away (`etmpc tasks | head`): nothing to say, and nobody to say it to
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # Python's flush at exit then finds no pipe
+        return 128 + signal.SIGPIPE
     except OSError as exc:  # the machine refused (a full disk, a vanished directory): one line, no traceback
         where = f"{exc.filename}: " if exc.filename else ""
         print(f"etmpc: error: {where}{exc.strerror or exc}", file=sys.stderr)

@@ -1,6 +1,7 @@
 """The command line: tables, JSON, and one-line errors with exit code 2."""
 
 import json
+import os
 import subprocess
 import sys
 
@@ -119,3 +120,15 @@ def test_the_plant_clock_times_one_environment_and_leaves_it_as_it_was():
     assert timed > 0 and clock.seconds == timed  # only env's steps counted
     assert env.physics.data.time == pytest.approx(before + 7 * env.physics.model.opt.timestep)  # the steps were taken
     assert "step" not in vars(env.physics)  # the class's own step again
+
+
+def test_a_reader_that_stops_early_ends_the_command_quietly():
+    # `etmpc tasks | head -1`: the pipe closes under the command; it stops, as `ls | head` does, with no
+    # error line (it said "etmpc: error: Broken pipe") and the shell's code for SIGPIPE
+    read_end, write_end = os.pipe()
+    os.close(read_end)  # the reader is gone before the first line is written
+    try:
+        result = subprocess.run([sys.executable, "-m", "etmpc.cli", "tasks"], stdout=write_end, stderr=subprocess.PIPE, text=True)
+    finally:
+        os.close(write_end)
+    assert result.stderr == "" and result.returncode == 141
