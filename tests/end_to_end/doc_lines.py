@@ -211,6 +211,8 @@ def deprecated(args, said: str) -> str | None:
         return None
     if args.command == "train-self":
         return "etmpc train-self"
+    if getattr(args, "given_policies", None):  # score's older form: its policies as positional words
+        return "etmpc score SPEC (now --policy SPEC)"
     old = [flag for flag in legacy.FLAGS if getattr(args, legacy._dest(flag), None) is not None]
     if getattr(args, "hyperparams", None) is not None:
         old.append("--hyperparams")
@@ -252,6 +254,7 @@ def check_policies(line: Line, args) -> None:
 
     given = getattr(args, "policy", None)
     specs = [] if given is None else given if isinstance(given, list) else [given]
+    specs += getattr(args, "given_policies", None) or []  # score's older form (refused off the changelog, by deprecated)
     specs += [args.against] if getattr(args, "against", None) else []
     tasks = getattr(args, "task", None) or ["cart_pendulum"]
     task = tasks if isinstance(tasks, str) else tasks[0]
