@@ -10,7 +10,7 @@ import re
 
 from etmpc.cli import main
 from etmpc.common import progress
-from etmpc.loop import closed
+from etmpc.loop import play
 
 ARGV = ["evaluate", "--task", "cart_pendulum/kicks", "--policy", "every:3", "--episodes", "1", "--workers", "1"]
 
@@ -21,7 +21,7 @@ def _one_second_per_read():
 
 
 def test_a_long_episode_reports_its_steps_every_30_s_after_the_first_10_s(tmp_path, monkeypatch, capsys):
-    monkeypatch.setattr(closed, "EpisodeSteps", functools.partial(progress.EpisodeSteps, clock=_one_second_per_read()))
+    monkeypatch.setattr(play, "EpisodeSteps", functools.partial(progress.EpisodeSteps, clock=_one_second_per_read()))
     assert main([*ARGV, "--json", str(tmp_path / "e.json")]) == 0
     steps = json.loads((tmp_path / "e.json").read_text())["runs"][0]["steps"]
     lines = re.findall(r"etmpc evaluate: episode 0 of every:3: step (\d+)/(\d+), (\S+) elapsed", capsys.readouterr().err)
