@@ -112,7 +112,7 @@ def test_training_which_draws_its_episodes_still_takes_such_an_option():
 def test_the_environment_draws_its_training_episodes_with_such_an_option_and_refuses_it_on_the_stored_test_set():
     from etmpc.envs.gym import TriggerEnv
 
-    env = TriggerEnv(KICKS, task_options={"disturbances.kicks_per_s": 3})
+    env = TriggerEnv(KICKS, options={"disturbances.kicks_per_s": 3})
     assert env.core.system.config.disturbances.kicks_per_s == 3.0
     env.reset(seed=0)  # a training episode, drawn at the rate asked
     with pytest.raises(EtmpcError, match="disturbances.kicks_per_s: it acts only on newly drawn episodes"):
