@@ -15,6 +15,7 @@ from etmpc.common.checks import BadValue
 from etmpc.common.frozen import frozen, readonly
 from etmpc.control.plan import Plan
 from etmpc.control.timing import ANSWERS, KEEP, SOLVE, level_of
+from etmpc.loop.flight import Flight
 from etmpc.loop.records import Trajectory, computation_cost
 from etmpc.loop.state import AugmentedState, DecisionContext, Snapshot
 from etmpc.systems.base import System
@@ -78,13 +79,12 @@ class ClosedLoop:
         self.done, self.failed = True, False
         # the last step's: the task's reward, whether it computed, what (a level), its work and its price
         self.reward, self.recomputed, self.level, self.work, self.cost = 0.0, False, KEEP, 0, 0.0
-        self.latency, self.levels = system.latency, system.compute_levels
+        self.levels = system.compute_levels
         # What the controller reads (etmpc.control.sensing): with an exact sensor it sees the state itself
         # (seen is x); else a filter's estimate (seen is belief.mean) from the episode's readings.
         self.sensor, self.estimator = system.sensor, system.estimator
         self.belief, self._readings = None, None
-        self.pending: tuple[int, int, Plan, int] | None = None  # the solve in flight: (arrives at, made for, plan, started)
-        self._instant = True  # the next plan is made before the interval (the first, or after a restart)
+        self.flight = Flight(system)  # the solve in flight (etmpc.control.timing): latency and compute levels
 
     def reset(self, episode: Any = None) -> ClosedLoop:
         """Start an episode: a stored one if given, else one drawn by the task."""
@@ -98,7 +98,8 @@ class ClosedLoop:
         self.trajectory = Trajectory.empty(system.episode_steps, self.x.shape[0], nu, sensing=self.estimator is not None)
         self.plan: Plan | None = None
         self.age, self.u_prev, self.step_index, self.done, self.failed = 0, readonly(np.zeros(nu)), 0, False, False
-        self.pending, self._instant, self._readings = None, True, None
+        self.flight.restart()
+        self._readings = None
         self._sense(None)
         self._arrive()
         return self
@@ -117,7 +118,8 @@ class ClosedLoop:
         self.plan, self.age, self.u_prev, self.x = snapshot.plan, snapshot.age, snapshot.u_prev, x
         self.belief, self.seen, self._readings = snapshot.belief, snapshot.seen, None
         self._observation, self.step_index, self.done, self.failed = shown, snapshot.step, False, False
-        self.pending, self._instant, self.timestep = snapshot.pending, snapshot.plan is None, None
+        self.flight.restart(snapshot.pending, snapshot.plan is None)
+        self.timestep = None
         return self
 
     @property
@@ -125,14 +127,17 @@ class ClosedLoop:
         """The plan has run out (age = N; with a latency of ``d`` intervals, it would run out before a
         solve started now arrives: age >= N - d), or there is none yet: the loop must solve, whatever
         is asked. Never while a solve is in flight."""
-        if self.pending is not None:
-            return False
-        return self.plan is None or self.age >= self.plan.horizon - (0 if self._instant else self.latency.intervals)
+        return self.flight.forced(self.plan, self.age)
 
     @property
     def in_flight(self) -> bool:
         """A solve is under way: its plan is not in force yet, and no other starts (the policy is not asked)."""
-        return self.pending is not None
+        return self.flight.pending is not None
+
+    @property
+    def pending(self) -> tuple[int, int, Plan, int] | None:
+        """The solve in flight, ``(arrives at, made for, plan, started)``, or None (:class:`~etmpc.loop.flight.Flight`)."""
+        return self.flight.pending
 
     @property
     def observation(self) -> Mapping:
@@ -148,7 +153,7 @@ class ClosedLoop:
         ``context``, the loop's whole state too (for policies that simulate); without ``observes``,
         no observation (a policy that never reads it: the light mode then does not make it). Also
         ``None`` while a solve is in flight: the policy is not asked then."""
-        return None if (self.forced or self.pending is not None) else self.observed_state(context, observes)
+        return None if (self.forced or self.flight.pending is not None) else self.observed_state(context, observes)
 
     def observed_state(self, context: bool = False, observes: bool = True) -> AugmentedState | None:
         """The augmented state now, also when the decision is forced; ``None`` before the first plan."""
@@ -173,18 +178,15 @@ class ClosedLoop:
         records = self.records
         start = (cpu_clock() if started is None else started) if records else 0.0
         system, i, x = self.system, self.step_index, self.seen
-        in_flight, forced = self.pending is not None, self.forced
+        in_flight = self.flight.pending is not None
+        forced = self.forced
         level = SOLVE if forced else KEEP if in_flight else self._level(recompute)
         work = 0
         if level != KEEP:
             new = solved if solved is not None else self._compute(level, i)
             work = new.iterations if self.levels else 1  # its SQP iterations on a task with levels, else 1 per solve
-            delay = 0 if self._instant else self.latency.delay(new.iterations, system.control_interval_s)
-            if delay == 0:
+            if self.flight.start(new, i, self.plan):  # no delay: in force now; else in flight
                 self._deliver(new, i, forced)
-            else:  # made for step i (or, delay-compensated, for the step its prediction is of)
-                self.pending = (i + delay, i + (self.latency.intervals if self._compensates() else 0), new, i)
-            self._instant = False
         plan = self.plan
         feedback_start = cpu_clock() if records else 0.0
         u, u_planned, correction, x_predicted = _input(system, plan, self.age, x)
@@ -215,11 +217,13 @@ class ClosedLoop:
         restarted = self.env.task.restarted
         self._sense(None if restarted else u)
         if restarted:  # the task put the plant back: the plan (and one in flight) no longer applies
-            self.age, self.pending, self._instant = plan.horizon, None, True
-        elif self.pending is not None and self.pending[0] == self.step_index:
-            _, made, arrived, started = self.pending
-            self.pending = None
-            self._deliver(arrived, made, self.age >= plan.horizon, self.step_index, started)
+            self.age = plan.horizon
+            self.flight.restart()
+        else:
+            landed = self.flight.arrives(self.step_index)
+            if landed is not None:
+                _, made, arrived, started = landed
+                self._deliver(arrived, made, self.age >= plan.horizon, self.step_index, started)
         if records:
             self.trajectory.step_time_s[i] = cpu_clock() - start
             if self.timestep.last() or self.step_index >= system.episode_steps:
@@ -253,17 +257,12 @@ class ClosedLoop:
                 self.trajectory.arrivals.append(now)
                 self.trajectory.starts.append(made if started is None else started)
 
-    def _compensates(self) -> bool:
-        return self.latency.compensate and self.latency.intervals > 0 and not self._instant and self.plan is not None
-
     def _compute(self, level: int, i: int) -> Plan:
         """A new plan from the state now (or, delay-compensated, from the state the kept plan predicts
         for when it will arrive): a full solve or one SQP iteration; timed and a failure counted when
         recording."""
-        system, x, u_prev, warm, age = self.system, self.seen, self.u_prev, self.plan, self.age
-        if self._compensates():
-            ahead = np.array([warm.input_at(age + j) for j in range(self.latency.intervals)])
-            x, u_prev, age = readonly(system.predict(x, ahead)[-1]), readonly(ahead[-1]), age + self.latency.intervals
+        system, warm = self.system, self.plan
+        x, u_prev, age = self.flight.solve_from(self.seen, self.u_prev, warm, self.age)
         solver = system.plan if level == SOLVE else system.iterate
         if not self.records:
             observation = self._observation
