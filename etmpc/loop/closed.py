@@ -17,6 +17,7 @@ from etmpc.control.plan import Plan
 from etmpc.control.timing import ANSWERS, KEEP, SOLVE, level_of
 from etmpc.loop.flight import Flight
 from etmpc.loop.records import Trajectory, computation_cost
+from etmpc.loop.sensed import Sensed
 from etmpc.loop.state import AugmentedState, DecisionContext, Snapshot
 from etmpc.systems.base import System
 
@@ -80,10 +81,7 @@ class ClosedLoop:
         # the last step's: the task's reward, whether it computed, what (a level), its work and its price
         self.reward, self.recomputed, self.level, self.work, self.cost = 0.0, False, KEEP, 0, 0.0
         self.levels = system.compute_levels
-        # What the controller reads (etmpc.control.sensing): with an exact sensor it sees the state itself
-        # (seen is x); else a filter's estimate (seen is belief.mean) from the episode's readings.
-        self.sensor, self.estimator = system.sensor, system.estimator
-        self.belief, self._readings = None, None
+        self.sensed = Sensed(system, env)  # what the controller reads of the state (etmpc.control.sensing)
         self.flight = Flight(system)  # the solve in flight (etmpc.control.timing): latency and compute levels
 
     def reset(self, episode: Any = None) -> ClosedLoop:
@@ -95,11 +93,11 @@ class ClosedLoop:
         self.timestep = _shown(self.env.reset())
         self.x = readonly(system.state(self.timestep))
         nu = system.u_min.shape[0]
-        self.trajectory = Trajectory.empty(system.episode_steps, self.x.shape[0], nu, sensing=self.estimator is not None)
+        self.trajectory = Trajectory.empty(system.episode_steps, self.x.shape[0], nu, sensing=not self.sensed.exact)
         self.plan: Plan | None = None
         self.age, self.u_prev, self.step_index, self.done, self.failed = 0, readonly(np.zeros(nu)), 0, False, False
         self.flight.restart()
-        self._readings = None
+        self.sensed.new_episode()
         self._sense(None)
         self._arrive()
         return self
@@ -116,7 +114,7 @@ class ClosedLoop:
             self.env.physics.forward()
         self.env.task.resume(snapshot.episode if episode is None else episode, snapshot.step)
         self.plan, self.age, self.u_prev, self.x = snapshot.plan, snapshot.age, snapshot.u_prev, x
-        self.belief, self.seen, self._readings = snapshot.belief, snapshot.seen, None
+        self.sensed.resume(snapshot.belief, snapshot.seen)
         self._observation, self.step_index, self.done, self.failed = shown, snapshot.step, False, False
         self.flight.restart(snapshot.pending, snapshot.plan is None)
         self.timestep = None
@@ -138,6 +136,16 @@ class ClosedLoop:
     def pending(self) -> tuple[int, int, Plan, int] | None:
         """The solve in flight, ``(arrives at, made for, plan, started)``, or None (:class:`~etmpc.loop.flight.Flight`)."""
         return self.flight.pending
+
+    @property
+    def seen(self) -> np.ndarray:
+        """What the controller reads of the state now: :attr:`x`, or the filter's estimate (:mod:`etmpc.loop.sensed`)."""
+        return self.sensed.seen
+
+    @property
+    def belief(self) -> Any:
+        """The filter's :class:`~etmpc.control.sensing.Belief` after this step's reading; None with an exact sensor."""
+        return self.sensed.belief
 
     @property
     def observation(self) -> Mapping:
@@ -277,21 +285,13 @@ class ClosedLoop:
         return new
 
     def _sense(self, u: np.ndarray | None) -> None:
-        """What the controller sees of the state now (:attr:`seen`): the state itself with an exact sensor;
-        else the reading of this step, filtered (after the interval under ``u``; ``None``: the filter starts
-        again, at the episode's start or after the task put the plant back), recorded with the estimate."""
-        if self.estimator is None or not np.isfinite(self.x).all():  # exact; or the plant failed: nothing to read
-            self.seen = self.x
-            return
-        if self._readings is None:  # the episode's draws (those of the episode a light loop plays on)
-            self._readings = self.sensor.readings(self.env.task.episode, self.system.episode_steps, self.x.shape[0])
-        y, read = self.sensor.read(np.array(self.x), self._readings, self.step_index)
-        self.belief = self.estimator.start(y, read) if u is None else self.estimator.step(self.belief, u, y, read)
-        self.seen = self.belief.mean
-        if self.records:
-            self.trajectory.measurements[self.step_index] = y
-            self.trajectory.estimates[self.step_index] = self.seen
-            self.trajectory.nis[self.step_index] = self.belief.nis
+        """What the controller sees of the state now (:attr:`seen`, after the interval under ``u``; ``None``:
+        the filter starts again); a reading is recorded with the estimate."""
+        sensed = self.sensed
+        if sensed.sense(self.x, u, self.step_index) and self.records:
+            self.trajectory.measurements[self.step_index] = sensed.reading
+            self.trajectory.estimates[self.step_index] = sensed.seen
+            self.trajectory.nis[self.step_index] = sensed.belief.nis
 
     def _advance(self, action) -> float | None:
         """Step the plant over one control interval; the task's reward, or None if the plant failed."""
