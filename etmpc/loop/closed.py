@@ -132,6 +132,21 @@ class ClosedLoop:
         return self.flight.pending
 
     @property
+    def latency(self) -> Any:
+        """The task's :class:`~etmpc.control.timing.Latency` (the solve in flight's, :attr:`flight`)."""
+        return self.flight.latency
+
+    @property
+    def sensor(self) -> Any:
+        """The task's sensor (:attr:`sensed`'s)."""
+        return self.sensed.sensor
+
+    @property
+    def estimator(self) -> Any:
+        """The task's filter, or None with an exact sensor (:attr:`sensed`'s)."""
+        return self.sensed.estimator
+
+    @property
     def seen(self) -> np.ndarray:
         """What the controller reads of the state now: :attr:`x`, or the filter's estimate (:mod:`etmpc.loop.sensed`)."""
         return self.sensed.seen
