@@ -275,9 +275,9 @@ class ClosedLoop:
         """A new plan from the state now (or, delay-compensated, from the state the kept plan predicts
         for when it will arrive): a full solve or one SQP iteration; timed and a failure counted when
         recording."""
-        system, warm = self.system, self.plan
+        warm = self.plan
         x, u_prev, age = self.flight.solve_from(self.sensed.seen, self.u_prev, warm, self.age)
-        solver = system.plan if level == SOLVE else system.iterate
+        solver = self.system.plan if level == SOLVE else self.system.iterate
         return self.mode.solve(self, solver, x, u_prev, warm, age, i)
 
     def _sense(self, u: np.ndarray | None) -> None:

@@ -81,7 +81,7 @@ class Mode(Protocol):
         """The step ``i``, begun at ``start``, is over: whether the episode ends (see :meth:`settle`)."""
 
     def settle(self, loop: Any) -> None:
-        """At the start of a step: a non-finite state, or the episode's end, ends the episode."""
+        """At an episode's start (after :meth:`start` and the first reading): a non-finite state ends it."""
 
 
 class Recording:
@@ -130,7 +130,8 @@ class Recording:
         loop.trajectory.starts.append(started)
 
     def sensed(self, loop, sensed) -> None:
-        traj, i = loop.trajectory, loop.step_index
+        traj = loop.trajectory
+        i = loop.step_index
         traj.measurements[i] = sensed.reading
         traj.estimates[i] = sensed.seen
         traj.nis[i] = sensed.belief.nis
@@ -183,14 +184,15 @@ class Light:
     def resume(self, loop, snapshot, episode, start) -> None:
         physics = loop.env.physics
         physics.restore(snapshot.physics)
-        x, shown = snapshot.x, snapshot.observation
-        if start is not None:  # the plant moved: its observation is made again when read
-            x, shown = readonly(np.array(start, dtype=float)), None
-            physics.set_state_vector(x)
+        if start is None:
+            loop.x = snapshot.x
+            loop._observation = snapshot.observation
+        else:  # the plant moved: its observation is made again when read
+            loop.x = readonly(np.array(start, dtype=float))
+            loop._observation = None
+            physics.set_state_vector(loop.x)
             physics.forward()
         loop.env.task.resume(snapshot.episode if episode is None else episode, snapshot.step)
-        loop.x = x
-        loop._observation = shown
         loop.timestep = None
 
     def observation(self, loop) -> Mapping:
@@ -214,7 +216,8 @@ class Light:
     def advance(self, loop, action) -> float | None:
         """As ``control.Environment.step``, without a ``TimeStep``; the state read off the physics."""
         env = loop.env
-        task, physics = env.task, env.physics
+        task = env.task
+        physics = env.physics
         try:
             task.before_step(action, physics)
             physics.step(env._n_sub_steps)
