@@ -26,6 +26,10 @@ Two ways to play the same loop, bit for bit the same numbers:
 * :func:`play_on` continues from a :class:`Snapshot` of a running episode, stepping the task and
   the physics directly (no ``TimeStep`` per step) and keeping only the return: the fast path the
   rollout policies simulate their futures with.
+
+These are the recording and the light mode of :class:`ClosedLoop` (:mod:`etmpc.loop.modes`), two strategies
+it asks, never branches on; the solve in flight (:mod:`etmpc.loop.flight`) and what the controller sees of
+the state (:mod:`etmpc.loop.sensed`) are its other collaborators.
 """
 
 from etmpc.loop.closed import ClosedLoop

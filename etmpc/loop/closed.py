@@ -1,34 +1,28 @@
 """The loop itself: :class:`ClosedLoop`, one control interval per step (see :mod:`etmpc.loop`); what plays
-it, episode by episode, is in :mod:`etmpc.loop.play`."""
+it, episode by episode, is in :mod:`etmpc.loop.play`. Its collaborators: the solve in flight
+(:mod:`etmpc.loop.flight`), what the controller sees (:mod:`etmpc.loop.sensed`), and the mode it plays in,
+recording or light (:mod:`etmpc.loop.modes`)."""
 
 from __future__ import annotations
 
-import time
 from collections.abc import Mapping
 from typing import Any
 
 import dm_env
 import numpy as np
-from dm_control.rl.control import PhysicsError
 
 from etmpc.common.checks import BadValue
-from etmpc.common.frozen import frozen, readonly
+from etmpc.common.frozen import readonly
 from etmpc.control.plan import Plan
 from etmpc.control.timing import ANSWERS, KEEP, SOLVE, level_of
-from etmpc.loop.records import Trajectory, computation_cost
+from etmpc.loop.flight import Flight
+from etmpc.loop.modes import LIGHT, RECORDING, cpu_clock
+from etmpc.loop.records import computation_cost
+from etmpc.loop.sensed import Sensed
 from etmpc.loop.state import AugmentedState, DecisionContext, Snapshot
 from etmpc.systems.base import System
 
-# The clock of the trajectory's timings: the CPU time of the thread that runs the loop (the solve, MuJoCo,
-# the feedback and the policy all run in it), so a step played while other processes share the cores
-# does not count the time it waited for a core. Their competition for caches and memory still slows it
-# (measured in docs/scorecard.md): compare CPU figures played on an idle machine.
-cpu_clock = time.thread_time
-
-
-def _shown(timestep: dm_env.TimeStep) -> dm_env.TimeStep:
-    """The step with its observation frozen: the loop shows it to policies, and they cannot write into it."""
-    return dm_env.TimeStep(timestep.step_type, timestep.reward, timestep.discount, frozen(timestep.observation))
+__all__ = ["ClosedLoop", "cpu_clock"]  # cpu_clock: the clock of the trajectory's timings (etmpc.loop.modes)
 
 
 def _input(system: System, plan: Plan, age: int, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -55,109 +49,138 @@ class ClosedLoop:
     ...     loop.step(s is not None and my_rule(s))
     >>> loop.trajectory
 
-    ``records=False`` is the light mode: the task and the physics are stepped directly, as
-    ``control.Environment.step`` steps them, without a ``TimeStep`` (the state is read off the
-    physics, ``system.measure``, and the task's observation is made only when a solve or a policy
+    ``records=False`` is the light mode (:data:`~etmpc.loop.modes.LIGHT`): the task and the physics are
+    stepped directly, as ``control.Environment.step`` steps them, without a ``TimeStep`` (the state is read
+    off the physics, ``system.measure``, and the task's observation is made only when a solve or a policy
     reads it), and nothing is recorded or timed (no :attr:`trajectory`). It starts from a snapshot
-    (:meth:`resume`); a plant that fails sets :attr:`failed`.
+    (:meth:`resume`); a plant that fails sets :attr:`failed`. The mode is chosen once, here: :meth:`step`
+    asks it (:class:`~etmpc.loop.modes.Mode`) what differs, and never branches on it.
 
     Time in the loop (:mod:`etmpc.control.timing`): on a task with a latency, a solve started at step
     ``k`` is :attr:`pending` until ``k + d``; the policy is not asked meanwhile (:attr:`in_flight`)
     and the plan comes into force with age ``d``. On a task with compute levels a decision is
     ``KEEP``, ``ITERATE`` or ``SOLVE`` (``True``/``False`` are a full solve/keep), and a recompute
-    costs its SQP iterations.
+    costs its SQP iterations. The solve in flight is :attr:`flight` (:mod:`etmpc.loop.flight`).
 
     Sensing (:mod:`etmpc.control.sensing`): :attr:`x` is always the plant's state (recorded, rewarded,
     judged for failures); :attr:`seen` is what the controller reads of it: :attr:`x` itself with an exact
     sensor, else the filter's estimate (:attr:`belief`'s mean) after this step's reading. The MPC plans from
-    :attr:`seen`, the feedback corrects from it, and the policy is shown it.
+    :attr:`seen`, the feedback corrects from it, and the policy is shown it (:attr:`sensed`, :mod:`etmpc.loop.sensed`).
     """
 
     def __init__(self, system: System, env: dm_env.Environment, records: bool = True):
-        self.system, self.env, self.records = system, env, records
-        self.done, self.failed = True, False
+        self.system = system
+        self.env = env
+        self.records = records
+        self.mode = RECORDING if records else LIGHT  # chosen once: step asks it, never branches on it
+        self.done = True
+        self.failed = False
         # the last step's: the task's reward, whether it computed, what (a level), its work and its price
-        self.reward, self.recomputed, self.level, self.work, self.cost = 0.0, False, KEEP, 0, 0.0
-        self.latency, self.levels = system.latency, system.compute_levels
-        # What the controller reads (etmpc.control.sensing): with an exact sensor it sees the state itself
-        # (seen is x); else a filter's estimate (seen is belief.mean) from the episode's readings.
-        self.sensor, self.estimator = system.sensor, system.estimator
-        self.belief, self._readings = None, None
-        self.pending: tuple[int, int, Plan, int] | None = None  # the solve in flight: (arrives at, made for, plan, started)
-        self._instant = True  # the next plan is made before the interval (the first, or after a restart)
+        self.reward = 0.0
+        self.recomputed = False
+        self.level = KEEP
+        self.work = 0
+        self.cost = 0.0
+        self.levels = system.compute_levels
+        self.sensed = Sensed(system, env)  # what the controller reads of the state (etmpc.control.sensing)
+        self.flight = Flight(system)  # the solve in flight (etmpc.control.timing): latency and compute levels
 
     def reset(self, episode: Any = None) -> ClosedLoop:
-        """Start an episode: a stored one if given, else one drawn by the task."""
-        if not self.records:
-            raise RuntimeError("a light loop continues a snapshot: use resume()")
-        system = self.system
-        self.env.task.use_episode(episode)
-        self.timestep = _shown(self.env.reset())
-        self.x = readonly(system.state(self.timestep))
-        nu = system.u_min.shape[0]
-        self.trajectory = Trajectory.empty(system.episode_steps, self.x.shape[0], nu, sensing=self.estimator is not None)
-        self.plan: Plan | None = None
-        self.age, self.u_prev, self.step_index, self.done, self.failed = 0, readonly(np.zeros(nu)), 0, False, False
-        self.pending, self._instant, self._readings = None, True, None
+        """Start an episode: a stored one if given, else one drawn by the task (a light loop refuses: it
+        continues a snapshot)."""
+        self.mode.start(self, episode)
+        nu = self.system.u_min.shape[0]
+        self._restart(None, 0, readonly(np.zeros(nu)), 0)
+        self.flight.restart()
+        self.sensed.new_episode()
         self._sense(None)
-        self._arrive()
+        self.mode.settle(self)
         return self
 
     def resume(self, snapshot: Snapshot, episode: Any = None, start: np.ndarray | None = None) -> ClosedLoop:
         """Continue ``snapshot`` (of a twin environment) in the light mode, from ``episode`` and ``start`` if given."""
-        if self.records:
-            raise RuntimeError("only a light loop (records=False) resumes a snapshot")
-        self.env.physics.restore(snapshot.physics)
-        x, shown = snapshot.x, snapshot.observation
-        if start is not None:  # the plant moved: its observation is made again when read
-            x, shown = readonly(np.array(start, dtype=float)), None
-            self.env.physics.set_state_vector(x)
-            self.env.physics.forward()
-        self.env.task.resume(snapshot.episode if episode is None else episode, snapshot.step)
-        self.plan, self.age, self.u_prev, self.x = snapshot.plan, snapshot.age, snapshot.u_prev, x
-        self.belief, self.seen, self._readings = snapshot.belief, snapshot.seen, None
-        self._observation, self.step_index, self.done, self.failed = shown, snapshot.step, False, False
-        self.pending, self._instant, self.timestep = snapshot.pending, snapshot.plan is None, None
+        self.mode.resume(self, snapshot, episode, start)
+        self._restart(snapshot.plan, snapshot.age, snapshot.u_prev, snapshot.step)
+        self.sensed.resume(snapshot.belief, snapshot.seen)
+        self.flight.restart(snapshot.pending, snapshot.plan is None)
         return self
+
+    def _restart(self, plan: Plan | None, age: int, u_prev: np.ndarray, step: int) -> None:
+        """The controller's memory at an episode's start or a snapshot's step: the plan in force, its age, the last input."""
+        self.plan = plan
+        self.age = age
+        self.u_prev = u_prev
+        self.step_index = step
+        self.done = False
+        self.failed = False
 
     @property
     def forced(self) -> bool:
         """The plan has run out (age = N; with a latency of ``d`` intervals, it would run out before a
         solve started now arrives: age >= N - d), or there is none yet: the loop must solve, whatever
         is asked. Never while a solve is in flight."""
-        if self.pending is not None:
-            return False
-        return self.plan is None or self.age >= self.plan.horizon - (0 if self._instant else self.latency.intervals)
+        return self.flight.forced(self.plan, self.age)
 
     @property
     def in_flight(self) -> bool:
         """A solve is under way: its plan is not in force yet, and no other starts (the policy is not asked)."""
-        return self.pending is not None
+        return self.flight.pending is not None
+
+    @property
+    def pending(self) -> tuple[int, int, Plan, int] | None:
+        """The solve in flight, ``(arrives at, made for, plan, started)``, or None (:class:`~etmpc.loop.flight.Flight`)."""
+        return self.flight.pending
+
+    @property
+    def latency(self) -> Any:
+        """The task's :class:`~etmpc.control.timing.Latency` (the solve in flight's, :attr:`flight`)."""
+        return self.flight.latency
+
+    @property
+    def sensor(self) -> Any:
+        """The task's sensor (:attr:`sensed`'s)."""
+        return self.sensed.sensor
+
+    @property
+    def estimator(self) -> Any:
+        """The task's filter, or None with an exact sensor (:attr:`sensed`'s)."""
+        return self.sensed.estimator
+
+    @property
+    def seen(self) -> np.ndarray:
+        """What the controller reads of the state now: :attr:`x`, or the filter's estimate (:mod:`etmpc.loop.sensed`)."""
+        return self.sensed.seen
+
+    @property
+    def belief(self) -> Any:
+        """The filter's :class:`~etmpc.control.sensing.Belief` after this step's reading; None with an exact sensor."""
+        return self.sensed.belief
 
     @property
     def observation(self) -> Mapping:
         """What the task shows now (frozen); in the light mode made when first read."""
-        if self.records:
-            return self.timestep.observation
-        if self._observation is None:
-            self._observation = frozen(self.env.task.get_observation(self.env.physics))
-        return self._observation
+        return self.mode.observation(self)
 
     def augmented_state(self, context: bool = False, observes: bool = True) -> AugmentedState | None:
         """What a policy sees at this step's decision; ``None`` when the decision is forced. With
         ``context``, the loop's whole state too (for policies that simulate); without ``observes``,
         no observation (a policy that never reads it: the light mode then does not make it). Also
         ``None`` while a solve is in flight: the policy is not asked then."""
-        return None if (self.forced or self.pending is not None) else self.observed_state(context, observes)
+        if self.flight.forced(self.plan, self.age) or self.flight.pending is not None:
+            return None
+        return self.observed_state(context, observes)
 
     def observed_state(self, context: bool = False, observes: bool = True) -> AugmentedState | None:
         """The augmented state now, also when the decision is forced; ``None`` before the first plan."""
         if self.plan is None:
             return None
-        plan, age = self.plan, self.age
-        loop = (self.system, self.env, self.step_index, plan, age, self.u_prev, self.timestep, self.belief)
-        ctx, shown = DecisionContext(*loop) if context else None, self.observation if observes else None
-        return AugmentedState(self.seen, plan.states[0], age, plan.state_at(age), plan, shown, ctx, self.belief)
+        plan = self.plan
+        age = self.age
+        belief = self.sensed.belief
+        loop = (self.system, self.env, self.step_index, plan, age, self.u_prev, self.timestep, belief)
+        ctx = DecisionContext(*loop) if context else None
+        shown = self.observation if observes else None
+        return AugmentedState(self.sensed.seen, plan.states[0], age, plan.state_at(age), plan, shown, ctx, belief)
 
     def step(self, recompute: bool | int, started: float | None = None, solved: Plan | None = None) -> float:
         """Play this control interval: compute a new plan if ``recompute`` (or if forced; on a task
@@ -170,67 +193,64 @@ class ClosedLoop:
         answer is ignored (recorded as :attr:`in_flight` in the trajectory)."""
         if self.done:
             raise RuntimeError("the episode is over: reset the loop")
-        records = self.records
-        start = (cpu_clock() if started is None else started) if records else 0.0
-        system, i, x = self.system, self.step_index, self.seen
-        in_flight, forced = self.pending is not None, self.forced
+        mode = self.mode
+        start = mode.tick() if started is None else started  # the step's time counts from here (when recording)
+        i = self.step_index
+        # decide: forced (the plan runs out), none while a solve is in flight, else the policy's answer
+        in_flight = self.flight.pending is not None
+        forced = self.flight.forced(self.plan, self.age)
         level = SOLVE if forced else KEEP if in_flight else self._level(recompute)
-        work = 0
-        if level != KEEP:
-            new = solved if solved is not None else self._compute(level, i)
-            work = new.iterations if self.levels else 1  # its SQP iterations on a task with levels, else 1 per solve
-            delay = 0 if self._instant else self.latency.delay(new.iterations, system.control_interval_s)
-            if delay == 0:
-                self._deliver(new, i, forced)
-            else:  # made for step i (or, delay-compensated, for the step its prediction is of)
-                self.pending = (i + delay, i + (self.latency.intervals if self._compensates() else 0), new, i)
-            self._instant = False
+        # maybe solve: in force now, or in flight until its delay is over
+        work = 0 if level == KEEP else self._recompute(level, i, forced, solved)
+        # feedback: the plan in force's input plus the LQR correction, clipped
         plan = self.plan
-        feedback_start = cpu_clock() if records else 0.0
-        u, u_planned, correction, x_predicted = _input(system, plan, self.age, x)
-        if records:
-            self.trajectory.feedback_time_s[i] = cpu_clock() - feedback_start
-        recompute = level != KEEP
-        reward = self._advance(system.action(u, recompute)) if np.isfinite(u).all() else None  # as a diverged plant
-        self.recomputed, self.level, self.work = recompute, level, work
-        self.cost = computation_cost(work, system.recompute_price)
+        feedback_start = mode.tick()
+        u, u_planned, correction, x_predicted = _input(self.system, plan, self.age, self.sensed.seen)
+        mode.fed(self, i, feedback_start)
+        # advance the plant (a non-finite input as a diverged plant)
+        recomputed = level != KEEP
+        reward = mode.advance(self, self.system.action(u, recomputed)) if np.isfinite(u).all() else None
+        # bookkeeping
+        self.recomputed = recomputed
+        self.level = level
+        self.work = work
+        self.cost = computation_cost(work, self.system.recompute_price)
         if reward is None:  # the plant failed
-            self.failed = self.done = True
-            if records:
-                self.trajectory.nonfinite = True
+            self.failed = True
+            self.done = True
+            mode.failed(self)
             self.reward = 0.0
             return self.reward - self.cost
         self.reward = reward
-        if records:
-            traj = self.trajectory
-            traj.recompute[i], traj.forced[i], traj.level[i], traj.work[i] = recompute, forced, level, work
-            traj.in_flight[i] = in_flight
-            traj.applied[i], traj.planned[i], traj.correction[i] = u, u_planned, correction
-            traj.predicted[i], traj.plan_age[i] = x_predicted, self.age
-            traj.rewards[i] = reward
-            traj.steps = i + 1
+        mode.played(self, i, forced, in_flight, u, u_planned, correction, x_predicted)
+        self._move_on(i, u, plan)
+        mode.ended(self, i, start)
+        return reward - self.cost
+
+    def _recompute(self, level: int, i: int, forced: bool, solved: Plan | None) -> int:
+        """Start step ``i``'s recompute at ``level`` (its plan ``solved`` if the caller has it); its work."""
+        new = solved if solved is not None else self._compute(level, i)
+        if self.flight.start(new, i, self.plan):  # no delay: in force now; else in flight
+            self._deliver(new, i, forced)
+        return new.iterations if self.levels else 1  # its SQP iterations on a task with levels, else 1 per solve
+
+    def _move_on(self, i: int, u: np.ndarray, plan: Plan) -> None:
+        """After step ``i`` under ``plan``: the plan ages, ``u`` is the last input, the state is seen again, and
+        a solve in flight that arrives now comes into force (a plant the task put back drops the plan)."""
         self.step_index = i + 1
         u.flags.writeable = False  # the loop's own new array (np.minimum's): shown as u_prev, never written again
-        self.age, self.u_prev = self.age + 1, u
+        self.age = self.age + 1
+        self.u_prev = u
         restarted = self.env.task.restarted
         self._sense(None if restarted else u)
         if restarted:  # the task put the plant back: the plan (and one in flight) no longer applies
-            self.age, self.pending, self._instant = plan.horizon, None, True
-        elif self.pending is not None and self.pending[0] == self.step_index:
-            _, made, arrived, started = self.pending
-            self.pending = None
+            self.age = plan.horizon
+            self.flight.restart()
+            return
+        landed = self.flight.arrives(self.step_index)
+        if landed is not None:
+            _, made, arrived, started = landed
             self._deliver(arrived, made, self.age >= plan.horizon, self.step_index, started)
-        if records:
-            self.trajectory.step_time_s[i] = cpu_clock() - start
-            if self.timestep.last() or self.step_index >= system.episode_steps:
-                self._finish()
-            else:
-                self._arrive()
-        elif not np.isfinite(self.x).all():
-            self.failed = self.done = True
-        elif self.step_index >= system.episode_steps:
-            self.done = True
-        return reward - self.cost
 
     def _level(self, answer) -> int:
         """A decision as a compute level (:func:`~etmpc.control.timing.level_of`): on a task with levels,
@@ -247,80 +267,22 @@ class ClosedLoop:
         it failed and the plan in force still has steps left (``expired``: it has none, or there is no plan)."""
         if new.success or expired or self.plan is None:
             now = made if now is None else now
-            self.plan, self.age = new, now - made
-            if self.records:
-                self.trajectory.plans.append((made, new))
-                self.trajectory.arrivals.append(now)
-                self.trajectory.starts.append(made if started is None else started)
-
-    def _compensates(self) -> bool:
-        return self.latency.compensate and self.latency.intervals > 0 and not self._instant and self.plan is not None
+            self.plan = new
+            self.age = now - made
+            self.mode.delivered(self, made, new, now, made if started is None else started)
 
     def _compute(self, level: int, i: int) -> Plan:
         """A new plan from the state now (or, delay-compensated, from the state the kept plan predicts
         for when it will arrive): a full solve or one SQP iteration; timed and a failure counted when
         recording."""
-        system, x, u_prev, warm, age = self.system, self.seen, self.u_prev, self.plan, self.age
-        if self._compensates():
-            ahead = np.array([warm.input_at(age + j) for j in range(self.latency.intervals)])
-            x, u_prev, age = readonly(system.predict(x, ahead)[-1]), readonly(ahead[-1]), age + self.latency.intervals
-        solver = system.plan if level == SOLVE else system.iterate
-        if not self.records:
-            observation = self._observation
-            if observation is None:
-                observation = self.env.task.get_observation(self.env.physics)
-            return solver(x, u_prev, warm, age, dm_env.TimeStep(dm_env.StepType.MID, None, None, observation))
-        solve_start = cpu_clock()
-        new = solver(x, u_prev, warm, age, self.timestep)
-        self.trajectory.solve_time_s[i] = cpu_clock() - solve_start
-        if not new.success:
-            self.trajectory.solver_failures += 1
-        return new
+        warm = self.plan
+        x, u_prev, age = self.flight.solve_from(self.sensed.seen, self.u_prev, warm, self.age)
+        solver = self.system.plan if level == SOLVE else self.system.iterate
+        return self.mode.solve(self, solver, x, u_prev, warm, age, i)
 
     def _sense(self, u: np.ndarray | None) -> None:
-        """What the controller sees of the state now (:attr:`seen`): the state itself with an exact sensor;
-        else the reading of this step, filtered (after the interval under ``u``; ``None``: the filter starts
-        again, at the episode's start or after the task put the plant back), recorded with the estimate."""
-        if self.estimator is None or not np.isfinite(self.x).all():  # exact; or the plant failed: nothing to read
-            self.seen = self.x
-            return
-        if self._readings is None:  # the episode's draws (those of the episode a light loop plays on)
-            self._readings = self.sensor.readings(self.env.task.episode, self.system.episode_steps, self.x.shape[0])
-        y, read = self.sensor.read(np.array(self.x), self._readings, self.step_index)
-        self.belief = self.estimator.start(y, read) if u is None else self.estimator.step(self.belief, u, y, read)
-        self.seen = self.belief.mean
-        if self.records:
-            self.trajectory.measurements[self.step_index] = y
-            self.trajectory.estimates[self.step_index] = self.seen
-            self.trajectory.nis[self.step_index] = self.belief.nis
-
-    def _advance(self, action) -> float | None:
-        """Step the plant over one control interval; the task's reward, or None if the plant failed."""
-        if self.records:
-            try:
-                self.timestep = _shown(self.env.step(action))
-            except PhysicsError:
-                return None
-            self.x = readonly(self.system.state(self.timestep))
-            return self.timestep.reward
-        task, physics = self.env.task, self.env.physics  # as control.Environment.step, without a TimeStep
-        try:
-            task.before_step(action, physics)
-            physics.step(self.env._n_sub_steps)
-        except PhysicsError:
-            return None
-        task.after_step(physics)
-        reward = task.get_reward(physics)
-        self._observation, self.x = None, readonly(self.system.measure(physics))
-        return reward
-
-    def _arrive(self) -> None:
-        """At the start of a step: the state is recorded; a non-finite one ends the episode."""
-        self.trajectory.states[self.step_index] = self.x
-        if not np.all(np.isfinite(self.x)):
-            self.trajectory.nonfinite, self.done, self.failed = True, True, True
-
-    def _finish(self) -> None:
-        self.trajectory.states[self.trajectory.steps] = self.x
-        self.trajectory.nonfinite = self.failed = not bool(np.all(np.isfinite(self.x)))
-        self.done = True
+        """What the controller sees of the state now (:attr:`seen`, after the interval under ``u``; ``None``:
+        the filter starts again); a reading is recorded with the estimate."""
+        sensed = self.sensed
+        if sensed.sense(self.x, u, self.step_index):
+            self.mode.sensed(self, sensed)
