@@ -23,8 +23,9 @@ class LazyHelp(str):
     """A help text made only when the help is shown (argparse expands it with ``%``): ``make()`` may read the
     registry and import the tasks, which ``etmpc --help`` and every command's parsing must not."""
 
-    def __new__(cls, make):
-        text = super().__new__(cls, "(made when shown)")
+    def __new__(cls, make, plain: str = "(made when shown)"):
+        """``make``: the text, made when the help is shown; ``plain``: what the help is as a plain string."""
+        text = super().__new__(cls, plain)
         text.make = make
         return text
 

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from etmpc.cli.tasks import task_option
 from etmpc.cli import types
-from etmpc.cli.output import distinct_policies as _distinct_policies, say as _say, warn
+from etmpc.cli.output import LazyHelp, distinct_policies as _distinct_policies, say as _say, warn
 from etmpc.common.errors import EtmpcError
 from etmpc.policies.specs import syntax
 
@@ -21,19 +21,16 @@ LEADERBOARD_OUT = Path("docs")
 _OLD_POLICIES = "given_policies"  # where the older form's positional policies land
 
 
-class _LeaderboardHelp(str):
-    """``--leaderboard``'s help, naming the leaderboard's rows from :mod:`etmpc.experiments.leaderboard_rows` (imported
+def _leaderboard_help() -> str:
+    """``--leaderboard``'s help, naming the leaderboard's rows from :mod:`etmpc.experiments.leaderboard_rows` (made
     only when the help is shown: it is a heavy import)."""
+    from etmpc.experiments.leaderboard_rows import row_names
 
-    def __mod__(self, params):
-        from etmpc.experiments.leaderboard_rows import row_names
-
-        rows = ", ".join(row_names()).replace("%", "%%")
-        return (
-            f"score every built-in policy ({rows}; a shipped learner where policies/<task>/ holds it; the oracle "
-            "is the clairvoyant reference, 100) and write DIR/leaderboard.md, .json and the profile figure (make "
-            "leaderboard)"
-        ) % params
+    return (
+        f"score every built-in policy ({', '.join(row_names())}; a shipped learner where policies/<task>/ holds it; "
+        "the oracle is the clairvoyant reference, 100) and write DIR/leaderboard.md, .json and the profile figure "
+        "(make leaderboard)"
+    )
 
 
 def add_parser(sub, tasks: str) -> None:
@@ -77,8 +74,9 @@ def add_parser(sub, tasks: str) -> None:
     sc.add_argument(
         "--leaderboard",
         action="store_true",
-        help=_LeaderboardHelp(
-            "score every built-in policy and write DIR/leaderboard.md, .json and the profile figure (make leaderboard)"
+        help=LazyHelp(
+            _leaderboard_help,
+            "score every built-in policy and write DIR/leaderboard.md, .json and the profile figure (make leaderboard)",
         ),
     )
     sc.add_argument(
