@@ -72,6 +72,11 @@ def stage(name: str) -> Iterator[None]:
         _STAGES.reset(token)
 
 
+def _title(label: str = "") -> str:
+    """What a line starts with: the command, the stages it is in, and ``label`` (``etmpc score: DPI: episodes``)."""
+    return ": ".join([_COMMAND.get(), *_STAGES.get(), *([label] if label else [])])
+
+
 def clock_time(seconds: float) -> str:
     """``83`` -> ``1:23``, ``3723`` -> ``1:02:03``."""
     whole = max(0, int(round(seconds)))
@@ -121,7 +126,7 @@ class Progress:
         self._stream = sys.stderr if stream is None else stream
         self._clock = clock
         self._started = clock()
-        self._title = ": ".join([_COMMAND.get(), *_STAGES.get(), *([label] if label else [])])
+        self._title = _title(label)
         outer = _OPEN.get()
         self._parent = outer if outer is not None and outer.whole else None
         shown = enabled and outer is None  # inside another tracker: its count shows (a whole one's), or nothing
@@ -263,7 +268,5 @@ class EpisodeSteps:
             self._next = now + EVERY
             elapsed = now - self._started
             left = (self.total - self.n) * elapsed / self.n
-            title = ": ".join([_COMMAND.get(), *_STAGES.get(), _EPISODE.get()])
-            say(
-                f"{title}: step {self.n}/{self.total}, {clock_time(elapsed)} elapsed, about {clock_time(left)} left", self._stream
-            )
+            where = f"step {self.n}/{self.total}, {clock_time(elapsed)} elapsed, about {clock_time(left)} left"
+            say(f"{_title(_EPISODE.get())}: {where}", self._stream)
