@@ -35,11 +35,11 @@ class LazyHelp(str):
 
 def task_prices() -> str:
     """Each task's own price of a recompute, from the registry: ``5e-05 on cart_pendulum/balance; 0.1 on ...``."""
-    from etmpc.systems import names, system_class
+    from etmpc.systems.catalogue import entries
 
     by_price: dict[float, list[str]] = {}
-    for task in names():
-        by_price.setdefault(system_class(task).Config().recompute_price, []).append(task)
+    for entry in entries():
+        by_price.setdefault(entry.recompute_price, []).append(entry.spec.id)
     return "; ".join(f"{price:g} on {', '.join(tasks)}" for price, tasks in by_price.items())
 
 
