@@ -20,27 +20,14 @@ from etmpc.evaluation.verify import sample, verify
 def card(tmp_path_factory):
     folder = tmp_path_factory.mktemp("card")
     path = folder / "card.json"
-    assert (
-        main(
-            [
-                "score",
-                "--policy",
-                "every:3",
-                "--policy",
-                "threshold:0.02",
-                "--task",
-                "battery",
-                "--episodes",
-                "4",
-                "--workers",
-                "1",
-                "--json",
-                str(path),
-            ]
-        )
-        == 0
-    )
+    assert main([*_scored(4), "--json", str(path)]) == 0
     return path
+
+
+def _scored(episodes: int) -> list[str]:
+    """The score command both cards come from: two policies on the battery's first ``episodes``, one process."""
+    policies = ["--policy", "every:3", "--policy", "threshold:0.02"]
+    return ["score", *policies, "--task", "battery", "--episodes", str(episodes), "--workers", "1"]
 
 
 def _edited(card, tmp_path, edit):
@@ -356,20 +343,7 @@ def options_card(tmp_path_factory):
     real = scorecard.build_references
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(scorecard, "build_references", lambda *a, **k: built.append(real(*a, **k)) or built[-1])
-        argv = [
-            "score",
-            "--policy",
-            "every:3",
-            "--policy",
-            "threshold:0.02",
-            "--task",
-            "battery",
-            "--episodes",
-            str(EPISODES),
-            "--workers",
-            "1",
-        ]
-        assert main([*argv, "--option", OPTION, "--json", str(path)]) == 0
+        assert main([*_scored(EPISODES), "--option", OPTION, "--json", str(path)]) == 0
     return path, built[0]
 
 
