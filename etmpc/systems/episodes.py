@@ -26,6 +26,19 @@ def scale_setting(what: str) -> Any:
     return setting(1.0, low=0, high=MAX_SCALE, why=f"every {what} played, times this: acts on a stored test set too")
 
 
+def drawn_setting(default: Any, high: float, why: str, unit: str = "", pair: bool = False) -> Any:
+    """A setting of how episodes are drawn, from 0 to ``high`` (a probability, a rate, a size; with ``pair``, a
+    range ``(low, high)`` drawn uniformly), as an option: ``etmpc testset --option ...`` draws a test set with it,
+    and a rollout redraws a future with it."""
+    return setting(default, low=0, high=high, unit=unit, draws=True, pair=pair, why=why)
+
+
+def jumps_setting(default: float, interval_s: float, what: str) -> Any:
+    """The jumps a second of ``what`` (a target, a reference), as an option drawn with: at most one an interval
+    of ``interval_s`` (the episode draws a jump per interval with probability ``jumps a second * interval_s``)."""
+    return drawn_setting(default, 1 / interval_s, f"{what}'s jumps a second: at most one an interval", unit="1/s")
+
+
 def generator(random: Random) -> np.random.Generator:
     """The task's generator from what ``dm_control.suite`` tasks accept as ``random``.
 

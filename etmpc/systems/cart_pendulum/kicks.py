@@ -42,11 +42,19 @@ import mujoco
 import numpy as np
 from dm_control.rl import control
 
-from etmpc.common.declared import Checked, setting
+from etmpc.common.declared import Checked
 from etmpc.systems.cart_pendulum.model import NX, STATE_NAMES
 from etmpc.systems.cart_pendulum.physics import Bumpers, Physics, load_model
 from etmpc.systems.cart_pendulum.task import CartPendulumTask
-from etmpc.systems.episodes import MAX_EVENTS_PER_S, Random, build_environment, jump_process, scale_setting
+from etmpc.systems.episodes import (
+    MAX_EVENTS_PER_S,
+    Random,
+    build_environment,
+    drawn_setting,
+    jump_process,
+    jumps_setting,
+    scale_setting,
+)
 
 CONTROL_DT_S = 0.1
 PHYSICS_DT_S = 0.01  # 10 RK4 steps per interval: the bumpers' spring (31 rad/s on the cart) needs them
@@ -75,27 +83,12 @@ class Disturbances(Checked):
     with them); ``kick_scale`` multiplies every kick as it is played, a stored episode's too, so that one test
     set measures a trigger against stronger or gentler kicks, episode by episode (``etmpc robustness``)."""
 
-    kicks_per_s: float = setting(
-        KICKS_PER_S, low=0, high=MAX_EVENTS_PER_S, unit="1/s", draws=True, why="the kicks' Poisson rate, as episodes are drawn"
-    )
-    kick_rad_s: tuple[float, ...] = setting(  # |delta omega| ~ U(low, high), random sign
-        KICK_RAD_S,
-        low=0,
-        high=MAX_KICK_RAD_S,
-        pair=True,
-        unit="rad/s",
-        draws=True,
-        why="a kick's size on the pole's rate ~ U(low, high), random sign",
+    kicks_per_s: float = drawn_setting(KICKS_PER_S, MAX_EVENTS_PER_S, "the kicks' Poisson rate, as episodes are drawn", "1/s")
+    kick_rad_s: tuple[float, ...] = drawn_setting(  # |delta omega| ~ U(low, high), random sign
+        KICK_RAD_S, MAX_KICK_RAD_S, "a kick's size on the pole's rate ~ U(low, high), random sign", "rad/s", True
     )
     kick_scale: float = scale_setting("kick")
-    reference_jumps_per_s: float = setting(
-        REFERENCE_JUMPS_PER_S,
-        low=0,
-        high=1 / CONTROL_DT_S,
-        unit="1/s",
-        draws=True,
-        why="the cart reference's jumps a second: at most one an interval",
-    )
+    reference_jumps_per_s: float = jumps_setting(REFERENCE_JUMPS_PER_S, CONTROL_DT_S, "the cart reference")
 
     @property
     def reference_jump_probability(self) -> float:

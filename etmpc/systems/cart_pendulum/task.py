@@ -39,11 +39,11 @@ import numpy as np
 from dm_control.rl import control
 from dm_env import specs
 
-from etmpc.common.declared import Checked, setting
+from etmpc.common.declared import Checked
 from etmpc.systems.cart_pendulum.model import NX, STATE_NAMES
 from etmpc.systems.cart_pendulum.physics import Physics, load_model
 from etmpc.systems.plants import PLANTS
-from etmpc.systems.episodes import GAUSSIAN_BOUND_STD, EpisodeTask, Random, build_environment, scale_setting
+from etmpc.systems.episodes import GAUSSIAN_BOUND_STD, EpisodeTask, Random, build_environment, drawn_setting, scale_setting
 
 __all__ = ["PLANTS", "Disturbances", "Episode", "Balance", "Physics", "load_model", "make_environment"]
 
@@ -68,13 +68,11 @@ class Disturbances(Checked):
     episode's too, so that one test set measures a trigger against a stronger or gentler disturbance, episode by
     episode (``etmpc robustness``)."""
 
-    angular_std_rad_s2: float = setting(  # w ~ N(0, this) per control interval
+    angular_std_rad_s2: float = drawn_setting(  # w ~ N(0, this) per control interval
         DISTURBANCE_STD_RAD_S2,
-        low=0,
-        high=MAX_ANGULAR_STD_RAD_S2,
-        unit="rad/s^2",
-        draws=True,
-        why="the angular disturbance's standard deviation, drawn per control interval",
+        MAX_ANGULAR_STD_RAD_S2,
+        "the angular disturbance's standard deviation, drawn per control interval",
+        "rad/s^2",
     )
     disturbance_scale: float = scale_setting("disturbance")
 

@@ -40,8 +40,8 @@ from dm_control.rl import control
 from dm_control.utils import containers
 from dm_env import specs
 
-from etmpc.common.declared import Checked, setting
-from etmpc.systems.episodes import EpisodeTask, Random, add_task, build_environment, jump_process, scale_setting
+from etmpc.common.declared import Checked
+from etmpc.systems.episodes import EpisodeTask, Random, add_task, build_environment, drawn_setting, jump_process, scale_setting
 from etmpc.systems.plants import PLANTS
 from etmpc.systems.quadrotor.model import NX, STATE_NAMES
 from etmpc.systems.quadrotor.physics import Physics, load_model
@@ -75,23 +75,11 @@ class Disturbances(Checked):
     them); ``gust_scale`` multiplies every gust's force as it is played, a stored episode's too, so that one test
     set measures a trigger against stronger or weaker gusts, episode by episode (``etmpc robustness``)."""
 
-    change_probability: float = setting(  # a waypoint change per interval after the first
-        CHANGE_PROBABILITY, low=0, high=1, draws=True, why="a waypoint change's probability per interval"
-    )
-    gust_probability: float = setting(  # a gust's onset per interval
-        GUST_PROBABILITY, low=0, high=1, draws=True, why="a gust's onset's probability per interval"
-    )
-    gust_peak_n: tuple[float, ...] = setting(  # its peak ~ U(low, high)
-        GUST_PEAK_N, low=0, high=MAX_GUST_N, pair=True, unit="N", draws=True, why="a gust's peak force ~ U(low, high)"
-    )
-    gust_duration_s: tuple[float, ...] = setting(  # its length ~ U(low, high), in whole intervals
-        GUST_DURATION_S,
-        low=0,
-        high=MAX_GUST_S,
-        pair=True,
-        unit="s",
-        draws=True,
-        why="a gust's length ~ U(low, high), in whole intervals",
+    change_probability: float = drawn_setting(CHANGE_PROBABILITY, 1, "a waypoint change's probability per interval")
+    gust_probability: float = drawn_setting(GUST_PROBABILITY, 1, "a gust's onset's probability per interval")
+    gust_peak_n: tuple[float, ...] = drawn_setting(GUST_PEAK_N, MAX_GUST_N, "a gust's peak force ~ U(low, high)", "N", True)
+    gust_duration_s: tuple[float, ...] = drawn_setting(
+        GUST_DURATION_S, MAX_GUST_S, "a gust's length ~ U(low, high), in whole intervals", "s", True
     )
     gust_scale: float = scale_setting("gust")
 

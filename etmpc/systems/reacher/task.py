@@ -33,8 +33,8 @@ from dm_control.rl import control
 from dm_control.utils import containers
 from dm_env import specs
 
-from etmpc.common.declared import Checked, setting
-from etmpc.systems.episodes import EpisodeTask, Random, add_task, build_environment, jump_process
+from etmpc.common.declared import Checked
+from etmpc.systems.episodes import EpisodeTask, Random, add_task, build_environment, drawn_setting, jump_process, jumps_setting
 from etmpc.systems.reacher.model import NX, STATE_NAMES, Parameters
 from etmpc.systems.plants import PLANTS
 from etmpc.systems.reacher.physics import Physics, load_model
@@ -60,22 +60,9 @@ class Disturbances(Checked):
     """The target's jumps, as options (``--option disturbances.jumps_per_s=2``): how episodes are drawn (``etmpc
     testset --option ...`` draws a test set with them; a rollout redraws a future with them)."""
 
-    jumps_per_s: float = setting(  # a jump with probability jumps_per_s * CONTROL_DT_S per interval after the first
-        JUMPS_PER_S,
-        low=0,
-        high=1 / CONTROL_DT_S,
-        unit="1/s",
-        draws=True,
-        why="the target's jumps a second: at most one an interval",
-    )
-    target_radius_m: tuple[float, ...] = setting(  # a target's radius ~ U(low, high), within the arm's reach
-        TARGET_RADIUS_M,
-        low=0,
-        high=REACH_M,
-        pair=True,
-        unit="m",
-        draws=True,
-        why="a target's distance from the shoulder ~ U(low, high), within the arm's reach",
+    jumps_per_s: float = jumps_setting(JUMPS_PER_S, CONTROL_DT_S, "the target")  # jump_probability per interval after the first
+    target_radius_m: tuple[float, ...] = drawn_setting(  # a target's radius ~ U(low, high), within the arm's reach
+        TARGET_RADIUS_M, REACH_M, "a target's distance from the shoulder ~ U(low, high), within the arm's reach", "m", True
     )
 
     @property
