@@ -34,27 +34,18 @@ disturbance is (Åström and Bernhardsson 2002); this task makes it bursty.
 
 from __future__ import annotations
 
-import collections
 import math
 from dataclasses import asdict, dataclass
 
 import mujoco
 import numpy as np
-from dm_control.rl import control
 
 from etmpc.common.declared import Checked
 from etmpc.systems.cart_pendulum.model import NX, STATE_NAMES
 from etmpc.systems.cart_pendulum.physics import Bumpers, Physics, load_model
 from etmpc.systems.cart_pendulum.task import CartPendulumTask
-from etmpc.systems.episodes import (
-    MAX_EVENTS_PER_S,
-    Random,
-    build_environment,
-    drawn_setting,
-    jump_process,
-    jumps_setting,
-    scale_setting,
-)
+from etmpc.systems.tracking import initial_state_range
+from etmpc.systems.episodes import MAX_EVENTS_PER_S, Random, drawn_setting, jump_process, jumps_setting, scale_setting
 
 CONTROL_DT_S = 0.1
 PHYSICS_DT_S = 0.01  # 10 RK4 steps per interval: the bumpers' spring (31 rad/s on the cart) needs them
@@ -174,19 +165,23 @@ class Kicks(CartPendulumTask):
     """Keep the pole upright and the cart on its reference, on the rail, through random kicks and
     reference jumps (see the module's docstring)."""
 
+    episode_class = KickEpisode
+    disturbances_class = Disturbances
+    intervals = ("kick", "kicks")
     observation_names = OBSERVATION_NAMES
+    interval_s = CONTROL_DT_S
+    episode_steps = EPISODE_STEPS
 
     def __init__(self, random: Random = None, steps: int = EPISODE_STEPS, disturbances: Disturbances | None = None):
-        super().__init__(random, steps)
+        super().__init__(random, steps, disturbances)
         self._fell = False
-        self.disturbances = Disturbances() if disturbances is None else disturbances
 
-    def check_episode(self, episode: KickEpisode) -> None:
-        if episode.kick.shape[0] < self._steps:
-            raise ValueError(f"episode has {episode.kick.shape[0]} kicks, need {self._steps}")
-
-    def draw_episode(self, random: np.random.Generator) -> KickEpisode:
-        return KickEpisode.draw(random, self._steps, self.disturbances)
+    @staticmethod
+    def make_physics(plant: str) -> Physics:
+        root = load_model(plant, timestep_s=PHYSICS_DT_S, bumpers=BUMPERS, reference=True)
+        physics = Physics.from_xml_string(root.to_xml_string(), assets=root.get_assets())
+        physics.bumpers = BUMPERS
+        return physics
 
     def resample_episode(self, episode: KickEpisode, step: int, random: np.random.Generator) -> KickEpisode:
         """``episode`` with the kicks of intervals ``step..`` and the references after ``step``
@@ -201,8 +196,7 @@ class Kicks(CartPendulumTask):
         """What the episodes are drawn from (recorded in the test set; the kicks' scale where it is not 1)."""
         d = self.disturbances
         return {
-            "initial_state_low": INITIAL_STATE_LOW.tolist(),
-            "initial_state_high": INITIAL_STATE_HIGH.tolist(),
+            **initial_state_range(INITIAL_STATE_LOW, INITIAL_STATE_HIGH),
             "kicks_per_s": d.kicks_per_s,
             "kick_rad_s": list(d.kick_rad_s),
             **({"kick_scale": d.kick_scale} if d.kick_scale != 1 else {}),
@@ -230,7 +224,7 @@ class Kicks(CartPendulumTask):
 
     def current_reference(self) -> float:
         """The reference of the interval about to be played (the last one's once the episode is over)."""
-        return float(self._episode.reference[min(self._step, self._episode.reference.shape[0] - 1)])
+        return float(self.current("reference"))
 
     def initialize_episode(self, physics: Physics) -> None:
         episode = self.next_episode()
@@ -264,19 +258,8 @@ class Kicks(CartPendulumTask):
         error = physics.cart_position() - float(self._episode.reference[self._step - 1])
         return -step_cost(physics.pole_angle(), error, physics.touches_bumper())
 
-    def get_observation(self, physics: Physics) -> collections.OrderedDict:
-        return collections.OrderedDict(zip(self.observation_names, np.append(physics.state(), self.current_reference())))
+    def observation_values(self, physics: Physics) -> np.ndarray:
+        return np.append(physics.state(), self.current_reference())
 
 
-def make_environment(
-    random: Random = None,
-    plant: str = "mismatched",
-    steps: int = EPISODE_STEPS,
-    environment_kwargs: dict | None = None,
-    disturbances: Disturbances | None = None,
-) -> control.Environment:
-    root = load_model(plant, timestep_s=PHYSICS_DT_S, bumpers=BUMPERS, reference=True)
-    physics = Physics.from_xml_string(root.to_xml_string(), assets=root.get_assets())
-    physics.bumpers = BUMPERS
-    task = Kicks(random=random, steps=steps, disturbances=disturbances)
-    return build_environment(physics, task, steps, CONTROL_DT_S, environment_kwargs)
+make_environment = Kicks.environment  # the task's dm-control environment (plant=, disturbances=, ...)

@@ -31,19 +31,17 @@ decreases as the episode goes on.
 
 from __future__ import annotations
 
-import collections
 import math
 from dataclasses import dataclass
 
 import numpy as np
-from dm_control.rl import control
-from dm_env import specs
 
 from etmpc.common.declared import Checked
 from etmpc.systems.cart_pendulum.model import NX, STATE_NAMES
 from etmpc.systems.cart_pendulum.physics import Physics, load_model
 from etmpc.systems.plants import PLANTS
-from etmpc.systems.episodes import GAUSSIAN_BOUND_STD, EpisodeTask, Random, build_environment, drawn_setting, scale_setting
+from etmpc.systems.episodes import GAUSSIAN_BOUND_STD, drawn_setting, scale_setting
+from etmpc.systems.tracking import TrackingTask, initial_state_range
 
 __all__ = ["PLANTS", "Disturbances", "Episode", "Balance", "Physics", "load_model", "make_environment"]
 
@@ -112,27 +110,14 @@ def off_balance_steps(rewards: np.ndarray) -> int:
     return int(np.sum(beyond & ~recovering))
 
 
-class CartPendulumTask(EpisodeTask):
+class CartPendulumTask(TrackingTask):
     """What the cart pendulum's tasks share: the force as action, the state as observation, a
     non-finite state as the end (:meth:`EpisodeTask.get_termination`). A task that observes more
     names it in ``observation_names`` and extends :meth:`get_observation`."""
 
     observation_names: tuple[str, ...] = STATE_NAMES
-
-    def __init__(self, random: Random = None, steps: int = EPISODE_STEPS):
-        super().__init__(random)
-        self._steps = steps
-        self._step = 0
-
-    def action_spec(self, physics: Physics) -> specs.BoundedArray:
-        low, high = physics.model.actuator_ctrlrange[0]
-        return specs.BoundedArray((1,), np.float64, [low], [high], name="force")
-
-    def observation_spec(self, physics: Physics) -> collections.OrderedDict:
-        return collections.OrderedDict((name, specs.Array((), np.float64, name=name)) for name in self.observation_names)
-
-    def get_observation(self, physics: Physics) -> collections.OrderedDict:
-        return collections.OrderedDict(zip(STATE_NAMES, physics.state()))
+    action_name = "force"
+    interval_s = CONTROL_DT_S
 
 
 class Balance(CartPendulumTask):
@@ -143,16 +128,15 @@ class Balance(CartPendulumTask):
     ``disturbances`` (:class:`Disturbances`) says how they are drawn and how their disturbances are played.
     """
 
-    def __init__(self, random: Random = None, steps: int = EPISODE_STEPS, disturbances: Disturbances | None = None):
-        super().__init__(random, steps)
-        self.disturbances = Disturbances() if disturbances is None else disturbances
+    episode_class = Episode
+    disturbances_class = Disturbances
+    intervals = ("disturbance", "disturbances")
+    episode_steps = EPISODE_STEPS
 
-    def check_episode(self, episode: Episode) -> None:
-        if episode.disturbance.shape[0] < self._steps:
-            raise ValueError(f"episode has {episode.disturbance.shape[0]} disturbances, need {self._steps}")
-
-    def draw_episode(self, random: np.random.Generator) -> Episode:
-        return Episode.draw(random, self._steps, self.disturbances)
+    @staticmethod
+    def make_physics(plant: str) -> Physics:
+        root = load_model(plant)
+        return Physics.from_xml_string(root.to_xml_string(), assets=root.get_assets())
 
     def resample_episode(self, episode: Episode, step: int, random: np.random.Generator) -> Episode:
         """``episode`` with the disturbances of intervals ``step..`` redrawn: at the decision of step
@@ -165,8 +149,7 @@ class Balance(CartPendulumTask):
         """What the episodes are drawn from (recorded in the test set; the disturbances' scale where it is not 1)."""
         d = self.disturbances
         return {
-            "initial_state_low": INITIAL_STATE_LOW.tolist(),
-            "initial_state_high": INITIAL_STATE_HIGH.tolist(),
+            **initial_state_range(INITIAL_STATE_LOW, INITIAL_STATE_HIGH),
             "disturbance_std_rad_s2": d.angular_std_rad_s2,
             **({"disturbance_scale": d.disturbance_scale} if d.disturbance_scale != 1 else {}),
             "steps": EPISODE_STEPS,
@@ -212,14 +195,4 @@ class Balance(CartPendulumTask):
         return -(physics.pole_angle() ** 2)
 
 
-def make_environment(
-    random: Random = None,
-    plant: str = "mismatched",
-    steps: int = EPISODE_STEPS,
-    environment_kwargs: dict | None = None,
-    disturbances: Disturbances | None = None,
-) -> control.Environment:
-    root = load_model(plant)
-    physics = Physics.from_xml_string(root.to_xml_string(), assets=root.get_assets())
-    task = Balance(random=random, steps=steps, disturbances=disturbances)
-    return build_environment(physics, task, steps, CONTROL_DT_S, environment_kwargs)
+make_environment = Balance.environment  # the task's dm-control environment (plant=, disturbances=, ...)

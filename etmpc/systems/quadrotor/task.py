@@ -31,20 +31,18 @@ from its plan). Both arrive at random times (Bernoulli per interval).
 
 from __future__ import annotations
 
-import collections
 import math
 from dataclasses import dataclass
 
 import numpy as np
-from dm_control.rl import control
 from dm_control.utils import containers
-from dm_env import specs
 
 from etmpc.common.declared import Checked
-from etmpc.systems.episodes import EpisodeTask, Random, add_task, build_environment, drawn_setting, jump_process, scale_setting
+from etmpc.systems.episodes import Random, drawn_setting, jump_process, scale_setting
 from etmpc.systems.plants import PLANTS
 from etmpc.systems.quadrotor.model import NX, STATE_NAMES
 from etmpc.systems.quadrotor.physics import Physics, load_model
+from etmpc.systems.tracking import TrackingTask, add_tracking_task
 
 __all__ = ["PLANTS", "SUITE", "Disturbances", "Episode", "Physics", "Waypoints", "load_model", "make_environment"]
 
@@ -185,22 +183,25 @@ def failure_steps(rewards: np.ndarray) -> int:
     return int(np.sum(np.asarray(rewards) <= -FAILURE_PENALTY))
 
 
-class Waypoints(EpisodeTask):
+class Waypoints(TrackingTask):
     """Hold the drone on a waypoint that changes at random times, under gusts (see the module's docstring)."""
 
+    episode_class = Episode
+    disturbances_class = Disturbances
+    intervals = ("target", "waypoints")
+    observation_names = OBSERVATION_NAMES
+    action_name = "thrust"
+    interval_s = CONTROL_DT_S
+    episode_steps = EPISODE_STEPS
+
     def __init__(self, random: Random = None, steps: int = EPISODE_STEPS, disturbances: Disturbances | None = None):
-        super().__init__(random)
-        self.disturbances = Disturbances() if disturbances is None else disturbances
-        self._steps = steps
-        self._step = 0
+        super().__init__(random, steps, disturbances)
         self._gusts = np.zeros((steps, 3))
 
-    def check_episode(self, episode: Episode) -> None:
-        if episode.target.shape[0] < self._steps:
-            raise ValueError(f"episode has {episode.target.shape[0]} waypoints, need {self._steps}")
-
-    def draw_episode(self, random: np.random.Generator) -> Episode:
-        return Episode.draw(random, self._steps, self.disturbances)
+    @staticmethod
+    def make_physics(plant: str) -> Physics:
+        root = load_model(plant, timestep_s=PHYSICS_DT_S)
+        return Physics.from_xml_string(root.to_xml_string(), assets=root.get_assets())
 
     def resample_episode(self, episode: Episode, step: int, random: np.random.Generator) -> Episode:
         """``episode`` with what comes after interval ``step`` redrawn: the waypoints (the controller
@@ -264,7 +265,7 @@ class Waypoints(EpisodeTask):
 
     def current_target(self) -> np.ndarray:
         """The waypoint of the interval about to be played (the last one's once the episode is over)."""
-        return self._episode.target[min(self._step, self._episode.target.shape[0] - 1)]
+        return self.current("target")
 
     def resume(self, episode: Episode, step: int) -> None:
         super().resume(episode, step)
@@ -293,47 +294,23 @@ class Waypoints(EpisodeTask):
         reward = distance_reward(math.sqrt(dx * dx + dy * dy + dz * dz))  # no BLAS: the same bits on any CPU
         return reward - FAILURE_PENALTY if outside(position) else reward
 
-    def action_spec(self, physics: Physics) -> specs.BoundedArray:
-        low, high = physics.model.actuator_ctrlrange.T
-        return specs.BoundedArray((4,), np.float64, low, high, name="thrust")
-
-    def observation_spec(self, physics: Physics) -> collections.OrderedDict:
-        return collections.OrderedDict((name, specs.Array((), np.float64, name=name)) for name in OBSERVATION_NAMES)
-
-    def get_observation(self, physics: Physics) -> collections.OrderedDict:
-        values = np.concatenate([physics.state(), self.current_target()])
-        return collections.OrderedDict(zip(OBSERVATION_NAMES, values))
+    def observation_values(self, physics: Physics) -> np.ndarray:
+        return np.concatenate([physics.state(), self.current_target()])
 
 
-def make_environment(
-    random: Random = None,
-    plant: str = "mismatched",
-    steps: int = EPISODE_STEPS,
-    environment_kwargs: dict | None = None,
-    disturbances: Disturbances | None = None,
-) -> control.Environment:
-    root = load_model(plant, timestep_s=PHYSICS_DT_S)
-    physics = Physics.from_xml_string(root.to_xml_string(), assets=root.get_assets())
-    task = Waypoints(random=random, steps=steps, disturbances=disturbances)
-    return build_environment(physics, task, steps, CONTROL_DT_S, environment_kwargs)
+make_environment = Waypoints.environment  # the task's dm-control environment (plant=, disturbances=, ...)
 
 
-add_task(
+add_tracking_task(
     SUITE,
     "waypoints",
-    make_environment,
-    EPISODE_STEPS,
-    CONTROL_DT_S,
+    Waypoints,
     "Hold a quadrotor on changing waypoints under gusts, inside a geofence: 100 control intervals of 0.05 s (plant=...).",
-    episode=Episode,
 )
-add_task(
+add_tracking_task(
     SUITE,
     "waypoints_noisy",
-    make_environment,
-    EPISODE_STEPS,
-    CONTROL_DT_S,
+    Waypoints,
     "The waypoints world, for the task whose controller reads the drone through noisy sensors and a Kalman filter.",
     tags=("benchmarking", "sensing"),
-    episode=Episode,
 )

@@ -24,20 +24,18 @@ periodic schedule at the same rate of recomputes.
 
 from __future__ import annotations
 
-import collections
 import math
 from dataclasses import dataclass
 
 import numpy as np
-from dm_control.rl import control
 from dm_control.utils import containers
-from dm_env import specs
 
 from etmpc.common.declared import Checked
-from etmpc.systems.episodes import EpisodeTask, Random, add_task, build_environment, drawn_setting, jump_process, jumps_setting
+from etmpc.systems.episodes import drawn_setting, jump_process, jumps_setting
 from etmpc.systems.reacher.model import NX, STATE_NAMES, Parameters
 from etmpc.systems.plants import PLANTS
 from etmpc.systems.reacher.physics import Physics, load_model
+from etmpc.systems.tracking import TrackingTask, add_tracking_task, initial_state_range
 
 __all__ = ["PLANTS", "SUITE", "Disturbances", "Episode", "Jumps", "Physics", "load_model", "make_environment"]
 
@@ -122,21 +120,21 @@ def far_steps(rewards: np.ndarray) -> int:
     return int(np.sum(np.asarray(rewards) < distance_reward(DISTANCE_SCALE_M)))
 
 
-class Jumps(EpisodeTask):
+class Jumps(TrackingTask):
     """Keep the fingertip on a target that jumps at random times (see the module's docstring)."""
 
-    def __init__(self, random: Random = None, steps: int = EPISODE_STEPS, disturbances: Disturbances | None = None):
-        super().__init__(random)
-        self.disturbances = Disturbances() if disturbances is None else disturbances
-        self._steps = steps
-        self._step = 0
+    episode_class = Episode
+    disturbances_class = Disturbances
+    intervals = ("target", "targets")
+    observation_names = OBSERVATION_NAMES
+    action_name = "torque"
+    interval_s = CONTROL_DT_S
+    episode_steps = EPISODE_STEPS
 
-    def check_episode(self, episode: Episode) -> None:
-        if episode.target.shape[0] < self._steps:
-            raise ValueError(f"episode has {episode.target.shape[0]} targets, need {self._steps}")
-
-    def draw_episode(self, random: np.random.Generator) -> Episode:
-        return Episode.draw(random, self._steps, self.disturbances)
+    @staticmethod
+    def make_physics(plant: str) -> Physics:
+        root = load_model(plant, timestep_s=PHYSICS_DT_S)
+        return Physics.from_xml_string(root.to_xml_string(), assets=root.get_assets())
 
     def resample_episode(self, episode: Episode, step: int, random: np.random.Generator) -> Episode:
         """``episode`` with the targets of intervals after ``step`` redrawn: at the decision of step
@@ -149,8 +147,7 @@ class Jumps(EpisodeTask):
         """What the episodes are drawn from (recorded in the test set): the disturbances' jump probability and radii."""
         d = self.disturbances
         return {
-            "initial_state_low": INITIAL_STATE_LOW.tolist(),
-            "initial_state_high": INITIAL_STATE_HIGH.tolist(),
+            **initial_state_range(INITIAL_STATE_LOW, INITIAL_STATE_HIGH),
             "jump_probability": d.jump_probability,
             "target_radius_m": list(d.target_radius_m),
             "steps": EPISODE_STEPS,
@@ -169,7 +166,7 @@ class Jumps(EpisodeTask):
 
     def current_target(self) -> np.ndarray:
         """The target of the interval about to be played (the last one's once the episode is over)."""
-        return self._episode.target[min(self._step, self._episode.target.shape[0] - 1)]
+        return self.current("target")
 
     def initialize_episode(self, physics: Physics) -> None:
         episode = self.next_episode()
@@ -187,47 +184,20 @@ class Jumps(EpisodeTask):
         target = self._episode.target[self._step - 1]
         return distance_reward(float(np.hypot(*(physics.fingertip() - target))))
 
-    def action_spec(self, physics: Physics) -> specs.BoundedArray:
-        low, high = physics.model.actuator_ctrlrange.T
-        return specs.BoundedArray((2,), np.float64, low, high, name="torque")
-
-    def observation_spec(self, physics: Physics) -> collections.OrderedDict:
-        return collections.OrderedDict((name, specs.Array((), np.float64, name=name)) for name in OBSERVATION_NAMES)
-
-    def get_observation(self, physics: Physics) -> collections.OrderedDict:
-        values = np.concatenate([physics.state(), self.current_target(), physics.fingertip()])
-        return collections.OrderedDict(zip(OBSERVATION_NAMES, values))
+    def observation_values(self, physics: Physics) -> np.ndarray:
+        return np.concatenate([physics.state(), self.current_target(), physics.fingertip()])
 
 
-def make_environment(
-    random: Random = None,
-    plant: str = "mismatched",
-    steps: int = EPISODE_STEPS,
-    environment_kwargs: dict | None = None,
-    disturbances: Disturbances | None = None,
-) -> control.Environment:
-    root = load_model(plant, timestep_s=PHYSICS_DT_S)
-    physics = Physics.from_xml_string(root.to_xml_string(), assets=root.get_assets())
-    task = Jumps(random=random, steps=steps, disturbances=disturbances)
-    return build_environment(physics, task, steps, CONTROL_DT_S, environment_kwargs)
+make_environment = Jumps.environment  # the task's dm-control environment (plant=, disturbances=, ...)
 
 
-add_task(
-    SUITE,
-    "jumps",
-    make_environment,
-    EPISODE_STEPS,
-    CONTROL_DT_S,
-    "Keep the fingertip on a jumping target: 100 control intervals of 0.1 s by default (plant=...).",
-    episode=Episode,
+add_tracking_task(
+    SUITE, "jumps", Jumps, "Keep the fingertip on a jumping target: 100 control intervals of 0.1 s by default (plant=...)."
 )
-add_task(
+add_tracking_task(
     SUITE,
     "jumps_late",
-    make_environment,
-    EPISODE_STEPS,
-    CONTROL_DT_S,
+    Jumps,
     "The jumps world, for the task whose solves take one control interval (the latency is the controller's).",
     tags=("benchmarking", "timing"),
-    episode=Episode,
 )
