@@ -38,11 +38,11 @@ from etmpc.control.mpc import FeedbackWeights, SolverSettings
 from etmpc.control.settings import horizon_setting, input_weight_setting, levels_setting, rk4_setting, weight_setting
 from etmpc.control.sensing import FilterSettings, Sensor
 from etmpc.control.timing import Latency
-from etmpc.systems.gauss_newton import GaussNewtonSystem
 from etmpc.systems.plants import plant_setting
 from etmpc.systems.cart_pendulum import kicks
 from etmpc.systems.cart_pendulum.model import NU, NX, STATE_NAMES, AnalyticModel
 from etmpc.systems.cart_pendulum.system import MAX_FORCE_N
+from etmpc.systems.tracking_system import TrackingSystem
 
 
 REFERENCE = "cart_reference_m"  # the observation's current reference, and the plan's forecast of it
@@ -108,7 +108,7 @@ class Config(Checked):
     )
 
 
-class KicksSystem(GaussNewtonSystem):
+class KicksSystem(TrackingSystem):
     Config = Config
     domain = "cart_pendulum"
     task = "kicks"
@@ -129,10 +129,10 @@ class KicksSystem(GaussNewtonSystem):
     camera = "track"
 
     def __init__(self, config: Config | None = None):
-        self.config = config = self.Config() if config is None else config
-        self.model = AnalyticModel(dt_s=kicks.CONTROL_DT_S, rk4_substeps=config.rk4_substeps)
-        self.u_min, self.u_max = np.array([-config.force_limit_n]), np.array([config.force_limit_n])
-        self.error_weights = np.sqrt(np.asarray(config.feedback_state_weights))
+        super().__init__(config)
+        self.model = AnalyticModel(dt_s=kicks.CONTROL_DT_S, rk4_substeps=self.config.rk4_substeps)
+        self.u_min = np.array([-self.config.force_limit_n])
+        self.u_max = np.array([self.config.force_limit_n])
 
     def residuals(self) -> tuple[ca.Function, ca.Function]:
         c = self.config
@@ -176,8 +176,4 @@ class KicksSystem(GaussNewtonSystem):
         return self.observed(timestep)
 
     # -- failures (episodes are drawn, resampled and described by the task: kicks.Kicks) -----------------
-    failures_in_rewards = staticmethod(kicks.falls)
-
-    def failures(self, trajectory, episode) -> int:
-        """Falls in an episode, from its rewards."""
-        return kicks.falls(trajectory.rewards[: trajectory.steps])
+    failures_in_rewards = staticmethod(kicks.falls)  # falls in an episode

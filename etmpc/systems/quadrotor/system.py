@@ -33,11 +33,12 @@ from etmpc.control.sensing import FilterSettings, Sensor
 from etmpc.control.settings import horizon_setting, input_weight_setting, levels_setting, rk4_setting, weight_setting
 from etmpc.control.timing import Latency
 from etmpc.systems.capabilities import ShieldRule
-from etmpc.systems.gauss_newton import GaussNewtonSystem, TrackedFeatures
+from etmpc.systems.gauss_newton import TrackedFeatures
 from etmpc.systems.plants import plant_setting
 from etmpc.systems.quadrotor import task as quadrotor_task
 from etmpc.systems.quadrotor.model import INPUT_NAMES, NU, NX, STATE_NAMES, AnalyticModel, Parameters
 from etmpc.systems.space import Space
+from etmpc.systems.tracking_system import TrackingSystem
 
 TARGET = ("target_x_m", "target_y_m", "target_z_m")  # the observation's current waypoint, and the plan's forecasts of it
 
@@ -109,7 +110,7 @@ class Config(Checked):
     solver: SolverSettings = SolverSettings(route="condensed", max_iterations=10, regularisation=1e-3, step_tolerance=3e-3)
 
 
-class QuadrotorSystem(GaussNewtonSystem):
+class QuadrotorSystem(TrackingSystem):
     Config = Config
     domain = "quadrotor"
     task = "waypoints"
@@ -128,12 +129,11 @@ class QuadrotorSystem(GaussNewtonSystem):
     space = SPACE  # the recordings' 3-D view of the flight
 
     def __init__(self, config: Config | None = None):
-        self.config = config = self.Config() if config is None else config
+        super().__init__(config)
         self.params = Parameters()
-        self.model = AnalyticModel(params=self.params, dt_s=quadrotor_task.CONTROL_DT_S, rk4_substeps=config.rk4_substeps)
-        self.u_min = np.full(NU, config.idle_thrust_n)
+        self.model = AnalyticModel(params=self.params, dt_s=quadrotor_task.CONTROL_DT_S, rk4_substeps=self.config.rk4_substeps)
+        self.u_min = np.full(NU, self.config.idle_thrust_n)
         self.u_max = np.full(NU, self.params.max_thrust_n)
-        self.error_weights = np.sqrt(np.asarray(config.feedback_state_weights))
 
     def residuals(self) -> tuple[ca.Function, ca.Function]:
         c, p = self.config, self.params
@@ -173,8 +173,4 @@ class QuadrotorSystem(GaussNewtonSystem):
         return stage, terminal
 
     # -- failures (episodes are drawn, resampled and described by the task: task.Waypoints) --------------
-    failures_in_rewards = staticmethod(quadrotor_task.failure_steps)
-
-    def failures(self, trajectory, episode) -> int:
-        """Steps ending outside the geofence or on the ground."""
-        return quadrotor_task.failure_steps(trajectory.rewards[: trajectory.steps])
+    failures_in_rewards = staticmethod(quadrotor_task.failure_steps)  # steps ending outside the geofence or on the ground

@@ -45,10 +45,11 @@ from etmpc.control.sensing import FilterSettings, Sensor
 from etmpc.control.mpc import SolverSettings
 from etmpc.control.settings import horizon_setting, input_weight_setting, levels_setting, rk4_setting, weight_setting
 from etmpc.control.timing import Latency
-from etmpc.systems.gauss_newton import TRACKING_SOLVER, GaussNewtonSystem, TrackedFeatures
+from etmpc.systems.gauss_newton import TRACKING_SOLVER, TrackedFeatures
 from etmpc.systems.plants import plant_setting
 from etmpc.systems.reacher import task as reacher_task
 from etmpc.systems.reacher.model import INPUT_NAMES, NU, NX, STATE_NAMES, AnalyticModel, fingertip
+from etmpc.systems.tracking_system import TrackingSystem
 
 TARGET = ("target_x_m", "target_y_m")  # the observation's current target, and the plan's forecasts of it
 
@@ -91,7 +92,7 @@ class Config(Checked):
     solver: SolverSettings = TRACKING_SOLVER
 
 
-class ReacherSystem(GaussNewtonSystem):
+class ReacherSystem(TrackingSystem):
     Config = Config
     domain = "reacher"
     task = "jumps"
@@ -106,11 +107,10 @@ class ReacherSystem(GaussNewtonSystem):
     camera = "top"  # the scene shows the arm; the target stays where the physics has it
 
     def __init__(self, config: Config | None = None):
-        self.config = config = self.Config() if config is None else config
-        self.model = AnalyticModel(dt_s=reacher_task.CONTROL_DT_S, rk4_substeps=config.rk4_substeps)
-        self.u_max = np.full(NU, config.torque_limit_nm)
+        super().__init__(config)
+        self.model = AnalyticModel(dt_s=reacher_task.CONTROL_DT_S, rk4_substeps=self.config.rk4_substeps)
+        self.u_max = np.full(NU, self.config.torque_limit_nm)
         self.u_min = -self.u_max
-        self.error_weights = np.sqrt(np.asarray(config.feedback_state_weights))
 
     def residuals(self) -> tuple[ca.Function, ca.Function]:
         c = self.config
@@ -127,8 +127,4 @@ class ReacherSystem(GaussNewtonSystem):
         return stage, terminal
 
     # -- failures (episodes are drawn, resampled and described by the task: task.Jumps) -----------------
-    failures_in_rewards = staticmethod(reacher_task.far_steps)
-
-    def failures(self, trajectory, episode) -> int:
-        """Steps ending farther than 0.1 m from the target, from the rewards."""
-        return reacher_task.far_steps(trajectory.rewards[: trajectory.steps])
+    failures_in_rewards = staticmethod(reacher_task.far_steps)  # steps ending farther than 0.1 m from the target
