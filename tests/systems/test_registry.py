@@ -13,7 +13,7 @@ import pytest
 
 from etmpc.common.errors import EtmpcError, UnknownNameError
 from etmpc.policies import specs
-from etmpc.systems import registry
+from etmpc.systems import discovery, registry
 
 # What parse_policy reads of a system, for kinds that need no real one.
 TASK = SimpleNamespace(error_weights=np.ones(4), name="cart_pendulum", episode_steps=100)
@@ -36,7 +36,7 @@ def plugins(tmp_path, monkeypatch):
         specs.kinds.cache_clear()
 
     monkeypatch.syspath_prepend(str(tmp_path))
-    monkeypatch.setattr(registry, "entry_points", fake_entry_points)
+    monkeypatch.setattr(discovery, "entry_points", fake_entry_points)
     monkeypatch.setattr(specs, "entry_points", fake_entry_points)
     yield install
     registry.domains.cache_clear()
