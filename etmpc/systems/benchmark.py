@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, fields
 from pathlib import Path
+from typing import Any
 
 from etmpc.common.documents import loads
 from etmpc.common.errors import EtmpcError
@@ -72,7 +73,7 @@ def read_benchmark(path: Path) -> Benchmark:
             f"{path}: a task's benchmark holds prices, sweep_thresholds, report_thresholds and optionally "
             f"{', '.join(n for n in names if n not in ('prices', 'sweep_thresholds', 'report_thresholds'))}, notes"
         )
-    values = {k: tuple(v) if isinstance(v, list) else v for k, v in data.items() if k != "notes"}
+    values: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in data.items() if k != "notes"}  # checked below
     numbers = all(
         isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
         for k, v in values.items()

@@ -66,6 +66,7 @@ def domains() -> dict[str, ModuleType]:
     with interrupts.watching():  # a Ctrl-C is told apart from a KeyboardInterrupt a plugin raises
         for point in sorted(entry_points(group=ENTRY_POINTS), key=lambda p: p.name):
             where = f"task plugin {point.name!r} ({point.value})"
+            problem: str | None
             if point.name in found or not point.name.isidentifier():
                 problem = "names a domain etmpc already has" if point.name in found else "is not a valid domain name"
             else:

@@ -8,6 +8,7 @@ import numbers
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 from dm_control.rl import control
 from dm_env import specs
 
@@ -57,14 +58,14 @@ def generator(random: Random) -> np.random.Generator:
     raise TypeError(f"random must be an int seed, a numpy Generator or RandomState, or None; got {type(random).__name__}")
 
 
-def jump_process(rng: np.random.Generator, current: np.ndarray, steps: int, probability: float, draw) -> np.ndarray:
+def jump_process(rng: np.random.Generator, current: npt.ArrayLike, steps: int, probability: float, draw) -> np.ndarray:
     """A signal that holds its value and, at each of ``steps`` intervals, jumps with ``probability``
     to a new value ``draw(rng)``: the intervals after one whose value is ``current``, shape
     ``(steps, *current.shape)``. Draws the jumps first, then the new values in order, so a future
     redrawn from an interval on (a rollout's) uses the generator as the episode's own draw did."""
     jumps = rng.random(steps) < probability
-    current = np.asarray(current, dtype=float)
-    values, value = np.empty((steps, *current.shape)), current
+    value = np.asarray(current, dtype=float)
+    values = np.empty((steps, *value.shape))
     new = [draw(rng) for _ in range(int(jumps.sum()))]
     for j in range(steps):
         if jumps[j]:
@@ -145,7 +146,10 @@ def add_task(
 
     factory.__name__ = factory.__qualname__ = name
     factory.__doc__ = summary
-    factory.steps, factory.interval_s, factory.episode = steps, interval_s, episode
+    # mypy does not model attributes set on a function object (a dm-control suite's entries are functions)
+    factory.steps = steps  # type: ignore[attr-defined]
+    factory.interval_s = interval_s  # type: ignore[attr-defined]
+    factory.episode = episode  # type: ignore[attr-defined]
     return suite.add(*tags)(factory)
 
 

@@ -44,9 +44,10 @@ def _element(kind: Any) -> Any | None:
 def _declared(config: Any) -> dict[str, tuple[Declared, Any]]:
     """The options among ``config``'s own fields (not those of the settings within it): each declared one
     (:func:`~etmpc.common.declared.setting`) of a scalar type or a tuple of scalars, but the price."""
+    config_class: type = type(config)  # a class is hashable (declarations caches by it); type[Any] reads as not
     return {
         name: (declared, kind)
-        for name, (declared, kind) in declarations(type(config)).items()
+        for name, (declared, kind) in declarations(config_class).items()
         if name not in NOT_OPTIONS and (_scalar(kind) or _element(kind) is not None)
     }
 

@@ -30,6 +30,7 @@ from __future__ import annotations
 import warnings
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any, Protocol
 
 from etmpc.common import checks
 from etmpc.common.errors import EtmpcError, UnknownNameError
@@ -37,6 +38,17 @@ from etmpc.common.errors import EtmpcError, UnknownNameError
 # The domains, found by name (etmpc.systems.discovery), are read here too: BUILT_IN, lazy and data_dir as a
 # domain's package and a plugin name them.
 from etmpc.systems.discovery import BUILT_IN, ENTRY_POINTS, data_dir, domain, domains, lazy  # noqa: F401
+
+
+class SystemClass(Protocol):
+    """A task's :class:`~etmpc.systems.base.System` class as it is read before a system is built (the registry, the
+    catalogue): its ``Config``, its episode as its suite entry declares it, and the system it builds from a Config."""
+
+    Config: type
+    episode_steps: int
+    control_interval_s: float
+
+    def __call__(self, config: Any) -> Any: ...
 
 
 class TaskNameDeprecation(FutureWarning):
@@ -79,7 +91,7 @@ class TaskSpec:
         return f"{self.domain}-{self.task}"
 
     @property
-    def system_class(self) -> type:
+    def system_class(self) -> SystemClass:
         """The :class:`~etmpc.systems.base.System` class the control loop plays (its entry point)."""
         return domain(self.domain).SYSTEMS[self.task]
 
@@ -208,7 +220,7 @@ def has_levels(name: str) -> bool:
     return checks.argument("compute_levels", checks.flag, getattr(system_class(name).Config, "compute_levels", False))
 
 
-def system_class(name: str) -> type:
+def system_class(name: str) -> SystemClass:
     """The :class:`~etmpc.systems.base.System` class of task ``name`` (:attr:`TaskSpec.system_class`)."""
     return spec(name).system_class
 

@@ -167,7 +167,7 @@ def sample_future(rng: np.random.Generator, episode: Episode, known_rows: int, b
     now_s = episode.start_s + dt_s * k
     times_s = episode.start_s + dt_s * np.arange(known_rows, steps + 1)
     hours = (np.floor(times_s / SECONDS_PER_HOUR) - np.floor(now_s / SECONDS_PER_HOUR)).astype(int)  # 0: this hour
-    arrays = {}
+    arrays: dict[str, np.ndarray] = {}
     for name, names in SIGNAL_ARRAYS.items():
         signal: Signal = getattr(market, name)
         true, base, forecast = (np.array(getattr(episode, a)) for a in names)
@@ -193,4 +193,5 @@ def sample_future(rng: np.random.Generator, episode: Episode, known_rows: int, b
             forecast[known_rows:] = base[known_rows:, None] + signal.forecast_std_per_step * lead * noise
             forecast[known_rows:, 0] = true[known_rows:]
         arrays.update(zip(names, (true, base, forecast)))
-    return dataclasses.replace(episode, **arrays)
+    # the keys are SIGNAL_ARRAYS' names, the Episode's array fields: mypy checks a ** mapping against every field
+    return dataclasses.replace(episode, **arrays)  # type: ignore[arg-type]

@@ -13,6 +13,7 @@ played trajectory's charges and recomputes and the episode's net production.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TypeAlias
 from functools import cached_property
 
 import dm_env
@@ -96,7 +97,7 @@ class Config(Checked):
 
 
 class BatterySystem(SystemBase):
-    Config = Config  # the settings it is built from (etmpc.systems.make_system)
+    Config: TypeAlias = Config  # the settings it is built from (etmpc.systems.make_system)
     exogenous_feature_names = EXOGENOUS_FEATURES  # what the learned policy's "error" features add
     exogenous_features = staticmethod(exogenous_features)
     domain = "battery"

@@ -120,7 +120,8 @@ def draw_kicks(rng: np.random.Generator, steps: int, disturbances: Disturbances 
     d = Disturbances() if disturbances is None else disturbances
     counts = rng.poisson(d.kicks_per_s * CONTROL_DT_S, size=steps)
     n = int(counts.sum())
-    sizes = rng.uniform(*d.kick_rad_s, size=n) * rng.choice([-1.0, 1.0], size=n)
+    low, high = d.kick_rad_s
+    sizes = rng.uniform(low, high, size=n) * rng.choice([-1.0, 1.0], size=n)
     kick = np.zeros(steps)
     np.add.at(kick, np.repeat(np.arange(steps), counts), sizes)
     return kick

@@ -28,6 +28,7 @@ knows the rail, a feedback that follows the plan, and the price of a recompute.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TypeAlias
 
 import casadi as ca
 import dm_env
@@ -38,6 +39,7 @@ from etmpc.control.mpc import FeedbackWeights, SolverSettings
 from etmpc.control.settings import horizon_setting, input_weight_setting, levels_setting, rk4_setting, weight_setting
 from etmpc.control.sensing import FilterSettings, Sensor
 from etmpc.control.timing import Latency
+from etmpc.systems.capabilities import ShieldRule
 from etmpc.systems.plants import plant_setting
 from etmpc.systems.cart_pendulum import kicks
 from etmpc.systems.cart_pendulum.model import NU, NX, STATE_NAMES, AnalyticModel
@@ -109,7 +111,7 @@ class Config(Checked):
 
 
 class KicksSystem(TrackingSystem):
-    Config = Config
+    Config: TypeAlias = Config
     domain = "cart_pendulum"
     task = "kicks"
     state_names = STATE_NAMES
@@ -117,7 +119,7 @@ class KicksSystem(TrackingSystem):
     tracked = (REFERENCE,)  # the cart's current reference (m), as observed: the OCP's parameter
     mpc_name = "cart_pendulum_kicks_mpc"
     make_environment = staticmethod(kicks.make_environment)
-    exogenous_feature_names = EXOGENOUS_FEATURES  # what the learned policy's "error" features add
+    exogenous_feature_names: tuple[str, ...] = EXOGENOUS_FEATURES  # what the learned policy's "error" features add
     exogenous_features = staticmethod(exogenous_features)
     failure_name = "falls"  # per episode, beside the mean objective
     safety_margin = staticmethod(kicks.fall_margin)  # rad before a fall, one interval on (shield:)
@@ -125,7 +127,7 @@ class KicksSystem(TrackingSystem):
     # shield:BASE's rule (scripts/shields.py, docs/results/shields.md): none, since on validation episodes no rule
     # made the shipped learners fall less without costing them more than the budget (a recompute forced near a fall
     # made falls no rarer under this model mismatch); shield:AGE[:MARGIN]:BASE still works
-    shield = None
+    shield: ShieldRule | None = None
     camera = "track"
 
     def __init__(self, config: Config | None = None):

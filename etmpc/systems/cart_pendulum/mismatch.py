@@ -26,7 +26,7 @@ def one_step_errors(plant: str, samples: int, rng: np.random.Generator, model: A
             physics.set_disturbance(0.0)
         physics.set_control([u])
         physics.step(environment._n_sub_steps)  # one control interval, as control.Environment does
-        errors[n] = physics.state() - model.predict(x, u)
+        errors[n] = physics.state() - model.predict(x, np.array([u]))
     return errors
 
 

@@ -182,6 +182,7 @@ class Physics(PlantPhysics):
         """The bumpers' force on the slider now (N): 0 on the rail, a spring-damper past its ends
         (``qpos``, ``qvel``: mjData's own arrays, if the caller has them at hand)."""
         b = self.bumpers
+        assert b is not None, "the bumpers' force is asked for only where the rail has them"
         qpos = self.data.qpos if qpos is None else qpos
         qvel = self.data.qvel if qvel is None else qvel
         eta = float(qpos[self._slider[0]])

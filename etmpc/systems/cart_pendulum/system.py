@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import importlib.util
 from dataclasses import dataclass, replace
+from typing import TypeAlias
 from functools import cached_property
 
 import casadi as ca
@@ -42,7 +43,7 @@ class Config(Checked):
 
 
 class CartPendulumSystem(SystemBase):
-    Config = Config  # the settings it is built from (etmpc.systems.make_system)
+    Config: TypeAlias = Config  # the settings it is built from (etmpc.systems.make_system)
     domain = "cart_pendulum"
     task = "balance"
     state_names = STATE_NAMES

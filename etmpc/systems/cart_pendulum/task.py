@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
@@ -115,7 +116,7 @@ class CartPendulumTask(TrackingTask):
     non-finite state as the end (:meth:`EpisodeTask.get_termination`). A task that observes more
     names it in ``observation_names`` and extends :meth:`get_observation`."""
 
-    observation_names: tuple[str, ...] = STATE_NAMES
+    observation_names: ClassVar[tuple[str, ...]] = STATE_NAMES
     action_name = "force"
     interval_s = CONTROL_DT_S
 

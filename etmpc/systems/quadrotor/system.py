@@ -23,6 +23,7 @@ feedback that follows the plan, and the price of a recompute. The numbers are th
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any, Callable, TypeAlias
 
 import casadi as ca
 import numpy as np
@@ -111,7 +112,7 @@ class Config(Checked):
 
 
 class QuadrotorSystem(TrackingSystem):
-    Config = Config
+    Config: TypeAlias = Config
     domain = "quadrotor"
     task = "waypoints"
     state_names = STATE_NAMES
@@ -120,7 +121,7 @@ class QuadrotorSystem(TrackingSystem):
     mpc_name = "quadrotor_waypoints_mpc"
     make_environment = staticmethod(quadrotor_task.make_environment)
     exogenous_feature_names = EXOGENOUS_FEATURES  # what the learned policy's "error" features add
-    exogenous_features = EXOGENOUS
+    exogenous_features: Callable[[Any], np.ndarray] = EXOGENOUS
     failure_name = "outside geofence"  # steps ending outside the geofence or on the ground, per episode
     safety_margin = staticmethod(quadrotor_task.fence_margin)  # m to the fence or the ground, one interval on (shield:)
     margin_unit = "m"

@@ -151,11 +151,14 @@ def draw_gusts(rng: np.random.Generator, steps: int, disturbances: Disturbances 
     so a future redrawn from an interval on (a rollout's) uses the generator as an episode's own draw did."""
     d = Disturbances() if disturbances is None else disturbances
     onsets = np.flatnonzero(rng.random(steps) < d.gust_probability)
+    peak_low, peak_high = d.gust_peak_n
+    shortest, longest = d.gust_duration_s
     peak, intervals = np.zeros((steps, 3)), np.zeros(steps, dtype=np.int64)
     for j in onsets:
-        size, angle = rng.uniform(*d.gust_peak_n), rng.uniform(-math.pi, math.pi)
+        size = rng.uniform(peak_low, peak_high)
+        angle = rng.uniform(-math.pi, math.pi)
         peak[j] = [size * math.cos(angle), size * math.sin(angle), 0.0]
-        intervals[j] = max(1, round(rng.uniform(*d.gust_duration_s) / CONTROL_DT_S))
+        intervals[j] = max(1, round(rng.uniform(shortest, longest) / CONTROL_DT_S))
     return peak, intervals
 
 

@@ -36,6 +36,7 @@ feedback that follows the plan, and the price of a recompute.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TypeAlias
 
 import casadi as ca
 import numpy as np
@@ -93,7 +94,7 @@ class Config(Checked):
 
 
 class ReacherSystem(TrackingSystem):
-    Config = Config
+    Config: TypeAlias = Config
     domain = "reacher"
     task = "jumps"
     state_names = STATE_NAMES

@@ -96,7 +96,9 @@ class Episode:
 def draw_target(rng: np.random.Generator, disturbances: Disturbances | None = None) -> np.ndarray:
     """A target ``(x, y)``: radius ``U(target_radius_m)`` (``TARGET_RADIUS_M`` by default), angle ``U(-pi, pi)``."""
     d = Disturbances() if disturbances is None else disturbances
-    radius, angle = rng.uniform(*d.target_radius_m), rng.uniform(-math.pi, math.pi)
+    low, high = d.target_radius_m
+    radius = rng.uniform(low, high)
+    angle = rng.uniform(-math.pi, math.pi)
     return np.array([radius * math.cos(angle), radius * math.sin(angle)])
 
 
