@@ -24,6 +24,8 @@ class TrackingSystem(GaussNewtonSystem):
     """A tracking task's system (see the module's docstring); a subclass sets ``failures_in_rewards`` to its
     task's count of failures in a stretch of rewards."""
 
+    Config: type  # the frozen settings the system is built from: Config() is the task's default
+
     def __init__(self, config: Any = None):
         self.config = self.Config() if config is None else config
 
