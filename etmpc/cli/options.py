@@ -10,7 +10,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from etmpc.cli.tasks import task_option
-from etmpc.cli import discriminate, figures, scoring, training, types
+from etmpc.cli import discriminate, figures, scoring, study, training, types
 from etmpc.cli.output import LazyHelp, backend_arguments, task_prices
 from etmpc.cli import suite
 from etmpc.common.errors import EtmpcError
@@ -247,4 +247,5 @@ def build_parser() -> argparse.ArgumentParser:
 
     discriminate.add_parser(sub, tasks)
     figures.add_parser(sub, tasks)
+    study.add_parser(sub)
     return parser
