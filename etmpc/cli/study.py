@@ -25,11 +25,7 @@ def add_parser(sub) -> None:
         description="Run a study behind a results page. Each study has options of its own: etmpc study NAME --help.",
     )
     st.add_argument(
-        "name",
-        nargs="?",
-        choices=sorted(STUDIES),
-        metavar="NAME",
-        help="the study to run (etmpc study --list names them)",
+        "name", nargs="?", choices=sorted(STUDIES), metavar="NAME", help="the study to run (etmpc study --list names them)"
     )
     st.add_argument(
         "options", nargs=argparse.REMAINDER, metavar="OPTION", help="the study's own options (etmpc study NAME --help)"

@@ -26,7 +26,9 @@ class Entry(NamedTuple):
 #: Every study, by the name ``etmpc study NAME`` takes.
 STUDIES = {
     "estimators": Entry("estimators", "the noisy variants' filters, chosen on training episodes: results/estimators.md"),
-    "failure-cost": Entry("failure_cost", "safety in learning, its weight chosen on validation episodes: results/failure_cost.md"),
+    "failure-cost": Entry(
+        "failure_cost", "safety in learning, its weight chosen on validation episodes: results/failure_cost.md"
+    ),
     "learners": Entry("learners", "DPI and PPO compared over training seeds, and the policies they ship: results/learners.md"),
     "levels": Entry("levels", "what a trigger that chooses how much to compute gains, and a learner could: results/levels.md"),
     "quadrotor-flight": Entry("quadrotor_flight", "the quadrotor page's flight figure: one episode under two triggers"),
