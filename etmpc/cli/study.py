@@ -48,4 +48,5 @@ def run(args: argparse.Namespace) -> None:
     study = load(args.name)
     parser = _StudyParser(prog=f"etmpc study {args.name}", description=STUDIES[args.name].summary)
     study.arguments(parser)
-    study.run(parser.parse_args(args.options))
+    command = " ".join(["etmpc", "study", args.name, *args.options])  # what a study's JSON may record as its maker
+    study.run(parser.parse_args(args.options, argparse.Namespace(command=command)))
