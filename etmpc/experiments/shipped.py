@@ -6,7 +6,7 @@ Three answers, per learner: the same file, byte for byte; the same parameters in
 otherwise (a shipped file written by an older etmpc names the task by its domain, or records fewer of its
 recipe's entries); or other parameters, with the recipe entries, recorded by both files, in which the shipped
 one departs from the run's. A run's DPI is trained with the run's settings (its seeds, episodes,
-schedules); the shipped one with the recipe its file records (``scripts/learners.py`` in a checkout, over
+schedules); the shipped one with the recipe its file records (``etmpc study learners`` in a checkout, over
 more seeds on some tasks). PPO is trained from the task's ``ppo.yml`` by both.
 """
 
