@@ -5,6 +5,7 @@
 from __future__ import annotations
 
 import argparse
+from typing import NoReturn
 
 from etmpc.common.errors import EtmpcError
 from etmpc.experiments.studies import STUDIES, load
@@ -13,7 +14,7 @@ from etmpc.experiments.studies import STUDIES, load
 class _StudyParser(argparse.ArgumentParser):
     """A study's own options, under ``etmpc study NAME``: an error is one line (exit code 2), as the command's."""
 
-    def error(self, message: str):  # type: ignore[override]  # raises instead of exiting: etmpc's one-line errors
+    def error(self, message: str) -> NoReturn:  # raises instead of exiting: etmpc's one-line errors
         raise EtmpcError(message)
 
 

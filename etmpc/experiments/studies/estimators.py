@@ -46,14 +46,17 @@ def tune(task: str, schedule: str, episodes: int, seed: int) -> dict:
         testsets.draw(base, seed, episodes, path)
         training = testsets.load(path, base.domain, base.task)
         drawn = [base.episode_from_arrays(training.episode_arrays(i)) for i in range(episodes)]
-    rows = []
+    rows: list[dict] = []
     for factor in FACTORS:
         process = ",".join(repr(float(v)) for v in shape * factor)
         system = system_key(task, None, {"estimator.process_std": process}).make()
         policy = parse_policy(schedule, system)
-        costs, errors, nis = [], [], []
+        costs: list[float] = []
+        errors = []
+        nis: list[float] = []
         for episode in drawn:
             traj = run_episode(system, system.make_env(), policy, None, episode)
+            assert traj.estimates is not None and traj.nis is not None  # a noisy task's loop keeps its filter's
             n = traj.steps
             rewards = traj.rewards[:n] - system.recompute_price * traj.work[:n]
             costs.append(-float(np.sum(rewards)) if system.objective_sense == "min" else float(np.sum(rewards)))

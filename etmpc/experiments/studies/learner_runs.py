@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import shutil
+from typing import Any
 from dataclasses import replace
 from pathlib import Path
 
@@ -28,7 +29,7 @@ DPI_KEYS = ("futures", "horizon", "states_per_episode", "ridge", "selection_epis
 #: include the event-triggered real-time iteration under an age cap (shield:A:threshold:X:iterate), which does
 #: better than the task's best fixed schedule iterate:1 on validation episodes; from iterate:1 and the default
 #: schedules, DPI's policies did worse than iterate:1 there.
-RECIPES = {
+RECIPES: dict[str, dict[str, Any]] = {
     "cart_pendulum/kicks_levels": {
         "episodes_per_seed": 60,  # the shipped policy is its run's first iteration (20 episodes); the run had 60
         "bases": (
@@ -53,7 +54,7 @@ def recipe_folder(task: str) -> Path:
 def shipped_recipe(task: str) -> TrainConfig:
     """The DPI run the shipped ``learned.json`` records (its hyperparameters; its base task's for a new variant)."""
     data = json.loads((recipe_folder(task) / "learned.json").read_text())
-    h = dict(data["hyperparameters"], **RECIPES.get(task, {}))
+    h: dict[str, Any] = dict(data["hyperparameters"], **RECIPES.get(task, {}))
     return TrainConfig(
         task,
         episodes=h.get("episodes_per_seed", h["episodes"]),  # "episodes": the policy's own (an iteration's, if chosen so)
@@ -132,7 +133,7 @@ def ppo_runs(
         paths[seed] = out / "selected.zip"
         validation[seed] = json.loads((out / "selected.json").read_text())["validation_objective"]
     sense = make_system(task).objective_sense
-    chosen = (max if sense == "max" else min)(seeds, key=validation.get)
+    chosen = (max if sense == "max" else min)(seeds, key=lambda seed: validation[seed])
     out = folder / f"seed{chosen}"
     files = {"ppo.zip": out / "selected.zip", "ppo.json": out / "selected.json"} if paths[chosen].parent == out else {}
     return {

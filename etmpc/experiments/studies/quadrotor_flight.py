@@ -78,6 +78,7 @@ def run(args: argparse.Namespace) -> None:
         altitude.plot(t, position[:, 2], color=colour)
         made = dt * np.flatnonzero(traj.recompute[:steps])
         computed.vlines(made, row + 0.1, row + 0.9, color=colour, linewidth=1.2)
+    assert target is not None  # every episode played has its waypoints, and at least one was played
     changes = dt * (np.flatnonzero(np.any(np.diff(target, axis=0) != 0, axis=1)) + 1)
     for ax in (distance, altitude, computed):
         for c in changes:

@@ -89,8 +89,8 @@ def play(task: str, episodes: int, policy_spec: str) -> dict:
         first = env.reset()
         system.plan(system.state(first), np.zeros(len(system.u_min)), None, 0, first)  # the compiled MPC's lazy build
         setups[route] = (system, env, parse_policy(policy_spec, system), counted(system))
-    times = {route: [] for route in systems}
-    objective = {route: [] for route in systems}
+    times: dict[str, list[float]] = {route: [] for route in systems}
+    objective: dict[str, list[float]] = {route: [] for route in systems}
     solver_failures = {route: 0 for route in systems}
     failures = {route: 0 for route in systems}
     for i in range(min(episodes, testset.episodes)):
