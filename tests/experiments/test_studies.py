@@ -47,7 +47,8 @@ def test_every_option_of_every_study_says_what_it_is(name):
 
 def test_the_cheapest_study_runs_end_to_end_into_a_folder_of_its_own(tmp_path, capsys):
     """``solvers`` on one episode of one task: both routes played, the JSON and the page written where asked."""
-    report, page = tmp_path / "solvers.json", tmp_path / "solvers.md"
+    report = tmp_path / "solvers.json"
+    page = tmp_path / "solvers.md"
     shipped = (REPO / "docs" / "solvers.md").read_text()
     argv = ["study", "solvers", "cart_pendulum", "--episodes", "1", "--json", str(report), "--page", str(page)]
     assert main(argv) == 0

@@ -93,7 +93,8 @@ def readings(task: str, base: str, workers: int) -> list[dict]:
     picks = [(base, "the state (exact)", best_threshold(base, workers, print, grid))]
     picks += [(task, "the filter's estimate", best_threshold(task, workers, print, grid))]
     picks += [(task, "the readings", best_threshold(task, workers, print, [f"{spec}:reading" for spec in grid]))]
-    rows, reference = [], None
+    rows = []
+    reference = None
     for name, reads, spec in picks:
         row = score([spec], tasks=[name], workers=workers, progress=False).rows[0]
         scores = np.asarray(row.episode_scores)

@@ -80,11 +80,13 @@ def choose(costs: list[float], validation: dict, sense: str) -> tuple[float, lis
 
 
 def study(task: str, work: Path, costs: list[float], seeds, episodes: int, workers: int, learner: str = "dpi") -> dict:
-    system, refs = make_system(task), stored(task)
+    system = make_system(task)
+    refs = stored(task)
     trained_runs = runs(task, work, costs, seeds, workers, learner)
     specs = [refs.best] + [trained_runs[c]["policy"] for c in costs]
     checked = validate(task, specs, episodes, workers)
-    schedule, validation = checked[0], dict(zip(costs, checked[1:]))
+    schedule = checked[0]
+    validation = dict(zip(costs, checked[1:]))
     chosen, tied = choose(costs, validation, system.objective_sense)
     card = score(specs, [task], workers=workers)
     rows = {r.policy: row(r) for r in card.rows}

@@ -54,7 +54,8 @@ def bounds_of(system, refs) -> tuple[dict, dict]:
 
 
 def compare(task: str, work: Path, dpi_seeds, ppo_seeds, workers: int, retrain: bool = False) -> dict:
-    system, refs = make_system(task), stored(task)
+    system = make_system(task)
+    refs = stored(task)
     learners = {"DPI": dpi_runs(task, work, dpi_seeds, workers), "PPO": ppo_runs(task, work, ppo_seeds, workers, retrain=retrain)}
     kinds = {"DPI": "rl", "PPO": "sb3"}
     shielded = system.shield is not None
@@ -118,7 +119,8 @@ def arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> None:
-    clock, provenance = runner.Stopwatch(), runner.made()  # the code that runs: the checkout as it starts
+    clock = runner.Stopwatch()
+    provenance = runner.made()  # the code that runs: the checkout as it starts
     results = runner.Results(args.out, "learners")
     document = results.kept(lambda: {"tasks": {}})
     document["tasks"] = {t: document["tasks"][t] for t in names() if t in document["tasks"]}

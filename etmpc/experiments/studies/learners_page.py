@@ -93,6 +93,7 @@ def page(document: dict) -> str:
         ]
         low, high = metrics.iqm_ci95(shipped)
         plow, phigh = metrics.iqm_ci95(pooled)
-        one, every = metrics.iqm(shipped), metrics.iqm(pooled)
+        one = metrics.iqm(shipped)
+        every = metrics.iqm(pooled)
         lines.append(f"| {name} | {one:.1f} [{low:.1f}, {high:.1f}] | {every:.1f} [{plow:.1f}, {phigh:.1f}] |")
     return "\n".join(lines) + "\n"

@@ -67,7 +67,8 @@ def run(args: argparse.Namespace) -> None:
     target = None
     for row, (spec, colour) in enumerate(zip(specs, COLOURS)):
         played = play_test_episode(system.name, parse_policy(spec, system), 0, 0, args.episode)
-        traj, target = played.trajectory, played.episode.target
+        traj = played.trajectory
+        target = played.episode.target
         steps = traj.steps
         position = traj.states[1 : steps + 1, :3]  # the state after each interval
         t = dt * np.arange(1, steps + 1)

@@ -59,7 +59,8 @@ def page(document: dict) -> str:
         "",
     ]
     for task, result in document["tasks"].items():
-        schedule, unshielded = result["schedule"], result["unshielded"]
+        schedule = result["schedule"]
+        unshielded = result["unshielded"]
         chosen = (
             "none (no rule within the budget is safer than no shield)"
             if result["chosen"] is None
@@ -103,7 +104,8 @@ def run(args: argparse.Namespace) -> None:
         document["tasks"] = {task: pick(result) for task, result in document["tasks"].items()}
         results.write(document, page)
         return
-    clock, provenance = runner.Stopwatch(), runner.made()  # the code that runs: the checkout as it starts
+    clock = runner.Stopwatch()
+    provenance = runner.made()  # the code that runs: the checkout as it starts
     played = results.kept(lambda: {"tasks": {}})["tasks"]  # the tasks not run again stay
     for task in args.task or list(GRIDS):
         played[task] = dict(rule(task, args.episodes, args.workers), commit=provenance["commit"], date=provenance["date"])
@@ -122,11 +124,13 @@ def rule(task: str, episodes: int | None, workers: int) -> dict:
     chosen, as the line to declare in its system class."""
     ages, margins, default_episodes = GRIDS[task]
     episodes = episodes or default_episodes
-    grid, policies = rules(ages, margins), shipped(task)
+    grid = rules(ages, margins)
+    policies = shipped(task)
     jobs = (1 + len(policies) * (1 + len(grid))) * episodes
     with make_backend("local", workers) as pool, Progress(jobs, f"{task}: shield rules") as bar:
         result = choose(task, policies, stored(task).best, grid, episodes, pool, lambda job: bar.update())
-    schedule, unshielded = result["schedule"], result["unshielded"]
+    schedule = result["schedule"]
+    unshielded = result["unshielded"]
     worst = unshielded["worst_failures"]
     print(f"{task}: {schedule['spec']} fails {schedule['failures']:.3f}/episode; unshielded learners at worst {worst:.3f}")
     for row in result["rules"]:

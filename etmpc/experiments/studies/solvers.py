@@ -60,7 +60,8 @@ def variants(task: str) -> dict:
 
 def counted(system) -> list:
     """Wrap ``system.mpc``'s solve and iterate to keep each plan's ``(success, converged, iterations)``."""
-    mpc, kept = system.mpc, []
+    mpc = system.mpc
+    kept = []
     for name in ("solve", "iterate"):
         method = getattr(mpc, name)
 
@@ -194,7 +195,8 @@ def page(report: dict) -> str:
     ]
     for task, routes in report["tasks"].items():
         for route, r in routes.items():
-            ms, it = r["ms"], r["iterations"]
+            ms = r["ms"]
+            it = r["iterations"]
             qps = "(not counted)" if it["max"] < 0 else f"{it['median']:.0f} / {it['mean']:.1f} / {it['max']}"
             lines.append(
                 f"| {task} | {route} | {r['replans']} | {ms['median']:.2f} | {ms['mean']:.2f} | {ms['p99']:.2f} | "
@@ -204,7 +206,8 @@ def page(report: dict) -> str:
     for task, routes in report["tasks"].items():
         if not set(ROUTES) <= set(routes):
             continue
-        old, new = routes["sqpmethod"], routes["condensed"]
+        old = routes["sqpmethod"]
+        new = routes["condensed"]
         change = (new["objective_mean"] - old["objective_mean"]) / abs(old["objective_mean"])
         lines.append(
             f"* **{task}**: {old['ms']['mean'] / new['ms']['mean']:.1f}x the speed in mean, "
@@ -214,7 +217,8 @@ def page(report: dict) -> str:
         )
     for task, routes in report["tasks"].items():
         if CONVERGED in routes and "condensed" in routes:
-            full, new = routes[CONVERGED], routes["condensed"]
+            full = routes[CONVERGED]
+            new = routes["condensed"]
             change = (new["objective_mean"] - full["objective_mean"]) / abs(full["objective_mean"])
             lines += [
                 "",
@@ -269,7 +273,8 @@ def run(args: argparse.Namespace) -> None:
     for task in args.tasks:
         results[task] = play(task, args.episodes, args.policy)
         for route, r in results[task].items():
-            ms, it = r["ms"], r["iterations"]
+            ms = r["ms"]
+            it = r["iterations"]
             print(
                 f"{task:22s} {route:9s} median {ms['median']:6.2f} ms  mean {ms['mean']:6.2f}  p99 {ms['p99']:6.2f}  "
                 f"max {ms['max']:7.2f}  iterations {it['median']:.0f}/{it['mean']:.1f}/{it['max']}  failed {r['failed']}  "

@@ -78,14 +78,16 @@ def triggers(task: str) -> list[str]:
 def study_pair(base: str, variant: str, workers: int, say) -> dict:
     system = make_system(variant)
     sense = system.objective_sense
-    base_policies, own_policies = shipped(base), shipped(variant)
+    base_policies = shipped(base)
+    own_policies = shipped(variant)
     common = triggers(base) + list(base_policies.values())
     say(f"{base}: {len(common)} triggers")
     at_zero = objectives(base, common, workers)
     late_specs = triggers(variant) + list(base_policies.values()) + list(own_policies.values())
     say(f"{variant}: {len(late_specs)} triggers")
     late = objectives(variant, late_specs, workers)
-    refs_zero, refs_late = stored(base), stored(variant)
+    refs_zero = stored(base)
+    refs_late = stored(variant)
     names = {spec: f"{name} of {base}" for name, spec in base_policies.items()}
     names |= {spec: f"{name} trained on {variant}" for name, spec in own_policies.items()}
 
@@ -99,7 +101,8 @@ def study_pair(base: str, variant: str, workers: int, say) -> dict:
     # Pairs of triggers played on both whose order changes: A - B at latency 0 against A - B with time in the loop.
     changes = []
     for a, b in itertools.combinations(common, 2):
-        zero, timed = versus(at_zero, a, b, sense), versus(late, a, b, sense)
+        zero = versus(at_zero, a, b, sense)
+        timed = versus(late, a, b, sense)
         if np.sign(zero["mean_difference"]) != np.sign(timed["mean_difference"]) and zero["mean_difference"] != 0:
             significant = abs(zero["mean_difference"]) > zero["ci95"] and abs(timed["mean_difference"]) > timed["ci95"]
             changes.append(
@@ -131,7 +134,8 @@ def study_pair(base: str, variant: str, workers: int, say) -> dict:
         may_iterate = [s for s in late_specs if s.startswith("iterate:")] + [own_policies[n] for n in own_policies]
         solve_only = [s for s in late_specs if not s.startswith("iterate:") and s not in own_policies.values()]
         pick = lambda specs: min(specs, key=lambda s: np.mean(late[s]) * (1 if sense == "min" else -1))  # noqa: E731
-        best_it, best_solve = pick(may_iterate), pick(solve_only)
+        best_it = pick(may_iterate)
+        best_solve = pick(solve_only)
         found["levels"] = {
             "best_that_may_iterate": names.get(best_it, best_it),
             "best_keep_or_solve": names.get(best_solve, best_solve),
@@ -157,7 +161,8 @@ def page(results: dict) -> str:
         "",
     ]
     for pair in results["pairs"]:
-        base, variant = pair["base"], pair["variant"]
+        base = pair["base"]
+        variant = pair["variant"]
         lines += [
             f"## `{variant}` against `{base}`",
             "",
