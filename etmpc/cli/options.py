@@ -244,7 +244,6 @@ def build_parser() -> argparse.ArgumentParser:
     op = sub.add_parser("options", help="a task's options (--option NAME=VALUE) with their values: its defaults, or as set")
     task_option(op, tasks, "the task whose options to list")
     suite.add_parser(sub)
-
     discriminate.add_parser(sub, tasks)
     figures.add_parser(sub, tasks)
     study.add_parser(sub)
