@@ -7,7 +7,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from etmpc.cli import discriminate, figures, legacy, scoring, suite, training
+from etmpc.cli import discriminate, figures, legacy, scoring, study, suite, training
 from etmpc.cli.recording import file_of, recorded, viewer
 from etmpc.cli.output import check_backend as _check_backend, distinct_policies as _distinct_policies, say as _say
 from etmpc.common.errors import EtmpcError
@@ -234,4 +234,5 @@ COMMANDS = {
     "tasks": suite.run,
     "discriminate": discriminate.run,
     "figure": figures.run,
+    "study": study.run,
 }

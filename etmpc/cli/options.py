@@ -10,7 +10,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from etmpc.cli.tasks import task_option
-from etmpc.cli import discriminate, figures, scoring, training, types
+from etmpc.cli import discriminate, figures, scoring, study, training, types
 from etmpc.cli.output import LazyHelp, backend_arguments, task_prices
 from etmpc.cli import suite
 from etmpc.common.errors import EtmpcError
@@ -244,7 +244,7 @@ def build_parser() -> argparse.ArgumentParser:
     op = sub.add_parser("options", help="a task's options (--option NAME=VALUE) with their values: its defaults, or as set")
     task_option(op, tasks, "the task whose options to list")
     suite.add_parser(sub)
-
     discriminate.add_parser(sub, tasks)
     figures.add_parser(sub, tasks)
+    study.add_parser(sub)
     return parser

@@ -89,7 +89,7 @@ def time_table(systems: dict[str, dict]) -> list[str]:
         total = f"{'≥ ' if untimed else ''}{totals[task] / 60:.1f}"
         share = f"{100 * totals[task] / run:.0f} %" if run > 0 else "–"
         lines.append(f"| {task} | " + " | ".join(cells) + f" | {total} | {share} |")
-    costliest = max(totals, key=totals.get)
+    costliest = max(totals, key=lambda task: totals[task])
     lines += [
         "",
         f"Costliest: {costliest}, {totals[costliest] / 60:.1f} min of {run / 60:.1f}"

@@ -46,13 +46,12 @@ def discriminate(
     priced_key = system_key(task, price, options)
     periodic = [f"every:{t}" for t in range(1, system.horizon + 1)]
     events = system.benchmark.threshold_specs()
-    common = dict(episodes=episodes, progress=progress, workers=workers)
     with stage(f"{task}: {len(periodic)} periodic schedules and {len(events)} event triggers"):
-        fixed = evaluate(unpriced, periodic + events, **common).to_json()
+        fixed = evaluate(unpriced, periodic + events, episodes=episodes, progress=progress, workers=workers).to_json()
     best = best_periodic(fixed, periodic, price, system.objective_sense)
     specs = [f"oracle:{best}", f"rollout:{best}:{ROLLOUT_FUTURES}:{system.benchmark.capped(ROLLOUT_HORIZON)}"]
     with stage(f"{task}: the oracle and the rollout over {best}"):
-        priced = evaluate(priced_key, specs, **common).to_json()
+        priced = evaluate(priced_key, specs, episodes=episodes, progress=progress, workers=workers).to_json()
     table = {**episode_table(fixed), **episode_table(priced)}
     rows = {spec: versus_front(table, periodic, spec, system.objective_sense) for spec in events + specs}
     chosen = dict(unpriced.options)  # the task's options, beside the results (none: the task as it is)

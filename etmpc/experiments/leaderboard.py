@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import os
 import platform
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
 
@@ -92,7 +92,7 @@ def build(
     workers: int = 1,
     readme: Path | None = None,
     say: Callable[[str], None] = lambda line: None,
-    cards: list[Path] = (),
+    cards: Sequence[Path] = (),
 ) -> dict:
     """Score every entry on every task and write ``docs/leaderboard.{md,json}`` and the profile figure;
     with ``readme``, rewrite its headline table between the markers. Each of ``cards`` (an external
@@ -138,7 +138,8 @@ def submitted(
     sample of each row replayed bit for bit)."""
     for card in cards:
         _scored_as_asked(card, tasks, episodes)
-    found, rows = [], {}
+    found: list[Entry] = []
+    rows: dict[tuple[str, str], TaskScore] = {}
     for card in cards:
         verdict = verify(card, workers=workers)
         if not verdict.verified:

@@ -80,6 +80,16 @@ def shipped_policy(task: str, file: str = "learned.json") -> Path | None:
         return path
 
 
+def _meters(tasks: list[str], best: dict[str, str]) -> dict[str, str]:
+    """The rollout meter's spec over each task's best fixed schedule, on the tasks that have one."""
+    found = {}
+    for task in tasks:
+        meter = rollout_meter_spec(make_system(task), best[task])
+        if meter is not None:
+            found[task] = meter
+    return found
+
+
 def best_threshold(task: str, workers: int, say: Callable[[str], None], specs: list[str] | None = None) -> str:
     """The ``threshold:X`` of the task's grid (or of ``specs``) with the best mean objective on training-distribution
     episodes."""
@@ -161,7 +171,7 @@ def entries(
         Entry(
             LAST[0],
             "meter",
-            {t: rollout_meter_spec(make_system(t), best[t]) for t in tasks},
+            _meters(tasks, best),
             "one-step lookahead over sampled futures, a real policy: on a noisy variant each future also starts "
             "from a state drawn from the filter's belief",
         ),

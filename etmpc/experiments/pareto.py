@@ -32,6 +32,12 @@ def objective(control: float, computations: float, price: float, sense: str) -> 
     return control - metrics.oriented(computation_cost(computations, price), sense)
 
 
+def _priced(cell: tuple[float, float], price: float, sense: str) -> float:
+    """:func:`objective` of an :func:`episode_table` cell, (control objective, recomputes), at ``price``."""
+    control, computations = cell
+    return objective(control, computations, price, sense)
+
+
 def best_periodic(fixed: dict, periodic: list[str], price: float, sense: str) -> str:
     """The periodic schedule with the best mean objective at ``price`` on the evaluated episodes."""
     table = episode_table(fixed)
@@ -110,8 +116,8 @@ def versus_nearest(table: dict, periodic: list[str], spec: str, price: float, se
     episodes = sorted(table[spec])
     rate = np.mean([table[spec][e][1] for e in episodes])
     nearest = min(periodic, key=lambda p: (abs(np.mean([table[p][e][1] for e in episodes]) - rate), p))
-    mine = np.array([objective(*table[spec][e], price, sense) for e in episodes])
-    theirs = np.array([objective(*table[nearest][e], price, sense) for e in episodes])
+    mine = np.array([_priced(table[spec][e], price, sense) for e in episodes])
+    theirs = np.array([_priced(table[nearest][e], price, sense) for e in episodes])
     gain = metrics.oriented(mine - theirs, sense)
     scale, ci = abs(float(theirs.mean())), _ci(gain)
     return {
@@ -130,7 +136,8 @@ def build_pareto(
     """``pareto.json``: a point per (policy, price) and, per price, the equal-rate answer."""
     fixed_table = episode_table(fixed)
     on_front = front(fixed_table, periodic, sorted(fixed_table[periodic[0]]), sense)
-    points, answers = [], []
+    points: list[dict] = []
+    answers: list[dict] = []
     for price, evaluation in zip(settings.prices, priced, strict=True):
         table = {**episode_table(evaluation), **fixed_table}
         kinds = {**{p: "periodic" for p in periodic}, **{p: "event" for p in events}}

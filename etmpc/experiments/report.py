@@ -19,7 +19,7 @@ PAPER = {"cart_pendulum/balance": {"margin_percent": 5.0}, "battery/trading": {"
 
 def software_versions() -> dict:
     names = ("numpy", "scipy", "mujoco", "dm-control", "casadi", "control", "rerun-sdk", "ray", "matplotlib", "av")
-    versions = {"python": platform.python_version()}
+    versions: dict[str, str | None] = {"python": platform.python_version()}
     for name in names:
         try:
             versions[name] = metadata.version(name)

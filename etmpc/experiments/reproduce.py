@@ -291,8 +291,8 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
             files["figure1"] = "figure1_forecasts.png"
         if offers(system, Scene):
             if not (folder / "episode.mp4").exists():
-                size = dict(width=settings.video_size[0], height=settings.video_size[1])
-                render_rollout(domain, best, 0, folder / "episode.mp4", **size, progress=progress)
+                width, height = settings.video_size
+                render_rollout(domain, best, 0, folder / "episode.mp4", width=width, height=height, progress=progress)
             files["video"] = "episode.mp4"
     summary["files"] = {k: f"{folder_name(domain)}/{v}" for k, v in files.items()}
     summary["stage_seconds"] = clock.read()

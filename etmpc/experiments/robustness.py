@@ -103,7 +103,7 @@ def robustness(
         say(f"{task}: {option}={text}")
         evaluation = evaluate(key, list(policies), episodes, workers=workers, progress=progress).to_json()
         runs = evaluation["runs"]
-        row = {"value": text, "policies": {}}
+        found: dict[str, dict] = {}  # each policy's entry at this value
         base = _costs(runs, against, sense) if against is not None else None
         for spec in policies:
             costs = _costs(runs, spec, sense)
@@ -120,10 +120,11 @@ def robustness(
                 gain = 100.0 * (base - costs) / scale if scale > 0 else np.full(costs.shape, math.nan)
                 entry["improvement_pct"] = float(np.mean(gain))
                 entry["improvement_ci95"] = float(metrics.mean_ci95(gain))
-            row["policies"][spec] = entry
-        row["test_set_sha256"] = evaluation["test_set"]["sha256"]
-        row["episodes"] = len({r["episode"] for r in runs})
-        levels.append(row)
+            found[spec] = entry
+        episodes_played = len({r["episode"] for r in runs})
+        levels.append(
+            {"value": text, "policies": found, "test_set_sha256": evaluation["test_set"]["sha256"], "episodes": episodes_played}
+        )
     return commit_and_date() | {
         "format": FORMAT,
         "task": system.name,

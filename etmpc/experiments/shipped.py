@@ -6,7 +6,7 @@ Three answers, per learner: the same file, byte for byte; the same parameters in
 otherwise (a shipped file written by an older etmpc names the task by its domain, or records fewer of its
 recipe's entries); or other parameters, with the recipe entries, recorded by both files, in which the shipped
 one departs from the run's. A run's DPI is trained with the run's settings (its seeds, episodes,
-schedules); the shipped one with the recipe its file records (``scripts/learners.py`` in a checkout, over
+schedules); the shipped one with the recipe its file records (``etmpc study learners`` in a checkout, over
 more seeds on some tasks). PPO is trained from the task's ``ppo.yml`` by both.
 """
 
@@ -31,7 +31,7 @@ def compare(task: str, made: Path) -> dict:
     byte), ``{"verdict": "same parameters", "record": [entries recorded otherwise]}``, ``{"verdict": "differs",
     "recipe": {entry: [shipped, run's]}}`` (the entries both files record, where they depart; empty: the same
     recipe, other bits) or ``{"verdict": "not shipped"}``."""
-    found = {}
+    found: dict[str, dict[str, object]] = {}
     for learner, file, recipe_file, key in FILES:
         ours = made / file
         if not ours.is_file():
@@ -59,6 +59,12 @@ def _load(path: Path):
         return None
 
 
+def _hyperparameters(policy: dict) -> dict:
+    """A JSON policy's recorded recipe (none: empty)."""
+    recipe = policy.get("hyperparameters")
+    return recipe if isinstance(recipe, dict) else {}
+
+
 def _record_only(theirs: Path, ours: Path) -> list[str] | None:
     """The entries in which two JSON policies' records differ, if their parameters are the same; else None."""
     a, b = _load(theirs), _load(ours)
@@ -66,7 +72,7 @@ def _record_only(theirs: Path, ours: Path) -> list[str] | None:
         return None
     if {k: v for k, v in a.items() if k not in _RECORD} != {k: v for k, v in b.items() if k not in _RECORD}:
         return None
-    recipes = [x.get("hyperparameters") if isinstance(x.get("hyperparameters"), dict) else {} for x in (a, b)]
+    recipes = [_hyperparameters(a), _hyperparameters(b)]
     differ = {k for k in recipes[0].keys() | recipes[1].keys() if recipes[0].get(k) != recipes[1].get(k)}
     return sorted(differ - _OUTCOMES | ({"domain"} if a.get("domain") != b.get("domain") else set()))
 

@@ -185,6 +185,7 @@ def _efficiency(folder: Path, system, baselines: dict, best: str, state, ppo_run
             steps,
         )
     if ppo_run is not None:
+        assert ppo_curve is not None  # PPO's run and its checkpoints' curve come together (stages._ppo)
         curves["ppo"] = efficiency.ppo_points(ppo_run, ppo_curve, baselines, best, sense)
     return curves
 

@@ -31,6 +31,7 @@ def summarise_system(system, baselines: dict, learned: dict | None, curve: dict 
     }
     if learned is None:
         return head
+    assert curve is not None  # the paper's learner is evaluated with its learning curve, or neither is
     per_seed = [s["objective_mean"] for s in learned["policies"].values()]
     # As evaluate does: a run that ended on a non-finite state is counted, never averaged in.
     learned_runs = [r for r in learned["runs"] if r["finite"]]
@@ -90,7 +91,9 @@ def summarise_default(system, baselines: dict, default: dict, state) -> dict:
     }
 
 
-def summarise_headroom(system, best: str, baselines: dict, learned: dict, default: dict, rollout: dict, oracle: dict) -> dict:
+def summarise_headroom(
+    system, best: str, baselines: dict, learned: dict | None, default: dict, rollout: dict, oracle: dict
+) -> dict:
     """Every contender and the oracle against the best fixed policy, paired on the episodes the
     rollout policy played. Rows, in order: the oracle (a reference, not a policy), the rollout
     policy, the default learner, the paper's learner, the best fixed policy."""
@@ -139,7 +142,7 @@ def _row(s: dict) -> dict:
 def summarise_learners(
     system,
     baselines: dict,
-    learned: dict,
+    learned: dict | None,
     default: dict,
     ppo: dict | None,
     ppo_run: dict | None,
@@ -182,6 +185,7 @@ def summarise_learners(
             },
         )
     if ppo is not None:
+        assert ppo_run is not None  # PPO's evaluation and its run come together (stages._ppo)
         rows["ppo"] = (
             ppo,
             {
@@ -191,14 +195,15 @@ def summarise_learners(
                 "workers": ppo_run["workers"],
             },
         )
-    out = {"reference": best}
+    out: dict[str, object] = {"reference": best}
     for name, (evaluation, cost) in rows.items():
         runs = [r for r in evaluation["runs"] if r["finite"]]
         stage = (costs or {}).get(name)
         if stage is not None:
             cost = dict(cost, wall_seconds=stage["wall_seconds"], workers=stage["workers"])
-        if (curves or {}).get(name):
-            cost = dict(cost, simulated_steps_per_seed=curves[name][-1]["simulated_steps"])
+        curve = (curves or {}).get(name)
+        if curve:
+            cost = dict(cost, simulated_steps_per_seed=curve[-1]["simulated_steps"])
         out[name] = dict(
             paired(per_episode(evaluation), reference, sense),
             policies=list(evaluation["policies"]),

@@ -75,7 +75,7 @@ class LearnerSettings:
     bases: tuple[str, ...] = ("always", "every:2", "every:3", "every:5", "every:8", "every:12", "every:20")
     selection_episodes: int = 20
 
-    def config(self, domain: str, price: float, options=()) -> TrainConfig:
+    def config(self, domain: str, price: float | None, options=()) -> TrainConfig:
         return TrainConfig(
             domain,
             self.seeds,

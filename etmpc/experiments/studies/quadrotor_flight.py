@@ -1,7 +1,7 @@
 """The quadrotor page's flight figure: one stored test-set episode under two triggers, side by side in time.
 
-    python scripts/quadrotor_flight.py [--episode 59] [--policy every:7 --policy rl:policies/quadrotor/waypoints/learned.json]
-                                       [--out docs/tasks/quadrotor_flight.png]
+    etmpc study quadrotor-flight [--episode 59] [--policy every:7 --policy rl:policies/quadrotor/waypoints/learned.json]
+                                 [--out docs/tasks/quadrotor_flight.png]
 
 Three panels on one time axis: the drone's distance from its waypoint (the waypoint changes drawn as
 dotted lines), its altitude with the waypoint's and the ground's, and when each trigger computed a plan.
@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from etmpc.common.errors import EtmpcError
 from etmpc.evaluation.evaluate import scores
 from etmpc.evaluation.workers import play_test_episode
 from etmpc.policies import parse_policy
@@ -32,15 +33,26 @@ def _short(spec: str) -> str:
     return f"{kind}:{Path(rest).name}" if "/" in rest else spec
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--episode", type=int, default=59)
-    parser.add_argument("--policy", action="append", default=None)
-    parser.add_argument("--out", type=Path, default=Path("docs/tasks/quadrotor_flight.png"))
-    args = parser.parse_args()
+def arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--episode", type=int, default=59, help="the stored test-set episode (default 59)")
+    parser.add_argument(
+        "--policy",
+        action="append",
+        default=None,
+        help=f"a trigger (repeatable, at most {len(COLOURS)}; default: every:7 and the shipped DPI)",
+    )
+    parser.add_argument(
+        "--out",
+        type=Path,
+        default=Path("docs/tasks/quadrotor_flight.png"),
+        help="the figure (default docs/tasks/quadrotor_flight.png)",
+    )
+
+
+def run(args: argparse.Namespace) -> None:
     specs = args.policy or ["every:7", "rl:policies/quadrotor/waypoints/learned.json"]
     if len(specs) > len(COLOURS):
-        parser.error(f"at most {len(COLOURS)} policies")
+        raise EtmpcError(f"at most {len(COLOURS)} policies")
 
     import matplotlib
 
@@ -55,7 +67,8 @@ def main() -> None:
     target = None
     for row, (spec, colour) in enumerate(zip(specs, COLOURS)):
         played = play_test_episode(system.name, parse_policy(spec, system), 0, 0, args.episode)
-        traj, target = played.trajectory, played.episode.target
+        traj = played.trajectory
+        target = played.episode.target
         steps = traj.steps
         position = traj.states[1 : steps + 1, :3]  # the state after each interval
         t = dt * np.arange(1, steps + 1)
@@ -66,6 +79,7 @@ def main() -> None:
         altitude.plot(t, position[:, 2], color=colour)
         made = dt * np.flatnonzero(traj.recompute[:steps])
         computed.vlines(made, row + 0.1, row + 0.9, color=colour, linewidth=1.2)
+    assert target is not None  # every episode played has its waypoints, and at least one was played
     changes = dt * (np.flatnonzero(np.any(np.diff(target, axis=0) != 0, axis=1)) + 1)
     for ax in (distance, altitude, computed):
         for c in changes:
@@ -85,7 +99,3 @@ def main() -> None:
     fig.tight_layout()
     figures.save_png_atomically(fig, args.out, dpi=110)
     print(f"wrote {args.out}")
-
-
-if __name__ == "__main__":
-    main()
