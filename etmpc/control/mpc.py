@@ -40,6 +40,7 @@ import numpy as np
 
 from etmpc.control.compiled import CompiledFunction, CompileError
 from etmpc.control.condensed import CondensedGaussNewton
+from etmpc.control.ocp import OCP
 from etmpc.control.plan import Plan
 from etmpc.control.riccati import FeedbackWeights, gains_along
 from etmpc.control.settings import ROUTES, SolverSettings, check_block, plugin_library
@@ -74,6 +75,7 @@ class GaussNewtonMPC:
         self.u_min, self.u_max = np.atleast_1d(u_min).astype(float), np.atleast_1d(u_max).astype(float)
         self._model = model
         self.stage_residual, self.terminal_residual = stage_residual, terminal_residual
+        self.ocp = OCP(model, stage_residual, terminal_residual, horizon, self.u_min, self.u_max, parameters)
         self._condensed = self._compiled = self._step = None
         if settings.route == "condensed":
             self._condensed = CondensedGaussNewton(self, name)
@@ -198,19 +200,7 @@ class GaussNewtonMPC:
     def objective(self, x: np.ndarray, u_prev: np.ndarray, inputs: np.ndarray, parameters: np.ndarray | None = None) -> float:
         """The OCP's objective of an input sequence ``(N, nu)``, rolled out through the predictor
         from ``x`` (single shooting: no variable but the inputs)."""
-        if not hasattr(self, "_objective"):
-            xs, up = ca.SX.sym("x", self.nx), ca.SX.sym("u_prev", self.nu)
-            us, extra = ca.SX.sym("u", self.nu, self.horizon), ca.SX.sym("p", self.parameters)
-            with_extra = (lambda *args: (*args, extra)) if self.parameters else (lambda *args: args)
-            total, state, previous = 0, xs, up
-            for k in range(self.horizon):
-                total += ca.sumsqr(self.stage_residual(*with_extra(state, us[:, k], us[:, k] - previous)))
-                previous = us[:, k]
-                state = self._model(state, us[:, k])
-            total += ca.sumsqr(self.terminal_residual(*with_extra(state)))
-            self._objective = ca.Function("objective", [xs, up, us, extra], [total])
-        extra = np.zeros(0) if parameters is None else np.asarray(parameters, float)
-        return float(self._objective(x, u_prev, np.asarray(inputs, float).reshape(self.horizon, self.nu).T, extra))
+        return self.ocp.objective(x, u_prev, inputs, parameters)
 
     def _gains(self, states: ca.MX, w: ca.MX, weights: FeedbackWeights) -> ca.MX:
         """The TV-LQR gains ``K_k`` (row-major, ``N nu nx`` values) of the plan ``(states, w)``
@@ -242,10 +232,8 @@ class GaussNewtonMPC:
         return self._lbw, self._ubw
 
     def rollout(self, x0: np.ndarray, inputs: np.ndarray) -> np.ndarray:
-        states = [np.asarray(x0, dtype=float)]
-        for u in inputs:
-            states.append(np.asarray(self._model(states[-1], u)).ravel())
-        return np.array(states)
+        """The predictor's states ``(len(inputs) + 1, nx)`` from ``x0`` under ``inputs``."""
+        return self.ocp.rollout(x0, inputs)
 
     # -- solving ----------------------------------------------------------------------------------
     def initial_guess(self, x: np.ndarray, warm: Plan | None, age: int) -> np.ndarray:
