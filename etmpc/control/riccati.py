@@ -1,6 +1,6 @@
 """The time-varying LQR along a plan: the discrete Riccati recursion on the predictor's linearisation
-at each planned step, written once for both MPC routes (:mod:`etmpc.control.mpc`,
-:mod:`etmpc.control.condensed`)."""
+at each planned step, written once for both MPC routes (:mod:`etmpc.control.sqpmethod`,
+:mod:`etmpc.control.condensing`)."""
 
 from __future__ import annotations
 
