@@ -36,12 +36,14 @@ class OCP:
     u_max: np.ndarray
     parameters: int = 0
 
-    @property
+    @cached_property
     def nx(self) -> int:
+        """The state's size (asked of the model once: a route reads it at every solve)."""
         return int(self.model.size1_in(0))
 
-    @property
+    @cached_property
     def nu(self) -> int:
+        """The input's size."""
         return int(self.model.size1_in(1))
 
     def rollout(self, x0: np.ndarray, inputs: np.ndarray) -> np.ndarray:
