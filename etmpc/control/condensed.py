@@ -12,7 +12,7 @@ stage:
 rollout through the predictor from the measured state. So every iterate is a plan the predictor
 would fly, converged or not, and a QP has bounds only: always feasible.
 
-**An iteration** (Gauss-Newton, as :mod:`etmpc.control.mpc`'s):
+**An iteration** (Gauss-Newton, as :mod:`etmpc.control.sqpmethod`'s):
 
 1. *Linearise* (one generated C function, :mod:`etmpc.control.condensing`): along the rollout, the
    condensed Gauss-Newton Hessian ``H = 2 J'J + mu I`` and gradient ``g = 2 J'r`` of the objective in
