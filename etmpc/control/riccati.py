@@ -1,9 +1,10 @@
 """The time-varying LQR along a plan: the discrete Riccati recursion on the predictor's linearisation
-at each planned step, written once for both MPC routes (:mod:`etmpc.control.mpc`,
-:mod:`etmpc.control.condensed`)."""
+at each planned step, written once for both MPC routes (:mod:`etmpc.control.sqpmethod`,
+:mod:`etmpc.control.condensing`)."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import casadi as ca
@@ -31,15 +32,17 @@ def riccati_step(weights: FeedbackWeights, nx: int, nu: int) -> ca.Function:
     return ca.Function("riccati", [P, A, B], [K, 0.5 * (P_next + P_next.T)])
 
 
-def gains_along(linearisation, horizon: int, weights: FeedbackWeights, nx: int, nu: int):
+def gains_along(
+    linearisation: Callable[[int], tuple[ca.MX, ca.MX] | list[ca.MX]], horizon: int, weights: FeedbackWeights, nx: int, nu: int
+) -> ca.MX:
     """The gains ``K_k`` (row-major, ``N nu nx`` values, a CasADi column) of the TV-LQR whose
     linearisation at step ``k`` is ``linearisation(k) -> (A_k, B_k)`` (asked from the last step back),
     from ``P_N = terminal_factor Q``."""
     riccati = riccati_step(weights, nx, nu)
-    P_k = ca.DM(np.diag(weights.Q)) * weights.terminal_factor
-    gains = [None] * horizon
+    P_k: ca.DM | ca.MX = ca.DM(np.diag(weights.Q)) * weights.terminal_factor
+    backwards: list[ca.MX] = []  # K_{N-1}, .., K_0
     for k in range(horizon - 1, -1, -1):
         A_k, B_k = linearisation(k)
-        K_k, P_k = riccati(P_k, A_k, B_k)
-        gains[k] = ca.reshape(K_k.T, nu * nx, 1)  # K_k row by row
-    return ca.vertcat(*gains)
+        K_k, P_k = riccati.call([P_k, A_k, B_k])
+        backwards.append(ca.reshape(K_k.T, nu * nx, 1))  # K_k row by row
+    return ca.vertcat(*reversed(backwards))

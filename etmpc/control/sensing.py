@@ -15,6 +15,7 @@ This module may import ``etmpc.common`` and ``etmpc.control.compiled`` (the filt
 from __future__ import annotations
 
 import hashlib
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import lru_cache
 import warnings
@@ -282,6 +283,7 @@ class ExtendedKalmanFilter:
                 for (name, function), native in zip(functions.items(), built, strict=True):
                     self._functions[name] = (function, native)
             else:  # entries the sensor does not measure as a rule (never in a task's loop)
+                assert isinstance(key, bytes)  # a mask's bytes: "predict" is the one name that is text
                 self._functions[key] = (correction(np.frombuffer(key, dtype=bool), self._variance), None)
         return self._functions[key]
 
@@ -315,7 +317,7 @@ def correction(seen: np.ndarray, variance: np.ndarray) -> ca.Function:
     return ca.Function(name, [mean, p, nu], [ca.densify(out) for out in outputs])
 
 
-def _compiled(functions: list[ca.Function]) -> list[CompiledFunction | None]:
+def _compiled(functions: list[ca.Function]) -> Sequence[CompiledFunction | None]:
     """``functions`` built together as C; without a C compiler, None for each (CasADi's virtual machine, which
     performs the same operations in the same order: the same bits), with a warning."""
     try:

@@ -1,5 +1,5 @@
 """How an MPC's OCP is solved: :class:`SolverSettings`, read by :class:`~etmpc.control.mpc.GaussNewtonMPC`
-and its condensed route (:mod:`etmpc.control.condensed`); and the declarations the controllers' settings share
+and its routes (:mod:`etmpc.control.route`); and the declarations the controllers' settings share
 (:func:`horizon_setting`, :func:`weight_setting`, ...), each an option with its range (:mod:`etmpc.common.declared`)."""
 
 from __future__ import annotations
@@ -11,6 +11,9 @@ from typing import Any
 from etmpc.common.checks import BadValue
 from etmpc.common.declared import Checked, setting
 
+#: The routes ``SolverSettings.route`` may name: the names of :data:`etmpc.control.route.ROUTE_CLASSES`, which maps
+#: each to its class (tests/control/test_routes.py holds them equal; this module cannot import that table, whose
+#: routes read these settings, without an import circle).
 ROUTES = ("sqpmethod", "condensed")
 COLD_STARTS = ("rollout", "hold")
 #: The QP solvers sqpmethod may use: CasADi plugins that this project tests on its OCPs (tests/control/test_mpc.py
@@ -85,9 +88,9 @@ def plugin_library(kind: str, name: str) -> Path:
 
 @dataclass(frozen=True)
 class SolverSettings(Checked):
-    """How an MPC's OCP is solved. ``route``: ``"sqpmethod"`` (CasADi's SQP on the multiple-shooting NLP, its
-    QPs by ``qpsol``: reads ``tolerance``, ``dual_tolerance``, ``qpsol``, ``qpsol_options``, ``block``,
-    ``sqp_options``, ``cold_start``) or ``"condensed"`` (:mod:`etmpc.control.condensed`: a Gauss-Newton SQP
+    """How an MPC's OCP is solved. ``route``: ``"sqpmethod"`` (:mod:`etmpc.control.sqpmethod`: CasADi's SQP on the
+    multiple-shooting NLP, its QPs by ``qpsol``: reads ``tolerance``, ``dual_tolerance``, ``qpsol``, ``qpsol_options``,
+    ``block``, ``sqp_options``, ``cold_start``) or ``"condensed"`` (:mod:`etmpc.control.condensed`: a Gauss-Newton SQP
     on the inputs alone, its dense QPs by DAQP; reads ``step_tolerance``). Both read ``max_iterations``,
     ``regularisation``, ``compiled`` and ``warm_from_expired``. ``qpsol_options`` and ``sqp_options`` are set in
     code, never as options."""

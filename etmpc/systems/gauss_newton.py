@@ -13,12 +13,15 @@ This module may import ``etmpc.common`` and ``etmpc.control``.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from functools import cached_property
+from typing import Any
 
 import casadi as ca
 import dm_env
 import numpy as np
+from dm_control.rl import control
 
 from etmpc.control.lqr import PlanFeedback
 from etmpc.control.mpc import FeedbackWeights, GaussNewtonMPC, SolverSettings
@@ -108,11 +111,18 @@ class GaussNewtonSystem(SystemBase):
     feedback = PlanFeedback()
     # The task module's make_environment(random=, plant=, ...), as a staticmethod: make_env builds it at the
     # Config's plant setting.
-    make_environment = None
+    make_environment: Callable[..., control.Environment] | None = None
 
-    def make_env(self, random=None):
+    def __init__(self, config: Any = None) -> None:
+        """What a subclass's constructor takes, as :meth:`interpreted` calls it: its ``Config`` (None: the
+        default one). The subclass sets ``self.config``, its model and its input bounds there; this one sets
+        nothing (a subclass need not call it)."""
+
+    def make_env(self, random: np.random.Generator | np.random.RandomState | int | None = None) -> control.Environment:
         """The dm-control environment: the task's ``make_environment`` at this Config's ``plant`` (and its
         ``disturbances``, where the Config has them: the task's options of its world)."""
+        if self.make_environment is None:
+            raise NotImplementedError(f"{type(self).__name__} names no make_environment")
         disturbances = getattr(self.config, "disturbances", None)
         if disturbances is None:
             return self.make_environment(random=random, plant=self.config.plant)

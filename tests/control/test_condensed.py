@@ -43,7 +43,7 @@ def single_shooting(system, x, u_prev, target):
     for k in range(n):
         u_k = U[k * nu : (k + 1) * nu]
         residuals.append(stage(x_k, u_k, u_k - previous, target))
-        x_k, previous = mpc._model(x_k, u_k), u_k
+        x_k, previous = mpc.ocp.model(x_k, u_k), u_k
         states.append(x_k)
     residuals.append(terminal(x_k, target))
     return U, ca.vertcat(*residuals), ca.horzcat(*states)
@@ -60,11 +60,11 @@ def test_the_linearisation_is_the_gauss_newton_model_of_the_single_shooting_resi
     truth = ca.Function("truth", [U], [ca.sumsqr(r), 2 * J.T @ r, 2 * J.T @ J + mu * ca.DM.eye(U.numel()), states])
     xs, us = ca.SX.sym("x", 12), ca.SX.sym("u", 4)
     jacobians = ca.Function(
-        "AB", [xs, us], [ca.jacobian(quadrotor.mpc._model(xs, us), xs), ca.jacobian(quadrotor.mpc._model(xs, us), us)]
+        "AB", [xs, us], [ca.jacobian(quadrotor.mpc.ocp.model(xs, us), xs), ca.jacobian(quadrotor.mpc.ocp.model(xs, us), us)]
     )
     z0 = np.concatenate([x, u_prev])
     for system in (quadrotor, interpreted(quadrotor)):
-        solver = system.mpc._condensed
+        solver = system.mpc.route
         assert solver.is_compiled is (system is quadrotor)
         guess = rng.uniform(0.03, 0.12, U.numel())
         f, g, H, rolled, A, B = (np.array(v) for v in solver._linearised(guess, z0, target, 0))
@@ -82,7 +82,7 @@ def test_the_linearisation_is_the_gauss_newton_model_of_the_single_shooting_resi
 def ipopt_quadrotor(system, x, u_prev, target) -> tuple[float, np.ndarray]:
     """The OCP transcribed independently (full multiple shooting, every state and input a variable, the
     regularisation-free objective), solved by Ipopt to 1e-12: the objective and the first input."""
-    n, model = system.config.horizon, system.mpc._model
+    n, model = system.config.horizon, system.mpc.ocp.model
     stage, terminal = system.residuals()
     X, U = ca.SX.sym("X", 12, n + 1), ca.SX.sym("U", 4, n)
     previous = ca.horzcat(ca.DM(u_prev), U[:, :-1])
@@ -160,8 +160,8 @@ def test_the_warm_start_is_the_kept_plan_flown_under_its_gains(quadrotor):
     x, u_prev, target = random_problem(rng)
     plan = quadrotor.mpc.solve(x, u_prev, parameters=target)
     measured, age, n = plan.states[3] + rng.normal(0, 0.05, 12), 3, quadrotor.config.horizon
-    guess = quadrotor.mpc._condensed.guess(measured, plan.inputs[2], plan, age, target)
-    model, state, expected = quadrotor.mpc._model, measured, []
+    guess = quadrotor.mpc.route.warm_start(measured, plan.inputs[2], plan, age, target)
+    model, state, expected = quadrotor.mpc.ocp.model, measured, []
     for k in range(n):
         j = min(k + age, n - 1)
         u = plan.inputs[j] - plan.gains[j] @ (state - plan.states[min(k + age, n)])

@@ -357,16 +357,16 @@ def test_compute_levels_that_is_not_a_bool_is_refused_when_the_config_is_made(va
 
 
 def test_a_task_that_counts_iterations_builds_their_code_with_its_mpc_so_no_measured_solve_holds_a_build(monkeypatch):
-    from etmpc.control import mpc as mpc_module
+    from etmpc.control import sqpmethod  # the route the kicks fly builds their compiled code
 
     made = []
 
-    class Counted(mpc_module.CompiledFunction):
+    class Counted(sqpmethod.CompiledFunction):
         def __init__(self, function, *args, **kwargs):
             made.append(function.name())
             super().__init__(function, *args, **kwargs)
 
-    monkeypatch.setattr(mpc_module, "CompiledFunction", Counted)
+    monkeypatch.setattr(sqpmethod, "CompiledFunction", Counted)
     system = make_system("cart_pendulum/kicks_levels")
     system.mpc
     assert made == ["cart_pendulum_kicks_mpc", "cart_pendulum_kicks_mpc_step"]
