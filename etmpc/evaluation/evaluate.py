@@ -76,8 +76,8 @@ def _run(job: tuple) -> tuple[RunResult, EpisodeRecord | None, dict[str, float]]
 # -- driver side ---------------------------------------------------------------------------------
 def run_jobs(jobs: list, workers: int, progress: bool, backend: str = "local", address: str | None = None) -> list[tuple]:
     chunk = max(1, min(8, len(jobs) // (4 * workers)))
-    with Progress(len(jobs), enabled=progress) as bar, make_backend(backend, workers, address) as backend:
-        return backend.map(_run, jobs, on_result=lambda job: bar.update(), chunksize=chunk)
+    with Progress(len(jobs), enabled=progress) as bar, make_backend(backend, workers, address) as pool:
+        return pool.map(_run, jobs, on_result=lambda job: bar.update(), chunksize=chunk)
 
 
 def evaluate(
@@ -187,7 +187,7 @@ def check_picklable(spec: str, policy, backend: str = "local") -> None:
     the ``ray`` backend cloudpickled (as Ray sends it). Pickle names a class by its module, so a class
     of a ``__main__`` that a spawned worker cannot re-create (``python -c``, stdin, a notebook) round-trips
     here but not there: refused too (Ray's cloudpickle sends such a class by value)."""
-    dumps = pickle.dumps
+    dumps: Callable[[object], bytes] = pickle.dumps
     if backend == "ray":
         with contextlib.suppress(ImportError):
             from ray import cloudpickle
@@ -200,7 +200,8 @@ def check_picklable(spec: str, policy, backend: str = "local") -> None:
             pickler.dump(policy)
             data = buffer.getvalue()
         else:
-            data, pickler = dumps(policy), None
+            data = dumps(policy)
+            pickler = None
         pickle.loads(data)
     except BaseException as exc:
         if genuine(exc):
@@ -210,10 +211,11 @@ def check_picklable(spec: str, policy, backend: str = "local") -> None:
             "(workers=1 in Python), or make it picklable (its class at the top level of a module, "
             "no lambdas, open files or locks in it)"
         ) from None
-    where = unimportable_main() if pickler is not None and pickler.found else None
+    found = pickler.found if pickler is not None else []  # what the local pickler saw of __main__
+    where = unimportable_main() if found else None
     if where is not None:
         raise MainOnlyError(
-            f"policy {spec}: {pickler.found[0]} is defined in __main__ ({where}), which worker "
+            f"policy {spec}: {found[0]} is defined in __main__ ({where}), which worker "
             "processes cannot import: define it in a module (or a script run under `if __name__ == "
             '"__main__":`), or use workers=1'
         )

@@ -138,7 +138,7 @@ class TestSet:
                 raise TestSetError(f"test set {self.path}, episode {index}: {exc}") from None
 
 
-def load(path: Path, domain: str, task: str) -> TestSet:
+def load(path: str | Path, domain: str, task: str) -> TestSet:
     """Load and verify a test set; any problem raises :class:`TestSetError` with what to do.
 
     Beyond its checksum (which only says the file is the one its ``.sha256`` describes), the

@@ -310,6 +310,6 @@ def _caution(card: dict) -> str | None:
         return None
     return (
         f"this machine's C library rounds sin, cos, exp and log as {LIBM_WORDS[mine]}; the card's was "
-        f"{LIBM_WORDS.get(theirs, 'not recorded (an older etmpc)')}: replays of the kicks tasks, the reacher and "
+        f"{LIBM_WORDS.get(theirs or '', 'not recorded (an older etmpc)')}: replays of the kicks tasks, the reacher and "
         "the quadrotor may differ from the card's with nothing wrong in it; verify it on a machine like the card's"
     )
