@@ -108,7 +108,7 @@ class _Snapshotter:
     spec, stochastic, simulates = "never", False, True
 
     def __init__(self):
-        self.snapshot = None
+        self.snapshot: Snapshot | None = None
 
     def decide(self, s, rng) -> bool:
         if self.snapshot is None:
@@ -138,6 +138,7 @@ def _rollout_steps(system, env, testset, episodes: int, repeats: int = 5) -> dic
         snapshotter = _Snapshotter()
         run_episode(system, env, snapshotter, None, test_episode(system, testset, e))
         snapshot = snapshotter.snapshot
+        assert snapshot is not None  # taken at the episode's first decision
         for _ in range(repeats):
             solve_s[0] = 0.0
             start = cpu_clock()

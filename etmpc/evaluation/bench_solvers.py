@@ -7,10 +7,15 @@ from __future__ import annotations
 
 import time
 
+import dm_env
 import numpy as np
 
+from etmpc.control.plan import Plan
 from etmpc.loop import run_episode
 from etmpc.policies import parse_policy
+
+# An OCP as an ``always`` run met it: (x, u_prev, continuing: warm started from the previous plan, timestep).
+Problem = tuple[np.ndarray, np.ndarray, bool, dm_env.TimeStep]
 
 
 def timing_stats(values_s) -> dict:
@@ -30,7 +35,9 @@ class _Capture:
     """The system, with every ``plan`` call's problem kept: (x, u_prev, continuing, timestep)."""
 
     def __init__(self, system, limit: int):
-        self._system, self._limit, self.problems = system, limit, []
+        self._system = system
+        self._limit = limit
+        self.problems: list[Problem] = []
 
     def __getattr__(self, name):
         return getattr(self._system, name)
@@ -41,7 +48,7 @@ class _Capture:
         return self._system.plan(x, u_prev, warm, age, timestep)
 
 
-def captured_problems(system, env, testset, count: int) -> list:
+def captured_problems(system, env, testset, count: int) -> list[Problem]:
     """The first ``count`` OCPs an ``always`` run meets on the test set (an untimed run)."""
     capture = _Capture(system, count)
     policy = parse_policy("always", system)
@@ -52,9 +59,11 @@ def captured_problems(system, env, testset, count: int) -> list:
     return capture.problems
 
 
-def _time_ours(system, problems) -> tuple[list[float], list[np.ndarray]]:
+def _time_ours(system, problems: list[Problem]) -> tuple[list[float], list[np.ndarray]]:
     """``system.plan`` on each problem, warm started from its own previous plan within an episode."""
-    times, inputs, plan = [], [], None
+    times: list[float] = []
+    inputs: list[np.ndarray] = []
+    plan: Plan | None = None
     for x, u_prev, continuing, timestep in problems:
         warm = plan if continuing else None
         start = time.perf_counter()
@@ -64,16 +73,19 @@ def _time_ours(system, problems) -> tuple[list[float], list[np.ndarray]]:
     return times, inputs
 
 
-def compare_reference(system, reference, problems) -> dict:
+def compare_reference(system, reference, problems: list[Problem]) -> dict:
+    """Our solver against ``reference`` on the same OCPs: times, failures and how far its objective is from ours."""
     ours_s, our_inputs = _time_ours(system, problems)
-    theirs_s, gaps, failures = [], [], 0
-    for (x, u_prev, continuing, timestep), ours in zip(problems, our_inputs):
+    theirs_s: list[float] = []
+    gaps: list[float] = []
+    failures = 0
+    for (x, u_prev, continuing, timestep), our_u in zip(problems, our_inputs):
         inputs, elapsed, ok = reference.solve(x, u_prev, timestep, continuing)
         theirs_s.append(elapsed)
         if not ok:
             failures += 1
             continue
-        ours_cost = system.plan_cost(x, u_prev, timestep, ours)
+        ours_cost = system.plan_cost(x, u_prev, timestep, our_u)
         gaps.append((system.plan_cost(x, u_prev, timestep, inputs) - ours_cost) / max(abs(ours_cost), 1e-12))
     ours, theirs = timing_stats(ours_s), timing_stats(theirs_s)
     return {
@@ -89,7 +101,7 @@ def compare_reference(system, reference, problems) -> dict:
     }
 
 
-def compare_interpreted(system, problems) -> dict | None:
+def compare_interpreted(system, problems: list[Problem]) -> dict | None:
     """Our solver against the same OCPs solved as before it was compiled (``system.interpreted()``)."""
     if system.interpreted is None:  # no other way it runs (the battery's LP is solved inside HiGHS)
         return None
@@ -98,9 +110,9 @@ def compare_interpreted(system, problems) -> dict | None:
     ours_s, ours_inputs = _time_ours(system, problems)
     theirs_s, theirs_inputs = _time_ours(before, problems)
     gaps = []
-    for (x, u_prev, _, timestep), ours, theirs in zip(problems, ours_inputs, theirs_inputs):
-        ours_cost = system.plan_cost(x, u_prev, timestep, ours)
-        gaps.append((system.plan_cost(x, u_prev, timestep, theirs) - ours_cost) / max(abs(ours_cost), 1e-12))
+    for (x, u_prev, _, timestep), our_u, their_u in zip(problems, ours_inputs, theirs_inputs):
+        ours_cost = system.plan_cost(x, u_prev, timestep, our_u)
+        gaps.append((system.plan_cost(x, u_prev, timestep, their_u) - ours_cost) / max(abs(ours_cost), 1e-12))
     ours, theirs = timing_stats(ours_s), timing_stats(theirs_s)
     return {
         "ours": ours,
