@@ -21,19 +21,18 @@ from etmpc.common.progress import Progress
 from etmpc.common.errors import EtmpcError
 from etmpc.common.interrupts import described, genuine
 from etmpc.common.outputs import check_inputs
-from etmpc.common.wording import counted
-from etmpc.common.sense import higher_or_lower, oriented
+from etmpc.common.sense import oriented
 from etmpc.policies import parse_policy
 from etmpc.policies.specs import names_a_kind
 from etmpc.policies.user import checked
 from etmpc.loop.records import EpisodeRecord, EpisodeSink
-from etmpc.systems import SystemKey, has_levels, system_key
-from etmpc.systems.options import options_line
+from etmpc.systems import SystemKey, system_key
 from etmpc.evaluation.inputs import check_run_outputs, check_shipped, run_inputs
 from etmpc.evaluation.mainscript import refuse_in_rerun_main, unimportable_main
 from etmpc.evaluation.backends import BACKENDS, make_backend
 from etmpc.evaluation.workers import play_test_episode, workers_for
 from etmpc.evaluation.results import Evaluation, PolicySummary, RunResult, failures_cell, summarise  # noqa: F401 (re-exported)
+from etmpc.evaluation.table import format_table  # noqa: F401 (re-exported: the README and examples import it from here)
 
 
 # -- worker side ---------------------------------------------------------------------------------
@@ -325,38 +324,3 @@ def _evaluate(
         [cpu for _, _, cpu in outcomes],
         dict(key.options) or None,
     )
-
-
-def format_table(evaluation: Evaluation) -> str:
-    sense = evaluation.summaries[0].objective_sense if evaluation.summaries else "min"
-    names = {s.policy: s.policy + (" (oracle)" if s.clairvoyant else "") for s in evaluation.summaries}
-    width = max([16] + [len(name) + 2 for name in names.values()])  # long rl:PATH specs stay aligned
-    task_failures = next((s.failure_name for s in evaluation.summaries if s.failure_name), None)
-    failures_width = max(len(task_failures) + 10, 16) if task_failures else 0
-    extra = f"{task_failures + '/episode':>{failures_width}}" if task_failures else ""
-    head = (
-        f"{'policy':<{width}}{'objective':>12}{'± std':>10}{'control':>11}{'recomputes':>12}{extra}"
-        f"{'solver failures':>17}{'non-finite':>12}"
-    )
-    levels = has_levels(f"{evaluation.domain}/{evaluation.task}")
-    lines = [
-        f"{evaluation.domain}/{evaluation.task}: objective ({higher_or_lower(sense)} is better), "
-        f"test set {evaluation.testset_sha256[:12]}, {evaluation.recompute_price:g} per "
-        + ("SQP iteration (recomputes: solves and iterations started)" if levels else "recompute"),
-        *options_line(evaluation.options),
-        head,
-        "-" * len(head),
-    ]
-    for s in evaluation.summaries:
-        column = f"{failures_cell(s.failures_mean, s.failures_ci95):>{failures_width}}" if task_failures else ""
-        lines.append(
-            f"{names[s.policy]:<{width}}{s.objective_mean:>12.5f}{s.objective_std:>10.5f}{s.control_objective_mean:>11.5f}"
-            f"{s.recomputes_mean:>12.2f}{column}{s.solver_failures:>17d}{s.nonfinite_episodes:>12d}"
-        )
-    first = evaluation.summaries[0] if evaluation.summaries else None
-    lines.append(f"{counted(first.episodes, 'episode')} x {counted(first.repeats, 'repeat')} per policy" if first else "")
-    if task_failures:
-        lines.append(f"{task_failures}/episode: the task's failures, mean ± 95 % CI over the episodes (1.96 sd / √n)")
-    if any(s.clairvoyant for s in evaluation.summaries):
-        lines.append("(oracle): it knows each episode's future, a reference and not a policy; a policy can do better than it")
-    return "\n".join(lines)
