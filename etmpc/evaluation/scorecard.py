@@ -52,7 +52,8 @@ from etmpc.common.progress import Progress
 from etmpc.evaluation import metrics
 from etmpc.evaluation import testsets as ts_mod
 from etmpc.common import checks
-from etmpc.evaluation.evaluate import Evaluation, check_policies, evaluate, parse_policies
+from etmpc.evaluation.arguments import check_policies, parse_policies
+from etmpc.evaluation.evaluate import Evaluation, evaluate
 from etmpc.evaluation.inputs import check_run_outputs, run_inputs
 from etmpc.evaluation.metrics import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED  # noqa: F401  (the card's statistics)
 from etmpc.evaluation.references import References, build_references, references_path, stored

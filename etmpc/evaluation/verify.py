@@ -52,7 +52,8 @@ from etmpc.evaluation import metrics
 from etmpc.evaluation.card import TaskScore
 from etmpc.evaluation.card_checks import check_card, check_row
 from etmpc.evaluation.consistency import aggregate_mismatches, row_mismatches, same
-from etmpc.evaluation.evaluate import parse_policies, run_jobs
+from etmpc.evaluation.arguments import parse_policies
+from etmpc.evaluation.evaluate import run_jobs
 from etmpc.evaluation.references import SUITE_VERSION, References, stored
 from etmpc.evaluation.workers import workers_for
 from etmpc.policies.specs import find
