@@ -3,7 +3,6 @@
 
 from __future__ import annotations
 
-import re
 import threading
 from collections.abc import Iterable
 from pathlib import Path
@@ -15,6 +14,7 @@ from etmpc.common.sense import sign as sense_sign
 from etmpc.loop import computation_cost
 from etmpc.loop.records import EpisodeRecord
 from etmpc.views.layout import _about, _fan, _slots, _solve_series, _timeline
+from etmpc.views.decisions import log_decisions
 from etmpc.views.solves import solve_log
 from etmpc.views.schema import APPLICATION_ID, END_MARKER, episode_root
 from etmpc.views.sinks import Destinations, is_url
@@ -212,74 +212,8 @@ class Recorder:
                 written.append(path)
         written += log_space(rr, stream, root, record, dt)  # a system with a Space: its 3-D view (etmpc.views.space)
 
-        # The decisions.
-        decisions = np.stack([record.recompute, record.forced], axis=1).astype(float)
-        stream.send_columns(f"{root}/decision", self._steps(n, dt), rr.Scalars.columns(scalars=decisions))  # for replay
-        written.append("decision")
-        events = np.flatnonzero(record.recompute)
-        if len(events):
-            made_at = np.array([k for k, *_ in record.plans], dtype=np.int64)
-            previous = made_at[np.maximum(np.searchsorted(made_at, events) - 1, 0)] if len(made_at) else events
-            age = np.where(events > 0, events - previous, 0)
-            forced = record.forced[events] & (events > 0)  # step 0 is forced too (there is no plan yet): the first plan
-            # A series per kind of recompute, at the recomputes only (NaN: another kind), at the age
-            # of the plan each one replaced.
-            kinds = np.stack([(events > 0) & ~forced, forced, events == 0], axis=1)
-            series(
-                "recompute",
-                _timeline(events, dt),
-                np.where(kinds, age[:, None], np.nan),
-                ["chosen by the policy", "forced: the plan ran out", "first plan"],
-                kind="SeriesPoints",
-                colors=[look.CHOSEN, look.FORCED, look.FIRST],
-                markers=["circle", "cross", "diamond"],
-                marker_sizes=[3.0, 4.5, 4.0],
-            )
-            error = record.prediction_error[events]
-            text = [
-                "first plan"
-                if i == 0
-                else f"{'FORCED, the plan ran out' if f else 'chosen by the policy'}: plan age {a}, ‖W (x − x̂)‖ {e:.4g}"
-                for i, f, a, e in zip(events, forced, age, error)
-            ]
-            if record.announced:  # a self-trigger: what it announced as it made each plan
-                announced = dict(record.announced)
-                text = [
-                    t
-                    + (f"; announced: keep {announced[i]} steps, next solve at step {i + announced[i]}" if i in announced else "")
-                    for t, i in zip(text, events)
-                ]
-            stream.send_columns(
-                f"{root}/events",
-                _timeline(events, dt),
-                rr.TextLog.columns(text=text, level=["WARN" if f else "INFO" for f in forced]),
-            )
-            written.append("events")
-        if record.announced:
-            made, keep = (np.array(v, dtype=np.int64) for v in zip(*record.announced))
-            series(
-                "announced",
-                _timeline(made, dt),
-                keep.astype(float),
-                ["announced at the solve: steps the plan will be kept"],
-                kind="SeriesPoints",
-                colors=[look.ANNOUNCED],
-                markers=["up"],
-                marker_sizes=[4.0],
-            )
-        known = np.flatnonzero(np.isfinite(record.prediction_error))
-        series("prediction_error", _timeline(known, dt), record.prediction_error[known], ["‖W (x − x̂)‖"], **realised)
-        threshold = re.fullmatch(r"threshold:(.+)", identity["policy"])
-        if threshold:
-            x = float(threshold.group(1))
-            series(
-                "threshold",
-                _timeline(np.array([0, n - 1]), dt),
-                np.array([x, x]),
-                [f"threshold {x:g}"],
-                colors=[look.BOUND],
-                widths=[1.0],
-            )
+        # The decisions: each step's, the recomputes by kind and what each was told, the error and the threshold.
+        written += log_decisions(rr, stream, root, record, series, self._steps(n, dt))
 
         if record.timed:  # time in the loop: each step's recompute, the plan in force, each solve's start and arrival
             for path, steps, values, names, kind, style in _solve_series(record):
