@@ -6,6 +6,8 @@ from __future__ import annotations
 import threading
 from collections.abc import Iterable
 from pathlib import Path
+from types import ModuleType
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -19,6 +21,9 @@ from etmpc.views.solves import solve_log
 from etmpc.views.schema import APPLICATION_ID, END_MARKER, episode_root
 from etmpc.views.sinks import Destinations, is_url
 from etmpc.views.space import log_space
+
+if TYPE_CHECKING:  # imported for the run by a thread of the Recorder's (it takes a second or two)
+    import rerun
 
 
 class Recorder:
@@ -40,8 +45,8 @@ class Recorder:
         self._importer.start()
         self.destinations = Destinations(path, connect, spawn, rerun=self._rerun)  # each checked: before any work
         self.path = self.destinations.path
-        self._rr = None
-        self._stream = None
+        self._rr: ModuleType | None = None  # the rerun module, once opened
+        self._stream: rerun.RecordingStream | None = None
         self._policy_parts: dict[tuple[str, str], str] = {}
         self._styles: dict = {}
         self._indexes: dict = {}
@@ -54,18 +59,19 @@ class Recorder:
     def __exit__(self, exc_type, *exc):
         self.close(keep=exc_type is None)
 
-    def _rerun(self):
+    def _rerun(self) -> ModuleType:
         """The ``rerun`` module, once the thread has imported it."""
         self._importer.join()
         if isinstance(self._imported[0], BaseException):
             raise self._imported[0]
         return self._imported[0]
 
-    def _open(self):
-        if self._stream is None:
-            self._rr = self._rerun()
-            self._stream = self._rr.RecordingStream(APPLICATION_ID)
-            self.destinations.attach(self._rr, self._stream)
+    def _open(self) -> tuple[ModuleType, rerun.RecordingStream]:
+        if self._rr is None or self._stream is None:
+            rr = self._rerun()
+            self._rr = rr
+            self._stream = rr.RecordingStream(APPLICATION_ID)
+            self.destinations.attach(rr, self._stream)
         return self._rr, self._stream
 
     def close(self, keep: bool = True) -> None:
@@ -99,7 +105,8 @@ class Recorder:
                 name, i = f"{base} ({i})", i + 1
             self._policy_parts[key] = name
         name = self._policy_parts[key]
-        return name, self._rr.escape_entity_path_part(name.replace("/", "_"))  # one path part
+        rr, _ = self._open()  # open already: log_episode opened it
+        return name, rr.escape_entity_path_part(name.replace("/", "_"))  # one path part
 
     def _style(self, kind: str, **fields):
         """A static ``SeriesLines`` or ``SeriesPoints``, built once per look (they repeat from one
@@ -137,13 +144,15 @@ class Recorder:
         # What happened. Entities drawn in one view are drawn in the order of their paths, so
         # ``realised/…`` comes over ``plan/…`` and ``forecast/…``.
         realised = dict(colors=[look.REALISED], widths=[look.REALISED_WIDTH])
-        sensed = record.estimates is not None  # a sensor that is not exact: its readings and the estimate beside the truth
+        # A sensor that is not exact: its readings and the estimate beside the truth (a record keeps both or neither).
+        estimates = record.estimates
+        measurements = record.measurements
         for j, s in enumerate(record.state_names):
-            if sensed:
+            if estimates is not None and measurements is not None:
                 series(
                     f"realised/state/{s}",
                     self._steps(n + 1, dt),
-                    np.column_stack([record.states[:, j], record.estimates[:, j], record.measurements[:, j]]),
+                    np.column_stack([record.states[:, j], estimates[:, j], measurements[:, j]]),
                     [f"what happened [{look.unit(s)}]", f"estimated [{look.unit(s)}]", f"measured [{look.unit(s)}]"],
                     colors=[look.REALISED, look.ESTIMATED, look.MEASURED],
                     widths=[look.REALISED_WIDTH, 1.5, 1.0],
@@ -172,8 +181,11 @@ class Recorder:
             else:
                 series(f"realised/input/{u}", self._steps(n, dt), record.applied[:, j], [f"applied {what}"], **realised)
             series(f"correction/{u}", self._steps(n, dt), record.correction[:, j], [f"LQR correction {what}"], **realised)
-        forecasts = {look.signal_of_forecast(f, record.signals): f for f in (record.plans[0][3] if record.plans else {})}
-        forecasts.pop(None, None)
+        forecasts: dict[str, str] = {}  # signal -> its forecast, for the signals the plans forecast
+        for f in record.plans[0][3] if record.plans else {}:
+            signal = look.signal_of_forecast(f, record.signals)
+            if signal is not None:
+                forecasts[signal] = f
         for s, values in record.signals.items():
             series(
                 f"realised/signal/{s}",
