@@ -4,6 +4,7 @@ check that a policy is named once, and the ``--backend`` and ``--address`` optio
 from __future__ import annotations
 
 import sys
+from collections.abc import Callable
 
 from etmpc.common import progress
 from etmpc.common.errors import EtmpcError
@@ -23,7 +24,9 @@ class LazyHelp(str):
     """A help text made only when the help is shown (argparse expands it with ``%``): ``make()`` may read the
     registry and import the tasks, which ``etmpc --help`` and every command's parsing must not."""
 
-    def __new__(cls, make, plain: str = "(made when shown)"):
+    make: Callable[[], str]  # the text, made when the help is shown
+
+    def __new__(cls, make: Callable[[], str], plain: str = "(made when shown)") -> LazyHelp:
         """``make``: the text, made when the help is shown; ``plain``: what the help is as a plain string."""
         text = super().__new__(cls, plain)
         text.make = make

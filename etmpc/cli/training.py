@@ -182,15 +182,28 @@ def run(args) -> None:
     # and, now that the learner says which files of the run's directory are its, none of them is the settings file
     check_run_outputs({}, {"--out": args.out}, {"--settings": path}, writes={"--out": learner.owns})
     workers = args.workers or default_workers()
-    views = dict(recorder=Recorder, curve_png=write_curve_png)  # what the run's recordings and curve are drawn with
-    done = train(learner, key, args.out, seeds, workers, args.resume, args.backend, args.address, say=say, **views)
+    # recorder and curve_png: what the run's recordings and curve are drawn with (views, a floor above learning)
+    done = train(
+        learner,
+        key,
+        args.out,
+        seeds,
+        workers,
+        args.resume,
+        args.backend,
+        args.address,
+        say=say,
+        recorder=Recorder,
+        curve_png=write_curve_png,
+    )
     for note in notes:
         warn(note)
     learner = done.learner
-    if getattr(learner, "run_state", None) is not None:  # gpomdp, dpi: the test-set curve
+    run_state = getattr(learner, "run_state", None)
+    if run_state is not None:  # gpomdp, dpi: the test-set curve
         from etmpc.learning.train import format_summary
 
-        print(format_summary(learner.run_state))
+        print(format_summary(run_state))
     result = getattr(learner, "result", None)
     if isinstance(result, dict) and "checkpoints" in result:  # ppo
         print(
