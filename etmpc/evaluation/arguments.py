@@ -15,7 +15,7 @@ from etmpc.evaluation.inputs import check_shipped, run_inputs
 from etmpc.loop.records import EpisodeSink
 from etmpc.policies import parse_policy
 from etmpc.policies.specs import names_a_kind
-from etmpc.policies.user import checked
+from etmpc.policies.user import Checked, checked
 from etmpc.systems import SystemKey
 
 
@@ -68,6 +68,7 @@ def parse_policies(system, policies: list) -> dict:
             spec, policy = policy, parse_policy(policy, system)
         else:
             policy = checked(policy, levels=system.compute_levels)  # its answers checked as the task takes them
+            assert isinstance(policy, Checked)  # checked() wraps every object it is given (its policy: the user's)
             spec = policy.spec
             if names_a_kind(spec) and not type(policy.policy).__module__.startswith("etmpc."):
                 raise EtmpcError(
