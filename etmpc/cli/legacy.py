@@ -10,7 +10,9 @@ stays one line).
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import TypedDict
 
 from etmpc.cli.tasks import task_option
 from etmpc.cli import types
@@ -19,9 +21,18 @@ from etmpc.common.errors import EtmpcError
 from etmpc.learning.gpomdp import BASELINES
 from etmpc.policies.features import FEATURE_SETS
 
-_N = dict(type=types.positive_int, metavar="N")
+
+class _Keywords(TypedDict, total=False):
+    """An old flag's argparse keywords."""
+
+    type: Callable[[str], object]
+    metavar: str
+    choices: Sequence[str]
+
+
+_N = _Keywords(type=types.positive_int, metavar="N")
 # the old flag -> (the setting it sets, the learners it was an option of, its argparse keywords)
-FLAGS = {
+FLAGS: dict[str, tuple[str, tuple[str, ...], _Keywords]] = {
     "--episodes": ("episodes", ("gpomdp", "dpi", "self"), _N),
     "--eval-every": ("eval_every", ("gpomdp", "dpi"), _N),
     "--eval-episodes": ("eval_episodes", ("gpomdp", "dpi"), _N),

@@ -11,7 +11,7 @@ from pathlib import Path
 
 from etmpc.cli.tasks import task_option
 from etmpc.cli import discriminate, figures, scoring, study, training, types
-from etmpc.cli.output import LazyHelp, backend_arguments, task_prices
+from etmpc.cli.output import LazyHelp, backend_arguments, run_arguments, task_prices
 from etmpc.cli import suite
 from etmpc.common.errors import EtmpcError
 from etmpc.policies.specs import syntax
@@ -121,15 +121,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="also sweep the price of a recompute (etmpc sweep) and answer the equal-rate question in the "
         "report; on a finished run's directory only the sweeps run (make sweep)",
     )
-    re_.add_argument(
-        "--out",
-        type=Path,
-        default=None,
-        metavar="DIR",
-        help="run directory (default results/reproduce, or results/reproduce-quick with --quick)",
-    )
-    re_.add_argument("--workers", type=types.workers, default=None, help="worker processes (default: one per core)")
-    backend_arguments(re_)
+    run_arguments(re_, "run directory (default results/reproduce, or results/reproduce-quick with --quick)")
 
     sw = sub.add_parser("sweep", help="the trade-off curve over prices of a recompute: pareto.json, pareto.png, SWEEP.md")
     task_option(sw, tasks, many=True)
@@ -147,15 +139,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="first N test-set episodes for every policy (default 20, 3 with --quick)",
     )
     sw.add_argument("--quick", action="store_true", help="a smoke run: 3 episodes, half the thresholds, rollouts K=2 H=10")
-    sw.add_argument(
-        "--out",
-        type=Path,
-        default=None,
-        metavar="DIR",
-        help="run directory, a folder per task (default results/sweep, or results/sweep-quick with --quick)",
-    )
-    sw.add_argument("--workers", type=types.workers, default=None, help="worker processes (default: one per core)")
-    backend_arguments(sw)
+    run_arguments(sw, "run directory, a folder per task (default results/sweep, or results/sweep-quick with --quick)")
 
     rn = sub.add_parser("render", help="render one test-set episode headless to an MP4 video (a task with a 3-D scene)")
     task_option(rn, tasks, "the task to render (one with a 3-D scene: a task without one, such as the battery, says so)")

@@ -1,10 +1,14 @@
 """What the commands of the ``etmpc`` command line share: progress lines and warnings on stderr, the
-check that a policy is named once, and the ``--backend`` and ``--address`` options with their check."""
+check that a policy is named once, the ``--backend`` and ``--address`` options with their check, and the run
+directory and workers of a study."""
 
 from __future__ import annotations
 
 import sys
+from pathlib import Path
+from collections.abc import Callable
 
+from etmpc.cli import types
 from etmpc.common import progress
 from etmpc.common.errors import EtmpcError
 
@@ -23,7 +27,9 @@ class LazyHelp(str):
     """A help text made only when the help is shown (argparse expands it with ``%``): ``make()`` may read the
     registry and import the tasks, which ``etmpc --help`` and every command's parsing must not."""
 
-    def __new__(cls, make, plain: str = "(made when shown)"):
+    make: Callable[[], str]  # the text, made when the help is shown
+
+    def __new__(cls, make: Callable[[], str], plain: str = "(made when shown)") -> LazyHelp:
         """``make``: the text, made when the help is shown; ``plain``: what the help is as a plain string."""
         text = super().__new__(cls, plain)
         text.make = make
@@ -59,6 +65,15 @@ def backend_arguments(parser) -> None:
         help="Ray cluster to join, e.g. auto or ray://HOST:10001 (with --backend ray; "
         "default: start a local Ray instance of --workers CPUs)",
     )
+
+
+def run_arguments(parser, out_help: str) -> None:
+    """A study's run directory (``--out DIR``, described by ``out_help``; default None: the command's own),
+    its worker processes (one per core by default) and where they run (:func:`backend_arguments`): the
+    options that ``etmpc reproduce`` and ``etmpc sweep`` share, declared once."""
+    parser.add_argument("--out", type=Path, default=None, metavar="DIR", help=out_help)
+    parser.add_argument("--workers", type=types.workers, default=None, help="worker processes (default: one per core)")
+    backend_arguments(parser)
 
 
 def check_backend(args) -> None:

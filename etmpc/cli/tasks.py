@@ -63,6 +63,7 @@ def resolve(args) -> None:
     old = getattr(args, _OLD, None)
     given = bool(old) if args.task_many else old is not None
     if given:
+        assert old is not None  # given: the task (or tasks) in the old form
         if args.task:
             raise EtmpcError("give the task once, as --task TASK")
         words = old if args.task_many else [old]

@@ -14,7 +14,7 @@ from pathlib import Path
 
 from etmpc.cli.tasks import task_option
 from etmpc.cli import legacy, types
-from etmpc.cli.output import backend_arguments, check_backend, say, warn
+from etmpc.cli.output import LazyHelp, backend_arguments, check_backend, say, warn
 from etmpc.common.errors import EtmpcError
 
 DEFAULT = "dpi"
@@ -44,27 +44,34 @@ def _names(names: list[str]) -> str:
     return " and ".join([", ".join(names[:-1]), names[-1]] if len(names) > 1 else names)
 
 
-class _AlgorithmHelp(str):
-    def __mod__(self, params):
-        found = _learners()
-        kinds = {"many": "several (in lockstep)", "one": "one", "none": "none"}
-        seeds = ", ".join(
-            f"{_names([n for n, c in found.items() if c.seeding == kind])} {what}"
-            for kind, what in kinds.items()
-            if any(c.seeding == kind for c in found.values())
-        )
-        return (
-            f"{self}: {', '.join(found)} (default {DEFAULT}; every Learner registered in etmpc.learning.base is "
-            f"one, see docs/learning.md); --seeds: {seeds}"
-        ).replace("%", "%%") % params
+_ALGORITHM = "the learner"
+_SET = (
+    "one setting, over --settings' or the defaults (repeatable): VALUE is read as YAML "
+    "(4, 0.05, paper, [always, every:3], null); an unknown KEY says which are known."
+)
 
 
-class _SetHelp(str):
-    def __mod__(self, params):
-        known = "; ".join(
-            f"{name}'s: {', '.join(f.name for f in dataclasses.fields(cls.Settings))}" for name, cls in _learners().items()
-        )
-        return (f"{self} Settings by learner: {known}.").replace("%", "%%") % params
+def _algorithm_help() -> str:
+    """``--algorithm``'s help, made when shown: every registered learner, and how many seeds each trains."""
+    found = _learners()
+    kinds = {"many": "several (in lockstep)", "one": "one", "none": "none"}
+    seeds = ", ".join(
+        f"{_names([n for n, c in found.items() if c.seeding == kind])} {what}"
+        for kind, what in kinds.items()
+        if any(c.seeding == kind for c in found.values())
+    )
+    return (
+        f"{_ALGORITHM}: {', '.join(found)} (default {DEFAULT}; every Learner registered in etmpc.learning.base is "
+        f"one, see docs/learning.md); --seeds: {seeds}"
+    )
+
+
+def _set_help() -> str:
+    """``--set``'s help, made when shown: the settings of every registered learner."""
+    known = "; ".join(
+        f"{name}'s: {', '.join(f.name for f in dataclasses.fields(cls.Settings))}" for name, cls in _learners().items()
+    )
+    return f"{_SET} Settings by learner: {known}."
 
 
 def add_parser(sub, tasks: str) -> None:
@@ -75,7 +82,9 @@ def add_parser(sub, tasks: str) -> None:
         "GPOMDP (the paper's), the self-trigger or PPO (Stable-Baselines3, the 'rl' extra)",
     )
     task_option(tr, tasks, "the task to train on")
-    tr.add_argument("--algorithm", choices=_Registered(), default=DEFAULT, metavar="NAME", help=_AlgorithmHelp("the learner"))
+    tr.add_argument(
+        "--algorithm", choices=_Registered(), default=DEFAULT, metavar="NAME", help=LazyHelp(_algorithm_help, _ALGORITHM)
+    )
     tr.add_argument(
         "--settings",
         type=Path,
@@ -85,15 +94,7 @@ def add_parser(sub, tasks: str) -> None:
         "hyperparameter file, default the task's policies/<task>/ppo.yml); default: its defaults",
     )
     tr.add_argument(
-        "--set",
-        type=types.setting,
-        action="append",
-        default=None,
-        metavar="KEY=VALUE",
-        help=_SetHelp(
-            "one setting, over --settings' or the defaults (repeatable): VALUE is read as YAML "
-            "(4, 0.05, paper, [always, every:3], null); an unknown KEY says which are known."
-        ),
+        "--set", type=types.setting, action="append", default=None, metavar="KEY=VALUE", help=LazyHelp(_set_help, _SET)
     )
     tr.add_argument("--out", type=Path, required=True, metavar="DIR", help="run directory: its files, checkpoints, the policy")
     tr.add_argument(
@@ -182,15 +183,28 @@ def run(args) -> None:
     # and, now that the learner says which files of the run's directory are its, none of them is the settings file
     check_run_outputs({}, {"--out": args.out}, {"--settings": path}, writes={"--out": learner.owns})
     workers = args.workers or default_workers()
-    views = dict(recorder=Recorder, curve_png=write_curve_png)  # what the run's recordings and curve are drawn with
-    done = train(learner, key, args.out, seeds, workers, args.resume, args.backend, args.address, say=say, **views)
+    # recorder and curve_png: what the run's recordings and curve are drawn with (views, a floor above learning)
+    done = train(
+        learner,
+        key,
+        args.out,
+        seeds,
+        workers,
+        args.resume,
+        args.backend,
+        args.address,
+        say=say,
+        recorder=Recorder,
+        curve_png=write_curve_png,
+    )
     for note in notes:
         warn(note)
     learner = done.learner
-    if getattr(learner, "run_state", None) is not None:  # gpomdp, dpi: the test-set curve
+    run_state = getattr(learner, "run_state", None)
+    if run_state is not None:  # gpomdp, dpi: the test-set curve
         from etmpc.learning.train import format_summary
 
-        print(format_summary(learner.run_state))
+        print(format_summary(run_state))
     result = getattr(learner, "result", None)
     if isinstance(result, dict) and "checkpoints" in result:  # ppo
         print(

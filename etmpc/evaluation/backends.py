@@ -29,10 +29,15 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from multiprocessing.context import SpawnContext, SpawnProcess
+from typing import TYPE_CHECKING, Any, Callable, Iterator
 
 from etmpc.common.errors import EtmpcError
 from etmpc.common.interrupts import described
 from etmpc.evaluation.mainscript import UNGUARDED, UNGUARDED_EXIT, UnguardedScript, missing_main_script, refuse_in_rerun_main
+
+if TYPE_CHECKING:  # the type of a Ray remote function of two arguments (Ray names no public one)
+    from ray import ObjectRef
+    from ray._private.worker import RemoteFunction1
 
 
 class _QuietSpawnProcess(SpawnProcess):
@@ -126,7 +131,7 @@ class LocalBackend:
 
     def __init__(self, workers: int):
         self.workers = workers
-        self._pool = None
+        self._pool: ProcessPoolExecutor | None = None
         self._shared = False
         self._limits = None
 
@@ -159,6 +164,7 @@ class LocalBackend:
 
     def map(self, fn, jobs: list, on_result=None, chunksize: int = 1) -> list:
         results = []
+        iterator: Iterator[object]
         if self._pool is None:
             iterator = map(fn, jobs)
         else:  # each job pickled here and unpickled by _call_pickled: a job a worker cannot load fails in one line
@@ -186,6 +192,7 @@ class LocalBackend:
     def _ended_with(self, code: int) -> bool:
         """Whether a worker of the (broken) pool exited with ``code``. The pool's own thread reaps its
         workers: the pool is shut down first (which waits for that thread), then their exit codes are known."""
+        assert self._pool is not None  # only a pool of workers breaks
         processes = list((getattr(self._pool, "_processes", None) or {}).values())
         self._pool.shutdown(wait=True, cancel_futures=True)
         return any(process.exitcode == code for process in processes)
@@ -203,7 +210,7 @@ class RayBackend:
     def __init__(self, workers: int, address: str | None = None):
         self.workers, self.address = workers, address
         self._started = False
-        self._remote = None
+        self._remote: RemoteFunction1[list, Callable[[Any], Any], list] | None = None  # set on entering
 
     def __enter__(self):
         try:
@@ -211,14 +218,19 @@ class RayBackend:
         except ImportError:
             raise EtmpcError("--backend ray needs Ray: pip install 'etmpc[ray]'") from None
         if not ray.is_initialized():
-            options = dict(include_dashboard=False, logging_level=logging.WARNING, log_to_driver=True)
-            if self.address is None:
-                # The object store only carries jobs and results (kilobytes): keep it small.
-                options.update(num_cpus=self.workers, object_store_memory=100 * 2**20)
-            else:
+            own = self.address is None  # a Ray of our own for the run, sized here
+            if self.address is not None:
                 _check_reachable(self.address)
             try:
-                ray.init(address=self.address or "local", **options)
+                ray.init(
+                    address=self.address or "local",
+                    include_dashboard=False,
+                    logging_level=logging.WARNING,
+                    log_to_driver=True,
+                    num_cpus=self.workers if own else None,
+                    # The object store only carries jobs and results (kilobytes): keep it small.
+                    object_store_memory=100 * 2**20 if own else None,
+                )
             except ConnectionError as exc:
                 raise EtmpcError(
                     f"cannot join the Ray cluster at {self.address}: {exc} (a cluster with token "
@@ -237,20 +249,25 @@ class RayBackend:
     def map(self, fn, jobs: list, on_result=None, chunksize: int = 1) -> list:
         import ray
 
+        remote = self._remote
+        assert remote is not None, "map is called inside the backend's with block"
         chunks = [jobs[i : i + chunksize] for i in range(0, len(jobs), chunksize)]
         window = 2 * self.workers
-        pending = [self._remote.remote(fn, chunk) for chunk in chunks[:window]]
-        results = []
+        pending: list[ObjectRef[list] | None] = [remote.remote(fn, chunk) for chunk in chunks[:window]]
+        results: list = []
         for i, chunk in enumerate(chunks):
+            ref = pending[i]
+            assert ref is not None  # freed only once its results are in
             try:
-                results += ray.get(pending[i])
+                done: list = ray.get(ref)
+                results += done
             except ray.exceptions.RayTaskError as exc:
                 if isinstance(exc.cause, EtmpcError):  # bad input found on a worker: the same one-line error as locally
                     raise exc.cause from None
                 raise
             pending[i] = None  # let Ray free the result
             if i + window < len(chunks):
-                pending.append(self._remote.remote(fn, chunks[i + window]))
+                pending.append(remote.remote(fn, chunks[i + window]))
             if on_result is not None:
                 for job in chunk:
                     on_result(job)
@@ -285,12 +302,12 @@ def _call_pickled(fn, job: bytes):
     return fn(job)
 
 
-def _run_chunk(fn, chunk: list) -> list:
+def _run_chunk(fn: Callable[[Any], Any], chunk: list) -> list:
     with single_threaded():
         return [fn(job) for job in chunk]
 
 
-def make_backend(name: str, workers: int, address: str | None = None):
+def make_backend(name: str, workers: int, address: str | None = None) -> LocalBackend | RayBackend:
     """A context manager with ``.map(fn, jobs, on_result=None, chunksize=1)``."""
     refuse_in_rerun_main()  # a worker re-running an unguarded script: it must not start this work (or workers) again
     if name == "local":

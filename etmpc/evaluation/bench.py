@@ -39,6 +39,7 @@ import numpy as np
 
 from etmpc.common.wording import counted
 from etmpc.evaluation import testsets as ts_mod
+from etmpc.evaluation.bench_solvers import captured_problems, compare_interpreted, compare_reference, test_episode, timing_stats
 from etmpc.common.errors import EtmpcError
 from etmpc.loop import Snapshot, play_on, run_episode
 from etmpc.loop.closed import cpu_clock
@@ -47,24 +48,11 @@ from etmpc.systems import SystemKey, system_key
 from etmpc.systems.capabilities import Bench, offers
 
 
-def _stats(values_s) -> dict:
-    values_s = np.asarray(values_s)
-    return {
-        "median_ms": float(np.median(values_s) * 1e3),
-        "p90_ms": float(np.percentile(values_s, 90) * 1e3),
-        "samples": int(values_s.size),
-    }
-
-
-def _episode(system, testset, index: int):
-    return system.episode_from_arrays(testset.episode_arrays(index))
-
-
 def _play(system, env, testset, spec: str, episodes: int):
     policy = parse_policy(spec, system)
     start = time.perf_counter()
     trajectories = [
-        run_episode(system, env, policy, np.random.default_rng(e), _episode(system, testset, e)) for e in range(episodes)
+        run_episode(system, env, policy, np.random.default_rng(e), test_episode(system, testset, e)) for e in range(episodes)
     ]
     return trajectories, time.perf_counter() - start
 
@@ -114,97 +102,13 @@ def _step_budget(trajectories, plant_s: float, cores: int) -> dict:
     }
 
 
-class _Capture:
-    """The system, with every ``plan`` call's problem kept: (x, u_prev, continuing, timestep)."""
-
-    def __init__(self, system, limit: int):
-        self._system, self._limit, self.problems = system, limit, []
-
-    def __getattr__(self, name):
-        return getattr(self._system, name)
-
-    def plan(self, x, u_prev, warm, age, timestep):
-        if len(self.problems) < self._limit:
-            self.problems.append((np.array(x), np.array(u_prev), warm is not None, timestep))
-        return self._system.plan(x, u_prev, warm, age, timestep)
-
-
-def _problems(system, env, testset, count: int) -> list:
-    """The first ``count`` OCPs an ``always`` run meets on the test set (an untimed run)."""
-    capture = _Capture(system, count)
-    policy = parse_policy("always", system)
-    episode = 0
-    while len(capture.problems) < count and episode < testset.episodes:
-        run_episode(capture, env, policy, np.random.default_rng(episode), _episode(system, testset, episode))
-        episode += 1
-    return capture.problems
-
-
-def _time_ours(system, problems) -> tuple[list[float], list[np.ndarray]]:
-    """``system.plan`` on each problem, warm started from its own previous plan within an episode."""
-    times, inputs, plan = [], [], None
-    for x, u_prev, continuing, timestep in problems:
-        warm = plan if continuing else None
-        start = time.perf_counter()
-        plan = system.plan(x, u_prev, warm, 1 if warm is not None else 0, timestep)
-        times.append(time.perf_counter() - start)
-        inputs.append(plan.inputs.ravel())
-    return times, inputs
-
-
-def _compare_reference(system, reference, problems) -> dict:
-    ours_s, our_inputs = _time_ours(system, problems)
-    theirs_s, gaps, failures = [], [], 0
-    for (x, u_prev, continuing, timestep), ours in zip(problems, our_inputs):
-        inputs, elapsed, ok = reference.solve(x, u_prev, timestep, continuing)
-        theirs_s.append(elapsed)
-        if not ok:
-            failures += 1
-            continue
-        ours_cost = system.plan_cost(x, u_prev, timestep, ours)
-        gaps.append((system.plan_cost(x, u_prev, timestep, inputs) - ours_cost) / max(abs(ours_cost), 1e-12))
-    ours, theirs = _stats(ours_s), _stats(theirs_s)
-    return {
-        "name": reference.name,
-        "ours": ours,
-        "reference": theirs,
-        "speedup_median": theirs["median_ms"] / ours["median_ms"],
-        "reference_failures": failures,
-        "objective_gap_relative": {
-            "median": float(np.median(gaps)) if gaps else float("nan"),
-            "max_abs": float(np.max(np.abs(gaps))) if gaps else float("nan"),
-        },
-    }
-
-
-def _compare_interpreted(system, problems) -> dict | None:
-    """Our solver against the same OCPs solved as before it was compiled (``system.interpreted()``)."""
-    if system.interpreted is None:  # no other way it runs (the battery's LP is solved inside HiGHS)
-        return None
-    before = system.interpreted()
-    _time_ours(before, problems[:1])  # build lazily constructed solvers before timing
-    ours_s, ours_inputs = _time_ours(system, problems)
-    theirs_s, theirs_inputs = _time_ours(before, problems)
-    gaps = []
-    for (x, u_prev, _, timestep), ours, theirs in zip(problems, ours_inputs, theirs_inputs):
-        ours_cost = system.plan_cost(x, u_prev, timestep, ours)
-        gaps.append((system.plan_cost(x, u_prev, timestep, theirs) - ours_cost) / max(abs(ours_cost), 1e-12))
-    ours, theirs = _stats(ours_s), _stats(theirs_s)
-    return {
-        "ours": ours,
-        "interpreted": theirs,
-        "speedup_median": theirs["median_ms"] / ours["median_ms"],
-        "objective_gap_relative": {"median": float(np.median(gaps)), "max_abs": float(np.max(np.abs(gaps)))},
-    }
-
-
 class _Snapshotter:
     """A policy that never recomputes and keeps a snapshot of the loop at its first decision."""
 
     spec, stochastic, simulates = "never", False, True
 
     def __init__(self):
-        self.snapshot = None
+        self.snapshot: Snapshot | None = None
 
     def decide(self, s, rng) -> bool:
         if self.snapshot is None:
@@ -232,8 +136,9 @@ def _rollout_steps(system, env, testset, episodes: int, repeats: int = 5) -> dic
     timed = _Timed()
     for e in range(episodes):
         snapshotter = _Snapshotter()
-        run_episode(system, env, snapshotter, None, _episode(system, testset, e))
+        run_episode(system, env, snapshotter, None, test_episode(system, testset, e))
         snapshot = snapshotter.snapshot
+        assert snapshot is not None  # taken at the episode's first decision
         for _ in range(repeats):
             solve_s[0] = 0.0
             start = cpu_clock()
@@ -285,8 +190,8 @@ def run_bench(
         **({"options": dict(key.options)} if key.options else {}),
         "machine": {"processor": platform.processor() or platform.machine(), "python": platform.python_version()},
         "episodes": episodes,
-        "mpc_solve": _stats(solves),
-        "rest_of_step": {**_stats(rest), "median_us": float(np.median(rest) * 1e6)},
+        "mpc_solve": timing_stats(solves),
+        "rest_of_step": {**timing_stats(rest), "median_us": float(np.median(rest) * 1e6)},
         "rollout_step": _rollout_steps(system, env, testset, episodes),
         "episodes_per_second": {spec: episodes / seconds for spec, (_, seconds) in played.items()},
         "step_budget": _step_budget(played["every:3"][0], plant.seconds, os.cpu_count() or 1),
@@ -295,11 +200,11 @@ def run_bench(
         "references_skipped": not references,
         "interpreted": None,
     }
-    problems = _problems(system, env, testset, reference_solves)
+    problems = captured_problems(system, env, testset, reference_solves)
     if references:
-        figures["references"] = [_compare_reference(system, ref, problems) for ref in system.reference_solvers()]
+        figures["references"] = [compare_reference(system, ref, problems) for ref in system.reference_solvers()]
     if offers(system, Bench):  # a task that offers plan_cost and interpreted()
-        figures["interpreted"] = _compare_interpreted(system, problems)
+        figures["interpreted"] = compare_interpreted(system, problems)
     return figures
 
 

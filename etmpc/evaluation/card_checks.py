@@ -18,7 +18,7 @@ from etmpc.evaluation.card import TaskScore
 # A row's lists with a value per episode, each in the order of episode_scores (None: a row of an older etmpc).
 PER_EPISODE = ("episode_scores", "episode_objectives", "episode_recomputes", "episode_solver_failures", "episode_failures")
 # The references of a task scored with options, as etmpc.evaluation.scorecard.score keeps them in the card.
-CARRIED = ("options", "best_objectives", "oracle_objectives", "objective_sense", "best_periodic", "oracle")
+CARRIED: tuple[str, ...] = ("options", "best_objectives", "oracle_objectives", "objective_sense", "best_periodic", "oracle")
 CARRIED += ("test_set_sha256", "episodes", "recompute_price", "gap")
 AGGREGATE_NUMBERS = ("iqm", "probability_of_improvement")  # each with its 95 % CI, a pair: number or null
 

@@ -72,6 +72,9 @@ def _episodes_consistency(row: TaskScore, refs: References, name: str) -> list[s
             return [f"{name}: no {key} (a row of an older etmpc): score the policy again to verify its numbers"]
         if len(values) != row.episodes:
             return [f"{name}: {len(values)} {key} for {row.episodes} episodes"]
+    recomputes = row.episode_recomputes
+    solver_failures = row.episode_solver_failures
+    assert recomputes is not None and solver_failures is not None  # each checked in the loop above
     objectives = np.asarray(row.episode_objectives, dtype=float)
     if not np.all(np.isfinite(objectives)):
         return [f"{name}: an episode objective is not a number in a row that was scored"]
@@ -84,11 +87,11 @@ def _episodes_consistency(row: TaskScore, refs: References, name: str) -> list[s
     ]
     if _mean_differs(row.objective_mean, objectives):
         found.append(f"{name}: objective {row.objective_mean!r} in the card, {float(np.mean(objectives))!r} from its episodes")
-    if _mean_differs(row.recomputes_mean, row.episode_recomputes):
-        mean = float(np.mean(row.episode_recomputes))
+    if _mean_differs(row.recomputes_mean, recomputes):
+        mean = float(np.mean(recomputes))
         found.append(f"{name}: recomputes {row.recomputes_mean!r} per episode in the card, {mean!r} from its episodes")
-    if row.solver_failures != sum(row.episode_solver_failures):
-        total = sum(row.episode_solver_failures)
+    if row.solver_failures != sum(solver_failures):
+        total = sum(solver_failures)
         found.append(f"{name}: {row.solver_failures!r} solver failures in the card, {total!r} from its episodes")
     return found
 

@@ -20,20 +20,16 @@ from etmpc.common import checks, interrupts
 from etmpc.common.progress import Progress
 from etmpc.common.errors import EtmpcError
 from etmpc.common.interrupts import described, genuine
-from etmpc.common.outputs import check_inputs
-from etmpc.common.wording import counted
-from etmpc.common.sense import higher_or_lower, oriented
-from etmpc.policies import parse_policy
-from etmpc.policies.specs import names_a_kind
-from etmpc.policies.user import checked
+from etmpc.common.sense import oriented
 from etmpc.loop.records import EpisodeRecord, EpisodeSink
-from etmpc.systems import SystemKey, has_levels, system_key
-from etmpc.systems.options import options_line
-from etmpc.evaluation.inputs import check_run_outputs, check_shipped, run_inputs
+from etmpc.systems import SystemKey, system_key
+from etmpc.evaluation.inputs import check_run_outputs, run_inputs
 from etmpc.evaluation.mainscript import refuse_in_rerun_main, unimportable_main
-from etmpc.evaluation.backends import BACKENDS, make_backend
+from etmpc.evaluation.backends import make_backend
 from etmpc.evaluation.workers import play_test_episode, workers_for
 from etmpc.evaluation.results import Evaluation, PolicySummary, RunResult, failures_cell, summarise  # noqa: F401 (re-exported)
+from etmpc.evaluation.table import format_table  # noqa: F401 (re-exported: the README and examples import it from here)
+from etmpc.evaluation.arguments import check_arguments, check_policies, parse_policies  # noqa: F401 (re-exported)
 
 
 # -- worker side ---------------------------------------------------------------------------------
@@ -76,8 +72,8 @@ def _run(job: tuple) -> tuple[RunResult, EpisodeRecord | None, dict[str, float]]
 # -- driver side ---------------------------------------------------------------------------------
 def run_jobs(jobs: list, workers: int, progress: bool, backend: str = "local", address: str | None = None) -> list[tuple]:
     chunk = max(1, min(8, len(jobs) // (4 * workers)))
-    with Progress(len(jobs), enabled=progress) as bar, make_backend(backend, workers, address) as backend:
-        return backend.map(_run, jobs, on_result=lambda job: bar.update(), chunksize=chunk)
+    with Progress(len(jobs), enabled=progress) as bar, make_backend(backend, workers, address) as pool:
+        return pool.map(_run, jobs, on_result=lambda job: bar.update(), chunksize=chunk)
 
 
 def evaluate(
@@ -127,43 +123,6 @@ def evaluate(
         )
 
 
-def check_arguments(
-    domain, policies, episodes, repeats, workers, seed, testset_path, progress, backend, address, record, recompute_price
-) -> None:
-    """What the command line's parser checks, checked for a call from Python, with the same messages
-    (raises :class:`EtmpcError`)."""
-    if not isinstance(domain, (str, SystemKey)):
-        raise EtmpcError(f"task: a task name (str) is needed, got {type(domain).__name__} {domain!r}")
-    check_policies(policies)
-    if episodes is not None:
-        checks.argument("episodes", lambda v: checks.at_least(checks.whole(v), 1), episodes)
-    checks.argument("repeats", lambda v: checks.at_least(checks.whole(v), 1), repeats)
-    if workers is not None:
-        checks.argument("workers", checks.workers, workers)
-    checks.argument("seed", checks.seed, seed)
-    record = None if isinstance(record, EpisodeSink) else record  # an open recording: checked where it was opened
-    for name, path in (("test_set", testset_path), ("record", record)):
-        if path is not None and not isinstance(path, (str, os.PathLike)):
-            raise EtmpcError(f"{name}: a file path is needed, got {type(path).__name__} {path!r}")
-    if record is not None and Path(record).suffix != ".rrd":
-        raise EtmpcError(f"record: {record} does not end in .rrd")
-    if not isinstance(progress, bool):
-        raise EtmpcError(f"progress: True or False, got {progress!r}")
-    if backend not in BACKENDS:
-        raise EtmpcError(f"backend: unknown backend {backend!r}: {' | '.join(BACKENDS)}")
-    if address is not None and backend != "ray":
-        raise EtmpcError("--address needs --backend ray")
-
-
-def check_policies(policies) -> None:
-    """Raise :class:`EtmpcError` unless ``policies`` is a non-empty list (or tuple) of specs or objects."""
-    if isinstance(policies, (str, bytes)) or not isinstance(policies, (list, tuple)):
-        hint = f" (for one policy: [{policies!r}])" if isinstance(policies, str) else ""
-        raise EtmpcError(f"policies: a list of policy specs or objects is needed, got {type(policies).__name__}{hint}")
-    if not policies:
-        raise EtmpcError("policies: the list is empty; give at least one policy (a spec such as 'every:3', or an object)")
-
-
 class MainOnlyError(EtmpcError):
     """A policy whose class lives in a ``__main__`` that worker processes cannot re-create."""
 
@@ -187,7 +146,7 @@ def check_picklable(spec: str, policy, backend: str = "local") -> None:
     the ``ray`` backend cloudpickled (as Ray sends it). Pickle names a class by its module, so a class
     of a ``__main__`` that a spawned worker cannot re-create (``python -c``, stdin, a notebook) round-trips
     here but not there: refused too (Ray's cloudpickle sends such a class by value)."""
-    dumps = pickle.dumps
+    dumps: Callable[[object], bytes] = pickle.dumps
     if backend == "ray":
         with contextlib.suppress(ImportError):
             from ray import cloudpickle
@@ -200,7 +159,8 @@ def check_picklable(spec: str, policy, backend: str = "local") -> None:
             pickler.dump(policy)
             data = buffer.getvalue()
         else:
-            data, pickler = dumps(policy), None
+            data = dumps(policy)
+            pickler = None
         pickle.loads(data)
     except BaseException as exc:
         if genuine(exc):
@@ -210,37 +170,14 @@ def check_picklable(spec: str, policy, backend: str = "local") -> None:
             "(workers=1 in Python), or make it picklable (its class at the top level of a module, "
             "no lambdas, open files or locks in it)"
         ) from None
-    where = unimportable_main() if pickler is not None and pickler.found else None
+    found = pickler.found if pickler is not None else []  # what the local pickler saw of __main__
+    where = unimportable_main() if found else None
     if where is not None:
         raise MainOnlyError(
-            f"policy {spec}: {pickler.found[0]} is defined in __main__ ({where}), which worker "
+            f"policy {spec}: {found[0]} is defined in __main__ ({where}), which worker "
             "processes cannot import: define it in a module (or a script run under `if __name__ == "
             '"__main__":`), or use workers=1'
         )
-
-
-def parse_policies(system, policies: list) -> dict:
-    """``policies`` (specs and objects) as the policies ``system``'s loop plays, by spec: each spec
-    parsed, each object checked; a bad one, or one named twice, raises :class:`EtmpcError`. A file a spec
-    reads that is no regular file (a FIFO, which would hang the read; a device) is refused before any is read."""
-    check_inputs(run_inputs(policies))
-    parsed = {}
-    for policy in policies:
-        if isinstance(policy, str):
-            check_shipped(policy)
-            spec, policy = policy, parse_policy(policy, system)
-        else:
-            policy = checked(policy, levels=system.compute_levels)  # its answers checked as the task takes them
-            spec = policy.spec
-            if names_a_kind(spec) and not type(policy.policy).__module__.startswith("etmpc."):
-                raise EtmpcError(
-                    f"policy object {type(policy.policy).__name__} has the spec {spec!r}, a built-in policy's: "
-                    "give it a name of its own, or the results would show its numbers as that policy's"
-                )
-        if spec in parsed:
-            raise EtmpcError(f"policy {spec} is given twice")
-        parsed[spec] = policy
-    return parsed
 
 
 def _evaluate(
@@ -323,38 +260,3 @@ def _evaluate(
         [cpu for _, _, cpu in outcomes],
         dict(key.options) or None,
     )
-
-
-def format_table(evaluation: Evaluation) -> str:
-    sense = evaluation.summaries[0].objective_sense if evaluation.summaries else "min"
-    names = {s.policy: s.policy + (" (oracle)" if s.clairvoyant else "") for s in evaluation.summaries}
-    width = max([16] + [len(name) + 2 for name in names.values()])  # long rl:PATH specs stay aligned
-    task_failures = next((s.failure_name for s in evaluation.summaries if s.failure_name), None)
-    failures_width = max(len(task_failures) + 10, 16) if task_failures else 0
-    extra = f"{task_failures + '/episode':>{failures_width}}" if task_failures else ""
-    head = (
-        f"{'policy':<{width}}{'objective':>12}{'± std':>10}{'control':>11}{'recomputes':>12}{extra}"
-        f"{'solver failures':>17}{'non-finite':>12}"
-    )
-    levels = has_levels(f"{evaluation.domain}/{evaluation.task}")
-    lines = [
-        f"{evaluation.domain}/{evaluation.task}: objective ({higher_or_lower(sense)} is better), "
-        f"test set {evaluation.testset_sha256[:12]}, {evaluation.recompute_price:g} per "
-        + ("SQP iteration (recomputes: solves and iterations started)" if levels else "recompute"),
-        *options_line(evaluation.options),
-        head,
-        "-" * len(head),
-    ]
-    for s in evaluation.summaries:
-        column = f"{failures_cell(s.failures_mean, s.failures_ci95):>{failures_width}}" if task_failures else ""
-        lines.append(
-            f"{names[s.policy]:<{width}}{s.objective_mean:>12.5f}{s.objective_std:>10.5f}{s.control_objective_mean:>11.5f}"
-            f"{s.recomputes_mean:>12.2f}{column}{s.solver_failures:>17d}{s.nonfinite_episodes:>12d}"
-        )
-    first = evaluation.summaries[0] if evaluation.summaries else None
-    lines.append(f"{counted(first.episodes, 'episode')} x {counted(first.repeats, 'repeat')} per policy" if first else "")
-    if task_failures:
-        lines.append(f"{task_failures}/episode: the task's failures, mean ± 95 % CI over the episodes (1.96 sd / √n)")
-    if any(s.clairvoyant for s in evaluation.summaries):
-        lines.append("(oracle): it knows each episode's future, a reference and not a policy; a policy can do better than it")
-    return "\n".join(lines)

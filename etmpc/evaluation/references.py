@@ -16,6 +16,8 @@ schedule with the episode's future known must (it can always answer as the sched
 
 from __future__ import annotations
 
+import functools
+import math
 import platform
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
@@ -23,8 +25,6 @@ from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
 import numpy as np
-
-import math
 
 from etmpc.common.documents import check_seal, read_document, sealed
 from etmpc.common.errors import EtmpcError
@@ -181,16 +181,16 @@ def build_references(
     periodic = periodic_schedules(system)
     after = "the oracle and the rollout meter" if meter else "the oracle"
     say(f"{system.name}: references: {len(periodic)} periodic schedules, then {after} over the best")
-    run = dict(episodes=episodes, workers=workers, test_set=test_set, progress=progress)
+    play = functools.partial(evaluate, key, episodes=episodes, workers=workers, test_set=test_set, progress=progress)
     with stage(f"{system.name}: references: {len(periodic)} periodic schedules"):  # each named in the progress lines
-        fixed = evaluate(key, periodic, **run)
+        fixed = play(periodic)
     table = {spec: _objectives(fixed, spec) for spec in periodic}
     best = best_schedule(table, system.objective_sense)
     with stage(f"{system.name}: references: the oracle"):
-        oracle = evaluate(key, [f"oracle:{best}"], **run)
-    meter = rollout_meter_spec(system, best) if meter else None
+        oracle = play([f"oracle:{best}"])
+    meter_spec = rollout_meter_spec(system, best) if meter else None
     with stage(f"{system.name}: references: the rollout meter"):
-        rollout = meter and evaluate(key, [meter], **run)
+        rollout = play([meter_spec]) if meter_spec else None
     refs = References(
         system.name,
         fixed.testset_sha256,

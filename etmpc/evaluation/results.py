@@ -70,7 +70,7 @@ def summarise(
     finite = [r for r in runs if r.finite]
     by_episode: dict[int, list[float]] = {}
     by_repeat: dict[int, list[float]] = {}
-    failures_by_episode: dict[int, list[int]] = {}
+    failures_by_episode: dict[int, list[int | None]] = {}  # read only where every run counted
     for r in finite:
         by_episode.setdefault(r.episode, []).append(r.objective)
         by_repeat.setdefault(r.repeat, []).append(r.objective)
@@ -128,7 +128,7 @@ class Evaluation:
     def to_json(self, cpu: bool = False) -> dict:
         """The evaluation as JSON; with ``cpu``, also each run's CPU seconds (machine-dependent); the task's
         options where it was played with some."""
-        extra = {"cpu_seconds": self.cpu} if cpu and self.cpu is not None else {}
+        extra: dict[str, object] = {"cpu_seconds": self.cpu} if cpu and self.cpu is not None else {}
         extra |= {"options": dict(self.options)} if self.options else {}
         return {
             "domain": self.domain,

@@ -41,7 +41,7 @@ writes the card as text.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -52,7 +52,8 @@ from etmpc.common.progress import Progress
 from etmpc.evaluation import metrics
 from etmpc.evaluation import testsets as ts_mod
 from etmpc.common import checks
-from etmpc.evaluation.evaluate import Evaluation, check_policies, evaluate, parse_policies
+from etmpc.evaluation.arguments import check_policies, parse_policies
+from etmpc.evaluation.evaluate import Evaluation, evaluate
 from etmpc.evaluation.inputs import check_run_outputs, run_inputs
 from etmpc.evaluation.metrics import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED  # noqa: F401  (the card's statistics)
 from etmpc.evaluation.references import References, build_references, references_path, stored
@@ -96,7 +97,6 @@ def task_score(refs: References, evaluation: Evaluation | dict, spec: str) -> Ta
     cpu = [c for r, c in zip(data["runs"], data.get("cpu_seconds") or []) if r["policy"] == spec]
     parts = {k: 1e3 * float(np.mean([c[k] for c in cpu])) for k in ("solve", "feedback", "decide")} if cpu else {}
     episodes = sorted(by_episode)
-    counted = all(f is not None for e in episodes for f in failures[e])  # by a task that counts them
     return _scored(
         refs,
         spec,
@@ -105,11 +105,24 @@ def task_score(refs: References, evaluation: Evaluation | dict, spec: str) -> Ta
         nonfinite,
         data["policies"][spec],
         parts | {"total": sum(parts.values())} if parts else {},
-        # an episode's count, or its mean over a stochastic policy's passes
-        [f[0] if len(f) == 1 else float(np.mean(f)) for f in map(failures.get, episodes)] if counted else None,
-        [c[0] if len(c) == 1 else float(np.mean(c)) for c in map(recomputes.get, episodes)],
+        _counted(failures, episodes),
+        [_per_episode(recomputes[e]) for e in episodes],
         [solver_failures[e] for e in episodes],
     )
+
+
+def _per_episode(values: Sequence[float]) -> float:
+    """An episode's count, or its mean over a stochastic policy's passes."""
+    return values[0] if len(values) == 1 else float(np.mean(values))
+
+
+def _counted(failures: dict[int, list[int | None]], episodes: list[int]) -> list[float] | None:
+    """Each episode's failures (:func:`_per_episode`), or None where a run did not count them (a task that
+    does not count its failures)."""
+    known = {e: [f for f in failures[e] if f is not None] for e in episodes}
+    if any(len(known[e]) < len(failures[e]) for e in episodes):
+        return None
+    return [_per_episode(known[e]) for e in episodes]
 
 
 def _scored(
@@ -217,12 +230,15 @@ def score(
     check_run_outputs({"--json": json_path}, inputs=run_inputs(policies, test_set))
     if test_set is None and not given:  # every task's references checked before any policy is played
         references = {task: stored(task, episodes) for task in tasks}
-        shown = {task: {"stored": f"{folder_name(task)}/{references_path(task).name}"} for task in tasks}
+        shown: dict[str, dict[str, object]] = {
+            task: {"stored": f"{folder_name(task)}/{references_path(task).name}"} for task in tasks
+        }
     else:
         if test_set is not None:
             system = make_system(tasks[0])
             ts_mod.load(test_set, system.domain, system.task)  # a bad test set fails before the references are played
-        references, shown = {}, {}
+        references = {}
+        shown = {}
         for task in tasks:
             why = f"test set {test_set}" if test_set is not None else f"its options ({', '.join(f'{n}={v}' for n, v in given)})"
             say(f"{task}: no stored references for {why}: computing them for this run")

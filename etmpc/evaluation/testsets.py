@@ -47,6 +47,7 @@ def check_options_act(key, test_set: str | Path | None = None, takes_test_set: b
     calls this one check (evaluate, score, robustness, render, bench, discriminate, figure, sweep, and the
     Gymnasium environment's test episodes); what draws its own episodes (testset, the learners) does not."""
     from etmpc.systems import system_class
+    from etmpc.systems.base import SystemBase
     from etmpc.systems.options import drawn_only, shown
 
     if not key.options:
@@ -54,7 +55,9 @@ def check_options_act(key, test_set: str | Path | None = None, takes_test_set: b
     found = spec(key.task)
     if test_set is not None and Path(test_set).resolve() != default_path(found.domain, found.task).resolve():
         return  # a test set of the caller's: drawn with the options, we trust, as etmpc testset says
-    inert = drawn_only(system_class(key.task).Config(), key.options)
+    cls = system_class(key.task)
+    assert issubclass(cls, SystemBase)  # every system subclasses SystemBase (tests/systems/test_systems.py)
+    inert = drawn_only(cls.Config(), key.options)
     if inert:
         out, it = f"{found.slug}.npz", "it acts" if len(inert) == 1 else "they act"
         raise EtmpcError(
@@ -138,7 +141,7 @@ class TestSet:
                 raise TestSetError(f"test set {self.path}, episode {index}: {exc}") from None
 
 
-def load(path: Path, domain: str, task: str) -> TestSet:
+def load(path: str | Path, domain: str, task: str) -> TestSet:
     """Load and verify a test set; any problem raises :class:`TestSetError` with what to do.
 
     Beyond its checksum (which only says the file is the one its ``.sha256`` describes), the

@@ -52,7 +52,8 @@ from etmpc.evaluation import metrics
 from etmpc.evaluation.card import TaskScore
 from etmpc.evaluation.card_checks import check_card, check_row
 from etmpc.evaluation.consistency import aggregate_mismatches, row_mismatches, same
-from etmpc.evaluation.evaluate import parse_policies, run_jobs
+from etmpc.evaluation.arguments import parse_policies
+from etmpc.evaluation.evaluate import run_jobs
 from etmpc.evaluation.references import SUITE_VERSION, References, stored
 from etmpc.evaluation.workers import workers_for
 from etmpc.policies.specs import find
@@ -310,6 +311,6 @@ def _caution(card: dict) -> str | None:
         return None
     return (
         f"this machine's C library rounds sin, cos, exp and log as {LIBM_WORDS[mine]}; the card's was "
-        f"{LIBM_WORDS.get(theirs, 'not recorded (an older etmpc)')}: replays of the kicks tasks, the reacher and "
+        f"{LIBM_WORDS.get(theirs or '', 'not recorded (an older etmpc)')}: replays of the kicks tasks, the reacher and "
         "the quadrotor may differ from the card's with nothing wrong in it; verify it on a machine like the card's"
     )

@@ -20,12 +20,12 @@ from etmpc.common import progress
 from etmpc.evaluation.mainscript import missing_main_script
 from etmpc.loop import Trajectory, run_episode
 from etmpc.loop.records import EpisodeRecord
-from etmpc.systems import make_system
+from etmpc.systems import SystemKey, make_system
 
 _CONTEXTS: dict = {}
 
 
-def context(domain: str, testset_path: str | None = None, sha256: str | None = None):
+def context(domain: str | SystemKey, testset_path: str | None = None, sha256: str | None = None):
     """``(system, env, testset)`` for ``domain``, built once per process (the stored test set by
     default). ``sha256``, the digest the driver verified, keys the cache, so a test-set file that
     changed in between is loaded afresh."""
@@ -80,7 +80,13 @@ class Played:
 
 
 def play_test_episode(
-    domain: str, policy, seed: int, repeat: int, episode: int, testset_path: str | None = None, sha256: str | None = None
+    domain: str | SystemKey,
+    policy,
+    seed: int,
+    repeat: int,
+    episode: int,
+    testset_path: str | None = None,
+    sha256: str | None = None,
 ) -> Played:
     """Test-set ``episode`` under ``policy`` with the policy's draws of pass ``repeat`` of ``seed``: how
     ``evaluate``, the evaluations during ``train``, ``render`` and the figures all play an episode."""

@@ -13,6 +13,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from matplotlib.artist import Artist  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 
@@ -202,7 +203,7 @@ def draw_policy_bars(evaluations: Sequence[dict], group_learned: bool = True, so
     ax.set_title(f"{first['domain']}/{first['task']}: objective per policy ({episodes} test-set episodes)", fontsize=11)
     ax.grid(axis="y", alpha=0.3)
     ax.set_axisbelow(True)
-    handles = []
+    handles: list[Artist] = []
     if any(not b.stochastic and not b.clairvoyant for b in bars):
         handles.append(Patch(color="tab:blue", alpha=0.85, label="fixed policy"))
     if any(b.clairvoyant for b in bars):

@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from etmpc.systems import spec, system_class
+from etmpc.systems.base import SystemBase
 
 MAX_EPISODE_TABS = 10  # per policy: each tab adds about 140 kB and 15 ms to a recording
 
@@ -66,7 +67,11 @@ _SUFFIX_UNITS = (
 def objective_unit(domain: str, task: str) -> str:
     """The objective's unit of a task (its system's ``benchmark``; the cart pendulum's cost is a sum of
     squared pole angles, rad²)."""
-    return system_class(f"{domain}/{task}").benchmark.objective_unit
+    cls = system_class(f"{domain}/{task}")
+    assert issubclass(cls, SystemBase)  # every system subclasses SystemBase (tests/systems/test_systems.py)
+    benchmark = cls.benchmark
+    assert benchmark is not None  # every task of the suite has its benchmark.json beside its test set
+    return benchmark.objective_unit
 
 
 def task_part(domain: str, task: str) -> str:

@@ -51,12 +51,14 @@ def draw_pareto(pareto: dict):
         label="periodic every:T",
         gid="periodic-points",
     )
-    for kind, style, label in (
-        ("periodic", dict(color="black", marker="o", linestyle="-"), "the periodic front"),
-        ("event", dict(color="tab:blue", marker="x", linestyle="--"), "event trigger threshold:X"),
+    for kind, color, marker, linestyle, label in (
+        ("periodic", "black", "o", "-", "the periodic front"),
+        ("event", "tab:blue", "x", "--", "event trigger threshold:X"),
     ):
         rows = sorted((p for p in first if p["kind"] == kind and p.get("on_front", True)), key=lambda p: p["computations"])
-        ax.plot([p["computations"] for p in rows], [p["control_objective"] for p in rows], label=label, gid=kind, **style)
+        computations = [p["computations"] for p in rows]
+        objectives = [p["control_objective"] for p in rows]
+        ax.plot(computations, objectives, label=label, gid=kind, color=color, marker=marker, linestyle=linestyle)
     colours = plt.get_cmap("viridis")(np.linspace(0.0, 0.9, len(prices)))
     for colour, price in zip(colours, prices, strict=True):
         for kind, marker, face, name in (

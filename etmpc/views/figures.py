@@ -164,8 +164,9 @@ def draw_trajectory(system, traj: Trajectory, title: str | None = None, signals:
             label="planned (before LQR correction)",
             gid="planned",
         )
-        for bound, label in ((system.u_min[i], "bounds"), (system.u_max[i], None)):
-            ax.axhline(bound, color="grey", ls=":", lw=1.0, label=label, gid="bound")
+        bounds: tuple[tuple[float, str | None], ...] = ((system.u_min[i], "bounds"), (system.u_max[i], None))
+        for bound, bound_label in bounds:
+            ax.axhline(bound, color="grey", ls=":", lw=1.0, label=bound_label, gid="bound")
         ax.set_ylabel(axis_label(name))
 
     for i, (name, values) in enumerate(signals.items()):

@@ -35,6 +35,7 @@ class RerunLogger(gymnasium.Wrapper):
             raise EtmpcError(f"RerunLogger logs an etmpc environment (etmpc/...-v*), got {env.unwrapped!r}")
         if not isinstance(policy, str) or not policy:
             raise EtmpcError(f"policy: a name to show the episodes under, got {policy!r}")
+        self._core = core  # the environment's loop, played and logged (the same object for the env's life)
         self.recorder = recording if isinstance(recording, Recorder) else Recorder(recording)
         self.policy = policy
         self.logged = 0  # episodes logged so far
@@ -70,7 +71,7 @@ class RerunLogger(gymnasium.Wrapper):
 
     def _log(self) -> None:
         """The episode played since the last reset into the recording, once (nothing if no step was played)."""
-        core = self.env.unwrapped.core
+        core = self._core
         if not self._pending or core.loop.trajectory.steps == 0:
             return
         self._pending = False

@@ -3,10 +3,11 @@
 
 from __future__ import annotations
 
-import re
 import threading
 from collections.abc import Iterable
 from pathlib import Path
+from types import ModuleType
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -15,10 +16,14 @@ from etmpc.common.sense import sign as sense_sign
 from etmpc.loop import computation_cost
 from etmpc.loop.records import EpisodeRecord
 from etmpc.views.layout import _about, _fan, _slots, _solve_series, _timeline
+from etmpc.views.decisions import log_decisions
 from etmpc.views.solves import solve_log
 from etmpc.views.schema import APPLICATION_ID, END_MARKER, episode_root
 from etmpc.views.sinks import Destinations, is_url
 from etmpc.views.space import log_space
+
+if TYPE_CHECKING:  # imported for the run by a thread of the Recorder's (it takes a second or two)
+    import rerun
 
 
 class Recorder:
@@ -40,8 +45,8 @@ class Recorder:
         self._importer.start()
         self.destinations = Destinations(path, connect, spawn, rerun=self._rerun)  # each checked: before any work
         self.path = self.destinations.path
-        self._rr = None
-        self._stream = None
+        self._rr: ModuleType | None = None  # the rerun module, once opened
+        self._stream: rerun.RecordingStream | None = None
         self._policy_parts: dict[tuple[str, str], str] = {}
         self._styles: dict = {}
         self._indexes: dict = {}
@@ -54,18 +59,19 @@ class Recorder:
     def __exit__(self, exc_type, *exc):
         self.close(keep=exc_type is None)
 
-    def _rerun(self):
+    def _rerun(self) -> ModuleType:
         """The ``rerun`` module, once the thread has imported it."""
         self._importer.join()
         if isinstance(self._imported[0], BaseException):
             raise self._imported[0]
         return self._imported[0]
 
-    def _open(self):
-        if self._stream is None:
-            self._rr = self._rerun()
-            self._stream = self._rr.RecordingStream(APPLICATION_ID)
-            self.destinations.attach(self._rr, self._stream)
+    def _open(self) -> tuple[ModuleType, rerun.RecordingStream]:
+        if self._rr is None or self._stream is None:
+            rr = self._rerun()
+            self._rr = rr
+            self._stream = rr.RecordingStream(APPLICATION_ID)
+            self.destinations.attach(rr, self._stream)
         return self._rr, self._stream
 
     def close(self, keep: bool = True) -> None:
@@ -99,7 +105,8 @@ class Recorder:
                 name, i = f"{base} ({i})", i + 1
             self._policy_parts[key] = name
         name = self._policy_parts[key]
-        return name, self._rr.escape_entity_path_part(name.replace("/", "_"))  # one path part
+        rr, _ = self._open()  # open already: log_episode opened it
+        return name, rr.escape_entity_path_part(name.replace("/", "_"))  # one path part
 
     def _style(self, kind: str, **fields):
         """A static ``SeriesLines`` or ``SeriesPoints``, built once per look (they repeat from one
@@ -137,13 +144,15 @@ class Recorder:
         # What happened. Entities drawn in one view are drawn in the order of their paths, so
         # ``realised/…`` comes over ``plan/…`` and ``forecast/…``.
         realised = dict(colors=[look.REALISED], widths=[look.REALISED_WIDTH])
-        sensed = record.estimates is not None  # a sensor that is not exact: its readings and the estimate beside the truth
+        # A sensor that is not exact: its readings and the estimate beside the truth (a record keeps both or neither).
+        estimates = record.estimates
+        measurements = record.measurements
         for j, s in enumerate(record.state_names):
-            if sensed:
+            if estimates is not None and measurements is not None:
                 series(
                     f"realised/state/{s}",
                     self._steps(n + 1, dt),
-                    np.column_stack([record.states[:, j], record.estimates[:, j], record.measurements[:, j]]),
+                    np.column_stack([record.states[:, j], estimates[:, j], measurements[:, j]]),
                     [f"what happened [{look.unit(s)}]", f"estimated [{look.unit(s)}]", f"measured [{look.unit(s)}]"],
                     colors=[look.REALISED, look.ESTIMATED, look.MEASURED],
                     widths=[look.REALISED_WIDTH, 1.5, 1.0],
@@ -172,8 +181,11 @@ class Recorder:
             else:
                 series(f"realised/input/{u}", self._steps(n, dt), record.applied[:, j], [f"applied {what}"], **realised)
             series(f"correction/{u}", self._steps(n, dt), record.correction[:, j], [f"LQR correction {what}"], **realised)
-        forecasts = {look.signal_of_forecast(f, record.signals): f for f in (record.plans[0][3] if record.plans else {})}
-        forecasts.pop(None, None)
+        forecasts: dict[str, str] = {}  # signal -> its forecast, for the signals the plans forecast
+        for f in record.plans[0][3] if record.plans else {}:
+            signal = look.signal_of_forecast(f, record.signals)
+            if signal is not None:
+                forecasts[signal] = f
         for s, values in record.signals.items():
             series(
                 f"realised/signal/{s}",
@@ -212,74 +224,8 @@ class Recorder:
                 written.append(path)
         written += log_space(rr, stream, root, record, dt)  # a system with a Space: its 3-D view (etmpc.views.space)
 
-        # The decisions.
-        decisions = np.stack([record.recompute, record.forced], axis=1).astype(float)
-        stream.send_columns(f"{root}/decision", self._steps(n, dt), rr.Scalars.columns(scalars=decisions))  # for replay
-        written.append("decision")
-        events = np.flatnonzero(record.recompute)
-        if len(events):
-            made_at = np.array([k for k, *_ in record.plans], dtype=np.int64)
-            previous = made_at[np.maximum(np.searchsorted(made_at, events) - 1, 0)] if len(made_at) else events
-            age = np.where(events > 0, events - previous, 0)
-            forced = record.forced[events] & (events > 0)  # step 0 is forced too (there is no plan yet): the first plan
-            # A series per kind of recompute, at the recomputes only (NaN: another kind), at the age
-            # of the plan each one replaced.
-            kinds = np.stack([(events > 0) & ~forced, forced, events == 0], axis=1)
-            series(
-                "recompute",
-                _timeline(events, dt),
-                np.where(kinds, age[:, None], np.nan),
-                ["chosen by the policy", "forced: the plan ran out", "first plan"],
-                kind="SeriesPoints",
-                colors=[look.CHOSEN, look.FORCED, look.FIRST],
-                markers=["circle", "cross", "diamond"],
-                marker_sizes=[3.0, 4.5, 4.0],
-            )
-            error = record.prediction_error[events]
-            text = [
-                "first plan"
-                if i == 0
-                else f"{'FORCED, the plan ran out' if f else 'chosen by the policy'}: plan age {a}, ‖W (x − x̂)‖ {e:.4g}"
-                for i, f, a, e in zip(events, forced, age, error)
-            ]
-            if record.announced:  # a self-trigger: what it announced as it made each plan
-                announced = dict(record.announced)
-                text = [
-                    t
-                    + (f"; announced: keep {announced[i]} steps, next solve at step {i + announced[i]}" if i in announced else "")
-                    for t, i in zip(text, events)
-                ]
-            stream.send_columns(
-                f"{root}/events",
-                _timeline(events, dt),
-                rr.TextLog.columns(text=text, level=["WARN" if f else "INFO" for f in forced]),
-            )
-            written.append("events")
-        if record.announced:
-            made, keep = (np.array(v, dtype=np.int64) for v in zip(*record.announced))
-            series(
-                "announced",
-                _timeline(made, dt),
-                keep.astype(float),
-                ["announced at the solve: steps the plan will be kept"],
-                kind="SeriesPoints",
-                colors=[look.ANNOUNCED],
-                markers=["up"],
-                marker_sizes=[4.0],
-            )
-        known = np.flatnonzero(np.isfinite(record.prediction_error))
-        series("prediction_error", _timeline(known, dt), record.prediction_error[known], ["‖W (x − x̂)‖"], **realised)
-        threshold = re.fullmatch(r"threshold:(.+)", identity["policy"])
-        if threshold:
-            x = float(threshold.group(1))
-            series(
-                "threshold",
-                _timeline(np.array([0, n - 1]), dt),
-                np.array([x, x]),
-                [f"threshold {x:g}"],
-                colors=[look.BOUND],
-                widths=[1.0],
-            )
+        # The decisions: each step's, the recomputes by kind and what each was told, the error and the threshold.
+        written += log_decisions(rr, stream, root, record, series, self._steps(n, dt))
 
         if record.timed:  # time in the loop: each step's recompute, the plan in force, each solve's start and arrival
             for path, steps, values, names, kind, style in _solve_series(record):

@@ -4,6 +4,7 @@ a solve in flight (``etmpc.views.solves.frame_captions``)."""
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -63,7 +64,7 @@ def render_rollout(
     states = states[np.all(np.isfinite(states), axis=1)]  # an episode that diverged ends on a NaN row
     kept = played.record(policy_spec, getattr(policy, "announce", None))
     with Progress(len(states), enabled=progress, unit="frames") as bar:  # the frames drawn, as the encoder takes them
-        frames = (bar.update() or frame for frame in iter_frames(system, env, states, width, height))
+        frames: Iterable[np.ndarray] = _counted(iter_frames(system, env, states, width, height), bar)
         if kept.timed:  # time in the loop: each frame says which plan is in force, and which solve is in flight
             frames = caption_frames(frames, frame_captions(kept, bool(system.compute_levels)))
         if record is None:  # frames go straight into the encoder
@@ -74,3 +75,10 @@ def render_rollout(
             with Recorder(record) as recorder:
                 recorder.log_episode(kept, frames)
     return RenderResult(path=Path(out), frames=count, fps=fps, trajectory=traj)
+
+
+def _counted(frames: Iterable[np.ndarray], bar: Progress) -> Iterator[np.ndarray]:
+    """``frames``, each counted on ``bar`` as the encoder takes it."""
+    for frame in frames:
+        bar.update()
+        yield frame

@@ -221,9 +221,10 @@ def format_replay(episodes: list[ReplayedEpisode], per_episode: bool = False) ->
                 "-" * len(head),
             ]
             current = task
-        for e in [None] + (group if per_episode else []):  # the policy's line, then its episodes
-            chosen = group if e is None else [e]
-            label = policy if e is None else f"  episode {e.episode} repeat {e.repeat}"
+        rows: list[ReplayedEpisode | None] = [None, *(group if per_episode else [])]
+        for row in rows:  # the policy's line (None), then its episodes
+            chosen = group if row is None else [row]
+            label = policy if row is None else f"  episode {row.episode} repeat {row.repeat}"
             lines.append(f"{label:<{width}}{_row(chosen, failures_width)}")
     return "\n".join(lines)
 
@@ -234,11 +235,11 @@ def _row(chosen: list[ReplayedEpisode], failures_width: int) -> str:
     top = max((x.prediction_error_max for x in chosen if np.isfinite(x.prediction_error_max)), default=float("nan"))
     failures = [x.failures for x in chosen]
     cell = "-" if None in failures else failures_cell(_mean(failures), metrics.mean_ci95(np.array(failures, float)))
-    solver = [x.solver_failures for x in chosen]
+    solver = [x.solver_failures for x in chosen if x.solver_failures is not None]  # None: a recording that kept none
     return (
         f"{len(chosen):>9}{mean('objective'):>12.5f}{mean('control_objective'):>11.5f}{mean('recomputes'):>12.2f}"
         + (f"{cell:>{failures_width}}" if failures_width else "")
-        + f"{'-' if None in solver else sum(solver):>17}"
+        + f"{'-' if len(solver) < len(chosen) else sum(solver):>17}"
         f"{spread(mean('prediction_error_mean'), '.4f'):>15}{spread(top, '.4f'):>10}"
         f"{spread(mean('prediction_error_at_recompute'), '.4f'):>14}"
     )

@@ -59,6 +59,7 @@ def viewer_url(text: str) -> str:
 def _address(url: str) -> tuple[str, int]:
     parts = urlsplit(url)
     default = 443 if parts.scheme in ("rerun", "rerun+https") else 80
+    assert parts.hostname is not None  # a URL viewer_url let through: it names its host
     return parts.hostname, parts.port or default
 
 

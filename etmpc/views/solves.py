@@ -56,8 +56,8 @@ def solves(record) -> list[Solve]:
     plan_of = {int(s): j for j, s in enumerate(record.starts)}
     in_flight = np.append(np.asarray(record.in_flight[:n], bool), False)
     out = []
-    for s in np.flatnonzero(record.recompute[:n]):
-        s = int(s)
+    for step in np.flatnonzero(record.recompute[:n]):
+        s = int(step)
         j = plan_of.get(s)
         if j is not None:
             due, made_for = int(record.arrivals[j]), made[j]
