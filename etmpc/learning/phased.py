@@ -11,14 +11,14 @@ from typing import ClassVar
 
 import numpy as np
 
-from etmpc.common.sense import oriented
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import refuse_foreign
 from etmpc.evaluation.workers import context
 from etmpc.learning import dpi, gpomdp
 from etmpc.learning.base import Learner
-from etmpc.learning.checkpoint import RunState, candidates, load_checkpoint, ours, policy_of, save, state_from_json
+from etmpc.learning.checkpoint import RunState, candidates, load_checkpoint, ours, save, state_from_json
 from etmpc.learning.config import SELECTION_ENTROPY, TrainConfig
+from etmpc.learning.curve import add_points, evaluation_jobs, once_each
 from etmpc.learning.jobs import _call, _learner_to_json, mean_scores
 from etmpc.learning.phased_settings import (  # noqa: F401 (the settings re-exported, as before the split)
     SHARED,
@@ -196,48 +196,19 @@ class _Phased(Learner):
     # The test-set curve.
 
     def _evaluate(self) -> None:
-        """Evaluate every seed's policy; with ``record_episodes``, also write the first that many test-set
-        episodes of each seed into ``out/recordings/eval_<episodes>.rrd``."""
-        state, record_episodes = self.run_state, self.settings.record_episodes
-        config, done = state.config, state.done
+        """Evaluate every seed's policy (a point of the test-set curve each: :mod:`etmpc.learning.curve`); with
+        ``record_episodes``, also write the first that many test-set episodes of each seed into
+        ``out/recordings/eval_<episodes>.rrd``."""
+        state = self.run_state
         testset_n, sha256 = self._testset
-
-        def identity(seed: int, e: int) -> dict | None:
-            if e >= record_episodes:
-                return None
-            return {"policy": f"seed{seed}/episodes{done:05d}", "training_seed": seed, "training_episodes": done}
-
-        jobs = [
-            ("evaluate", (config.system, sha256, policy_of(state, state.learners[str(s)]), r, e, identity(s, e)))
-            for s in config.seeds
-            for r in range(config.eval_repeats)
-            for e in range(testset_n)
-        ]
+        jobs = evaluation_jobs(state, testset_n, sha256, self.settings.record_episodes)
         results = once_each(self.pool, _call, jobs, self._tick)
         records = [c[3] for c in results if c[3] is not None]
         if records:
-            with self.recorder(self.out / "recordings" / f"eval_{done:05d}.rrd") as sink:
+            with self.recorder(self.out / "recordings" / f"eval_{state.done:05d}.rrd") as sink:
                 for record in records:
                     sink.log_episode(record)
-        per_seed = config.eval_repeats * testset_n
-        sense = state.objective_sense
-        for i, seed in enumerate(config.seeds):
-            chunk = results[i * per_seed : (i + 1) * per_seed]
-            row = {
-                "episodes": done,
-                "seed": seed,
-                "objective": float(np.mean([c[0] for c in chunk])),
-                "control": float(np.mean([c[1] for c in chunk])),
-                "recomputes": float(np.mean([c[2] for c in chunk])),
-            }
-            state.curve.append(row)
-            best = state.best.get(str(seed))
-            better = best is None or oriented(row["objective"], sense) > oriented(best["objective"], sense)
-            if better:
-                learner = state.learners[str(seed)]
-                state.best[str(seed)] = {"episodes": done, "objective": row["objective"], "theta": learner["theta"]}
-                if "theta_level" in learner:  # compute levels
-                    state.best[str(seed)]["theta_level"] = learner["theta_level"]
+        add_points(state, results, state.config.eval_repeats * testset_n)
 
 
 class GpomdpLearner(_Phased):
@@ -304,24 +275,6 @@ class DpiLearner(_Phased):
 
 
 LEARNER_OF = {"gpomdp": GpomdpLearner, "dpi": DpiLearner}
-
-
-def once_each(backend, fn, jobs: list, progress) -> list:
-    """``backend.map(fn, jobs, progress)``, with each distinct job played once: an evaluation's
-    result is a function of its arguments alone, and every seed starts from the same policy, so the
-    first evaluation would otherwise play each episode once per seed."""
-    keys = [json.dumps(job, sort_keys=True, default=str) for job in jobs]
-    distinct, repeats = {}, []
-    for key, job in zip(keys, jobs):
-        if key in distinct:
-            repeats.append(job)
-        else:
-            distinct[key] = job
-    played = dict(zip(distinct, backend.map(fn, list(distinct.values()), progress)))
-    if progress is not None:
-        for job in repeats:  # counted on the progress bar as played
-            progress(job)
-    return [played[key] for key in keys]
 
 
 def _identity(config: TrainConfig) -> dict:
