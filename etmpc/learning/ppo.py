@@ -38,11 +38,8 @@ are not in Stable-Baselines3's save).
 
 from __future__ import annotations
 
-import pickle
 import shutil
 import time
-import warnings
-import zipfile
 from dataclasses import replace
 from pathlib import Path
 
@@ -53,17 +50,17 @@ from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import refuse_foreign, write_json
 from etmpc.envs.normalization import save_normalization
 from etmpc.learning.base import Learner
-from etmpc.learning.resume import AGAIN
+from etmpc.learning.ppo_model import environments, load_weights, make_model, rollouts
 from etmpc.learning.ppo_state import (
     FINISHED_FORMAT,
     NORMALIZE,
     RESUME,
     RESUME_FORMAT,
-    RUNNING,
     check_progress,
     description,
     read_state,
     restore_running,
+    running_statistics,
     state_file,
 )
 from etmpc.learning.ppo_settings import (  # noqa: F401 (SettingError and the rest re-exported, as before the split)
@@ -130,11 +127,7 @@ class PpoLearner(Learner):
         if s.reward_baseline is not None:  # the environments' own checks, before the run's folder is made
             fixed_schedule(s.reward_baseline, self.system)
         checked_failure_cost(s.failure_cost, self.system)
-        # PPO collects n_steps per environment between updates: a budget too small for that shrinks n_steps,
-        # and each checkpoint's slice is a whole number of rollouts (so the steps reported are the steps run).
-        self.n_steps = min(s.n_steps, max(1, s.timesteps // (s.checkpoints * s.n_envs)))
-        rollout = self.n_steps * s.n_envs
-        self.slices = [max(1, round(s.timesteps / s.checkpoints / rollout)) * rollout] * s.checkpoints
+        self.n_steps, self.slices = rollouts(s)  # the budget in whole rollouts
 
     def milestones(self) -> list[int]:
         return [int(x) for x in np.cumsum(self.slices)]
@@ -166,52 +159,13 @@ class PpoLearner(Learner):
             "checkpoints": self.checkpoints,
         }
 
-    def _environments(self):
-        from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnvWrapper
-
-        class Float32Rewards(VecEnvWrapper):
-            """Rewards as float32, as DummyVecEnv keeps them (SubprocVecEnv hands float64): so that one
-            process or several give the same numbers."""
-
-            def reset(self):
-                return self.venv.reset()
-
-            def step_wait(self):
-                obs, rewards, dones, infos = self.venv.step_wait()
-                return obs, rewards.astype(np.float32), dones, infos
-
-        s = self.settings
-        envs = [_make_env(self.key, s.seed * 1000 + i, s.reward_baseline, s.failure_cost) for i in range(s.n_envs)]
-        # The environments in worker processes or in this one: the same numbers either way.
-        return Float32Rewards(SubprocVecEnv(envs) if min(self.workers, s.n_envs) > 1 else DummyVecEnv(envs))
-
     def setup(self) -> None:
         from stable_baselines3.common.vec_env import VecNormalize
 
         s, system = self.settings, self.system
         self.torch.set_num_threads(1)
-        self.vec = VecNormalize(self._environments(), norm_obs=True, norm_reward=True, gamma=s.gamma)
-        rollout = self.n_steps * s.n_envs
-        self.model = self.sb3.PPO(
-            "MlpPolicy",
-            self.vec,
-            seed=s.seed,
-            device="cpu",
-            n_steps=self.n_steps,
-            batch_size=min(s.batch_size, rollout),
-            n_epochs=s.n_epochs,
-            learning_rate=s.learning_rate,
-            gamma=s.gamma,
-            gae_lambda=s.gae_lambda,
-            clip_range=s.clip_range,
-            ent_coef=s.ent_coef,
-            policy_kwargs={"net_arch": list(s.hidden)},
-            verbose=0,
-        )
-        # A logger that writes nowhere: left to itself, every learn() makes an empty tempdir/SB3-<date> folder
-        from stable_baselines3.common.logger import Logger
-
-        self.model.set_logger(Logger(folder=None, output_formats=[]))
+        self.vec = VecNormalize(environments(self.key, s, self.workers), norm_obs=True, norm_reward=True, gamma=s.gamma)
+        self.model = make_model(self.sb3, self.vec, s, self.n_steps)
         if list(self.vec.get_attr("observation_names")[0]) != list(observation_names(system.name, system.state_names)):
             raise EtmpcError(f"{self.key.task}: the environment's observation is not the one sb3: computes")
         self.started = time.perf_counter()
@@ -228,13 +182,7 @@ class PpoLearner(Learner):
         last = self.checkpoints[-1]
         self.setup()  # the model and the normalisation the settings make, then the run's numbers into them
         restore_running(self.vec, self.out / "checkpoints" / NORMALIZE)
-        try:  # the weights only: PyTorch's weights-only reader refuses a pickle (and would warn of its protocol)
-            with warnings.catch_warnings():
-                warnings.filterwarnings("ignore", message="Detected pickle protocol")
-                self.model.set_parameters(str(self.out / last["file"]), exact_match=True, device="cpu")
-        except (pickle.UnpicklingError, RuntimeError, ValueError, KeyError, OSError, EOFError, zipfile.BadZipFile) as exc:
-            first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-            raise EtmpcError(f"{self.out / last['file']}: not this run's weights ({first[:160]}); {AGAIN}") from None
+        load_weights(self.model, self.out / last["file"])
         self.model.num_timesteps = self._timesteps = int(last["timesteps"])
         self.started = time.perf_counter() - last["wall_seconds"]
         self._simulated_before = int(last["simulated_steps"])
@@ -277,14 +225,7 @@ class PpoLearner(Learner):
 
     def save(self) -> None:
         if self.result is None and self.checkpoints:  # under way: what resume needs
-            write_json_atomically(
-                self.out / "checkpoints" / NORMALIZE,
-                {
-                    name: {"mean": rms.mean.tolist(), "var": rms.var.tolist(), "count": float(rms.count)}
-                    for name in RUNNING
-                    for rms in [getattr(self.vec, name)]
-                },
-            )
+            write_json_atomically(self.out / "checkpoints" / NORMALIZE, running_statistics(self.vec))
             write_json_atomically(self.out / "checkpoints" / RESUME, self.state())
 
     @property
