@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 from dataclasses import asdict
+from abc import abstractmethod
 from typing import ClassVar
 
 import numpy as np
@@ -17,7 +18,7 @@ from etmpc.evaluation.workers import context
 from etmpc.learning import dpi, gpomdp
 from etmpc.learning.base import Learner
 from etmpc.learning.checkpoint import RunState, candidates, load_checkpoint, ours, save, state_from_json
-from etmpc.learning.config import SELECTION_ENTROPY, TrainConfig
+from etmpc.learning.config import DEFAULT_SEEDS, SELECTION_ENTROPY, TrainConfig
 from etmpc.learning.curve import add_points, evaluation_jobs, once_each
 from etmpc.learning.jobs import _call, _learner_to_json, mean_scores
 from etmpc.learning.phased_settings import (  # noqa: F401 (the settings re-exported, as before the split)
@@ -37,12 +38,20 @@ class _Phased(Learner):
     resumes_exactly = True
     policy_kind = "rl"
     algorithm: ClassVar[str]
+    _testset: tuple[int, str]  # the test-set episodes each evaluation plays and the set's sha256 (check()'s)
 
     def __init__(self, settings=None, config: TrainConfig | None = None):
         super().__init__(settings)
         self._config = config  # kept as given (train(config) checkpoints it byte for byte)
-        self.run_state: RunState | None = None
-        self._summary = None
+        self.run_state: RunState | None = None  # None until set up or resumed
+        self._summary: dict | None = None  # the learning curve's summary, as save() last wrote it
+
+    @property
+    def _run(self) -> RunState:
+        """The run's state, once set up or resumed (the runner does one of them before it trains or chooses)."""
+        if self.run_state is None:
+            raise EtmpcError(f"{self.name}: the run is neither set up nor resumed")
+        return self.run_state
 
     @classmethod
     def from_config(cls, config: TrainConfig, record_episodes: int = 0) -> _Phased:
@@ -68,7 +77,7 @@ class _Phased(Learner):
         )
 
     def default_seeds(self) -> tuple[int, ...]:
-        return TrainConfig.__dataclass_fields__["seeds"].default  # 0-4, as etmpc train's
+        return DEFAULT_SEEDS  # 0-4, as etmpc train's
 
     # The run's directory and state.
 
@@ -102,7 +111,7 @@ class _Phased(Learner):
         return str(self.out / "checkpoint.json"), _identity(TrainConfig.from_json(state["config"]))
 
     def state(self) -> dict:
-        return self.run_state.to_json()
+        return self._run.to_json()
 
     def load_state(self, state: dict) -> None:
         self.run_state = state_from_json(state)
@@ -125,6 +134,20 @@ class _Phased(Learner):
         return len(config.seeds) * (
             done + sum(1 for m in config.milestones if m <= done) * config.eval_repeats * self._testset[0]
         )
+
+    # What each algorithm says: its policy's hyperparameters, its learners' start, a phase of training.
+
+    @abstractmethod
+    def _hyperparameters(self, config: TrainConfig) -> dict:
+        """The algorithm's settings as its policy's hyperparameters keep them."""
+
+    @abstractmethod
+    def _start(self, config: TrainConfig, initial: LogisticPolicy) -> tuple[dict, str | None]:
+        """A seed's learner at the start (JSON), from the ``initial`` policy, and DPI's first schedule (None: none)."""
+
+    @abstractmethod
+    def _advance(self, start: int, stop: int) -> None:
+        """Train every seed on its episodes ``start..stop-1``, into the run's state."""
 
     def _tick(self, job) -> None:
         self.tick(job[1][5] - job[1][4] if job[0] == "train" else 1 if job[0] != "score" else 0)
@@ -157,14 +180,16 @@ class _Phased(Learner):
         self._evaluate()
 
     def learn(self, budget: int, callback) -> None:
-        self._advance(self.run_state.done, budget)
+        self._advance(self._run.done, budget)
         self._evaluate()
 
     def save(self) -> None:
-        self._summary = save(self.out, self.run_state, self.curve_png)
+        self._summary = save(self.out, self._run, self.curve_png)
 
     def report(self) -> str:
-        point, state = self._summary["points"][-1], self.run_state
+        assert self._summary is not None  # the runner saves before each report
+        point = self._summary["points"][-1]
+        state = self._run
         return (
             f"{state.config.domain}: {state.done}/{state.config.episodes} episodes per seed, test objective "
             f"{point['objective_mean']:.5f} ± {point['objective_std']:.5f}, {point['recomputes_mean']:.1f} recomputes"
@@ -174,16 +199,16 @@ class _Phased(Learner):
 
     @property
     def chosen(self) -> bool:
-        return bool(self.run_state.validation)
+        return bool(self._run.validation)
 
     def validation_episodes(self) -> int:
         return self.config().validation_episodes
 
     def candidates(self) -> dict:
-        return candidates(self.run_state)
+        return candidates(self._run)
 
     def choose(self, scores: list[float]) -> None:
-        self.run_state.validation = dict(zip(candidates(self.run_state), scores, strict=True))
+        self._run.validation = dict(zip(candidates(self._run), scores, strict=True))
 
     def policy(self) -> str:
         return f"rl:{self.out / 'selected.json'}"
@@ -199,12 +224,13 @@ class _Phased(Learner):
         """Evaluate every seed's policy (a point of the test-set curve each: :mod:`etmpc.learning.curve`); with
         ``record_episodes``, also write the first that many test-set episodes of each seed into
         ``out/recordings/eval_<episodes>.rrd``."""
-        state = self.run_state
+        state = self._run
         testset_n, sha256 = self._testset
         jobs = evaluation_jobs(state, testset_n, sha256, self.settings.record_episodes)
         results = once_each(self.pool, _call, jobs, self._tick)
         records = [c[3] for c in results if c[3] is not None]
         if records:
+            assert self.recorder is not None  # check() refuses record episodes without one
             with self.recorder(self.out / "recordings" / f"eval_{state.done:05d}.rrd") as sink:
                 for record in records:
                     sink.log_episode(record)
@@ -232,7 +258,8 @@ class GpomdpLearner(_Phased):
         return _learner_to_json(gpomdp.Learner.start(initial.theta, config.gpomdp, steps)), None
 
     def _advance(self, start: int, stop: int) -> None:
-        state, config = self.run_state, self.run_state.config
+        state = self._run
+        config = state.config
         jobs = [("train", (config.system, state.policy, state.learners[str(s)], s, start, stop)) for s in config.seeds]
         for seed, (learner, stats) in zip(config.seeds, self.pool.map(_call, jobs, self._tick)):
             state.learners[str(seed)] = learner
@@ -257,7 +284,7 @@ class DpiLearner(_Phased):
 
     def _start(self, config: TrainConfig, initial: LogisticPolicy) -> tuple[dict, str]:
         learner = {"theta": initial.theta.tolist()}
-        if initial.levels:  # compute levels: the second stage's parameters
+        if initial.theta_level is not None:  # compute levels (initial.levels): the second stage's parameters
             learner["theta_level"] = initial.theta_level.tolist()
         learner.update(episodes=0, iterations=0, data=[])
         base = dpi.choose_base(
@@ -268,7 +295,7 @@ class DpiLearner(_Phased):
         return learner, base
 
     def _advance(self, start: int, stop: int) -> None:
-        dpi.iteration(self.run_state, self.pool, self._tick, start, stop)
+        dpi.iteration(self._run, self.pool, self._tick, start, stop)
 
     def simulated_steps(self) -> int | None:
         return None  # the rollouts' steps are counted from the labels (etmpc.experiments.efficiency)

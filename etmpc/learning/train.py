@@ -86,6 +86,7 @@ def train(
         recorder=recorder,
         curve_png=curve_png,
     )
+    assert learner.run_state is not None  # the runner set it up or resumed it
     return learner.run_state
 
 
