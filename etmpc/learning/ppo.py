@@ -42,6 +42,7 @@ import shutil
 import time
 from dataclasses import replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -78,6 +79,10 @@ from etmpc.policies.learned import write_json_atomically
 from etmpc.policies.sb3 import metadata_path
 from etmpc.systems import SystemKey, system_key
 
+if TYPE_CHECKING:
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.vec_env import VecNormalize
+
 
 class PpoLearner(Learner):
     """PPO (an MLP policy) on ``etmpc.envs.gym.TriggerEnv``, one seed (``settings.seed``)."""
@@ -99,8 +104,10 @@ class PpoLearner(Learner):
         self.workers = workers  # processes stepping the environments (the numbers do not depend on it)
         self.checkpoints: list[dict] = []
         self.result: dict | None = None
-        self.vec = self.model = None
-        self._timesteps = self._simulated_before = 0  # _simulated_before: a resumed run's steps before it resumed
+        self.vec: VecNormalize | None = None  # the environments, normalised (setup's; None once closed)
+        self.model: PPO | None = None
+        self._timesteps = 0
+        self._simulated_before = 0  # a resumed run's steps before it resumed
 
     @classmethod
     def read_settings(cls, path, task) -> PpoSettings:
@@ -164,9 +171,10 @@ class PpoLearner(Learner):
 
         s, system = self.settings, self.system
         self.torch.set_num_threads(1)
-        self.vec = VecNormalize(environments(self.key, s, self.workers), norm_obs=True, norm_reward=True, gamma=s.gamma)
-        self.model = make_model(self.sb3, self.vec, s, self.n_steps)
-        if list(self.vec.get_attr("observation_names")[0]) != list(observation_names(system.name, system.state_names)):
+        vec = VecNormalize(environments(self.key, s, self.workers), norm_obs=True, norm_reward=True, gamma=s.gamma)
+        self.vec = vec
+        self.model = make_model(self.sb3, vec, s, self.n_steps)
+        if list(vec.get_attr("observation_names")[0]) != list(observation_names(system.name, system.state_names)):
             raise EtmpcError(f"{self.key.task}: the environment's observation is not the one sb3: computes")
         self.started = time.perf_counter()
         (self.out / "checkpoints").mkdir(parents=True, exist_ok=True)
@@ -181,17 +189,27 @@ class PpoLearner(Learner):
         self.checkpoints = list(state["checkpoints"])
         last = self.checkpoints[-1]
         self.setup()  # the model and the normalisation the settings make, then the run's numbers into them
-        restore_running(self.vec, self.out / "checkpoints" / NORMALIZE)
-        load_weights(self.model, self.out / last["file"])
-        self.model.num_timesteps = self._timesteps = int(last["timesteps"])
+        model, vec = self._made()
+        restore_running(vec, self.out / "checkpoints" / NORMALIZE)
+        load_weights(model, self.out / last["file"])
+        self._timesteps = int(last["timesteps"])
+        model.num_timesteps = self._timesteps
         self.started = time.perf_counter() - last["wall_seconds"]
         self._simulated_before = int(last["simulated_steps"])
         self.say(f"{self.key.task}: PPO resumed at {self._timesteps} steps (its environments reset)")
 
+    def _made(self) -> tuple[PPO, VecNormalize]:
+        """The model and its environments, which :meth:`setup` makes (a resumed run's :meth:`load_state` too)."""
+        if self.model is None or self.vec is None:
+            raise EtmpcError("PPO: no model: the runner calls setup() or load_state() before it trains")
+        return self.model, self.vec
+
     def learn(self, budget: int, callback) -> None:
         from etmpc.learning.runner import validate
 
-        model, vec, out, s = self.model, self.vec, self.out, self.settings
+        model, vec = self._made()
+        out = self.out
+        s = self.settings
         before = model.num_timesteps
         model.learn(total_timesteps=int(budget - model.num_timesteps), reset_num_timesteps=False)
         callback(int(model.num_timesteps - before))
@@ -225,7 +243,7 @@ class PpoLearner(Learner):
 
     def save(self) -> None:
         if self.result is None and self.checkpoints:  # under way: what resume needs
-            write_json_atomically(self.out / "checkpoints" / NORMALIZE, running_statistics(self.vec))
+            write_json_atomically(self.out / "checkpoints" / NORMALIZE, running_statistics(self._made()[1]))
             write_json_atomically(self.out / "checkpoints" / RESUME, self.state())
 
     @property
@@ -253,7 +271,7 @@ class PpoLearner(Learner):
             "task": str(self.key),
             "settings": settings_json(s),
             "workers": self.workers,
-            "environment_steps": int(self.model.num_timesteps),
+            "environment_steps": int(self._made()[0].num_timesteps),
             "simulated_steps": self.checkpoints[-1]["simulated_steps"],
             "wall_seconds": time.perf_counter() - self.started,
             "checkpoints": self.checkpoints,
@@ -304,4 +322,5 @@ def train_ppo(
         (out / "checkpoints" / RESUME).unlink(missing_ok=True)  # a stopped run starts again
     learner = PpoLearner(settings, workers)
     run(learner, key, out, (settings.seed,), workers, resume, progress=progress, say=say)
+    assert learner.result is not None  # the runner ends by choosing, or finds the run had chosen
     return learner.result
