@@ -20,6 +20,7 @@ as :mod:`etmpc.learning.dpi` does for event triggering:
 
 from __future__ import annotations
 
+import types
 import typing
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -85,7 +86,15 @@ class SelfLearner(Learner):
         super().__init__(settings)
         self.policy_file = policy_file  # where the policy goes (default: OUT/selected.json)
         self._standalone = policy_file is not None  # train_self: a file, written over as before
-        self.written: SelfTrigger | None = None
+        self.written: SelfTrigger | None = None  # the policy this invocation wrote
+        self.finished = False  # the policy chosen and written, by this invocation or the run it resumed
+
+    @property
+    def selected_file(self) -> Path:
+        """Where the policy goes: the file given, or the one :meth:`check` names in the run's directory."""
+        if self.policy_file is None:
+            raise EtmpcError("self: no policy file yet: check() names it in the run's directory")
+        return self.policy_file
 
     def owns(self, name: str) -> bool:
         return name == "selected.json"
@@ -103,7 +112,7 @@ class SelfLearner(Learner):
 
     def saved_state(self) -> dict | None:
         """The finished run in :attr:`out`: its ``selected.json``, each field checked (:func:`read_run`)."""
-        return read_run(self.policy_file) if not self._standalone and self.policy_file.exists() else None
+        return read_run(self.selected_file) if not self._standalone and self.selected_file.exists() else None
 
     def identity(self) -> dict:
         return {"task": str(self.key), "settings": self.settings.to_json()}
@@ -114,16 +123,16 @@ class SelfLearner(Learner):
 
     def load_state(self, state: dict) -> None:
         if state["domain"] != self.system.name or state["hyperparameters"]["recompute_price"] != self.system.recompute_price:
-            raise corrupt(self.policy_file, f"its policy is not one of {self.key}'s")
-        self.written = True  # the run had finished
+            raise corrupt(self.selected_file, f"its policy is not one of {self.key}'s")
+        self.finished = True  # the run had finished
 
     @property
     def chosen(self) -> bool:
-        return self.written is not None
+        return self.finished
 
     @property
     def done(self) -> int:
-        return self.settings.episodes if self.written is not None or hasattr(self, "fits") else 0
+        return self.settings.episodes if self.finished or hasattr(self, "fits") else 0
 
     def milestones(self) -> list[int]:
         return [self.settings.episodes]
@@ -137,7 +146,10 @@ class SelfLearner(Learner):
         )
 
     def learn(self, budget: int, callback) -> None:
-        settings, system, candidates, out = self.settings, self.system, self.candidate_lengths, self.policy_file
+        settings = self.settings
+        system = self.system
+        candidates = self.candidate_lengths
+        out = self.selected_file
         jobs = [(self.key, self.base, candidates, settings, i) for i in range(budget)]
         labelled = self.pool.map(_label_job, jobs, lambda job: callback(1))  # each labelled episode counted as it ends
         self.rows = [row for episode in labelled for row in episode]
@@ -181,8 +193,9 @@ class SelfLearner(Learner):
             validation=dict(zip(self.fits, validation)),
             chosen=chosen,
         )
-        write_json(Path(self.policy_file), policy.to_json(hyper))
+        write_json(self.selected_file, policy.to_json(hyper))
         self.written = policy
+        self.finished = True
 
     def policy(self) -> str:
         return f"self:{self.policy_file}"
@@ -205,14 +218,24 @@ def train_self(
 
     learner = SelfLearner(settings, Path(out))
     run(learner, system_key(key), Path(out).parent, None, workers, False, backend, address, progress=progress, say=say)
+    assert learner.written is not None  # a run in a file of its own is never resumed: it chose and wrote
     return learner.written
 
 
 # What a self-trigger run's selected.json holds (checks.typed_json's hints), the settings as SelfSettings.to_json writes them.
 _POLICY = dict(format=str, version=int, domain=str, candidates=list[int], theta=list, mean=list, scale=list, hyperparameters=dict)
-_RUN = {
-    f: list[typing.get_args(h)[0]] if typing.get_origin(h) is tuple else h for f, h in typing.get_type_hints(SelfSettings).items()
-}
+
+
+def _json_hints(settings: type) -> dict[str, object]:
+    """A settings dataclass's fields as its JSON holds them (checks.typed_json's hints): a ``tuple[T, ...]`` as ``list[T]``."""
+    hints: dict[str, object] = typing.get_type_hints(settings)
+    for name, hint in hints.items():
+        if typing.get_origin(hint) is tuple:
+            hints[name] = types.GenericAlias(list, (typing.get_args(hint)[0],))
+    return hints
+
+
+_RUN = _json_hints(SelfSettings)
 _RUN.update(system=str, recompute_price=float, base=str, labelled_solves=int, best_keep_counts=dict[str, int], chosen=str)
 _RUN.update(base_selection=dict[str, float | None], validation=dict[str, float | None])  # a score not finite is null
 
