@@ -49,9 +49,8 @@ import numpy as np
 from etmpc.common.sense import best as best_of
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import refuse_foreign, write_json
-from etmpc.envs.normalization import save_normalization
 from etmpc.learning.base import Learner
-from etmpc.learning.ppo_model import environments, load_weights, make_model, rollouts
+from etmpc.learning.ppo_model import environments, load_weights, make_model, rollouts, save_checkpoint
 from etmpc.learning.ppo_state import (
     FINISHED_FORMAT,
     NORMALIZE,
@@ -215,16 +214,7 @@ class PpoLearner(Learner):
         callback(int(model.num_timesteps - before))
         self._timesteps = int(model.num_timesteps)
         path = out / "checkpoints" / f"step_{model.num_timesteps:08d}.zip"
-        save_model(model, path)
-        save_normalization(
-            vec,
-            self.key,
-            metadata_path(path),
-            recompute_price=self.system.recompute_price,
-            timesteps=int(model.num_timesteps),
-            settings=settings_json(s),
-            **({"options": dict(self.key.options)} if self.key.options else {}),  # trained with some of the task's options
-        )
+        save_checkpoint(model, vec, self.key, path, self.system.recompute_price, settings_json(s))
         score = validate(self.pool, self.key, [f"sb3:{path}"], s.validation_episodes)[0]
         simulated = self._simulated_before + int(sum(vec.get_attr("simulated_steps")))  # the baseline's steps too
         self.checkpoints.append(

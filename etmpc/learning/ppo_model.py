@@ -1,6 +1,7 @@
 """The Stable-Baselines3 side of a PPO run (:class:`etmpc.learning.ppo.PpoLearner`): the budget in whole
 rollouts (:func:`rollouts`), the vectorised trigger environments (:func:`environments`), the PPO model the
-settings make (:func:`make_model`) and a checkpoint's weights read back into it (:func:`load_weights`).
+settings make (:func:`make_model`), a checkpoint saved (:func:`save_checkpoint`) and its weights read back into
+it (:func:`load_weights`).
 Stable-Baselines3 is imported when first used: it is the optional extra ``rl``."""
 
 from __future__ import annotations
@@ -13,8 +14,10 @@ from pathlib import Path
 import numpy as np
 
 from etmpc.common.errors import EtmpcError
-from etmpc.learning.ppo_settings import PpoSettings, _make_env
+from etmpc.envs.normalization import save_normalization
+from etmpc.learning.ppo_settings import PpoSettings, _make_env, save_model
 from etmpc.learning.resume import AGAIN
+from etmpc.policies.sb3 import metadata_path
 from etmpc.systems import SystemKey
 
 
@@ -75,6 +78,22 @@ def make_model(sb3, vec, s: PpoSettings, n_steps: int):
     # A logger that writes nowhere: left to itself, every learn() makes an empty tempdir/SB3-<date> folder
     model.set_logger(Logger(folder=None, output_formats=[]))
     return model
+
+
+def save_checkpoint(model, vec, key: SystemKey, path: Path, recompute_price: float, settings: dict) -> None:
+    """The network at ``path`` (:func:`~etmpc.learning.ppo_settings.save_model`: the same bytes for the same
+    training) and beside it the description ``sb3:PATH`` reads (:func:`etmpc.envs.save_normalization`: ``key``'s
+    task at ``recompute_price``, the normalisation frozen, the steps so far and the run's ``settings``)."""
+    save_model(model, path)
+    save_normalization(
+        vec,
+        key,
+        metadata_path(path),
+        recompute_price=recompute_price,
+        timesteps=int(model.num_timesteps),
+        settings=settings,
+        **({"options": dict(key.options)} if key.options else {}),  # trained with some of the task's options
+    )
 
 
 def load_weights(model, path: Path) -> None:
