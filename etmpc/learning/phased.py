@@ -26,6 +26,8 @@ from etmpc.learning.phased_settings import (  # noqa: F401 (the settings re-expo
     DpiSettings,
     GpomdpSettings,
     PhasedSettings,
+    identity_of,
+    train_config,
 )
 from etmpc.policies.learned import LogisticPolicy, Normalisation
 from etmpc.systems import has_levels, make_system
@@ -64,17 +66,7 @@ class _Phased(Learner):
     def config(self) -> TrainConfig:
         if self._config is not None:
             return self._config
-        s = self.settings
-        own = {"gpomdp": s.algorithm_settings} if self.algorithm == "gpomdp" else {"dpi": s.algorithm_settings}
-        return TrainConfig(
-            self.key.task,
-            self.seeds,
-            **{n: getattr(s, n) for n in SHARED},
-            algorithm=self.algorithm,
-            recompute_price=self.key.recompute_price,
-            options=self.key.options,
-            **own,
-        )
+        return train_config(self.settings, self.algorithm, self.key, self.seeds)
 
     def default_seeds(self) -> tuple[int, ...]:
         return DEFAULT_SEEDS  # 0-4, as etmpc train's
@@ -105,10 +97,10 @@ class _Phased(Learner):
         return load_checkpoint(checkpoint).to_json() if checkpoint.exists() else None
 
     def identity(self) -> dict:
-        return _identity(self.config())
+        return identity_of(self.config())
 
     def saved_identity(self, state: dict) -> tuple[str, dict]:
-        return str(self.out / "checkpoint.json"), _identity(TrainConfig.from_json(state["config"]))
+        return str(self.out / "checkpoint.json"), identity_of(TrainConfig.from_json(state["config"]))
 
     def state(self) -> dict:
         return self._run.to_json()
@@ -302,10 +294,3 @@ class DpiLearner(_Phased):
 
 
 LEARNER_OF = {"gpomdp": GpomdpLearner, "dpi": DpiLearner}
-
-
-def _identity(config: TrainConfig) -> dict:
-    """A run's :meth:`~etmpc.learning.base.Learner.identity`: the task its workers build (at its price, with its
-    options), and the rest of its configuration (the seeds too: a run is resumed with the seeds it trains)."""
-    settings = {k: v for k, v in config.to_json().items() if k not in ("domain", "recompute_price", "options")}
-    return {"task": str(config.system), "settings": settings}

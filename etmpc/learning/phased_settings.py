@@ -1,6 +1,8 @@
 """What a GPOMDP or DPI run is asked for (``etmpc train --algorithm gpomdp|dpi --set NAME=VALUE``): the
 settings both share (:class:`PhasedSettings`) and each algorithm's own (:class:`GpomdpSettings`,
-:class:`DpiSettings`), checked when made. The run itself is :mod:`etmpc.learning.phased`."""
+:class:`DpiSettings`), checked when made; the :class:`~etmpc.learning.config.TrainConfig` they make on a task
+(:func:`train_config`) and the identity a resumed run is checked against (:func:`identity_of`). The run itself is
+:mod:`etmpc.learning.phased`."""
 
 from __future__ import annotations
 
@@ -9,7 +11,9 @@ from dataclasses import dataclass, fields
 from etmpc.common import checks
 from etmpc.common.errors import EtmpcError
 from etmpc.learning import dpi, gpomdp
+from etmpc.learning.config import TrainConfig
 from etmpc.policies.features import DEFAULT_FEATURES, check_features
+from etmpc.systems import SystemKey
 
 
 @dataclass(frozen=True)
@@ -78,3 +82,25 @@ class DpiSettings(PhasedSettings):
 
 # The settings a TrainConfig holds as they are (record_episodes changes no result: it is the run's, not the config's).
 SHARED = tuple(f.name for f in fields(PhasedSettings) if f.name != "record_episodes")
+
+
+def train_config(settings: PhasedSettings, algorithm: str, key: SystemKey, seeds: tuple[int, ...]) -> TrainConfig:
+    """The :class:`TrainConfig` of a run of ``settings`` by ``algorithm`` (``"gpomdp"`` or ``"dpi"``) on ``key``'s
+    task (at its price, with its options) with ``seeds``."""
+    own = {"gpomdp": settings.algorithm_settings} if algorithm == "gpomdp" else {"dpi": settings.algorithm_settings}
+    return TrainConfig(
+        key.task,
+        seeds,
+        **{n: getattr(settings, n) for n in SHARED},
+        algorithm=algorithm,
+        recompute_price=key.recompute_price,
+        options=key.options,
+        **own,
+    )
+
+
+def identity_of(config: TrainConfig) -> dict:
+    """A run's :meth:`~etmpc.learning.base.Learner.identity`: the task its workers build (at its price, with its
+    options), and the rest of its configuration (the seeds too: a run is resumed with the seeds it trains)."""
+    settings = {k: v for k, v in config.to_json().items() if k not in ("domain", "recompute_price", "options")}
+    return {"task": str(config.system), "settings": settings}
