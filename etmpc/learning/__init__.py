@@ -5,10 +5,11 @@ and trained by one runner (:func:`etmpc.learning.runner.run`: seeds, checkpoints
 validation selection, cost). The learners: GPOMDP, the paper's policy gradient
 (:mod:`~etmpc.learning.gpomdp`), and direct policy iteration (:mod:`~etmpc.learning.dpi`), both run
 over seeds in phases with checkpoints and exact resume (:mod:`~etmpc.learning.phased`,
-:mod:`~etmpc.learning.config`, :mod:`~etmpc.learning.jobs`, :mod:`~etmpc.learning.checkpoint`,
-:mod:`~etmpc.learning.train`); the self-triggering policy (:mod:`~etmpc.learning.selftrigger`); PPO
+:mod:`~etmpc.learning.phased_settings`, :mod:`~etmpc.learning.curve`, :mod:`~etmpc.learning.config`,
+:mod:`~etmpc.learning.jobs`, :mod:`~etmpc.learning.checkpoint`, :mod:`~etmpc.learning.train`); the
+self-triggering policy (:mod:`~etmpc.learning.selftrigger`, :mod:`~etmpc.learning.selftrigger_labels`); PPO
 from Stable-Baselines3 (:mod:`~etmpc.learning.ppo`, :mod:`~etmpc.learning.ppo_settings`,
-:mod:`~etmpc.learning.hyperparams`).
+:mod:`~etmpc.learning.ppo_model`, :mod:`~etmpc.learning.ppo_state`, :mod:`~etmpc.learning.hyperparams`).
 
 This package may import ``etmpc.common``, ``etmpc.control``, ``etmpc.systems``, ``etmpc.loop``,
 ``etmpc.policies``, ``etmpc.evaluation`` and ``etmpc.envs``; not ``etmpc.views``, which stands above it: a

@@ -32,12 +32,15 @@ import importlib
 import typing
 from abc import ABC, abstractmethod
 from pathlib import Path
-from typing import Any, Callable, ClassVar
+from typing import TYPE_CHECKING, Any, Callable, ClassVar, Generic, Protocol, TypeVar
 
 from etmpc.common.documents import loads, yaml_loads
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import refuse_foreign, strict
 from etmpc.loop.records import EpisodeSink
+
+if TYPE_CHECKING:
+    from etmpc.systems import SystemKey
 
 LEARNERS: dict[str, type[Learner]] = {}  # name -> class, filled as classes are defined
 BUILT_IN = {
@@ -46,6 +49,34 @@ BUILT_IN = {
     "self": "etmpc.learning.selftrigger",
     "ppo": "etmpc.learning.ppo",
 }  # the modules that define the built-in learners
+
+
+class Pool(Protocol):
+    """What a learner asks of the worker backend (:func:`etmpc.evaluation.backends.make_backend`'s): ``fn`` of each
+    job, in job order, ``on_result(job)`` called as each ends."""
+
+    def map(self, fn: Callable[[Any], Any], jobs: list, on_result: Callable[[Any], object] | None = None) -> list: ...
+
+
+T = TypeVar("T")
+
+
+class SetByRunner(Generic[T]):
+    """An attribute of a learner that :func:`etmpc.learning.runner.run` sets before it calls the learner (the
+    task, the seeds, the run's directory, the worker backend): read before it is set, it is an error that says
+    so, not a None met later."""
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self.name = name
+
+    def __get__(self, learner: Learner, owner: type | None = None) -> T:
+        value = learner.__dict__.get(self.name)
+        if value is None:
+            raise EtmpcError(f"{learner.name}: its {self.name} is not set: run it with etmpc.learning.runner.run")
+        return value
+
+    def __set__(self, learner: Learner, value: T | None) -> None:
+        learner.__dict__[self.name] = value  # None: released (the backend, once the run ends)
 
 
 class Learner(ABC):
@@ -66,6 +97,10 @@ class Learner(ABC):
     # True: it trains only on tasks whose decisions are keep or solve (the runner refuses a task with
     # compute levels, keep, one SQP iteration or a full solve, before any work)
     keep_or_solve_only: ClassVar[bool] = False
+    key: SetByRunner[SystemKey] = SetByRunner()  # the task at its price and with its options
+    seeds: SetByRunner[tuple[int, ...]] = SetByRunner()
+    out: SetByRunner[Path] = SetByRunner()  # the run's directory
+    pool: SetByRunner[Pool] = SetByRunner()  # the worker backend, while the run goes on
 
     def __init_subclass__(cls, **kwargs):
         super().__init_subclass__(**kwargs)
@@ -76,7 +111,6 @@ class Learner(ABC):
         self.settings = self.Settings() if settings is None else settings
         if not isinstance(self.settings, self.Settings):
             raise EtmpcError(f"{self.name}: settings must be {self.Settings.__name__}, got {type(self.settings).__name__}")
-        self.key = self.seeds = self.out = self.pool = None
         self.workers = 1  # the run's worker processes (the runner sets it)
         self.tick: Callable[[int], None] = lambda n: None
         self.say: Callable[[str], None] = lambda line: None

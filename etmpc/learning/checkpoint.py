@@ -68,16 +68,19 @@ def load_checkpoint(path: Path) -> RunState:
 
 
 # What checkpoint.json's records hold (checks.typed_json's hints): every field is checked when a run is resumed.
-_STATE = dict(format=str, version=int, config=dict, policy=dict, learners=dict, curve=list, best=dict, training=list)
+_STATE: dict[str, object] = dict(
+    format=str, version=int, config=dict, policy=dict, learners=dict, curve=list, best=dict, training=list
+)
 _STATE.update(base=str | None, validation=dict[str, float])
 # A number no result reads back may be null (a non-finite one, as strict JSON writes it): the control cost, a return.
 _CURVE_ROW = dict(episodes=int, seed=int, objective=float, control=float | None, recomputes=float)
-_POINT = dict(episodes=int, theta=list, theta_level=list)  # a policy DPI kept (its history)
+_POINT: dict[str, object] = dict(episodes=int, theta=list, theta_level=list)  # a policy DPI kept (its history)
+_BEST = dict(_POINT, objective=float)  # a seed's best point on the test-set curve
 _LEARNER = {
     "gpomdp": dict(theta=list, baseline_mean=list, episodes=int, settings=dict, value_gram=list, value_target=list),
     "dpi": dict(theta=list, theta_level=list, episodes=int, iterations=int, data=list, history=list),
 }
-_EPISODE = {
+_EPISODE: dict[str, dict[str, object]] = {
     "gpomdp": {"episode": int, "return": float | None, "recomputes": float, "seed": int},
     "dpi": dict(episode=int, seed=int, labels=int),
 }
@@ -157,7 +160,7 @@ def _check(state: RunState, p: int, levels: bool) -> None:
     if [(row["episodes"], row["seed"]) for row in state.curve] != evaluated:
         raise checks.BadValue("curve must hold a point per seed at each milestone so far")
     for seed in seeds:
-        best = checks.typed_json(state.best[seed], {**_POINT, "objective": float}, f"best.{seed}", optional=("theta_level",))
+        best = checks.typed_json(state.best[seed], _BEST, f"best.{seed}", optional=("theta_level",))
         _parameters(best, f"best.{seed}", p, levels)
         if best["episodes"] not in milestones or best["episodes"] > done:
             raise checks.BadValue(f"best.{seed}.episodes is {best['episodes']}, not a milestone so far")
@@ -278,7 +281,7 @@ def save(out: Path, state: RunState, curve_png: Callable[[Path, dict, int], None
 
 
 def curve_summary(state: RunState) -> dict:
-    rows = {}
+    rows: dict[int, list[dict]] = {}
     for row in state.curve:
         rows.setdefault(row["episodes"], []).append(row)
     points = []

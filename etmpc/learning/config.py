@@ -21,6 +21,7 @@ SELECTION_ENTROPY = 0x7365_6C65_6374  # "select"
 VALIDATION_ENTROPY = 0x7661_6C69_64  # "valid"
 ALGORITHMS = ("gpomdp", "dpi")
 CHECKPOINT_FORMAT = "etmpc-train-checkpoint"
+DEFAULT_SEEDS = (0, 1, 2, 3, 4)  # a run's seeds, unless it says
 
 
 @dataclass(frozen=True)
@@ -28,7 +29,7 @@ class TrainConfig:
     """One training run. Everything here must match when a run is resumed."""
 
     domain: str
-    seeds: tuple[int, ...] = (0, 1, 2, 3, 4)
+    seeds: tuple[int, ...] = DEFAULT_SEEDS
     episodes: int = 1500  # training episodes per seed
     eval_every: int = 150  # evaluate on the test set after every this many episodes (and at 0)
     eval_episodes: int | None = None  # first N test-set episodes (None: all)
@@ -98,11 +99,12 @@ MAX_SEEDS = 1000
 
 def parse_seeds(text: str) -> tuple[int, ...]:
     """``"0-4"`` -> (0, 1, 2, 3, 4); ``"1,3,7"``; ``"2"``."""
-    seeds = []
+    seeds: list[int] = []
     try:
         for part in text.split(","):
-            lo, sep, hi = part.partition("-")
-            lo, hi = int(lo), int(hi) if sep else int(lo)
+            first, sep, last = part.partition("-")
+            lo = int(first)
+            hi = int(last) if sep else lo
             if hi - lo + 1 + len(seeds) > MAX_SEEDS:
                 raise EtmpcError(f"bad --seeds {text!r}: at most {MAX_SEEDS} seeds")
             seeds += range(lo, hi + 1)

@@ -162,13 +162,23 @@ def label_episode(domain: str, base, settings: Settings, policy_json: dict, seed
 
     # Where the sensor is not exact, the labels' plays start from the plant's true state (privileged
     # information, as in learning with a privileged critic): the policy learnt reads only the filter's.
-    cost = dict(failure_cost=settings.failure_cost, from_belief=False)
+    def answers(s, twin):  # every answer's returns over the same sampled futures
+        return q_values(
+            s.context,
+            base,
+            settings.futures,
+            future_rng,
+            twin,
+            settings.horizon,
+            failure_cost=settings.failure_cost,
+            from_belief=False,
+        )
 
     def label(s, twin):  # every answer over the same sampled futures, then phi(s)
         if system.compute_levels:
-            keep, iterate, solve = q_values(s.context, base, settings.futures, future_rng, twin, settings.horizon, **cost)
+            keep, iterate, solve = answers(s, twin)
             return featurise(s), float(np.mean(keep)), float(np.mean(solve)), s.context.step, float(np.mean(iterate))
-        keep, recompute = q_values(s.context, base, settings.futures, future_rng, twin, settings.horizon, **cost)
+        keep, recompute = answers(s, twin)
         return featurise(s), float(np.mean(keep)), float(np.mean(recompute)), s.context.step
 
     labeller = Labeller(base, picked, label)

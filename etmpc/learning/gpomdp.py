@@ -107,6 +107,7 @@ class Learner:
 
     def value_weights(self) -> np.ndarray:
         """The state baseline's ``w`` from the decisions seen so far (0 before any)."""
+        assert self.value_gram is not None and self.value_target is not None  # made by __post_init__
         return np.linalg.solve(self.value_gram + VALUE_RIDGE * np.eye(len(self.value_target)), self.value_target)
 
     def update(self, features, recompute, keep_probability, steps, rewards) -> np.ndarray:

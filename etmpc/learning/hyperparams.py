@@ -95,7 +95,7 @@ def parse(document: Any, task: str, where: str, base: PpoSettings = PpoSettings(
             values["hidden"] = _net_arch(value, where)
         elif name == "env_kwargs":
             values.update(_env_kwargs(value, where))
-        elif RENAMED.get(name, name) in known:
+        elif isinstance(name, str) and RENAMED.get(name, name) in known:
             if isinstance(value, str) and _numeral(value):  # PyYAML's YAML 1.1 reads 3e-4 and 1e6 as text
                 raise HyperparameterError(
                     f"{where}: {name} must be a number, got {value!r} (YAML reads it as text: "

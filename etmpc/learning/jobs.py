@@ -5,6 +5,7 @@ labelling job is :func:`etmpc.learning.dpi.label_episode`, with the rest of DPI.
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+from typing import Any, Callable
 
 import numpy as np
 
@@ -16,6 +17,7 @@ from etmpc.loop import run_episode
 from etmpc.policies import parse_policy, selftrigger
 from etmpc.policies.features import raw_features
 from etmpc.policies.learned import LogisticPolicy
+from etmpc.systems import SystemKey
 from etmpc.loop.records import EpisodeRecord
 
 
@@ -26,7 +28,7 @@ class _Coin:
 
     def __init__(self, features: str, domain: str):
         self.features, self.domain = features, domain
-        self.states = []
+        self.states: list[np.ndarray] = []
 
     def decide(self, s, rng):
         self.states.append(raw_features(self.features, self.domain, s))
@@ -129,18 +131,21 @@ def _policy(system, policy):
     return LogisticPolicy.from_json(policy)
 
 
-def _call(job):
+def _call(job: tuple[str, tuple]):
+    """``job``, ``(name, arguments)``, played: the worker function of that name on its arguments."""
     name, args = job
-    return {
+    functions: dict[str, Callable[..., Any]] = {
         "normalisation": normalisation_states,
         "train": train_block,
         "evaluate": evaluate_theta,
         "score": training_return,
         "outcome": training_outcome,
-    }[name](*args)
+    }
+    return functions[name](*args)
 
 
 def _learner_to_json(learner: Learner) -> dict:
+    assert learner.value_gram is not None and learner.value_target is not None  # made by Learner.__post_init__
     return {
         "theta": learner.theta.tolist(),
         "baseline_mean": learner.baseline_mean.tolist(),
@@ -162,23 +167,29 @@ def _learner_from_json(data: dict) -> Learner:
     )
 
 
-def episode_scores(pool, domain: str, policies: list, entropy: int, episodes: int, on_result=None) -> list[np.ndarray]:
+def episode_scores(
+    pool, domain: str | SystemKey, policies: list, entropy: int, episodes: int, on_result=None
+) -> list[np.ndarray]:
     """Each policy's objective on each of the first ``episodes`` episodes of ``entropy``'s stream."""
     return _per_policy(pool, "score", domain, policies, entropy, episodes, on_result)
 
 
-def episode_outcomes(pool, domain: str, policies: list, entropy: int, episodes: int, on_result=None) -> list[np.ndarray]:
+def episode_outcomes(
+    pool, domain: str | SystemKey, policies: list, entropy: int, episodes: int, on_result=None
+) -> list[np.ndarray]:
     """Each policy's ``(objective, failures, recomputes)`` rows on the first ``episodes`` episodes of ``entropy``'s stream."""
     return _per_policy(pool, "outcome", domain, policies, entropy, episodes, on_result)
 
 
-def _per_policy(pool, job: str, domain: str, policies: list, entropy: int, episodes: int, on_result) -> list[np.ndarray]:
+def _per_policy(
+    pool, job: str, domain: str | SystemKey, policies: list, entropy: int, episodes: int, on_result
+) -> list[np.ndarray]:
     """Job ``job`` (``"score"``, ``"outcome"``) on each policy's first ``episodes`` episodes, an array per policy."""
     jobs = [(job, (domain, policy, entropy, i)) for policy in policies for i in range(episodes)]
     values = pool.map(_call, jobs, on_result)
     return [np.array(values[k * episodes : (k + 1) * episodes], dtype=float) for k in range(len(policies))]
 
 
-def mean_scores(pool, domain: str, policies: list, entropy: int, episodes: int, on_result=None) -> list[float]:
+def mean_scores(pool, domain: str | SystemKey, policies: list, entropy: int, episodes: int, on_result=None) -> list[float]:
     """Each policy's mean objective on the first ``episodes`` episodes of ``entropy``'s stream."""
     return [float(np.mean(values)) for values in episode_scores(pool, domain, policies, entropy, episodes, on_result)]

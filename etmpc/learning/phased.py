@@ -6,91 +6,31 @@ for the streams and the outputs)."""
 from __future__ import annotations
 
 import json
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict
+from abc import abstractmethod
 from typing import ClassVar
 
 import numpy as np
 
-from etmpc.common import checks
-from etmpc.common.sense import oriented
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import refuse_foreign
 from etmpc.evaluation.workers import context
 from etmpc.learning import dpi, gpomdp
 from etmpc.learning.base import Learner
-from etmpc.learning.checkpoint import RunState, candidates, load_checkpoint, ours, policy_of, save, state_from_json
-from etmpc.learning.config import SELECTION_ENTROPY, TrainConfig
+from etmpc.learning.checkpoint import RunState, candidates, load_checkpoint, ours, save, state_from_json
+from etmpc.learning.config import DEFAULT_SEEDS, SELECTION_ENTROPY, TrainConfig
+from etmpc.learning.curve import add_points, evaluation_jobs, once_each
 from etmpc.learning.jobs import _call, _learner_to_json, mean_scores
-from etmpc.policies.features import DEFAULT_FEATURES, check_features
+from etmpc.learning.phased_settings import (  # noqa: F401 (the settings re-exported, as before the split)
+    SHARED,
+    DpiSettings,
+    GpomdpSettings,
+    PhasedSettings,
+    identity_of,
+    train_config,
+)
 from etmpc.policies.learned import LogisticPolicy, Normalisation
 from etmpc.systems import has_levels, make_system
-
-
-@dataclass(frozen=True)
-class PhasedSettings:
-    """What GPOMDP and DPI runs share (``etmpc train --set NAME=VALUE``)."""
-
-    episodes: int = 1500  # training episodes per seed
-    eval_every: int = 150  # evaluate on the test set after every this many episodes (and at 0)
-    eval_episodes: int | None = None  # first N test-set episodes (None: all)
-    eval_repeats: int = 1  # passes over the test set per evaluation
-    normalisation_episodes: int = 20
-    features: str = DEFAULT_FEATURES
-    validation_episodes: int = 50  # training-distribution episodes that choose selected.json
-    record_episodes: int = 0  # test-set episodes per seed recorded at each evaluation (changes no result)
-
-    def __post_init__(self):
-        checks.typed(self, finite=True, most=checks.MAX_COUNT)
-        for name in ("episodes", "eval_every", "eval_repeats", "normalisation_episodes", "validation_episodes"):
-            if not isinstance(getattr(self, name), int) or getattr(self, name) < 1:
-                raise EtmpcError(f"{name.replace('_', '-')} must be an integer >= 1, got {getattr(self, name)!r}")
-        if self.eval_episodes is not None and (not isinstance(self.eval_episodes, int) or self.eval_episodes < 1):
-            raise EtmpcError(f"eval-episodes must be an integer >= 1 or None, got {self.eval_episodes!r}")
-        if not isinstance(self.record_episodes, int) or self.record_episodes < 0:
-            raise EtmpcError(f"record episodes must be >= 0, got {self.record_episodes}")
-        check_features(self.features)
-        try:
-            self.algorithm_settings  # the algorithm's own checks, as one line
-        except ValueError as exc:
-            raise EtmpcError(str(exc)) from None
-
-    @property
-    def algorithm_settings(self):
-        """The algorithm's own settings (:class:`etmpc.learning.gpomdp.Settings`, ...), built from these."""
-        return None
-
-
-@dataclass(frozen=True)
-class GpomdpSettings(PhasedSettings):
-    """A GPOMDP run: :class:`PhasedSettings` and :class:`etmpc.learning.gpomdp.Settings`' fields."""
-
-    discount: float = 0.975
-    learning_rate: float = 0.05
-    baseline: str = "none"
-
-    @property
-    def algorithm_settings(self) -> gpomdp.Settings:
-        return gpomdp.Settings(self.discount, self.learning_rate, self.baseline)
-
-
-@dataclass(frozen=True)
-class DpiSettings(PhasedSettings):
-    """A DPI run: :class:`PhasedSettings` and :class:`etmpc.learning.dpi.Settings`' fields."""
-
-    futures: int = 4
-    horizon: int = 20
-    states_per_episode: int = 25
-    ridge: float = 1e-2
-    bases: tuple[str, ...] = dpi.BASES  # on a task with compute levels, by default also dpi.LEVEL_BASES
-    selection_episodes: int = 30
-    failure_cost: float = 0.0  # each failure in a labelling rollout costs this much more (dpi.Settings)
-
-    @property
-    def algorithm_settings(self) -> dpi.Settings:
-        return dpi.Settings(**{f.name: getattr(self, f.name) for f in fields(dpi.Settings)})
-
-
-_SHARED = tuple(f.name for f in fields(PhasedSettings) if f.name != "record_episodes")
 
 
 class _Phased(Learner):
@@ -100,38 +40,36 @@ class _Phased(Learner):
     resumes_exactly = True
     policy_kind = "rl"
     algorithm: ClassVar[str]
+    _testset: tuple[int, str]  # the test-set episodes each evaluation plays and the set's sha256 (check()'s)
 
     def __init__(self, settings=None, config: TrainConfig | None = None):
         super().__init__(settings)
         self._config = config  # kept as given (train(config) checkpoints it byte for byte)
-        self.run_state: RunState | None = None
-        self._summary = None
+        self.run_state: RunState | None = None  # None until set up or resumed
+        self._summary: dict | None = None  # the learning curve's summary, as save() last wrote it
+
+    @property
+    def _run(self) -> RunState:
+        """The run's state, once set up or resumed (the runner does one of them before it trains or chooses)."""
+        if self.run_state is None:
+            raise EtmpcError(f"{self.name}: the run is neither set up nor resumed")
+        return self.run_state
 
     @classmethod
     def from_config(cls, config: TrainConfig, record_episodes: int = 0) -> _Phased:
         """The learner of a :class:`TrainConfig` (its algorithm's)."""
         learner = LEARNER_OF[config.algorithm]
         own = asdict(config.gpomdp) if config.algorithm == "gpomdp" else asdict(config.dpi)
-        settings = learner.Settings(**{n: getattr(config, n) for n in _SHARED}, **own, record_episodes=record_episodes)
+        settings = learner.Settings(**{n: getattr(config, n) for n in SHARED}, **own, record_episodes=record_episodes)
         return learner(settings, config)
 
     def config(self) -> TrainConfig:
         if self._config is not None:
             return self._config
-        s = self.settings
-        own = {"gpomdp": s.algorithm_settings} if self.algorithm == "gpomdp" else {"dpi": s.algorithm_settings}
-        return TrainConfig(
-            self.key.task,
-            self.seeds,
-            **{n: getattr(s, n) for n in _SHARED},
-            algorithm=self.algorithm,
-            recompute_price=self.key.recompute_price,
-            options=self.key.options,
-            **own,
-        )
+        return train_config(self.settings, self.algorithm, self.key, self.seeds)
 
     def default_seeds(self) -> tuple[int, ...]:
-        return TrainConfig.__dataclass_fields__["seeds"].default  # 0-4, as etmpc train's
+        return DEFAULT_SEEDS  # 0-4, as etmpc train's
 
     # The run's directory and state.
 
@@ -159,13 +97,13 @@ class _Phased(Learner):
         return load_checkpoint(checkpoint).to_json() if checkpoint.exists() else None
 
     def identity(self) -> dict:
-        return _identity(self.config())
+        return identity_of(self.config())
 
     def saved_identity(self, state: dict) -> tuple[str, dict]:
-        return str(self.out / "checkpoint.json"), _identity(TrainConfig.from_json(state["config"]))
+        return str(self.out / "checkpoint.json"), identity_of(TrainConfig.from_json(state["config"]))
 
     def state(self) -> dict:
-        return self.run_state.to_json()
+        return self._run.to_json()
 
     def load_state(self, state: dict) -> None:
         self.run_state = state_from_json(state)
@@ -188,6 +126,20 @@ class _Phased(Learner):
         return len(config.seeds) * (
             done + sum(1 for m in config.milestones if m <= done) * config.eval_repeats * self._testset[0]
         )
+
+    # What each algorithm says: its policy's hyperparameters, its learners' start, a phase of training.
+
+    @abstractmethod
+    def _hyperparameters(self, config: TrainConfig) -> dict:
+        """The algorithm's settings as its policy's hyperparameters keep them."""
+
+    @abstractmethod
+    def _start(self, config: TrainConfig, initial: LogisticPolicy) -> tuple[dict, str | None]:
+        """A seed's learner at the start (JSON), from the ``initial`` policy, and DPI's first schedule (None: none)."""
+
+    @abstractmethod
+    def _advance(self, start: int, stop: int) -> None:
+        """Train every seed on its episodes ``start..stop-1``, into the run's state."""
 
     def _tick(self, job) -> None:
         self.tick(job[1][5] - job[1][4] if job[0] == "train" else 1 if job[0] != "score" else 0)
@@ -220,14 +172,16 @@ class _Phased(Learner):
         self._evaluate()
 
     def learn(self, budget: int, callback) -> None:
-        self._advance(self.run_state.done, budget)
+        self._advance(self._run.done, budget)
         self._evaluate()
 
     def save(self) -> None:
-        self._summary = save(self.out, self.run_state, self.curve_png)
+        self._summary = save(self.out, self._run, self.curve_png)
 
     def report(self) -> str:
-        point, state = self._summary["points"][-1], self.run_state
+        assert self._summary is not None  # the runner saves before each report
+        point = self._summary["points"][-1]
+        state = self._run
         return (
             f"{state.config.domain}: {state.done}/{state.config.episodes} episodes per seed, test objective "
             f"{point['objective_mean']:.5f} ± {point['objective_std']:.5f}, {point['recomputes_mean']:.1f} recomputes"
@@ -237,16 +191,16 @@ class _Phased(Learner):
 
     @property
     def chosen(self) -> bool:
-        return bool(self.run_state.validation)
+        return bool(self._run.validation)
 
     def validation_episodes(self) -> int:
         return self.config().validation_episodes
 
     def candidates(self) -> dict:
-        return candidates(self.run_state)
+        return candidates(self._run)
 
     def choose(self, scores: list[float]) -> None:
-        self.run_state.validation = dict(zip(candidates(self.run_state), scores, strict=True))
+        self._run.validation = dict(zip(candidates(self._run), scores, strict=True))
 
     def policy(self) -> str:
         return f"rl:{self.out / 'selected.json'}"
@@ -259,48 +213,20 @@ class _Phased(Learner):
     # The test-set curve.
 
     def _evaluate(self) -> None:
-        """Evaluate every seed's policy; with ``record_episodes``, also write the first that many test-set
-        episodes of each seed into ``out/recordings/eval_<episodes>.rrd``."""
-        state, record_episodes = self.run_state, self.settings.record_episodes
-        config, done = state.config, state.done
+        """Evaluate every seed's policy (a point of the test-set curve each: :mod:`etmpc.learning.curve`); with
+        ``record_episodes``, also write the first that many test-set episodes of each seed into
+        ``out/recordings/eval_<episodes>.rrd``."""
+        state = self._run
         testset_n, sha256 = self._testset
-
-        def identity(seed: int, e: int) -> dict | None:
-            if e >= record_episodes:
-                return None
-            return {"policy": f"seed{seed}/episodes{done:05d}", "training_seed": seed, "training_episodes": done}
-
-        jobs = [
-            ("evaluate", (config.system, sha256, policy_of(state, state.learners[str(s)]), r, e, identity(s, e)))
-            for s in config.seeds
-            for r in range(config.eval_repeats)
-            for e in range(testset_n)
-        ]
+        jobs = evaluation_jobs(state, testset_n, sha256, self.settings.record_episodes)
         results = once_each(self.pool, _call, jobs, self._tick)
         records = [c[3] for c in results if c[3] is not None]
         if records:
-            with self.recorder(self.out / "recordings" / f"eval_{done:05d}.rrd") as sink:
+            assert self.recorder is not None  # check() refuses record episodes without one
+            with self.recorder(self.out / "recordings" / f"eval_{state.done:05d}.rrd") as sink:
                 for record in records:
                     sink.log_episode(record)
-        per_seed = config.eval_repeats * testset_n
-        sense = state.objective_sense
-        for i, seed in enumerate(config.seeds):
-            chunk = results[i * per_seed : (i + 1) * per_seed]
-            row = {
-                "episodes": done,
-                "seed": seed,
-                "objective": float(np.mean([c[0] for c in chunk])),
-                "control": float(np.mean([c[1] for c in chunk])),
-                "recomputes": float(np.mean([c[2] for c in chunk])),
-            }
-            state.curve.append(row)
-            best = state.best.get(str(seed))
-            better = best is None or oriented(row["objective"], sense) > oriented(best["objective"], sense)
-            if better:
-                learner = state.learners[str(seed)]
-                state.best[str(seed)] = {"episodes": done, "objective": row["objective"], "theta": learner["theta"]}
-                if "theta_level" in learner:  # compute levels
-                    state.best[str(seed)]["theta_level"] = learner["theta_level"]
+        add_points(state, results, state.config.eval_repeats * testset_n)
 
 
 class GpomdpLearner(_Phased):
@@ -324,7 +250,8 @@ class GpomdpLearner(_Phased):
         return _learner_to_json(gpomdp.Learner.start(initial.theta, config.gpomdp, steps)), None
 
     def _advance(self, start: int, stop: int) -> None:
-        state, config = self.run_state, self.run_state.config
+        state = self._run
+        config = state.config
         jobs = [("train", (config.system, state.policy, state.learners[str(s)], s, start, stop)) for s in config.seeds]
         for seed, (learner, stats) in zip(config.seeds, self.pool.map(_call, jobs, self._tick)):
             state.learners[str(seed)] = learner
@@ -349,7 +276,7 @@ class DpiLearner(_Phased):
 
     def _start(self, config: TrainConfig, initial: LogisticPolicy) -> tuple[dict, str]:
         learner = {"theta": initial.theta.tolist()}
-        if initial.levels:  # compute levels: the second stage's parameters
+        if initial.theta_level is not None:  # compute levels (initial.levels): the second stage's parameters
             learner["theta_level"] = initial.theta_level.tolist()
         learner.update(episodes=0, iterations=0, data=[])
         base = dpi.choose_base(
@@ -360,35 +287,10 @@ class DpiLearner(_Phased):
         return learner, base
 
     def _advance(self, start: int, stop: int) -> None:
-        dpi.iteration(self.run_state, self.pool, self._tick, start, stop)
+        dpi.iteration(self._run, self.pool, self._tick, start, stop)
 
     def simulated_steps(self) -> int | None:
         return None  # the rollouts' steps are counted from the labels (etmpc.experiments.efficiency)
 
 
 LEARNER_OF = {"gpomdp": GpomdpLearner, "dpi": DpiLearner}
-
-
-def once_each(backend, fn, jobs: list, progress) -> list:
-    """``backend.map(fn, jobs, progress)``, with each distinct job played once: an evaluation's
-    result is a function of its arguments alone, and every seed starts from the same policy, so the
-    first evaluation would otherwise play each episode once per seed."""
-    keys = [json.dumps(job, sort_keys=True, default=str) for job in jobs]
-    distinct, repeats = {}, []
-    for key, job in zip(keys, jobs):
-        if key in distinct:
-            repeats.append(job)
-        else:
-            distinct[key] = job
-    played = dict(zip(distinct, backend.map(fn, list(distinct.values()), progress)))
-    if progress is not None:
-        for job in repeats:  # counted on the progress bar as played
-            progress(job)
-    return [played[key] for key in keys]
-
-
-def _identity(config: TrainConfig) -> dict:
-    """A run's :meth:`~etmpc.learning.base.Learner.identity`: the task its workers build (at its price, with its
-    options), and the rest of its configuration (the seeds too: a run is resumed with the seeds it trains)."""
-    settings = {k: v for k, v in config.to_json().items() if k not in ("domain", "recompute_price", "options")}
-    return {"task": str(config.system), "settings": settings}

@@ -38,32 +38,29 @@ are not in Stable-Baselines3's save).
 
 from __future__ import annotations
 
-import pickle
 import shutil
 import time
-import warnings
-import zipfile
 from dataclasses import replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from etmpc.common.sense import best as best_of
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import refuse_foreign, write_json
-from etmpc.envs.normalization import save_normalization
 from etmpc.learning.base import Learner
-from etmpc.learning.resume import AGAIN
+from etmpc.learning.ppo_model import environments, load_weights, make_model, rollouts, save_checkpoint
 from etmpc.learning.ppo_state import (
     FINISHED_FORMAT,
     NORMALIZE,
     RESUME,
     RESUME_FORMAT,
-    RUNNING,
     check_progress,
     description,
     read_state,
     restore_running,
+    running_statistics,
     state_file,
 )
 from etmpc.learning.ppo_settings import (  # noqa: F401 (SettingError and the rest re-exported, as before the split)
@@ -80,6 +77,10 @@ from etmpc.policies.features import observation_names
 from etmpc.policies.learned import write_json_atomically
 from etmpc.policies.sb3 import metadata_path
 from etmpc.systems import SystemKey, system_key
+
+if TYPE_CHECKING:
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.vec_env import VecNormalize
 
 
 class PpoLearner(Learner):
@@ -102,8 +103,10 @@ class PpoLearner(Learner):
         self.workers = workers  # processes stepping the environments (the numbers do not depend on it)
         self.checkpoints: list[dict] = []
         self.result: dict | None = None
-        self.vec = self.model = None
-        self._timesteps = self._simulated_before = 0  # _simulated_before: a resumed run's steps before it resumed
+        self.vec: VecNormalize | None = None  # the environments, normalised (setup's; None once closed)
+        self.model: PPO | None = None
+        self._timesteps = 0
+        self._simulated_before = 0  # a resumed run's steps before it resumed
 
     @classmethod
     def read_settings(cls, path, task) -> PpoSettings:
@@ -130,11 +133,7 @@ class PpoLearner(Learner):
         if s.reward_baseline is not None:  # the environments' own checks, before the run's folder is made
             fixed_schedule(s.reward_baseline, self.system)
         checked_failure_cost(s.failure_cost, self.system)
-        # PPO collects n_steps per environment between updates: a budget too small for that shrinks n_steps,
-        # and each checkpoint's slice is a whole number of rollouts (so the steps reported are the steps run).
-        self.n_steps = min(s.n_steps, max(1, s.timesteps // (s.checkpoints * s.n_envs)))
-        rollout = self.n_steps * s.n_envs
-        self.slices = [max(1, round(s.timesteps / s.checkpoints / rollout)) * rollout] * s.checkpoints
+        self.n_steps, self.slices = rollouts(s)  # the budget in whole rollouts
 
     def milestones(self) -> list[int]:
         return [int(x) for x in np.cumsum(self.slices)]
@@ -166,53 +165,15 @@ class PpoLearner(Learner):
             "checkpoints": self.checkpoints,
         }
 
-    def _environments(self):
-        from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnvWrapper
-
-        class Float32Rewards(VecEnvWrapper):
-            """Rewards as float32, as DummyVecEnv keeps them (SubprocVecEnv hands float64): so that one
-            process or several give the same numbers."""
-
-            def reset(self):
-                return self.venv.reset()
-
-            def step_wait(self):
-                obs, rewards, dones, infos = self.venv.step_wait()
-                return obs, rewards.astype(np.float32), dones, infos
-
-        s = self.settings
-        envs = [_make_env(self.key, s.seed * 1000 + i, s.reward_baseline, s.failure_cost) for i in range(s.n_envs)]
-        # The environments in worker processes or in this one: the same numbers either way.
-        return Float32Rewards(SubprocVecEnv(envs) if min(self.workers, s.n_envs) > 1 else DummyVecEnv(envs))
-
     def setup(self) -> None:
         from stable_baselines3.common.vec_env import VecNormalize
 
         s, system = self.settings, self.system
         self.torch.set_num_threads(1)
-        self.vec = VecNormalize(self._environments(), norm_obs=True, norm_reward=True, gamma=s.gamma)
-        rollout = self.n_steps * s.n_envs
-        self.model = self.sb3.PPO(
-            "MlpPolicy",
-            self.vec,
-            seed=s.seed,
-            device="cpu",
-            n_steps=self.n_steps,
-            batch_size=min(s.batch_size, rollout),
-            n_epochs=s.n_epochs,
-            learning_rate=s.learning_rate,
-            gamma=s.gamma,
-            gae_lambda=s.gae_lambda,
-            clip_range=s.clip_range,
-            ent_coef=s.ent_coef,
-            policy_kwargs={"net_arch": list(s.hidden)},
-            verbose=0,
-        )
-        # A logger that writes nowhere: left to itself, every learn() makes an empty tempdir/SB3-<date> folder
-        from stable_baselines3.common.logger import Logger
-
-        self.model.set_logger(Logger(folder=None, output_formats=[]))
-        if list(self.vec.get_attr("observation_names")[0]) != list(observation_names(system.name, system.state_names)):
+        vec = VecNormalize(environments(self.key, s, self.workers), norm_obs=True, norm_reward=True, gamma=s.gamma)
+        self.vec = vec
+        self.model = make_model(self.sb3, vec, s, self.n_steps)
+        if list(vec.get_attr("observation_names")[0]) != list(observation_names(system.name, system.state_names)):
             raise EtmpcError(f"{self.key.task}: the environment's observation is not the one sb3: computes")
         self.started = time.perf_counter()
         (self.out / "checkpoints").mkdir(parents=True, exist_ok=True)
@@ -227,38 +188,33 @@ class PpoLearner(Learner):
         self.checkpoints = list(state["checkpoints"])
         last = self.checkpoints[-1]
         self.setup()  # the model and the normalisation the settings make, then the run's numbers into them
-        restore_running(self.vec, self.out / "checkpoints" / NORMALIZE)
-        try:  # the weights only: PyTorch's weights-only reader refuses a pickle (and would warn of its protocol)
-            with warnings.catch_warnings():
-                warnings.filterwarnings("ignore", message="Detected pickle protocol")
-                self.model.set_parameters(str(self.out / last["file"]), exact_match=True, device="cpu")
-        except (pickle.UnpicklingError, RuntimeError, ValueError, KeyError, OSError, EOFError, zipfile.BadZipFile) as exc:
-            first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-            raise EtmpcError(f"{self.out / last['file']}: not this run's weights ({first[:160]}); {AGAIN}") from None
-        self.model.num_timesteps = self._timesteps = int(last["timesteps"])
+        model, vec = self._made()
+        restore_running(vec, self.out / "checkpoints" / NORMALIZE)
+        load_weights(model, self.out / last["file"])
+        self._timesteps = int(last["timesteps"])
+        model.num_timesteps = self._timesteps
         self.started = time.perf_counter() - last["wall_seconds"]
         self._simulated_before = int(last["simulated_steps"])
         self.say(f"{self.key.task}: PPO resumed at {self._timesteps} steps (its environments reset)")
 
+    def _made(self) -> tuple[PPO, VecNormalize]:
+        """The model and its environments, which :meth:`setup` makes (a resumed run's :meth:`load_state` too)."""
+        if self.model is None or self.vec is None:
+            raise EtmpcError("PPO: no model: the runner calls setup() or load_state() before it trains")
+        return self.model, self.vec
+
     def learn(self, budget: int, callback) -> None:
         from etmpc.learning.runner import validate
 
-        model, vec, out, s = self.model, self.vec, self.out, self.settings
+        model, vec = self._made()
+        out = self.out
+        s = self.settings
         before = model.num_timesteps
         model.learn(total_timesteps=int(budget - model.num_timesteps), reset_num_timesteps=False)
         callback(int(model.num_timesteps - before))
         self._timesteps = int(model.num_timesteps)
         path = out / "checkpoints" / f"step_{model.num_timesteps:08d}.zip"
-        save_model(model, path)
-        save_normalization(
-            vec,
-            self.key,
-            metadata_path(path),
-            recompute_price=self.system.recompute_price,
-            timesteps=int(model.num_timesteps),
-            settings=settings_json(s),
-            **({"options": dict(self.key.options)} if self.key.options else {}),  # trained with some of the task's options
-        )
+        save_checkpoint(model, vec, self.key, path, self.system.recompute_price, settings_json(s))
         score = validate(self.pool, self.key, [f"sb3:{path}"], s.validation_episodes)[0]
         simulated = self._simulated_before + int(sum(vec.get_attr("simulated_steps")))  # the baseline's steps too
         self.checkpoints.append(
@@ -277,14 +233,7 @@ class PpoLearner(Learner):
 
     def save(self) -> None:
         if self.result is None and self.checkpoints:  # under way: what resume needs
-            write_json_atomically(
-                self.out / "checkpoints" / NORMALIZE,
-                {
-                    name: {"mean": rms.mean.tolist(), "var": rms.var.tolist(), "count": float(rms.count)}
-                    for name in RUNNING
-                    for rms in [getattr(self.vec, name)]
-                },
-            )
+            write_json_atomically(self.out / "checkpoints" / NORMALIZE, running_statistics(self._made()[1]))
             write_json_atomically(self.out / "checkpoints" / RESUME, self.state())
 
     @property
@@ -312,7 +261,7 @@ class PpoLearner(Learner):
             "task": str(self.key),
             "settings": settings_json(s),
             "workers": self.workers,
-            "environment_steps": int(self.model.num_timesteps),
+            "environment_steps": int(self._made()[0].num_timesteps),
             "simulated_steps": self.checkpoints[-1]["simulated_steps"],
             "wall_seconds": time.perf_counter() - self.started,
             "checkpoints": self.checkpoints,
@@ -363,4 +312,5 @@ def train_ppo(
         (out / "checkpoints" / RESUME).unlink(missing_ok=True)  # a stopped run starts again
     learner = PpoLearner(settings, workers)
     run(learner, key, out, (settings.seed,), workers, resume, progress=progress, say=say)
+    assert learner.result is not None  # the runner ends by choosing, or finds the run had chosen
     return learner.result

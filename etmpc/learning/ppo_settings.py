@@ -35,7 +35,7 @@ class SettingError(EtmpcError):
 
 
 def _integer(least: int, most: float = math.inf):
-    return lambda v: isinstance(v, numbers.Integral) and not isinstance(v, bool) and least <= v <= most  # 8.0 is not
+    return lambda v: isinstance(v, numbers.Integral) and not isinstance(v, bool) and least <= int(v) <= most  # 8.0 is not
 
 
 def _real(holds):

@@ -85,9 +85,19 @@ def check_progress(out: Path, state: dict, milestones: list[int]) -> None:
         raise corrupt(path, f"selected is {saved['selected']!r}, not one of its checkpoints with selected.zip beside it")
 
 
+def running_statistics(vec) -> dict:
+    """``vec``'s (a VecNormalize's) running statistics as JSON, what :func:`restore_running` puts back: each a
+    mean, a variance and a count."""
+    return {
+        name: {"mean": rms.mean.tolist(), "var": rms.var.tolist(), "count": float(rms.count)}
+        for name in RUNNING
+        for rms in [getattr(vec, name)]
+    }
+
+
 def restore_running(vec, path: Path) -> None:
-    """Put the running statistics :meth:`~etmpc.learning.ppo.PpoLearner.save` wrote as JSON back into ``vec`` (a
-    VecNormalize of the same shapes), each number checked: finite, a variance and a count >= 0."""
+    """Put the running statistics :meth:`~etmpc.learning.ppo.PpoLearner.save` wrote as JSON (:func:`running_statistics`)
+    back into ``vec`` (a VecNormalize of the same shapes), each number checked: finite, a variance and a count >= 0."""
     try:
         data = loads(path.read_text())
     except (OSError, ValueError) as exc:

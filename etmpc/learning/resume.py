@@ -15,6 +15,7 @@ A folder handed to ``--resume`` is data, and maybe someone else's or an edited o
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -29,7 +30,7 @@ if TYPE_CHECKING:
 AGAIN = "start the run again in another --out"  # the remedy for a saved state that cannot be read as the run's
 
 
-def corrupt(where: str, problem: Any, error: type[EtmpcError] = EtmpcError) -> EtmpcError:
+def corrupt(where: str | Path, problem: Any, error: type[EtmpcError] = EtmpcError) -> EtmpcError:
     """The one-line error of a saved state ``where`` (a file) whose field is not what it must be (``problem``
     names the field: a :class:`~etmpc.common.checks.BadValue`'s message)."""
     return error(f"{where} is corrupt ({problem}); {AGAIN}")

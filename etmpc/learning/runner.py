@@ -102,8 +102,13 @@ def run(
                 learner.save()
         finally:
             learner.close()
-            learner.pool = learner.tick = None
+            learner.pool = None  # released: the backend is closed
+            learner.tick = _no_progress  # the bar is closed
     return Run(learner, learner.policy(), time.perf_counter() - started, learner.simulated_steps())
+
+
+def _no_progress(n: int) -> None:
+    """A learner's :attr:`~etmpc.learning.base.Learner.tick` outside a run: its units go nowhere."""
 
 
 def _seeds(learner: Learner, seeds) -> tuple[int, ...]:

@@ -20,30 +20,30 @@ as :mod:`etmpc.learning.dpi` does for event triggering:
 
 from __future__ import annotations
 
+import types
 import typing
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy.optimize import minimize
 
 from etmpc.common import checks
 from etmpc.common.sense import oriented
 from etmpc.common.documents import loads
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import write_json
-from etmpc.evaluation.workers import context
-from etmpc.learning import dpi
 from etmpc.learning.base import Learner
 from etmpc.learning.config import SELECTION_ENTROPY
 from etmpc.learning.jobs import mean_scores
 from etmpc.learning.resume import AGAIN, corrupt
-from etmpc.loop import Snapshot, play_on, run_episode
+from etmpc.learning.selftrigger_labels import (  # noqa: F401 (SELF_ENTROPY re-exported, as before the split)
+    SELF_ENTROPY,
+    fit,
+    label_episode,
+)
 from etmpc.policies import Always, Every, parse_policy
-from etmpc.policies.selftrigger import CANDIDATES, SelfTrigger, from_json, plan_features
+from etmpc.policies.selftrigger import CANDIDATES, SelfTrigger, from_json
 from etmpc.systems import SystemKey, system_key
-
-SELF_ENTROPY = 0x73656C66  # "self"
 
 
 @dataclass(frozen=True)
@@ -70,93 +70,6 @@ class SelfSettings:
         return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
 
 
-class _KeepFor:
-    """Keep the plan made at the snapshot ``n`` steps, then follow ``base`` (for :func:`play_on`)."""
-
-    def __init__(self, first_plan, n: int, base):
-        self.first_plan, self.n, self.base = first_plan, n, base
-        self.spec, self.stochastic = f"keep:{n}+{base.spec}", base.stochastic
-        self.observes = getattr(base, "observes", True)
-
-    def decide(self, s, rng) -> bool:
-        if s.plan is self.first_plan:
-            return s.age >= self.n
-        return self.base.decide(s, rng)
-
-
-def _candidate_returns(base, candidates: tuple[int, ...], futures: int, horizon: int, rng: np.random.Generator):
-    """The label of a picked step (for :class:`etmpc.learning.dpi.Labeller`): a plan solved there, its
-    features, and every candidate ``n``'s mean return over ``futures`` futures sampled from what the
-    controller knows (the same for all, no draws of ``base``) of keeping that plan ``n`` steps and then
-    following ``base``, played ``horizon`` steps on."""
-
-    def label(s, twin) -> tuple[list[float], list[float]]:
-        ctx = s.context
-        system = ctx.system
-        snapshot = Snapshot.take(ctx)
-        sampled = [system.sample_future(snapshot.episode, ctx.step, rng) for _ in range(futures)]
-        solved = system.plan(snapshot.seen, snapshot.u_prev, snapshot.plan, snapshot.age, ctx.timestep)
-        stop = ctx.step + horizon
-        returns = [
-            np.mean(
-                [
-                    play_on(system, twin, snapshot, _KeepFor(solved, n, base), None, True, future, solved, stop)
-                    for future in sampled
-                ]
-            )
-            for n in candidates
-        ]
-        return plan_features(solved).tolist(), [float(q) for q in returns]
-
-    return label
-
-
-def label_episode(key: str, base: str, candidates: tuple[int, ...], settings: SelfSettings, index: int) -> list:
-    """Training episode ``index`` played by ``base``: ``[(features, returns per candidate), ...]``
-    at its picked steps (those where the loop asks the policy: a plan is in force)."""
-    system, env, _ = context(key)
-    rngs = [np.random.default_rng(np.random.SeedSequence(SELF_ENTROPY, spawn_key=(index, k))) for k in range(3)]
-    steps = set(
-        rngs[1]
-        .choice(
-            np.arange(1, system.episode_steps), size=min(settings.solves_per_episode, system.episode_steps - 1), replace=False
-        )
-        .tolist()
-    )
-    policy = parse_policy(base, system)
-    label = _candidate_returns(policy, candidates, settings.futures, max(candidates) + settings.horizon, rngs[2])
-    labeller = dpi.Labeller(policy, steps, label, "label-self")
-    run_episode(system, env, labeller, None, system.draw_episode(rngs[0]))
-    return labeller.rows
-
-
-def fit(features: np.ndarray, returns: np.ndarray, ridge: float) -> np.ndarray:
-    """``theta (C, 1 + p)`` of the softmax model, fitted to each row's best candidate with weights
-    ``best - mean return`` (normalised to mean 1) and ``ridge / 2 |theta[:, 1:]|^2``."""
-    n, p = features.shape
-    c = returns.shape[1]
-    design = np.hstack([np.ones((n, 1)), features])
-    best = np.argmax(returns, axis=1)
-    weight = returns.max(axis=1) - returns.mean(axis=1)
-    weight = weight / weight.mean() if weight.mean() > 0 else np.ones(n)
-    target = np.zeros((n, c))
-    target[np.arange(n), best] = 1.0
-    penalty = np.ones((c, 1 + p))
-    penalty[:, 0] = 0.0
-
-    def loss(flat):
-        theta = flat.reshape(c, 1 + p)
-        logits = design @ theta.T
-        logits -= logits.max(axis=1, keepdims=True)
-        log_p = logits - np.log(np.exp(logits).sum(axis=1, keepdims=True))
-        value = -np.sum(weight * np.sum(target * log_p, axis=1)) / n + 0.5 * ridge * np.sum(penalty * theta**2)
-        grad = ((np.exp(log_p) - target) * weight[:, None]).T @ design / n + ridge * penalty * theta
-        return value, grad.ravel()
-
-    result = minimize(loss, np.zeros(c * (1 + p)), jac=True, method="L-BFGS-B", options={"maxiter": 1000})
-    return result.x.reshape(c, 1 + p)
-
-
 class SelfLearner(Learner):
     """The self-trigger's training behind the learner interface: :meth:`setup` chooses the base,
     :meth:`learn` labels ``settings.episodes`` episodes and fits one model per ridge, the runner scores
@@ -173,7 +86,15 @@ class SelfLearner(Learner):
         super().__init__(settings)
         self.policy_file = policy_file  # where the policy goes (default: OUT/selected.json)
         self._standalone = policy_file is not None  # train_self: a file, written over as before
-        self.written: SelfTrigger | None = None
+        self.written: SelfTrigger | None = None  # the policy this invocation wrote
+        self.finished = False  # the policy chosen and written, by this invocation or the run it resumed
+
+    @property
+    def selected_file(self) -> Path:
+        """Where the policy goes: the file given, or the one :meth:`check` names in the run's directory."""
+        if self.policy_file is None:
+            raise EtmpcError("self: no policy file yet: check() names it in the run's directory")
+        return self.policy_file
 
     def owns(self, name: str) -> bool:
         return name == "selected.json"
@@ -191,7 +112,7 @@ class SelfLearner(Learner):
 
     def saved_state(self) -> dict | None:
         """The finished run in :attr:`out`: its ``selected.json``, each field checked (:func:`read_run`)."""
-        return read_run(self.policy_file) if not self._standalone and self.policy_file.exists() else None
+        return read_run(self.selected_file) if not self._standalone and self.selected_file.exists() else None
 
     def identity(self) -> dict:
         return {"task": str(self.key), "settings": self.settings.to_json()}
@@ -202,16 +123,16 @@ class SelfLearner(Learner):
 
     def load_state(self, state: dict) -> None:
         if state["domain"] != self.system.name or state["hyperparameters"]["recompute_price"] != self.system.recompute_price:
-            raise corrupt(self.policy_file, f"its policy is not one of {self.key}'s")
-        self.written = True  # the run had finished
+            raise corrupt(self.selected_file, f"its policy is not one of {self.key}'s")
+        self.finished = True  # the run had finished
 
     @property
     def chosen(self) -> bool:
-        return self.written is not None
+        return self.finished
 
     @property
     def done(self) -> int:
-        return self.settings.episodes if self.written is not None or hasattr(self, "fits") else 0
+        return self.settings.episodes if self.finished or hasattr(self, "fits") else 0
 
     def milestones(self) -> list[int]:
         return [self.settings.episodes]
@@ -225,7 +146,10 @@ class SelfLearner(Learner):
         )
 
     def learn(self, budget: int, callback) -> None:
-        settings, system, candidates, out = self.settings, self.system, self.candidate_lengths, self.policy_file
+        settings = self.settings
+        system = self.system
+        candidates = self.candidate_lengths
+        out = self.selected_file
         jobs = [(self.key, self.base, candidates, settings, i) for i in range(budget)]
         labelled = self.pool.map(_label_job, jobs, lambda job: callback(1))  # each labelled episode counted as it ends
         self.rows = [row for episode in labelled for row in episode]
@@ -269,8 +193,9 @@ class SelfLearner(Learner):
             validation=dict(zip(self.fits, validation)),
             chosen=chosen,
         )
-        write_json(Path(self.policy_file), policy.to_json(hyper))
+        write_json(self.selected_file, policy.to_json(hyper))
         self.written = policy
+        self.finished = True
 
     def policy(self) -> str:
         return f"self:{self.policy_file}"
@@ -293,14 +218,24 @@ def train_self(
 
     learner = SelfLearner(settings, Path(out))
     run(learner, system_key(key), Path(out).parent, None, workers, False, backend, address, progress=progress, say=say)
+    assert learner.written is not None  # a run in a file of its own is never resumed: it chose and wrote
     return learner.written
 
 
 # What a self-trigger run's selected.json holds (checks.typed_json's hints), the settings as SelfSettings.to_json writes them.
 _POLICY = dict(format=str, version=int, domain=str, candidates=list[int], theta=list, mean=list, scale=list, hyperparameters=dict)
-_RUN = {
-    f: list[typing.get_args(h)[0]] if typing.get_origin(h) is tuple else h for f, h in typing.get_type_hints(SelfSettings).items()
-}
+
+
+def _json_hints(settings: type) -> dict[str, object]:
+    """A settings dataclass's fields as its JSON holds them (checks.typed_json's hints): a ``tuple[T, ...]`` as ``list[T]``."""
+    hints: dict[str, object] = typing.get_type_hints(settings)
+    for name, hint in hints.items():
+        if typing.get_origin(hint) is tuple:
+            hints[name] = types.GenericAlias(list, (typing.get_args(hint)[0],))
+    return hints
+
+
+_RUN = _json_hints(SelfSettings)
 _RUN.update(system=str, recompute_price=float, base=str, labelled_solves=int, best_keep_counts=dict[str, int], chosen=str)
 _RUN.update(base_selection=dict[str, float | None], validation=dict[str, float | None])  # a score not finite is null
 

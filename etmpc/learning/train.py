@@ -45,7 +45,8 @@ from typing import Callable
 from etmpc.common.sense import higher_or_lower
 from etmpc.learning.checkpoint import RunState, curve_summary, load_checkpoint
 from etmpc.learning.config import ALGORITHMS, TrainConfig, parse_seeds
-from etmpc.learning.phased import _Phased, once_each
+from etmpc.learning.curve import once_each
+from etmpc.learning.phased import _Phased
 from etmpc.learning.runner import run
 from etmpc.loop.records import EpisodeSink
 
@@ -85,6 +86,7 @@ def train(
         recorder=recorder,
         curve_png=curve_png,
     )
+    assert learner.run_state is not None  # the runner set it up or resumed it
     return learner.run_state
 
 
