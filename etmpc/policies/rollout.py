@@ -33,7 +33,7 @@ import numpy as np
 from etmpc.common.errors import EtmpcError
 from etmpc.common.numerics import fsum
 from etmpc.control.timing import ITERATE, KEEP, SOLVE
-from etmpc.loop import AugmentedState, Continuation, DecisionContext, Policy, Snapshot, play_on
+from etmpc.loop import AugmentedState, Continuation, Decision, DecisionContext, Policy, Snapshot, play_on
 from etmpc.systems.capabilities import RewardFailures, Rollouts, require
 
 DEFAULT_FUTURES = 8
@@ -211,7 +211,7 @@ class Rollout:
             self._twin = (system, system.make_env())
         return self._twin[1]
 
-    def decide(self, s: AugmentedState, rng: np.random.Generator) -> bool:
+    def decide(self, s: AugmentedState, rng: np.random.Generator | None) -> Decision:
         if s.context is None:
             raise EtmpcError(f"{self.spec} simulates the episode: it needs the control loop's context")
         memo = None

@@ -46,9 +46,8 @@ import numpy as np
 from etmpc.common import checks
 from etmpc.common.documents import read_document
 from etmpc.common.errors import EtmpcError
-from etmpc.loop import AugmentedState
+from etmpc.loop import AugmentedState, Decision
 from etmpc.policies.features import observation, observation_names
-from etmpc.systems import canonical, has_levels, system_class
 from etmpc.policies.sb3_network import (  # noqa: F401 (re-exported: what reads a zip as data, and the network)
     ALGORITHMS,
     DEFAULT_NET_ARCH,
@@ -62,6 +61,7 @@ from etmpc.policies.sb3_network import (  # noqa: F401 (re-exported: what reads 
     open_network,
     pickled_globals,
 )
+from etmpc.systems import canonical, has_levels, system_class
 
 FORMAT = "etmpc-sb3-policy"
 CLIP = 10.0  # VecNormalize's clip_obs
@@ -128,7 +128,7 @@ class SB3Policy:
         """What the network sees at ``s``: the environment's observation, normalised (:func:`normalise`)."""
         return normalise(finite_observation(observation(self.domain, s, self._size)), self.mean, self.scale)
 
-    def decide(self, s: AugmentedState, rng: np.random.Generator) -> bool | int:
+    def decide(self, s: AugmentedState, rng: np.random.Generator | None) -> Decision:
         action = self.network.action(self.normalised(s))
         return action if self._levels else action == 1
 

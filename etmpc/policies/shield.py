@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from etmpc.control.timing import ITERATE
-from etmpc.loop import AugmentedState, Policy
+from etmpc.loop import AugmentedState, Decision, Policy, observes, simulates
 from etmpc.systems.capabilities import ShieldRule
 
 
@@ -44,8 +44,8 @@ class Shield:
     def __post_init__(self):
         self.spec = f"shield:{ShieldRule(self.max_age, self.margin).text}:{self.base.spec}"  # the rule, checked
         self.stochastic = self.base.stochastic
-        self.simulates = getattr(self.base, "simulates", False)
-        self.observes = getattr(self.base, "observes", True)
+        self.simulates = simulates(self.base)
+        self.observes = observes(self.base)
         self.overrides = 0  # decisions the shield turned from a keep into a recompute
 
     def unsafe(self, s: AugmentedState) -> bool:
@@ -54,7 +54,7 @@ class Shield:
             return True
         return self.margin is not None and float(self.margin_of(np.asarray(s.x))) < self.margin
 
-    def decide(self, s: AugmentedState, rng: np.random.Generator):
+    def decide(self, s: AugmentedState, rng: np.random.Generator | None) -> Decision:
         choice = self.base.decide(s, rng)
         if not choice and self.unsafe(s):  # a keep (False, or the level KEEP = 0) where keeping is not safe
             self.overrides += 1
