@@ -20,12 +20,15 @@ from gymnasium.envs.registration import EnvSpec
 
 from etmpc.common.errors import EtmpcError
 from etmpc.systems import spec
+from etmpc.systems.base import SystemBase
 
 
 @cache
 def episode_steps(task: str) -> int:
     """Task ``task``'s episode length: its System class's ``episode_steps``, as its suite entry declares it."""
-    steps = spec(task).system_class.episode_steps
+    cls = spec(task).system_class
+    assert issubclass(cls, SystemBase)  # every system subclasses SystemBase (tests/systems/test_systems.py)
+    steps = cls.episode_steps
     if isinstance(steps, bool) or not isinstance(steps, int) or steps < 1:
         raise EtmpcError(f"task {task}'s episode_steps is {steps!r}, not a whole number >= 1")
     return steps

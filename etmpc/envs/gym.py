@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import os
 import sys
+from types import FrameType
 from collections.abc import Mapping
 
 import gymnasium
@@ -60,9 +61,11 @@ def _maker_level() -> int:
     """The ``stacklevel`` at which :func:`~etmpc.common.checks.renamed`, called by ``TriggerEnv.__init__``,
     names the line that made the environment: past gymnasium's own frames (``gymnasium.make``), so that the
     warning shows where Python shows a ``DeprecationWarning``, in the user's code."""
-    level, frame = 3, sys._getframe(2)  # 3: renamed -> __init__ -> its caller; frame 2: __init__'s caller
+    level = 3  # renamed -> __init__ -> its caller
+    frame: FrameType | None = sys._getframe(2)  # __init__'s caller
     while frame is not None and frame.f_globals.get("__name__", "").startswith("gymnasium"):
-        level, frame = level + 1, frame.f_back
+        level += 1
+        frame = frame.f_back
     return level
 
 

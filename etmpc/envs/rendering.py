@@ -25,8 +25,8 @@ import warnings
 
 import numpy as np
 
-from etmpc.common.display import check_display, render
 from etmpc.common.checks import BadType, BadValue
+from etmpc.common.display import check_display, render
 from etmpc.common.errors import EtmpcError
 from etmpc.common.wording import unit_label
 

@@ -62,6 +62,7 @@ from etmpc.policies.sb3_network import (  # noqa: F401 (re-exported: what reads 
     pickled_globals,
 )
 from etmpc.systems import canonical, has_levels, system_class
+from etmpc.systems.base import SystemBase
 
 FORMAT = "etmpc-sb3-policy"
 CLIP = 10.0  # VecNormalize's clip_obs
@@ -111,7 +112,9 @@ class SB3Policy:
         self.path, self.task, self.network = Path(path), task, network
         self.mean = None if mean is None else np.asarray(mean, float)
         self.scale = None if var is None else np.sqrt(np.asarray(var, float) + EPSILON)
-        self.domain = system_class(task).name
+        cls = system_class(task)
+        assert issubclass(cls, SystemBase)  # every system subclasses SystemBase (tests/systems/test_systems.py)
+        self.domain = cls.name
         self._size = (network.hidden[0][0] if network.hidden else network.head[0]).shape[1]
         self._levels = network.actions == 3  # keep, one SQP iteration, a full solve: the level is the answer
 
@@ -147,6 +150,7 @@ def read_description(meta_file: Path, task: str | None, trained: str, missing: s
     try:
         trained_on = canonical(str(meta["task"]))
         cls = system_class(trained_on)
+        assert issubclass(cls, SystemBase)  # every system subclasses SystemBase (tests/systems/test_systems.py)
         # finite numbers, a variance >= 0 (checks.json_numbers: an integer beyond a double is refused, not an OverflowError)
         mean = checks.json_numbers(meta["observation_mean"], "observation_mean")
         var = checks.json_numbers(meta["observation_var"], "observation_var", smallest=0.0)
@@ -198,5 +202,6 @@ def _raw(model: Path, task: str, missing: str) -> SB3Policy:
             f"{str(metadata_path(model))!r})"
         )
     cls = system_class(task)
+    assert issubclass(cls, SystemBase)  # every system subclasses SystemBase (tests/systems/test_systems.py)
     size = len(observation_names(cls.name, cls.state_names))
     return SB3Policy(model, task, None, None, open_network(model, "ppo", size, task_actions(task), task))
