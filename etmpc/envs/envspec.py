@@ -20,12 +20,13 @@ from gymnasium.envs.registration import EnvSpec
 
 from etmpc.common.errors import EtmpcError
 from etmpc.systems import spec
-from etmpc.systems.base import SystemBase
 
 
 @cache
 def episode_steps(task: str) -> int:
     """Task ``task``'s episode length: its System class's ``episode_steps``, as its suite entry declares it."""
+    from etmpc.systems.base import SystemBase  # here: importing etmpc loads no CasADi (tests/envs)
+
     cls = spec(task).system_class
     assert issubclass(cls, SystemBase)  # every system subclasses SystemBase (tests/systems/test_systems.py)
     steps = cls.episode_steps
@@ -37,6 +38,10 @@ def episode_steps(task: str) -> int:
 class TaskEnvSpec(EnvSpec):
     """An ``EnvSpec`` whose ``max_episode_steps``, when none is given, is the episode length of the task
     its environment plays (``kwargs["task"]`` when registered), read when first asked."""
+
+    _steps: int | None  # max_episode_steps as given (None: none given, or not read yet)
+    _given: bool  # _steps holds the answer: given, or read off the task
+    _task: str | None  # the task its environment plays (kwargs["task"])
 
     def __post_init__(self) -> None:
         super().__post_init__()

@@ -126,8 +126,7 @@ class TriggerEnv(gymnasium.Env):
         if options:
             raise BadValue(f"unknown reset options {sorted(options)}; known: test_episode")
         timestep = self.core.reset(test_episode=test_episode)
-        if self._window is not None:
-            self._window.show(self._frames.frame(self.core))
+        self._show()
         return self._observed(timestep.observation)
 
     def step(self, action):
@@ -137,9 +136,14 @@ class TriggerEnv(gymnasium.Env):
         terminated = timestep.last() and timestep.discount == 0.0
         truncated = timestep.last() and not terminated
         obs, info = self._observed(timestep.observation)
-        if self._window is not None:
-            self._window.show(self._frames.frame(self.core))
+        self._show()
         return obs, float(timestep.reward), terminated, truncated, info
+
+    def _show(self) -> None:
+        """Draw the step in the window, with ``render_mode="human"`` (which makes the window and its frames)."""
+        if self._window is not None:
+            assert self._frames is not None  # made with the window
+            self._window.show(self._frames.frame(self.core))
 
     def render(self):
         """The current step drawn: an RGB frame, uint8 ``(height, width, 3)``, with ``render_mode="rgb_array"``;
@@ -152,6 +156,7 @@ class TriggerEnv(gymnasium.Env):
             return None
         if self.core.episode is None:
             raise RuntimeError("nothing to draw before the first reset(): call reset()")
+        assert self._frames is not None  # made with any render mode
         frame = self._frames.frame(self.core)
         if self._window is None:
             return frame
