@@ -51,7 +51,7 @@ def q_values(
     memo: OracleMemo | None = None,
     failure_cost: float = 0.0,
     from_belief: bool = True,
-) -> tuple[np.ndarray, np.ndarray]:
+) -> np.ndarray:
     """Returns of each answer at ``context``'s decision, one row per answer and one column per future
     (paired): keeping and recomputing, or, on a task with compute levels, keeping, one SQP iteration
     and a full solve (:func:`answers`).
@@ -99,6 +99,7 @@ def q_values(
                 system, twin, snapshot, base, base_rng, first, episode, solved, stop, trace, failure_cost, start
             )
             if memo is not None:
+                assert trace is not None  # made where there is a memo
                 memo.played(int(first), trace, returns[index, k])
     return returns
 

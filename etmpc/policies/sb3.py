@@ -74,7 +74,9 @@ def finite_observation(obs: np.ndarray) -> np.ndarray:
     the float32 range, NaN as 0 (unchanged, the same array, when all are finite)."""
     if np.isfinite(obs.sum()):
         return obs
-    return np.nan_to_num(obs, nan=0.0, posinf=np.finfo(np.float32).max, neginf=np.finfo(np.float32).min)
+    # float32's range as Python floats (exactly: every float32 is a double), as numpy's stubs type the bounds
+    largest = float(np.finfo(np.float32).max)
+    return np.nan_to_num(obs, nan=0.0, posinf=largest, neginf=-largest)
 
 
 def normalise(obs: np.ndarray, mean: np.ndarray | None, scale: np.ndarray | None) -> np.ndarray:

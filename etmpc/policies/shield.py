@@ -21,6 +21,7 @@ training-distribution episodes (``scripts/shields.py``), never the test set; ``s
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -38,7 +39,7 @@ class Shield:
     base: Policy
     max_age: int
     margin: float | None = None
-    margin_of: object = None  # the task's safety_margin, (x) -> float; needed when margin is set
+    margin_of: Callable[[np.ndarray], float] | None = None  # the task's safety_margin; needed when margin is set
     levels: bool = False  # the task's decisions are compute levels: force one SQP iteration
 
     def __post_init__(self):
@@ -52,7 +53,10 @@ class Shield:
         """Whether keeping is not left to the base at ``s``."""
         if s.age >= self.max_age:
             return True
-        return self.margin is not None and float(self.margin_of(np.asarray(s.x))) < self.margin
+        if self.margin is None:
+            return False
+        assert self.margin_of is not None  # given with a margin (shield: refuses a margin on a task without one)
+        return float(self.margin_of(np.asarray(s.x))) < self.margin
 
     def decide(self, s: AugmentedState, rng: np.random.Generator | None) -> Decision:
         choice = self.base.decide(s, rng)

@@ -154,6 +154,8 @@ def load_user(spec: str, levels: bool | None = None) -> Policy:
     if factory is _MISSING:
         raise EtmpcError(f"policy {spec}: {module_name} has no {name}")
     with users_code(f"policy {spec}: {name}()"):
-        is_factory = isinstance(factory, type) or (callable(factory) and not callable(getattr(factory, "decide", None)))
-        policy = factory() if is_factory else factory
+        if isinstance(factory, type) or (callable(factory) and not callable(getattr(factory, "decide", None))):
+            policy = factory()  # a class or a function that makes the policy
+        else:
+            policy = factory
     return checked(policy, spec, levels)
