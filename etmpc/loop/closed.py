@@ -16,8 +16,8 @@ from etmpc.common.frozen import readonly
 from etmpc.control.plan import Plan
 from etmpc.control.timing import ANSWERS, KEEP, SOLVE, level_of
 from etmpc.loop.flight import Flight
-from etmpc.loop.modes import LIGHT, RECORDING, cpu_clock
-from etmpc.loop.records import Trajectory, computation_cost
+from etmpc.loop.modes import LIGHT, RECORDING, Kept, cpu_clock
+from etmpc.loop.records import computation_cost
 from etmpc.loop.sensed import Sensed
 from etmpc.loop.state import AugmentedState, Decision, DecisionContext, Snapshot
 from etmpc.systems.base import System
@@ -34,7 +34,7 @@ def _input(system: System, plan: Plan, age: int, x: np.ndarray) -> tuple[np.ndar
     return np.minimum(np.maximum(u_planned + correction, system.u_min), system.u_max), u_planned, correction, x_predicted
 
 
-class ClosedLoop:
+class ClosedLoop(Kept):
     """Algorithm 1, one control interval at a time: an episode in play, and its step. The only place
     a control interval is played.
 
@@ -67,17 +67,6 @@ class ClosedLoop:
     sensor, else the filter's estimate (:attr:`belief`'s mean) after this step's reading. The MPC plans from
     :attr:`seen`, the feedback corrects from it, and the policy is shown it (:attr:`sensed`, :mod:`etmpc.loop.sensed`).
     """
-
-    # What the mode (etmpc.loop.modes) sets at an episode's start, a snapshot's resume and every step:
-    x: np.ndarray  # the plant's state now
-    timestep: dm_env.TimeStep | None  # the recording mode's last TimeStep; None in the light mode
-    trajectory: Trajectory  # the recording mode's record of the episode (a light loop keeps none)
-    _observation: Mapping | None  # the light mode's observation now, made when first read (None: not yet)
-    # The controller's memory (_restart): the plan in force (None before the first), its age, the last input.
-    plan: Plan | None
-    age: int
-    u_prev: np.ndarray
-    step_index: int
 
     def __init__(self, system: System, env: dm_env.Environment, records: bool = True):
         self.system = system
@@ -159,8 +148,7 @@ class ClosedLoop:
 
     @property
     def seen(self) -> np.ndarray | None:
-        """What the controller reads of the state now: :attr:`x`, or the filter's estimate (:mod:`etmpc.loop.sensed`);
-        None before the episode's start."""
+        """What the controller reads of the state now: :attr:`x`, or the filter's estimate (None before a reset)."""
         return self.sensed.seen
 
     @property
