@@ -97,7 +97,9 @@ def task_actions(task: str) -> int:
 def plays_on(trained_on: str, task: str) -> bool:
     """Whether a model trained on ``trained_on`` plays on ``task`` (both canonical): the same task, or one
     that plays its world with time in the loop (``task``'s system names it as its ``variant_of``)."""
-    variant = getattr(system_class(task), "variant_of", None)
+    cls = system_class(task)
+    assert issubclass(cls, SystemBase)  # every system subclasses SystemBase (tests/systems/test_systems.py)
+    variant = cls.variant_of
     return trained_on == task or (variant is not None and canonical(variant) == trained_on)
 
 
