@@ -6,7 +6,7 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 export MUJOCO_GL ?= egl
 
-.PHONY: reproduce sweep leaderboard evaluate example test docs dist setup clean
+.PHONY: reproduce sweep leaderboard evaluate example test types docs dist setup clean
 
 setup: $(VENV)/.installed
 
@@ -51,6 +51,11 @@ example: setup
 
 test: setup
 	$(BIN)/python -m pytest -q
+
+# The type checker alone: mypy over etmpc/ with pyproject.toml's [tool.mypy] (`make test` runs it too,
+# tests/end_to_end/test_types.py, and requires zero errors).
+types: setup
+	$(BIN)/python -m mypy
 
 # The documentation site into site/ (mkdocs.yml; strict: a broken link or anchor fails it). `make test`
 # builds it too (tests/end_to_end/test_docs.py); `$(BIN)/mkdocs serve` shows it while you write.

@@ -74,7 +74,7 @@ def price(value: Any) -> float:
     """A price of a recompute: a finite number >= 0."""
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
         raise BadValue(f"{value!r} is not a number")
-    if not (math.isfinite(value) and value >= 0):
+    if not (math.isfinite(value) and not value < 0):  # not below 0: typeshed's numbers.Real declares < and <=, not >=
         raise BadValue(f"a price of a recompute is a finite number >= 0, got {value}")
     return float(value)
 
@@ -162,7 +162,8 @@ def _conforms(value: Any, hint: Any, finite: bool, most: int | None) -> bool:
     if hint is bool:
         return isinstance(value, bool)
     if hint is int:
-        return isinstance(value, numbers.Integral) and not isinstance(value, bool) and (most is None or abs(value) <= most)
+        whole = isinstance(value, numbers.Integral) and not isinstance(value, bool)
+        return whole and (most is None or abs(value) <= most)
     if hint is float:  # an integer beyond a double is not finite (math.isfinite would raise OverflowError)
         real = isinstance(value, numbers.Real) and not isinstance(value, bool)
         whole_number = isinstance(value, numbers.Integral)
@@ -211,8 +212,10 @@ def typed(record: Any, finite: bool = False, most: int | None = None) -> None:
     annotated type (a bool is not a number; with ``finite``, a float is finite; with ``most``, a whole number
     is within ``-most..most``): the one check of settings and of records read from files, so that text where
     a number goes, a list where an object goes or a count past any C integer is one line, before any work."""
+    kind: type = type(record)  # a class, hashable: the key of _hints' cache (mypy takes type[Any] for unhashable)
     for field in dataclasses.fields(record):
-        hint, value = _hints(type(record))[field.name], getattr(record, field.name)
+        hint = _hints(kind)[field.name]
+        value = getattr(record, field.name)
         if not _conforms(value, hint, finite, most):
             raise BadValue(f"{field.name} must be {_spelled(hint, finite, most)}, got {_shown(value)}")
 

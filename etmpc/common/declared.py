@@ -76,9 +76,21 @@ class Declared:
 
     def _bounds(self) -> str:
         """``in [0, 1)``, ``in 1..100`` for whole numbers (written by :meth:`describe`)."""
-        left = ("[", self.low) if self.low is not None else ("(", self.above)
-        right = ("]", self.high) if self.high is not None else (")", self.below)
-        return f"in {left[0]}{_number(left[1])}, {_number(right[1])}{right[0]}"
+        left = "[" if self.low is not None else "("
+        right = "]" if self.high is not None else ")"
+        return f"in {left}{_number(self._lower())}, {_number(self._upper())}{right}"
+
+    def _lower(self) -> float:
+        """The lower bound, inclusive (``low``) or not (``above``): a number has one (checked by :func:`setting`)."""
+        bound = self.low if self.low is not None else self.above
+        assert bound is not None, "a number needs a lower bound"
+        return bound
+
+    def _upper(self) -> float:
+        """The upper bound, inclusive (``high``) or not (``below``): a number has one (checked by :func:`setting`)."""
+        bound = self.high if self.high is not None else self.below
+        assert bound is not None, "a number needs an upper bound"
+        return bound
 
     def describe(self, kind: Any) -> str:
         """What the setting may be, in words: ``a whole number in 1..100``, ``one of qrqp, osqp``."""
@@ -91,8 +103,8 @@ class Declared:
         elif self.label:
             word = f"a label of at most {MAX_LABEL} characters"
         elif scalar is int:
-            low = self.low if self.low is not None else self.above + 1
-            high = self.high if self.high is not None else self.below - 1
+            low = self.low if self.low is not None else self._lower() + 1
+            high = self.high if self.high is not None else self._upper() - 1
             word = f"a whole number in {short(int(low))}..{'2**63-1' if high == 2**63 - 1 else short(int(high))}"
         else:
             word = f"a number {self._bounds()}"
@@ -143,7 +155,8 @@ class Declared:
             raise BadType(wrong)
         if kind is int and not isinstance(value, numbers.Integral):
             raise BadType(wrong)
-        if not (math.isfinite(value) and self._in_range(value)):
+        # typeshed's numbers stubs are incomplete (its note says so): a checker sees no Real as a float, which it is here
+        if not (math.isfinite(value) and self._in_range(value)):  # type: ignore[arg-type]
             raise BadValue(wrong)
         if type(value) in (int, float):
             return value
@@ -235,7 +248,8 @@ def check_per_state(name: str, declared: Declared, value: Any, states: int) -> N
 def check_fields(settings: Any, prefix: str = "") -> None:
     """Check every declared field of the (frozen) dataclass ``settings`` (not those within it), naming each
     ``PREFIX + field``, and hold each as Python's own types (:meth:`Declared.check`)."""
-    for name, (declared, kind) in declarations(type(settings)).items():
+    cls: type = type(settings)  # a class, hashable: the key of declarations' cache (mypy takes type[Any] for unhashable)
+    for name, (declared, kind) in declarations(cls).items():
         value = getattr(settings, name)
         held = declared.check(f"{prefix}{name}", kind, value)
         if held is not value:  # a NumPy number, a list: held as Python's own, the equal value

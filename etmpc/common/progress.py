@@ -38,7 +38,7 @@ import sys
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from contextvars import ContextVar
+from contextvars import ContextVar, Token
 
 FIRST_LINE_AFTER = 10.0  # seconds of work before the first line: an estimate from less is noise
 EVERY = 30.0  # seconds between lines, at the least
@@ -146,7 +146,7 @@ class Progress:
                 file=self._stream,
                 leave=False,
             )
-        self._token = None
+        self._token: Token[Progress | None] | None = None  # set by __enter__ of the outermost bar
 
     def __enter__(self) -> Progress:
         if _OPEN.get() is None:

@@ -25,7 +25,11 @@ from etmpc.systems import spec
 @cache
 def episode_steps(task: str) -> int:
     """Task ``task``'s episode length: its System class's ``episode_steps``, as its suite entry declares it."""
-    steps = spec(task).system_class.episode_steps
+    from etmpc.systems.base import SystemBase  # here: importing etmpc loads no CasADi (tests/envs)
+
+    cls = spec(task).system_class
+    assert issubclass(cls, SystemBase)  # every system subclasses SystemBase (tests/systems/test_systems.py)
+    steps = cls.episode_steps
     if isinstance(steps, bool) or not isinstance(steps, int) or steps < 1:
         raise EtmpcError(f"task {task}'s episode_steps is {steps!r}, not a whole number >= 1")
     return steps
@@ -34,6 +38,10 @@ def episode_steps(task: str) -> int:
 class TaskEnvSpec(EnvSpec):
     """An ``EnvSpec`` whose ``max_episode_steps``, when none is given, is the episode length of the task
     its environment plays (``kwargs["task"]`` when registered), read when first asked."""
+
+    _steps: int | None  # max_episode_steps as given (None: none given, or not read yet)
+    _given: bool  # _steps holds the answer: given, or read off the task
+    _task: str | None  # the task its environment plays (kwargs["task"])
 
     def __post_init__(self) -> None:
         super().__post_init__()

@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import os
 import sys
+from types import FrameType
 from collections.abc import Mapping
 
 import gymnasium
@@ -60,9 +61,11 @@ def _maker_level() -> int:
     """The ``stacklevel`` at which :func:`~etmpc.common.checks.renamed`, called by ``TriggerEnv.__init__``,
     names the line that made the environment: past gymnasium's own frames (``gymnasium.make``), so that the
     warning shows where Python shows a ``DeprecationWarning``, in the user's code."""
-    level, frame = 3, sys._getframe(2)  # 3: renamed -> __init__ -> its caller; frame 2: __init__'s caller
+    level = 3  # renamed -> __init__ -> its caller
+    frame: FrameType | None = sys._getframe(2)  # __init__'s caller
     while frame is not None and frame.f_globals.get("__name__", "").startswith("gymnasium"):
-        level, frame = level + 1, frame.f_back
+        level += 1
+        frame = frame.f_back
     return level
 
 
@@ -123,8 +126,7 @@ class TriggerEnv(gymnasium.Env):
         if options:
             raise BadValue(f"unknown reset options {sorted(options)}; known: test_episode")
         timestep = self.core.reset(test_episode=test_episode)
-        if self._window is not None:
-            self._window.show(self._frames.frame(self.core))
+        self._show()
         return self._observed(timestep.observation)
 
     def step(self, action):
@@ -134,9 +136,14 @@ class TriggerEnv(gymnasium.Env):
         terminated = timestep.last() and timestep.discount == 0.0
         truncated = timestep.last() and not terminated
         obs, info = self._observed(timestep.observation)
-        if self._window is not None:
-            self._window.show(self._frames.frame(self.core))
+        self._show()
         return obs, float(timestep.reward), terminated, truncated, info
+
+    def _show(self) -> None:
+        """Draw the step in the window, with ``render_mode="human"`` (which makes the window and its frames)."""
+        if self._window is not None:
+            assert self._frames is not None  # made with the window
+            self._window.show(self._frames.frame(self.core))
 
     def render(self):
         """The current step drawn: an RGB frame, uint8 ``(height, width, 3)``, with ``render_mode="rgb_array"``;
@@ -149,6 +156,7 @@ class TriggerEnv(gymnasium.Env):
             return None
         if self.core.episode is None:
             raise RuntimeError("nothing to draw before the first reset(): call reset()")
+        assert self._frames is not None  # made with any render mode
         frame = self._frames.frame(self.core)
         if self._window is None:
             return frame

@@ -23,12 +23,20 @@ import sys
 import time
 import warnings
 
+from typing import TYPE_CHECKING, Any
+
 import numpy as np
 
-from etmpc.common.display import check_display, render
 from etmpc.common.checks import BadType, BadValue
+from etmpc.common.display import check_display, render
 from etmpc.common.errors import EtmpcError
 from etmpc.common.wording import unit_label
+
+if TYPE_CHECKING:  # imported where first drawn, not when etmpc.envs is
+    import tkinter
+
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from PIL import ImageTk
 
 RENDER_MODES = ("rgb_array", "human")
 HUMAN_MIN_FPS = 10.0  # "human" shows a task whose control interval is longer than 0.1 s faster than real time
@@ -86,7 +94,8 @@ class SceneFrames:
                 f"({limits.offwidth}x{limits.offheight}, <global offwidth offheight> in its model file)"
             )
         self.camera, self.width, self.height = camera, width, height
-        self._scene = None  # a copy of the plant's physics, sharing its model: made at the first frame
+        # a copy of the plant's physics (dm_control's, untyped), sharing its model: made at the first frame
+        self._scene: Any = None
 
     def frame(self, core) -> np.ndarray:
         import mujoco
@@ -124,7 +133,7 @@ class ChartFrames:
 
     def __init__(self, system, width: int, height: int):
         self.system, self.width, self.height = system, width, height
-        self._canvas = None
+        self._canvas: FigureCanvasAgg | None = None  # made at the first frame (_build)
         self._signals: tuple[object, dict] = (None, {})
 
     def _build(self, signals: dict) -> None:
@@ -165,6 +174,8 @@ class ChartFrames:
         signals = self._signals[1]
         if self._canvas is None:
             self._build(signals)
+        canvas = self._canvas
+        assert canvas is not None  # made by _build
         traj, k, plan = loop.trajectory, loop.step_index, loop.plan
         computed = np.flatnonzero(traj.recompute[:k])
         ticks_x = np.repeat(computed, 3).astype(float)
@@ -195,8 +206,8 @@ class ChartFrames:
         self._title.set_text(f"{system.name}: step {k} of {system.episode_steps}, {made}")
         with warnings.catch_warnings():  # a frame too small for the panels' labels is drawn without the layout
             warnings.filterwarnings("ignore", "constrained_layout not applied", UserWarning)
-            self._canvas.draw()
-        return np.asarray(self._canvas.buffer_rgba())[..., :3].copy()
+            canvas.draw()
+        return np.asarray(canvas.buffer_rgba())[..., :3].copy()
 
     def close(self) -> None:
         self._canvas = None
@@ -208,7 +219,9 @@ class Window:
 
     def __init__(self, title: str, fps: float):
         self.title, self.period = title, 1.0 / max(fps, HUMAN_MIN_FPS)
-        self._root = self._label = self._image = None
+        self._root: tkinter.Tk | None = None  # the window, made at the first frame shown
+        self._label: tkinter.Label | None = None  # the frame's place in it
+        self._image: ImageTk.PhotoImage | None = None  # the frame shown (kept: Tk does not hold it)
         self._dismissed, self._due = False, 0.0
 
     def show(self, frame: np.ndarray) -> None:
@@ -227,6 +240,7 @@ class Window:
             self._root.protocol("WM_DELETE_WINDOW", self._dismiss)
             self._label = tkinter.Label(self._root)
             self._label.pack()
+        assert self._label is not None  # made with the window
         wait = self._due - time.monotonic()
         if wait > 0:
             time.sleep(wait)

@@ -45,6 +45,7 @@ from __future__ import annotations
 import math
 import numbers
 import os
+from pathlib import Path
 from typing import Any
 
 import dm_env
@@ -125,7 +126,7 @@ def not_picklable(env) -> TypeError:
 
 def checked_failure_cost(value, system) -> float:
     """``failure_cost`` as a float: a finite number >= 0; above 0 only on a task that counts failures."""
-    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not (math.isfinite(value) and value >= 0):
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not (math.isfinite(value) and not value < 0):
         raise EtmpcError(f"failure_cost must be a finite number >= 0, got {value!r}")
     if value and system.failures is None:
         raise EtmpcError(f"failure_cost: task {system.name} counts no failures, so none can cost")
@@ -176,7 +177,7 @@ class TriggerEnvironment(dm_env.Environment):
         self._size = len(self.observation_names)
         self._rng = np.random.default_rng(seed)
         self._test_set_path = test_set
-        self._test_set = None
+        self._test_set: testsets.TestSet | None = None
         self.info: dict = {}
         self._episode = None  # the episode being played
         self.reward_baseline = None if reward_baseline is None else fixed_schedule(reward_baseline, self.system)
@@ -246,9 +247,12 @@ class TriggerEnvironment(dm_env.Environment):
     def _baseline_step(self) -> float:
         """One interval of the baseline's loop (its reward net of its recomputes; 0 once it is over)."""
         shadow = self._shadow
+        baseline = self.reward_baseline
+        assert shadow is not None and baseline is not None  # step plays it only where a baseline was given
         if shadow.done:
             return 0.0
-        recompute = shadow.forced or self.reward_baseline.decide(shadow.observed_state(), None)
+        s = None if shadow.forced else shadow.observed_state()  # not forced: a plan is in force, so s is shown
+        recompute = s is None or baseline.decide(s, None)
         self.simulated_steps += 1
         reward = shadow.step(recompute)
         if self.failure_cost:
@@ -288,7 +292,7 @@ class TriggerEnvironment(dm_env.Environment):
         if self._test_set is None:
             testsets.check_options_act(self.key, self._test_set_path)  # its training episodes are drawn: they feel them
             path = self._test_set_path or testsets.default_path(self.system.domain, self.system.task)
-            test_set = testsets.load(path, self.system.domain, self.system.task)
+            test_set = testsets.load(Path(path), self.system.domain, self.system.task)
             test_set.check_playable(self.system, self.loop.env.task)  # a bad episode is refused here, named
             self._test_set = test_set
         return self.system.episode_from_arrays(self._test_set.episode_arrays(check_index(index, "the index")))

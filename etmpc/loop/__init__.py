@@ -14,7 +14,9 @@ not asked meanwhile, and a decision may be one SQP iteration instead of a full s
 iterations. Latency 0 is the loop above, bit for bit.
 
 A system plugs in by providing what :class:`etmpc.systems.base.System` lists; a policy by providing
-what :class:`Policy` lists, deciding from an :class:`AugmentedState`. Nothing here knows about MuJoCo,
+what :class:`Policy` lists, deciding from an :class:`AugmentedState` (a :data:`Decision`), and
+declaring what else it is, if anything (:class:`Simulates`, :class:`Observes`, :class:`Announces`,
+:class:`Clairvoyant`; :func:`simulates` and its siblings read them). Nothing here knows about MuJoCo,
 batteries or any particular policy.
 
 This module may import ``etmpc.common``, ``etmpc.control`` and ``etmpc.systems``.
@@ -35,17 +37,42 @@ the state (:mod:`etmpc.loop.sensed`) are its other collaborators.
 from etmpc.loop.closed import ClosedLoop
 from etmpc.loop.play import play_on, run_episode
 from etmpc.loop.records import Continuation, Trajectory, computation_cost
-from etmpc.loop.state import AugmentedState, DecisionContext, Policy, Snapshot
+from etmpc.loop.state import (
+    Announces,
+    AugmentedState,
+    Clairvoyant,
+    Decision,
+    DecisionContext,
+    Observes,
+    Policy,
+    Simulates,
+    Snapshot,
+    announcer,
+    clairvoyant,
+    drawing,
+    observes,
+    simulates,
+)
 
 __all__ = [
+    "Announces",
     "AugmentedState",
+    "Clairvoyant",
     "ClosedLoop",
     "Continuation",
+    "Decision",
     "DecisionContext",
+    "Observes",
     "Policy",
+    "Simulates",
     "Snapshot",
     "Trajectory",
+    "announcer",
+    "clairvoyant",
     "computation_cost",
+    "drawing",
+    "observes",
     "play_on",
     "run_episode",
+    "simulates",
 ]

@@ -16,10 +16,10 @@ from etmpc.common.frozen import readonly
 from etmpc.control.plan import Plan
 from etmpc.control.timing import ANSWERS, KEEP, SOLVE, level_of
 from etmpc.loop.flight import Flight
-from etmpc.loop.modes import LIGHT, RECORDING, cpu_clock
+from etmpc.loop.modes import LIGHT, RECORDING, Kept, cpu_clock
 from etmpc.loop.records import computation_cost
 from etmpc.loop.sensed import Sensed
-from etmpc.loop.state import AugmentedState, DecisionContext, Snapshot
+from etmpc.loop.state import AugmentedState, Decision, DecisionContext, Snapshot
 from etmpc.systems.base import System
 
 __all__ = ["ClosedLoop", "cpu_clock"]  # cpu_clock: the clock of the trajectory's timings (etmpc.loop.modes)
@@ -34,7 +34,7 @@ def _input(system: System, plan: Plan, age: int, x: np.ndarray) -> tuple[np.ndar
     return np.minimum(np.maximum(u_planned + correction, system.u_min), system.u_max), u_planned, correction, x_predicted
 
 
-class ClosedLoop:
+class ClosedLoop(Kept):
     """Algorithm 1, one control interval at a time: an episode in play, and its step. The only place
     a control interval is played.
 
@@ -147,8 +147,8 @@ class ClosedLoop:
         return self.sensed.estimator
 
     @property
-    def seen(self) -> np.ndarray:
-        """What the controller reads of the state now: :attr:`x`, or the filter's estimate (:mod:`etmpc.loop.sensed`)."""
+    def seen(self) -> np.ndarray | None:
+        """What the controller reads of the state now: :attr:`x`, or the filter's estimate (None before a reset)."""
         return self.sensed.seen
 
     @property
@@ -177,12 +177,14 @@ class ClosedLoop:
         plan = self.plan
         age = self.age
         belief = self.sensed.belief
+        seen = self.sensed.seen
+        assert seen is not None  # read at the episode's start (reset, resume), as the plan was made
         loop = (self.system, self.env, self.step_index, plan, age, self.u_prev, self.timestep, belief)
         ctx = DecisionContext(*loop) if context else None
         shown = self.observation if observes else None
-        return AugmentedState(self.sensed.seen, plan.states[0], age, plan.state_at(age), plan, shown, ctx, belief)
+        return AugmentedState(seen, plan.states[0], age, plan.state_at(age), plan, shown, ctx, belief)
 
-    def step(self, recompute: bool | int, started: float | None = None, solved: Plan | None = None) -> float:
+    def step(self, recompute: Decision, started: float | None = None, solved: Plan | None = None) -> float:
         """Play this control interval: compute a new plan if ``recompute`` (or if forced; on a task
         with compute levels ``recompute`` is the level), apply the plan in force's input plus the LQR
         correction, clipped, and step the plant. Returns the policy's reward for it: the task's
@@ -204,8 +206,10 @@ class ClosedLoop:
         work = 0 if level == KEEP else self._recompute(level, i, forced, solved)
         # feedback: the plan in force's input plus the LQR correction, clipped
         plan = self.plan
+        seen = self.sensed.seen
+        assert plan is not None and seen is not None  # the episode's first decision is forced: a plan is in force
         feedback_start = mode.tick()
-        u, u_planned, correction, x_predicted = _input(self.system, plan, self.age, self.sensed.seen)
+        u, u_planned, correction, x_predicted = _input(self.system, plan, self.age, seen)
         mode.fed(self, i, feedback_start)
         # advance the plant (a non-finite input as a diverged plant)
         recomputed = level != KEEP
@@ -252,7 +256,7 @@ class ClosedLoop:
             _, made, arrived, started = landed
             self._deliver(arrived, made, self.age >= plan.horizon, self.step_index, started)
 
-    def _level(self, answer) -> int:
+    def _level(self, answer: Decision) -> int:
         """A decision as a compute level (:func:`~etmpc.control.timing.level_of`): on a task with levels,
         ``KEEP``/``ITERATE``/``SOLVE`` (a bool is keep or a full solve); elsewhere a bool, 0 or 1. Any other
         answer is refused, naming the task: read by its truth, 2 was a full solve on a keep-or-solve task."""
@@ -276,8 +280,11 @@ class ClosedLoop:
         for when it will arrive): a full solve or one SQP iteration; timed and a failure counted when
         recording."""
         warm = self.plan
-        x, u_prev, age = self.flight.solve_from(self.sensed.seen, self.u_prev, warm, self.age)
+        seen = self.sensed.seen
+        assert seen is not None  # read at the episode's start (reset, resume)
+        x, u_prev, age = self.flight.solve_from(seen, self.u_prev, warm, self.age)
         solver = self.system.plan if level == SOLVE else self.system.iterate
+        assert solver is not None  # ITERATE is a level only on a task with compute levels, which offers iterate
         return self.mode.solve(self, solver, x, u_prev, warm, age, i)
 
     def _sense(self, u: np.ndarray | None) -> None:

@@ -55,14 +55,16 @@ class Flight:
         """A solve started now is made from the state predicted for when it arrives (delay compensation)."""
         return self.latency.compensate and self.latency.intervals > 0 and not self.instant and plan is not None
 
-    def solve_from(self, x: np.ndarray, u_prev: np.ndarray, plan: Plan | None, age: int) -> tuple:
+    def solve_from(self, x: np.ndarray, u_prev: np.ndarray, plan: Plan | None, age: int) -> tuple[np.ndarray, np.ndarray, int]:
         """``(x, u_prev, age)`` a new plan is made from: those now, or, delay-compensated, those the kept
         ``plan`` predicts for when the new one arrives (its predictor under the kept plan's inputs)."""
-        if not self.compensates(plan):
+        if plan is None or not self.compensates(plan):
             return x, u_prev, age
+        predict = self.system.predict
+        assert predict is not None  # a task with a latency offers TimeInTheLoop (the registry requires it)
         intervals = self.latency.intervals
         ahead = np.array([plan.input_at(age + j) for j in range(intervals)])
-        return readonly(self.system.predict(x, ahead)[-1]), readonly(ahead[-1]), age + intervals
+        return readonly(predict(x, ahead)[-1]), readonly(ahead[-1]), age + intervals
 
     def start(self, new: Plan, i: int, plan: Plan | None) -> bool:
         """A recompute started at step ``i`` (with ``plan`` in force) gave ``new``: True if it is in force now

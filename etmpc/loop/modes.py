@@ -41,6 +41,16 @@ def _shown(timestep: dm_env.TimeStep) -> dm_env.TimeStep:
     return dm_env.TimeStep(timestep.step_type, timestep.reward, timestep.discount, frozen(timestep.observation))
 
 
+class Kept:
+    """What a mode sets on the loop it plays (:class:`~etmpc.loop.closed.ClosedLoop` is one), at an episode's
+    start, a snapshot's resume and every step: the loop keeps it, the mode writes it."""
+
+    x: np.ndarray  # the plant's state now
+    timestep: dm_env.TimeStep | None  # the recording mode's last TimeStep; None in the light mode
+    trajectory: Trajectory  # the recording mode's record of the episode (a light loop keeps none)
+    _observation: Mapping | None  # the light mode's observation now, made when first read (None: not yet)
+
+
 class Mode(Protocol):
     """What the loop asks of a mode; ``loop`` is the :class:`~etmpc.loop.closed.ClosedLoop` in play."""
 

@@ -15,7 +15,7 @@ from etmpc.common.progress import EpisodeSteps
 from etmpc.control.plan import Plan
 from etmpc.loop.closed import ClosedLoop, cpu_clock
 from etmpc.loop.records import Continuation, Trajectory
-from etmpc.loop.state import Policy, Snapshot
+from etmpc.loop.state import Policy, Snapshot, observes, simulates
 from etmpc.systems.base import System
 
 
@@ -24,11 +24,11 @@ def run_episode(
 ) -> Trajectory:
     """Play one episode (a stored one if given, else one drawn by the task) under ``policy``."""
     loop = ClosedLoop(system, env).reset(episode)
-    simulates = getattr(policy, "simulates", False)
+    shows_context = simulates(policy)  # a policy that simulates the loop is shown its whole state
     steps = EpisodeSteps(len(loop.trajectory.rewards))  # a long episode (a rollout's) says where it is, on stderr
     while not loop.done:
         started = cpu_clock()
-        s = loop.augmented_state(simulates)
+        s = loop.augmented_state(shows_context)
         answer = False if s is None else policy.decide(s, rng)  # a level on a task with compute levels
         if s is not None:
             loop.trajectory.decide_time_s[loop.step_index] = cpu_clock() - started
@@ -70,13 +70,14 @@ def play_on(
     """
     loop = ClosedLoop(system, env, records=False).resume(snapshot, episode, start)
     end = system.episode_steps if stop is None else min(stop, system.episode_steps)
-    observes = getattr(policy, "observes", True)  # the observation is made only when someone reads it
-    total, rewards = 0.0, [] if failure_cost else None  # a failure cost counts the play's failures from its rewards
+    observation = observes(policy)  # the observation is made only when someone reads it
+    total = 0.0
+    rewards: list[float] | None = [] if failure_cost else None  # a failure cost counts the play's failures from its rewards
     while loop.step_index < end:
         if loop.step_index == snapshot.step:
             added = loop.step(first, solved=first_plan)
         else:
-            s = loop.augmented_state(observes=observes)
+            s = loop.augmented_state(observes=observation)
             added = loop.step(False if s is None else policy.decide(s, rng))
         if loop.failed:
             return -math.inf
@@ -91,4 +92,8 @@ def play_on(
             trace.after.append((loop.x, loop.plan, loop.age, loop.u_prev, loop.pending, loop.belief))
     if end < system.episode_steps:
         total += system.truncation_value(loop.x)
-    return total - failure_cost * system.failures_in_rewards(np.array(rewards)) if failure_cost else total
+    if not failure_cost:
+        return total
+    failures = system.failures_in_rewards
+    assert failures is not None  # a failure cost needs RewardFailures (the rollout policy requires it)
+    return total - failure_cost * failures(np.array(rewards))

@@ -5,14 +5,17 @@ that played the episode and sent to the process that writes the file, such as
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field, is_dataclass
-from typing import Protocol, runtime_checkable
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
 from etmpc.common.numerics import norm
 from etmpc.control.plan import Plan
-from etmpc.systems.options import of as task_options, shown
+from etmpc.systems.base import System
+from etmpc.systems.options import of as task_options
+from etmpc.systems.options import shown
 
 
 def computation_cost(computations, price: float):
@@ -188,7 +191,9 @@ class EpisodeRecord:
         return len(self.rewards)
 
     @classmethod
-    def from_trajectory(cls, system, traj, identity: dict, episode, announce=None) -> EpisodeRecord:
+    def from_trajectory(
+        cls, system: System, traj: Trajectory, identity: dict, episode: Any, announce: Callable[[Plan], int] | None = None
+    ) -> EpisodeRecord:
         """``announce``: a self-triggering policy's ``announce(plan)``, to record what it announced
         at each solve (it is a function of the plan alone, so asking again gives the same answer)."""
         n = traj.steps
@@ -236,7 +241,7 @@ class EpisodeRecord:
             arrivals=tuple(int(a) for a in arrivals),
             starts=tuple(int(s) for s in _starts(traj, arrivals, shift)),
             timed=timed,
-            space=getattr(system, "space", None),
+            space=system.space,
         )
 
 

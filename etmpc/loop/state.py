@@ -3,9 +3,9 @@ the loop's state at a decision, for policies that simulate (:class:`DecisionCont
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Any, Protocol, TypeAlias, runtime_checkable
 
 import dm_env
 import numpy as np
@@ -37,13 +37,81 @@ class AugmentedState:
     belief: Any = None
 
 
-class Policy(Protocol):
-    spec: str
-    stochastic: bool
-    # Optional ``observes = False``: decide never reads ``s.observation`` (the fast path of
-    # etmpc.loop.play_on then skips making it). Without the attribute, a policy is assumed to read it.
+#: A policy's answer at a decision: keep (False) or recompute (True); on a task with compute levels
+#: (:mod:`etmpc.control.timing`), a level: ``KEEP`` (0), ``ITERATE`` (1, one SQP iteration) or ``SOLVE`` (2).
+#: numpy's bools and integers are answers alike (:func:`~etmpc.control.timing.level_of` reads every one).
+Decision: TypeAlias = bool | int | np.bool_ | np.integer
 
-    def decide(self, s: AugmentedState, rng: np.random.Generator) -> bool: ...
+
+class Policy(Protocol):
+    """What the loop asks of a policy: its spec, whether it draws from ``rng``, and its decision at ``s``.
+    ``rng`` is None where the caller gives none (a deterministic policy never reads it)."""
+
+    @property
+    def spec(self) -> str: ...
+    @property
+    def stochastic(self) -> bool: ...
+
+    def decide(self, s: AugmentedState, rng: np.random.Generator | None) -> Decision: ...
+
+
+def drawing(rng: np.random.Generator | None) -> np.random.Generator:
+    """``rng``, for a policy that draws from it: a stochastic policy is always played with a generator
+    (:mod:`etmpc.evaluation` seeds one per episode and pass); only a deterministic one may be given None."""
+    assert rng is not None, "a stochastic policy is played with a generator"
+    return rng
+
+
+# -- what a policy may declare beyond Policy: each a protocol, absent on most policies ----------------------
+@runtime_checkable
+class Simulates(Protocol):
+    """``simulates``: True if the policy simulates the loop (``rollout:``, the oracle): it is shown the loop's
+    whole state (:attr:`AugmentedState.context`). Without it, a policy is shown none."""
+
+    simulates: bool
+
+
+@runtime_checkable
+class Observes(Protocol):
+    """``observes``: False if ``decide`` never reads ``s.observation`` (the light mode of
+    :func:`~etmpc.loop.play.play_on` then skips making it). Without it, a policy is assumed to read it."""
+
+    observes: bool
+
+
+@runtime_checkable
+class Announces(Protocol):
+    """``announce(plan) -> steps``: a self-trigger's, what it announces at each solve: how many steps the plan
+    will be kept (recorded with the episode, :class:`~etmpc.loop.records.EpisodeRecord`)."""
+
+    def announce(self, plan: Plan) -> int: ...
+
+
+@runtime_checkable
+class Clairvoyant(Protocol):
+    """``clairvoyant``: True for an oracle, which knows each episode's future: a reference, not a policy."""
+
+    clairvoyant: bool
+
+
+def simulates(policy: object) -> bool:
+    """Whether ``policy`` simulates the loop (:class:`Simulates`; False if it does not say)."""
+    return isinstance(policy, Simulates) and bool(policy.simulates)
+
+
+def observes(policy: object) -> bool:
+    """Whether ``policy`` reads the observation (:class:`Observes`; True if it does not say)."""
+    return not isinstance(policy, Observes) or bool(policy.observes)
+
+
+def announcer(policy: object) -> Callable[[Plan], int] | None:
+    """``policy``'s ``announce`` (:class:`Announces`), or None if it announces nothing."""
+    return policy.announce if isinstance(policy, Announces) else None
+
+
+def clairvoyant(policy: object) -> bool:
+    """Whether ``policy`` is an oracle (:class:`Clairvoyant`; False if it does not say)."""
+    return isinstance(policy, Clairvoyant) and bool(policy.clairvoyant)
 
 
 @dataclass(frozen=True, eq=False)
@@ -56,7 +124,7 @@ class DecisionContext:
     plan: Plan
     age: int
     u_prev: np.ndarray
-    timestep: dm_env.TimeStep
+    timestep: dm_env.TimeStep | None  # None in the light mode (etmpc.loop.modes), which shows no policy a context
     belief: Any = None  # the filter's Belief (etmpc.control.sensing), where the sensor is not exact
 
 
@@ -84,7 +152,9 @@ class Snapshot:
     @classmethod
     def take(cls, context: DecisionContext) -> Snapshot:
         env = context.env
-        x = context.system.state(context.timestep)
+        timestep = context.timestep
+        assert timestep is not None  # a context is made by a recording loop, which has a TimeStep
+        x = context.system.state(timestep)
         return cls(
             env.physics.snapshot(),
             context.step,
@@ -93,6 +163,6 @@ class Snapshot:
             context.age,
             np.array(context.u_prev),
             x,
-            context.timestep.observation,
+            timestep.observation,
             belief=context.belief,
         )

@@ -25,6 +25,7 @@ import numpy as np
 from etmpc.common.errors import EtmpcError
 from etmpc.loop import AugmentedState
 from etmpc.systems import system_class
+from etmpc.systems.base import SystemBase
 
 FEATURE_SETS = ("error", "paper", "levels")
 DEFAULT_FEATURES = "error"
@@ -40,6 +41,7 @@ def _exogenous(domain: str):
     """The task's exogenous features ``f(s) -> array`` and their names (its system's optional
     ``exogenous_features``, see :mod:`etmpc.systems.base`), or None."""
     system = system_class(domain)
+    assert issubclass(system, SystemBase)  # every system subclasses SystemBase (tests/systems/test_systems.py)
     names = system.exogenous_feature_names
     return (system.exogenous_features, names) if system.exogenous_features is not None and names else None
 

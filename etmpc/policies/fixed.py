@@ -26,7 +26,7 @@ class _Constant(_Schedule):
     stochastic: bool = False
     answer: ClassVar[bool] = False
 
-    def decide(self, s: AugmentedState, rng: np.random.Generator) -> bool:
+    def decide(self, s: AugmentedState, rng: np.random.Generator | None) -> bool:
         return self.answer
 
 
@@ -41,7 +41,7 @@ class Every(_Schedule):
     def spec(self) -> str:
         return f"every:{self.period}"
 
-    def decide(self, s: AugmentedState, rng: np.random.Generator) -> bool:
+    def decide(self, s: AugmentedState, rng: np.random.Generator | None) -> bool:
         return s.age >= self.period
 
 
@@ -57,7 +57,7 @@ class Iterate(_Schedule):
     def spec(self) -> str:
         return f"iterate:{self.period}"
 
-    def decide(self, s: AugmentedState, rng: np.random.Generator) -> int:
+    def decide(self, s: AugmentedState, rng: np.random.Generator | None) -> int:
         return ITERATE if s.age >= self.period else KEEP
 
 

@@ -48,7 +48,7 @@ from etmpc.common.errors import EtmpcError
 from etmpc.common.numerics import dot
 from etmpc.common.outputs import dumps, write_text
 from etmpc.control.timing import ITERATE, KEEP, SOLVE
-from etmpc.loop import AugmentedState
+from etmpc.loop import AugmentedState, Decision, drawing
 from etmpc.policies.features import FEATURE_SETS, feature_size, raw_features
 from etmpc.systems import has_levels, same_task
 
@@ -204,6 +204,7 @@ class LogisticPolicy:
 
     def level_value(self, phi: np.ndarray) -> float:
         """The logit ``theta_level . phi`` of a full solve over one SQP iteration, as :meth:`decision_value`."""
+        assert self.theta_level is not None  # a policy with compute levels: it has level parameters
         return self._logit(self.theta_level, phi, "level value")
 
     def _logit(self, theta: np.ndarray, phi: np.ndarray, what: str) -> float:
@@ -216,18 +217,19 @@ class LogisticPolicy:
             )
         return logit
 
-    def decide(self, s: AugmentedState, rng: np.random.Generator) -> bool | int:
+    def decide(self, s: AugmentedState, rng: np.random.Generator | None) -> Decision:
         phi = self.phi(s)
         logit = self.decision_value(phi)
         p_keep = sigmoid(logit)
         # Greedy: recompute when pi(keep | s) < 1/2, i.e. when the logit is negative (decided on the
         # logit itself, so no exp rounding can move the boundary).
-        answer = recompute = logit < 0.0 if self.greedy else bool(rng.random() >= p_keep)
+        recompute = logit < 0.0 if self.greedy else bool(drawing(rng).random() >= p_keep)
+        answer: Decision = recompute
         if self.theta_level is not None:  # compute levels: then a full solve or one SQP iteration
             answer = KEEP
             if recompute:
                 level = self.level_value(phi)
-                solve = level > 0.0 if self.greedy else bool(rng.random() < sigmoid(level))
+                solve = level > 0.0 if self.greedy else bool(drawing(rng).random() < sigmoid(level))
                 answer = SOLVE if solve else ITERATE
         if self.record:
             self.decisions.append((phi, answer, p_keep))

@@ -33,7 +33,7 @@ import numpy as np
 from etmpc.common.errors import EtmpcError
 from etmpc.common.numerics import fsum
 from etmpc.control.timing import ITERATE, KEEP, SOLVE
-from etmpc.loop import AugmentedState, Continuation, DecisionContext, Policy, Snapshot, play_on
+from etmpc.loop import AugmentedState, Continuation, Decision, DecisionContext, Policy, Snapshot, play_on
 from etmpc.systems.capabilities import RewardFailures, Rollouts, require
 
 DEFAULT_FUTURES = 8
@@ -51,7 +51,7 @@ def q_values(
     memo: OracleMemo | None = None,
     failure_cost: float = 0.0,
     from_belief: bool = True,
-) -> tuple[np.ndarray, np.ndarray]:
+) -> np.ndarray:
     """Returns of each answer at ``context``'s decision, one row per answer and one column per future
     (paired): keeping and recomputing, or, on a task with compute levels, keeping, one SQP iteration
     and a full solve (:func:`answers`).
@@ -99,6 +99,7 @@ def q_values(
                 system, twin, snapshot, base, base_rng, first, episode, solved, stop, trace, failure_cost, start
             )
             if memo is not None:
+                assert trace is not None  # made where there is a memo
                 memo.played(int(first), trace, returns[index, k])
     return returns
 
@@ -211,7 +212,7 @@ class Rollout:
             self._twin = (system, system.make_env())
         return self._twin[1]
 
-    def decide(self, s: AugmentedState, rng: np.random.Generator) -> bool:
+    def decide(self, s: AugmentedState, rng: np.random.Generator | None) -> Decision:
         if s.context is None:
             raise EtmpcError(f"{self.spec} simulates the episode: it needs the control loop's context")
         memo = None

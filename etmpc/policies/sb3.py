@@ -46,9 +46,8 @@ import numpy as np
 from etmpc.common import checks
 from etmpc.common.documents import read_document
 from etmpc.common.errors import EtmpcError
-from etmpc.loop import AugmentedState
+from etmpc.loop import AugmentedState, Decision
 from etmpc.policies.features import observation, observation_names
-from etmpc.systems import canonical, has_levels, system_class
 from etmpc.policies.sb3_network import (  # noqa: F401 (re-exported: what reads a zip as data, and the network)
     ALGORITHMS,
     DEFAULT_NET_ARCH,
@@ -62,6 +61,8 @@ from etmpc.policies.sb3_network import (  # noqa: F401 (re-exported: what reads 
     open_network,
     pickled_globals,
 )
+from etmpc.systems import canonical, has_levels, system_class
+from etmpc.systems.base import SystemBase
 
 FORMAT = "etmpc-sb3-policy"
 CLIP = 10.0  # VecNormalize's clip_obs
@@ -73,7 +74,9 @@ def finite_observation(obs: np.ndarray) -> np.ndarray:
     the float32 range, NaN as 0 (unchanged, the same array, when all are finite)."""
     if np.isfinite(obs.sum()):
         return obs
-    return np.nan_to_num(obs, nan=0.0, posinf=np.finfo(np.float32).max, neginf=np.finfo(np.float32).min)
+    # float32's range as Python floats (exactly: every float32 is a double), as numpy's stubs type the bounds
+    largest = float(np.finfo(np.float32).max)
+    return np.nan_to_num(obs, nan=0.0, posinf=largest, neginf=-largest)
 
 
 def normalise(obs: np.ndarray, mean: np.ndarray | None, scale: np.ndarray | None) -> np.ndarray:
@@ -94,7 +97,9 @@ def task_actions(task: str) -> int:
 def plays_on(trained_on: str, task: str) -> bool:
     """Whether a model trained on ``trained_on`` plays on ``task`` (both canonical): the same task, or one
     that plays its world with time in the loop (``task``'s system names it as its ``variant_of``)."""
-    variant = getattr(system_class(task), "variant_of", None)
+    cls = system_class(task)
+    assert issubclass(cls, SystemBase)  # every system subclasses SystemBase (tests/systems/test_systems.py)
+    variant = cls.variant_of
     return trained_on == task or (variant is not None and canonical(variant) == trained_on)
 
 
@@ -111,7 +116,9 @@ class SB3Policy:
         self.path, self.task, self.network = Path(path), task, network
         self.mean = None if mean is None else np.asarray(mean, float)
         self.scale = None if var is None else np.sqrt(np.asarray(var, float) + EPSILON)
-        self.domain = system_class(task).name
+        cls = system_class(task)
+        assert issubclass(cls, SystemBase)  # every system subclasses SystemBase (tests/systems/test_systems.py)
+        self.domain = cls.name
         self._size = (network.hidden[0][0] if network.hidden else network.head[0]).shape[1]
         self._levels = network.actions == 3  # keep, one SQP iteration, a full solve: the level is the answer
 
@@ -128,7 +135,7 @@ class SB3Policy:
         """What the network sees at ``s``: the environment's observation, normalised (:func:`normalise`)."""
         return normalise(finite_observation(observation(self.domain, s, self._size)), self.mean, self.scale)
 
-    def decide(self, s: AugmentedState, rng: np.random.Generator) -> bool | int:
+    def decide(self, s: AugmentedState, rng: np.random.Generator | None) -> Decision:
         action = self.network.action(self.normalised(s))
         return action if self._levels else action == 1
 
@@ -147,6 +154,7 @@ def read_description(meta_file: Path, task: str | None, trained: str, missing: s
     try:
         trained_on = canonical(str(meta["task"]))
         cls = system_class(trained_on)
+        assert issubclass(cls, SystemBase)  # every system subclasses SystemBase (tests/systems/test_systems.py)
         # finite numbers, a variance >= 0 (checks.json_numbers: an integer beyond a double is refused, not an OverflowError)
         mean = checks.json_numbers(meta["observation_mean"], "observation_mean")
         var = checks.json_numbers(meta["observation_var"], "observation_var", smallest=0.0)
@@ -198,5 +206,6 @@ def _raw(model: Path, task: str, missing: str) -> SB3Policy:
             f"{str(metadata_path(model))!r})"
         )
     cls = system_class(task)
+    assert issubclass(cls, SystemBase)  # every system subclasses SystemBase (tests/systems/test_systems.py)
     size = len(observation_names(cls.name, cls.state_names))
     return SB3Policy(model, task, None, None, open_network(model, "ppo", size, task_actions(task), task))

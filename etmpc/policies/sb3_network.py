@@ -116,7 +116,9 @@ def pickled_globals(encoded) -> tuple[list[str], bool]:
     run; a global whose name comes from the pickle's memo is ``"?"``. ``ValueError`` if it is no pickle."""
     if not isinstance(encoded, str):
         raise ValueError("not base64 text")
-    found, only_references, recent = [], True, []
+    found: list[str] = []
+    only_references = True
+    recent: list[str | None] = []  # what was pushed last: a STACK_GLOBAL's module and name are strings (None: not one)
     for op, arg, _ in pickletools.genops(base64.b64decode(encoded, validate=True)):
         only_references = only_references and op.name in _REFERENCE
         if op.name == "GLOBAL":
@@ -192,8 +194,11 @@ def _architecture(path: Path, data: bytes, size: int, actions: int = 2, task: st
                 f"sb3:{path} needs an {kind} space of type {_short(found)}; etmpc reads a Box of "
                 "observations and a Discrete of actions"
             )
-    shape, found = spaces["observation"].get("_shape"), spaces["action"].get("n")
-    if shape != [size] or type(shape[0]) is not int or found != str(actions) or spaces["action"].get("start", "0") != "0":
+    observation, action = spaces["observation"], spaces["action"]
+    assert isinstance(observation, dict) and isinstance(action, dict)  # each refused above if not
+    shape = observation.get("_shape")
+    found = action.get("n")
+    if shape != [size] or type(shape[0]) is not int or found != str(actions) or action.get("start", "0") != "0":
         shape = tuple(shape) if isinstance(shape, list) else shape
         raise EtmpcError(
             f"sb3:{path} takes observations of shape {_short(shape)} and {_short(found)} actions; the trigger "
@@ -258,7 +263,8 @@ def _network(path: Path, state: dict, widths: list[int], size: int, actions: int
     the value function's weights (not needed)."""
     import torch
 
-    shapes, inputs = {}, size
+    shapes: dict[str, tuple[int, ...]] = {}
+    inputs = size
     for i, width in enumerate(widths):
         layer = f"mlp_extractor.policy_net.{2 * i}"  # the Linear before the i-th Tanh
         shapes |= {f"{layer}.weight": (width, inputs), f"{layer}.bias": (width,)}

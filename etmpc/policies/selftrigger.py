@@ -72,7 +72,7 @@ class SelfTrigger:
             raise EtmpcError(f"self-trigger policy {self.path} gives a non-finite score for a plan")
         return int(self.candidates[int(np.argmax(logits))])
 
-    def decide(self, s: AugmentedState, rng: np.random.Generator) -> bool:
+    def decide(self, s: AugmentedState, rng: np.random.Generator | None) -> bool:
         if s.plan is not self._plan:  # a plan seen for the first time: its announcement
             self._plan, self._keep = s.plan, self.announce(s.plan)
         return s.age >= self._keep

@@ -21,12 +21,13 @@ training-distribution episodes (``scripts/shields.py``), never the test set; ``s
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
 from etmpc.control.timing import ITERATE
-from etmpc.loop import AugmentedState, Policy
+from etmpc.loop import AugmentedState, Decision, Policy, observes, simulates
 from etmpc.systems.capabilities import ShieldRule
 
 
@@ -38,23 +39,26 @@ class Shield:
     base: Policy
     max_age: int
     margin: float | None = None
-    margin_of: object = None  # the task's safety_margin, (x) -> float; needed when margin is set
+    margin_of: Callable[[np.ndarray], float] | None = None  # the task's safety_margin; needed when margin is set
     levels: bool = False  # the task's decisions are compute levels: force one SQP iteration
 
     def __post_init__(self):
         self.spec = f"shield:{ShieldRule(self.max_age, self.margin).text}:{self.base.spec}"  # the rule, checked
         self.stochastic = self.base.stochastic
-        self.simulates = getattr(self.base, "simulates", False)
-        self.observes = getattr(self.base, "observes", True)
+        self.simulates = simulates(self.base)
+        self.observes = observes(self.base)
         self.overrides = 0  # decisions the shield turned from a keep into a recompute
 
     def unsafe(self, s: AugmentedState) -> bool:
         """Whether keeping is not left to the base at ``s``."""
         if s.age >= self.max_age:
             return True
-        return self.margin is not None and float(self.margin_of(np.asarray(s.x))) < self.margin
+        if self.margin is None:
+            return False
+        assert self.margin_of is not None  # given with a margin (shield: refuses a margin on a task without one)
+        return float(self.margin_of(np.asarray(s.x))) < self.margin
 
-    def decide(self, s: AugmentedState, rng: np.random.Generator):
+    def decide(self, s: AugmentedState, rng: np.random.Generator | None) -> Decision:
         choice = self.base.decide(s, rng)
         if not choice and self.unsafe(s):  # a keep (False, or the level KEEP = 0) where keeping is not safe
             self.overrides += 1

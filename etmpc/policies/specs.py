@@ -23,6 +23,7 @@ from functools import cache
 from importlib.metadata import entry_points
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from etmpc.common import interrupts
 from etmpc.common.errors import EtmpcError, UnknownNameError
@@ -77,7 +78,8 @@ def _shield(arg: str, spec: str, context: Context) -> Policy:
 
 def _shielded(arg: str) -> tuple[list[str], str]:
     """A shield's argument as its numbers (at most two, first) and its base's spec."""
-    parts, numbers = arg.split(":"), []
+    parts = arg.split(":")
+    numbers: list[str] = []
     while parts and len(numbers) < 2 and _numeric(parts[0]):
         numbers.append(parts.pop(0))
     return numbers, ":".join(parts)
@@ -239,10 +241,26 @@ def parse_policy(spec: str, system, *legacy) -> Policy:
             DeprecationWarning,
             stacklevel=2,
         )
-        return _parse(spec, Context(np.asarray(system), *(legacy + (None, 100)[len(legacy) :]), None))
-    levels, variant_of = bool(getattr(system, "compute_levels", False)), getattr(system, "variant_of", None)
-    safety = (getattr(system, "shield", None), getattr(system, "safety_margin", None))
-    return _parse(spec, Context(system.error_weights, system.name, system.episode_steps, None, levels, variant_of, *safety))
+        return _parse(spec, _legacy_context(system, *legacy))
+    # a stand-in for a system (a test's) may give only error_weights, name and episode_steps: the rest of
+    # what is read here (System's members) defaults as on a task that offers none
+    levels = bool(getattr(system, "compute_levels", False))
+    variant_of = getattr(system, "variant_of", None)
+    shield = getattr(system, "shield", None)
+    margin = getattr(system, "safety_margin", None)
+    return _parse(
+        spec, Context(system.error_weights, system.name, system.episode_steps, _unset, levels, variant_of, shield, margin)
+    )
+
+
+def _legacy_context(error_weights: ArrayLike, task: str | None = None, steps: int = 100) -> Context:
+    """The context of the older form, ``parse_policy(spec, error_weights, task=None, steps=100)``."""
+    return Context(np.asarray(error_weights), task, steps, _unset)
+
+
+def _unset(spec: str) -> Policy:
+    """A context's ``parse`` before :func:`_parse` sets its own (no builder sees a context without it)."""
+    raise AssertionError(f"no parser for {spec!r}: the context was not made by _parse")
 
 
 def _short(spec: str) -> str:

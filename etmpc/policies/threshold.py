@@ -11,7 +11,7 @@ import numpy as np
 
 from etmpc.common.numerics import norm
 from etmpc.control.timing import ITERATE, KEEP
-from etmpc.loop import AugmentedState
+from etmpc.loop import AugmentedState, Decision
 
 
 @dataclass(frozen=True)
@@ -33,7 +33,7 @@ class Threshold:
     def spec(self) -> str:
         return f"threshold:{self.level:g}" + (":iterate" if self.iterate else "") + (":reading" if self.reads else "")
 
-    def decide(self, s: AugmentedState, rng: np.random.Generator) -> bool | int:
+    def decide(self, s: AugmentedState, rng: np.random.Generator | None) -> Decision:
         if self.reads and s.belief is not None:
             read = ~np.isnan(s.belief.reading)
             error = self.weights[read] * (s.belief.reading[read] - s.x_predicted[read])

@@ -31,7 +31,7 @@ import numpy as np
 from etmpc.common.errors import EtmpcError
 from etmpc.common.interrupts import described, failed, genuine, users_code
 from etmpc.control.timing import ANSWERS, level_of
-from etmpc.loop import AugmentedState, DecisionContext, Policy
+from etmpc.loop import AugmentedState, Decision, DecisionContext, Policy
 
 
 def check_policy(policy: Any, where: str) -> None:
@@ -92,7 +92,7 @@ class Checked:
         twin.task.resume(context.env.task.episode, context.step)
         return replace(context, env=twin)
 
-    def decide(self, s: AugmentedState, rng: np.random.Generator) -> bool:
+    def decide(self, s: AugmentedState, rng: np.random.Generator | None) -> Decision:
         if s.context is not None:
             s = replace(s, context=self._sandboxed(s.context))
         try:
@@ -154,6 +154,8 @@ def load_user(spec: str, levels: bool | None = None) -> Policy:
     if factory is _MISSING:
         raise EtmpcError(f"policy {spec}: {module_name} has no {name}")
     with users_code(f"policy {spec}: {name}()"):
-        is_factory = isinstance(factory, type) or (callable(factory) and not callable(getattr(factory, "decide", None)))
-        policy = factory() if is_factory else factory
+        if isinstance(factory, type) or (callable(factory) and not callable(getattr(factory, "decide", None))):
+            policy = factory()  # a class or a function that makes the policy
+        else:
+            policy = factory
     return checked(policy, spec, levels)

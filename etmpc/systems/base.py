@@ -1,20 +1,23 @@
 """What a system provides: the contract between a task's folder and the rest of etmpc.
 
 A *system* is one task as the control loop sees it: the dm-control environment (plant and task), the
-MPC that makes plans, the feedback that corrects them, and the objective. :class:`System` lists the
-members every task writes (:data:`REQUIRED`, eight). :class:`SystemBase`, which every system
-subclasses, derives the rest from them with defaults a task may override (:data:`DERIVED`), and holds
-each optional capability as an attribute that is ``None`` when the task does not offer it
-(:mod:`etmpc.systems.capabilities`: a 3-D scene, sampled futures for rollouts, failures, ...): a feature
-that needs one says so in one line. ``docs/adding-a-task.md`` says in which order a newcomer writes them.
+MPC that makes plans, the feedback that corrects them, and the objective. :class:`System`
+(:mod:`etmpc.systems.protocol`, re-exported here) lists what the rest of etmpc reads of one: the members
+every task writes (:data:`REQUIRED`, eight), those :class:`SystemBase`, which every system subclasses,
+derives from them with defaults a task may override (:data:`DERIVED`) or reads off the task's Config
+(:data:`SETTINGS`), and each optional capability (:data:`OPTIONAL`), an attribute that is ``None`` when
+the task does not offer it (:mod:`etmpc.systems.capabilities`: a 3-D scene, sampled futures for rollouts,
+failures, ...): a feature that needs one says so in one line.
+``docs/adding-a-task.md`` says in which order a newcomer writes them.
 
 This module may import ``etmpc.common`` and ``etmpc.control``.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from functools import cache, cached_property
-from typing import Any, Protocol
+from typing import Any
 
 import dm_env
 import numpy as np
@@ -25,46 +28,16 @@ from etmpc.control.plan import Plan
 from etmpc.control.sensing import ExtendedKalmanFilter, FilterSettings, Sensor
 from etmpc.control.timing import Latency, checked_latency
 from etmpc.systems.benchmark import Benchmark, read_benchmark  # noqa: F401 (Benchmark: the systems' API)
-
-
-class System(Protocol):
-    """What every task writes (``cart_pendulum/system.py`` and ``battery/system.py`` are two)."""
-
-    Config: type  # the frozen settings it is built from; Config() is the default, with fields horizon and recompute_price
-    domain: str  # the domain's name in the registry (etmpc.systems.registry)
-    task: str  # the task's name in its domain's SUITE and SYSTEMS
-    state_names: tuple[str, ...]  # x, with units in the names (etmpc.views.blueprint reads them)
-    input_names: tuple[str, ...]  # u, likewise
-    feedback: Any  # ErrorFeedback or PlanFeedback: the correction added to the planned input while a plan is kept
-
-    def make_env(self, random: Any = None) -> dm_env.Environment: ...  # the dm-control environment (plant and task)
-    def plan(self, x: np.ndarray, u_prev: np.ndarray, warm: Plan | None, age: int, timestep: dm_env.TimeStep) -> Plan: ...
-
-
-#: The members every task writes (:class:`System`).
-REQUIRED = ("Config", "domain", "task", "state_names", "input_names", "feedback", "make_env", "plan")
-#: What :class:`SystemBase` derives from them, each a default a task may override.
-DERIVED = (
-    "name",
-    "episode_steps",  # the three from the task's suite entry (add_task): declared once, there
-    "control_interval_s",
-    "Episode",
-    "horizon",
-    "recompute_price",
-    "objective_sense",
-    "u_min",
-    "u_max",
-    "error_weights",
-    "state",
-    "measure",
-    "action",
-    "draw_episode",
-    "episode_from_arrays",
-    "episode_parameters",
-    "signals",
-    "truncation_value",
-    "show",
+from etmpc.systems.capabilities import ShieldRule
+from etmpc.systems.protocol import (  # noqa: F401 (re-exported: where tests, docs and plugins import them from)
+    DERIVED,
+    OPTIONAL,
+    REQUIRED,
+    SETTINGS,
+    Feedback,
+    System,
 )
+from etmpc.systems.space import Space
 
 
 class _StoredBenchmark:
@@ -132,34 +105,49 @@ class SystemBase:
     """The base of every system: what :data:`DERIVED` lists, from the members a task writes, and every
     capability of :mod:`~etmpc.systems.capabilities` as ``None``. A task overrides what differs for it."""
 
+    # -- what every task writes (REQUIRED): declared here for the type checker, set by each task ----------------
+    Config: type
+    domain: str
+    task: str
+    state_names: tuple[str, ...]
+    input_names: tuple[str, ...]
+    feedback: Feedback
+    make_env: Callable[..., dm_env.Environment]  # (random=None) -> the dm-control environment
+    plan: Callable[..., Plan]  # (x, u_prev, warm, age, timestep) -> a Plan
+    config: Any  # the Config the system was made with
+
     name = _Name()  # how files, folders and commands name the task
     episode_steps = _Declared("steps")  # the episode, as the task's suite entry declares it
     control_interval_s = _Declared("interval_s")
     Episode = _Declared("episode")
     objective_sense = "min"  # "min": the objective is a cost; "max": a profit
-    config: Any
 
     # -- optional capabilities (etmpc.systems.capabilities): None where the task offers none -----------------------
     benchmark = _StoredBenchmark()  # benchmark.json beside its test set
     exogenous_feature_names: tuple[str, ...] = ()
-    exogenous_features: Any = None  # (s) -> array: the values of exogenous_feature_names
+    exogenous_features: Callable[[Any], np.ndarray] | None = None  # (s) -> array: the values of exogenous_feature_names
     camera: str | None = None  # the MJCF camera that films the scene
+    space: Space | None = None  # where the scene sits in 3-D, for the recordings' 3-D view (etmpc.views.space)
     failure_name: str | None = None  # what a failure is called ("falls")
     # (trajectory, episode) -> int: the failures of an episode so far, counted from what it played (the loop's
     # Trajectory, its first trajectory.steps rows: rewards, states, inputs, recomputes) and the episode it
     # played; each step judged on the steps up to it, so that the count never decreases as the episode goes on
-    failures: Any = None
-    failures_in_rewards: Any = None  # (rewards) -> int: failures read off a stretch of rewards alone (the same count)
+    failures: Callable[[Any, Any], int] | None = None
+    # (rewards) -> int: failures read off a stretch of rewards alone (the same count)
+    failures_in_rewards: Callable[[np.ndarray], int] | None = None
     # (x) -> the state's margin to a safety failure one interval on (at most 0: a failure), and the task's own
     # shield rule (capabilities.ShieldRule): what shield: plays around a policy
-    safety_margin: Any = None
+    safety_margin: Callable[[np.ndarray], float] | None = None
     margin_unit: str | None = None
-    shield: Any = None
-    plan_cost: Any = None  # (x, u_prev, timestep, inputs) -> the OCP's objective of an input sequence
-    interpreted: Any = None  # () -> the same system with its MPC not compiled (None: it has no other way to run)
+    shield: ShieldRule | None = None
+    # (x, u_prev, timestep, inputs) -> the OCP's objective of an input sequence
+    plan_cost: Callable[..., float] | None = None
+    # () -> the same system with its MPC not compiled (None: it has no other way to run)
+    interpreted: Callable[[], SystemBase] | None = None
     # (x, u_prev, warm, age, timestep) -> a Plan from one SQP iteration (Plan.iterations: 1), for compute levels
-    iterate: Any = None
-    predict: Any = None  # (x, inputs) -> the predictor's states from x under inputs (N+1 rows), for delay compensation
+    iterate: Callable[..., Plan] | None = None
+    # (x, inputs) -> the predictor's states from x under inputs (N+1 rows), for delay compensation
+    predict: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None
 
     # the task this one plays with time in the loop (its world, episodes and learned policies), if any
     variant_of: str | None = None
@@ -262,7 +250,7 @@ class SystemBase:
         return self.world.draw_episode(rng)
 
     @property
-    def sample_future(self) -> Any:
+    def sample_future(self) -> Callable[[Any, int, np.random.Generator], Any] | None:
         """``(episode, step, rng) -> episode`` with what a controller cannot know at the decision of
         ``step`` redrawn: the task's ``resample_episode``, or None where the task offers none."""
         return getattr(self.world, "resample_episode", None)

@@ -18,12 +18,15 @@ import math
 import re
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Protocol, TypeGuard, TypeVar
+from typing import TYPE_CHECKING, Any, Protocol, TypeGuard, TypeVar
 
 import numpy as np
 
 from etmpc.common.errors import EtmpcError
 from etmpc.systems.benchmark import Benchmark
+
+if TYPE_CHECKING:  # a capability is a protocol class: a form of a type (PEP 747), not a class one may instantiate
+    from typing_extensions import TypeForm
 
 
 class Experiments(Protocol):
@@ -137,13 +140,15 @@ def feature(capability: type) -> str:
     return re.sub(r"(?<!^)(?=[A-Z])", " ", capability.__name__).lower()
 
 
-def offers(system: Any, capability: type[C]) -> TypeGuard[C]:
+def offers(system: Any, capability: TypeForm[C]) -> TypeGuard[C]:
     """Whether ``system`` (an instance or its class) offers ``capability``: every member set, none ``None``."""
+    assert isinstance(capability, type)  # a capability is one of the protocol classes above
     return all(getattr(system, member, None) is not None for member in members(capability))
 
 
-def require(system: Any, capability: type[C], what: str) -> C:
+def require(system: Any, capability: TypeForm[C], what: str) -> C:
     """``system``, if it offers ``capability``, which ``what`` needs; else one line naming the task and what it lacks."""
+    assert isinstance(capability, type)  # a capability is one of the protocol classes above
     if not offers(system, capability):
         raise EtmpcError(
             f"{what} needs {feature(capability)} ({', '.join(members(capability))}), which task {system.name} does not offer"
