@@ -19,16 +19,14 @@ from functools import cache
 from gymnasium.envs.registration import EnvSpec
 
 from etmpc.common.errors import EtmpcError
-from etmpc.systems import spec
 
 
 @cache
 def episode_steps(task: str) -> int:
     """Task ``task``'s episode length: its System class's ``episode_steps``, as its suite entry declares it."""
-    from etmpc.systems.base import SystemBase  # here: importing etmpc loads no CasADi (tests/envs)
+    from etmpc.systems.base import system_type  # here: importing etmpc loads no CasADi (tests/envs)
 
-    cls = spec(task).system_class
-    assert issubclass(cls, SystemBase)  # every system subclasses SystemBase (tests/systems/test_systems.py)
+    cls = system_type(task)
     steps = cls.episode_steps
     if isinstance(steps, bool) or not isinstance(steps, int) or steps < 1:
         raise EtmpcError(f"task {task}'s episode_steps is {steps!r}, not a whole number >= 1")

@@ -21,8 +21,8 @@ from etmpc.common.checks import BadType, BadValue
 from etmpc.common.outputs import write_json
 from etmpc.policies.features import observation_names
 from etmpc.policies.sb3 import CLIP, EPSILON, FORMAT, normalise, read_description
-from etmpc.systems import SystemKey, system_class, system_key
-from etmpc.systems.base import SystemBase
+from etmpc.systems import SystemKey, system_key
+from etmpc.systems.base import system_type
 
 
 @dataclass(frozen=True, eq=False)
@@ -65,8 +65,7 @@ def save_normalization(vec_normalize, task: str | SystemKey, path: str | os.Path
     ``MODEL`` and ``normalize=`` reads: ``save_normalization(vec, "cart_pendulum", "ppo_cart.json")``.
     ``extra`` fields are kept in it (``etmpc train`` writes its settings). Returns ``path``."""
     key = system_key(task)
-    cls = system_class(key.task)
-    assert issubclass(cls, SystemBase)  # every system subclasses SystemBase (tests/systems/test_systems.py)
+    cls = system_type(key.task)
     names = list(observation_names(cls.name, cls.state_names))
     rms = getattr(vec_normalize, "obs_rms", None)
     mean = np.asarray(getattr(rms, "mean", np.nan), float)

@@ -21,6 +21,7 @@ from etmpc.common.progress import Progress
 from etmpc.common.errors import EtmpcError
 from etmpc.common.interrupts import described, genuine
 from etmpc.common.sense import oriented
+from etmpc.loop import announcer, clairvoyant
 from etmpc.loop.records import EpisodeRecord, EpisodeSink
 from etmpc.systems import SystemKey, system_key
 from etmpc.evaluation.inputs import check_run_outputs, run_inputs
@@ -60,11 +61,7 @@ def _run(job: tuple) -> tuple[RunResult, EpisodeRecord | None, dict[str, float]]
             finite=not traj.nonfinite,
             failures=None if played.system.failures is None else played.system.failures(traj, played.episode),
         ),
-        (
-            played.record(spec, getattr(policy, "announce", None), clairvoyant=bool(getattr(policy, "clairvoyant", False)))
-            if record
-            else None
-        ),
+        (played.record(spec, announcer(policy), clairvoyant=clairvoyant(policy)) if record else None),
         traj.cpu_seconds(),
     )
 
@@ -244,7 +241,7 @@ def _evaluate(
             episodes,
             repeats,
             system.failure_name,
-            bool(getattr(parsed[spec], "clairvoyant", False)),
+            clairvoyant(parsed[spec]),
         )
         for spec in policies
     ]

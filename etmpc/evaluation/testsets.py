@@ -46,8 +46,7 @@ def check_options_act(key, test_set: str | Path | None = None, takes_test_set: b
     else evaluate and score do). Every command and function that plays a test set with options
     calls this one check (evaluate, score, robustness, render, bench, discriminate, figure, sweep, and the
     Gymnasium environment's test episodes); what draws its own episodes (testset, the learners) does not."""
-    from etmpc.systems import system_class
-    from etmpc.systems.base import SystemBase
+    from etmpc.systems.base import system_type
     from etmpc.systems.options import drawn_only, shown
 
     if not key.options:
@@ -55,8 +54,7 @@ def check_options_act(key, test_set: str | Path | None = None, takes_test_set: b
     found = spec(key.task)
     if test_set is not None and Path(test_set).resolve() != default_path(found.domain, found.task).resolve():
         return  # a test set of the caller's: drawn with the options, we trust, as etmpc testset says
-    cls = system_class(key.task)
-    assert issubclass(cls, SystemBase)  # every system subclasses SystemBase (tests/systems/test_systems.py)
+    cls = system_type(key.task)
     inert = drawn_only(cls.Config(), key.options)
     if inert:
         out, it = f"{found.slug}.npz", "it acts" if len(inert) == 1 else "they act"

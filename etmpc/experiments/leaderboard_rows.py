@@ -28,7 +28,8 @@ from etmpc.learning.base import shipped
 from etmpc.learning.config import VALIDATION_ENTROPY
 from etmpc.learning.jobs import mean_scores
 from etmpc.loop.closed import cpu_clock
-from etmpc.systems import folder_name, make_system, names, system_class, task_version
+from etmpc.systems import folder_name, make_system, names, task_version
+from etmpc.systems.base import system_type
 from etmpc.systems.capabilities import Experiments, require
 
 VALIDATION_EPISODES = 20  # training-distribution episodes that choose the best threshold
@@ -62,7 +63,7 @@ SHIELDED = " + shield"  # a shipped learner's row under the task's shield (on a 
 def row_names() -> list[str]:
     """The leaderboard's rows, in order (a shipped learner's shielded row only where it ships a policy for a
     task that declares a shield)."""
-    guarded = [task for task in names() if system_class(task).shield is not None]
+    guarded = [task for task in names() if system_type(task).shield is not None]
     rows = [*FIRST]
     for name, file, *_ in shipped_learners():
         rows += [name, name + SHIELDED] if any(shipped_policy(t, file) for t in guarded) else [name]

@@ -16,6 +16,7 @@ from etmpc.control.plan import Plan
 from etmpc.systems.base import System
 from etmpc.systems.options import of as task_options
 from etmpc.systems.options import shown
+from etmpc.systems.space import Space
 
 
 def computation_cost(computations, price: float):
@@ -181,7 +182,7 @@ class EpisodeRecord:
     signals: dict = field(default_factory=dict)  # name -> (>= S,)
     input_bounds: tuple = ()  # (u_min (nu,), u_max (nu,)), or () if the system has none
     announced: tuple = ()  # a self-trigger's (step a plan was made, steps it announced it would be kept)
-    space: object = None  # the system's etmpc.systems.space.Space: a 3-D view of the episode (etmpc.views.space), or None
+    space: Space | None = None  # the system's 3-D view of the episode (etmpc.views.space), or None
     # with a sensor that is not exact: its readings (NaN where none) and the filter's estimates, (S + 1, nx) each
     measurements: np.ndarray | None = None
     estimates: np.ndarray | None = None

@@ -24,8 +24,7 @@ import numpy as np
 
 from etmpc.common.errors import EtmpcError
 from etmpc.loop import AugmentedState
-from etmpc.systems import system_class
-from etmpc.systems.base import SystemBase
+from etmpc.systems.base import system_type
 
 FEATURE_SETS = ("error", "paper", "levels")
 DEFAULT_FEATURES = "error"
@@ -40,8 +39,7 @@ def raw_state(s: AugmentedState) -> np.ndarray:
 def _exogenous(domain: str):
     """The task's exogenous features ``f(s) -> array`` and their names (its system's optional
     ``exogenous_features``, see :mod:`etmpc.systems.base`), or None."""
-    system = system_class(domain)
-    assert issubclass(system, SystemBase)  # every system subclasses SystemBase (tests/systems/test_systems.py)
+    system = system_type(domain)
     names = system.exogenous_feature_names
     return (system.exogenous_features, names) if system.exogenous_features is not None and names else None
 

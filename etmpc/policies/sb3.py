@@ -61,8 +61,8 @@ from etmpc.policies.sb3_network import (  # noqa: F401 (re-exported: what reads 
     open_network,
     pickled_globals,
 )
-from etmpc.systems import canonical, has_levels, system_class
-from etmpc.systems.base import SystemBase
+from etmpc.systems import canonical, has_levels
+from etmpc.systems.base import system_type
 
 FORMAT = "etmpc-sb3-policy"
 CLIP = 10.0  # VecNormalize's clip_obs
@@ -97,8 +97,7 @@ def task_actions(task: str) -> int:
 def plays_on(trained_on: str, task: str) -> bool:
     """Whether a model trained on ``trained_on`` plays on ``task`` (both canonical): the same task, or one
     that plays its world with time in the loop (``task``'s system names it as its ``variant_of``)."""
-    cls = system_class(task)
-    assert issubclass(cls, SystemBase)  # every system subclasses SystemBase (tests/systems/test_systems.py)
+    cls = system_type(task)
     variant = cls.variant_of
     return trained_on == task or (variant is not None and canonical(variant) == trained_on)
 
@@ -116,8 +115,7 @@ class SB3Policy:
         self.path, self.task, self.network = Path(path), task, network
         self.mean = None if mean is None else np.asarray(mean, float)
         self.scale = None if var is None else np.sqrt(np.asarray(var, float) + EPSILON)
-        cls = system_class(task)
-        assert issubclass(cls, SystemBase)  # every system subclasses SystemBase (tests/systems/test_systems.py)
+        cls = system_type(task)
         self.domain = cls.name
         self._size = (network.hidden[0][0] if network.hidden else network.head[0]).shape[1]
         self._levels = network.actions == 3  # keep, one SQP iteration, a full solve: the level is the answer
@@ -153,8 +151,7 @@ def read_description(meta_file: Path, task: str | None, trained: str, missing: s
     )
     try:
         trained_on = canonical(str(meta["task"]))
-        cls = system_class(trained_on)
-        assert issubclass(cls, SystemBase)  # every system subclasses SystemBase (tests/systems/test_systems.py)
+        cls = system_type(trained_on)
         # finite numbers, a variance >= 0 (checks.json_numbers: an integer beyond a double is refused, not an OverflowError)
         mean = checks.json_numbers(meta["observation_mean"], "observation_mean")
         var = checks.json_numbers(meta["observation_var"], "observation_var", smallest=0.0)
@@ -205,7 +202,6 @@ def _raw(model: Path, task: str, missing: str) -> SB3Policy:
             f"write them with etmpc.envs.save_normalization(vec_normalize, {task!r}, "
             f"{str(metadata_path(model))!r})"
         )
-    cls = system_class(task)
-    assert issubclass(cls, SystemBase)  # every system subclasses SystemBase (tests/systems/test_systems.py)
+    cls = system_type(task)
     size = len(observation_names(cls.name, cls.state_names))
     return SB3Policy(model, task, None, None, open_network(model, "ppo", size, task_actions(task), task))

@@ -285,3 +285,18 @@ class SystemBase:
     def reference_solvers(self) -> list:
         """Other solvers of the same OCP, for etmpc bench."""
         return []
+
+
+def system_type(task: str) -> type[SystemBase]:
+    """Task ``task``'s system class as a :class:`SystemBase` (what every task's system subclasses:
+    docs/adding-a-task.md), for the class-level members it declares (``name``, ``state_names``, ``Config``,
+    ``benchmark``, ``shield``, ``variant_of``, ...). The registry gives the class as it is registered
+    (:func:`etmpc.systems.registry.system_class`); this is where a class that is not one is refused."""
+    from etmpc.systems.registry import system_class
+
+    cls = system_class(task)
+    if not (isinstance(cls, type) and issubclass(cls, SystemBase)):
+        raise EtmpcError(
+            f"task {task!r}: its system class {cls!r} does not subclass etmpc.systems.base.SystemBase (see docs/adding-a-task.md)"
+        )
+    return cls

@@ -12,6 +12,7 @@ This module may import ``etmpc.common``, ``etmpc.control`` and the modules of ``
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from functools import cached_property
 from typing import Any
 
@@ -25,6 +26,7 @@ class TrackingSystem(GaussNewtonSystem):
     task's count of failures in a stretch of rewards."""
 
     Config: type  # the frozen settings the system is built from: Config() is the task's default
+    failures_in_rewards: Callable[[np.ndarray], int]  # every tracking task counts its failures in its rewards
 
     def __init__(self, config: Any = None):
         self.config = self.Config() if config is None else config

@@ -29,8 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
-from etmpc.systems import spec, system_class
-from etmpc.systems.base import SystemBase
+from etmpc.systems import spec
+from etmpc.systems.base import system_type
 
 MAX_EPISODE_TABS = 10  # per policy: each tab adds about 140 kB and 15 ms to a recording
 
@@ -67,8 +67,7 @@ _SUFFIX_UNITS = (
 def objective_unit(domain: str, task: str) -> str:
     """The objective's unit of a task (its system's ``benchmark``; the cart pendulum's cost is a sum of
     squared pole angles, rad²)."""
-    cls = system_class(f"{domain}/{task}")
-    assert issubclass(cls, SystemBase)  # every system subclasses SystemBase (tests/systems/test_systems.py)
+    cls = system_type(f"{domain}/{task}")
     benchmark = cls.benchmark
     assert benchmark is not None  # every task of the suite has its benchmark.json beside its test set
     return benchmark.objective_unit

@@ -12,7 +12,7 @@ import numpy as np
 
 from etmpc.common.progress import Progress
 from etmpc.evaluation.workers import context, play_test_episode
-from etmpc.loop import Trajectory
+from etmpc.loop import Trajectory, announcer
 from etmpc.policies import parse_policy
 from etmpc.evaluation.inputs import check_shipped
 from etmpc.evaluation.testsets import check_options_act
@@ -62,7 +62,7 @@ def render_rollout(
     fps = 1.0 / env.control_timestep() if fps is None else fps
     states = traj.states[: traj.steps + 1]
     states = states[np.all(np.isfinite(states), axis=1)]  # an episode that diverged ends on a NaN row
-    kept = played.record(policy_spec, getattr(policy, "announce", None))
+    kept = played.record(policy_spec, announcer(policy))
     with Progress(len(states), enabled=progress, unit="frames") as bar:  # the frames drawn, as the encoder takes them
         frames: Iterable[np.ndarray] = _counted(iter_frames(system, env, states, width, height), bar)
         if kept.timed:  # time in the loop: each frame says which plan is in force, and which solve is in flight

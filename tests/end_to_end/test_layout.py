@@ -4,6 +4,7 @@ and tests that mirror the package."""
 
 import importlib
 import pkgutil
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -90,6 +91,29 @@ def test_rooms_of_one_job():
     assert over == {}, f"over {MOST_LINES} lines: {over}; {SPLIT}"
     over_cli = {name: n for name, n in sizes.items() if name.startswith("etmpc/cli/") and n > MOST_LINES_CLI}
     assert over_cli == {}, f"a command over {MOST_LINES_CLI} lines: {over_cli}; {SPLIT}"
+
+
+def _floor_rows() -> dict[str, str]:
+    """docs/architecture.md's table of floors: each ``etmpc/<floor>/`` row's text, by floor."""
+    rows = {}
+    for line in (REPO / "docs" / "architecture.md").read_text().splitlines():
+        found = re.match(r"\| `etmpc/(\w+)/` \| (.*) \|$", line)
+        if found:
+            rows[found.group(1)] = found.group(2)
+    return rows
+
+
+def test_the_architecture_page_names_every_module():
+    """The page is checked against the code: a row for every floor, and each floor's row names every module
+    of that floor (as `name.py`, at any depth) and no module that does not exist."""
+    rows = _floor_rows()
+    floors = sorted(p.name for p in PACKAGE.iterdir() if (p / "__init__.py").is_file() and p.name != "_data")
+    assert sorted(rows) == floors
+    for floor, text in rows.items():
+        files = {p.name for p in (PACKAGE / floor).rglob("*.py") if p.name not in ("__init__.py", "__main__.py")}
+        named = set(re.findall(r"`(?:[\w/]*/)?(\w+\.py)`", text))
+        assert sorted(files - named) == [], f"docs/architecture.md's row for etmpc/{floor}/ does not name these"
+        assert sorted(named - files) == [], f"docs/architecture.md's row for etmpc/{floor}/ names modules that are gone"
 
 
 def test_every_package_says_what_it_holds_and_what_it_may_import():

@@ -4,6 +4,9 @@ among the optional ones; and the docs count the members a task writes as REQUIRE
 
 import re
 
+import pytest
+
+from etmpc.common.errors import EtmpcError
 from etmpc.systems.base import SystemBase
 from etmpc.systems.capabilities import CAPABILITIES, members
 from etmpc.systems.protocol import DERIVED, OPTIONAL, REQUIRED, SETTINGS, System
@@ -37,3 +40,14 @@ def test_the_docs_count_the_members_a_task_writes_as_required_does():
     assert re.search(rf"writes the {word} members `etmpc\.systems\.base\.REQUIRED`", architecture)
     assert f"writes {word} members** (`etmpc.systems.base.REQUIRED`)" in adding
     assert not re.search(r"\b(\w+) members of `etmpc\.systems\.base\.System`", architecture)
+
+
+def test_system_type_gives_the_registered_class_and_refuses_one_that_is_not_a_system_base(monkeypatch):
+    """``system_type`` is the registry's class, typed as a SystemBase; a registered class that does not
+    subclass it is refused in one line naming the task (not an AssertionError met later)."""
+    from etmpc.systems import base, registry
+
+    assert base.system_type("cart_pendulum/kicks") is registry.system_class("cart_pendulum/kicks")
+    monkeypatch.setattr(registry, "system_class", lambda task: dict)
+    with pytest.raises(EtmpcError, match="'quadrotor/waypoints'.*does not subclass etmpc.systems.base.SystemBase"):
+        base.system_type("quadrotor/waypoints")
