@@ -83,7 +83,7 @@ class Settings:
     bases: tuple[str, ...] = BASES  # candidates for pi_0 (with levels, by default also LEVEL_BASES: level_bases)
     selection_episodes: int = 30  # training episodes that choose pi_0 among the bases
     # what each of the task's failures (falls, steps outside the geofence) in a labelling rollout costs on top of
-    # its reward: safety in the labels, its weight chosen on validation episodes (scripts/failure_cost.py); 0: none
+    # its reward: safety in the labels, its weight chosen on validation episodes (etmpc study failure-cost); 0: none
     failure_cost: float = 0.0
 
     def __post_init__(self):

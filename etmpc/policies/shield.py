@@ -16,7 +16,7 @@ the answer that arrives soonest); elsewhere a solve.
 Why a shield and not a failure cost in learning: it holds for every policy (PPO's, DPI's, a user's) and
 every version of it without training again, and its two numbers are read in the task's own units. A task
 that offers a margin may declare its own rule (:class:`etmpc.systems.capabilities.ShieldRule`), chosen on
-training-distribution episodes (``scripts/shields.py``), never the test set; ``shield:BASE`` plays it.
+training-distribution episodes (``etmpc study shields``), never the test set; ``shield:BASE`` plays it.
 """
 
 from __future__ import annotations

@@ -95,7 +95,7 @@ class Config(Checked):
     sensor: Sensor = Sensor()
     # the filter's process noise per state and interval (m, m/s, rad, rad/s): the plant's mismatch with the
     # predictor and the kicks (jumps of the pole's rate), chosen on training episodes for kicks_noisy's sensor
-    # (scripts/estimators.py, docs/results/estimators.md)
+    # (etmpc study estimators, docs/results/estimators.md)
     estimator: FilterSettings = FilterSettings(process_std=PROCESS_STD)
     solver: SolverSettings = field(
         default_factory=lambda: SolverSettings(
@@ -124,7 +124,7 @@ class KicksSystem(TrackingSystem):
     failure_name = "falls"  # per episode, beside the mean objective
     safety_margin = staticmethod(kicks.fall_margin)  # rad before a fall, one interval on (shield:)
     margin_unit = "rad"
-    # shield:BASE's rule (scripts/shields.py, docs/results/shields.md): none, since on validation episodes no rule
+    # shield:BASE's rule (etmpc study shields, docs/results/shields.md): none, since on validation episodes no rule
     # made the shipped learners fall less without costing them more than the budget (a recompute forced near a fall
     # made falls no rarer under this model mismatch); shield:AGE[:MARGIN]:BASE still works
     shield: ShieldRule | None = None

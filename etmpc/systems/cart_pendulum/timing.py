@@ -42,11 +42,11 @@ class KicksLateSystem(KicksSystem):
     Config = LateConfig
     task = "kicks_late"
     variant_of = "cart_pendulum/kicks"  # its world, episodes and rl: policies are kicks'
-    shield = ShieldRule(10)  # shield:BASE's rule, chosen on validation episodes: scripts/shields.py
+    shield = ShieldRule(10)  # shield:BASE's rule, chosen on validation episodes: etmpc study shields
 
 
 class KicksLevelsSystem(KicksSystem):
     Config = LevelsConfig
     task = "kicks_levels"
     variant_of = "cart_pendulum/kicks"
-    shield = None  # no rule made the shipped learners safer on validation episodes: scripts/shields.py
+    shield = None  # no rule made the shipped learners safer on validation episodes: etmpc study shields

@@ -101,7 +101,7 @@ class Config(Checked):
     # what the controller measures, and its filter (etmpc.control.sensing): the exact state by default
     sensor: Sensor = Sensor()
     # the filter's process noise per interval (position m, attitude rad, velocity m/s, rates rad/s), where a sensor
-    # is set: chosen on training episodes for waypoints_noisy's sensor (scripts/estimators.py)
+    # is set: chosen on training episodes for waypoints_noisy's sensor (etmpc study estimators)
     estimator: FilterSettings = FilterSettings(process_std=(0.02,) * 6 + (0.4,) * 6)
     # The condensed Gauss-Newton SQP (etmpc.control.condensed): converged when a step moves no thrust by more
     # than 0.3 % of its range, and at most 10 QPs by DAQP (a plan that has not converged by then is flown: each
@@ -125,7 +125,7 @@ class QuadrotorSystem(TrackingSystem):
     failure_name = "outside geofence"  # steps ending outside the geofence or on the ground, per episode
     safety_margin = staticmethod(quadrotor_task.fence_margin)  # m to the fence or the ground, one interval on (shield:)
     margin_unit = "m"
-    shield = ShieldRule(10, 0.25)  # shield:BASE's rule, chosen on validation episodes: scripts/shields.py
+    shield = ShieldRule(10, 0.25)  # shield:BASE's rule, chosen on validation episodes: etmpc study shields
     camera = "arena"
     space = SPACE  # the recordings' 3-D view of the flight
 
