@@ -171,7 +171,7 @@ def page(report: dict) -> str:
     lines = [
         "# The MPC's solve: two routes, measured side by side",
         "",
-        runner.generated("solvers --page"),
+        runner.generated("solvers"),
         "",
         "Every task whose MPC is a Gauss-Newton one can solve its OCP by two routes (`SolverSettings.route`):",
         "",
