@@ -32,7 +32,7 @@ import importlib
 import typing
 from abc import ABC, abstractmethod
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable, ClassVar, Generic, Protocol, TypeVar
+from typing import TYPE_CHECKING, Any, Callable, ClassVar, Generic, Protocol, TypeVar, overload
 
 from etmpc.common.documents import loads, yaml_loads
 from etmpc.common.errors import EtmpcError
@@ -69,7 +69,15 @@ class SetByRunner(Generic[T]):
     def __set_name__(self, owner: type, name: str) -> None:
         self.name = name
 
-    def __get__(self, learner: Learner, owner: type | None = None) -> T:
+    @overload
+    def __get__(self, learner: None, owner: type | None = None) -> SetByRunner[T]: ...
+
+    @overload
+    def __get__(self, learner: Learner, owner: type | None = None) -> T: ...
+
+    def __get__(self, learner: Learner | None, owner: type | None = None) -> T | SetByRunner[T]:
+        if learner is None:
+            return self  # read on the class (help(), introspection): the descriptor itself
         value = learner.__dict__.get(self.name)
         if value is None:
             raise EtmpcError(f"{learner.name}: its {self.name} is not set: run it with etmpc.learning.runner.run")

@@ -327,3 +327,15 @@ def test_a_stopped_ppo_run_resumes_only_on_its_task_price_and_options(tmp_path, 
     assert json.loads((tmp_path / "cut" / "checkpoints" / "resume.json").read_text())["task"] == "battery/trading"
     with pytest.raises(EtmpcError, match="holds a ppo run on battery/trading, not battery/trading@0.5; resume it with that task"):
         run(tiny("ppo"), system_key("battery", 0.5), tmp_path / "cut", SEEDS["ppo"], resume=True, progress=False)
+
+
+@pytest.mark.parametrize("attribute", ["key", "seeds", "out", "pool"])
+def test_what_the_runner_sets_is_an_error_that_says_so_when_read_before(attribute):
+    """A learner's task, seeds, run directory and backend are the runner's to set: read before, a one-line
+    error naming the attribute and the runner, not a None met later; read on the class, the descriptor."""
+    learner = learner_class("dpi")()
+    with pytest.raises(EtmpcError, match=rf"^dpi: its {attribute} is not set: run it with etmpc.learning.runner.run$"):
+        getattr(learner, attribute)
+    assert isinstance(getattr(Learner, attribute), base.SetByRunner)
+    setattr(learner, attribute, "set")
+    assert getattr(learner, attribute) == "set"
