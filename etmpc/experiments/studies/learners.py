@@ -32,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
+from etmpc.common import outputs
 from etmpc.evaluation.references import rollout_meter_spec, stored
 from etmpc.evaluation.scorecard import score, task_score
 from etmpc.experiments.studies import runner
@@ -71,8 +72,7 @@ def compare(task: str, work: Path, dpi_seeds, ppo_seeds, workers: int, retrain: 
     else:
         card = score(specs, [task], workers=workers)
         rows = {r.policy: row(r) for r in card.rows}
-        card_path.parent.mkdir(parents=True, exist_ok=True)
-        card_path.write_text(json.dumps({"specs": specs, "rows": rows}) + "\n")
+        outputs.write_text(card_path, json.dumps({"specs": specs, "rows": rows}) + "\n")
     bounds, bound_rows = bounds_of(system, refs)
     rows |= bound_rows
     result = {"task": task, "best_fixed": refs.best, "rows": rows, "bounds": bounds, "learners": {}, "shield": None}

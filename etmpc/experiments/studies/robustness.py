@@ -17,6 +17,7 @@ import argparse
 import json
 from pathlib import Path
 
+from etmpc.common import outputs
 from etmpc.experiments.robustness import markdown, robustness, write
 from etmpc.experiments.studies import runner
 
@@ -51,7 +52,7 @@ def run(args: argparse.Namespace) -> None:
         image = f"robustness/{folder.name}/robustness.png"
         sections += [markdown(document), f"![{task} against {option}]({image})", ""]
     path = runner.Results(args.out, "robustness").page
-    path.write_text(page(made, runner.machine(args.workers), sections))
+    outputs.write_text(path, page(made, runner.machine(args.workers), sections))
     print(f"wrote {path}")
 
 

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
 
+from etmpc.common import outputs
 from etmpc.common.provenance import commit_and_date
 
 RESULTS = Path("docs/results")  # where the results pages and their JSON live, from the checkout's root
@@ -105,11 +106,10 @@ class Results:
 
     def write_page(self, page: Callable[[Document], str], document: Document | None = None) -> None:
         """The page of ``document`` (default: the one written before, for ``--page-only``)."""
-        self.page.write_text(page(self.read() if document is None else document))
+        outputs.write_text(self.page, page(self.read() if document is None else document))
 
     def write(self, document: Document, page: Callable[[Document], str]) -> None:
         """The document and its page, and a line that says so."""
-        self.folder.mkdir(parents=True, exist_ok=True)
-        self.json.write_text(json.dumps(document, indent=1) + "\n")
+        outputs.write_text(self.json, json.dumps(document, indent=1) + "\n")
         self.write_page(page, document)
         print(f"wrote {self.json} and {self.page}")

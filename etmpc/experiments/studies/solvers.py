@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from etmpc.common import outputs
 from etmpc.common.errors import EtmpcError
 from etmpc.experiments.studies import runner
 
@@ -283,8 +284,6 @@ def run(args: argparse.Namespace) -> None:
             )
     report = {"command": args.command, "policy": args.policy, "episodes": args.episodes, "machine": machine(), "tasks": results}
     if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(report, indent=1) + "\n")
+        outputs.write_text(args.json, json.dumps(report, indent=1) + "\n")
     if args.page:
-        args.page.parent.mkdir(parents=True, exist_ok=True)
-        args.page.write_text(page(report))
+        outputs.write_text(args.page, page(report))
