@@ -94,24 +94,29 @@ class Clairvoyant(Protocol):
     clairvoyant: bool
 
 
+# The four reads below are where etmpc reads these members of a policy. Each reads its member by name, as declared
+# by its protocol, rather than by isinstance against it: a runtime-checkable protocol's isinstance costs about
+# 12 us against 0.1 us (play_on asks observes() at every future it plays), and from Python 3.12 on it looks
+# members up statically, missing one a policy provides through __getattr__.
 def simulates(policy: object) -> bool:
     """Whether ``policy`` simulates the loop (:class:`Simulates`; False if it does not say)."""
-    return isinstance(policy, Simulates) and bool(policy.simulates)
+    return bool(getattr(policy, "simulates", False))
 
 
 def observes(policy: object) -> bool:
     """Whether ``policy`` reads the observation (:class:`Observes`; True if it does not say)."""
-    return not isinstance(policy, Observes) or bool(policy.observes)
+    return bool(getattr(policy, "observes", True))
 
 
 def announcer(policy: object) -> Callable[[Plan], int] | None:
     """``policy``'s ``announce`` (:class:`Announces`), or None if it announces nothing."""
-    return policy.announce if isinstance(policy, Announces) else None
+    announce: Callable[[Plan], int] | None = getattr(policy, "announce", None)
+    return announce
 
 
 def clairvoyant(policy: object) -> bool:
     """Whether ``policy`` is an oracle (:class:`Clairvoyant`; False if it does not say)."""
-    return isinstance(policy, Clairvoyant) and bool(policy.clairvoyant)
+    return bool(getattr(policy, "clairvoyant", False))
 
 
 @dataclass(frozen=True, eq=False)
