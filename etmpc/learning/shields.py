@@ -11,12 +11,20 @@ chosen if no rule is within the budget, or if the chosen one would be no safer t
 the chosen rule (or no shield) is as safe as the schedule on these episodes is said beside it (``safe``).
 The unshielded policies are played too, as the row the choice is measured against. :func:`pick` chooses
 from a table alone, so a stored table can be read again.
+
+:func:`certify` chooses by a bound instead of a budget, safety as a constraint: a rule (or no shield) is
+*certified* when, for every policy, the paired difference of failures per episode against the schedule, on
+the same validation episodes, has a 95 % upper confidence bound of at most ``bound`` (:data:`SAFETY_BOUND`),
+the bound widened for the number of rules tried (Bonferroni), so that the one chosen is not the luckiest of
+many. Among the certified, the best mean objective wins. This is the test a shipped learner is held to on
+fresh episodes (the ``safety`` study), asked of validation episodes first.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from statistics import NormalDist
 
 import numpy as np
 
@@ -28,6 +36,8 @@ from etmpc.systems.capabilities import ShieldRule
 
 
 BUDGET = 0.01  # the share of the unshielded policies' mean objective a shield may cost on validation episodes
+SAFETY_BOUND = 0.05  # failures per episode a shielded learner may add to the schedule's (a 95 % upper bound)
+CONFIDENCE = 0.95  # of certify's bound, shared by the rules it tries
 
 
 @dataclass(frozen=True)
@@ -61,16 +71,18 @@ def choose(
     episodes; return the table and the chosen rule (see the module's docstring)."""
     system = make_system(task)
     specs = [schedule, *policies] + [f"shield:{rule.text}:{p}" for rule in grid for p in policies]
-    played = dict(
-        zip(specs, (_mean(rows) for rows in episode_outcomes(pool, system.name, specs, VALIDATION_ENTROPY, episodes, tick)))
-    )
+    rows = dict(zip(specs, episode_outcomes(pool, system.name, specs, VALIDATION_ENTROPY, episodes, tick)))
+    played = {spec: _mean(outcomes) for spec, outcomes in rows.items()}
 
     def summary(prefix: str) -> dict:
         outcomes = [played[prefix + p] for p in policies]
         return {
             "objective": float(np.mean([o.objective for o in outcomes])),
             "worst_failures": max(o.failures for o in outcomes),
-            "policies": {p: vars(played[prefix + p]) for p in policies},
+            "policies": {
+                p: dict(vars(played[prefix + p]), failure_gap=paired_gap(rows[prefix + p][:, 1], rows[schedule][:, 1]))
+                for p in policies
+            },
         }
 
     result = {
@@ -97,4 +109,57 @@ def pick(result: dict, budget: float = BUDGET) -> dict:
         chosen = None  # it buys no safety
     limit = result["schedule"]["failures"]
     safe = (chosen or result["unshielded"])["worst_failures"] <= limit
-    return dict(result, chosen=None if chosen is None else chosen["rule"], budget=budget, safe=bool(safe))
+    return dict(
+        result, chosen=None if chosen is None else chosen["rule"], budget=budget, selection={"by": "budget"}, safe=bool(safe)
+    )
+
+
+def select(result: dict) -> dict:
+    """``result`` chosen again as it was chosen (its ``selection``: by :func:`certify`'s bound, or by
+    :func:`pick`'s budget, which a table made before the choice was recorded was chosen by)."""
+    selection = result.get("selection", {"by": "budget"})
+    if selection["by"] == "certify":
+        return certify(result, selection["bound"], selection["confidence"])
+    return pick(result, result.get("budget", BUDGET))
+
+
+def paired_gap(values: np.ndarray, reference: np.ndarray) -> dict:
+    """The paired difference ``values - reference`` over the same episodes: its mean, standard deviation
+    (``ddof=1``) and the number of episodes, what a confidence bound on it needs."""
+    gap = np.asarray(values, dtype=float) - np.asarray(reference, dtype=float)
+    return {"mean": float(gap.mean()), "sd": float(gap.std(ddof=1)) if len(gap) > 1 else 0.0, "episodes": len(gap)}
+
+
+def upper_bound(gap: dict, z: float, least_sd: float = 0.0) -> float:
+    """``mean + z sd / sqrt(n)`` of a :func:`paired_gap`, its upper confidence bound at ``z``, with ``sd`` at least
+    ``least_sd``."""
+    return gap["mean"] + z * max(gap["sd"], least_sd) / np.sqrt(gap["episodes"])
+
+
+def certify(result: dict, bound: float = SAFETY_BOUND, confidence: float = CONFIDENCE) -> dict:
+    """``result`` (:func:`choose`'s) with its ``chosen`` rule by certification (see the module's docstring):
+    ``certified`` lists the candidates (``"none"``: no shield) whose every policy's failure gap to the schedule
+    has its upper bound at most ``bound``; ``chosen`` is the certified rule with the best mean objective
+    (None: no shield, certified or not; ``safe`` says whether what is chosen was certified)."""
+    candidates = [{"rule": "none", **result["unshielded"]}, *result["rules"]]
+    if any("failure_gap" not in p for row in candidates for p in row["policies"].values()):
+        raise ValueError("this table has no paired failure gaps (made before certify was written): play it again")
+    # a two-sided (1 - confidence) interval's upper end, shared by the candidates (Bonferroni)
+    z = NormalDist().inv_cdf(1.0 - (1.0 - confidence) / (2 * len(candidates)))
+    # Failures are rare: a few hundred episodes may see none, and a spread of 0 would certify anything. The
+    # spread is taken at least as that of one more failure in a share `bound` of the episodes, the gap at the
+    # bound itself (as Wilson's interval takes the variance at the value tested): with no failure seen, about
+    # (z / bound)^2 episodes certify (157 at 0.05 and z = 2.8).
+    share = min(bound, 0.5)
+    least = float(np.sqrt(share * (1.0 - share)))
+    worst = {row["rule"]: max(upper_bound(p["failure_gap"], z, least) for p in row["policies"].values()) for row in candidates}
+    certified = [row for row in candidates if worst[row["rule"]] <= bound]
+    best = max(certified, key=lambda row: oriented(row["objective"], result["objective_sense"]), default=None)
+    chosen = None if best is None or best["rule"] == "none" else best["rule"]
+    return dict(
+        {key: value for key, value in result.items() if key != "budget"},  # a budget's choice is not this one's
+        chosen=chosen,
+        selection={"by": "certify", "bound": bound, "confidence": confidence, "z": z, "least_sd": least, "upper_bounds": worst},
+        certified=[row["rule"] for row in certified],
+        safe=best is not None,
+    )

@@ -66,3 +66,70 @@ def test_an_outcome_is_the_episodes_objective_failures_and_recomputes():
     assert rows.shape == (2, 3) and list(rows[:, 2]) == [50.0, 50.0]
     assert list(rows[:, 0]) == [training_return(TASK, "every:3", shields.VALIDATION_ENTROPY, i) for i in range(2)]
     assert all(f >= 0 and f == int(f) for f in rows[:, 1])  # falls: a count
+
+
+def _certify_table(monkeypatch, failures: dict, objectives: dict, grid, bound: float):
+    """Play made-up episodes: ``failures[spec]`` per episode, ``objectives[spec]`` on every episode."""
+
+    def played(pool, domain, specs, entropy, episodes, tick):
+        return [np.column_stack([np.full(episodes, objectives[s]), failures[s], np.full(episodes, 10.0)]) for s in specs]
+
+    monkeypatch.setattr(shields, "episode_outcomes", played)
+    episodes = len(failures["every:3"])
+    return shields.certify(shields.choose(TASK, ["rl:a"], "every:3", grid, episodes, pool=None), bound=bound)
+
+
+def _upper(extra, z: float, bound: float) -> float:
+    """The upper bound certify should give, computed here: the spread at least a Bernoulli's at the bound."""
+    extra = np.asarray(extra, float)
+    p = min(bound, 0.5)
+    return extra.mean() + z * max(extra.std(ddof=1), np.sqrt(p * (1 - p))) / np.sqrt(len(extra))
+
+
+def test_certify_keeps_the_rules_whose_paired_upper_bound_is_within_the_bound_then_the_best_objective(monkeypatch):
+    from scipy.stats import norm
+
+    schedule = np.tile([0, 1, 0, 0, 0, 0, 1, 0], 4).astype(float)  # 32 episodes
+    extra = {
+        "none": np.tile([1, 0, 1, 0, 2, 0, 0, 1], 4),  # unshielded: the cheapest, 5 more falls in 8 episodes
+        "5": np.tile([0, 0, 1, 0, 0, 0, 0, 0], 4),  # 1 more fall in 8
+        "5:0.5": np.zeros(32),  # as safe as the schedule, episode by episode
+    }
+    failures = {"every:3": schedule, "rl:a": schedule + extra["none"]}
+    failures |= {"shield:5:rl:a": schedule + extra["5"], "shield:5:0.5:rl:a": schedule + extra["5:0.5"]}
+    objectives = {"every:3": 30.0, "rl:a": 26.0, "shield:5:rl:a": 27.0, "shield:5:0.5:rl:a": 28.0}
+    grid = shields.rules((5,), (None, 0.5))
+    z = norm.ppf(1 - 0.05 / (2 * 3))  # three candidates: none, 5, 5:0.5
+
+    result = _certify_table(monkeypatch, failures, objectives, grid, bound=0.5)
+    bounds = {rule: _upper(gap, z, 0.5) for rule, gap in extra.items()}
+    assert result["selection"]["upper_bounds"] == pytest.approx(bounds)
+    assert bounds["5:0.5"] < bounds["5"] < 0.5 < bounds["none"]  # 0.21 and 0.34 within 0.5; 0.94 not
+    assert result["certified"] == ["5", "5:0.5"] and result["chosen"] == "5" and result["safe"]  # 27 beats 28
+    # a tighter bound leaves the rule that is as safe as the schedule; a looser one leaves no shield at all
+    tight = shields.certify(result, bound=0.3)
+    assert tight["selection"]["upper_bounds"]["5"] == pytest.approx(_upper(extra["5"], z, 0.3))  # 0.32
+    assert tight["certified"] == ["5:0.5"] and tight["chosen"] == "5:0.5"
+    loose = shields.certify(result, bound=2.0)
+    assert loose["chosen"] is None and loose["certified"] == ["none", "5", "5:0.5"] and loose["safe"]
+
+
+def test_certify_needs_enough_episodes_when_none_fails(monkeypatch):
+    """No failure in a few episodes certifies nothing: the spread is taken as a failure's in 5 % of them."""
+    for episodes, certified in ((20, False), (200, True)):
+        nothing = np.zeros(episodes)
+        failures = {"every:3": nothing, "rl:a": nothing, "shield:5:rl:a": nothing}
+        objectives = {"every:3": 30.0, "rl:a": 26.0, "shield:5:rl:a": 27.0}
+        result = _certify_table(monkeypatch, failures, objectives, [ShieldRule(5)], bound=0.05)
+        assert result["safe"] is certified and result["chosen"] is None  # no shield: the cheaper, when certified
+
+
+def test_certify_says_when_nothing_is_certified_and_refuses_a_table_without_gaps(monkeypatch):
+    schedule = np.zeros(8)
+    failures = {"every:3": schedule, "rl:a": schedule + 1, "shield:5:rl:a": schedule + 1}
+    objectives = {"every:3": 30.0, "rl:a": 26.0, "shield:5:rl:a": 27.0}
+    result = _certify_table(monkeypatch, failures, objectives, [ShieldRule(5)], bound=0.05)
+    assert result["certified"] == [] and result["chosen"] is None and not result["safe"]
+    old = dict(result, unshielded={**result["unshielded"], "policies": {"rl:a": {"objective": 26.0}}})
+    with pytest.raises(ValueError, match="no paired failure gaps"):
+        shields.certify(old)

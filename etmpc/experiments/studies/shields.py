@@ -3,9 +3,13 @@
     etmpc study shields                       # the tasks below, about 40 min on 2 cores
     etmpc study shields --task quadrotor/waypoints --episodes 30
     etmpc study shields --from-tables         # choose again from shields.json's tables, and its page
+    etmpc study shields --task quadrotor/waypoints --episodes 1000 --select certify --bound 0.05
 
 For each task: its shipped DPI and PPO, unshielded and under every rule of the task's grid, and its best
-fixed schedule, on the first ``--episodes`` validation episodes (never the test set). Writes
+fixed schedule, on the first ``--episodes`` validation episodes (never the test set), and a rule chosen by
+``--select``: ``budget``, the safest rule within a cost budget (:func:`~etmpc.learning.shields.pick`), or
+``certify``, the cheapest rule whose failures per episode, paired with the schedule's, are within ``--bound``
+at 95 % for every learner (:func:`~etmpc.learning.shields.certify`). Each task keeps how it was chosen. Writes
 ``docs/results/shields.json`` (what was chosen, and the whole table) and its page ``shields.md``, and
 prints each task's rule as the line to declare in its system class (``shield = ShieldRule(...)``). The
 test-set figures of the shielded policies are on the learner comparison page, the ``learners`` study's.
@@ -20,7 +24,7 @@ from etmpc.evaluation.backends import make_backend
 from etmpc.evaluation.references import stored
 from etmpc.experiments.leaderboard_rows import shipped_policy
 from etmpc.experiments.studies import runner
-from etmpc.learning.shields import BUDGET, choose, pick, rules
+from etmpc.learning.shields import BUDGET, SAFETY_BOUND, certify, choose, pick, rules, select
 
 #: Each task whose failures are safety events: its grid (maximum plan ages, margins in its unit) and how many
 #: validation episodes (falls are rare on the cart pendulum: a few in a hundred episodes).
@@ -51,44 +55,78 @@ def page(document: dict) -> str:
         f"Last run at commit `{document['commit']}` ({document['date']}) on {document['machine']}, in "
         f"{document['seconds'] / 60:.0f} min (each task says the commit it was played at). Each rule played around "
         "the task's shipped DPI and PPO on validation episodes (the training distribution, never the test set), "
-        "beside the best fixed schedule. A shield is insurance bought with objective: among the rules that cost "
+        "beside the best fixed schedule. A rule is chosen in one of two ways, and each task says which. By a "
+        "budget: a shield is insurance bought with objective: among the rules that cost "
         f"the learners at most {100 * BUDGET:g} % of their unshielded mean objective (lower is better on these "
         "tasks), the chosen rule is the safest (the fewest failures per episode of the learner that fails most), "
-        "then the cheapest; none if no rule within the budget is safer than no shield. What the shield is: "
-        "[policies](../policies.md#shields-shield).",
+        "then the cheapest; none if no rule within the budget is safer than no shield. By certification: safety "
+        "as a constraint: a rule (or none) is certified when, for each learner, the upper end of the 95 % "
+        "confidence interval of its failures per episode minus the schedule's, paired episode by episode, is "
+        "within the bound, the interval widened for the number of rules tried (Bonferroni); the certified rule "
+        "with the best mean objective is chosen. What the shield is: [policies](../policies.md#shields-shield).",
         "",
     ]
     for task, result in document["tasks"].items():
-        schedule = result["schedule"]
-        unshielded = result["unshielded"]
-        chosen = (
-            "none (no rule within the budget is safer than no shield)"
-            if result["chosen"] is None
-            else f"**`shield:{result['chosen']}`**"
-        )
-        safety = "as safe as" if result["safe"] else "less safe than"
-        lines += [
-            f"## `{task}`",
-            "",
-            f"{result['episodes']} validation episodes, played at commit `{result.get('commit', document['commit'])}`; "
-            f"margins in {result['margin_unit']}. "
-            f"`{schedule['spec']}`: objective {schedule['objective']:.3f}, {schedule['failures']:.3f} failures per episode. "
-            f"Chosen: {chosen} ({safety} `{schedule['spec']}` on these episodes).",
-            "",
-            "| rule | mean objective of the learners | failures per episode, the worse learner |",
-            "|---|---|---|",
-            f"| none | {unshielded['objective']:.3f} | {unshielded['worst_failures']:.3f} |",
-        ]
-        for row in result["rules"]:
-            mark = " (chosen)" if row["rule"] == result["chosen"] else ""
-            lines.append(f"| `{row['rule']}`{mark} | {row['objective']:.3f} | {row['worst_failures']:.3f} |")
-        lines.append("")
+        lines += _task_section(task, result, result.get("commit", document["commit"]))
     return "\n".join(lines)
+
+
+def _task_section(task: str, result: dict, commit: str) -> list[str]:
+    """One task's paragraph and table of rules."""
+    schedule, unshielded = result["schedule"], result["unshielded"]
+    selection = result.get("selection", {"by": "budget"})
+    certified = selection["by"] == "certify"
+    if certified:
+        how = f"by certification, within {selection['bound']:g} failures per episode of `{schedule['spec']}`"
+        none = "none (no shield is certified and cheapest)" if result["safe"] else "none (no rule is certified)"
+        safety = "certified" if result["safe"] else "not certified"
+    else:
+        how = "by a budget"
+        none = "none (no rule within the budget is safer than no shield)"
+        safety = ("as safe as" if result["safe"] else "less safe than") + f" `{schedule['spec']}` on these episodes"
+    chosen = none if result["chosen"] is None else f"**`shield:{result['chosen']}`**"
+    header = "| rule | mean objective of the learners | failures per episode, the worse learner |"
+    rule = "|---|---|---|"
+    if certified:
+        header += " upper bound of the paired failure gap, the worse learner |"
+        rule += "---|"
+    lines = [
+        f"## `{task}`",
+        "",
+        f"{result['episodes']} validation episodes, played at commit `{commit}`; margins in {result['margin_unit']}. "
+        f"`{schedule['spec']}`: objective {schedule['objective']:.3f}, {schedule['failures']:.3f} failures per episode. "
+        f"Chosen {how}: {chosen} ({safety}).",
+        "",
+        header,
+        rule,
+    ]
+    for row in [{"rule": "none", **unshielded}, *result["rules"]]:
+        name = "none" if row["rule"] == "none" else f"`{row['rule']}`"
+        mark = " (chosen)" if row["rule"] == result["chosen"] else ""
+        line = f"| {name}{mark} | {row['objective']:.3f} | {row['worst_failures']:.3f} |"
+        if certified:
+            line += f" {selection['upper_bounds'][row['rule']]:.3f} |"
+        lines.append(line)
+    lines.append("")
+    return lines
 
 
 def arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--task", action="append", choices=sorted(GRIDS), help="a task (repeatable; default: all)")
     parser.add_argument("--episodes", type=int, help="validation episodes per policy (default: the task's, 100 or 200)")
+    parser.add_argument(
+        "--select",
+        choices=("certify", "budget"),
+        default="certify",
+        help="certify: the cheapest rule within --bound of the schedule's failures (paired, 95 %%); "
+        f"budget: the safest rule costing at most {100 * BUDGET:g} %% (default: certify)",
+    )
+    parser.add_argument(
+        "--bound",
+        type=float,
+        default=SAFETY_BOUND,
+        help=f"with --select certify: failures per episode a learner may add to the schedule's (default: {SAFETY_BOUND:g})",
+    )
     runner.options(parser, page_only=False)
     parser.add_argument(
         "--from-tables",
@@ -101,14 +139,17 @@ def run(args: argparse.Namespace) -> None:
     results = runner.Results(args.out, "shields")
     if args.from_tables:
         document = results.read()
-        document["tasks"] = {task: pick(result) for task, result in document["tasks"].items()}
+        document["tasks"] = {task: select(result) for task, result in document["tasks"].items()}
         results.write(document, page)
         return
     clock = runner.Stopwatch()
     provenance = runner.made()  # the code that runs: the checkout as it starts
     played = results.kept(lambda: {"tasks": {}})["tasks"]  # the tasks not run again stay
     for task in args.task or list(GRIDS):
-        played[task] = dict(rule(task, args.episodes, args.workers), commit=provenance["commit"], date=provenance["date"])
+        result = rule(task, args.episodes, args.workers)
+        result = certify(result, args.bound) if args.select == "certify" else pick(result)
+        played[task] = dict(result, commit=provenance["commit"], date=provenance["date"])
+        report(result)
     document = {
         "commit": provenance["commit"],
         "date": provenance["date"],
@@ -120,8 +161,8 @@ def run(args: argparse.Namespace) -> None:
 
 
 def rule(task: str, episodes: int | None, workers: int) -> dict:
-    """Play ``task``'s grid of rules (on its own number of validation episodes unless ``episodes``), and say which was
-    chosen, as the line to declare in its system class."""
+    """Play ``task``'s grid of rules (on its own number of validation episodes unless ``episodes``): the table a rule
+    is chosen from."""
     ages, margins, default_episodes = GRIDS[task]
     episodes = episodes or default_episodes
     grid = rules(ages, margins)
@@ -129,17 +170,25 @@ def rule(task: str, episodes: int | None, workers: int) -> dict:
     jobs = (1 + len(policies) * (1 + len(grid))) * episodes
     with make_backend("local", workers) as pool, Progress(jobs, f"{task}: shield rules") as bar:
         result = choose(task, policies, stored(task).best, grid, episodes, pool, lambda job: bar.update())
-    schedule = result["schedule"]
-    unshielded = result["unshielded"]
+    return result
+
+
+def report(result: dict) -> None:
+    """Print a task's table and its choice, as the line to declare in its system class."""
+    schedule, unshielded = result["schedule"], result["unshielded"]
     worst = unshielded["worst_failures"]
-    print(f"{task}: {schedule['spec']} fails {schedule['failures']:.3f}/episode; unshielded learners at worst {worst:.3f}")
-    for row in result["rules"]:
-        print(f"  shield:{row['rule']:<8} objective {row['objective']:9.4f}  worst failures {row['worst_failures']:.3f}")
+    print(
+        f"{result['task']}: {schedule['spec']} fails {schedule['failures']:.3f}/episode; unshielded learners at worst {worst:.3f}"
+    )
+    bounds = result["selection"].get("upper_bounds", {})
+    for row in [{"rule": "none", **unshielded}, *result["rules"]]:
+        bound = f"  upper bound of the gap {bounds[row['rule']]:.3f}" if bounds else ""
+        print(f"  shield:{row['rule']:<8} objective {row['objective']:9.4f}  worst failures {row['worst_failures']:.3f}{bound}")
+    verdict = "certified" if result["selection"]["by"] == "certify" else "as safe as the schedule"
+    verdict = verdict if result["safe"] else f"not {verdict}"
     if result["chosen"] is None:
-        print("  chosen: none within the budget: shield = None")
-        return result
+        print(f"  chosen: no shield ({verdict}): shield = None")
+        return
     chosen = result["chosen"].split(":")
     declared = f"ShieldRule({chosen[0]}{', ' + chosen[1] if len(chosen) > 1 else ''})"
-    verdict = "as safe as the schedule" if result["safe"] else "less safe than the schedule"
     print(f"  chosen: shield:{result['chosen']} ({verdict}): {declared}")
-    return result
