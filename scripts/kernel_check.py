@@ -21,10 +21,16 @@ replay the evaluations byte for byte; one without does not (docs/using.md gives 
 Usage::
 
     python scripts/kernel_check.py [--episodes 4]
+    python scripts/kernel_check.py --ppo
 
 prints one line per setting and exits 1 if any evaluation differs from the default one, other than
 an expected difference. A setting's
 run is this script with ``--digest``: it prints the sha256 of each system's evaluation JSON.
+
+``--ppo`` asks the same of PPO training (the ``rl`` extra): a short run on the balance task, once with the
+CPU's own PyTorch kernels and once with ``kernels=portable`` (:mod:`etmpc.learning.kernels`), under each
+setting above plus MKL's and ATen's own switches (``MKL_ENABLE_INSTRUCTIONS``, ``ATEN_CPU_CAPABILITY``); it
+compares the trained networks' bytes, and exits 1 if the portable ones differ.
 """
 
 from __future__ import annotations
@@ -97,6 +103,51 @@ def settings() -> dict[str, dict[str, str]]:
     if {"avx512f", "avx512dq", "avx512bw", "avx512vl", "avx512cd"} <= flags:
         chosen["AVX-512 machine: OpenBLAS SkylakeX"] = {"OPENBLAS_CORETYPE": "SkylakeX"}
     return chosen
+
+
+def ppo_settings() -> dict[str, dict[str, str]]:
+    """:func:`settings`, with PyTorch's own switches as that machine would take them (MKL's widest
+    instructions, ATen's vector width)."""
+    chosen = settings()
+    widths = {
+        "SSE": ("SSE4_2", "default"),
+        "no FMA": ("SSE4_2", "default"),
+        "AVX2": ("AVX2", "avx2"),
+        "AVX-512": ("AVX512", "avx512"),
+    }
+    for name, env in chosen.items():
+        for prefix, (mkl, aten) in widths.items():
+            if name.startswith(prefix):
+                env.update(MKL_ENABLE_INSTRUCTIONS=mkl, ATEN_CPU_CAPABILITY=aten)
+    return chosen
+
+
+def ppo_digest(kernels: str) -> str:
+    """The sha256 of a short PPO run's network, trained in this process with PyTorch's ``kernels``."""
+    from etmpc.learning.ppo import train_ppo
+    from etmpc.learning.ppo_settings import PpoSettings
+
+    settings = PpoSettings(timesteps=1024, n_steps=256, batch_size=128, checkpoints=1, validation_episodes=2, kernels=kernels)
+    with tempfile.TemporaryDirectory() as tmp:
+        train_ppo("cart_pendulum/balance", Path(tmp) / "run", settings)
+        return hashlib.sha256((Path(tmp) / "run" / "selected.zip").read_bytes()).hexdigest()
+
+
+def compare_ppo() -> dict[str, dict[str, str]]:
+    """Each setting's :func:`ppo_digest` per kernel setting, each in a fresh interpreter (PyTorch reads its switches
+    when it loads)."""
+    found: dict[str, dict[str, str]] = {}
+    for name, env in ppo_settings().items():
+        for kernels in ("native", "portable"):
+            result = subprocess.run(
+                [sys.executable, __file__, "--ppo-digest", kernels],
+                env={**os.environ, **env},
+                capture_output=True,
+                text=True,
+                check=True,
+            )
+            found.setdefault(name, {})[kernels] = result.stdout.strip().splitlines()[-1]
+    return found
 
 
 SELF_TRIGGER_FEATURES = {"cart_pendulum": 4 + 4 + 4 + 1 + 1, "battery": 1 + 1 + 1 + 1 + 1 + 4}
@@ -179,10 +230,23 @@ def main() -> int:
     parser.add_argument("--episodes", type=int, default=4, help="first N test-set episodes per system (default 4)")
     parser.add_argument("--digest", action="store_true", help="print this process's digests as JSON (one setting)")
     parser.add_argument("--skip", action="append", default=[], metavar="SYSTEM", help="with --digest: not this system")
+    parser.add_argument("--ppo", action="store_true", help="compare PPO training's networks instead (the rl extra)")
+    parser.add_argument("--ppo-digest", choices=("native", "portable"), help="print one PPO run's digest (one setting)")
     args = parser.parse_args()
     if args.digest:
         print(json.dumps(digests(args.episodes, tuple(args.skip))))
         return 0
+    if args.ppo_digest:
+        print(ppo_digest(args.ppo_digest))
+        return 0
+    if args.ppo:
+        found = compare_ppo()
+        for name, values in found.items():
+            print(f"{name}: " + ", ".join(f"{k} {v[:12]}" for k, v in values.items()))
+        portable = {values["portable"] for values in found.values()}
+        native = {values["native"] for values in found.values()}
+        print(f"portable: {len(portable)} network(s) over {len(found)} settings; native: {len(native)}")
+        return 0 if len(portable) == 1 else 1
     found = compare(args.episodes)
     reference, failed = found["default"], unexpected(found)
     for name, values in found.items():

@@ -21,6 +21,7 @@ The file holds one mapping under the task's gymnasium id, with rl-zoo3's key nam
         net_arch: [64, 64]
       seed: 0
       checkpoints: 4            # etmpc's own: slices of the budget, each saved and scored on validation episodes
+      kernels: portable         # etmpc's own: PyTorch's kernels, the same on every x86-64 host (default: native)
 
 Two differences from rl-zoo3: ``policy_kwargs`` is a mapping, not Python text (nothing from a file is
 ever evaluated), and only keys this project reads are accepted (a misspelt one is an error, never

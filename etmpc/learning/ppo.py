@@ -17,7 +17,9 @@ on ``validation_episodes`` training-distribution episodes, drawn as ``etmpc trai
 the settings, the validation scores, the environment and simulated steps and the wall time.
 
 Evaluate it like any policy: ``etmpc evaluate --task TASK --policy sb3:DIR/selected.zip``. PyTorch runs on
-one thread per process, on the CPU. Stable-Baselines3 and PyTorch are the optional extra ``rl``.
+one thread per process, on the CPU, with the kernels ``kernels`` names (:mod:`etmpc.learning.kernels`:
+``portable`` gives the same networks on every x86-64 host). Stable-Baselines3 and PyTorch are the optional
+extra ``rl``.
 
 On a task with compute levels (``cart_pendulum/kicks_levels``) the environment's actions are
 ``Discrete(3)`` (keep, one SQP iteration, a full solve): the network has three outputs, its ``sb3:``
@@ -50,6 +52,7 @@ from etmpc.common.sense import best as best_of
 from etmpc.common.errors import EtmpcError
 from etmpc.common.outputs import refuse_foreign, write_json
 from etmpc.learning.base import Learner
+from etmpc.learning.kernels import in_effect, pin
 from etmpc.learning.ppo_model import environments, load_weights, make_model, rollouts, save_checkpoint
 from etmpc.learning.ppo_state import (
     FINISHED_FORMAT,
@@ -105,6 +108,7 @@ class PpoLearner(Learner):
         self.result: dict | None = None
         self.vec: VecNormalize | None = None  # the environments, normalised (setup's; None once closed)
         self.model: PPO | None = None
+        self.kernels: dict = {}  # the paths PyTorch takes in this process (etmpc.learning.kernels), read by check
         self._timesteps = 0
         self._simulated_before = 0  # a resumed run's steps before it resumed
 
@@ -125,7 +129,9 @@ class PpoLearner(Learner):
         refuse_foreign(self.out, self.owns, "PPO training run")
         if self.seeds[0] != self.settings.seed:
             self.settings = replace(self.settings, seed=self.seeds[0])
+        pin(self.settings.kernels)  # before PyTorch is loaded
         self.sb3, self.torch = _libraries()
+        self.kernels = in_effect()
         self.system = self.key.make()
         s = self.settings
         from etmpc.envs.trigger import checked_failure_cost, fixed_schedule
@@ -269,6 +275,7 @@ class PpoLearner(Learner):
             "objective_sense": system.objective_sense,
             "stable_baselines3": self.sb3.__version__,
             "torch": self.torch.__version__,
+            "kernels": dict(setting=s.kernels, **self.kernels),
         }
         write_json(out / "training.json", result)
         for name in (RESUME, NORMALIZE):

@@ -17,6 +17,7 @@ from pathlib import Path
 from etmpc.common import checks
 from etmpc.common.checks import MAX_COUNT, short
 from etmpc.common.errors import EtmpcError
+from etmpc.learning.kernels import KERNELS
 from etmpc.learning.resume import corrupt
 from etmpc.systems import SystemKey
 
@@ -64,6 +65,7 @@ RANGES = {
         "None or a fixed schedule's spec (always, never, every:T, or iterate:T on a task with compute levels)",
         lambda v: v is None or isinstance(v, str),
     ),
+    "kernels": (f"one of {', '.join(KERNELS)}", lambda v: v in KERNELS),
 }
 
 
@@ -91,6 +93,9 @@ class PpoSettings:
     # what each of the task's failures costs on top of its reward, in the training environments' reward only
     # (TriggerEnvironment's failure_cost; the validation that chooses among checkpoints scores the task's own)
     failure_cost: float = 0.0
+    # PyTorch's numerical kernels in the training process (etmpc.learning.kernels): "native", the CPU's own, or
+    # "portable", the same networks on every x86-64 host
+    kernels: str = "native"
 
     def __post_init__(self):
         for name, (allowed, holds) in RANGES.items():
@@ -180,12 +185,14 @@ def _ours(name: str) -> bool:
 
 
 def settings_json(settings: PpoSettings) -> dict:
-    """``settings`` as a run's files keep them; without a failure cost, as before there was one (so the
-    files of earlier runs are read as the same settings)."""
+    """``settings`` as a run's files keep them; without a failure cost, or with the native kernels, as before
+    there were such settings (so the files of earlier runs are read as the same settings)."""
     data = asdict(settings)
     data["hidden"] = list(settings.hidden)
     if not settings.failure_cost:
         del data["failure_cost"]
+    if settings.kernels == "native":
+        del data["kernels"]
     return data
 
 
