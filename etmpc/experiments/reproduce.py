@@ -58,7 +58,7 @@ from etmpc.experiments.summary import (
     summarise_scorecard,
     summarise_system,
 )
-from etmpc.learning.dpi import Settings as DpiSettings
+from etmpc.learning.dpi_recipe import recipe
 from etmpc.learning.runner import cost_path, timed  # noqa: F401 (cost_path: reproduce's API)
 from etmpc.learning.train import TrainConfig, curve_summary, load_checkpoint
 from etmpc.policies.learned import write_json_atomically
@@ -192,23 +192,8 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
         with clock.stage("GPOMDP evaluation", folder / "learned.json"):
             learned = evaluated_once(folder / "learned.json", policies=learned_specs, repeats=settings.repeats, **common)
 
-    _say(f"{domain}: the default learner (DPI), {len(settings.dpi_seeds)} seeds x {settings.dpi_episodes} episodes")
-    dpi_config = TrainConfig(
-        domain,
-        settings.dpi_seeds,
-        settings.dpi_episodes,
-        settings.dpi_eval_every,
-        settings.eval_episodes,
-        features="error",
-        algorithm="dpi",
-        validation_episodes=settings.validation_episodes,
-        dpi=DpiSettings(
-            futures=settings.dpi_futures,
-            horizon=system.benchmark.capped(settings.dpi_horizon),
-            states_per_episode=settings.dpi_labels,
-            selection_episodes=settings.dpi_selection_episodes,
-        ),
-    )
+    dpi_config = settings.dpi(recipe(system.name), system.benchmark.capped)  # the task's dpi.yml, at the run's sizes
+    _say(f"{domain}: the default learner (DPI), {len(dpi_config.seeds)} seeds x {dpi_config.episodes} episodes")
     dpi_dir = folder / "train_dpi"
     with clock.stage("DPI training", cost_path(dpi_dir)), timed(dpi_dir, run["workers"]):
         trained(dpi_config, dpi_dir, run, progress)
@@ -233,7 +218,9 @@ def _system(folder: Path, domain: str, settings: Settings, run: dict, progress: 
     ppo_run, ppo, ppo_curve = _ppo(folder, domain, settings, run, common, clock)
     costs = {name: _cost(folder / stage) for name, stage in (("gpomdp", "train"), ("dpi", "train_dpi"), ("ppo", "train_ppo"))}
     curves = _efficiency(folder, system, baselines, best, state, ppo_run, ppo_curve)
-    summary["learners"] = summarise_learners(system, baselines, learned, default, ppo, ppo_run, settings.to_json(), costs, curves)
+    summary["learners"] = summarise_learners(
+        system, baselines, learned, default, ppo, ppo_run, settings.to_json(), dpi_config, costs, curves
+    )
     summary["efficiency"] = curves
     if not (folder / "efficiency.png").exists():
         chosen = {

@@ -4,7 +4,10 @@ at small sizes (:data:`QUICK`). A run keeps them in its ``settings.json``; a sec
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
+from typing import Any
+
+from etmpc.learning.config import TrainConfig
 
 
 @dataclass(frozen=True)
@@ -19,14 +22,15 @@ class Settings:
     repeats: int = 5  # passes over the test set for the learned policy
     record_episodes: int = 3  # representative episodes per policy in the recording
     video_size: tuple[int, int] = (640, 480)
-    # The default learner (DPI on the error features) and the headroom meters.
-    dpi_seeds: tuple[int, ...] = (0, 1, 2)
-    dpi_episodes: int = 60  # training episodes per seed: 3 iterations of 20
-    dpi_eval_every: int = 20
-    dpi_labels: int = 25  # decisions labelled per training episode
-    dpi_futures: int = 4
-    dpi_horizon: int = 20  # at most the task's Benchmark.lookahead
-    dpi_selection_episodes: int = 30  # training episodes that choose DPI's first policy among its bases
+    # The default learner (DPI on the error features): each None is the task's recipe's (policies/<task>/dpi.yml,
+    # the shipped policy's; etmpc.learning.dpi_recipe), a number sets it on every task.
+    dpi_seeds: tuple[int, ...] | None = None
+    dpi_episodes: int | None = None  # training episodes per seed
+    dpi_eval_every: int | None = None  # episodes per DPI iteration
+    dpi_labels: int | None = None  # decisions labelled per training episode
+    dpi_futures: int | None = None
+    dpi_horizon: int | None = None  # at most the task's Benchmark.lookahead
+    dpi_selection_episodes: int | None = None  # training episodes that choose DPI's first policy among its bases
     validation_episodes: int = 50  # training-distribution episodes that choose the shipped seed
     rollout_episodes: int = 30  # first test-set episodes for rollout:BEST and oracle:BEST
     rollout_futures: int = 4  # K: 8 doubles its cost (2 K H simulated steps per decision)
@@ -36,10 +40,29 @@ class Settings:
 
     def to_json(self) -> dict:
         data = asdict(self)
-        data["seeds"], data["video_size"], data["dpi_seeds"] = list(self.seeds), list(self.video_size), list(self.dpi_seeds)
-        if self.dpi_selection_episodes == Settings.dpi_selection_episodes:  # as a run made before it was a setting
+        data["seeds"], data["video_size"] = list(self.seeds), list(self.video_size)
+        if self.dpi_seeds is not None:
+            data["dpi_seeds"] = list(self.dpi_seeds)
+        if self.dpi_selection_episodes is None:  # as a run made before it was a setting
             del data["dpi_selection_episodes"]
         return data
+
+    def dpi(self, recipe: TrainConfig, capped) -> TrainConfig:
+        """The task's DPI ``recipe`` with what these settings set (``capped``: the task's cap on a horizon)."""
+        run: dict[str, Any] = {"eval_episodes": self.eval_episodes, "validation_episodes": self.validation_episodes}
+        sizes: dict[str, Any] = {}
+        for name, value in (("seeds", self.dpi_seeds), ("episodes", self.dpi_episodes), ("eval_every", self.dpi_eval_every)):
+            if value is not None:
+                run[name] = value
+        for name, value in (
+            ("states_per_episode", self.dpi_labels),
+            ("futures", self.dpi_futures),
+            ("horizon", None if self.dpi_horizon is None else capped(self.dpi_horizon)),
+            ("selection_episodes", self.dpi_selection_episodes),
+        ):
+            if value is not None:
+                sizes[name] = value
+        return replace(recipe, **run, dpi=replace(recipe.dpi, **sizes))
 
 
 FULL = Settings()

@@ -11,6 +11,7 @@ import numpy as np
 from etmpc.common.documents import loads
 from etmpc.evaluation.compare import paired, per_episode
 from etmpc.evaluation import metrics
+from etmpc.learning.config import TrainConfig
 from etmpc.learning.train import curve_summary
 
 
@@ -147,6 +148,7 @@ def summarise_learners(
     ppo: dict | None,
     ppo_run: dict | None,
     settings: dict,
+    dpi_config: TrainConfig,
     costs: dict | None = None,
     curves: dict | None = None,
 ) -> dict:
@@ -159,19 +161,16 @@ def summarise_learners(
     best = _best_fixed(baselines["policies"], sense)
     reference = per_episode(baselines, {best})
     steps = system.episode_steps
-    dpi_episodes = len(settings["dpi_seeds"]) * settings["dpi_episodes"]
+    dpi_episodes = len(dpi_config.seeds) * dpi_config.episodes
+    labelling = dpi_config.dpi.states_per_episode * dpi_config.dpi.futures * 2 * dpi_config.dpi.horizon
     rows = {
         "dpi": (
             default,
             {
-                "seeds": len(settings["dpi_seeds"]),
+                "seeds": len(dpi_config.seeds),
                 "episodes": dpi_episodes,
                 "environment_steps": dpi_episodes * steps,
-                "simulated_steps_at_most": dpi_episodes
-                * settings["dpi_labels"]
-                * settings["dpi_futures"]
-                * 2
-                * settings["dpi_horizon"],
+                "simulated_steps_at_most": dpi_episodes * labelling,
             },
         )
     }

@@ -75,10 +75,13 @@ def test_the_wheel_holds_every_module_and_the_data_and_nothing_else(wheel):
         f"etmpc/_data/tasks/{p.relative_to(REPO / 'tasks').as_posix()}" for p in (REPO / "tasks").glob("*/*/references.json")
     }
     data |= {
-        f"etmpc/_data/policies/{p.relative_to(REPO / 'policies').as_posix()}" for p in (REPO / "policies").glob("*/*/ppo.yml")
+        f"etmpc/_data/policies/{p.relative_to(REPO / 'policies').as_posix()}"
+        for recipe in ("ppo.yml", "dpi.yml")
+        for p in (REPO / "policies").glob(f"*/*/{recipe}")
     }
     assert len(data) > 12 and data <= names, sorted(data - names)
-    assert not {n for n in names if n.startswith("etmpc/_data/policies/") and not n.endswith("/ppo.yml")}  # no policy ships in it
+    recipes = ("/ppo.yml", "/dpi.yml")
+    assert not {n for n in names if n.startswith("etmpc/_data/policies/") and not n.endswith(recipes)}  # no policy ships in it
     top_level = {name.split("/")[0] for name in names}
     assert top_level == {"etmpc", f"{wheel.name.split('-')[0]}-{wheel.name.split('-')[1]}.dist-info"}
 
@@ -184,9 +187,9 @@ def test_the_sdist_holds_what_the_wheel_is_built_from_and_twine_check_passes(sdi
         "*/*/benchmark.json",
     ):  # the package data of pyproject.toml
         needed |= {p.relative_to(REPO).as_posix() for p in (REPO / "tasks").glob(pattern)}
-    needed |= {p.relative_to(REPO).as_posix() for p in (REPO / "policies").glob("*/*/ppo.yml")}
+    needed |= {p.relative_to(REPO).as_posix() for r in ("ppo.yml", "dpi.yml") for p in (REPO / "policies").glob(f"*/*/{r}")}
     assert not needed - names, sorted(needed - names)  # CITATION.cff: `include CITATION.cff` in MANIFEST.in
-    assert not {n for n in names if n.startswith("policies/") and not n.endswith("/ppo.yml")}  # no policy ships
+    assert not {n for n in names if n.startswith("policies/") and not n.endswith(("/ppo.yml", "/dpi.yml"))}  # no policy ships
     checked = subprocess.run(
         [sys.executable, "-m", "twine", "check", "--strict", str(sdist), str(wheel)], capture_output=True, text=True
     )

@@ -7,7 +7,7 @@
 
 For each failure cost ``c`` of ``--costs`` (DPI's ``failure_cost``: each of the task's failures in a labelling
 rollout costs ``c`` on top of its reward; PPO's: each failure costs ``c`` in its training environments' reward),
-the learner is trained with the recipe the task ships (DPI: what ``learned.json`` records,
+the learner is trained with the recipe the task ships (DPI: its ``dpi.yml``,
 the ``learners`` study's; PPO: ``ppo.yml``), over the same seeds, in ``WORK/<task>/cost_<c>`` (PPO:
 ``WORK/ppo/<task>/cost_<c>/seed<s>``); each cost's run ships the seed it chose on its own validation episodes. The
 cost is then chosen on ``--validation`` training-distribution episodes (the stream ``etmpc train`` validates on,

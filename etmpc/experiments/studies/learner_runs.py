@@ -1,21 +1,18 @@
-"""The learners' runs from the recipes the shipped policies record, shared by the studies that train them
-(``learners``, ``failure-cost``, ``levels``): DPI over seeds in lockstep, PPO one run per seed, each kept in a
-work folder so that a study run again continues; and a score card's row as those studies keep it.
-
-:data:`RECIPES` says where this etmpc departs from what a shipped file records.
+"""The learners' runs from the tasks' recipes (``policies/<task>/dpi.yml`` and ``ppo.yml``), shared by the studies
+that train them (``learners``, ``failure-cost``, ``levels``): DPI over seeds in lockstep, PPO one run per seed, each
+kept in a work folder so that a study run again continues; and a score card's row as those studies keep it.
 """
 
 from __future__ import annotations
 
 import json
 import shutil
-from typing import Any
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from etmpc.learning import dpi, hyperparams
+from etmpc.learning import dpi_recipe, hyperparams
 from etmpc.learning.config import TrainConfig
 from etmpc.learning.ppo import train_ppo
 from etmpc.learning.ppo_settings import PpoSettings, settings_json
@@ -24,23 +21,6 @@ from etmpc.learning.runner import cost_path, timed
 from etmpc.systems import folder_name, make_system, system_class
 
 EVAL_EPISODES = 10  # test-set episodes of DPI's learning curve (a look back, never a choice)
-DPI_KEYS = ("futures", "horizon", "states_per_episode", "ridge", "selection_episodes")
-#: Where this etmpc's recipe departs from what the shipped file records. kicks_levels: DPI's first schedules
-#: include the event-triggered real-time iteration under an age cap (shield:A:threshold:X:iterate), which does
-#: better than the task's best fixed schedule iterate:1 on validation episodes; from iterate:1 and the default
-#: schedules, DPI's policies did worse than iterate:1 there.
-RECIPES: dict[str, dict[str, Any]] = {
-    "cart_pendulum/kicks_levels": {
-        "episodes_per_seed": 60,  # the shipped policy is its run's first iteration (20 episodes); the run had 60
-        "bases": (
-            "iterate:1",
-            "shield:5:threshold:0.2:iterate",
-            "shield:8:threshold:0.2:iterate",
-            "shield:8:threshold:0.1:iterate",
-            "shield:8:threshold:0.3:iterate",
-        ),
-    }
-}
 
 
 def recipe_folder(task: str) -> Path:
@@ -52,39 +32,29 @@ def recipe_folder(task: str) -> Path:
 
 
 def shipped_recipe(task: str) -> TrainConfig:
-    """The DPI run the shipped ``learned.json`` records (its hyperparameters; its base task's for a new variant)."""
-    data = json.loads((recipe_folder(task) / "learned.json").read_text())
-    h: dict[str, Any] = dict(data["hyperparameters"], **RECIPES.get(task, {}))
-    return TrainConfig(
-        task,
-        episodes=h.get("episodes_per_seed", h["episodes"]),  # "episodes": the policy's own (an iteration's, if chosen so)
-        eval_every=h.get("eval_every", 20),  # one DPI iteration per phase; files before it was written: 20
-        eval_episodes=EVAL_EPISODES,
-        normalisation_episodes=h["normalisation_episodes"],
-        features=h["features"],
-        algorithm="dpi",
-        dpi=dpi.Settings(**{k: h[k] for k in DPI_KEYS}, bases=tuple(h["bases"]), failure_cost=h.get("failure_cost", 0.0)),
-        validation_episodes=h["validation_episodes"],
-    )
+    """The DPI run of ``task``'s recipe, ``policies/<task>/dpi.yml`` (:mod:`etmpc.learning.dpi_recipe`), with the
+    learning curve's test-set episodes; a new variant's first run takes the task's whose world it plays."""
+    return replace(dpi_recipe.recipe(task), eval_episodes=EVAL_EPISODES)
 
 
 def dpi_runs(
-    task: str, work: Path, seeds: tuple[int, ...], workers: int, failure_cost: float | None = None, out: Path | None = None
+    task: str, work: Path, seeds: tuple[int, ...] | None, workers: int, failure_cost: float | None = None, out: Path | None = None
 ) -> dict:
-    """DPI over ``seeds`` in lockstep with the shipped recipe (``failure_cost``, if given, in place of the recipe's),
-    in ``out`` (default ``WORK/dpi/<task>``)."""
+    """DPI over ``seeds`` (None: the recipe's) in lockstep with the task's recipe (``failure_cost``, if given, in
+    place of the recipe's), in ``out`` (default ``WORK/dpi/<task>``)."""
     out = work / "dpi" / folder_name(task) if out is None else out
     if (out / "checkpoint.json").exists():  # a run already in WORK continues as it was set up
         config = TrainConfig.from_json(json.loads((out / "checkpoint.json").read_text())["config"])
-        seeds = config.seeds
     else:
-        config = replace(shipped_recipe(task), seeds=seeds)
+        config = shipped_recipe(task)
+        config = config if seeds is None else replace(config, seeds=seeds)
         if failure_cost is not None:
             config = replace(config, dpi=replace(config.dpi, failure_cost=failure_cost))
 
     with timed(out, workers):  # the first invocation that finishes the run keeps its wall time
         trained(config, out, {"workers": workers, "backend": "local", "address": None}, progress=True)
     cost = json.loads(cost_path(out).read_text())
+    seeds = config.seeds
     per_seed = {s: out / f"seed{s}" / "selected.json" for s in seeds}
     validation = {s: json.loads(p.read_text())["hyperparameters"]["validation_objective"] for s, p in per_seed.items()}
     return {

@@ -5,10 +5,10 @@
     etmpc study learners --page-only                               # the page again from learners.json
     etmpc study learners --task TASK --retrain --ship              # after TASK's version changed: every seed again
 
-Per task, with the recipe the shipped files record (``policies/<task>/learned.json``'s hyperparameters,
-``ppo.yml``; :data:`~etmpc.experiments.studies.learner_runs.RECIPES` says where this etmpc departs from it):
+Per task, with the task's recipes (``policies/<task>/dpi.yml`` and ``ppo.yml``, which ``etmpc reproduce`` reads
+too):
 
-* **DPI** trained once over ``--dpi-seeds`` in lockstep (``WORK/dpi/<task>``): every seed's own choice on
+* **DPI** trained once over ``--dpi-seeds`` (default: the recipe's) in lockstep (``WORK/dpi/<task>``): every seed's own choice on
   validation episodes (``seed<S>/selected.json``) and the run's (``selected.json``, the shipped seed);
 * **PPO** trained once per seed of ``--ppo-seeds`` (``WORK/ppo/<task>/seed<S>``); the shipped seed is the
   one with the best objective on the same validation episodes;
@@ -101,7 +101,7 @@ def arguments(parser: argparse.ArgumentParser) -> None:
         "--work", type=Path, default=Path("runs/learners"), help="where runs, cards and costs are kept (resumable)"
     )
     parser.add_argument("--task", action="append", choices=names(), help="a task (repeatable; default: every task)")
-    parser.add_argument("--dpi-seeds", type=parse_seeds, default=(0, 1, 2, 3, 4), help="DPI's seeds (default 0-4)")
+    parser.add_argument("--dpi-seeds", type=parse_seeds, help="DPI's seeds (default: its dpi.yml's)")
     parser.add_argument("--ppo-seeds", type=parse_seeds, default=(0, 1, 2), help="PPO's seeds (default 0-2)")
     runner.options(parser)
     parser.add_argument("--ship", action="store_true", help="copy the chosen seeds' files into policies/<task>/")
