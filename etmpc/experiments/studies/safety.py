@@ -22,6 +22,7 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -68,7 +69,7 @@ def _key(task: str, spec: str, episodes: int) -> dict:
 
 
 def _kept_path(work: Path, task: str, row: str) -> Path:
-    slug = "".join(c if c.isalnum() else "-" for c in row.lower()).strip("-")
+    slug = re.sub(r"[^a-z0-9]+", "-", row.lower()).strip("-")  # "DPI (shipped) + shield" -> dpi-shipped-shield
     return work / folder_name(task) / f"{slug}.json"
 
 
