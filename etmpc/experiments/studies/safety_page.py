@@ -40,7 +40,8 @@ def page(document: dict) -> str:
         f"The issue's target: the upper bound of the 95 % CI of the paired difference, learner failures minus the "
         f"schedule's per episode, at most **{target:g}** (normal CI, 1.96 sd / sqrt(n); the paired percentile "
         "bootstrap's interval beside it, seeded). The objective column is the paired gain over the schedule in % "
-        "of its mean objective (above 0: the learner is better), ± its 95 % CI.",
+        "of its mean objective (above 0: the learner is better), ± its 95 % CI. Played on "
+        f"{document['machine']}; each task says the commit it was played at.",
         "",
         "What a failure is: " + "; ".join(f"**{name}**: {text}" for name, text in COUNTS.items()) + ".",
         "",
