@@ -41,6 +41,8 @@ def test_the_paired_difference_by_hand():
     assert found["objective_gain_percent"] == pytest.approx(-25.0, rel=1e-12)
     assert found["objective_gain_percent_ci95"] == pytest.approx(50 * 1.96 * math.sqrt(5 / 3) / 2, rel=1e-12)
     assert found["recomputes_difference"] == -7
+    assert found["failed_episodes_difference"] == 0.25  # episodes with any: 1, 0, 1, 0 against 0, 0, 1, 0
+    assert found["failed_episodes_difference_ci95"] == pytest.approx(1.96 * 0.5 / 2, rel=1e-12)  # sd of 1, 0, 0, 0
     low, high = found["failures_difference_bootstrap"]
     assert 0 <= low <= 0.5 <= high <= 1  # the resampled means of 0s and 1s
     assert paired(LEARNER, FIXED, "min")["failures_difference_bootstrap"] == [low, high]  # seeded

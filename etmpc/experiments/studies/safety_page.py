@@ -76,10 +76,11 @@ def section(task: str, t: dict) -> list[str]:
         f"({made['date']}), in {t['seconds'] / 60:.1f} min of play.",
         "",
         "| row | failures / episode | episodes with a failure | most in one episode | learner − fixed, failures / "
-        "episode (95 % CI) | upper bound | bootstrap 95 % CI | meets | objective vs fixed | recomputes |",
-        "|---|---:|---:|---:|---:|---:|---:|---|---:|---:|",
+        "episode (95 % CI) | upper bound | bootstrap 95 % CI | meets | learner − fixed, share of episodes with a "
+        "failure | objective vs fixed | recomputes |",
+        "|---|---:|---:|---:|---:|---:|---:|---|---:|---:|---:|",
         f"| best fixed `{fixed['spec']}` | {fixed['failures']:.3f} ± {fixed['failures_ci95']:.3f} | "
-        f"{fixed['failed_episodes']} | {fixed['worst_episode_failures']:g} | | | | | | {fixed['recomputes']:.1f} |",
+        f"{fixed['failed_episodes']} | {fixed['worst_episode_failures']:g} | | | | | | | {fixed['recomputes']:.1f} |",
     ]
     for r in t["rows"]:
         low, high = r["failures_difference_bootstrap"]
@@ -87,6 +88,7 @@ def section(task: str, t: dict) -> list[str]:
             f"| {r['row']} `{r['spec']}` | {r['failures']:.3f} ± {r['failures_ci95']:.3f} | {r['failed_episodes']} | "
             f"{r['worst_episode_failures']:g} | {r['failures_difference']:+.3f} ± {r['failures_difference_ci95']:.3f} | "
             f"{r['failures_difference_upper']:+.3f} | [{low:+.3f}, {high:+.3f}] | {'yes' if r['meets_target'] else '**no**'} "
+            f"| {r['failed_episodes_difference']:+.3f} ± {r['failed_episodes_difference_ci95']:.3f} "
             f"| {r['objective_gain_percent']:+.2f} % ± {r['objective_gain_percent_ci95']:.2f} | {r['recomputes']:.1f} |"
         )
     return [*lines, ""]

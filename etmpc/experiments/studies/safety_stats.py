@@ -43,7 +43,9 @@ def _mean(sample, axis=-1):
 def paired(rows: np.ndarray, fixed: np.ndarray, sense: str, seed: int = BOOTSTRAP_SEED) -> dict:
     """``rows`` (a learner's outcomes) against ``fixed`` (the schedule's, on the same episodes in the same order):
     the paired failures difference per episode (mean, normal 95 % CI half-width, its upper bound, the bootstrap's
-    interval, whether the upper bound meets :data:`TARGET`), and the paired objective difference as a percentage of
+    interval, whether the upper bound meets :data:`TARGET`); the same for the share of episodes with any failure
+    (how often, whatever how long: where a failure is a step outside, the failures count severity too); and the
+    paired objective difference as a percentage of
     the schedule's mean objective, oriented so that above 0 is better (± its 95 % CI)."""
     rows, fixed = np.asarray(rows, dtype=float), np.asarray(fixed, dtype=float)
     if rows.shape != fixed.shape or len(rows) < 2:
@@ -54,6 +56,7 @@ def paired(rows: np.ndarray, fixed: np.ndarray, sense: str, seed: int = BOOTSTRA
         bootstrap = (float(difference[0]), float(difference[0]))
     else:
         bootstrap = stratified_interval([difference], _mean, seed=seed)
+    incidents = (rows[:, FAILURES] > 0).astype(float) - (fixed[:, FAILURES] > 0)  # an episode with any failure: 1
     scale = 100.0 / abs(float(np.mean(fixed[:, OBJECTIVE])))
     objective = sign(sense) * (rows[:, OBJECTIVE] - fixed[:, OBJECTIVE])
     return {
@@ -62,6 +65,8 @@ def paired(rows: np.ndarray, fixed: np.ndarray, sense: str, seed: int = BOOTSTRA
         "failures_difference_upper": mean + half,
         "failures_difference_bootstrap": list(bootstrap),
         "meets_target": bool(mean + half <= TARGET),
+        "failed_episodes_difference": float(np.mean(incidents)),
+        "failed_episodes_difference_ci95": mean_ci95(incidents),
         "objective_gain_percent": scale * float(np.mean(objective)),
         "objective_gain_percent_ci95": scale * mean_ci95(objective),
         "recomputes_difference": float(np.mean(rows[:, RECOMPUTES] - fixed[:, RECOMPUTES])),
