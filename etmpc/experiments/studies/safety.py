@@ -75,7 +75,7 @@ def _kept_path(work: Path, task: str, row: str) -> Path:
 
 def _kept(path: Path, key: dict) -> dict | None:
     """What is kept at ``path`` for ``key`` (``outcomes``: rows of objective, failures, recomputes; ``seconds``:
-    the wall time they took), or None."""
+    the wall time they took; ``played``: the commit and date they were played at), or None."""
     if not path.is_file():
         return None
     try:
@@ -97,7 +97,7 @@ def play(task: str, episodes: int, workers: int, work: Path) -> tuple[dict[str, 
             clock = runner.Stopwatch()
             with make_backend("local", workers) as pool, Progress(episodes, f"{task}: {row}") as bar:
                 outcomes = episode_outcomes(pool, task, [spec], AUDIT_ENTROPY, episodes, lambda job: bar.update())[0]
-            kept = {"key": key, "outcomes": outcomes.tolist(), "seconds": clock.seconds()}
+            kept = {"key": key, "outcomes": outcomes.tolist(), "seconds": clock.seconds(), "played": runner.made()}
             write_json(path, kept, indent=None)
         found[row] = (spec, np.asarray(kept["outcomes"], dtype=float))
         seconds += kept["seconds"]
