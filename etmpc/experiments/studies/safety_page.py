@@ -41,8 +41,8 @@ def page(document: dict) -> str:
         f"schedule's per episode, at most **{target:g}** (normal CI, 1.96 sd / sqrt(n); the paired percentile "
         "bootstrap's interval beside it, seeded). The objective column is the paired gain over the schedule in % "
         "of its mean objective (above 0: the learner is better), ± its 95 % CI. Played on "
-        f"{document['machine']}; each task says the commit that made its table (its outcomes may be kept from an earlier run in `--work`, "
-        "which records the commit that played them).",
+        f"{document['machine']}; each task says the commit that made its table (its outcomes may be kept from an "
+        "earlier run in `--work`, which records the commit that played them).",
         "",
         "What a failure is: " + "; ".join(f"**{name}**: {text}" for name, text in COUNTS.items()) + ".",
         "",
