@@ -1,7 +1,7 @@
 """The safety audit: does each shipped learner fail more often than the best fixed schedule, on fresh episodes?
 ``docs/results/safety.{json,md}``.
 
-    etmpc study safety --work runs/safety                       # every safety task, 1000 episodes: ~35 min on 2 cores
+    etmpc study safety --work runs/safety                       # every safety task, 1000 episodes: ~50 min on 2 cores
     etmpc study safety --work runs/safety --task cart_pendulum/kicks --episodes 20
     etmpc study safety --page-only                               # the page again from the JSON
 
