@@ -145,6 +145,24 @@ def entries(
             f"threshold:X chosen on {VALIDATION_EPISODES} training-distribution episodes",
         ),
     ]
+    found += learner_entries(tasks)
+    found += [
+        Entry(
+            LAST[0],
+            "meter",
+            _meters(tasks, best),
+            "one-step lookahead over sampled futures, a real policy: on a noisy variant each future also starts "
+            "from a state drawn from the filter's belief",
+        ),
+        Entry(LAST[1], "oracle", {t: references[t].oracle_spec for t in tasks}, ORACLE_NOTE),
+    ]
+    return found
+
+
+def learner_entries(tasks: list[str]) -> list[Entry]:
+    """The shipped learners' rows on ``tasks``: each learner that ships a policy for one of them, and its row under
+    the task's shield where the task declares one (what the safety audit, ``etmpc study safety``, plays too)."""
+    found: list[Entry] = []
     rules = {t: make_system(t).shield for t in tasks}
     for name, file, prefix, note in shipped_learners():
         shipped = {t: shipped_policy(t, file) for t in tasks}
@@ -168,16 +186,6 @@ def entries(
                     f"to a failure is below MARGIN; docs/policies.md#shields-shield); policies/<task>/{file}",
                 )
             )
-    found += [
-        Entry(
-            LAST[0],
-            "meter",
-            _meters(tasks, best),
-            "one-step lookahead over sampled futures, a real policy: on a noisy variant each future also starts "
-            "from a state drawn from the filter's belief",
-        ),
-        Entry(LAST[1], "oracle", {t: references[t].oracle_spec for t in tasks}, ORACLE_NOTE),
-    ]
     return found
 
 

@@ -19,6 +19,10 @@ TRAIN_ENTROPY = 0x6574_6D70_6321  # "etmpc!"
 NORMALISATION_ENTROPY = 0x6E6F_726D  # "norm"
 SELECTION_ENTROPY = 0x7365_6C65_6374  # "select"
 VALIDATION_ENTROPY = 0x7661_6C69_64  # "valid"
+#: The held-out audit stream ("audit"): training-distribution episodes drawn from none of the streams above nor
+#: the stored test sets, for reporting only (``etmpc study safety``). Nothing is ever chosen on it: no weight, no
+#: seed, no rule, no schedule; a choice made on it would make it one more validation stream.
+AUDIT_ENTROPY = 0x6175_6469_74  # "audit"
 ALGORITHMS = ("gpomdp", "dpi")
 CHECKPOINT_FORMAT = "etmpc-train-checkpoint"
 DEFAULT_SEEDS = (0, 1, 2, 3, 4)  # a run's seeds, unless it says

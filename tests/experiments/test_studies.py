@@ -69,6 +69,7 @@ PAGES = {
     "failure-cost": ("failure_cost", ["--page-only"]),
     "learners": ("learners", ["--page-only"]),
     "levels": ("levels", ["--page-only"]),
+    "safety": ("safety", ["--page-only"]),
     "shields": ("shields", ["--from-tables"]),
     "timing": ("timing", ["--page-only"]),
 }

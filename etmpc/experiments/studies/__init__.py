@@ -33,6 +33,9 @@ STUDIES = {
     "levels": Entry("levels", "what a trigger that chooses how much to compute gains, and a learner could: results/levels.md"),
     "quadrotor-flight": Entry("quadrotor_flight", "the quadrotor page's flight figure: one episode under two triggers"),
     "robustness": Entry("robustness", "the triggers against sensor noise and gusts: results/robustness.md"),
+    "safety": Entry(
+        "safety", "the shipped learners' failures against the best fixed schedule, on fresh episodes: results/safety.md"
+    ),
     "shields": Entry("shields", "each safety task's shield rule, chosen on validation episodes: results/shields.md"),
     "solvers": Entry("solvers", "the MPC's two solver routes side by side, on the same episodes: solvers.md"),
     "timing": Entry("timing", "time in the loop: how the ranking of triggers changes when a solve takes time: results/timing.md"),
