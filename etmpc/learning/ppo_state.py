@@ -26,7 +26,8 @@ STEPS = 2**62  # the most steps a run's files may count (checked_checkpoints')
 # What resume.json and training.json hold (checks.typed_json's hints); the checkpoints are checked_checkpoints'.
 _UNDER_WAY = dict(format=str, version=int, task=str, settings=dict, checkpoints=list)
 _FINISHED = dict(_UNDER_WAY, workers=int, environment_steps=int, simulated_steps=int, wall_seconds=float, selected=str)
-_FINISHED.update(objective_sense=str, stable_baselines3=str, torch=str)
+_FINISHED.update(objective_sense=str, stable_baselines3=str, torch=str, kernels=dict[str, str | None])
+_OPTIONAL = ("kernels",)  # PyTorch's kernels in effect (etmpc.learning.kernels): not in a run made before them
 _RUNNING_STATISTICS = dict(mean=list | float, var=list | float, count=float)
 
 
@@ -46,7 +47,7 @@ def read_state(out: Path) -> dict | None:
         foreign=f"{found} is not a PPO run's state; {AGAIN}",
     )
     try:
-        checks.typed_json(state, _FINISHED if found is finished else _UNDER_WAY, "", most=STEPS)
+        checks.typed_json(state, _FINISHED if found is finished else _UNDER_WAY, "", optional=_OPTIONAL, most=STEPS)
         if state["version"] != 1:
             raise checks.BadValue(f"version is {state['version']}, not 1")
         if found is finished and (state["workers"] < 1 or state["wall_seconds"] < 0 or state["simulated_steps"] < 0):
