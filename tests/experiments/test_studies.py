@@ -95,3 +95,16 @@ def test_a_stored_page_is_what_its_study_makes_from_the_stored_json(tmp_path, ca
 
 def test_scripts_keeps_only_tools_for_developers():
     assert len([p for p in (REPO / "scripts").iterdir() if p.is_file()]) <= 10
+
+
+@pytest.mark.parametrize(
+    "option, message",
+    [
+        (["--episodes", "1"], "--episodes must be at least 2 (a paired bound needs two), got 1"),
+        (["--bound", "0"], "--bound must be a number of failures per episode > 0, got 0.0"),
+        (["--bound", "nan"], "--bound must be a number of failures per episode > 0, got nan"),
+    ],
+)
+def test_the_shields_study_refuses_a_bound_it_cannot_certify_with_before_any_episode(tmp_path, capsys, option, message):
+    assert main(["study", "shields", "--task", "cart_pendulum/kicks", *option, "--out", str(tmp_path)]) == 2
+    assert capsys.readouterr().err.strip() == f"etmpc: error: {message}" and not any(tmp_path.iterdir())

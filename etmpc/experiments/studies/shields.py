@@ -18,7 +18,9 @@ test-set figures of the shielded policies are on the learner comparison page, th
 from __future__ import annotations
 
 import argparse
+import math
 
+from etmpc.common.errors import EtmpcError
 from etmpc.common.progress import Progress
 from etmpc.evaluation.backends import make_backend
 from etmpc.evaluation.references import stored
@@ -145,6 +147,10 @@ def run(args: argparse.Namespace) -> None:
         document["tasks"] = {task: select(result) for task, result in document["tasks"].items()}
         results.write(document, page)
         return
+    if args.episodes < 2:
+        raise EtmpcError(f"--episodes must be at least 2 (a paired bound needs two), got {args.episodes}")
+    if not 0 < args.bound < math.inf:
+        raise EtmpcError(f"--bound must be a number of failures per episode > 0, got {args.bound}")
     clock = runner.Stopwatch()
     provenance = runner.made()  # the code that runs: the checkout as it starts
     played = results.kept(lambda: {"tasks": {}})["tasks"]  # the tasks not run again stay
