@@ -107,8 +107,26 @@ def test_fix_plus_best_takes_each_factor_from_the_best_row():
         "features error": row(0.5, features="error"),
         "baseline state": row(-2.0, baseline="state"),
         "baseline mean": row(-0.5, baseline="mean"),
-        "discount 0.7": row(-3.0, discount=0.7),
+        "short discount": row(-3.0, discount=0.7),
     }
     settings = study.settings_of("fix + best", rows)
     assert settings == dict(study.PAPER, features="error", baseline="mean", scale="advantage", learning_rate=0.005)
-    assert study.settings_of("alpha 0.5", rows) == dict(study.PAPER, learning_rate=0.5)
+    assert study.settings_of("alpha x10", rows) == dict(study.PAPER, learning_rate=0.5)
+
+
+def test_a_longer_row_continues_the_run_and_the_shorter_row_keeps_its_parameters(tmp_path, monkeypatch):
+    """Trained to 2 episodes, then continued to 4: the parameters at 2 are kept as they were, and the run at 4 is the
+    one trained straight to 4 (every draw keyed by seed and episode)."""
+    from etmpc.evaluation.backends import make_backend
+
+    monkeypatch.setattr(study, "SEEDS", (0,))
+    monkeypatch.setattr(study, "BLOCK", 1)
+    monkeypatch.setattr(study, "EPISODES", 2)
+    settings = dict(study.PAPER, learning_rate=0.5)
+    with make_backend("local", 1) as pool:
+        short = study.train("battery/trading", settings, tmp_path / "a", pool)
+        at_two = study.at(short, 2)
+        longer = study.train("battery/trading", dict(settings, episodes=4), tmp_path / "a", pool)
+        straight = study.train("battery/trading", dict(settings, episodes=4), tmp_path / "b", pool)
+    assert study.at(longer, 2) == at_two and study.at(longer, 4) == study.at(straight, 4) != at_two
+    assert len(study.summary_log(longer, 2)) == 2 and len(study.summary_log(longer, 4)) == 4

@@ -50,18 +50,19 @@ PAPER: dict[str, Any] = {"features": "paper", "baseline": "none", "learning_rate
 ROWS: dict[str, dict] = {
     "paper": {},
     "features error": {"features": "error"},
-    "discount 0.7": {"discount": 0.7},
+    "short discount": {"discount": 0.7},
     "baseline state": {"baseline": "state"},
     "fix + best": {"scale": "advantage", "learning_rate": 0.005},  # and each factor's best level (chosen)
-    "alpha 0.5": {"learning_rate": 0.5},
+    "alpha x10": {"learning_rate": 0.5},
+    "alpha x10 for 3000 episodes": {"learning_rate": 0.5, "episodes": 3000},  # the alpha 0.5 run, continued
     "fix": {"scale": "advantage", "learning_rate": 0.005},
     "baseline mean": {"baseline": "mean"},
-    "alpha 0.005": {"learning_rate": 0.005},
+    "alpha /10": {"learning_rate": 0.005},
 }
 FACTORS = {
     "features": ("paper", "features error"),
     "baseline": ("paper", "baseline mean", "baseline state"),
-    "discount": ("paper", "discount 0.7"),
+    "discount": ("paper", "short discount"),
 }
 
 
@@ -78,7 +79,7 @@ def settings_of(row: str, rows: dict) -> dict:
 
 
 def run_key(settings: dict) -> str:
-    s = settings
+    s = settings  # not its episodes: a longer row continues the run
     return f"{s['features']}-{s['baseline']}-a{s['learning_rate']:g}-g{s['discount']:g}-{s['scale']}"
 
 
@@ -90,8 +91,10 @@ def initial_policy(task: str, features: str, pool) -> LogisticPolicy:
 
 
 def train(task: str, settings: dict, work: Path, pool) -> dict:
-    """The run of ``settings`` on ``task`` over :data:`SEEDS` (kept in WORK after each block): its initial policy, each
-    seed's final parameters and the log of each block (per seed)."""
+    """The run of ``settings`` on ``task`` over :data:`SEEDS` to its ``episodes`` (default :data:`EPISODES`; kept in WORK
+    after each block): its initial policy, each seed's latest parameters (and ``snapshots``, each seed's at every
+    count a longer row went past), and the log of each block (per seed). A longer row continues the shorter one's run."""
+    episodes = settings.get("episodes", EPISODES)
     path = work / folder_name(task) / f"{run_key(settings)}.json"
     state = json.loads(path.read_text()) if path.exists() else None
     if state is None:
@@ -100,8 +103,10 @@ def train(task: str, settings: dict, work: Path, pool) -> dict:
         learner = _learner_to_json(gpomdp.Learner.start(policy.theta, own, make_system(task).episode_steps))
         state = {"policy": policy.to_json(), "learners": {str(s): learner for s in SEEDS}, "log": [], "done": 0, "seconds": 0.0}
     clock = runner.Stopwatch()
-    while state["done"] < EPISODES:
-        start, stop = state["done"], min(state["done"] + BLOCK, EPISODES)
+    while state["done"] < episodes:
+        snapshots = state.setdefault("snapshots", {})
+        snapshots[str(state["done"])] = {s: learner["theta"] for s, learner in state["learners"].items()}
+        start, stop = state["done"], min(state["done"] + BLOCK, episodes)
         jobs = [(task, state["policy"], state["learners"][str(s)], s, start, stop) for s in SEEDS]
         results = pool.map(_train, jobs)
         state["learners"] = {str(s): learner for s, (learner, _) in zip(SEEDS, results)}
@@ -109,7 +114,7 @@ def train(task: str, settings: dict, work: Path, pool) -> dict:
         state["done"], state["seconds"] = stop, state["seconds"] + clock.seconds()
         clock = runner.Stopwatch()
         outputs.write_text(path, json.dumps(state) + "\n")
-        print(f"{task} {run_key(settings)}: {stop}/{EPISODES} episodes per seed, {state['seconds'] / 60:.1f} min")
+        print(f"{task} {run_key(settings)}: {stop}/{episodes} episodes per seed, {state['seconds'] / 60:.1f} min")
     return state
 
 
@@ -137,12 +142,13 @@ def paired(policy: np.ndarray, fixed: np.ndarray, sense: str) -> dict:
     }
 
 
-def score(task: str, state: dict, fixed: dict, episodes: int, pool) -> dict:
+def score(task: str, state: dict, fixed: dict, episodes: int, pool, trained: int = EPISODES) -> dict:
     """Every seed's final policy on the validation episodes: the seed chosen on the first :data:`SELECT` (the one a
     run ships), every seed scored on the next ``episodes`` against the fixed schedule, and the chosen seed's
     policy also played greedily (its likelier decision at each step)."""
     initial = LogisticPolicy.from_json(state["policy"])
-    policies = [initial.with_theta(np.asarray(state["learners"][str(s)]["theta"])).to_json() for s in SEEDS]
+    thetas = at(state, trained)
+    policies = [initial.with_theta(np.asarray(thetas[str(s)])).to_json() for s in SEEDS]
     sense = make_system(task).objective_sense
     chooser = outcomes(pool, task, policies, 0, SELECT)
     pick = (min if sense == "min" else max)(range(len(SEEDS)), key=lambda k: chooser[k][:, 0].mean())
@@ -156,15 +162,21 @@ def score(task: str, state: dict, fixed: dict, episodes: int, pool) -> dict:
         "recomputes": float(np.mean([seeds[str(s)]["recomputes"] for s in SEEDS])),
         "chosen": SEEDS[pick],
         "greedy": paired(scored[-1], fixed["scoring"], sense),
-        "theta": {str(s): state["learners"][str(s)]["theta"] for s in SEEDS},
+        "theta": thetas,
     }
 
 
-def summary_log(state: dict) -> list[dict]:
-    """Each block's log, averaged over the seeds."""
-    return [
-        {k: float(np.mean([seed[k] for seed in block.values()])) for k in next(iter(block.values()))} for block in state["log"]
-    ]
+def at(state: dict, episodes: int) -> dict[str, list]:
+    """Each seed's parameters after ``episodes`` training episodes (its latest, or a snapshot a longer run kept)."""
+    if state["done"] == episodes:
+        return {str(s): state["learners"][str(s)]["theta"] for s in SEEDS}
+    return state["snapshots"][str(episodes)]
+
+
+def summary_log(state: dict, episodes: int = EPISODES) -> list[dict]:
+    """Each block's log up to ``episodes``, averaged over the seeds."""
+    blocks = [b for b in state["log"] if next(iter(b.values()))["episodes"] <= episodes]
+    return [{k: float(np.mean([seed[k] for seed in block.values()])) for k in next(iter(block.values()))} for block in blocks]
 
 
 def diagnose(task: str, pool) -> dict:
@@ -201,13 +213,14 @@ def study_task(task: str, rows: list[str], document: dict, work: Path, episodes:
             continue
         settings = settings_of(row, entry["rows"])
         state = train(task, settings, work, pool)
-        result = score(task, state, fixed, episodes, pool)
+        trained = settings.get("episodes", EPISODES)
+        result = score(task, state, fixed, episodes, pool, trained)
         entry["rows"][row] = dict(
             result,
             settings=settings,
             run=run_key(settings),
             episodes=episodes,
-            log=summary_log(state),
+            log=summary_log(state, trained),
             minutes=state["seconds"] / 60,
         )
         entry["made"] = runner.made()
@@ -236,6 +249,8 @@ def run(args: argparse.Namespace) -> None:
     seconds = document.get("seconds", 0.0)
 
     def save() -> None:
+        for entry in document["tasks"].values():  # the rows in the order of ROWS, however they were played
+            entry["rows"] = {r: entry["rows"][r] for r in ROWS if r in entry["rows"]}
         document.update(machine=runner.machine(args.workers), seconds=seconds + clock.seconds())
         results.write(document, page)
 

@@ -35,7 +35,8 @@ def task_section(task: str, entry: dict) -> list[str]:
     lines = [f"## `{task}`", ""]
     if made:
         lines += [f"Made at commit `{made['commit']}`{dirty} ({made['date']}).", ""]
-    lines += diagnosis_lines(entry["diagnosis"])
+    if "diagnosis" in entry:  # measured first (a stopped study may have no more)
+        lines += diagnosis_lines(entry["diagnosis"])
     if entry.get("rows"):
         lines += ablation_lines(task, entry)
         lines += movement_lines(entry)
@@ -64,7 +65,8 @@ def diagnosis_lines(diagnosis: dict) -> list[str]:
         "|---|---|---:|---:|---:|---:|---|",
     ]
     for features, d in diagnosis.items():
-        for name, e in d["estimators"].items():
+        for e in d["estimators"]:
+            name = e["name"]
             lines.append(
                 f"| {features} | {name} | {e['step']:.3g} | {e['walk']:.3g} | {e['bias_drift']:+.3g} | "
                 f"{e['bias_noise']:.3g} | {significant(e)} |"
@@ -79,10 +81,9 @@ def significant(s: dict) -> str:
 
 def changed(settings: dict) -> str:
     """What a row's settings change from the paper's, as ``--set`` pairs."""
+    values = dict(PAPER, episodes=1500)
     diff = [
-        f"{k}={settings[k]:g}" if isinstance(settings[k], float) else f"{k}={settings[k]}"
-        for k in PAPER
-        if settings[k] != PAPER[k]
+        f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k in values if (v := settings.get(k, values[k])) != values[k]
     ]
     return ", ".join(f"`{d}`" for d in diff) or "the paper's"
 
@@ -110,7 +111,7 @@ def ablation_lines(task: str, entry: dict) -> list[str]:
         )
     best = max(entry["rows"], key=lambda r: entry["rows"][r]["mean"])
     row = entry["rows"][best]
-    sets = " ".join(f"--set {k}={v}" for k, v in row["settings"].items() if v != PAPER[k])
+    sets = " ".join(f"--set {k}={v}" for k, v in row["settings"].items() if v != dict(PAPER, episodes=1500)[k])
     lines += [
         "",
         f"Best on validation (mean over seeds): **{best}**, {row['mean']:+.2f} % ± {row['sd']:.2f} "

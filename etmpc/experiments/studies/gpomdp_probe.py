@@ -165,12 +165,11 @@ def gradient_spread(task: str, features: str, episodes: list[dict], learning_rat
     scaled ones: their step and walk per unit of alpha), and the reward's scale: the returns' mean and standard
     deviation over the episodes, the mean reward per step, the recompute's price and the mean keep probability."""
     names = feature_names(task, features)
-    result: dict = {"estimators": {}}
+    result: dict = {"estimators": []}  # a list of named rows (a page's number markers find one by its name)
     for discount, baseline, scaled in ESTIMATORS:
         g = estimates(episodes, discount, baseline, scale=scaled)
-        result["estimators"][estimator_name(discount, baseline, scaled)] = spread(
-            g, names, 1.0 if scaled else learning_rate, run_episodes
-        )
+        rate = 1.0 if scaled else learning_rate
+        result["estimators"].append(dict(name=estimator_name(discount, baseline, scaled), **spread(g, names, rate, run_episodes)))
     returns = np.array([sum(e["rewards"]) for e in episodes])
     system = context(task)[0]
     result["reward"] = {
