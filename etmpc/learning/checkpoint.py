@@ -77,7 +77,16 @@ _CURVE_ROW = dict(episodes=int, seed=int, objective=float, control=float | None,
 _POINT: dict[str, object] = dict(episodes=int, theta=list, theta_level=list)  # a policy DPI kept (its history)
 _BEST = dict(_POINT, objective=float)  # a seed's best point on the test-set curve
 _LEARNER = {
-    "gpomdp": dict(theta=list, baseline_mean=list, episodes=int, settings=dict, value_gram=list, value_target=list),
+    "gpomdp": dict(
+        theta=list,
+        baseline_mean=list,
+        episodes=int,
+        settings=dict,
+        value_gram=list,
+        value_target=list,
+        advantage_count=int,  # the "advantage" scale's running sums (only a run with that scale has them)
+        advantage_square_sum=float,
+    ),
     "dpi": dict(theta=list, theta_level=list, episodes=int, iterations=int, data=list, history=list),
 }
 _EPISODE: dict[str, dict[str, object]] = {
@@ -133,7 +142,13 @@ def _check(state: RunState, p: int, levels: bool) -> None:
     steps = make_system(config.system).episode_steps if algorithm == "gpomdp" else 0
     for seed in seeds:
         name, learner = f"learners.{seed}", state.learners[seed]
-        checks.typed_json(learner, _LEARNER[algorithm], name, optional=("theta_level", "history"), most=checks.MAX_SEED)
+        checks.typed_json(
+            learner,
+            _LEARNER[algorithm],
+            name,
+            optional=("theta_level", "history", "advantage_count", "advantage_square_sum"),
+            most=checks.MAX_SEED,
+        )
         _parameters(learner, name, p, levels)
         if learner["episodes"] not in milestones:
             raise checks.BadValue(f"{name}.episodes is {learner['episodes']}, not one of the run's milestones")

@@ -33,6 +33,7 @@ import numpy as np
 from etmpc.common import checks
 
 BASELINES = ("none", "mean", "state")
+SCALES = ("none", "advantage")
 VALUE_RIDGE = 1.0  # ridge of the state baseline's least squares (features are normalised to O(1))
 
 
@@ -43,6 +44,7 @@ class Settings:
     discount: float = 0.975  # gamma
     learning_rate: float = 0.05  # alpha
     baseline: str = "none"  # "none" (the paper), "mean" (per step index) or "state" (linear in phi)
+    scale: str = "none"  # "none" (the paper: alpha g) or "advantage" (advantages over their running RMS)
 
     def __post_init__(self):
         checks.typed(self, finite=True, most=checks.MAX_COUNT)
@@ -52,6 +54,8 @@ class Settings:
             raise ValueError(f"learning rate must be a finite number > 0, got {self.learning_rate}")
         if self.baseline not in BASELINES:
             raise ValueError(f"baseline must be one of {', '.join(BASELINES)}, got {self.baseline!r}")
+        if self.scale not in SCALES:
+            raise ValueError(f"scale must be one of {', '.join(SCALES)}, got {self.scale!r}")
 
 
 def rewards_to_go(rewards: np.ndarray, discount: float) -> np.ndarray:
@@ -95,6 +99,8 @@ class Learner:
     episodes: int = 0
     value_gram: np.ndarray | None = None  # (p, p) sum of phi phi^T over earlier decisions ("state")
     value_target: np.ndarray | None = None  # (p,) sum of phi G over earlier decisions ("state")
+    advantage_count: int = 0  # decisions seen so far ("advantage" scale)
+    advantage_square_sum: float = 0.0  # the sum of their advantages' squares
 
     def __post_init__(self):
         p = len(self.theta)
@@ -110,6 +116,16 @@ class Learner:
         assert self.value_gram is not None and self.value_target is not None  # made by __post_init__
         return np.linalg.solve(self.value_gram + VALUE_RIDGE * np.eye(len(self.value_target)), self.value_target)
 
+    def _advantage_rms(self, advantage: np.ndarray) -> float:
+        """The root mean square of the earlier episodes' advantages (for the first episode, of its own), then this
+        episode's added to the running sums."""
+        square = float(advantage @ advantage)
+        count, total = (self.advantage_count, self.advantage_square_sum) if self.advantage_count else (len(advantage), square)
+        self.advantage_count += len(advantage)
+        self.advantage_square_sum += square
+        rms = math.sqrt(total / count)
+        return rms if rms > 0.0 else 1.0  # all advantages 0 so far: g is 0 too
+
     def update(self, features, recompute, keep_probability, steps, rewards) -> np.ndarray:
         """One GPOMDP step from one episode; returns the gradient used."""
         features, steps = np.asarray(features, float), np.asarray(steps, int)
@@ -120,6 +136,8 @@ class Learner:
         elif self.episodes and self.settings.baseline == "state" and len(steps):
             baseline = features @ self.value_weights()
         g = gradient(features, recompute, np.asarray(keep_probability), steps, returns, baseline)
+        if self.settings.scale == "advantage" and len(steps):
+            g = g / self._advantage_rms(returns[steps] - (baseline if baseline is not None else 0.0))
         self.theta = self.theta + self.settings.learning_rate * g
         self.episodes += 1
         n = len(returns)

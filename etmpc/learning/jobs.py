@@ -146,7 +146,7 @@ def _call(job: tuple[str, tuple]):
 
 def _learner_to_json(learner: Learner) -> dict:
     assert learner.value_gram is not None and learner.value_target is not None  # made by Learner.__post_init__
-    return {
+    data = {
         "theta": learner.theta.tolist(),
         "baseline_mean": learner.baseline_mean.tolist(),
         "episodes": learner.episodes,
@@ -154,6 +154,9 @@ def _learner_to_json(learner: Learner) -> dict:
         "value_gram": learner.value_gram.tolist(),
         "value_target": learner.value_target.tolist(),
     }
+    if learner.settings.scale != "none":  # the running RMS of the advantages (the paper's runs keep none: their bytes as before)
+        data.update(advantage_count=learner.advantage_count, advantage_square_sum=learner.advantage_square_sum)
+    return data
 
 
 def _learner_from_json(data: dict) -> Learner:
@@ -164,6 +167,8 @@ def _learner_from_json(data: dict) -> Learner:
         int(data["episodes"]),
         np.asarray(data["value_gram"], float),
         np.asarray(data["value_target"], float),
+        int(data.get("advantage_count", 0)),
+        float(data.get("advantage_square_sum", 0.0)),
     )
 
 

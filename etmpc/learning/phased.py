@@ -243,7 +243,9 @@ class GpomdpLearner(_Phased):
     )
 
     def _hyperparameters(self, config: TrainConfig) -> dict:
-        return dict(discount=config.gpomdp.discount, learning_rate=config.gpomdp.learning_rate, baseline=config.gpomdp.baseline)
+        g = config.gpomdp
+        scale = {} if g.scale == "none" else {"scale": g.scale}  # the paper's step: its policies' files as before
+        return dict(discount=g.discount, learning_rate=g.learning_rate, baseline=g.baseline, **scale)
 
     def _start(self, config: TrainConfig, initial: LogisticPolicy) -> tuple[dict, None]:
         steps = context(config.system)[0].episode_steps

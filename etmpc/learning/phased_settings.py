@@ -57,10 +57,11 @@ class GpomdpSettings(PhasedSettings):
     discount: float = 0.975
     learning_rate: float = 0.05
     baseline: str = "none"
+    scale: str = "none"
 
     @property
     def algorithm_settings(self) -> gpomdp.Settings:
-        return gpomdp.Settings(self.discount, self.learning_rate, self.baseline)
+        return gpomdp.Settings(self.discount, self.learning_rate, self.baseline, self.scale)
 
 
 @dataclass(frozen=True)

@@ -67,6 +67,7 @@ def test_the_cheapest_study_runs_end_to_end_into_a_folder_of_its_own(tmp_path, c
 PAGES = {
     "estimators": ("estimators", ["--page-only"]),
     "failure-cost": ("failure_cost", ["--page-only"]),
+    "gpomdp": ("gpomdp", ["--page-only"]),
     "learners": ("learners", ["--page-only"]),
     "levels": ("levels", ["--page-only"]),
     "safety": ("safety", ["--page-only"]),

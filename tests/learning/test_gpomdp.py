@@ -1,6 +1,7 @@
 """GPOMDP against exact gradients of a tiny MDP, computed by enumerating every action sequence."""
 
 import itertools
+import json
 
 import numpy as np
 import pytest
@@ -154,3 +155,111 @@ def test_state_baseline_is_ridge_least_squares_over_earlier_decisions():
     design = np.vstack(rows + [np.sqrt(VALUE_RIDGE) * np.eye(4)])
     reference = np.linalg.lstsq(design, np.concatenate(targets + [np.zeros(4)]), rcond=None)[0]
     np.testing.assert_allclose(learner.value_weights(), reference, rtol=1e-10)
+
+
+def test_the_advantage_scale_divides_the_step_by_the_earlier_advantages_rms():
+    """Reference by hand: the first update's unit is its own advantages' RMS, each later one's the RMS of every earlier
+    episode's advantages; the estimate is the paper's divided by it. A positive number fixed before the episode is
+    drawn: in expectation the exact gradient (the enumerated tiny MDP's, by finite differences) over that number."""
+    theta, gamma = np.array([0.4, -0.3, 0.2]), 0.9
+    episodes = list(enumerate_episodes(theta))
+    scaled = Learner.start(theta, Settings(discount=gamma, learning_rate=0.1, scale="advantage"), steps=4)
+    seen: list[float] = []
+    for _, rewards, feats, actions, keeps, steps in episodes[:5]:
+        advantages = rewards_to_go(rewards, gamma)[steps]
+        unit = np.sqrt(np.mean(np.square(seen if seen else advantages)))
+        before = scaled.theta
+        g = scaled.update(feats, actions, keeps, steps, rewards)
+        paper = gradient(feats, actions, keeps, steps, rewards_to_go(rewards, gamma))
+        np.testing.assert_allclose(g, paper / unit, rtol=1e-12)
+        np.testing.assert_allclose(scaled.theta, before + 0.1 * paper / unit, rtol=1e-12)
+        seen += list(advantages)
+    assert scaled.advantage_count == len(seen)
+    np.testing.assert_allclose(scaled.advantage_square_sum, np.sum(np.square(seen)), rtol=1e-12)
+    # Once the unit is fixed (after the first episode), the expected estimate is the exact gradient over it.
+    unit = np.sqrt(scaled.advantage_square_sum / scaled.advantage_count)
+    expected = np.zeros(3)
+    for p, rewards, feats, actions, keeps, steps in episodes:
+        learner = Learner(
+            theta.copy(),
+            Settings(discount=1.0, scale="advantage"),
+            np.zeros(4),
+            1,
+            None,
+            None,
+            scaled.advantage_count,
+            scaled.advantage_square_sum,
+        )
+        expected += p * learner.update(feats, actions, keeps, steps, rewards)
+    eps = 1e-6
+    fd = np.array([(expected_return(theta + eps * e) - expected_return(theta - eps * e)) / (2 * eps) for e in np.eye(3)])
+    np.testing.assert_allclose(expected, fd / unit, rtol=1e-6, atol=1e-9)
+
+
+def test_the_scale_is_checked_and_the_paper_step_is_the_default():
+    with pytest.raises(ValueError, match="scale"):
+        Settings(scale="gradient")
+    assert Settings().scale == "none"
+
+
+# theta after 3 training episodes of battery/trading (seed 7), paper features, normalisation from 2 episodes, default
+# settings and the state baseline: computed with etmpc.learning.jobs.train_block at commit 49d8583, before the scale.
+BEFORE_THE_SCALE = {
+    "none": [
+        0.05543609686666476,
+        0.08817074840596947,
+        -0.056239933733519556,
+        0.03567173191173148,
+        0.09409736655487644,
+        -0.0393363070696306,
+        -2.901868770148478,
+    ],
+    "state": [
+        0.05501192278067983,
+        0.06639919886813099,
+        -0.003989777349858725,
+        0.056828626477036556,
+        0.07710594440117458,
+        -0.0068097653610420805,
+        -2.9754061704276134,
+    ],
+}
+
+
+@pytest.mark.parametrize("baseline", sorted(BEFORE_THE_SCALE))
+def test_the_default_settings_train_the_same_parameters_as_before_the_scale(baseline):
+    from etmpc.learning.jobs import _learner_to_json, normalisation_states, train_block
+    from etmpc.policies.learned import LogisticPolicy, Normalisation
+
+    task = "battery/trading"
+    normalisation = Normalisation.fit(np.concatenate([normalisation_states(task, i, "paper") for i in range(2)]))
+    policy = LogisticPolicy.initial(normalisation, task, {}, "paper")
+    learner = Learner.start(policy.theta, Settings(baseline=baseline), 100)
+    trained, _ = train_block(task, policy.to_json(), _learner_to_json(learner), 7, 0, 3)
+    np.testing.assert_allclose(trained["theta"], BEFORE_THE_SCALE[baseline], rtol=1e-12, atol=1e-15)
+    assert "advantage_count" not in trained  # the paper's runs keep what they kept
+
+
+def test_a_scaled_learner_resumes_from_its_json_as_if_never_stopped():
+    from etmpc.learning.jobs import _learner_from_json, _learner_to_json
+
+    rng = np.random.default_rng(5)
+    batches = [
+        (
+            rng.normal(size=(6, 3)),
+            rng.integers(0, 2, 6),
+            np.full(6, 0.4),
+            np.sort(rng.choice(8, 6, replace=False)),
+            rng.normal(size=8),
+        )
+        for _ in range(4)
+    ]
+    straight = Learner.start(np.zeros(3), Settings(scale="advantage", baseline="state"), steps=8)
+    stopped = Learner.start(np.zeros(3), Settings(scale="advantage", baseline="state"), steps=8)
+    for k, batch in enumerate(batches):
+        straight.update(*batch)
+        if k == 2:
+            stopped = _learner_from_json(json.loads(json.dumps(_learner_to_json(stopped))))
+        stopped.update(*batch)
+    assert stopped.advantage_count == straight.advantage_count == 24
+    np.testing.assert_array_equal(stopped.theta, straight.theta)

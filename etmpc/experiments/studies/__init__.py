@@ -29,6 +29,7 @@ STUDIES = {
     "failure-cost": Entry(
         "failure_cost", "safety in learning, its weight chosen on validation episodes: results/failure_cost.md"
     ),
+    "gpomdp": Entry("gpomdp", "why the paper's learner loses: its gradient, an ablation and a fix: results/gpomdp.md"),
     "learners": Entry("learners", "DPI and PPO compared over training seeds, and the policies they ship: results/learners.md"),
     "levels": Entry("levels", "what a trigger that chooses how much to compute gains, and a learner could: results/levels.md"),
     "quadrotor-flight": Entry("quadrotor_flight", "the quadrotor page's flight figure: one episode under two triggers"),
