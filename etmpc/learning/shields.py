@@ -149,7 +149,7 @@ def certify(result: dict, bound: float = SAFETY_BOUND, confidence: float = CONFI
     # Failures are rare: a few hundred episodes may see none, and a spread of 0 would certify anything. The
     # spread is taken at least as that of one more failure in a share `bound` of the episodes, the gap at the
     # bound itself (as Wilson's interval takes the variance at the value tested): with no failure seen, about
-    # (z / bound)^2 episodes certify (157 at 0.05 and z = 2.8).
+    # z^2 (1 - bound) / bound episodes certify (150 at 0.05 and z = 2.8).
     share = min(bound, 0.5)
     least = float(np.sqrt(share * (1.0 - share)))
     worst = {row["rule"]: max(upper_bound(p["failure_gap"], z, least) for p in row["policies"].values()) for row in candidates}
