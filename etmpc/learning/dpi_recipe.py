@@ -29,11 +29,10 @@ from dataclasses import fields, replace
 from pathlib import Path
 from typing import Any
 
-from etmpc.common.documents import yaml_loads
 from etmpc.common.errors import EtmpcError
 from etmpc.common.resources import data_root
 from etmpc.envs.registration import env_id
-from etmpc.learning import dpi
+from etmpc.learning import dpi, hyperparams
 from etmpc.learning.config import TrainConfig
 from etmpc.learning.hyperparams import HyperparameterError
 from etmpc.systems import canonical, folder_name, make_system, system_class
@@ -79,12 +78,7 @@ def recipe(task: str) -> TrainConfig:
 
 def load(path: str | Path, task: str) -> TrainConfig:
     """``task``'s DPI run as the file at ``path`` says it (``eval_episodes`` left to the caller)."""
-    path = Path(path)
-    try:
-        document = yaml_loads(path.read_text())
-    except (OSError, ValueError) as exc:
-        raise HyperparameterError(f"{path}: cannot read it ({' '.join(str(exc).split())})") from None
-    return parse(document, task, str(path))
+    return parse(hyperparams.read(path), task, str(path))
 
 
 def parse(document: Any, task: str, where: str) -> TrainConfig:
@@ -119,7 +113,4 @@ def to_document(config: TrainConfig) -> dict:
 
 def dump(config: TrainConfig, comment: str = "") -> str:
     """The file's text for ``config`` (``comment``: lines to put on top, each made a YAML comment)."""
-    import yaml
-
-    head = "".join(f"# {line}\n".replace("# \n", "#\n") for line in comment.splitlines())
-    return head + yaml.safe_dump(to_document(config), sort_keys=False, default_flow_style=None)
+    return hyperparams.text(to_document(config), comment)

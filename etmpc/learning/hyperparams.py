@@ -69,12 +69,16 @@ def shipped(task: str | SystemKey, base: PpoSettings = PpoSettings()) -> PpoSett
 
 def load(path: str | Path, task: str, base: PpoSettings = PpoSettings()) -> PpoSettings:
     """``base`` with what the file at ``path`` sets for ``task`` (``DOMAIN`` or ``DOMAIN/TASK``)."""
+    return parse(read(path), task, str(path), base)
+
+
+def read(path: str | Path) -> Any:
+    """The YAML document in a learner's recipe file (``ppo.yml``, ``dpi.yml``), or one line saying why not."""
     path = Path(path)
     try:
-        document = yaml_loads(path.read_text())
+        return yaml_loads(path.read_text())
     except (OSError, ValueError) as exc:
         raise HyperparameterError(f"{path}: cannot read it ({' '.join(str(exc).split())})") from None
-    return parse(document, task, str(path), base)
 
 
 def parse(document: Any, task: str, where: str, base: PpoSettings = PpoSettings()) -> PpoSettings:
@@ -131,10 +135,15 @@ def to_document(settings: PpoSettings, task: str) -> dict:
 
 def dump(settings: PpoSettings, task: str, comment: str = "") -> str:
     """The file's text for ``settings`` (``comment``: lines to put on top, each made a YAML comment)."""
+    return text(to_document(settings, task), comment)
+
+
+def text(document: dict, comment: str = "") -> str:
+    """A recipe file's text: ``document`` as YAML in its keys' order, under ``comment``'s lines made comments."""
     import yaml
 
     head = "".join(f"# {line}\n".replace("# \n", "#\n") for line in comment.splitlines())
-    return head + yaml.safe_dump(to_document(settings, task), sort_keys=False, default_flow_style=None)
+    return head + yaml.safe_dump(document, sort_keys=False, default_flow_style=None)
 
 
 def _numeral(text: str) -> bool:
