@@ -7,7 +7,9 @@ the kept plan and its feedback run meanwhile, one solve is in flight at a time (
 asked then), and the late plan comes into force at its own time index (its age is ``d`` when it
 arrives). A task with ``compute_levels`` lets the policy choose, at a decision, between keeping the
 plan, one SQP iteration from the shifted last plan (a real-time iteration) and a full solve; each is
-priced by its work, SQP iterations, and the latency applies to each.
+priced by its work, SQP iterations, and the latency applies to each. A policy may also ask for at most
+``k`` SQP iterations from the shifted plan (:class:`Iterations`): the extra iterations of the advanced-step
+real-time iteration (AS-RTI), or an iteration budget per solve such as acados' ``timeout_max_time``.
 
 ``d`` is deterministic, so runs stay bit-reproducible: a fixed number of intervals plus, on a named
 target platform, the solve's own work, its SQP iterations times the time one takes there, rounded up
@@ -35,8 +37,28 @@ LEVEL_NAMES = ("keep", "iterate", "solve")
 #: What a policy may answer, on a task without compute levels (False) and with them (True).
 ANSWERS = {
     False: "False or 0 (keep) or True or 1 (a full solve)",
-    True: f"{KEEP} ({LEVEL_NAMES[0]}), {ITERATE} ({LEVEL_NAMES[1]}) or {SOLVE} ({LEVEL_NAMES[2]}), or False/True (keep/solve)",
+    True: f"{KEEP} ({LEVEL_NAMES[0]}), {ITERATE} ({LEVEL_NAMES[1]}), Iterations(k) or {SOLVE} ({LEVEL_NAMES[2]}), "
+    "or False/True (keep/solve)",
 }
+
+
+@dataclass(frozen=True)
+class Iterations:
+    """An answer on a task with compute levels: at most ``count`` SQP iterations from the shifted plan,
+    stopping early when they converge (the level :data:`ITERATE`; ``Iterations(1)`` is one real-time
+    iteration, as ``ITERATE`` is). Priced, and delayed, by the iterations made."""
+
+    count: int
+
+    def __post_init__(self):
+        if isinstance(self.count, bool) or not isinstance(self.count, (int, np.integer)) or self.count < 1:
+            raise BadValue(f"Iterations: a whole number of SQP iterations >= 1 is needed, got {self.count!r}")
+
+
+def iterations_of(answer: Any) -> int:
+    """How many SQP iterations at most an answer whose level is :data:`ITERATE` asks for: ``answer.count``
+    for an :class:`Iterations`, else 1 (``ITERATE`` itself)."""
+    return int(answer.count) if isinstance(answer, Iterations) else 1
 
 
 def level_of(answer: Any, levels: bool) -> int | None:
@@ -44,9 +66,10 @@ def level_of(answer: Any, levels: bool) -> int | None:
     is no answer on a task with compute ``levels`` (or without): the one check of an answer, shared by the
     loop and the check of a user's policy. A bool (Python's or numpy's) is keep or a full solve; an integer
     (Python's or numpy's) is a level by its value: 0 or 1 (keep, a full solve) on a task without levels, 0, 1
-    or 2 with them. Anything else is no answer, never read by its truth: 2 on a keep-or-solve task was taken
-    as a solve, and a float, a string or None as whatever its truth said. Asked at every decision: the
-    common answers cost an identity test or two."""
+    or 2 with them; an :class:`Iterations` is :data:`ITERATE` on a task with levels. Anything else is no
+    answer, never read by its truth: 2 on a keep-or-solve task was taken as a solve, and a float, a string
+    or None as whatever its truth said. Asked at every decision: the common answers cost an identity test
+    or two."""
     if answer is True or answer is False or isinstance(answer, np.bool_):
         return SOLVE if answer else KEEP
     if isinstance(answer, (int, np.integer)):
@@ -56,6 +79,8 @@ def level_of(answer: Any, levels: bool) -> int | None:
             return ITERATE if levels else SOLVE
         if answer == SOLVE and levels:
             return SOLVE
+    if isinstance(answer, Iterations) and levels:
+        return ITERATE
     return None
 
 

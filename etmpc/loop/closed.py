@@ -5,7 +5,8 @@ recording or light (:mod:`etmpc.loop.modes`)."""
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
+from functools import partial
 from typing import Any
 
 import dm_env
@@ -14,7 +15,7 @@ import numpy as np
 from etmpc.common.checks import BadValue
 from etmpc.common.frozen import readonly
 from etmpc.control.plan import Plan
-from etmpc.control.timing import ANSWERS, KEEP, SOLVE, level_of
+from etmpc.control.timing import ANSWERS, ITERATE, KEEP, SOLVE, iterations_of, level_of
 from etmpc.loop.flight import Flight
 from etmpc.loop.modes import LIGHT, RECORDING, Kept, cpu_clock
 from etmpc.loop.records import computation_cost
@@ -203,7 +204,7 @@ class ClosedLoop(Kept):
         forced = self.flight.forced(self.plan, self.age)
         level = SOLVE if forced else KEEP if in_flight else self._level(recompute)
         # maybe solve: in force now, or in flight until its delay is over
-        work = 0 if level == KEEP else self._recompute(level, i, forced, solved)
+        work = 0 if level == KEEP else self._recompute(level, i, forced, solved, recompute)
         # feedback: the plan in force's input plus the LQR correction, clipped
         plan = self.plan
         seen = self.sensed.seen
@@ -231,9 +232,11 @@ class ClosedLoop(Kept):
         mode.ended(self, i, start)
         return reward - self.cost
 
-    def _recompute(self, level: int, i: int, forced: bool, solved: Plan | None) -> int:
-        """Start step ``i``'s recompute at ``level`` (its plan ``solved`` if the caller has it); its work."""
-        new = solved if solved is not None else self._compute(level, i)
+    def _recompute(self, level: int, i: int, forced: bool, solved: Plan | None, answer: Decision) -> int:
+        """Start step ``i``'s recompute at ``level`` (its plan ``solved`` if the caller has it; ``answer``: the
+        policy's, which says how many SQP iterations an ``ITERATE`` may make); its work."""
+        limit = iterations_of(answer) if level == ITERATE else 1
+        new = solved if solved is not None else self._compute(level, i, limit)
         if self.flight.start(new, i, self.plan):  # no delay: in force now; else in flight
             self._deliver(new, i, forced)
         return new.iterations if self.levels else 1  # its SQP iterations on a task with levels, else 1 per solve
@@ -275,16 +278,21 @@ class ClosedLoop(Kept):
             self.age = now - made
             self.mode.delivered(self, made, new, now, made if started is None else started)
 
-    def _compute(self, level: int, i: int) -> Plan:
+    def _compute(self, level: int, i: int, limit: int = 1) -> Plan:
         """A new plan from the state now (or, delay-compensated, from the state the kept plan predicts
-        for when it will arrive): a full solve or one SQP iteration; timed and a failure counted when
-        recording."""
+        for when it will arrive): a full solve or at most ``limit`` SQP iterations (one: a real-time
+        iteration); timed and a failure counted when recording."""
         warm = self.plan
         seen = self.sensed.seen
         assert seen is not None  # read at the episode's start (reset, resume)
         x, u_prev, age = self.flight.solve_from(seen, self.u_prev, warm, self.age)
-        solver = self.system.plan if level == SOLVE else self.system.iterate
-        assert solver is not None  # ITERATE is a level only on a task with compute levels, which offers iterate
+        solver: Callable[..., Plan]
+        if level == SOLVE:
+            solver = self.system.plan
+        else:
+            iterate = self.system.iterate
+            assert iterate is not None  # ITERATE is a level only on a task with compute levels, which offers iterate
+            solver = iterate if limit == 1 else partial(iterate, limit=limit)
         return self.mode.solve(self, solver, x, u_prev, warm, age, i)
 
     def _sense(self, u: np.ndarray | None) -> None:

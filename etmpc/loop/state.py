@@ -11,6 +11,7 @@ import dm_env
 import numpy as np
 
 from etmpc.control.plan import Plan
+from etmpc.control.timing import Iterations
 
 
 # -- what the loop asks of a policy ------------------------------------------------------------------
@@ -38,9 +39,10 @@ class AugmentedState:
 
 
 #: A policy's answer at a decision: keep (False) or recompute (True); on a task with compute levels
-#: (:mod:`etmpc.control.timing`), a level: ``KEEP`` (0), ``ITERATE`` (1, one SQP iteration) or ``SOLVE`` (2).
-#: numpy's bools and integers are answers alike (:func:`~etmpc.control.timing.level_of` reads every one).
-Decision: TypeAlias = bool | int | np.bool_ | np.integer
+#: (:mod:`etmpc.control.timing`), a level: ``KEEP`` (0), ``ITERATE`` (1, one SQP iteration) or ``SOLVE`` (2), or
+#: ``Iterations(k)`` (at most k SQP iterations). numpy's bools and integers are answers alike
+#: (:func:`~etmpc.control.timing.level_of` reads every one).
+Decision: TypeAlias = bool | int | np.bool_ | np.integer | Iterations
 
 
 class Policy(Protocol):

@@ -1,5 +1,5 @@
 """A kind of policy (:class:`Kind`: its name, syntax and builder), what a builder may use (:class:`Context`), and
-how each built-in kind that wraps no other reads its argument: ``always``, ``never``, ``every:T``, ``iterate:T``,
+how each built-in kind that wraps no other reads its argument: ``always``, ``never``, ``every:T``, ``iterate:T[:K]``,
 ``threshold:X[:iterate][:reading]`` and the kinds that name a file (``rl:``, ``self:``, ``sb3:``). A builder is
 ``build(arg, spec, context)`` and raises :class:`~etmpc.common.errors.EtmpcError` with a one-line message on bad
 input. The registry of kinds, its parser and the kinds that wrap another (``shield:``, ``rollout:``, ``oracle:``)
@@ -87,10 +87,14 @@ def iterate(arg: str, spec: str, context: Context) -> Policy:
             f"bad policy {spec!r}: one SQP iteration is a compute level, and task {context.task} has none "
             "(its decisions are keep or solve)"
         )
-    period = number(arg, int, spec)
+    text, colon, rest = arg.partition(":")
+    period = number(text, int, spec)
     if period < 1:
         raise EtmpcError(f"bad policy {spec!r}: the period must be a whole number of steps >= 1")
-    return Iterate(period)
+    count = number(rest, int, spec) if colon else 1
+    if count < 1:
+        raise EtmpcError(f"bad policy {spec!r}: the SQP iterations at a time must be a whole number >= 1")
+    return Iterate(period, count)
 
 
 def threshold(arg: str, spec: str, context: Context) -> Policy:

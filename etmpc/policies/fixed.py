@@ -1,5 +1,5 @@
 """Fixed schedules: ``always`` (standard MPC), ``never`` (keep each plan to its end), ``every:T`` and,
-on a task with compute levels, ``iterate:T`` (real-time iterations)."""
+on a task with compute levels, ``iterate:T[:K]`` (real-time iterations, up to ``K`` at a time)."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ from typing import ClassVar
 
 import numpy as np
 
-from etmpc.control.timing import ITERATE, KEEP
-from etmpc.loop import AugmentedState
+from etmpc.control.timing import ITERATE, KEEP, Iterations
+from etmpc.loop import AugmentedState, Decision
 
 
 class _Schedule:
@@ -48,17 +48,22 @@ class Every(_Schedule):
 @dataclass(frozen=True)
 class Iterate(_Schedule):
     """Real-time iterations: one SQP iteration from the shifted plan when the plan is ``period`` steps
-    old (a full solve only where the loop forces one). On a task with compute levels only."""
+    old (a full solve only where the loop forces one), or up to ``count`` of them, stopping when they
+    converge: the extra iterations of the advanced-step RTI (Frey, Nurkanovic and Diehl 2024), or a fixed
+    iteration budget per solve. On a task with compute levels only."""
 
     period: int
+    count: int = 1
     stochastic: bool = False
 
     @property
     def spec(self) -> str:
-        return f"iterate:{self.period}"
+        return f"iterate:{self.period}" + (f":{self.count}" if self.count > 1 else "")
 
-    def decide(self, s: AugmentedState, rng: np.random.Generator | None) -> int:
-        return ITERATE if s.age >= self.period else KEEP
+    def decide(self, s: AugmentedState, rng: np.random.Generator | None) -> Decision:
+        if s.age < self.period:
+            return KEEP
+        return ITERATE if self.count == 1 else Iterations(self.count)
 
 
 @dataclass(frozen=True)

@@ -103,8 +103,8 @@ BUILT_IN: tuple[Kind, ...] = (
     Kind("every", "every:T", "recompute when the plan is T steps old", every, family="periodic"),
     Kind(
         "iterate",
-        "iterate:T",
-        "one SQP iteration when the plan is T steps old (a task with compute levels)",
+        "iterate:T[:K]",
+        "one SQP iteration (or up to K) when the plan is T steps old (a task with compute levels)",
         iterate,
         family="periodic",
     ),

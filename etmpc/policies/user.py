@@ -30,7 +30,7 @@ import numpy as np
 
 from etmpc.common.errors import EtmpcError
 from etmpc.common.interrupts import described, failed, genuine, users_code
-from etmpc.control.timing import ANSWERS, level_of
+from etmpc.control.timing import ANSWERS, Iterations, level_of
 from etmpc.loop import AugmentedState, Decision, DecisionContext, Policy
 
 
@@ -56,7 +56,8 @@ def _check_members(policy: Any, where: str) -> None:
 @dataclass(eq=False)
 class Checked:
     """``policy`` with its answers checked: an exception in ``decide``, or an answer that is no answer on the
-    task (:func:`~etmpc.control.timing.level_of`: a bool, 0 or 1; with compute ``levels`` 0, 1 or 2 too), is
+    task (:func:`~etmpc.control.timing.level_of`: a bool, 0 or 1; with compute ``levels`` 0, 1, 2 or an
+    ``Iterations(k)`` too), is
     an :class:`EtmpcError` naming the policy and the answer. Its ``spec`` is ``name``: the policy's own spec,
     or the ``py:MODULE:NAME`` it was loaded by. ``levels``: whether the task it plays has compute levels
     (None: not known here; 0, 1 and 2 pass, and the loop refuses a level its task has not)."""
@@ -108,13 +109,15 @@ class Checked:
                 f"policy {self.name}: decide must return a bool (True: recompute), {_EXPECTED[self.levels]}; "
                 f"it returned {type(answer).__name__} {answer!r}"
             )
+        if isinstance(answer, Iterations):
+            return answer
         return bool(answer) if isinstance(answer, np.bool_) else int(answer)
 
 
 _EXPECTED = {
     False: "or 0 or 1 (keep, a full solve) on a task without compute levels",
     True: f"or a compute level ({ANSWERS[True]})",
-    None: "or on a task with compute levels 0, 1 or 2 (keep, one SQP iteration, a full solve)",
+    None: "or on a task with compute levels 0, 1, Iterations(k) or 2 (keep, one SQP iteration, at most k, a full solve)",
 }
 
 

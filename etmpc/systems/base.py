@@ -144,7 +144,8 @@ class SystemBase:
     plan_cost: Callable[..., float] | None = None
     # () -> the same system with its MPC not compiled (None: it has no other way to run)
     interpreted: Callable[[], SystemBase] | None = None
-    # (x, u_prev, warm, age, timestep) -> a Plan from one SQP iteration (Plan.iterations: 1), for compute levels
+    # (x, u_prev, warm, age, timestep, limit=1) -> a Plan from at most ``limit`` SQP iterations (Plan.iterations),
+    # for compute levels
     iterate: Callable[..., Plan] | None = None
     # (x, inputs) -> the predictor's states from x under inputs (N+1 rows), for delay compensation
     predict: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None

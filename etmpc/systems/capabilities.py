@@ -107,8 +107,9 @@ class ShieldRule:
 
 
 class TimeInTheLoop(Protocol):
-    """Compute levels, work-priced solves and delay compensation: one SQP iteration (``iterate``, a Plan with
-    ``iterations`` 1) and the predictor's states under given inputs (``predict``)."""
+    """Compute levels, work-priced solves and delay compensation: SQP iterations from the shifted plan
+    (``iterate(..., limit=1)``: at most ``limit``, a Plan whose ``iterations`` says how many) and the predictor's
+    states under given inputs (``predict``)."""
 
     iterate: Callable[..., Any]
     predict: Callable[[np.ndarray, np.ndarray], np.ndarray]

@@ -157,10 +157,13 @@ class GaussNewtonSystem(SystemBase):
             plan = self.mpc.solve(x, u_prev, warm, age, parameters=p)
         return self._tracking(plan, p)
 
-    def iterate(self, x: np.ndarray, u_prev: np.ndarray, warm: Plan | None, age: int, timestep: dm_env.TimeStep) -> Plan:
-        """One SQP iteration from ``warm`` shifted by ``age`` (a real-time iteration)."""
+    def iterate(
+        self, x: np.ndarray, u_prev: np.ndarray, warm: Plan | None, age: int, timestep: dm_env.TimeStep, limit: int = 1
+    ) -> Plan:
+        """At most ``limit`` SQP iterations from ``warm`` shifted by ``age``, stopping when converged (one: a
+        real-time iteration)."""
         p = self.observed(timestep)
-        return self._tracking(self.mpc.iterate(x, u_prev, warm, age, parameters=p, limit=1), p)
+        return self._tracking(self.mpc.iterate(x, u_prev, warm, age, parameters=p, limit=limit), p)
 
     def predict(self, x: np.ndarray, inputs: np.ndarray) -> np.ndarray:
         """The predictor's states from ``x`` under ``inputs`` (for delay compensation)."""

@@ -178,7 +178,7 @@ def test_while_a_solve_is_in_flight_the_trigger_is_not_asked_and_a_loop_takes_le
     assert not loop.in_flight and loop.augmented_state() is not None
     levels = ClosedLoop(make_system("cart_pendulum/kicks_levels"), system.make_env()).reset(_episode(system, 0))
     levels.step(SOLVE)
-    with pytest.raises(ValueError, match=r"0 \(keep\), 1 \(iterate\) or 2 \(solve\)"):
+    with pytest.raises(ValueError, match=r"0 \(keep\), 1 \(iterate\), Iterations\(k\) or 2 \(solve\)"):
         levels.step(5)
 
 

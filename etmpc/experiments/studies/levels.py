@@ -12,7 +12,12 @@ never the stored test set), paired episode by episode with the task's best fixed
 2. the shipped learners, and DPI trained with the shipped recipe (the ``learners`` study's) over seeds 0-2 on
    its ``error`` features and on the ``levels`` features (the same and ``unconverged``: whether the kept plan is
    a real-time iterate short of convergence), each seed's own choice;
-3. on the first ``--rollout-episodes`` of them: the rollout policy over the best trigger of 1 (a one-step
+3. two fixed baselines from the field (:func:`baselines`): the advanced-step RTI's extra SQP iterations at every
+   interval (Frey, Nurkanovic and Diehl 2024; their level D, full SQP iterations, as ``iterate:1:K``), and an
+   iteration budget per interval, as acados users set one with ``timeout_max_time``: as many SQP iterations as
+   fit in one control interval on the task's target platform, stopping early when they converge, at every
+   interval and at every second one;
+4. on the first ``--rollout-episodes`` of them: the rollout policy over the best trigger of 1 (a one-step
    lookahead over sampled futures, with 4 and 16 futures: the policy DPI's classifier learns to imitate, with
    that trigger as its base) and the oracle over ``iterate:1`` (the same lookahead with each episode's future
    known: a reference, not a policy).
@@ -24,6 +29,7 @@ find there, and what separates the trigger from the oracle is what knowing the f
 from __future__ import annotations
 
 import argparse
+import math
 from dataclasses import replace
 from pathlib import Path
 
@@ -36,6 +42,7 @@ from etmpc.experiments.studies import runner
 from etmpc.experiments.studies.learner_runs import shipped_recipe
 from etmpc.learning.config import VALIDATION_ENTROPY
 from etmpc.learning.jobs import episode_outcomes
+from etmpc.systems import make_system
 
 TASK = "cart_pendulum/kicks_levels"
 BEST_FIXED = "iterate:1"
@@ -51,6 +58,22 @@ SEEDS = (0, 1, 2)
 
 def trigger(age: int, level: float) -> str:
     return f"shield:{age}:threshold:{level:g}:iterate"
+
+
+def baselines(task: str = TASK) -> dict[str, str]:
+    """Row name -> spec of the field's fixed baselines on ``task``: AS-RTI with one and two extra SQP iterations
+    at every interval, and the iteration budget of one control interval on the task's platform (the iterations
+    that fit in it, ``floor(interval / time per iteration)``), spent at every interval and at every second one."""
+    system = make_system(task)
+    latency = system.config.latency
+    budget = math.floor(system.control_interval_s / latency.iteration_s + 1e-9)
+    if budget < 1:
+        raise ValueError(f"{task}: one SQP iteration takes longer than a control interval on {latency.platform}")
+    rows = {f"AS-RTI, {extra} extra iteration{'s' * (extra > 1)}": f"iterate:1:{1 + extra}" for extra in (1, 2)}
+    for period in (1, 2):
+        every = "every interval" if period == 1 else f"every {period} intervals"
+        rows[f"budget of {budget} iterations (one interval), {every}"] = f"iterate:{period}:{budget}"
+    return rows
 
 
 def dpi_runs(work: Path, workers: int) -> dict[str, str]:
@@ -100,6 +123,8 @@ def summary(rows: np.ndarray, reference: np.ndarray, spec: str, trigger_rows: np
 def study(work: Path, episodes: int, rollout_episodes: int, workers: int) -> dict:
     triggers = [trigger(a, x) for a in AGES for x in THRESHOLDS]
     specs = {BEST_FIXED: BEST_FIXED, **{t: t for t in triggers}, **SHIPPED, **dpi_runs(work, workers)}  # row name -> spec
+    field = baselines()
+    specs.update(field)
     main = played(specs, episodes, workers)
     best = min(triggers, key=lambda name: float(np.mean(main[name][:, 0])))
     lookahead = {
@@ -116,7 +141,9 @@ def study(work: Path, episodes: int, rollout_episodes: int, workers: int) -> dic
         "validation_episodes": episodes,
         "rollout_episodes": rollout_episodes,
         "best_trigger": best,
-        "rows": {name: summary(rows, main[BEST_FIXED], specs[name]) for name, rows in main.items()},
+        "rows": {name: summary(rows, main[BEST_FIXED], specs[name]) for name, rows in main.items() if name not in field},
+        "baselines": {name: summary(main[name], main[BEST_FIXED], spec) for name, spec in field.items()},
+        "iteration_s": make_system(TASK).config.latency.iteration_s,
         "lookahead": {name: summary(rows, short[BEST_FIXED], lookahead[name], short[best]) for name, rows in short.items()},
     }
 
@@ -160,6 +187,7 @@ def page(document: dict) -> str:
         "",
         *table(learned),
         "",
+        *_baselines_section(document),
         f"## One step of lookahead ({document['rollout_episodes']} validation episodes)",
         "",
         f"The rollout policy over the best trigger above, `{best}`, simulates each answer over sampled futures and "
@@ -175,6 +203,29 @@ def page(document: dict) -> str:
         "",
     ]
     return "\n".join(lines)
+
+
+def _baselines_section(document: dict) -> list[str]:
+    """The field's fixed baselines, on the same validation episodes (absent from a document made before them)."""
+    field = document.get("baselines")
+    if not field:
+        return []
+    best = max(field, key=lambda name: field[name]["gain"])
+    return [
+        f"## Baselines from the field ({document['validation_episodes']} validation episodes)",
+        "",
+        "`iterate:T:K` makes up to `K` SQP iterations from the shifted plan when the plan is `T` steps old, stopping "
+        "early when they converge; each iteration is priced and takes "
+        f"{1000 * document['iteration_s']:g} ms on the task's platform. The advanced-step RTI (Frey, Nurkanović and "
+        "Diehl 2024) adds iterations to each real-time iteration: these rows are its level D (full SQP iterations); "
+        "its levels A-C, which iterate on a QP with the last linearisation, are not modelled. The budget rows spend "
+        "the iterations that fit in one control interval, as an acados user's `timeout_max_time` would.",
+        "",
+        *table(field),
+        "",
+        f"The best of them, {best}, gains {field[best]['gain']:+.1f} % ± {field[best]['gain_ci95']:.1f} over `iterate:1`.",
+        "",
+    ]
 
 
 def arguments(parser: argparse.ArgumentParser) -> None:
