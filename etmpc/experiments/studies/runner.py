@@ -61,7 +61,7 @@ def host(cpu: bool = False) -> str:
 
 def machine(workers: int, cpu: bool = False) -> str:
     """:func:`host` and the worker processes the study ran with."""
-    return f"{host(cpu)}, {workers} workers"
+    return f"{host(cpu)}, {workers} worker{'s' * (workers != 1)}"
 
 
 def made() -> dict[str, Any]:
