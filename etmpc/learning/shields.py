@@ -17,7 +17,10 @@ from a table alone, so a stored table can be read again.
 the same validation episodes, has a 95 % upper confidence bound of at most ``bound`` (:data:`SAFETY_BOUND`),
 the bound widened for the number of rules tried (Bonferroni), so that the one chosen is not the luckiest of
 many. Among the certified, the best mean objective wins. This is the test a shipped learner is held to on
-fresh episodes (the ``safety`` study), asked of validation episodes first.
+fresh episodes (the ``safety`` study), asked of validation episodes first. Where nothing is certified, not
+even no shield, :func:`certify_or_budget` falls back on the budget's choice, said to be uncertified: a task
+whose failures are rare and long (a quadrotor that stays on the ground) may certify nothing on a thousand
+episodes, and no shield at all would be the worst answer to that.
 """
 
 from __future__ import annotations
@@ -115,12 +118,26 @@ def pick(result: dict, budget: float = BUDGET) -> dict:
 
 
 def select(result: dict) -> dict:
-    """``result`` chosen again as it was chosen (its ``selection``: by :func:`certify`'s bound, or by
-    :func:`pick`'s budget, which a table made before the choice was recorded was chosen by)."""
+    """``result`` chosen again as it was chosen (its ``selection``: by :func:`certify`'s bound, by
+    :func:`certify_or_budget`'s fallback, or by :func:`pick`'s budget, which a table made before the choice was
+    recorded was chosen by)."""
     selection = result.get("selection", {"by": "budget"})
-    if selection["by"] == "certify":
-        return certify(result, selection["bound"], selection["confidence"])
+    if selection["by"] == "certify" or selection.get("uncertified"):
+        return certify_or_budget(result, selection["bound"], selection["confidence"], result.get("budget", BUDGET))
     return pick(result, result.get("budget", BUDGET))
+
+
+def certify_or_budget(
+    result: dict, bound: float = SAFETY_BOUND, confidence: float = CONFIDENCE, budget: float = BUDGET
+) -> dict:
+    """:func:`certify`'s choice where a candidate (a rule, or no shield) is certified; else :func:`pick`'s within
+    ``budget``, its ``selection`` keeping the bounds certification found (``uncertified``: True) and ``safe``
+    False: not certified, whatever its mean failures say."""
+    certified = certify(result, bound, confidence)
+    if certified["certified"]:
+        return certified
+    fallback = pick(result, budget)
+    return dict(fallback, selection={**certified["selection"], "by": "budget", "uncertified": True}, certified=[], safe=False)
 
 
 def paired_gap(values: np.ndarray, reference: np.ndarray) -> dict:

@@ -133,3 +133,28 @@ def test_certify_says_when_nothing_is_certified_and_refuses_a_table_without_gaps
     old = dict(result, unshielded={**result["unshielded"], "policies": {"rl:a": {"objective": 26.0}}})
     with pytest.raises(ValueError, match="no paired failure gaps"):
         shields.certify(old)
+
+
+def test_where_nothing_is_certified_the_budget_chooses_and_says_so_and_a_stored_table_chooses_again_the_same(monkeypatch):
+    """Long, rare failures (a quadrotor on the ground to the episode's end) may certify nothing: the budget's rule
+    then stands, said not to be certified, with the bounds certification found."""
+    schedule = np.zeros(40)
+    schedule[[3, 17]] = 60  # the schedule crashed twice
+    crashes = schedule.copy()
+    crashes[[3, 17, 25]] = [0, 0, 70]  # the learner crashed once, elsewhere: fewer failures, a wide interval
+    shielded = crashes.copy()
+    shielded[25] = 30
+    failures = {"every:3": schedule, "rl:a": crashes, "shield:5:rl:a": shielded, "shield:5:0.5:rl:a": shielded}
+    objectives = {"every:3": 30.0, "rl:a": 26.0, "shield:5:rl:a": 26.1, "shield:5:0.5:rl:a": 29.0}
+    result = _certify_table(monkeypatch, failures, objectives, shields.rules((5,), (None, 0.5)), bound=0.05)
+    assert result["certified"] == []  # certify alone: no shield, not certified
+    fallback = shields.certify_or_budget(result, bound=0.05)
+    budget = shields.pick(result)
+    assert budget["chosen"] == "5"  # within 1 % of 26.0 and safer than none; 5:0.5 costs 11 %
+    assert fallback["chosen"] == "5" and not fallback["safe"] and fallback["certified"] == []
+    assert fallback["selection"]["by"] == "budget" and fallback["selection"]["uncertified"]
+    assert fallback["selection"]["upper_bounds"] == result["selection"]["upper_bounds"]
+    assert shields.select(fallback) == fallback  # chosen again from the stored table, the same way
+    # where something is certified, the fallback is certify itself
+    certified = shields.certify_or_budget(result, bound=50.0)
+    assert certified["selection"]["by"] == "certify" and certified == shields.certify(result, bound=50.0)

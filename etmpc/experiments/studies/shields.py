@@ -9,7 +9,8 @@ For each task: its shipped DPI and PPO, unshielded and under every rule of the t
 fixed schedule, on the first ``--episodes`` validation episodes (never the test set), and a rule chosen by
 ``--select``: ``budget``, the safest rule within a cost budget (:func:`~etmpc.learning.shields.pick`), or
 ``certify``, the cheapest rule whose failures per episode, paired with the schedule's, are within ``--bound``
-at 95 % for every learner (:func:`~etmpc.learning.shields.certify`). Each task keeps how it was chosen. Writes
+at 95 % for every learner (:func:`~etmpc.learning.shields.certify`), or the budget's choice where nothing is
+(:func:`~etmpc.learning.shields.certify_or_budget`), said to be uncertified. Each task keeps how it was chosen. Writes
 ``docs/results/shields.json`` (what was chosen, and the whole table) and its page ``shields.md``, and
 prints each task's rule as the line to declare in its system class (``shield = ShieldRule(...)``). The
 test-set figures of the shielded policies are on the learner comparison page, the ``learners`` study's.
@@ -26,7 +27,7 @@ from etmpc.evaluation.backends import make_backend
 from etmpc.evaluation.references import stored
 from etmpc.experiments.leaderboard_rows import shipped_policy
 from etmpc.experiments.studies import runner
-from etmpc.learning.shields import BUDGET, SAFETY_BOUND, certify, choose, pick, rules, select
+from etmpc.learning.shields import BUDGET, SAFETY_BOUND, certify_or_budget, choose, pick, rules, select
 
 #: Each task whose failures are safety events: its grid (maximum plan ages, margins in its unit). Falls are rare
 #: on the cart pendulum (a few in a hundred episodes): a certified rule needs about a thousand episodes.
@@ -68,7 +69,9 @@ def page(document: dict) -> str:
         "as a constraint: a rule (or none) is certified when, for each learner, the upper end of the 95 % "
         "confidence interval of its failures per episode minus the schedule's, paired episode by episode, is "
         "within the bound, the interval widened for the number of rules tried (Bonferroni); the certified rule "
-        "with the best mean objective is chosen. What the shield is: [policies](../policies.md#shields-shield).",
+        "with the best mean objective is chosen; where nothing is certified, not even no shield, the budget "
+        "chooses and the task says its rule is not certified. What the shield is: "
+        "[policies](../policies.md#shields-shield).",
         "",
     ]
     for task, result in document["tasks"].items():
@@ -81,10 +84,18 @@ def _task_section(task: str, result: dict, commit: str) -> list[str]:
     schedule, unshielded = result["schedule"], result["unshielded"]
     selection = result.get("selection", {"by": "budget"})
     certified = selection["by"] == "certify"
+    bounds = "upper_bounds" in selection  # certification was asked (and, where nothing passed, the budget chose)
     if certified:
         how = f"by certification, within {selection['bound']:g} failures per episode of `{schedule['spec']}`"
         none = "none (no shield is certified and cheapest)" if result["safe"] else "none (no rule is certified)"
         safety = "certified" if result["safe"] else "not certified"
+    elif selection.get("uncertified"):
+        how = (
+            f"by a budget, as nothing (no shield included) is certified within {selection['bound']:g} failures per "
+            f"episode of `{schedule['spec']}`"
+        )
+        none = "none (no rule within the budget is safer than no shield)"
+        safety = "not certified"
     else:
         how = "by a budget"
         none = "none (no rule within the budget is safer than no shield)"
@@ -92,7 +103,7 @@ def _task_section(task: str, result: dict, commit: str) -> list[str]:
     chosen = none if result["chosen"] is None else f"**`shield:{result['chosen']}`**"
     header = "| rule | mean objective of the learners | failures per episode, the worse learner |"
     rule = "|---|---|---|"
-    if certified:
+    if bounds:
         header += " upper bound of the paired failure gap, the worse learner |"
         rule += "---|"
     lines = [
@@ -100,7 +111,7 @@ def _task_section(task: str, result: dict, commit: str) -> list[str]:
         "",
         f"{result['episodes']} validation episodes, played at commit `{commit}`; margins in {result['margin_unit']}. "
         f"`{schedule['spec']}`: objective {schedule['objective']:.3f}, {schedule['failures']:.3f} failures per episode. "
-        f"Chosen {how}: {chosen} ({safety}).",
+        f"Chosen {how}: {chosen} ({safety}).{_why_uncertified(result)}",
         "",
         header,
         rule,
@@ -109,11 +120,26 @@ def _task_section(task: str, result: dict, commit: str) -> list[str]:
         name = "none" if row["rule"] == "none" else f"`{row['rule']}`"
         mark = " (chosen)" if row["rule"] == result["chosen"] else ""
         line = f"| {name}{mark} | {row['objective']:.3f} | {row['worst_failures']:.3f} |"
-        if certified:
+        if bounds:
             line += f" {selection['upper_bounds'][row['rule']]:.3f} |"
         lines.append(line)
     lines.append("")
     return lines
+
+
+def _why_uncertified(result: dict) -> str:
+    """Where nothing was certified: how wide the spread of the paired gaps alone makes the interval."""
+    selection = result.get("selection", {})
+    if not selection.get("uncertified"):
+        return ""
+    rows = [result["unshielded"], *result["rules"]]
+    spreads = [p["failure_gap"]["sd"] for row in rows for p in row["policies"].values()]
+    half = selection["z"] * min(spreads) / math.sqrt(result["episodes"])
+    return (
+        f" The paired gaps' standard deviations are {min(spreads):.2f} to {max(spreads):.2f} failures per episode, so "
+        f"the interval's upper end is at least {half:.2f} above the mean gap, whatever the rule: rare, long failures "
+        "(episodes that count tens of failures) decide it."
+    )
 
 
 def arguments(parser: argparse.ArgumentParser) -> None:
@@ -123,8 +149,9 @@ def arguments(parser: argparse.ArgumentParser) -> None:
         "--select",
         choices=("certify", "budget"),
         default="certify",
-        help="certify: the cheapest rule within --bound of the schedule's failures (paired, 95 %%); "
-        f"budget: the safest rule costing at most {100 * BUDGET:g} %% (default: certify)",
+        help="certify: the cheapest rule within --bound of the schedule's failures (paired, 95 %%), or, where "
+        f"nothing is, the budget's choice, said to be uncertified; budget: the safest rule costing at most "
+        f"{100 * BUDGET:g} %% (default: certify)",
     )
     parser.add_argument(
         "--bound",
@@ -156,7 +183,7 @@ def run(args: argparse.Namespace) -> None:
     played = results.kept(lambda: {"tasks": {}})["tasks"]  # the tasks not run again stay
     for task in args.task or list(GRIDS):
         result = rule(task, args.episodes, args.workers)
-        result = certify(result, args.bound) if args.select == "certify" else pick(result)
+        result = certify_or_budget(result, args.bound) if args.select == "certify" else pick(result)
         played[task] = dict(result, commit=provenance["commit"], date=provenance["date"])
         report(result)
     document = {
@@ -192,6 +219,8 @@ def report(result: dict) -> None:
         print(f"  shield:{row['rule']:<8} objective {row['objective']:9.4f}  worst failures {row['worst_failures']:.3f}{bound}")
     verdict = "certified" if result["selection"]["by"] == "certify" else "as safe as the schedule"
     verdict = verdict if result["safe"] else f"not {verdict}"
+    if result["selection"].get("uncertified"):
+        verdict = "nothing certified: the budget's choice, not certified"
     if result["chosen"] is None:
         print(f"  chosen: no shield ({verdict}): shield = None")
         return

@@ -125,7 +125,9 @@ class QuadrotorSystem(TrackingSystem):
     failure_name = "outside geofence"  # steps ending outside the geofence or on the ground, per episode
     safety_margin = staticmethod(quadrotor_task.fence_margin)  # m to the fence or the ground, one interval on (shield:)
     margin_unit = "m"
-    shield = ShieldRule(10, 0.25)  # shield:BASE's rule, chosen on validation episodes: etmpc study shields
+    # shield:BASE's rule on 1,000 validation episodes (etmpc study shields): no rule is certified within 0.05 failures
+    # per episode of every:7, so the budget chose it (the safest rule costing the learners at most 1 %)
+    shield = ShieldRule(10, 0.25)
     camera = "arena"
     space = SPACE  # the recordings' 3-D view of the flight
 
