@@ -69,11 +69,12 @@ def baselines(task: str = TASK) -> dict[str, str]:
     budget = math.floor(system.control_interval_s / latency.iteration_s + 1e-9)
     if budget < 1:
         raise ValueError(f"{task}: one SQP iteration takes longer than a control interval on {latency.platform}")
-    rows = {f"AS-RTI, {extra} extra iteration{'s' * (extra > 1)}": f"iterate:1:{1 + extra}" for extra in (1, 2)}
+    names = {f"iterate:1:{1 + extra}": f"AS-RTI, {extra} extra iteration{'s' * (extra > 1)}" for extra in (1, 2)}
     for period in (1, 2):
         every = "every interval" if period == 1 else f"every {period} intervals"
-        rows[f"budget of {budget} iterations (one interval), {every}"] = f"iterate:{period}:{budget}"
-    return rows
+        spec, name = f"iterate:{period}:{budget}", f"budget of {budget} iterations (one interval), {every}"
+        names[spec] = f"{names[spec]} = {name}" if spec in names else name  # one schedule, played once
+    return {name: spec for spec, name in names.items()}
 
 
 def dpi_runs(work: Path, workers: int) -> dict[str, str]:
