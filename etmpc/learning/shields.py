@@ -127,9 +127,7 @@ def select(result: dict) -> dict:
     return pick(result, result.get("budget", BUDGET))
 
 
-def certify_or_budget(
-    result: dict, bound: float = SAFETY_BOUND, confidence: float = CONFIDENCE, budget: float = BUDGET
-) -> dict:
+def certify_or_budget(result: dict, bound: float = SAFETY_BOUND, confidence: float = CONFIDENCE, budget: float = BUDGET) -> dict:
     """:func:`certify`'s choice where a candidate (a rule, or no shield) is certified; else :func:`pick`'s within
     ``budget``, its ``selection`` keeping the bounds certification found (``uncertified``: True) and ``safe``
     False: not certified, whatever its mean failures say."""
