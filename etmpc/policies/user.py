@@ -57,10 +57,10 @@ def _check_members(policy: Any, where: str) -> None:
 class Checked:
     """``policy`` with its answers checked: an exception in ``decide``, or an answer that is no answer on the
     task (:func:`~etmpc.control.timing.level_of`: a bool, 0 or 1; with compute ``levels`` 0, 1, 2 or an
-    ``Iterations(k)`` too), is
-    an :class:`EtmpcError` naming the policy and the answer. Its ``spec`` is ``name``: the policy's own spec,
-    or the ``py:MODULE:NAME`` it was loaded by. ``levels``: whether the task it plays has compute levels
-    (None: not known here; 0, 1 and 2 pass, and the loop refuses a level its task has not)."""
+    ``Iterations(k)`` too), is an :class:`EtmpcError` naming the policy and the answer. Its ``spec`` is
+    ``name``: the policy's own spec, or the ``py:MODULE:NAME`` it was loaded by. ``levels``: whether the task
+    it plays has compute levels (None: not known here; 0, 1, 2 and ``Iterations(k)`` pass, and the loop
+    refuses a level its task has not)."""
 
     policy: Any
     name: str
