@@ -1,6 +1,7 @@
 """Choosing a task's shield rule (``shield:``, :mod:`etmpc.policies.shield`) on training-distribution episodes.
 
-Every rule of a grid (a maximum plan age, a safety margin, or both) is played around each given policy on
+Every rule of a grid (a maximum plan age, a safety margin, or both, and a bound on the state's deviation from
+the plan) is played around each given policy on
 the first ``episodes`` episodes of the validation stream (``VALIDATION_ENTROPY``: never the test set),
 beside the best fixed schedule on the same episodes. A shield is insurance, bought with objective: among
 the rules whose shielded policies' mean objective is worse than the unshielded policies' by at most
@@ -56,9 +57,15 @@ def _mean(rows: np.ndarray) -> Outcome:
     return Outcome(*(float(v) for v in rows.mean(axis=0)))
 
 
-def rules(ages: Sequence[int], margins: Sequence[float | None]) -> list[ShieldRule]:
-    """The grid: every age with every margin (``None``: by age alone)."""
-    return [ShieldRule(age, margin) for age in ages for margin in margins]
+def rules(ages: Sequence[int], margins: Sequence[float | None], deviations: Sequence[float | None] = (None,)) -> list[ShieldRule]:
+    """The grid: every age with every margin (``None``: by age alone), and each rule with a margin with every
+    deviation (``None``: not read; a deviation is read only beside a margin)."""
+    return [
+        ShieldRule(age, margin, deviation)
+        for age in ages
+        for margin in margins
+        for deviation in (deviations if margin is not None else (None,))
+    ]
 
 
 def choose(

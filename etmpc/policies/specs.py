@@ -43,6 +43,7 @@ ENTRY_POINTS = "etmpc.policies"
 #: characters on Linux, no built-in spec has more than a dozen parts, and no built-in kind wraps another more than
 #: twice (``oracle:shield:BASE``); a spec past these is refused before it is read.
 MAX_SPEC_CHARS, MAX_SPEC_PARTS, MAX_NESTING = 4096, 64, 8
+RULE = "AGE[:MARGIN[:DEVIATION]]"  # how a shield's own rule is written (ShieldRule.text)
 
 
 def _simulates(spec: str) -> bool:
@@ -53,34 +54,36 @@ def _simulates(spec: str) -> bool:
 
 
 def _shield(arg: str, spec: str, context: Context) -> Policy:
-    """``shield:BASE`` (the task's rule) or ``shield:AGE[:MARGIN]:BASE``: numbers first, then the base's spec."""
+    """``shield:BASE`` (the task's rule) or ``shield:AGE[:MARGIN[:DEVIATION]]:BASE``: numbers first, then the base's
+    spec."""
     numbers, base = _shielded(arg)
     if not base:
-        raise EtmpcError(f"bad policy {spec!r}: give the policy to shield, shield:BASE or shield:AGE[:MARGIN]:BASE")
+        raise EtmpcError(f"bad policy {spec!r}: give the policy to shield, shield:BASE or shield:{RULE}:BASE")
     if (kind := find(base)) is not None and kind.clairvoyant:
         raise EtmpcError(f"bad policy {spec!r}: {base} is an oracle, a reference and not a policy: shield a policy")
     if numbers:
         age = number(numbers[0], int, spec)
         try:
-            rule = ShieldRule(age, number(numbers[1], float, spec) if len(numbers) > 1 else None)
+            rule = ShieldRule(age, *(number(text, float, spec) for text in numbers[1:]))
         except EtmpcError as exc:
             raise EtmpcError(f"bad policy {spec!r}: {exc}") from None
     elif context.shield is None:
-        raise EtmpcError(f"bad policy {spec!r}: task {context.task} declares no shield rule: write shield:AGE[:MARGIN]:BASE")
+        raise EtmpcError(f"bad policy {spec!r}: task {context.task} declares no shield rule: write shield:{RULE}:BASE")
     else:
         rule = context.shield
     if rule.margin is not None and context.safety_margin is None:
         raise EtmpcError(
             f"bad policy {spec!r}: task {context.task} has no safety margin: shield it by age alone, shield:AGE:BASE"
         )
-    return Shield(context.parse(base), rule.max_age, rule.margin, context.safety_margin, context.levels)
+    weights = np.asarray(context.error_weights, dtype=float)
+    return Shield(context.parse(base), rule.max_age, rule.margin, context.safety_margin, context.levels, rule.deviation, weights)
 
 
 def _shielded(arg: str) -> tuple[list[str], str]:
-    """A shield's argument as its numbers (at most two, first) and its base's spec."""
+    """A shield's argument as its numbers (at most three, first) and its base's spec."""
     parts = arg.split(":")
     numbers: list[str] = []
-    while parts and len(numbers) < 2 and _numeric(parts[0]):
+    while parts and len(numbers) < 3 and _numeric(parts[0]):
         numbers.append(parts.pop(0))
     return numbers, ":".join(parts)
 
@@ -142,8 +145,9 @@ BUILT_IN: tuple[Kind, ...] = (
     ),
     Kind(
         "shield",
-        "shield:[AGE[:MARGIN]:]BASE",
-        "BASE, but compute when the plan is AGE steps old or the safety margin is below MARGIN (default: the task's rule)",
+        f"shield:[{RULE}:]BASE",
+        "BASE, but compute when the plan is AGE steps old, the safety margin is below MARGIN or the state is more than "
+        "DEVIATION off the plan (default: the task's rule)",
         _shield,
         family="shielded",
         wraps=True,

@@ -88,22 +88,31 @@ class SafetyMargin(Protocol):
 
 @dataclass(frozen=True)
 class ShieldRule:
-    """A shield's rule: compute when the kept plan is ``max_age`` steps old, or when the state's safety margin
-    is below ``margin`` (None: by age alone)."""
+    """A shield's rule: compute when the kept plan is ``max_age`` steps old, when the state's safety margin
+    is below ``margin`` (None: not read), or when the state has left the plan's prediction by more than
+    ``deviation``, measured as the threshold trigger measures it (``|W (x_i - x_hat_i)|``, the task's
+    ``error_weights``; None: not read). A deviation is given only after a margin (``AGE:MARGIN:DEVIATION``)."""
 
     max_age: int
     margin: float | None = None
+    deviation: float | None = None
 
     def __post_init__(self):
         if not isinstance(self.max_age, int) or self.max_age < 1:
             raise EtmpcError(f"a shield's age must be a whole number of steps >= 1, got {self.max_age!r}")
         if self.margin is not None and not (isinstance(self.margin, (int, float)) and math.isfinite(self.margin)):
             raise EtmpcError(f"a shield's margin must be a finite number, got {self.margin!r}")
+        if self.deviation is not None:
+            if not (isinstance(self.deviation, (int, float)) and math.isfinite(self.deviation) and self.deviation > 0):
+                raise EtmpcError(f"a shield's deviation must be a finite number > 0, got {self.deviation!r}")
+            if self.margin is None:
+                raise EtmpcError("a shield's deviation comes after its margin: AGE:MARGIN:DEVIATION")
 
     @property
     def text(self) -> str:
-        """How a spec writes it: ``AGE`` or ``AGE:MARGIN``."""
-        return str(self.max_age) if self.margin is None else f"{self.max_age}:{self.margin:g}"
+        """How a spec writes it: ``AGE``, ``AGE:MARGIN`` or ``AGE:MARGIN:DEVIATION``."""
+        numbers = [f"{v:g}" for v in (self.margin, self.deviation) if v is not None]
+        return ":".join([str(self.max_age), *numbers])
 
 
 class TimeInTheLoop(Protocol):
