@@ -4,6 +4,7 @@ validation episodes (played here by a stand-in that returns made-up outcomes per
 import numpy as np
 import pytest
 
+from etmpc.common.errors import EtmpcError
 from etmpc.learning import shields
 from etmpc.systems.capabilities import ShieldRule
 
@@ -53,6 +54,14 @@ def test_no_rule_within_the_budget_or_none_safer_than_no_shield_chooses_none(mon
     outcomes |= {"shield:9:rl:a": (27.6, 0.3), "shield:9:sb3:b": (27.5, 0.1)}  # within 1 %, but the worse still 0.3
     result = _choose(monkeypatch, outcomes, [ShieldRule(5), ShieldRule(9)])
     assert result["chosen"] is None and not result["safe"]  # unshielded, 0.3 > the schedule's 0
+
+
+def test_a_grid_reads_a_deviation_only_beside_a_margin_and_each_rule_is_written_as_a_spec_reads_it():
+    grid = shields.rules((10,), (None, 0.25), (None, 1.0, 2))
+    assert [rule.text for rule in grid] == ["10", "10:0.25", "10:0.25:1", "10:0.25:2"]
+    assert grid[2] == ShieldRule(10, 0.25, 1.0)
+    with pytest.raises(EtmpcError, match="comes after its margin"):
+        ShieldRule(10, None, 1.0)
 
 
 def test_an_outcome_is_the_episodes_objective_failures_and_recomputes():

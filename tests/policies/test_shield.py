@@ -80,6 +80,60 @@ def test_a_margin_shield_recomputes_wherever_the_margin_is_below_its_level(kicks
     assert np.array_equal(nowhere.recompute, bare.recompute) and np.array_equal(nowhere.applied, bare.applied, equal_nan=True)
 
 
+def test_a_deviation_shield_recomputes_exactly_where_the_state_has_left_the_plan(kicks_system):
+    """``shield:1000:-10:D:never`` in the loop: no age and no margin ever fires, so every recompute the shield
+    makes is the deviation's. From what the loop showed at each decision (the state and the kept plan's
+    prediction, recorded by the base), the played trajectory recomputed exactly where ``|W (x_i - x_hat_i)|``
+    was above D; unshielded, ``never`` keeps while the deviation grows far beyond it."""
+    level, weights = 0.3, np.asarray(kicks_system.error_weights)
+
+    class Watcher:  # never: keeps, and records the deviation it was shown
+        spec, stochastic = "never", False
+
+        def __init__(self):
+            self.seen = []
+
+        def decide(self, s, rng):
+            self.seen.append(np.linalg.norm(weights * (np.asarray(s.x) - np.asarray(s.x_predicted))))
+            return False
+
+    def played(policy):
+        episode = kicks_system.draw_episode(np.random.default_rng(0))
+        return run_episode(kicks_system, kicks_system.make_env(), policy, np.random.default_rng(1), episode)
+
+    watcher = Watcher()
+    shield = parse_policy(f"shield:1000:-10:{level:g}:never", kicks_system)
+    traj = played(Shield(watcher, 1000, -10.0, kicks.fall_margin, deviation=level, weights=weights))
+    asked = ~traj.forced[: traj.steps]  # no plan yet, or the plan ran out: a forced solve, nothing asked
+    deviation = np.array(watcher.seen)
+    assert len(deviation) == asked.sum() > traj.steps // 2
+    assert np.array_equal(traj.recompute[: traj.steps][asked], deviation > level)
+    assert 0 < (deviation > level).sum() < len(deviation)  # both answers were played
+    assert np.array_equal(_play(kicks_system, shield.spec).recompute, traj.recompute)  # the spec plays the same
+    watcher.seen.clear()
+    bare = played(Shield(watcher, 1000))  # the same base by age alone, which never fires: never itself
+    assert max(watcher.seen) > 3 * level and bare.recompute[: bare.steps].sum() < traj.recompute[: traj.steps].sum()
+
+
+def test_a_deviation_shield_reads_the_weighted_error_and_reads_it_last():
+    """The deviation's measure is the threshold trigger's, |W (x - x_hat)| (a 3-4-5 triangle here), and a
+    margin or an age that fires already is not read past."""
+
+    class Keeper:
+        spec, stochastic = "keeper", False
+
+        def decide(self, s, rng):
+            return False
+
+    shield = Shield(Keeper(), 10, 0.0, lambda x: float(x[0]), deviation=5.0, weights=np.array([1.0, 2.0]))
+    state = lambda x, x_hat, age=1: AugmentedState(np.array(x), np.zeros(2), age, np.array(x_hat))  # noqa: E731
+    assert not shield.decide(state([3.0, 2.0], [0.0, 0.0]), None)  # |(3, 4)| = 5: on the bound, kept
+    assert shield.decide(state([3.0, 2.01], [0.0, 0.0]), None)  # just past it
+    assert not shield.decide(state([4.0, 3.5], [1.0, 1.5]), None)  # the difference is what counts: (3, 4) again
+    assert shield.decide(state([-1.0, 0.0], [0.0, 0.0]), None)  # the margin (-1 < 0) fires first
+    assert shield.overrides == 2 and shield.spec == "shield:10:0:5:keeper"
+
+
 def test_the_shield_asks_its_base_at_every_decision_and_counts_its_overrides():
     asked = []
 
@@ -117,6 +171,9 @@ def test_on_a_task_with_compute_levels_the_shield_forces_one_sqp_iteration():
         ("shield:2.5:always", "is not an integer"),
         ("shield:5:oracle:every:3", "an oracle"),
         ("shield:5:nan:always", "finite"),
+        ("shield:5:0.3:0:always", "deviation must be a finite number > 0"),
+        ("shield:5:0.3:inf:always", "deviation must be a finite number > 0"),
+        ("shield:5:0.3:1:2:always", "unknown policy"),  # at most three numbers: the fourth starts the base
     ],
 )
 def test_bad_shields_are_one_line_each(kicks_system, spec, message):
@@ -140,7 +197,11 @@ def test_the_tasks_own_rule_is_what_shield_base_plays(task):
     system = make_system(task)
     assert isinstance(system.shield, ShieldRule)
     policy = parse_policy("shield:every:20", system)
-    assert (policy.max_age, policy.margin) == (system.shield.max_age, system.shield.margin)
+    assert (policy.max_age, policy.margin, policy.deviation) == (
+        system.shield.max_age,
+        system.shield.margin,
+        system.shield.deviation,
+    )
     assert policy.spec == f"shield:{system.shield.text}:every:20"  # the rule it played, written out
 
 
