@@ -1,4 +1,4 @@
-"""A shield around any policy: ``shield:BASE`` (the task's own rule) or ``shield:AGE[:MARGIN]:BASE``.
+"""A shield around any policy: ``shield:BASE`` (the task's own rule) or ``shield:AGE[:MARGIN[:DEVIATION]]:BASE``.
 
 Runtime assurance (a "shield", Alshiekh et al. 2018, "Safe reinforcement learning via shielding"): the
 base policy decides, and the shield overrides a *keep* with a recompute when keeping is no longer safe

@@ -32,11 +32,12 @@ from etmpc.learning.shields import BUDGET, SAFETY_BOUND, certify_or_budget, choo
 #: Each task whose failures are safety events: its grid (maximum plan ages, margins in its unit, and deviations
 #: from the plan beside a margin: |W (x - x_hat)|, the threshold trigger's measure). Falls are rare on the cart
 #: pendulum (a few in a hundred episodes): a certified rule needs about a thousand episodes. The quadrotor's crashes
-#: begin as a flip on a kept plan, while the margin to the ground is still wide: its grid reads the deviation.
+#: begin as a flip on a kept plan, while the margin to the ground is still wide: its grid reads the deviation. On
+#: kicks_levels the deviations are the event trigger's levels (threshold:X:iterate), beside the margin once certified.
 GRIDS: dict[str, tuple[tuple[int, ...], tuple[float | None, ...], tuple[float | None, ...]]] = {
     "cart_pendulum/kicks": ((5, 10, 20), (None, 0.6, 0.9, 1.0), (None,)),
     "cart_pendulum/kicks_late": ((3, 5, 10), (None, 0.9, 1.0, 1.1), (None,)),
-    "cart_pendulum/kicks_levels": ((3, 5, 10), (None, 0.9, 1.0, 1.1), (None,)),
+    "cart_pendulum/kicks_levels": ((5, 10), (None, 1.1), (None, 0.2, 0.3, 0.5)),
     "cart_pendulum/kicks_noisy": ((5, 10, 20), (None, 0.6, 0.9, 1.0), (None,)),
     "quadrotor/waypoints": ((10, 15), (None, 0.25), (None, 0.5, 1.0, 2.0)),
     "quadrotor/waypoints_noisy": ((10, 15), (None, 0.25), (None, 0.5, 1.0, 2.0)),

@@ -126,7 +126,7 @@ class KicksSystem(TrackingSystem):
     margin_unit = "rad"
     # shield:BASE's rule (etmpc study shields, docs/results/shields.md): none, since on validation episodes no rule
     # made the shipped learners fall less without costing them more than the budget (a recompute forced near a fall
-    # made falls no rarer under this model mismatch); shield:AGE[:MARGIN]:BASE still works
+    # made falls no rarer under this model mismatch); shield:AGE[:MARGIN[:DEVIATION]]:BASE still works
     shield: ShieldRule | None = None
     camera = "track"
 
