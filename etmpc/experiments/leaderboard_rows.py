@@ -182,8 +182,9 @@ def learner_entries(tasks: list[str]) -> list[Entry]:
                     name + SHIELDED,
                     "learned",
                     shielded,
-                    f"the same policy under the task's shield (a recompute when the plan is AGE steps old or the margin "
-                    f"to a failure is below MARGIN; docs/policies.md#shields-shield); policies/<task>/{file}",
+                    f"the same policy under the task's shield (a recompute when the plan is AGE steps old, the margin "
+                    f"to a failure is below MARGIN or the state is DEVIATION off the plan; docs/policies.md#shields-shield); "
+                    f"policies/<task>/{file}",
                 )
             )
     return found

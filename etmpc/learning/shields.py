@@ -17,7 +17,9 @@ from a table alone, so a stored table can be read again.
 *certified* when, for every policy, the paired difference of failures per episode against the schedule, on
 the same validation episodes, has a 95 % upper confidence bound of at most ``bound`` (:data:`SAFETY_BOUND`),
 the bound widened for the number of rules tried (Bonferroni), so that the one chosen is not the luckiest of
-many. Among the certified, the best mean objective wins. This is the test a shipped learner is held to on
+many, and every policy under it still beats the schedule's mean objective (a shield that makes a learner dearer
+than the schedule buys nothing the schedule does not give cheaper). Among the certified, the best mean objective
+wins. This is the test a shipped learner is held to on
 fresh episodes (the ``safety`` study), asked of validation episodes first. Where nothing is certified, not
 even no shield, :func:`certify_or_budget` falls back on the budget's choice, said to be uncertified: a task
 whose failures are rare and long (a quadrotor that stays on the ground) may certify nothing on a thousand
@@ -161,8 +163,10 @@ def upper_bound(gap: dict, z: float, least_sd: float = 0.0) -> float:
 def certify(result: dict, bound: float = SAFETY_BOUND, confidence: float = CONFIDENCE) -> dict:
     """``result`` (:func:`choose`'s) with its ``chosen`` rule by certification (see the module's docstring):
     ``certified`` lists the candidates (``"none"``: no shield) whose every policy's failure gap to the schedule
-    has its upper bound at most ``bound``; ``chosen`` is the certified rule with the best mean objective
-    (None: no shield, certified or not; ``safe`` says whether what is chosen was certified)."""
+    has its upper bound at most ``bound`` and whose every policy still beats the schedule's mean objective (those
+    within the bound that do not are the selection's ``behind_schedule``); ``chosen`` is the certified rule with
+    the best mean objective (None: no shield, certified or not; ``safe`` says whether what is chosen was
+    certified)."""
     candidates = [{"rule": "none", **result["unshielded"]}, *result["rules"]]
     if any("failure_gap" not in p for row in candidates for p in row["policies"].values()):
         raise ValueError("this table has no paired failure gaps (made before certify was written): play it again")
@@ -175,13 +179,27 @@ def certify(result: dict, bound: float = SAFETY_BOUND, confidence: float = CONFI
     share = min(bound, 0.5)
     least = float(np.sqrt(share * (1.0 - share)))
     worst = {row["rule"]: max(upper_bound(p["failure_gap"], z, least) for p in row["policies"].values()) for row in candidates}
-    certified = [row for row in candidates if worst[row["rule"]] <= bound]
-    best = max(certified, key=lambda row: oriented(row["objective"], result["objective_sense"]), default=None)
+    within = [row for row in candidates if worst[row["rule"]] <= bound]
+    # A shield that leaves a learner worse on objective than the schedule buys nothing the schedule does not give
+    # cheaper: a rule is certified only where every learner under it still beats the schedule on mean objective.
+    sense = result["objective_sense"]
+    schedule = oriented(result["schedule"]["objective"], sense)
+    certified = [row for row in within if all(oriented(p["objective"], sense) > schedule for p in row["policies"].values())]
+    best = max(certified, key=lambda row: oriented(row["objective"], sense), default=None)
     chosen = None if best is None or best["rule"] == "none" else best["rule"]
+    dearer = [row["rule"] for row in within if row not in certified]  # within the bound, but behind the schedule
     return dict(
         {key: value for key, value in result.items() if key != "budget"},  # a budget's choice is not this one's
         chosen=chosen,
-        selection={"by": "certify", "bound": bound, "confidence": confidence, "z": z, "least_sd": least, "upper_bounds": worst},
+        selection={
+            "by": "certify",
+            "bound": bound,
+            "confidence": confidence,
+            "z": z,
+            "least_sd": least,
+            "upper_bounds": worst,
+            "behind_schedule": dearer,
+        },
         certified=[row["rule"] for row in certified],
         safe=best is not None,
     )

@@ -167,3 +167,25 @@ def test_where_nothing_is_certified_the_budget_chooses_and_says_so_and_a_stored_
     # where something is certified, the fallback is certify itself
     certified = shields.certify_or_budget(result, bound=50.0)
     assert certified["selection"]["by"] == "certify" and certified == shields.certify(result, bound=50.0)
+
+
+def test_a_rule_within_the_bound_that_leaves_a_learner_behind_the_schedule_is_not_certified(monkeypatch):
+    """A shield that recomputes at nearly every step fails as seldom as the schedule but costs more than it: the
+    schedule is then the safer and cheaper answer, so that rule is not certified; it is listed, and the page says so."""
+    from etmpc.experiments.studies.shields import _task_section
+
+    schedule = np.zeros(400)
+    schedule[[5, 50]] = 1
+    failures = {"every:3": schedule, "rl:a": schedule + (np.arange(400) % 4 == 0), "shield:5:rl:a": schedule.copy()}
+    failures["shield:5:0.5:rl:a"] = schedule.copy()
+    objectives = {"every:3": 30.0, "rl:a": 26.0, "shield:5:rl:a": 30.5, "shield:5:0.5:rl:a": 29.5}  # lower is better
+    result = _certify_table(monkeypatch, failures, objectives, shields.rules((5,), (None, 0.5)), bound=0.05)
+    assert result["selection"]["upper_bounds"]["5"] <= 0.05 and result["selection"]["upper_bounds"]["none"] > 0.05
+    assert result["certified"] == ["5:0.5"] and result["chosen"] == "5:0.5"  # 29.5 beats the schedule's 30
+    assert result["selection"]["behind_schedule"] == ["5"]  # as safe, but 30.5
+    page = "\n".join(_task_section(TASK, result, "abc1234"))
+    assert "does worse than `every:3` on mean objective (the learners' mean in brackets): `5` (30.500)" in page
+    objectives["shield:5:0.5:rl:a"] = 31.0  # both behind: nothing is certified, and the budget's choice stands
+    result = _certify_table(monkeypatch, failures, objectives, shields.rules((5,), (None, 0.5)), bound=0.05)
+    assert result["certified"] == [] and result["selection"]["behind_schedule"] == ["5", "5:0.5"]
+    assert shields.certify_or_budget(result)["chosen"] is None  # none within 1 % of the unshielded 26

@@ -112,9 +112,10 @@ def _task_section(task: str, result: dict, commit: str) -> list[str]:
     lines = [
         f"## `{task}`",
         "",
-        f"{result['episodes']} validation episodes, played at commit `{commit}`; margins in {result['margin_unit']}. "
+        f"{result['episodes']} validation episodes, played at commit `{commit}`; a rule is `AGE[:MARGIN[:DEVIATION]]`, margins "
+        f"in {result['margin_unit']}, deviations as `threshold:X` measures them. "
         f"`{schedule['spec']}`: objective {schedule['objective']:.3f}, {schedule['failures']:.3f} failures per episode. "
-        f"Chosen {how}: {chosen} ({safety}).{_why_uncertified(result)}",
+        f"Chosen {how}: {chosen} ({safety}).{_behind_schedule(result)}{_why_uncertified(result)}",
         "",
         header,
         rule,
@@ -128,6 +129,19 @@ def _task_section(task: str, result: dict, commit: str) -> list[str]:
         lines.append(line)
     lines.append("")
     return lines
+
+
+def _behind_schedule(result: dict) -> str:
+    """The rules within the bound that certification passed over, as some learner under them loses to the schedule."""
+    behind = result.get("selection", {}).get("behind_schedule", [])
+    if not behind:
+        return ""
+    rows = {row["rule"]: row for row in [{"rule": "none", **result["unshielded"]}, *result["rules"]]}
+    named = ", ".join(f"`{rule}` ({rows[rule]['objective']:.3f})" for rule in behind)
+    return (
+        f" Within the bound, but not certified because a learner under it does worse than `{result['schedule']['spec']}` "
+        f"on mean objective (the learners' mean in brackets): {named}."
+    )
 
 
 def _why_uncertified(result: dict) -> str:
