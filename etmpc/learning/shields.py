@@ -1,8 +1,8 @@
 """Choosing a task's shield rule (``shield:``, :mod:`etmpc.policies.shield`) on training-distribution episodes.
 
 Every rule of a grid (a maximum plan age, a safety margin, or both, and a bound on the state's deviation from
-the plan) is played around each given policy on
-the first ``episodes`` episodes of the validation stream (``VALIDATION_ENTROPY``: never the test set),
+the plan) is played around each given policy on the first ``episodes`` episodes of the validation stream
+(``VALIDATION_ENTROPY``: never the test set),
 beside the best fixed schedule on the same episodes. A shield is insurance, bought with objective: among
 the rules whose shielded policies' mean objective is worse than the unshielded policies' by at most
 ``budget`` (a share of it, :data:`BUDGET`), the chosen rule is the safest (the one under which the policy
