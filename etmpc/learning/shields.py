@@ -160,6 +160,11 @@ def upper_bound(gap: dict, z: float, least_sd: float = 0.0) -> float:
     return gap["mean"] + z * max(gap["sd"], least_sd) / np.sqrt(gap["episodes"])
 
 
+def candidates(result: dict) -> list[dict]:
+    """A table's rows as chosen among: no shield (``"rule": "none"``, the unshielded row) first, then each rule's."""
+    return [{"rule": "none", **result["unshielded"]}, *result["rules"]]
+
+
 def certify(result: dict, bound: float = SAFETY_BOUND, confidence: float = CONFIDENCE) -> dict:
     """``result`` (:func:`choose`'s) with its ``chosen`` rule by certification (see the module's docstring):
     ``certified`` lists the candidates (``"none"``: no shield) whose every policy's failure gap to the schedule
@@ -167,27 +172,27 @@ def certify(result: dict, bound: float = SAFETY_BOUND, confidence: float = CONFI
     within the bound that do not are the selection's ``behind_schedule``); ``chosen`` is the certified rule with
     the best mean objective (None: no shield, certified or not; ``safe`` says whether what is chosen was
     certified)."""
-    candidates = [{"rule": "none", **result["unshielded"]}, *result["rules"]]
-    if any("failure_gap" not in p for row in candidates for p in row["policies"].values()):
+    rows = candidates(result)
+    if any("failure_gap" not in p for row in rows for p in row["policies"].values()):
         raise ValueError("this table has no paired failure gaps (made before certify was written): play it again")
     # a two-sided (1 - confidence) interval's upper end, shared by the candidates (Bonferroni)
-    z = NormalDist().inv_cdf(1.0 - (1.0 - confidence) / (2 * len(candidates)))
+    z = NormalDist().inv_cdf(1.0 - (1.0 - confidence) / (2 * len(rows)))
     # Failures are rare: a few hundred episodes may see none, and a spread of 0 would certify anything. The
     # spread is taken at least as that of one more failure in a share `bound` of the episodes, the gap at the
     # bound itself (as Wilson's interval takes the variance at the value tested): with no failure seen, about
     # z^2 (1 - bound) / bound episodes certify (150 at 0.05 and z = 2.8).
     share = min(bound, 0.5)
     least = float(np.sqrt(share * (1.0 - share)))
-    worst = {row["rule"]: max(upper_bound(p["failure_gap"], z, least) for p in row["policies"].values()) for row in candidates}
-    within = [row for row in candidates if worst[row["rule"]] <= bound]
+    worst = {row["rule"]: max(upper_bound(p["failure_gap"], z, least) for p in row["policies"].values()) for row in rows}
     # A shield that leaves a learner worse on objective than the schedule buys nothing the schedule does not give
     # cheaper: a rule is certified only where every learner under it still beats the schedule on mean objective.
     sense = result["objective_sense"]
     schedule = oriented(result["schedule"]["objective"], sense)
-    certified = [row for row in within if all(oriented(p["objective"], sense) > schedule for p in row["policies"].values())]
+    ahead = {row["rule"]: all(oriented(p["objective"], sense) > schedule for p in row["policies"].values()) for row in rows}
+    certified = [row for row in rows if worst[row["rule"]] <= bound and ahead[row["rule"]]]
     best = max(certified, key=lambda row: oriented(row["objective"], sense), default=None)
     chosen = None if best is None or best["rule"] == "none" else best["rule"]
-    dearer = [row["rule"] for row in within if row not in certified]  # within the bound, but behind the schedule
+    dearer = [row["rule"] for row in rows if worst[row["rule"]] <= bound and not ahead[row["rule"]]]  # behind the schedule
     return dict(
         {key: value for key, value in result.items() if key != "budget"},  # a budget's choice is not this one's
         chosen=chosen,

@@ -27,7 +27,7 @@ from etmpc.evaluation.backends import make_backend
 from etmpc.evaluation.references import stored
 from etmpc.experiments.leaderboard_rows import shipped_policy
 from etmpc.experiments.studies import runner
-from etmpc.learning.shields import BUDGET, SAFETY_BOUND, certify_or_budget, choose, pick, rules, select
+from etmpc.learning.shields import BUDGET, SAFETY_BOUND, candidates, certify_or_budget, choose, pick, rules, select
 
 #: Each task whose failures are safety events: its grid (maximum plan ages, margins in its unit, and deviations
 #: from the plan beside a margin: |W (x - x_hat)|, the threshold trigger's measure). Falls are rare on the cart
@@ -84,7 +84,7 @@ def page(document: dict) -> str:
 
 def _task_section(task: str, result: dict, commit: str) -> list[str]:
     """One task's paragraph and table of rules."""
-    schedule, unshielded = result["schedule"], result["unshielded"]
+    schedule = result["schedule"]
     selection = result.get("selection", {"by": "budget"})
     certified = selection["by"] == "certify"
     bounds = "upper_bounds" in selection  # certification was asked (and, where nothing passed, the budget chose)
@@ -120,7 +120,7 @@ def _task_section(task: str, result: dict, commit: str) -> list[str]:
         header,
         rule,
     ]
-    for row in [{"rule": "none", **unshielded}, *result["rules"]]:
+    for row in candidates(result):
         name = "none" if row["rule"] == "none" else f"`{row['rule']}`"
         mark = " (chosen)" if row["rule"] == result["chosen"] else ""
         line = f"| {name}{mark} | {row['objective']:.3f} | {row['worst_failures']:.3f} |"
@@ -136,7 +136,7 @@ def _behind_schedule(result: dict) -> str:
     behind = result.get("selection", {}).get("behind_schedule", [])
     if not behind:
         return ""
-    rows = {row["rule"]: row for row in [{"rule": "none", **result["unshielded"]}, *result["rules"]]}
+    rows = {row["rule"]: row for row in candidates(result)}
     named = ", ".join(f"`{rule}` ({rows[rule]['objective']:.3f})" for rule in behind)
     return (
         f" Within the bound, but not certified because a learner under it does worse than `{result['schedule']['spec']}` "
@@ -149,7 +149,7 @@ def _why_uncertified(result: dict) -> str:
     selection = result.get("selection", {})
     if not selection.get("uncertified"):
         return ""
-    rows = [result["unshielded"], *result["rules"]]
+    rows = candidates(result)
     spreads = [p["failure_gap"]["sd"] for row in rows for p in row["policies"].values()]
     half = selection["z"] * min(spreads) / math.sqrt(result["episodes"])
     return (
@@ -231,7 +231,7 @@ def report(result: dict) -> None:
         f"{result['task']}: {schedule['spec']} fails {schedule['failures']:.3f}/episode; unshielded learners at worst {worst:.3f}"
     )
     bounds = result["selection"].get("upper_bounds", {})
-    for row in [{"rule": "none", **unshielded}, *result["rules"]]:
+    for row in candidates(result):
         bound = f"  upper bound of the gap {bounds[row['rule']]:.3f}" if bounds else ""
         print(f"  shield:{row['rule']:<12} objective {row['objective']:9.4f}  worst failures {row['worst_failures']:.3f}{bound}")
     verdict = "certified" if result["selection"]["by"] == "certify" else "as safe as the schedule"
