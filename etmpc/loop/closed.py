@@ -292,7 +292,7 @@ class ClosedLoop(Kept):
         else:
             iterate = self.system.iterate
             assert iterate is not None  # ITERATE is a level only on a task with compute levels, which offers iterate
-            solver = iterate if limit == 1 else partial(iterate, limit=limit)
+            solver = iterate if limit == 1 else partial(iterate, limit=limit)  # an older task's iterate may take no limit
         return self.mode.solve(self, solver, x, u_prev, warm, age, i)
 
     def _sense(self, u: np.ndarray | None) -> None:
